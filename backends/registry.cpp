@@ -1,0 +1,40 @@
+#include "backends/registry.hpp"
+
+#include <stdexcept>
+
+#include "cpu/cpu_backend.hpp"
+#ifdef TISSUE_HAVE_CUDA
+#include "cuda/cuda_backend.hpp"
+#endif
+
+namespace tissue {
+
+std::vector<BackendInfo> list_backends() {
+  std::vector<BackendInfo> out;
+  out.push_back({"cpu", true, true, cpu_device_name()});
+#ifdef TISSUE_HAVE_CUDA
+  std::string why;
+  const bool gpu = cuda_available(&why);
+  out.push_back({"cuda", true, gpu, why});
+#else
+  out.push_back({"cuda", false, false, "not built: configure with -DTISSUE_WITH_CUDA=ON on a machine with the CUDA toolkit"});
+#endif
+  return out;
+}
+
+std::unique_ptr<Backend> create_backend(const std::string& name, Precision precision) {
+  if (name == "cpu") return make_cpu_backend(precision);
+  if (name == "cuda") {
+#ifdef TISSUE_HAVE_CUDA
+    std::string why;
+    if (!cuda_available(&why)) throw std::runtime_error("backend 'cuda' cannot run here: " + why);
+    return make_cuda_backend(precision);
+#else
+    throw std::runtime_error(
+        "backend 'cuda' was not built: configure with -DTISSUE_WITH_CUDA=ON on a machine with the CUDA toolkit");
+#endif
+  }
+  throw std::runtime_error("unknown backend '" + name + "' (known: cpu, cuda)");
+}
+
+}  // namespace tissue

@@ -1,0 +1,27 @@
+// Names and creates backends ("cpu", "cuda") and reports which this build and
+// this machine can run.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/backend.hpp"
+
+namespace tissue {
+
+struct BackendInfo {
+  std::string name;
+  bool built = false;      ///< compiled into this binary
+  bool available = false;  ///< built and usable on this machine (a GPU is present, ...)
+  std::string detail;      ///< device name, or why it is unavailable
+};
+
+/// Every known backend, built or not.
+std::vector<BackendInfo> list_backends();
+
+/// Creates a backend; throws std::runtime_error naming the CMake option to
+/// turn on when it was not built, or why it cannot run here.
+std::unique_ptr<Backend> create_backend(const std::string& name, Precision precision);
+
+}  // namespace tissue

@@ -1,0 +1,249 @@
+#include "core/model.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <fmt/format.h>
+#include <limits>
+#include <map>
+#include <array>
+
+#include "core/tet.hpp"
+
+namespace tissue {
+namespace {
+
+Vec3<double> node_pos(const std::vector<double>& xyz, index_t i) {
+  return {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]};
+}
+
+void check_materials(const ModelInput& in) {
+  if (in.materials.empty()) throw ModelError(in.source + ": no material given");
+  for (size_t k = 0; k < in.materials.size(); ++k) {
+    const auto& m = in.materials[k];
+    if (!(m.mu > 0) || !std::isfinite(m.mu))
+      throw ModelError(fmt::format("{}: material {}: shear modulus mu = {} must be > 0", in.source, k, m.mu));
+    if (!(m.K > 0) || !std::isfinite(m.K))
+      throw ModelError(fmt::format("{}: material {}: bulk modulus K = {} must be > 0", in.source, k, m.K));
+    if (!(m.rho > 0) || !std::isfinite(m.rho))
+      throw ModelError(fmt::format("{}: material {}: density rho = {} must be > 0", in.source, k, m.rho));
+  }
+}
+
+/// Boundary faces (faces owned by one tet), oriented outward.
+void extract_surface(TissueModel<double>& m) {
+  // Face opposite corner k, ordered so that its normal points away from corner k
+  // for a positively oriented tet.
+  static constexpr int kFace[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
+  std::map<std::array<index_t, 3>, std::pair<index_t, int>> faces;  // sorted ids -> (elem, corner)
+  std::map<std::array<index_t, 3>, int> count;
+  const index_t ne = m.n_elems;
+  for (index_t e = 0; e < ne; ++e)
+    for (int k = 0; k < 4; ++k) {
+      std::array<index_t, 3> f{m.elem_nodes[kFace[k][0] * ne + e], m.elem_nodes[kFace[k][1] * ne + e],
+                               m.elem_nodes[kFace[k][2] * ne + e]};
+      std::sort(f.begin(), f.end());
+      faces.emplace(f, std::pair{e, k});
+      ++count[f];
+    }
+  for (const auto& [f, c] : count) {
+    if (c != 1) continue;
+    const auto [e, k] = faces[f];
+    for (int v = 0; v < 3; ++v) m.tris.push_back(m.elem_nodes[kFace[k][v] * ne + e]);
+    m.tri_elem.push_back(e);
+  }
+  m.n_tris = static_cast<index_t>(m.tri_elem.size());
+  // component-major: (3 x n_tris)
+  std::vector<index_t> cm(m.tris.size());
+  for (index_t t = 0; t < m.n_tris; ++t)
+    for (int v = 0; v < 3; ++v) cm[v * m.n_tris + t] = m.tris[3 * t + v];
+  m.tris.swap(cm);
+  for (index_t t = 0; t < 3 * m.n_tris; ++t) m.node_flags[m.tris[t]] |= kSurface;
+}
+
+}  // namespace
+
+double lowest_mode_estimate(const TissueModel<double>& m) {
+  double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+  for (index_t i = 0; i < m.n_nodes; ++i)
+    for (int c = 0; c < 3; ++c) {
+      lo[c] = std::min(lo[c], m.X[c * m.n_nodes + i]);
+      hi[c] = std::max(hi[c], m.X[c * m.n_nodes + i]);
+    }
+  const double L = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+  double vol = 0, mu_v = 0;
+  for (index_t e = 0; e < m.n_elems; ++e) {
+    vol += m.volume[e];
+    mu_v += m.mu[e] * m.volume[e];
+  }
+  const double rho = m.total_mass / vol;
+  return 0.5 * M_PI * std::sqrt(mu_v / vol / rho) / L;
+}
+
+void set_time_step(TissueModel<double>& m, double dt, double damping) {
+  if (!(dt > 0) || !std::isfinite(dt)) throw ModelError(fmt::format("time step dt = {} s must be > 0", dt));
+  if (dt > m.dt_crit)
+    throw ModelError(fmt::format(
+        "time step dt = {:.6g} s is above the stable limit dt_crit = {:.6g} s set by element {} "
+        "(min_e L_e / c_e); use dt <= {:.6g} s or a safety factor < 1",
+        dt, m.dt_crit, m.dt_crit_elem, m.dt_crit));
+  if (!(damping >= 0) || !std::isfinite(damping))
+    throw ModelError(fmt::format("damping alpha = {} 1/s must be >= 0", damping));
+  m.dt = dt;
+  m.damping = damping;
+  m.cd_A.resize(m.n_nodes);
+  m.cd_B.resize(m.n_nodes);
+  m.cd_C.resize(m.n_nodes);
+  for (index_t i = 0; i < m.n_nodes; ++i) {
+    const auto k = central_difference_constants(m.mass[i], dt, damping);
+    m.cd_A[i] = k.A;
+    m.cd_B[i] = k.B;
+    m.cd_C[i] = k.C;
+  }
+}
+
+TissueModel<double> build_model(const ModelInput& in) {
+  TissueModel<double> m;
+  if (in.nodes.size() % 3 != 0) throw ModelError(in.source + ": node coordinate count is not a multiple of 3");
+  if (in.tets.size() % 4 != 0) throw ModelError(in.source + ": element corner count is not a multiple of 4");
+  m.n_nodes = static_cast<index_t>(in.nodes.size() / 3);
+  m.n_elems = static_cast<index_t>(in.tets.size() / 4);
+  if (m.n_nodes < 4 || m.n_elems < 1) throw ModelError(in.source + ": the mesh needs at least one tetrahedron");
+  check_materials(in);
+  const index_t n = m.n_nodes, ne = m.n_elems;
+  for (size_t k = 0; k < in.nodes.size(); ++k)
+    if (!std::isfinite(in.nodes[k]))
+      throw ModelError(fmt::format("{}: node {}: coordinate {} is not finite", in.source, k / 3, "xyz"[k % 3]));
+  if (!in.elem_material.empty() && in.elem_material.size() != size_t(ne))
+    throw ModelError(fmt::format("{}: {} element material ids for {} elements", in.source, in.elem_material.size(), ne));
+  if (!in.fixed.empty() && in.fixed.size() != size_t(n))
+    throw ModelError(fmt::format("{}: {} fixed flags for {} nodes", in.source, in.fixed.size(), n));
+
+  m.X.resize(3 * n);
+  for (index_t i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) m.X[c * n + i] = in.nodes[3 * i + c];
+  double bbox = 0;
+  for (int c = 0; c < 3; ++c) {
+    auto [lo, hi] = std::minmax_element(m.X.begin() + c * n, m.X.begin() + (c + 1) * n);
+    bbox = std::max(bbox, *hi - *lo);
+  }
+  const double vol_eps = 1e-12 * bbox * bbox * bbox;
+
+  m.elem_nodes.resize(4 * ne);
+  m.dndx.resize(12 * ne);
+  m.volume.resize(ne);
+  m.mu.resize(ne);
+  m.K.resize(ne);
+  m.mass.assign(n, 0.0);
+  m.node_flags.assign(n, 0);
+  m.dt_crit = std::numeric_limits<double>::infinity();
+  std::vector<index_t> uses(n, 0);
+  for (index_t e = 0; e < ne; ++e) {
+    index_t c[4];
+    for (int a = 0; a < 4; ++a) {
+      c[a] = in.tets[4 * e + a];
+      if (c[a] < 0 || c[a] >= n)
+        throw ModelError(fmt::format("{}: element {}: corner {} refers to node {}, but there are {} nodes", in.source,
+                                     e, a, c[a], n));
+      for (int b = 0; b < a; ++b)
+        if (c[b] == c[a])
+          throw ModelError(fmt::format("{}: element {}: node {} appears twice (zero-volume tet)", in.source, e, c[a]));
+    }
+    Vec3<double> X[4];
+    for (int a = 0; a < 4; ++a) X[a] = node_pos(in.nodes, c[a]);
+    double dN[12];
+    double V = tet_shape_gradients(X, dN);
+    if (std::fabs(V) <= vol_eps)
+      throw ModelError(fmt::format("{}: element {} (nodes {} {} {} {}): zero volume {:.3g} m^3; tets must have V > 0",
+                                   in.source, e, c[0], c[1], c[2], c[3], V));
+    if (V < 0) {  // inverted input: swap corners 1 and 2
+      std::swap(c[1], c[2]);
+      std::swap(X[1], X[2]);
+      V = tet_shape_gradients(X, dN);
+      ++m.reoriented;
+    }
+    const index_t mat = in.elem_material.empty() ? 0 : in.elem_material[e];
+    if (mat < 0 || size_t(mat) >= in.materials.size())
+      throw ModelError(fmt::format("{}: element {}: material index {} out of range (0..{})", in.source, e, mat,
+                                   in.materials.size() - 1));
+    const MaterialParams& p = in.materials[mat];
+    for (int a = 0; a < 4; ++a) {
+      m.elem_nodes[a * ne + e] = c[a];
+      m.mass[c[a]] += p.rho * V / 4;
+      ++uses[c[a]];
+    }
+    for (int k = 0; k < 12; ++k) m.dndx[k * ne + e] = dN[k];
+    m.volume[e] = V;
+    m.mu[e] = p.mu;
+    m.K[e] = p.K;
+    m.total_mass += p.rho * V;
+    const double lambda = p.K - 2.0 * p.mu / 3.0;
+    const double wave = std::sqrt((lambda + 2 * p.mu) / p.rho);
+    const double dt_e = tet_min_altitude(X, V) / wave;
+    if (dt_e < m.dt_crit) {
+      m.dt_crit = dt_e;
+      m.dt_crit_elem = e;
+    }
+  }
+  for (index_t i = 0; i < n; ++i)
+    if (uses[i] == 0)
+      throw ModelError(fmt::format("{}: node {} belongs to no element (every node needs mass)", in.source, i));
+    else if (!in.fixed.empty() && in.fixed[i])
+      m.node_flags[i] |= kFixed;
+
+  // node -> (element, corner) lists, sorted by element for a deterministic gather
+  m.node_elem_start.assign(n + 1, 0);
+  for (index_t i = 0; i < n; ++i) m.node_elem_start[i + 1] = m.node_elem_start[i] + uses[i];
+  m.node_elem.resize(4 * ne);
+  std::vector<index_t> fill(m.node_elem_start.begin(), m.node_elem_start.end() - 1);
+  for (index_t e = 0; e < ne; ++e)
+    for (int a = 0; a < 4; ++a) m.node_elem[fill[m.elem_nodes[a * ne + e]]++] = 4 * e + a;
+
+  extract_surface(m);
+
+  if (!(in.dt_safety > 0 && in.dt_safety < 1) && in.dt == 0)
+    throw ModelError(fmt::format("{}: dt safety factor {} must be in (0, 1)", in.source, in.dt_safety));
+  const double dt = in.dt > 0 ? in.dt : in.dt_safety * m.dt_crit;
+  const double damping = in.damping >= 0 ? in.damping : 2.0 * lowest_mode_estimate(m);
+  try {
+    set_time_step(m, dt, damping);
+  } catch (const ModelError& err) {
+    throw ModelError(in.source + ": " + err.what());
+  }
+  return m;
+}
+
+template <class T>
+TissueModel<T> convert(const TissueModel<double>& m) {
+  TissueModel<T> r;
+  auto cv = [](const std::vector<double>& v) { return std::vector<T>(v.begin(), v.end()); };
+  r.n_nodes = m.n_nodes;
+  r.n_elems = m.n_elems;
+  r.n_tris = m.n_tris;
+  r.X = cv(m.X);
+  r.elem_nodes = m.elem_nodes;
+  r.dndx = cv(m.dndx);
+  r.volume = cv(m.volume);
+  r.mu = cv(m.mu);
+  r.K = cv(m.K);
+  r.mass = cv(m.mass);
+  r.cd_A = cv(m.cd_A);
+  r.cd_B = cv(m.cd_B);
+  r.cd_C = cv(m.cd_C);
+  r.node_elem_start = m.node_elem_start;
+  r.node_elem = m.node_elem;
+  r.tris = m.tris;
+  r.tri_elem = m.tri_elem;
+  r.node_flags = m.node_flags;
+  r.dt = m.dt;
+  r.dt_crit = m.dt_crit;
+  r.dt_crit_elem = m.dt_crit_elem;
+  r.damping = m.damping;
+  r.total_mass = m.total_mass;
+  r.reoriented = m.reoriented;
+  return r;
+}
+
+template TissueModel<float> convert<float>(const TissueModel<double>&);
+template TissueModel<double> convert<double>(const TissueModel<double>&);
+
+}  // namespace tissue

@@ -1,0 +1,98 @@
+// The read-only tissue model: reference geometry, connectivity, shape
+// gradients, volumes, materials and integration constants, as one flat array
+// per field (structure of arrays). Built once per scene in double precision
+// by build_model(), then converted to the backend's scalar with convert().
+//
+// Array layouts ("component-major" keeps GPU loads coalesced):
+//   per-node vectors   v[c * n_nodes + i]   (c = 0, 1, 2 for x, y, z)
+//   element corners    elem_nodes[a * n_elems + e]   (a = 0..3)
+//   shape gradients    dndx[k * n_elems + e]   (k = 3 * a + j, dN_a/dX_j)
+#pragma once
+
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "core/hd.hpp"
+
+namespace tissue {
+
+/// Neo-Hookean parameters of one element set.
+struct MaterialParams {
+  double mu = 0;   ///< shear modulus (Pa)
+  double K = 0;    ///< bulk modulus (Pa)
+  double rho = 0;  ///< density (kg/m^3)
+};
+
+/// Everything build_model() needs, in SI units, with no file format in it.
+struct ModelInput {
+  std::vector<double> nodes;             ///< reference positions (n_nodes x 3, xyz interleaved) m
+  std::vector<index_t> tets;             ///< corner node ids (n_elems x 4)
+  std::vector<index_t> elem_material;    ///< material index per element (n_elems); empty = all 0
+  std::vector<MaterialParams> materials; ///< (n_materials)
+  std::vector<std::uint8_t> fixed;       ///< 1 = node held at zero displacement (n_nodes); empty = none
+  double dt = 0;                         ///< requested step (s); 0 = safety * dt_crit
+  double dt_safety = 0.5;                ///< fraction of dt_crit used when dt = 0
+  double damping = -1;                   ///< mass-proportional damping alpha (1/s); < 0 = from the lowest-mode estimate
+  std::string source = "<model>";        ///< names the input in error messages
+};
+
+/// Thrown for invalid model input; the message names the source, the
+/// element or node and the rule broken.
+struct ModelError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+/// Node flags (bit set, one byte per node).
+enum NodeFlag : std::uint8_t {
+  kFixed = 1,     ///< held at zero displacement by a scene constraint
+  kSurface = 2,   ///< a corner of a surface triangle
+};
+
+template <class T>
+struct TissueModel {
+  index_t n_nodes = 0, n_elems = 0, n_tris = 0;
+
+  std::vector<T> X;                  ///< reference positions (3 x n_nodes) m
+  std::vector<index_t> elem_nodes;   ///< (4 x n_elems)
+  std::vector<T> dndx;               ///< shape gradients (12 x n_elems) 1/m
+  std::vector<T> volume;             ///< reference volume (n_elems) m^3
+  std::vector<T> mu;                 ///< shear modulus (n_elems) Pa
+  std::vector<T> K;                  ///< bulk modulus (n_elems) Pa
+  std::vector<T> mass;               ///< lumped nodal mass (n_nodes) kg
+  std::vector<T> cd_A, cd_B, cd_C;   ///< central-difference constants (n_nodes each)
+  std::vector<index_t> node_elem_start;  ///< CSR offsets into node_elem (n_nodes + 1)
+  std::vector<index_t> node_elem;        ///< incident (element * 4 + corner), sorted (nnz)
+  std::vector<index_t> tris;         ///< outward surface triangles (3 x n_tris)
+  std::vector<index_t> tri_elem;     ///< tet owning each surface triangle (n_tris)
+  std::vector<std::uint8_t> node_flags;  ///< NodeFlag bits (n_nodes)
+
+  double dt = 0;            ///< time step (s)
+  double dt_crit = 0;       ///< critical step min_e L_e / c_e (s)
+  index_t dt_crit_elem = -1;///< element that sets dt_crit
+  double damping = 0;       ///< alpha (1/s)
+  double total_mass = 0;    ///< kg
+  index_t reoriented = 0;   ///< inverted input tets whose corners were swapped
+};
+
+/// Precomputes the model from the input; throws ModelError for zero-volume
+/// tets, unused nodes, bad materials or a dt above the stable limit (the
+/// message names the limit and the element that sets it). Inverted tets
+/// (V < 0) are reoriented by swapping corners 1 and 2 and counted.
+TissueModel<double> build_model(const ModelInput& in);
+
+/// Recomputes dt-dependent integration constants for a new step or damping
+/// (checks dt against dt_crit as build_model does).
+void set_time_step(TissueModel<double>& m, double dt, double damping);
+
+/// Lowest-mode estimate (rad/s) used for the default damping: the first
+/// shear mode of a clamped-free body of the model's largest extent,
+/// omega = (pi / 2) sqrt(mu / rho) / L, with the volume-weighted mean mu
+/// and the mean density.
+double lowest_mode_estimate(const TissueModel<double>& m);
+
+/// The same model in another scalar type.
+template <class T>
+TissueModel<T> convert(const TissueModel<double>& m);
+
+}  // namespace tissue

@@ -1,0 +1,40 @@
+// The per-step tissue state (structure of arrays, same layouts as model.hpp):
+// what the four IANP passes read and write, the region and the constraint
+// targets. A host backend owns one TissueState<T>; the CUDA backend keeps the
+// same fields as device buffers.
+#pragma once
+
+#include <vector>
+
+#include "core/model.hpp"
+#include "core/region.hpp"
+
+namespace tissue {
+
+template <class T>
+struct TissueState {
+  std::vector<T> u;        ///< displacement u^n (3 x n_nodes) m
+  std::vector<T> u_prev;   ///< u^{n-1} (3 x n_nodes) m
+  std::vector<T> u_next;   ///< u^{n+1}, written by pass 4 (3 x n_nodes) m
+  std::vector<T> u_held;   ///< target of held nodes: fixed, tool-driven, halo (3 x n_nodes) m
+  std::vector<std::uint8_t> held;  ///< 1 = node displacement set, not integrated (n_nodes)
+  std::vector<std::uint8_t> driven;///< 1 = node driven by the tool (n_nodes)
+  std::vector<T> elem_pv;  ///< pass 1: p_e V_e (n_elems) N m
+  std::vector<T> elem_J;   ///< pass 1: J_e = det F (n_elems)
+  std::vector<T> node_p;   ///< pass 2: nodal pressure p_a (n_nodes) Pa
+  std::vector<T> elem_f;   ///< pass 3: element nodal forces (12 x n_elems, k = 3 * corner + axis) N
+  std::vector<T> f;        ///< pass 4: internal nodal force (3 x n_nodes) N
+  Region region;           ///< active nodes and elements
+
+  void resize(index_t n_nodes, index_t n_elems) {
+    for (auto* v : {&u, &u_prev, &u_next, &u_held, &f}) v->assign(3 * size_t(n_nodes), T(0));
+    held.assign(n_nodes, 0);
+    driven.assign(n_nodes, 0);
+    elem_pv.assign(n_elems, T(0));
+    elem_J.assign(n_elems, T(1));
+    node_p.assign(n_nodes, T(0));
+    elem_f.assign(12 * size_t(n_elems), T(0));
+  }
+};
+
+}  // namespace tissue

@@ -1,0 +1,181 @@
+// Per-element and per-node TLED math for linear 4-node tetrahedra, written
+// once for every backend (DESIGN.md section 2). All quantities refer to the
+// undeformed configuration. Shapes: a tet's shape-function gradients are
+// dN[3*a + j] = dN_a/dX_j (a = corner 0..3, j = axis 0..2), in 1/m.
+#pragma once
+
+#include <cmath>
+
+#include "core/vec.hpp"
+
+namespace tissue {
+
+/// Reference volume (m^3, signed: > 0 for positively oriented corners) and
+/// shape-function gradients dN (4 x 3, 1/m) of the tet X[0..3] (m).
+/// Returns the signed volume; dN is written only when it is non-zero.
+template <class T>
+TISSUE_HD T tet_shape_gradients(const Vec3<T> X[4], T dN[12]) {
+  // Columns of J are the edge vectors from corner 0: X = X0 + J (xi, eta, zeta).
+  Mat3<T> J = {{X[1].x - X[0].x, X[2].x - X[0].x, X[3].x - X[0].x,  //
+                X[1].y - X[0].y, X[2].y - X[0].y, X[3].y - X[0].y,  //
+                X[1].z - X[0].z, X[2].z - X[0].z, X[3].z - X[0].z}};
+  const T d = det(J);
+  if (d == T(0)) return T(0);
+  const Mat3<T> Ji = inverse(J, d);  // rows of J^-1 are d(xi,eta,zeta)/dX
+  for (int j = 0; j < 3; ++j) {
+    dN[3 + j] = Ji(0, j);
+    dN[6 + j] = Ji(1, j);
+    dN[9 + j] = Ji(2, j);
+    dN[j] = -(Ji(0, j) + Ji(1, j) + Ji(2, j));
+  }
+  return d / T(6);
+}
+
+/// Smallest altitude of the tet (m): 3 V / largest face area. The
+/// characteristic length L_e of the critical time step.
+template <class T>
+TISSUE_HD T tet_min_altitude(const Vec3<T> X[4], T volume) {
+  const int faces[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
+  T max_area = 0;
+  for (const auto& f : faces) {
+    const T a = T(0.5) * norm(cross(X[f[1]] - X[f[0]], X[f[2]] - X[f[0]]));
+    max_area = a > max_area ? a : max_area;
+  }
+  return T(3) * std::fabs(volume) / max_area;
+}
+
+/// Deformation gradient F = I + sum_a u_a (dN_a/dX)^T from corner
+/// displacements u (m).
+template <class T>
+TISSUE_HD Mat3<T> deformation_gradient(const Vec3<T> u[4], const T dN[12]) {
+  Mat3<T> F = Mat3<T>::identity();
+TISSUE_UNROLL
+  for (int a = 0; a < 4; ++a)
+TISSUE_UNROLL
+    for (int i = 0; i < 3; ++i)
+TISSUE_UNROLL
+      for (int j = 0; j < 3; ++j) F(i, j) += u[a][i] * dN[3 * a + j];
+  return F;
+}
+
+/// Neo-Hookean second Piola-Kirchhoff stress (Pa) of DESIGN.md section 2:
+/// S = mu J^(-2/3) (I - I1/3 C^-1) + K J (J - 1) C^-1, C = F^T F, I1 = tr C.
+/// J = det F must be > 0 (the caller checks).
+template <class T>
+TISSUE_HD Mat3<T> neo_hookean_pk2(const Mat3<T>& F, T J, T mu, T K) {
+  const Mat3<T> C = transpose(F) * F;
+  const T I1 = trace(C);
+  const Mat3<T> Ci = inverse(C, J * J);  // det C = J^2
+  const T a = mu * std::pow(J, T(-2) / T(3));
+  const T b = -a * I1 / T(3) + K * J * (J - T(1));
+  Mat3<T> S = b * Ci;
+  S(0, 0) += a;
+  S(1, 1) += a;
+  S(2, 2) += a;
+  return S;
+}
+
+/// Neo-Hookean strain energy density (J/m^3):
+/// W = mu/2 (J^(-2/3) I1 - 3) + K/2 (J - 1)^2.
+template <class T>
+TISSUE_HD T neo_hookean_energy(const Mat3<T>& F, T mu, T K) {
+  const T J = det(F);
+  const T I1 = trace(transpose(F) * F);
+  return mu / T(2) * (std::pow(J, T(-2) / T(3)) * I1 - T(3)) + K / T(2) * (J - T(1)) * (J - T(1));
+}
+
+/// Element pressure (Pa) from the volumetric law p = K (J - 1).
+template <class T>
+TISSUE_HD T volumetric_pressure(T J, T K) {
+  return K * (J - T(1));
+}
+
+/// Element nodal forces f_a = V F S dN_a (N) for a given deformation
+/// gradient F (already modified for IANP, or plain) and its PK2 stress S.
+template <class T>
+TISSUE_HD void element_nodal_forces(const Mat3<T>& F, const Mat3<T>& S, T volume, const T dN[12], Vec3<T> f[4]) {
+  const Mat3<T> P = volume * (F * S);  // V times the first Piola-Kirchhoff stress
+TISSUE_UNROLL
+  for (int a = 0; a < 4; ++a) f[a] = P * Vec3<T>{dN[3 * a], dN[3 * a + 1], dN[3 * a + 2]};
+}
+
+/// IANP pass 3 for one element: from the averaged nodal pressure pbar (Pa),
+/// Jbar = 1 + pbar / K, Fbar = (Jbar / J)^(1/3) F, then f_a = V Fbar S(Fbar) dN_a.
+/// Returns J = det F of the unmodified gradient (<= 0 or NaN flags a bad element).
+template <class T>
+TISSUE_HD T ianp_element_forces(const Vec3<T> u[4], const T dN[12], T volume, T mu, T K, T pbar, Vec3<T> f[4]) {
+  Mat3<T> F = deformation_gradient(u, dN);
+  const T J = det(F);
+  const T Jbar = T(1) + pbar / K;
+  if (!(J > T(0)) || !(Jbar > T(0))) {
+    for (int a = 0; a < 4; ++a) f[a] = {T(0), T(0), T(0)};
+    return J > T(0) ? Jbar : J;  // report the non-positive one
+  }
+  const Mat3<T> Fbar = std::cbrt(Jbar / J) * F;
+  const Mat3<T> S = neo_hookean_pk2(Fbar, Jbar, mu, K);
+  element_nodal_forces(Fbar, S, volume, dN, f);
+  return J;
+}
+
+/// Plain (un-averaged) tet forces f_a = V F S(F) dN_a: the locking-prone
+/// formulation, kept as a reference for tests and the locking study.
+template <class T>
+TISSUE_HD T plain_element_forces(const Vec3<T> u[4], const T dN[12], T volume, T mu, T K, Vec3<T> f[4]) {
+  const Mat3<T> F = deformation_gradient(u, dN);
+  const T J = det(F);
+  if (!(J > T(0))) {
+    for (int a = 0; a < 4; ++a) f[a] = {T(0), T(0), T(0)};
+    return J;
+  }
+  element_nodal_forces(F, neo_hookean_pk2(F, J, mu, K), volume, dN, f);
+  return J;
+}
+
+/// Per-node integration constants of the damped central difference,
+/// u^{n+1} = A (R - f) + B u^n + C u^{n-1}, for lumped mass m (kg), step
+/// dt (s) and mass-proportional damping alpha (1/s).
+template <class T>
+struct CentralDifference {
+  T A, B, C;
+};
+
+template <class T>
+TISSUE_HD CentralDifference<T> central_difference_constants(T m, T dt, T alpha) {
+  const T inertia = m / (dt * dt);
+  const T damp = alpha * m / (T(2) * dt);
+  const T A = T(1) / (inertia + damp);
+  return {A, T(2) * inertia * A, (damp - inertia) * A};
+}
+
+/// One component of the central-difference update.
+template <class T>
+TISSUE_HD T central_difference_update(const CentralDifference<T>& k, T residual, T u, T u_prev) {
+  return k.A * residual + k.B * u + k.C * u_prev;
+}
+
+/// Segment A->B against triangle (P0, P1, P2) (Moller-Trumbore). Returns the
+/// fraction t in [0, 1] of |AB| at the hit, or a negative value for a miss
+/// (parallel segments miss). Hits on edges and vertices count (closed
+/// barycentric test). bary receives the weights of P1 and P2.
+template <class T>
+TISSUE_HD T segment_triangle(Vec3<T> A, Vec3<T> B, Vec3<T> P0, Vec3<T> P1, Vec3<T> P2, T bary[2]) {
+  const Vec3<T> d = B - A, e1 = P1 - P0, e2 = P2 - P0;
+  const Vec3<T> p = cross(d, e2);
+  const T det_ = dot(e1, p);
+  const T scale = norm(e1) * norm(e2) * norm(d);
+  if (!(std::fabs(det_) > scale * T(1e-7))) return T(-1);  // parallel or degenerate
+  const T inv = T(1) / det_;
+  const Vec3<T> s = A - P0;
+  const T b1 = dot(s, p) * inv;
+  if (b1 < T(0) || b1 > T(1)) return T(-1);
+  const Vec3<T> q = cross(s, e1);
+  const T b2 = dot(d, q) * inv;
+  if (b2 < T(0) || b1 + b2 > T(1)) return T(-1);
+  const T t = dot(e2, q) * inv;
+  if (t < T(0) || t > T(1)) return T(-1);
+  bary[0] = b1;
+  bary[1] = b2;
+  return t;
+}
+
+}  // namespace tissue

@@ -1,0 +1,17 @@
+// The cpu backend: TBB parallel loops over the region's elements and nodes,
+// Embree for the tool-segment query against the deformed surface.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "core/backend.hpp"
+
+namespace tissue {
+
+std::unique_ptr<Backend> make_cpu_backend(Precision precision);
+
+/// The processor's name and thread count, for reports.
+std::string cpu_device_name();
+
+}  // namespace tissue

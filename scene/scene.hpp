@@ -1,0 +1,83 @@
+// The scene model: one tissue object (mesh + element sets with materials),
+// constraints, tools and solver settings, in SI units. io/scene_xml reads and
+// writes it; scene/validate checks it and turns it into a core ModelInput.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/device.hpp"
+#include "core/hd.hpp"
+#include "core/model.hpp"
+#include "core/region.hpp"
+
+namespace tissue::scene {
+
+/// Neo-Hookean material given as (E, nu), (mu, K) or Lame (lambda, mu).
+struct Material {
+  enum class Form { YoungPoisson, ShearBulk, Lame };
+  std::string name;
+  Form form = Form::YoungPoisson;
+  double a = 0, b = 0;   ///< (E, nu) | (mu, K) | (lambda, mu), in Pa (nu dimensionless)
+  double rho = 1000;     ///< kg/m^3
+  int line = 0;          ///< source line, for messages (0 = unknown)
+
+  /// mu and K of this material (no validation).
+  MaterialParams params() const;
+};
+
+/// Elements carrying one material. `elements` empty with all = true: every element.
+struct ElementSet {
+  std::string name;
+  std::string material;             ///< Material::name
+  bool all = false;
+  std::vector<index_t> elements;    ///< element ids
+  int line = 0;
+};
+
+/// Fixed nodes: by id list, by an axis-aligned box, or by the side of a plane.
+struct Constraint {
+  enum class Kind { Nodes, Box, Plane };
+  Kind kind = Kind::Nodes;
+  std::vector<index_t> nodes;       ///< Kind::Nodes
+  double lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};   ///< Kind::Box (m)
+  double point[3] = {0, 0, 0}, normal[3] = {0, 0, 1};  ///< Kind::Plane: fixes nodes with (x - point).normal >= 0
+  int line = 0;
+};
+
+/// A rigid probe.
+struct Tool {
+  std::string name = "probe";
+  double radius = 1e-3;             ///< tip radius (m), for display
+  std::string device = "scripted";  ///< "scripted" | "mouse" | "phantom"
+  std::string path_file;            ///< CSV t,x,y,z for a scripted path (empty = `path`)
+  std::vector<Waypoint> path;       ///< inline scripted path
+  int line = 0;
+};
+
+struct Solver {
+  std::string backend = "cpu";
+  Precision precision = Precision::Float;
+  double dt = 0;                    ///< s; 0 = safety * dt_crit
+  double dt_safety = 0.5;
+  double damping = -1;              ///< alpha (1/s); < 0 = 2 x lowest-mode estimate
+  int depth = 5;                    ///< kDepthAll = whole mesh
+  double tick = 1e-3;               ///< haptic period (s)
+  double residual_tol = 1e-3;
+  double kinetic_tol = 1e-6;
+};
+
+struct Scene {
+  std::string source = "<scene>";   ///< file name, for messages
+  std::string mesh_file;            ///< external mesh (resolved relative to the scene file), if any
+  std::vector<double> nodes;        ///< (n_nodes x 3) m
+  std::vector<index_t> tets;        ///< (n_elems x 4)
+  std::vector<Material> materials;
+  std::vector<ElementSet> sets;
+  std::vector<Constraint> constraints;
+  std::vector<Tool> tools;
+  Solver solver;
+};
+
+}  // namespace tissue::scene
