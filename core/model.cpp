@@ -135,6 +135,7 @@ TissueModel<double> build_model(const ModelInput& in) {
   m.K.resize(ne);
   m.mass.assign(n, 0.0);
   m.node_flags.assign(n, 0);
+  m.ianp = in.ianp;
   m.dt_crit = std::numeric_limits<double>::infinity();
   std::vector<index_t> uses(n, 0);
   for (index_t e = 0; e < ne; ++e) {
@@ -240,6 +241,7 @@ TissueModel<T> convert(const TissueModel<double>& m) {
   r.damping = m.damping;
   r.total_mass = m.total_mass;
   r.reoriented = m.reoriented;
+  r.ianp = m.ianp;
   return r;
 }
 

@@ -34,6 +34,7 @@ struct ModelInput {
   double dt = 0;                         ///< requested step (s); 0 = safety * dt_crit
   double dt_safety = 0.5;                ///< fraction of dt_crit used when dt = 0
   double damping = -1;                   ///< mass-proportional damping alpha (1/s); < 0 = from the lowest-mode estimate
+  bool ianp = true;                      ///< improved average nodal pressure; false = plain (locking-prone) tets
   std::string source = "<model>";        ///< names the input in error messages
 };
 
@@ -73,6 +74,7 @@ struct TissueModel {
   double damping = 0;       ///< alpha (1/s)
   double total_mass = 0;    ///< kg
   index_t reoriented = 0;   ///< inverted input tets whose corners were swapped
+  bool ianp = true;         ///< pass 3 uses IANP (else plain tet forces, passes 1-2 unused)
 };
 
 /// Precomputes the model from the input; throws ModelError for zero-volume
