@@ -73,8 +73,12 @@ class Backend {
   /// Flood-fills the region from seeds for depth rings (kDepthAll = whole
   /// mesh), holds the new halo at its current displacement, freezes nodes
   /// leaving the region and recomputes pass 1 over all elements. Returns
-  /// the region's sizes (n_inner, n_halo, nodes.size(), elems.size()).
-  virtual Region build_region(std::span<const index_t> seeds, int depth) = 0;
+  /// the region's sizes only (a device backend keeps the lists on the
+  /// device: nothing but these four counts comes back).
+  virtual RegionSizes build_region(std::span<const index_t> seeds, int depth) = 0;
+
+  /// The current region's full lists (downloads; for output and tests).
+  virtual Region region() = 0;
 
   /// Prescribes the displacement (3 per node, m) of tool-driven nodes; these
   /// stay held until clear_driven(). Replaces the previous driven set.

@@ -29,6 +29,16 @@ struct Region {
   index_t n_inner = 0, n_halo = 0;
 
   bool whole() const { return depth == kDepthAll; }
+  RegionSizes sizes() const { return {depth, n_inner, n_halo, static_cast<index_t>(elems.size())}; }
+};
+
+/// Sizes of a region (what a device backend reports back per rebuild).
+struct RegionSizes {
+  int depth = kDepthAll;
+  index_t n_inner = 0, n_halo = 0;  ///< inner and halo nodes
+  index_t n_elems = 0;              ///< computed elements
+  index_t nodes() const { return n_inner + n_halo; }
+  bool whole() const { return depth == kDepthAll; }
 };
 
 /// Reference flood fill on the host (ascending lists, so every backend can be

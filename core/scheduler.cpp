@@ -26,7 +26,10 @@ void Scheduler::start_contact(const Hit& hit, const Vec3<double>& tip) {
   if (!region_.whole()) {
     std::vector<index_t> seeds(nodes_, nodes_ + 3);
     std::sort(seeds.begin(), seeds.end());
-    if (seeds != region_.seeds) region_ = backend_.build_region(seeds, settings_.depth);
+    if (seeds != seeds_) {
+      region_ = backend_.build_region(seeds, settings_.depth);
+      seeds_ = std::move(seeds);
+    }
   }
   drive(tip);
 }
@@ -76,8 +79,8 @@ TickReport Scheduler::tick(Device& device) {
   rep.contact_tri = contact_tri_;
   rep.force = contact_tri_ >= 0 ? -1.0 * r.reaction : Vec3<double>{0, 0, 0};
   rep.internal = r.internal;
-  rep.region_nodes = static_cast<index_t>(region_.nodes.size());
-  rep.region_elems = static_cast<index_t>(region_.elems.size());
+  rep.region_nodes = region_.nodes();
+  rep.region_elems = region_.n_elems;
   const double held = std::sqrt(r.held_force2);
   rep.residual = std::sqrt(r.free_force2) / std::max(held, settings_.force_floor);
   rep.kinetic = r.kinetic;

@@ -65,7 +65,8 @@ class Scheduler {
   long total_steps() const { return total_steps_; }
   double time() const { return tick_ * settings_.tick; }
   bool in_contact() const { return contact_tri_ >= 0; }
-  const Region& region() const { return region_; }
+  const RegionSizes& region() const { return region_; }
+  const std::vector<index_t>& seeds() const { return seeds_; }
   const SchedulerSettings& settings() const { return settings_; }
 
  private:
@@ -80,7 +81,8 @@ class Scheduler {
   long total_steps_ = 0;
   bool has_prev_ = false;
   Vec3<double> prev_ = {};
-  Region region_;
+  RegionSizes region_;
+  std::vector<index_t> seeds_;  ///< seeds of the current region (sorted)
   // contact
   index_t contact_tri_ = -1;
   index_t nodes_[3] = {-1, -1, -1};
