@@ -20,6 +20,15 @@ inline constexpr int kDepthAll = -1;
 /// Role of a node in the region (one byte per node).
 enum NodeRole : std::uint8_t { kOutside = 0, kInner = 1, kHalo = 2 };
 
+/// Sizes of a region (what a device backend reports back per rebuild).
+struct RegionSizes {
+  int depth = kDepthAll;
+  index_t n_inner = 0, n_halo = 0;  ///< inner and halo nodes
+  index_t n_elems = 0;              ///< computed elements
+  index_t nodes() const { return n_inner + n_halo; }
+  bool whole() const { return depth == kDepthAll; }
+};
+
 struct Region {
   int depth = kDepthAll;
   std::vector<index_t> seeds;           ///< flood-fill seeds (the contact triangle's nodes)
@@ -30,15 +39,6 @@ struct Region {
 
   bool whole() const { return depth == kDepthAll; }
   RegionSizes sizes() const { return {depth, n_inner, n_halo, static_cast<index_t>(elems.size())}; }
-};
-
-/// Sizes of a region (what a device backend reports back per rebuild).
-struct RegionSizes {
-  int depth = kDepthAll;
-  index_t n_inner = 0, n_halo = 0;  ///< inner and halo nodes
-  index_t n_elems = 0;              ///< computed elements
-  index_t nodes() const { return n_inner + n_halo; }
-  bool whole() const { return depth == kDepthAll; }
 };
 
 /// Reference flood fill on the host (ascending lists, so every backend can be
