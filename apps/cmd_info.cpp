@@ -1,0 +1,19 @@
+// tissue info: which backends this build has and which can run here.
+#include <fmt/format.h>
+
+#include "apps/commands.hpp"
+#include "backends/registry.hpp"
+
+namespace tissue::app {
+
+void add_info_command(CLI::App& app, int& rc) {
+  auto* cmd = app.add_subcommand("info", "List the backends, whether they were built and can run here");
+  cmd->callback([&rc] {
+    for (const BackendInfo& b : list_backends())
+      fmt::print("{:6} {:10} {}\n", b.name, b.available ? "available" : (b.built ? "no device" : "not built"),
+                 b.detail);
+    rc = 0;
+  });
+}
+
+}  // namespace tissue::app

@@ -1,0 +1,30 @@
+// tissue run: drives a scene's scripted tool through the Scheduler on the
+// chosen backend, logs every tick, and ends with a summary.
+#include <fmt/format.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <memory>
+
+#include "apps/commands.hpp"
+#include "apps/run_session.hpp"
+
+namespace tissue::app {
+
+void add_run_command(CLI::App& app, int& rc) {
+  auto* cmd = app.add_subcommand("run", "Run a scene's scripted tool path and print a summary");
+  auto opt = std::make_shared<RunOptions>();
+  cmd->add_option("scene", opt->scene, "Scene XML file, or @kidney for the built-in kidney")->required();
+  cmd->add_option("--backend", opt->backend, "cpu | cuda (default: the scene's)");
+  cmd->add_option("--precision", opt->precision, "float | double (default: the scene's)");
+  cmd->add_option("--depth", opt->depth, "Region depth N (rings from the contact triangle) or 'all'");
+  auto* ticks = cmd->add_option("--ticks", opt->ticks, "Haptic ticks to run (default: the tool path's length)");
+  cmd->add_option("--time", opt->time, "Simulated seconds to run")->excludes(ticks);
+  cmd->add_option("--out", opt->out_dir, "Write ticks.csv and VTU frames (series.pvd) here");
+  cmd->add_option("--frames", opt->frames, "VTU frames to save over the run (with --out)")->default_val(10);
+  cmd->add_flag("--quiet", opt->quiet, "No progress lines");
+  cmd->callback([opt, &rc] { rc = run_scene(*opt); });
+}
+
+}  // namespace tissue::app

@@ -1,0 +1,27 @@
+// Sub-command registration for the tissue command line. Each adds a CLI11
+// sub-app whose callback runs the command and stores its exit code in rc.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <string>
+
+#include "scene/scene.hpp"
+
+namespace tissue::app {
+
+void add_mesh_command(CLI::App& app, int& rc);
+void add_run_command(CLI::App& app, int& rc);
+void add_bench_command(CLI::App& app, int& rc);
+void add_info_command(CLI::App& app, int& rc);
+
+/// Loads a scene file, or the built-in kidney for the name "@kidney".
+scene::Scene load_scene_arg(const std::string& arg);
+
+/// Parses "float" | "double".
+Precision parse_precision(const std::string& s);
+
+/// Parses a region depth: a number >= 0 or "all".
+int parse_depth(const std::string& s);
+
+}  // namespace tissue::app

@@ -1,0 +1,32 @@
+#include <fmt/format.h>
+
+#include <charconv>
+#include <stdexcept>
+
+#include "apps/commands.hpp"
+#include "io/kidney.hpp"
+#include "io/scene_xml.hpp"
+
+namespace tissue::app {
+
+scene::Scene load_scene_arg(const std::string& arg) {
+  if (arg == "@kidney") return default_kidney_scene();
+  return read_scene(arg);
+}
+
+Precision parse_precision(const std::string& s) {
+  if (s == "float") return Precision::Float;
+  if (s == "double") return Precision::Double;
+  throw std::invalid_argument(fmt::format("precision '{}' is neither 'float' nor 'double'", s));
+}
+
+int parse_depth(const std::string& s) {
+  if (s == "all") return kDepthAll;
+  int d = -1;
+  const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), d);
+  if (ec != std::errc() || end != s.data() + s.size() || d < 0)
+    throw std::invalid_argument(fmt::format("region depth '{}' is neither a whole number >= 0 nor 'all'", s));
+  return d;
+}
+
+}  // namespace tissue::app

@@ -1,0 +1,26 @@
+// tissue: the command line. Sub-commands live one per file (cmd_*.cpp); each
+// registers its options on a CLI11 sub-app and returns an exit code.
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <exception>
+
+#include "apps/commands.hpp"
+
+int main(int argc, char** argv) {
+  CLI::App app{"tissue: interactive nonlinear soft-tissue deformation (TLED, Neo-Hookean, IANP)"};
+  app.require_subcommand(1);
+  int rc = 0;
+  tissue::app::add_mesh_command(app, rc);
+  tissue::app::add_run_command(app, rc);
+  tissue::app::add_info_command(app, rc);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tissue: error: %s\n", e.what());
+    return 1;
+  }
+  return rc;
+}

@@ -1,0 +1,127 @@
+#include "apps/run_session.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <optional>
+
+#include "apps/commands.hpp"
+#include "backends/registry.hpp"
+#include "io/csv_log.hpp"
+#include "io/path_csv.hpp"
+#include "io/vtu_writer.hpp"
+#include "scene/validate.hpp"
+
+namespace tissue::app {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+/// The scripted device of the scene's first tool.
+ScriptedDevice scripted_device(const scene::Scene& s) {
+  if (s.tools.empty()) throw std::runtime_error(s.source + ": the scene has no tool to drive");
+  const scene::Tool& tool = s.tools.front();
+  if (tool.device != "scripted")
+    throw std::runtime_error(fmt::format("{}: tool '{}' uses the '{}' device; `tissue run` needs a scripted tool "
+                                         "(use `tissue view` for interactive devices)",
+                                         s.source, tool.name, tool.device));
+  if (!tool.path.empty()) return ScriptedDevice(tool.path);
+  return ScriptedDevice(read_path_csv(tool.path_file));
+}
+
+void print_summary(const RunSummary& r, const Backend& b, const TissueModel<double>& m, int steps_per_tick) {
+  fmt::print(
+      "summary\n"
+      "  backend            {} ({}, {})\n"
+      "  mesh               {} nodes, {} tets, {} surface triangles\n"
+      "  time step          dt = {:.4g} s (dt_crit = {:.4g} s, element {}), {} TLED steps per {:.3g} ms tick\n"
+      "  TLED steps         {}\n"
+      "  haptic ticks       {}\n"
+      "  simulated time     {:.4f} s\n"
+      "  wall time          {:.3f} s ({:.2f}x real time)\n"
+      "  steps/s            {:.0f}\n"
+      "  max displacement   {:.4g} mm\n"
+      "  peak tool force    {:.4g} N\n"
+      "  final tool force   ({:.4g}, {:.4g}, {:.4g}) N\n"
+      "  region             {} nodes, {} elements\n"
+      "  equilibrium        {}\n",
+      b.name(), to_string(b.precision()), b.device_name(), m.n_nodes, m.n_elems, m.n_tris, m.dt, m.dt_crit,
+      m.dt_crit_elem, steps_per_tick, 1e3 * m.dt * steps_per_tick, r.steps, r.ticks, r.sim_time, r.wall_time,
+      r.sim_time / std::max(r.wall_time, 1e-12), r.steps / std::max(r.wall_time, 1e-12), 1e3 * r.max_disp,
+      r.peak_force, r.final_force.x, r.final_force.y, r.final_force.z, r.region_nodes, r.region_elems,
+      r.equilibrium ? "reached" : "not reached");
+}
+
+}  // namespace
+
+void apply_overrides(scene::Scene& s, const RunOptions& o) {
+  if (!o.backend.empty()) s.solver.backend = o.backend;
+  if (!o.precision.empty()) s.solver.precision = parse_precision(o.precision);
+  if (!o.depth.empty()) s.solver.depth = parse_depth(o.depth);
+}
+
+int run_scene(const RunOptions& o) {
+  scene::Scene s = load_scene_arg(o.scene);
+  apply_overrides(s, o);
+  ScriptedDevice device = scripted_device(s);
+  const TissueModel<double> model = scene::load_model(s);
+  const SchedulerSettings settings = scene::scheduler_settings(s);
+  std::unique_ptr<Backend> backend = create_backend(s.solver.backend, s.solver.precision);
+  backend->upload(model);
+  Scheduler sched(*backend, model, settings);
+
+  long n_ticks = o.ticks;
+  if (n_ticks < 0) {
+    const double t = o.time > 0 ? o.time : device.duration();
+    n_ticks = std::max(1L, std::lround(t / settings.tick));
+  }
+  if (model.reoriented > 0) fmt::print("note: {} inverted input tets were reoriented\n", model.reoriented);
+  fmt::print("running {} ticks of {} on {} ({}), region depth {}\n", n_ticks, s.source, backend->name(),
+             to_string(backend->precision()), settings.depth == kDepthAll ? "all" : std::to_string(settings.depth));
+
+  std::optional<TickLog> log;
+  std::optional<VtuSeries> frames;
+  long frame_every = 0;
+  if (!o.out_dir.empty()) {
+    std::filesystem::create_directories(o.out_dir);
+    log.emplace(o.out_dir + "/ticks.csv");
+    frames.emplace(o.out_dir);
+    frame_every = std::max(1L, n_ticks / std::max(1, o.frames));
+  }
+
+  RunSummary sum;
+  TickReport rep;
+  const auto t0 = Clock::now();
+  auto last_progress = t0;
+  for (long k = 0; k < n_ticks; ++k) {
+    rep = sched.tick(device);
+    sum.peak_force = std::max(sum.peak_force, norm(rep.force));
+    if (log) log->write(rep);
+    if (frames && ((k + 1) % frame_every == 0 || k + 1 == n_ticks)) frames->write(model, backend->download(), rep.time);
+    if (!o.quiet && seconds_since(last_progress) > 1.0) {
+      last_progress = Clock::now();
+      const double wall = seconds_since(t0);
+      fmt::print(stderr, "  tick {}/{}  t = {:.3f} s  {:.0f} steps/s  |f| = {:.4g} N  region {} nodes\n", k + 1,
+                 n_ticks, rep.time, sched.total_steps() / wall, norm(rep.force), rep.region_nodes);
+    }
+  }
+  sum.wall_time = seconds_since(t0);
+  sum.ticks = sched.ticks();
+  sum.steps = sched.total_steps();
+  sum.sim_time = sched.time();
+  sum.max_disp = rep.max_disp;
+  sum.final_force = rep.force;
+  sum.region_nodes = rep.region_nodes;
+  sum.region_elems = rep.region_elems;
+  sum.equilibrium = rep.equilibrium;
+  print_summary(sum, *backend, model, sched.steps_per_tick());
+  if (!o.out_dir.empty()) fmt::print("wrote {}/ticks.csv and {}/series.pvd\n", o.out_dir, o.out_dir);
+  return 0;
+}
+
+}  // namespace tissue::app

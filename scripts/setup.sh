@@ -1,0 +1,31 @@
+# Shared by scripts/demo and scripts/test (sourced): installs the Debian
+# packages the build needs, then configures and builds into build/.
+# Not root: prints the exact apt-get line and stops.
+set -euo pipefail
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+BUILD=${TISSUE_BUILD_DIR:-$ROOT/build}
+PACKAGES=(build-essential cmake pkg-config libfmt-dev libeigen3-dev libtbb-dev libembree-dev libtet1.5-dev
+          libassimp-dev libpugixml-dev libcli11-dev libgtest-dev libgmock-dev)
+
+install_packages() {
+  local missing=()
+  for p in "${PACKAGES[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  [ ${#missing[@]} -eq 0 ] && return 0
+  if [ "$(id -u)" -ne 0 ]; then
+    echo "tissue: missing Debian packages. Run as root:" >&2
+    echo "  apt-get update && apt-get install -y ${missing[*]}" >&2
+    exit 1
+  fi
+  echo "tissue: installing ${missing[*]}"
+  apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}"
+}
+
+build_tissue() {
+  local jobs
+  jobs=$(nproc)
+  cmake -S "$ROOT" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release ${TISSUE_CMAKE_ARGS:-}
+  cmake --build "$BUILD" -j "$jobs"
+}
