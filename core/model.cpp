@@ -4,7 +4,6 @@
 #include <cmath>
 #include <fmt/format.h>
 #include <limits>
-#include <map>
 #include <array>
 
 #include "core/tet.hpp"
@@ -29,34 +28,45 @@ void check_materials(const ModelInput& in) {
   }
 }
 
-/// Boundary faces (faces owned by one tet), oriented outward.
+/// Boundary faces (faces owned by one tet), oriented outward. Sorts all
+/// 4 n_elems faces by their sorted corner ids; a face seen once is boundary.
 void extract_surface(TissueModel<double>& m) {
   // Face opposite corner k, ordered so that its normal points away from corner k
   // for a positively oriented tet.
   static constexpr int kFace[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
-  std::map<std::array<index_t, 3>, std::pair<index_t, int>> faces;  // sorted ids -> (elem, corner)
-  std::map<std::array<index_t, 3>, int> count;
+  struct Face {
+    std::array<index_t, 3> key;  // sorted corner ids
+    index_t elem;
+    int corner;
+  };
   const index_t ne = m.n_elems;
+  std::vector<Face> faces;
+  faces.reserve(4 * size_t(ne));
   for (index_t e = 0; e < ne; ++e)
     for (int k = 0; k < 4; ++k) {
       std::array<index_t, 3> f{m.elem_nodes[kFace[k][0] * ne + e], m.elem_nodes[kFace[k][1] * ne + e],
                                m.elem_nodes[kFace[k][2] * ne + e]};
       std::sort(f.begin(), f.end());
-      faces.emplace(f, std::pair{e, k});
-      ++count[f];
+      faces.push_back({f, e, k});
     }
-  for (const auto& [f, c] : count) {
-    if (c != 1) continue;
-    const auto [e, k] = faces[f];
-    for (int v = 0; v < 3; ++v) m.tris.push_back(m.elem_nodes[kFace[k][v] * ne + e]);
-    m.tri_elem.push_back(e);
+  std::sort(faces.begin(), faces.end(), [](const Face& a, const Face& b) {
+    return a.key != b.key ? a.key < b.key : a.elem < b.elem;
+  });
+  std::vector<index_t> tri;  // (n_tris x 3) while collecting
+  for (size_t i = 0; i < faces.size();) {
+    size_t j = i + 1;
+    while (j < faces.size() && faces[j].key == faces[i].key) ++j;
+    if (j - i == 1) {
+      const Face& f = faces[i];
+      for (int v = 0; v < 3; ++v) tri.push_back(m.elem_nodes[kFace[f.corner][v] * ne + f.elem]);
+      m.tri_elem.push_back(f.elem);
+    }
+    i = j;
   }
   m.n_tris = static_cast<index_t>(m.tri_elem.size());
-  // component-major: (3 x n_tris)
-  std::vector<index_t> cm(m.tris.size());
+  m.tris.resize(tri.size());  // component-major (3 x n_tris)
   for (index_t t = 0; t < m.n_tris; ++t)
-    for (int v = 0; v < 3; ++v) cm[v * m.n_tris + t] = m.tris[3 * t + v];
-  m.tris.swap(cm);
+    for (int v = 0; v < 3; ++v) m.tris[v * m.n_tris + t] = tri[3 * t + v];
   for (index_t t = 0; t < 3 * m.n_tris; ++t) m.node_flags[m.tris[t]] |= kSurface;
 }
 
