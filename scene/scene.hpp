@@ -23,7 +23,9 @@ struct Material {
   double rho = 1000;     ///< kg/m^3
   int line = 0;          ///< source line, for messages (0 = unknown)
 
-  /// mu and K of this material (no validation).
+  /// mu and K of this material, with rho (no validation):
+  /// YoungPoisson: mu = E / (2 (1 + nu)), K = E / (3 (1 - 2 nu));
+  /// ShearBulk: as given; Lame: K = lambda + 2 mu / 3.
   MaterialParams params() const;
 };
 
@@ -51,26 +53,31 @@ struct Tool {
   std::string name = "probe";
   double radius = 1e-3;             ///< tip radius (m), for display
   std::string device = "scripted";  ///< "scripted" | "mouse" | "phantom"
-  std::string path_file;            ///< CSV t,x,y,z for a scripted path (empty = `path`)
-  std::vector<Waypoint> path;       ///< inline scripted path
+  std::string path_file;            ///< CSV t,x,y,z (io/path_csv) relative to the scene file; empty = inline
+  std::vector<Waypoint> path;       ///< scripted path (inline, or loaded from path_file by read_scene)
   int line = 0;
 };
 
+/// Solver and loop settings; io/scene_xml's <solver> element.
 struct Solver {
-  std::string backend = "cpu";
-  Precision precision = Precision::Float;
+  std::string backend = "cpu";      ///< "cpu" | "cuda"
+  Precision precision = Precision::Float;  ///< scalar of the backend's store and arithmetic
   double dt = 0;                    ///< s; 0 = safety * dt_crit
-  double dt_safety = 0.5;
-  double damping = -1;              ///< alpha (1/s); < 0 = 2 x lowest-mode estimate
+  double dt_safety = 0.5;           ///< fraction of dt_crit used when dt = 0, in (0, 1)
+  double damping = -1;              ///< alpha (1/s); -1 = auto: 2 x lowest-mode estimate
   int depth = 5;                    ///< kDepthAll = whole mesh
   double tick = 1e-3;               ///< haptic period (s)
-  double residual_tol = 1e-3;
-  double kinetic_tol = 1e-6;
+  double residual_tol = 1e-3;       ///< equilibrium: relative free-node residual (SchedulerSettings)
+  double kinetic_tol = 1e-6;        ///< equilibrium: relative kinetic energy (SchedulerSettings)
+  bool ianp = true;                 ///< improved average nodal pressure; false = plain tets
+  int line = 0;                     ///< source line of <solver>, for messages (0 = unknown / defaults)
 };
 
+/// A whole scene as read from a file, before validation (scene/validate.hpp).
 struct Scene {
   std::string source = "<scene>";   ///< file name, for messages
   std::string mesh_file;            ///< external mesh (resolved relative to the scene file), if any
+  int mesh_line = 0;                ///< source line of <mesh>, for messages
   std::vector<double> nodes;        ///< (n_nodes x 3) m
   std::vector<index_t> tets;        ///< (n_elems x 4)
   std::vector<Material> materials;

@@ -1,0 +1,55 @@
+#include "scene/text.hpp"
+
+#include <charconv>
+
+namespace tissue::scene {
+namespace {
+
+constexpr std::string_view kBlanks = " \t\r\n\v\f";
+
+/// from_chars rejects a leading '+'; accept one (not "+-1").
+std::string_view drop_plus(std::string_view t) {
+  if (t.size() > 1 && t[0] == '+' && t[1] != '-' && t[1] != '+') t.remove_prefix(1);
+  return t;
+}
+
+}  // namespace
+
+std::string_view trim(std::string_view text) {
+  const size_t b = text.find_first_not_of(kBlanks);
+  if (b == std::string_view::npos) return {};
+  const size_t e = text.find_last_not_of(kBlanks);
+  return text.substr(b, e - b + 1);
+}
+
+std::optional<double> parse_real(std::string_view text) {
+  const std::string_view t = drop_plus(trim(text));
+  if (t.empty()) return std::nullopt;
+  double v = 0;
+  const auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), v, std::chars_format::general);
+  // out-of-range values (1e999) are reported as errors too, not rounded to inf
+  if (ec != std::errc() || end != t.data() + t.size()) return std::nullopt;
+  return v;
+}
+
+std::optional<long long> parse_integer(std::string_view text) {
+  const std::string_view t = drop_plus(trim(text));
+  if (t.empty()) return std::nullopt;
+  long long v = 0;
+  const auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
+  if (ec != std::errc() || end != t.data() + t.size()) return std::nullopt;
+  return v;
+}
+
+std::vector<std::string_view> split_blanks(std::string_view text) {
+  std::vector<std::string_view> out;
+  size_t i = text.find_first_not_of(kBlanks);
+  while (i != std::string_view::npos) {
+    const size_t j = text.find_first_of(kBlanks, i);
+    out.push_back(text.substr(i, j == std::string_view::npos ? std::string_view::npos : j - i));
+    i = text.find_first_not_of(kBlanks, j);
+  }
+  return out;
+}
+
+}  // namespace tissue::scene

@@ -1,0 +1,28 @@
+// Strict text-to-number conversion shared by the scene readers (io/scene_xml,
+// io/tetgen_files, io/path_csv): a token is a number only if all of it is
+// one, so "3e", "1.5mm" or "abc" are rejected instead of silently read as a
+// prefix. Callers add the file, line and field to the error.
+#pragma once
+
+#include <optional>
+#include <string_view>
+#include <vector>
+
+namespace tissue::scene {
+
+/// The real number spelled by all of `text` (surrounding blanks ignored;
+/// decimal or scientific notation, optional sign, "inf"/"nan" accepted so that
+/// validation can name them); nullopt when any character is left over.
+std::optional<double> parse_real(std::string_view text);
+
+/// The integer spelled by all of `text` (surrounding blanks ignored, optional
+/// sign); nullopt when it is not one or does not fit in a long long.
+std::optional<long long> parse_integer(std::string_view text);
+
+/// Blank-separated tokens of `text` (spaces, tabs, CR, LF), as views into it.
+std::vector<std::string_view> split_blanks(std::string_view text);
+
+/// `text` without leading and trailing blanks.
+std::string_view trim(std::string_view text);
+
+}  // namespace tissue::scene

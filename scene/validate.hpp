@@ -1,0 +1,62 @@
+// Scene validation and its translation into core inputs. Every rule broken
+// gives a SceneError whose message reads
+//     "<file>:<line>: <what> ... <rule>"
+// (just "<file>: " when the scene was built in code and has no line), naming
+// the material, element set, element, node, tool or solver setting at fault.
+// The rules, in the order they are checked (the first broken one is reported):
+//   mesh:        coordinates and corner counts, finite coordinates, corner ids in range;
+//   materials:   names unique and non-empty; numbers finite; rho > 0;
+//                (E, nu): E > 0 and -1 < nu < 0.5; (mu, K): mu > 0, K > 0;
+//                Lame (lambda, mu): mu > 0 and K = lambda + 2 mu / 3 > 0;
+//   sets:        material defined; element ids in range; no element twice
+//                (within or across sets); every element in a set;
+//   constraints: node ids in range; numbers finite; box min <= max; plane
+//                normal non-zero; every constraint fixes at least one node;
+//   tools:       radius finite and > 0; device scripted | mouse | phantom; a
+//                scripted tool has a path; waypoints finite with increasing t;
+//   solver:      backend cpu | cuda; numbers finite; dt >= 0 (0 = auto);
+//                0 < dt-safety < 1; damping >= 0 or -1 (auto); depth >= -1
+//                (-1 = all); tick > 0; residual-tol > 0; kinetic-tol > 0.
+// The mesh geometry itself (zero-volume tets, unused nodes, dt above the
+// stable limit) is checked by core build_model(), whose ModelError names the
+// scene file (ModelInput::source) and the element or node.
+#pragma once
+
+#include <stdexcept>
+#include <string>
+
+#include "core/model.hpp"
+#include "core/scheduler.hpp"
+#include "scene/scene.hpp"
+
+namespace tissue::scene {
+
+/// A scene rule broken; the message starts with "<file>:<line>: ".
+struct SceneError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+/// "<source>:<line>", or just "<source>" when line is 0 (unknown).
+std::string location(const Scene& scene, int line);
+
+/// Checks every rule listed above; throws SceneError for the first one broken.
+void validate(const Scene& scene);
+
+/// Validates the scene and resolves it for build_model(): nodes and tets
+/// copied, element sets turned into one material index per element (the
+/// index of the set's material in scene.materials), materials into
+/// (mu, K, rho), constraints into the `fixed` mask (n_nodes, 1 = fixed), and
+/// the solver's dt, dt_safety, damping and ianp plus the scene's source name
+/// copied. Throws SceneError.
+ModelInput to_model_input(const Scene& scene);
+
+/// build_model(to_model_input(scene)): throws SceneError for scene rules and
+/// core ModelError (naming the source and the element or node) for the mesh
+/// geometry: zero-volume tets, unused nodes, a dt above the stable limit.
+TissueModel<double> load_model(const Scene& scene);
+
+/// The Scheduler's settings from the validated solver section (depth, tick,
+/// tolerances). Throws SceneError for a broken solver rule.
+SchedulerSettings scheduler_settings(const Scene& scene);
+
+}  // namespace tissue::scene
