@@ -13,6 +13,7 @@ int main(int argc, char** argv) {
   int rc = 0;
   tissue::app::add_mesh_command(app, rc);
   tissue::app::add_run_command(app, rc);
+  tissue::app::add_bench_command(app, rc);
   tissue::app::add_info_command(app, rc);
   try {
     app.parse(argc, argv);

@@ -37,4 +37,12 @@ std::unique_ptr<Backend> create_backend(const std::string& name, Precision preci
   throw std::runtime_error("unknown backend '" + name + "' (known: cpu, cuda)");
 }
 
+double measure_device_bandwidth(const std::string& name) {
+#ifdef TISSUE_HAVE_CUDA
+  if (name == "cuda") return cuda_copy_bandwidth();
+#endif
+  (void)name;
+  return 0;
+}
+
 }  // namespace tissue

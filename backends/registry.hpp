@@ -24,4 +24,8 @@ std::vector<BackendInfo> list_backends();
 /// turn on when it was not built, or why it cannot run here.
 std::unique_ptr<Backend> create_backend(const std::string& name, Precision precision);
 
+/// Measured device-memory copy bandwidth of a device backend (bytes/s,
+/// read + write counted); 0 for host backends (measure the host instead).
+double measure_device_bandwidth(const std::string& name);
+
 }  // namespace tissue

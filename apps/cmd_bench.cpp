@@ -1,0 +1,28 @@
+// tissue bench: JSON rows of throughput and latency (bench/bench.hpp).
+#include <fmt/format.h>
+
+#include <memory>
+
+#include "apps/commands.hpp"
+#include "bench/bench.hpp"
+
+namespace tissue::app {
+
+void add_bench_command(CLI::App& app, int& rc) {
+  auto* cmd = app.add_subcommand("bench", "Measure TLED steps/s, collision latency and haptic tick time (JSON rows)");
+  auto o = std::make_shared<bench::BenchOptions>();
+  auto precision = std::make_shared<std::string>("both");
+  cmd->add_option("--backend", o->backend, "cpu | cuda")->default_val("cpu");
+  cmd->add_option("--precision", *precision, "float | double | both")->default_val("both");
+  cmd->add_option("--json", o->json_path, "Also write the rows as a JSON array to this file");
+  cmd->add_option("--sizes", o->sizes, "Whole-mesh TLED meshes: kidney 100k 1m 4m")->delimiter(',');
+  cmd->add_option("--min-seconds", o->min_seconds, "Time each measurement at least this long")->default_val(0.5);
+  cmd->add_flag("--quick", o->quick, "Smoke run on tiny meshes (CI)");
+  cmd->callback([o, precision, &rc] {
+    if (*precision != "both") o->precisions = {parse_precision(*precision)};
+    bench::run_bench(*o);
+    rc = 0;
+  });
+}
+
+}  // namespace tissue::app

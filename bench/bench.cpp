@@ -1,0 +1,283 @@
+#include "bench/bench.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <ctime>
+#include <fstream>
+#include <memory>
+#include <stdexcept>
+#include <thread>
+
+#include "backends/registry.hpp"
+#include "core/box_mesh.hpp"
+#include "core/scheduler.hpp"
+#include "io/kidney.hpp"
+#include "scene/validate.hpp"
+
+namespace tissue::bench {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+/// A generated test mesh: box of c^3 cells x 6 tets, soft tissue material.
+TissueModel<double> box_model(int nx, int ny, int nz, double lx, double ly, double lz) {
+  ModelInput in;
+  box_mesh(in, nx, ny, nz, lx, ly, lz);
+  in.materials = {{3000 / 2.9, 3000 / 0.3, 1000}};  // E = 3000 Pa, nu = 0.45
+  in.source = fmt::format("box {}x{}x{}", nx, ny, nz);
+  return build_model(in);
+}
+
+struct NamedModel {
+  std::string name;
+  TissueModel<double> model;
+};
+
+NamedModel mesh_by_name(const std::string& name, bool quick) {
+  if (name == "kidney") return {name, scene::load_model(default_kidney_scene())};
+  // cells per side of a cube with 6 c^3 ~ the asked count
+  const long want = name == "100k" ? 100'000 : name == "1m" ? 1'000'000 : name == "4m" ? 4'000'000 : -1;
+  if (want < 0) throw std::invalid_argument("unknown bench mesh '" + name + "' (kidney, 100k, 1m, 4m)");
+  int c = static_cast<int>(std::lround(std::cbrt(want / 6.0)));
+  if (quick) c = std::min(c, 8);
+  return {name, box_model(c, c, c, 0.1, 0.1, 0.1)};
+}
+
+struct Row {
+  std::string text = "{";
+  void add(const std::string& k, const std::string& v) { sep(), text += fmt::format("\"{}\": \"{}\"", k, v); }
+  void add(const std::string& k, double v) { sep(), text += fmt::format("\"{}\": {:.6g}", k, v); }
+  void add(const std::string& k, long v) { sep(), text += fmt::format("\"{}\": {}", k, v); }
+  std::string done() const { return text + "}"; }
+  void sep() {
+    if (text.size() > 1) text += ", ";
+  }
+};
+
+struct Context {
+  const BenchOptions& o;
+  std::string device;
+  double bandwidth = 0;  // bytes/s
+  std::string date;
+  std::vector<std::string> rows;
+
+  Row row(const std::string& bench, const Backend& b) const {
+    Row r;
+    r.add("bench", bench);
+    r.add("backend", b.name());
+    r.add("precision", std::string(to_string(b.precision())));
+    r.add("device", device);
+    r.add("date", date);
+    r.add("measured_bandwidth_GBps", bandwidth * 1e-9);
+    return r;
+  }
+  void emit(const Row& r) {
+    rows.push_back(r.done());
+    fmt::print("{}\n", rows.back());
+    std::fflush(stdout);
+  }
+};
+
+/// Times advance() in batches until min_seconds have passed; returns steps/s.
+double time_steps(Backend& b, double min_seconds, long& steps_done) {
+  b.advance(2);  // warm-up (graph capture, caches)
+  b.reduce();
+  int batch = 1;
+  steps_done = 0;
+  const auto t0 = Clock::now();
+  double t = 0;
+  while ((t = since(t0)) < min_seconds) {
+    b.advance(batch);
+    b.reduce();  // synchronises device backends
+    steps_done += batch;
+    if (since(t0) < 0.1 * min_seconds) batch *= 2;
+  }
+  return steps_done / t;
+}
+
+/// A slow uniform push of the top so that the tet math runs on real, non-zero strains.
+void preload(Backend& b, const TissueModel<double>& m) {
+  std::vector<double> u(3 * size_t(m.n_nodes), 0.0);
+  double zlo = 1e300, zhi = -1e300;
+  for (index_t i = 0; i < m.n_nodes; ++i) {
+    zlo = std::min(zlo, m.X[2 * m.n_nodes + i]);
+    zhi = std::max(zhi, m.X[2 * m.n_nodes + i]);
+  }
+  for (index_t i = 0; i < m.n_nodes; ++i) {
+    const double s = (m.X[2 * m.n_nodes + i] - zlo) / (zhi - zlo);
+    u[2 * m.n_nodes + i] = -0.02 * s * (zhi - zlo);  // 2% compression
+    u[0 * m.n_nodes + i] = 0.005 * s * (zhi - zlo);  // and a little shear
+  }
+  b.set_displacements(u);
+}
+
+void bench_tled(Context& c, const std::string& mesh, Precision p) {
+  NamedModel nm = mesh_by_name(mesh, c.o.quick);
+  auto b = create_backend(c.o.backend, p);
+  b->upload(nm.model);
+  preload(*b, nm.model);
+  const RegionSizes whole = b->build_region({}, kDepthAll);
+  long steps = 0;
+  const double sps = time_steps(*b, c.o.min_seconds, steps);
+  const int s = p == Precision::Float ? 4 : 8;
+  const double bytes = bytes_per_step(nm.model.n_nodes, nm.model.n_elems, s);
+  Row r = c.row("tled_whole_mesh", *b);
+  r.add("mesh", nm.name);
+  r.add("nodes", long(nm.model.n_nodes));
+  r.add("elements", long(nm.model.n_elems));
+  r.add("region_elements", long(whole.n_elems));
+  r.add("steps", steps);
+  r.add("steps_per_s", sps);
+  r.add("element_steps_per_s", sps * nm.model.n_elems);
+  r.add("bytes_per_step", bytes);
+  r.add("achieved_GBps", sps * bytes * 1e-9);
+  if (c.bandwidth > 0) r.add("bandwidth_fraction", sps * bytes / c.bandwidth);
+  c.emit(r);
+
+  if (mesh != "kidney") return;
+  // region-limited (depth 5) against the whole mesh, seeded at the middle surface triangle
+  const index_t t = nm.model.n_tris / 2;
+  std::vector<index_t> seeds;
+  for (int v = 0; v < 3; ++v) seeds.push_back(nm.model.tris[v * nm.model.n_tris + t]);
+  std::sort(seeds.begin(), seeds.end());
+  const RegionSizes reg = b->build_region(seeds, 5);
+  const double sps5 = time_steps(*b, c.o.min_seconds, steps);
+  Row q = c.row("tled_region_depth5", *b);
+  q.add("mesh", nm.name);
+  q.add("nodes", long(nm.model.n_nodes));
+  q.add("elements", long(nm.model.n_elems));
+  q.add("region_nodes", long(reg.nodes()));
+  q.add("region_elements", long(reg.n_elems));
+  q.add("steps", steps);
+  q.add("steps_per_s", sps5);
+  q.add("element_steps_per_s", sps5 * reg.n_elems);
+  q.add("speedup_vs_whole", sps5 / sps);
+  c.emit(q);
+}
+
+void bench_collision(Context& c, long want_tris, Precision p) {
+  // a flat slab of N x N x 1 cells: 4 (N^2 + 2N) surface triangles
+  int N = static_cast<int>(std::lround(std::sqrt(want_tris / 4.0)));
+  if (c.o.quick) N = std::min(N, 10);
+  const TissueModel<double> m = box_model(N, N, 1, 0.1, 0.1, 0.1 / N);
+  auto b = create_backend(c.o.backend, p);
+  b->upload(m);
+  preload(*b, m);
+  const Vec3<double> a{0.05 + 1e-4, 0.05 + 2e-4, 0.2}, z{0.05 + 1e-4, 0.05 + 2e-4, -0.1};
+  std::vector<double> lat;
+  for (int k = 0; k < 200; ++k) {
+    b->advance(1);  // the surface moves between queries, as in the haptic loop
+    b->reduce();
+    const auto t0 = Clock::now();
+    const Hit h = b->collide(a, z);
+    lat.push_back(since(t0));
+    if (!h.hit()) throw std::runtime_error("bench: the collision segment missed the slab");
+  }
+  std::sort(lat.begin(), lat.end());
+  Row r = c.row("collision", *b);
+  r.add("surface_triangles", long(m.n_tris));
+  r.add("queries", long(lat.size()));
+  r.add("latency_us_p50", 1e6 * lat[lat.size() / 2]);
+  r.add("latency_us_p99", 1e6 * lat[lat.size() * 99 / 100]);
+  c.emit(r);
+}
+
+void bench_tick(Context& c, Precision p, int depth) {
+  const scene::Scene s = default_kidney_scene();
+  const TissueModel<double> m = scene::load_model(s);
+  SchedulerSettings st = scene::scheduler_settings(s);
+  st.depth = depth;
+  auto b = create_backend(c.o.backend, p);
+  b->upload(m);
+  Scheduler sched(*b, m, st);
+  ScriptedDevice dev(s.tools.front().path);
+  std::vector<double> lat;
+  const long n = std::lround((c.o.quick ? 0.3 : dev.duration()) / st.tick);
+  for (long k = 0; k < n; ++k) {
+    const auto t0 = Clock::now();
+    sched.tick(dev);
+    if (sched.in_contact()) lat.push_back(since(t0));
+  }
+  if (lat.empty()) throw std::runtime_error("bench: the kidney tool path never touched the kidney");
+  std::sort(lat.begin(), lat.end());
+  Row r = c.row("haptic_tick", *b);
+  r.add("mesh", std::string("kidney"));
+  r.add("depth", depth == kDepthAll ? std::string("all") : std::to_string(depth));
+  r.add("steps_per_tick", long(sched.steps_per_tick()));
+  r.add("ticks_in_contact", long(lat.size()));
+  r.add("tick_ms_p50", 1e3 * lat[lat.size() / 2]);
+  r.add("tick_ms_p99", 1e3 * lat[lat.size() * 99 / 100]);
+  r.add("tick_ms_max", 1e3 * lat.back());
+  c.emit(r);
+}
+
+std::string today() {
+  const std::time_t t = std::time(nullptr);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d", std::gmtime(&t));
+  return buf;
+}
+
+}  // namespace
+
+double bytes_per_step(long n, long ne, int s) {
+  // pass 1: corners 16, dN 12s, V s, K s, u 3s per node; writes p_e V_e and J
+  const double p1 = ne * (16.0 + 16 * s) + 3.0 * s * n;
+  // pass 2: CSR offsets 4 per node, entries 16 per element, p V and V; writes p_a
+  const double p2 = 4.0 * n + ne * (16.0 + 2 * s) + 1.0 * s * n;
+  // pass 3: corners, u, p_a, dN, V, mu, K; writes 12 force components
+  const double p3 = ne * (16.0 + 27 * s) + 4.0 * s * n;
+  // pass 4: CSR, element forces, u^n, u^{n-1}, A/B/C, held flag and target; writes u^{n+1}, f
+  const double p4 = 5.0 * n + ne * (16.0 + 12 * s) + 18.0 * s * n;
+  return p1 + p2 + p3 + p4;
+}
+
+double host_copy_bandwidth() {
+  const size_t bytes = size_t(1) << 28;  // 256 MiB each way, far above the caches
+  std::vector<char> a(bytes, 1), b(bytes, 0);
+  const unsigned nt = std::max(1u, std::thread::hardware_concurrency());
+  auto copy = [&] {
+    std::vector<std::thread> th;
+    const size_t chunk = bytes / nt;
+    for (unsigned k = 0; k < nt; ++k)
+      th.emplace_back([&, k] { std::memcpy(b.data() + k * chunk, a.data() + k * chunk, chunk); });
+    for (auto& t : th) t.join();
+  };
+  copy();
+  double best = 1e300;
+  for (int r = 0; r < 5; ++r) {
+    const auto t0 = Clock::now();
+    copy();
+    best = std::min(best, since(t0));
+  }
+  return 2.0 * bytes / best;
+}
+
+std::vector<std::string> run_bench(const BenchOptions& o) {
+  Context c{o, "", 0, today(), {}};
+  {
+    auto probe = create_backend(o.backend, Precision::Float);
+    c.device = probe->device_name();
+  }
+  c.bandwidth = o.backend == "cpu" ? host_copy_bandwidth() : measure_device_bandwidth(o.backend);
+  for (Precision p : o.precisions) {
+    for (const std::string& mesh : o.sizes) bench_tled(c, mesh, p);
+    for (long tris : {10'000L, 100'000L}) bench_collision(c, tris, p);
+    for (int depth : {5, kDepthAll}) bench_tick(c, p, depth);
+  }
+  if (!o.json_path.empty()) {
+    std::ofstream f(o.json_path);
+    if (!f) throw std::runtime_error("cannot write " + o.json_path);
+    f << "[\n";
+    for (size_t k = 0; k < c.rows.size(); ++k) f << "  " << c.rows[k] << (k + 1 < c.rows.size() ? ",\n" : "\n");
+    f << "]\n";
+  }
+  return c.rows;
+}
+
+}  // namespace tissue::bench

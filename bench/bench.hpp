@@ -1,0 +1,39 @@
+// `tissue bench`: throughput and latency of the active backend, as JSON rows.
+// Measured: whole-mesh TLED steps/s and element-steps/s on the kidney and on
+// generated box meshes (~100k, 1M, 4M tets); region-limited (depth 5) versus
+// whole mesh on the kidney; collision latency against ~10k and ~100k surface
+// triangles; the time of one full haptic tick; the device's measured copy
+// bandwidth and the fraction of it a TLED step achieves (bytes_per_step below).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/hd.hpp"
+
+namespace tissue::bench {
+
+struct BenchOptions {
+  std::string backend = "cpu";
+  std::vector<Precision> precisions = {Precision::Float, Precision::Double};
+  std::vector<std::string> sizes = {"kidney", "100k", "1m", "4m"};  ///< whole-mesh TLED meshes
+  double min_seconds = 0.5;  ///< time each measurement at least this long
+  std::string json_path;     ///< empty: rows only on stdout
+  bool quick = false;        ///< CI smoke run: tiny meshes, short timings
+};
+
+/// Fewest bytes one whole-mesh TLED step must move through memory (each
+/// array the four passes read or write counted once per pass that touches
+/// it), for n nodes, ne elements and scalar size s bytes. Used for the
+/// achieved-bandwidth column; see docs/benchmarks/README.md for the list.
+double bytes_per_step(long n, long ne, int s);
+
+/// Copy bandwidth of host memory (bytes/s, read + write counted), measured
+/// with a parallel copy of a buffer much larger than the caches.
+double host_copy_bandwidth();
+
+/// Runs every benchmark; returns the JSON rows (one object per line) it also
+/// printed. Throws if the backend cannot run here.
+std::vector<std::string> run_bench(const BenchOptions& o);
+
+}  // namespace tissue::bench
