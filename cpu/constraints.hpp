@@ -1,0 +1,49 @@
+// Which nodes the cpu backend integrates and which it holds: the region
+// change of Backend::build_region and the tool-driven set of
+// Backend::set_driven / clear_driven. Host functions of (const model&,
+// state&), called once per contact or tick, never inside the step loop.
+//
+// Holding rule (a node's held flag and u_held target):
+//   fixed  (model.node_flags & kFixed)  held, u_held = 0 (wins over everything)
+//   driven (state.driven)               held, u_held = the tool's target
+//   halo   (region role kHalo)          held, u_held = u at the time it became halo
+//   other region nodes                  integrated
+// Nodes outside the region are "frozen": u == u_prev == u_next, so the
+// vector rotation of pass 4 leaves them where they are.
+#pragma once
+
+#include <span>
+
+#include "core/state.hpp"
+
+namespace tissue::cpu {
+
+/// Installs `region` (a flood_fill result) into the state: nodes outside it
+/// are frozen (u_prev = u_next = u, f = 0); halo nodes are held at their
+/// current u (and stopped: u_prev = u_next = u); fixed and driven nodes stay
+/// held; every other region node is released. Elements outside the region
+/// get elem_f = 0, so a halo node's f sums only computed elements. The
+/// caller recomputes pass 1 over all elements afterwards.
+template <class T>
+void install_region(const TissueModel<T>& m, TissueState<T>& s, Region region);
+
+/// Makes `nodes` tool-driven with targets u (3 per node, xyz interleaved, m),
+/// releasing the previously driven nodes in `driven_list` first (see
+/// release_driven); driven_list then holds `nodes`. Throws
+/// std::invalid_argument for a size mismatch, a node out of range or outside
+/// the region, or a non-finite target.
+template <class T>
+void drive_nodes(const TissueModel<T>& m, TissueState<T>& s, std::vector<index_t>& driven_list,
+                 std::span<const index_t> nodes, std::span<const double> u);
+
+/// Releases every node in driven_list (then empties it): a released node
+/// stays held only if it is fixed (at 0) or halo (at its current u).
+template <class T>
+void release_driven(const TissueModel<T>& m, TissueState<T>& s, std::vector<index_t>& driven_list);
+
+/// Held flags and targets of fixed nodes from the model (upload): held =
+/// fixed, u_held = 0, nothing driven.
+template <class T>
+void init_constraints(const TissueModel<T>& m, TissueState<T>& s);
+
+}  // namespace tissue::cpu

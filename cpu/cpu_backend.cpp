@@ -1,0 +1,187 @@
+#include "cpu/cpu_backend.hpp"
+
+#include <fmt/format.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <cmath>
+#include <fstream>
+#include <numeric>
+#include <stdexcept>
+
+#include "cpu/constraints.hpp"
+#include "cpu/host_backend.hpp"
+#include "cpu/reduce.hpp"
+
+namespace tissue {
+
+std::unique_ptr<Backend> make_cpu_backend(Precision precision) {
+  if (precision == Precision::Float) return std::make_unique<cpu::CpuBackend<float>>();
+  return std::make_unique<cpu::CpuBackend<double>>();
+}
+
+std::string cpu_device_name() {
+  std::string model = "unknown CPU";
+  std::ifstream in("/proc/cpuinfo");
+  for (std::string line; std::getline(in, line);) {
+    if (line.rfind("model name", 0) != 0) continue;
+    const auto colon = line.find(':');
+    if (colon == std::string::npos) continue;
+    const auto first = line.find_first_not_of(" \t", colon + 1);
+    if (first != std::string::npos) model = line.substr(first);
+    break;
+  }
+  return fmt::format("{} ({} TBB threads)", model, tbb::this_task_arena::max_concurrency());
+}
+
+namespace cpu {
+
+template <class T>
+Precision CpuBackend<T>::precision() const {
+  return std::is_same_v<T, float> ? Precision::Float : Precision::Double;
+}
+
+template <class T>
+std::string CpuBackend<T>::device_name() const {
+  return cpu_device_name();
+}
+
+template <class T>
+void CpuBackend<T>::require_upload(const char* what) const {
+  if (!uploaded_) throw std::logic_error(fmt::format("cpu backend: {} called before upload()", what));
+}
+
+template <class T>
+void CpuBackend<T>::upload(const TissueModel<double>& model) {
+  uploaded_ = false;
+  surface_.reset();
+  model_ = convert<T>(model);
+  state_.resize(model_.n_nodes, model_.n_elems);
+  node_volume_ = node_volumes(model_);
+  all_elems_.resize(model_.n_elems);
+  std::iota(all_elems_.begin(), all_elems_.end(), 0);
+  driven_list_.clear();
+  driven_list_.reserve(64);
+  init_constraints(model_, state_);
+  state_.region = flood_fill(model_, std::span<const index_t>{}, kDepthAll);
+  cpu::element_pressure(model_, state_, all_elems_, all_elems_part_);
+  double J;
+  bad_.take(&J);
+  surface_ = std::make_unique<EmbreeSurface<T>>(model_);
+  uploaded_ = true;
+}
+
+template <class T>
+void CpuBackend<T>::set_displacements(std::span<const double> u) {
+  require_upload("set_displacements");
+  const index_t n = model_.n_nodes;
+  if (u.size() != 3 * std::size_t(n))
+    throw std::invalid_argument(
+        fmt::format("set_displacements: {} values for {} nodes (need 3 x n_nodes = {})", u.size(), n, 3 * n));
+  for (std::size_t k = 0; k < u.size(); ++k)
+    if (!std::isfinite(u[k]))
+      throw std::invalid_argument(fmt::format("set_displacements: node {}: displacement {} = {} is not finite",
+                                              k % n, "xyz"[k / n], u[k]));
+  for (std::size_t k = 0; k < u.size(); ++k) state_.u[k] = state_.u_prev[k] = state_.u_next[k] = T(u[k]);
+  for (index_t a = 0; a < n; ++a)
+    if (state_.region.role[a] == kHalo && !state_.driven[a] && !(model_.node_flags[a] & kFixed))
+      for (int c = 0; c < 3; ++c) state_.u_held[c * n + a] = state_.u[c * n + a];
+  cpu::element_pressure(model_, state_, all_elems_, all_elems_part_);
+  surface_->mark_dirty();
+}
+
+template <class T>
+RegionSizes CpuBackend<T>::build_region(std::span<const index_t> seeds, int depth) {
+  require_upload("build_region");
+  install_region(model_, state_, flood_fill(model_, seeds, depth));
+  cpu::element_pressure(model_, state_, all_elems_, all_elems_part_);
+  return state_.region.sizes();
+}
+
+template <class T>
+void CpuBackend<T>::set_driven(std::span<const index_t> nodes, std::span<const double> u) {
+  require_upload("set_driven");
+  drive_nodes(model_, state_, driven_list_, nodes, u);
+}
+
+template <class T>
+void CpuBackend<T>::clear_driven() {
+  require_upload("clear_driven");
+  release_driven(model_, state_, driven_list_);
+}
+
+template <class T>
+void CpuBackend<T>::element_pressure() {
+  cpu::element_pressure(model_, state_, state_.region.elems, parts_.element_pressure);
+}
+
+template <class T>
+void CpuBackend<T>::nodal_pressure() {
+  cpu::nodal_pressure(model_, state_, node_volume_, state_.region.nodes, parts_.nodal_pressure);
+}
+
+template <class T>
+void CpuBackend<T>::element_forces() {
+  cpu::element_forces(model_, state_, state_.region.elems, bad_, parts_.element_forces);
+}
+
+template <class T>
+void CpuBackend<T>::node_update() {
+  cpu::node_update(model_, state_, state_.region.nodes, parts_.node_update);
+  surface_->mark_dirty();
+}
+
+template <class T>
+void CpuBackend<T>::step() {
+  element_pressure();
+  nodal_pressure();
+  element_forces();
+  node_update();
+}
+
+template <class T>
+void CpuBackend<T>::advance(int steps) {
+  require_upload("advance");
+  for (int s = 0; s < steps; ++s) step();
+}
+
+template <class T>
+Hit CpuBackend<T>::collide(Vec3<double> a, Vec3<double> b) {
+  require_upload("collide");
+  return surface_->query(state_.u, a, b);
+}
+
+template <class T>
+Reductions CpuBackend<T>::reduce() {
+  require_upload("reduce");
+  Reductions r = reduce_region(model_, state_, state_.region.nodes);
+  r.bad_elem = bad_.take(&r.bad_J);
+  if (r.bad_elem < 0) r.bad_J = 1;
+  return r;
+}
+
+template <class T>
+Fields CpuBackend<T>::download() {
+  require_upload("download");
+  auto cv = [](const std::vector<T>& v) { return std::vector<double>(v.begin(), v.end()); };
+  return {cv(state_.u), cv(state_.node_p), cv(state_.elem_J), cv(state_.f)};
+}
+
+template <class T>
+void CpuBackend<T>::write_positions(float* dst) {
+  require_upload("write_positions");
+  const index_t n = model_.n_nodes;
+  const T* X = model_.X.data();
+  const T* u = state_.u.data();
+  tbb::parallel_for(tbb::blocked_range<index_t>(0, n, 4096), [&](const tbb::blocked_range<index_t>& r) {
+    for (index_t i = r.begin(); i != r.end(); ++i)
+      for (int c = 0; c < 3; ++c) dst[3 * i + c] = float(X[c * n + i] + u[c * n + i]);
+  });
+}
+
+template class CpuBackend<float>;
+template class CpuBackend<double>;
+
+}  // namespace cpu
+}  // namespace tissue
