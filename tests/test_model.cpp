@@ -1,0 +1,435 @@
+// Tests of the model precomputation (core/model.cpp) on box meshes
+// (core/box_mesh.hpp): lumped masses, volumes, node -> element lists, the
+// outward surface, the critical time step and every input rule with its
+// message, and convert<float>.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include "core/box_mesh.hpp"
+#include "core/model.hpp"
+#include "core/tet.hpp"
+
+namespace tissue {
+namespace {
+
+constexpr double kE = 3000.0, kNu = 0.45, kRho = 1000.0;
+
+MaterialParams material(double E, double nu, double rho) {
+  return {E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu)), rho};
+}
+
+/// A box [0, lx] x [0, ly] x [0, lz] of nx x ny x nz cells with brain-like tissue.
+ModelInput box_input(int nx, int ny, int nz, double lx, double ly, double lz) {
+  ModelInput in;
+  box_mesh(in, nx, ny, nz, lx, ly, lz);
+  in.materials = {material(kE, kNu, kRho)};
+  in.source = "box";
+  return in;
+}
+
+/// Calls fn, expects a ModelError whose message contains every one of parts.
+void expect_model_error(const std::function<void()>& fn, const std::vector<std::string>& parts) {
+  try {
+    fn();
+    ADD_FAILURE() << "no ModelError thrown; expected a message with '" << parts.front() << "'";
+  } catch (const ModelError& e) {
+    const std::string msg = e.what();
+    for (const auto& p : parts) EXPECT_NE(msg.find(p), std::string::npos) << "'" << p << "' missing from: " << msg;
+  }
+}
+
+Vec3<double> node_X(const TissueModel<double>& m, index_t i) {
+  return {m.X[i], m.X[m.n_nodes + i], m.X[2 * m.n_nodes + i]};
+}
+
+// ---------------------------------------------------------------- geometry and mass
+
+TEST(Model, BoxMeshSizesAndVolumes) {
+  const int nx = 3, ny = 2, nz = 4;
+  const double lx = 0.03, ly = 0.02, lz = 0.025;
+  const auto m = build_model(box_input(nx, ny, nz, lx, ly, lz));
+  EXPECT_EQ(m.n_nodes, (nx + 1) * (ny + 1) * (nz + 1));
+  EXPECT_EQ(m.n_elems, 6 * nx * ny * nz);
+  EXPECT_EQ(m.reoriented, 0);
+  const double cell = lx / nx * ly / ny * lz / nz;
+  double total = 0;
+  for (index_t e = 0; e < m.n_elems; ++e) {
+    EXPECT_NEAR(m.volume[e], cell / 6, 1e-12 * cell) << "element " << e;  // Kuhn tets are equal
+    total += m.volume[e];
+  }
+  EXPECT_NEAR(total, lx * ly * lz, 1e-12 * lx * ly * lz);
+  // node numbering of box_mesh
+  const index_t i = box_node(nx, ny, 2, 1, 3);
+  EXPECT_NEAR(node_X(m, i).x, 2 * lx / nx, 1e-15);
+  EXPECT_NEAR(node_X(m, i).y, 1 * ly / ny, 1e-15);
+  EXPECT_NEAR(node_X(m, i).z, 3 * lz / nz, 1e-15);
+}
+
+TEST(Model, ShapeGradientsMatchTetMath) {
+  const auto m = build_model(box_input(2, 2, 2, 0.02, 0.03, 0.01));
+  const index_t ne = m.n_elems;
+  for (index_t e = 0; e < ne; ++e) {
+    Vec3<double> X[4];
+    for (int a = 0; a < 4; ++a) X[a] = node_X(m, m.elem_nodes[a * ne + e]);
+    double dN[12];
+    EXPECT_NEAR(tet_shape_gradients(X, dN), m.volume[e], 1e-15 * m.volume[e]);
+    for (int k = 0; k < 12; ++k) EXPECT_NEAR(m.dndx[k * ne + e], dN[k], 1e-12 * 200) << "element " << e << " k " << k;
+  }
+}
+
+// Each tet gives rho_e V_e / 4 to each corner; the masses add up to the
+// total rho V, here with two materials of different density.
+TEST(Model, LumpedMassesTwoMaterials) {
+  ModelInput in = box_input(2, 3, 2, 0.02, 0.03, 0.02);
+  in.materials.push_back(material(kE, kNu, 2.5 * kRho));
+  const index_t ne = static_cast<index_t>(in.tets.size() / 4);
+  in.elem_material.resize(ne);
+  for (index_t e = 0; e < ne; ++e) in.elem_material[e] = e % 3 == 0 ? 1 : 0;
+  const auto m = build_model(in);
+  std::vector<double> expect(m.n_nodes, 0.0);
+  double total = 0;
+  for (index_t e = 0; e < ne; ++e) {
+    const double rho = in.materials[in.elem_material[e]].rho;
+    total += rho * m.volume[e];
+    for (int a = 0; a < 4; ++a) expect[m.elem_nodes[a * ne + e]] += rho * m.volume[e] / 4;
+  }
+  double sum = 0;
+  for (index_t i = 0; i < m.n_nodes; ++i) {
+    EXPECT_NEAR(m.mass[i], expect[i], 1e-14 * total) << "node " << i;
+    EXPECT_GT(m.mass[i], 0) << "node " << i;
+    sum += m.mass[i];
+  }
+  EXPECT_NEAR(sum, total, 1e-12 * total);
+  EXPECT_NEAR(m.total_mass, total, 1e-12 * total);
+  // one material: rho times the box volume
+  const auto m1 = build_model(box_input(2, 3, 2, 0.02, 0.03, 0.02));
+  EXPECT_NEAR(m1.total_mass, kRho * 0.02 * 0.03 * 0.02, 1e-12 * m1.total_mass);
+  // per-element materials are copied
+  for (index_t e = 0; e < ne; ++e) EXPECT_EQ(m.mu[e], in.materials[in.elem_material[e]].mu);
+}
+
+TEST(Model, SingleTetMassIsQuarterEach) {
+  ModelInput in;
+  in.nodes = {0, 0, 0, 0.01, 0, 0, 0, 0.02, 0, 0, 0, 0.03};
+  in.tets = {0, 1, 2, 3};
+  in.materials = {material(kE, kNu, kRho)};
+  const auto m = build_model(in);
+  const double V = 0.01 * 0.02 * 0.03 / 6;
+  ASSERT_NEAR(m.volume[0], V, 1e-15 * V);
+  for (index_t i = 0; i < 4; ++i) EXPECT_NEAR(m.mass[i], kRho * V / 4, 1e-15 * kRho * V);
+}
+
+// ---------------------------------------------------------------- connectivity
+
+TEST(Model, NodeElementListsSortedAndComplete) {
+  const auto m = build_model(box_input(3, 2, 2, 0.03, 0.02, 0.02));
+  const index_t n = m.n_nodes, ne = m.n_elems;
+  ASSERT_EQ(m.node_elem_start.size(), size_t(n + 1));
+  EXPECT_EQ(m.node_elem_start.front(), 0);
+  EXPECT_EQ(m.node_elem_start.back(), 4 * ne);
+  ASSERT_EQ(m.node_elem.size(), size_t(4 * ne));
+  std::vector<int> seen(4 * ne, 0);
+  for (index_t i = 0; i < n; ++i) {
+    EXPECT_LT(m.node_elem_start[i], m.node_elem_start[i + 1]) << "node " << i << " has no element";
+    for (index_t k = m.node_elem_start[i]; k < m.node_elem_start[i + 1]; ++k) {
+      const index_t entry = m.node_elem[k], e = entry / 4, a = entry % 4;
+      ASSERT_GE(e, 0);
+      ASSERT_LT(e, ne);
+      EXPECT_EQ(m.elem_nodes[a * ne + e], i) << "entry (" << e << ", " << a << ") listed under node " << i;
+      if (k > m.node_elem_start[i]) {
+        EXPECT_LT(m.node_elem[k - 1], entry) << "node " << i << " list not ascending";
+      }
+      ++seen[entry];
+    }
+  }
+  for (index_t entry = 0; entry < 4 * ne; ++entry) EXPECT_EQ(seen[entry], 1) << "(element, corner) " << entry;
+  // an interior node of a Kuhn mesh touches 24 tets, a box corner at the origin 1 (the 000 corner) ...
+  const index_t interior = box_node(3, 2, 1, 1, 1);
+  EXPECT_EQ(m.node_elem_start[interior + 1] - m.node_elem_start[interior], 24);
+  const index_t far_corner = box_node(3, 2, 3, 2, 2);  // ... and the 111 corner of the last cell 6
+  EXPECT_EQ(m.node_elem_start[far_corner + 1] - m.node_elem_start[far_corner], 6);
+}
+
+TEST(Model, SurfaceTrianglesCountAndOrientation) {
+  const int nx = 3, ny = 2, nz = 4;
+  const double l[3] = {0.03, 0.02, 0.025};
+  const auto m = build_model(box_input(nx, ny, nz, l[0], l[1], l[2]));
+  EXPECT_EQ(m.n_tris, 4 * (nx * ny + ny * nz + nx * nz));
+  ASSERT_EQ(m.tris.size(), size_t(3 * m.n_tris));
+  ASSERT_EQ(m.tri_elem.size(), size_t(m.n_tris));
+  const Vec3<double> centre = {l[0] / 2, l[1] / 2, l[2] / 2};
+  const index_t nt = m.n_tris, ne = m.n_elems;
+  double area = 0;
+  for (index_t t = 0; t < nt; ++t) {
+    const index_t v[3] = {m.tris[t], m.tris[nt + t], m.tris[2 * nt + t]};
+    const Vec3<double> p0 = node_X(m, v[0]), p1 = node_X(m, v[1]), p2 = node_X(m, v[2]);
+    const Vec3<double> normal = cross(p1 - p0, p2 - p0);
+    const Vec3<double> centroid = (1.0 / 3.0) * (p0 + p1 + p2);
+    EXPECT_GT(dot(normal, centroid - centre), 0) << "triangle " << t << " points inward";
+    area += 0.5 * norm(normal);
+    // all three corners lie on one face of the box
+    bool on_face = false;
+    for (int c = 0; c < 3; ++c)
+      for (double side : {0.0, l[c]})
+        on_face |= std::fabs(p0[c] - side) < 1e-12 && std::fabs(p1[c] - side) < 1e-12 && std::fabs(p2[c] - side) < 1e-12;
+    EXPECT_TRUE(on_face) << "triangle " << t;
+    // the owning tet has the triangle's nodes as corners
+    const index_t e = m.tri_elem[t];
+    for (index_t node : v) {
+      bool corner = false;
+      for (int a = 0; a < 4; ++a) corner |= m.elem_nodes[a * ne + e] == node;
+      EXPECT_TRUE(corner) << "triangle " << t << " node " << node << " not in element " << e;
+    }
+    for (index_t node : v) EXPECT_TRUE(m.node_flags[node] & kSurface);
+  }
+  const double box_area = 2 * (l[0] * l[1] + l[1] * l[2] + l[0] * l[2]);
+  EXPECT_NEAR(area, box_area, 1e-12 * box_area);
+  // interior nodes are not surface nodes
+  EXPECT_FALSE(m.node_flags[box_node(nx, ny, 1, 1, 1)] & kSurface);
+  EXPECT_FALSE(m.node_flags[box_node(nx, ny, 2, 1, 3)] & kSurface);
+}
+
+TEST(Model, FixedFlags) {
+  ModelInput in = box_input(2, 2, 2, 0.02, 0.02, 0.02);
+  const size_t n = in.nodes.size() / 3;
+  in.fixed.assign(n, 0);
+  for (int j = 0; j <= 2; ++j)
+    for (int i = 0; i <= 2; ++i) in.fixed[box_node(2, 2, i, j, 0)] = 1;
+  const auto m = build_model(in);
+  int fixed = 0;
+  for (index_t i = 0; i < m.n_nodes; ++i) {
+    const bool want = node_X(m, i).z == 0.0;
+    EXPECT_EQ(bool(m.node_flags[i] & kFixed), want) << "node " << i;
+    fixed += want;
+  }
+  EXPECT_EQ(fixed, 9);
+}
+
+// ---------------------------------------------------------------- time step
+
+TEST(Model, CriticalStepOfRegularTet) {
+  const double a = 0.01;
+  ModelInput in;
+  in.nodes = {0, 0, 0, a, 0, 0, a / 2, a * std::sqrt(3.0) / 2, 0, a / 2, a * std::sqrt(3.0) / 6, a * std::sqrt(2.0 / 3.0)};
+  in.tets = {0, 1, 2, 3};
+  in.materials = {material(kE, kNu, kRho)};
+  const auto m = build_model(in);
+  // by hand: L = a sqrt(2/3) (every altitude of a regular tet),
+  // lambda = K - 2 mu / 3, c = sqrt((lambda + 2 mu) / rho)
+  const double mu = kE / (2 * (1 + kNu)), K = kE / (3 * (1 - 2 * kNu));
+  const double lambda = K - 2 * mu / 3;
+  EXPECT_NEAR(lambda, kE * kNu / ((1 + kNu) * (1 - 2 * kNu)), 1e-9 * lambda);
+  const double c = std::sqrt((lambda + 2 * mu) / kRho);
+  const double expect = a * std::sqrt(2.0 / 3.0) / c;
+  EXPECT_NEAR(m.dt_crit, expect, 1e-12 * expect);
+  EXPECT_EQ(m.dt_crit_elem, 0);
+  EXPECT_NEAR(m.dt, 0.5 * expect, 1e-12 * expect);  // default safety 0.5
+}
+
+TEST(Model, SquashedTetSetsCriticalStep) {
+  const int n = 2;
+  const double s = 0.01, h = 0.05 * s;  // cell size, apex height of the squashed tet
+  ModelInput in = box_input(n, n, n, n * s, n * s, n * s);
+  // a flat tet on the top-face triangle (0,0,top)-(1,0,top)-(1,1,top), apex h above its centroid
+  const index_t a = box_node(n, n, 0, 0, n), b = box_node(n, n, 1, 0, n), c = box_node(n, n, 1, 1, n);
+  const index_t apex = static_cast<index_t>(in.nodes.size() / 3);
+  in.nodes.insert(in.nodes.end(), {2 * s / 3, s / 3, n * s + h});
+  in.tets.insert(in.tets.end(), {a, b, c, apex});
+  const auto m = build_model(in);
+  const index_t squashed = 6 * n * n * n;
+  EXPECT_EQ(m.dt_crit_elem, squashed);
+  const MaterialParams p = material(kE, kNu, kRho);
+  const double wave = std::sqrt((p.K + 4 * p.mu / 3) / p.rho);
+  // the base (area s^2/2) is the largest face, so L = h
+  EXPECT_NEAR(m.dt_crit, h / wave, 1e-9 * h / wave);
+  // without it, a Kuhn tet of cell s sets the step: L = s / sqrt(2)
+  const auto plain = build_model(box_input(n, n, n, n * s, n * s, n * s));
+  EXPECT_NEAR(plain.dt_crit, s / std::sqrt(2.0) / wave, 1e-12 * plain.dt_crit);
+}
+
+TEST(Model, TimeStepAboveCriticalIsRefused) {
+  const int n = 2;
+  const double s = 0.01, h = 0.05 * s;
+  ModelInput in = box_input(n, n, n, n * s, n * s, n * s);
+  const index_t apex = static_cast<index_t>(in.nodes.size() / 3);
+  in.nodes.insert(in.nodes.end(), {2 * s / 3, s / 3, n * s + h});
+  in.tets.insert(in.tets.end(), {box_node(n, n, 0, 0, n), box_node(n, n, 1, 0, n), box_node(n, n, 1, 1, n), apex});
+  const auto ok = build_model(in);
+  const double dt_crit = ok.dt_crit;
+  in.dt = 1.01 * dt_crit;
+  const std::string limit = fmt::format("{:.6g}", dt_crit);
+  expect_model_error([&] { build_model(in); }, {"box", "dt_crit", limit, "element 48"});
+  in.dt = dt_crit;  // the limit itself is accepted
+  EXPECT_NO_THROW(build_model(in));
+  // set_time_step refuses too and leaves the model as it was
+  auto m = ok;
+  expect_model_error([&] { set_time_step(m, 2 * dt_crit, 0.0); }, {"dt_crit", limit, "element 48"});
+  EXPECT_EQ(m.dt, ok.dt);
+  expect_model_error([&] { set_time_step(m, -1e-4, 0.0); }, {"dt", "> 0"});
+  expect_model_error([&] { set_time_step(m, 0.5 * dt_crit, -1.0); }, {"damping"});
+  set_time_step(m, 0.25 * dt_crit, 3.0);
+  EXPECT_EQ(m.dt, 0.25 * dt_crit);
+  EXPECT_EQ(m.damping, 3.0);
+  const auto k = central_difference_constants(m.mass[0], m.dt, 3.0);
+  EXPECT_DOUBLE_EQ(m.cd_A[0], k.A);
+  EXPECT_DOUBLE_EQ(m.cd_B[0], k.B);
+  EXPECT_DOUBLE_EQ(m.cd_C[0], k.C);
+}
+
+TEST(Model, SafetyFactorAndDefaultDamping) {
+  ModelInput in = box_input(2, 2, 3, 0.02, 0.02, 0.04);
+  in.dt_safety = 0.8;
+  const auto m = build_model(in);
+  EXPECT_NEAR(m.dt, 0.8 * m.dt_crit, 1e-15 * m.dt_crit);
+  // default alpha = 2 omega, omega = (pi/2) sqrt(mu/rho) / L_max
+  const double mu = material(kE, kNu, kRho).mu;
+  const double omega = 0.5 * M_PI * std::sqrt(mu / kRho) / 0.04;
+  EXPECT_NEAR(lowest_mode_estimate(m), omega, 1e-12 * omega);
+  EXPECT_NEAR(m.damping, 2 * omega, 1e-12 * omega);
+  for (double bad : {0.0, 1.0, 1.5, -0.2}) {
+    in.dt_safety = bad;
+    expect_model_error([&] { build_model(in); }, {"box", "safety"});
+  }
+  in.dt_safety = 0.5;
+  in.damping = 0;
+  EXPECT_EQ(build_model(in).damping, 0.0);
+}
+
+// ---------------------------------------------------------------- bad input
+
+TEST(ModelErrors, ZeroVolumeTetNamesElement) {
+  ModelInput in = box_input(2, 2, 2, 0.02, 0.02, 0.02);
+  // four coplanar nodes of the bottom face
+  in.tets.insert(in.tets.end(), {box_node(2, 2, 0, 0, 0), box_node(2, 2, 1, 0, 0), box_node(2, 2, 0, 1, 0),
+                                 box_node(2, 2, 1, 1, 0)});
+  expect_model_error([&] { build_model(in); }, {"box", "element 48", "zero volume"});
+  // a repeated node
+  in.tets.resize(in.tets.size() - 4);
+  in.tets.insert(in.tets.end(), {0, 1, 1, 4});
+  expect_model_error([&] { build_model(in); }, {"box", "element 48", "node 1", "twice"});
+}
+
+TEST(ModelErrors, InvertedTetsAreReorientedAndCounted) {
+  const ModelInput good = box_input(2, 2, 2, 0.02, 0.02, 0.02);
+  const auto ref = build_model(good);
+  ModelInput in = good;
+  const index_t flipped[] = {3, 10, 17, 40};
+  for (index_t e : flipped) std::swap(in.tets[4 * e + 1], in.tets[4 * e + 2]);
+  const auto m = build_model(in);
+  EXPECT_EQ(m.reoriented, 4);
+  // swapping corners 1 and 2 back restores the original element exactly
+  EXPECT_EQ(m.elem_nodes, ref.elem_nodes);
+  EXPECT_EQ(m.volume, ref.volume);
+  EXPECT_EQ(m.dndx, ref.dndx);
+  EXPECT_EQ(m.mass, ref.mass);
+  // another inversion (corners 0 and 3): positive volume, consistent gradients
+  ModelInput in2 = good;
+  std::swap(in2.tets[4 * 5 + 0], in2.tets[4 * 5 + 3]);
+  const auto m2 = build_model(in2);
+  EXPECT_EQ(m2.reoriented, 1);
+  const index_t ne = m2.n_elems;
+  Vec3<double> X[4];
+  for (int a = 0; a < 4; ++a) X[a] = node_X(m2, m2.elem_nodes[a * ne + 5]);
+  double dN[12];
+  EXPECT_NEAR(tet_shape_gradients(X, dN), ref.volume[5], 1e-15);
+  for (int k = 0; k < 12; ++k) EXPECT_DOUBLE_EQ(m2.dndx[k * ne + 5], dN[k]);
+  EXPECT_EQ(m2.n_tris, ref.n_tris);
+}
+
+TEST(ModelErrors, UnusedNodeNamed) {
+  ModelInput in = box_input(2, 2, 2, 0.02, 0.02, 0.02);
+  in.nodes.insert(in.nodes.end(), {0.05, 0.05, 0.05});
+  expect_model_error([&] { build_model(in); }, {"box", "node 27", "no element"});
+}
+
+TEST(ModelErrors, BadConnectivityAndCoordinates) {
+  ModelInput in = box_input(1, 1, 1, 0.01, 0.01, 0.01);
+  in.tets[4 * 2 + 3] = 99;
+  expect_model_error([&] { build_model(in); }, {"box", "element 2", "node 99"});
+  in.tets[4 * 2 + 3] = -1;
+  expect_model_error([&] { build_model(in); }, {"box", "element 2", "node -1"});
+  in = box_input(1, 1, 1, 0.01, 0.01, 0.01);
+  in.nodes[3 * 5 + 1] = std::numeric_limits<double>::quiet_NaN();
+  expect_model_error([&] { build_model(in); }, {"box", "node 5", "not finite"});
+  in = box_input(1, 1, 1, 0.01, 0.01, 0.01);
+  in.tets.pop_back();
+  expect_model_error([&] { build_model(in); }, {"box", "multiple of 4"});
+  in = box_input(1, 1, 1, 0.01, 0.01, 0.01);
+  in.fixed.assign(3, 1);
+  expect_model_error([&] { build_model(in); }, {"box", "fixed"});
+}
+
+TEST(ModelErrors, BadMaterialsNamed) {
+  const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+  struct Case {
+    MaterialParams p;
+    const char* what;
+  };
+  const MaterialParams ok = material(kE, kNu, kRho);
+  const Case cases[] = {{{0, ok.K, ok.rho}, "shear modulus"},   {{-5, ok.K, ok.rho}, "shear modulus"},
+                        {{nan, ok.K, ok.rho}, "shear modulus"}, {{ok.mu, 0, ok.rho}, "bulk modulus"},
+                        {{ok.mu, -1, ok.rho}, "bulk modulus"},  {{ok.mu, inf, ok.rho}, "bulk modulus"},
+                        {{ok.mu, ok.K, 0}, "density"},          {{ok.mu, ok.K, -kRho}, "density"},
+                        {{ok.mu, ok.K, nan}, "density"}};
+  for (const Case& c : cases) {
+    ModelInput in = box_input(1, 1, 1, 0.01, 0.01, 0.01);
+    in.materials = {ok, c.p};
+    in.elem_material.assign(6, 1);
+    SCOPED_TRACE(c.what);
+    expect_model_error([&] { build_model(in); }, {"box", "material 1", c.what});
+  }
+  ModelInput in = box_input(1, 1, 1, 0.01, 0.01, 0.01);
+  in.materials.clear();
+  expect_model_error([&] { build_model(in); }, {"box", "no material"});
+  in = box_input(1, 1, 1, 0.01, 0.01, 0.01);
+  in.elem_material = {0, 0, 0, 5, 0, 0};
+  expect_model_error([&] { build_model(in); }, {"box", "element 3", "material index 5"});
+  in.elem_material = {0, 0};
+  expect_model_error([&] { build_model(in); }, {"box", "material ids"});
+}
+
+// ---------------------------------------------------------------- conversion
+
+TEST(Model, ConvertFloatKeepsSizesAndValues) {
+  const auto m = build_model(box_input(3, 2, 2, 0.03, 0.02, 0.02));
+  const auto f = convert<float>(m);
+  EXPECT_EQ(f.n_nodes, m.n_nodes);
+  EXPECT_EQ(f.n_elems, m.n_elems);
+  EXPECT_EQ(f.n_tris, m.n_tris);
+  EXPECT_EQ(f.X.size(), m.X.size());
+  EXPECT_EQ(f.dndx.size(), m.dndx.size());
+  EXPECT_EQ(f.volume.size(), m.volume.size());
+  EXPECT_EQ(f.mass.size(), m.mass.size());
+  EXPECT_EQ(f.cd_A.size(), m.cd_A.size());
+  EXPECT_EQ(f.cd_B.size(), m.cd_B.size());
+  EXPECT_EQ(f.cd_C.size(), m.cd_C.size());
+  EXPECT_EQ(f.mu.size(), m.mu.size());
+  EXPECT_EQ(f.K.size(), m.K.size());
+  EXPECT_EQ(f.elem_nodes, m.elem_nodes);
+  EXPECT_EQ(f.node_elem_start, m.node_elem_start);
+  EXPECT_EQ(f.node_elem, m.node_elem);
+  EXPECT_EQ(f.tris, m.tris);
+  EXPECT_EQ(f.tri_elem, m.tri_elem);
+  EXPECT_EQ(f.node_flags, m.node_flags);
+  EXPECT_EQ(f.dt, m.dt);
+  EXPECT_EQ(f.dt_crit, m.dt_crit);
+  EXPECT_EQ(f.dt_crit_elem, m.dt_crit_elem);
+  EXPECT_EQ(f.damping, m.damping);
+  EXPECT_EQ(f.ianp, m.ianp);
+  for (size_t k = 0; k < m.dndx.size(); ++k) EXPECT_NEAR(f.dndx[k], m.dndx[k], 1e-6 * std::fabs(m.dndx[k]));
+  for (size_t k = 0; k < m.cd_A.size(); ++k) EXPECT_NEAR(f.cd_A[k], m.cd_A[k], 1e-6 * m.cd_A[k]);
+  const auto d = convert<double>(m);
+  EXPECT_EQ(d.X, m.X);
+  EXPECT_EQ(d.mass, m.mass);
+}
+
+}  // namespace
+}  // namespace tissue
