@@ -102,7 +102,7 @@ std::map<std::string, index_t> check_materials(const Scene& s) {
 std::string known_materials(const Scene& s) {
   if (s.materials.empty()) return "none are defined";
   std::string out = "defined:";
-  for (const Material& m : s.materials) out += " '" + m.name + "'";
+  for (size_t k = 0; k < s.materials.size(); ++k) out += (k ? ", '" : " '") + s.materials[k].name + "'";
   return out;
 }
 

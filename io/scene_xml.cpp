@@ -1,0 +1,539 @@
+#include "io/scene_xml.hpp"
+
+#include <fmt/format.h>
+#include <pugixml.hpp>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <initializer_list>
+#include <limits>
+#include <sstream>
+
+#include "io/path_csv.hpp"
+#include "io/tetgen_files.hpp"
+#include "scene/text.hpp"
+
+namespace tissue::io {
+namespace {
+
+namespace fs = std::filesystem;
+using scene::Constraint;
+using scene::Material;
+using scene::SceneError;
+using Names = std::initializer_list<std::string_view>;
+
+std::string join(Names names) {
+  std::string out;
+  for (std::string_view n : names) out += (out.empty() ? "" : ", ") + std::string(n);
+  return out;
+}
+
+std::string resolve(const std::string& base_dir, const std::string& file) {
+  return base_dir.empty() ? file : (fs::path(base_dir) / file).string();
+}
+
+// ---- reading ---------------------------------------------------------------
+
+/// Parses one document; knows the source name and turns offsets into lines.
+class Reader {
+ public:
+  Reader(std::string_view xml, std::string source, std::string base_dir)
+      : xml_(xml), source_(std::move(source)), base_dir_(std::move(base_dir)) {
+    for (size_t i = 0; i < xml_.size(); ++i)
+      if (xml_[i] == '\n') newlines_.push_back(i);
+  }
+
+  scene::Scene read();
+
+ private:
+  // -- locations and errors
+  int line_of(std::ptrdiff_t offset) const {
+    if (offset < 0) return 0;
+    return 1 + int(std::lower_bound(newlines_.begin(), newlines_.end(), size_t(offset)) - newlines_.begin());
+  }
+  int line(pugi::xml_node n) const { return line_of(n.offset_debug()); }
+  [[noreturn]] void fail_at(int line, const std::string& what) const {
+    throw SceneError(line > 0 ? fmt::format("{}:{}: {}", source_, line, what) : fmt::format("{}: {}", source_, what));
+  }
+  [[noreturn]] void fail(pugi::xml_node n, const std::string& what) const {
+    fail_at(line(n), fmt::format("<{}>: {}", n.name(), what));
+  }
+
+  // -- structure checks
+  void check_attributes(pugi::xml_node n, Names allowed) const;
+  void check_children(pugi::xml_node n, Names allowed) const;
+  void check_no_text(pugi::xml_node n) const;
+
+  // -- attribute values
+  std::string required(pugi::xml_node n, const char* name) const;
+  double real(pugi::xml_node n, const char* name) const;
+  double real_or(pugi::xml_node n, const char* name, double fallback) const;
+  double real_or_auto(pugi::xml_node n, const char* name, double fallback, double auto_value) const;
+  void triple(pugi::xml_node n, const char* name, double out[3]) const;
+  std::vector<index_t> ids(pugi::xml_node n, const char* name, std::string_view text) const;
+
+  // -- elements
+  void read_mesh(pugi::xml_node n, scene::Scene& s) const;
+  std::vector<double> read_node_text(pugi::xml_node n) const;
+  std::vector<index_t> read_element_text(pugi::xml_node n) const;
+  Material read_material(pugi::xml_node n) const;
+  scene::ElementSet read_set(pugi::xml_node n) const;
+  Constraint read_fixed(pugi::xml_node n) const;
+  scene::Tool read_tool(pugi::xml_node n) const;
+  scene::Solver read_solver(pugi::xml_node n) const;
+
+  template <class F>
+  void for_tokens(pugi::xml_node n, F&& f) const;
+
+  std::string_view xml_;
+  std::string source_, base_dir_;
+  std::vector<size_t> newlines_;
+};
+
+void Reader::check_attributes(pugi::xml_node n, Names allowed) const {
+  for (pugi::xml_attribute a : n.attributes()) {
+    if (std::find(allowed.begin(), allowed.end(), std::string_view(a.name())) == allowed.end())
+      fail(n, fmt::format("unknown attribute '{}'; allowed: {}", a.name(), allowed.size() ? join(allowed) : "none"));
+    for (pugi::xml_attribute b = a.next_attribute(); b; b = b.next_attribute())
+      if (std::string_view(a.name()) == b.name()) fail(n, fmt::format("attribute '{}' is given twice", a.name()));
+  }
+}
+
+void Reader::check_children(pugi::xml_node n, Names allowed) const {
+  for (pugi::xml_node c : n.children()) {
+    if (c.type() == pugi::node_element) {
+      if (std::find(allowed.begin(), allowed.end(), std::string_view(c.name())) == allowed.end())
+        fail_at(line(c), fmt::format("unknown element <{}> in <{}>; allowed: {}", c.name(), n.name(),
+                                     allowed.size() ? join(allowed) : "none"));
+    } else if (c.type() == pugi::node_pcdata || c.type() == pugi::node_cdata) {
+      if (!scene::trim(c.value()).empty())
+        fail(n, fmt::format("unexpected text '{}'; this element holds no text", scene::trim(c.value()).substr(0, 40)));
+    }
+  }
+}
+
+void Reader::check_no_text(pugi::xml_node n) const { check_children(n, {}); }
+
+std::string Reader::required(pugi::xml_node n, const char* name) const {
+  const pugi::xml_attribute a = n.attribute(name);
+  if (!a) fail(n, fmt::format("missing required attribute '{}'", name));
+  return a.value();
+}
+
+double Reader::real(pugi::xml_node n, const char* name) const {
+  const std::string text = required(n, name);
+  const auto v = scene::parse_real(text);
+  if (!v) fail(n, fmt::format("attribute {} = '{}' is not a number", name, text));
+  return *v;
+}
+
+double Reader::real_or(pugi::xml_node n, const char* name, double fallback) const {
+  return n.attribute(name) ? real(n, name) : fallback;
+}
+
+double Reader::real_or_auto(pugi::xml_node n, const char* name, double fallback, double auto_value) const {
+  const pugi::xml_attribute a = n.attribute(name);
+  if (!a) return fallback;
+  if (scene::trim(a.value()) == "auto") return auto_value;
+  const auto v = scene::parse_real(a.value());
+  if (!v) fail(n, fmt::format("attribute {} = '{}' is neither a number nor \"auto\"", name, a.value()));
+  return *v;
+}
+
+void Reader::triple(pugi::xml_node n, const char* name, double out[3]) const {
+  const std::string text = required(n, name);
+  const auto tok = scene::split_blanks(text);
+  if (tok.size() != 3) fail(n, fmt::format("attribute {} = '{}' must be three numbers \"x y z\"", name, text));
+  for (int k = 0; k < 3; ++k) {
+    const auto v = scene::parse_real(tok[k]);
+    if (!v) fail(n, fmt::format("attribute {}: {} = '{}' is not a number", name, "xyz"[k], tok[k]));
+    out[k] = *v;
+  }
+}
+
+std::vector<index_t> Reader::ids(pugi::xml_node n, const char* name, std::string_view text) const {
+  std::vector<index_t> out;
+  for (std::string_view tok : scene::split_blanks(text)) {
+    const auto v = scene::parse_integer(tok);
+    if (!v) fail(n, fmt::format("attribute {}: '{}' is not a whole number", name, tok));
+    if (*v < std::numeric_limits<index_t>::min() || *v > std::numeric_limits<index_t>::max())
+      fail(n, fmt::format("attribute {}: id {} is out of range", name, *v));
+    out.push_back(static_cast<index_t>(*v));
+  }
+  return out;
+}
+
+/// Calls f(token, line) for each blank-separated token of n's text.
+template <class F>
+void Reader::for_tokens(pugi::xml_node n, F&& f) const {
+  check_attributes(n, {});
+  for (pugi::xml_node c : n.children()) {
+    if (c.type() == pugi::node_element)
+      fail_at(line(c), fmt::format("unknown element <{}> in <{}>; it holds numbers only", c.name(), n.name()));
+    if (c.type() != pugi::node_pcdata && c.type() != pugi::node_cdata) continue;
+    const std::string_view text = c.value();
+    int ln = line(c);
+    size_t pos = 0;
+    for (std::string_view tok : scene::split_blanks(text)) {
+      const size_t at = size_t(tok.data() - text.data());
+      if (ln > 0) ln += int(std::count(text.begin() + pos, text.begin() + at, '\n'));
+      pos = at;
+      f(tok, ln);
+    }
+  }
+}
+
+std::vector<double> Reader::read_node_text(pugi::xml_node n) const {
+  std::vector<double> xyz;
+  for_tokens(n, [&](std::string_view tok, int ln) {
+    const auto v = scene::parse_real(tok);
+    if (!v)
+      fail_at(ln, fmt::format("<nodes>: node {} coordinate {} = '{}' is not a number", xyz.size() / 3,
+                              "xyz"[xyz.size() % 3], tok));
+    xyz.push_back(*v);
+  });
+  if (xyz.size() % 3 != 0)
+    fail(n, fmt::format("{} numbers is not a multiple of 3; write x y z for every node", xyz.size()));
+  return xyz;
+}
+
+std::vector<index_t> Reader::read_element_text(pugi::xml_node n) const {
+  std::vector<index_t> tets;
+  for_tokens(n, [&](std::string_view tok, int ln) {
+    const auto v = scene::parse_integer(tok);
+    if (!v || *v < std::numeric_limits<index_t>::min() || *v > std::numeric_limits<index_t>::max())
+      fail_at(ln, fmt::format("<elements>: element {} corner {} = '{}' is not a node id (a whole number)",
+                              tets.size() / 4, tets.size() % 4, tok));
+    tets.push_back(static_cast<index_t>(*v));
+  });
+  if (tets.size() % 4 != 0)
+    fail(n, fmt::format("{} node ids is not a multiple of 4; write 4 corner ids for every tetrahedron", tets.size()));
+  return tets;
+}
+
+void Reader::read_mesh(pugi::xml_node n, scene::Scene& s) const {
+  check_attributes(n, {"file"});
+  s.mesh_line = line(n);
+  if (n.attribute("file")) {
+    check_no_text(n);
+    s.mesh_file = n.attribute("file").value();
+    try {
+      TetgenFiles m = read_tetgen(resolve(base_dir_, s.mesh_file));
+      s.nodes = std::move(m.nodes);
+      s.tets = std::move(m.tets);
+    } catch (const TetgenFileError& e) {
+      fail(n, fmt::format("mesh file '{}': {}", s.mesh_file, e.what()));
+    }
+    return;
+  }
+  check_children(n, {"nodes", "elements"});
+  const pugi::xml_node nodes = n.child("nodes"), elems = n.child("elements");
+  if (!nodes || !elems) fail(n, "needs a <nodes> and an <elements> child, or a file=\"x.node\" attribute");
+  if (nodes.next_sibling("nodes")) fail_at(line(nodes.next_sibling("nodes")), "<mesh> has a second <nodes>");
+  if (elems.next_sibling("elements")) fail_at(line(elems.next_sibling("elements")), "<mesh> has a second <elements>");
+  s.nodes = read_node_text(nodes);
+  s.tets = read_element_text(elems);
+}
+
+Material Reader::read_material(pugi::xml_node n) const {
+  check_attributes(n, {"name", "E", "nu", "mu", "K", "lambda", "rho"});
+  check_no_text(n);
+  Material m;
+  m.line = line(n);
+  m.name = required(n, "name");
+  const auto has = [&](const char* a) { return bool(n.attribute(a)); };
+  const int given = has("E") + has("nu") + has("mu") + has("K") + has("lambda");
+  if (given == 2 && has("E") && has("nu")) {
+    m.form = Material::Form::YoungPoisson;
+    m.a = real(n, "E");
+    m.b = real(n, "nu");
+  } else if (given == 2 && has("mu") && has("K")) {
+    m.form = Material::Form::ShearBulk;
+    m.a = real(n, "mu");
+    m.b = real(n, "K");
+  } else if (given == 2 && has("lambda") && has("mu")) {
+    m.form = Material::Form::Lame;
+    m.a = real(n, "lambda");
+    m.b = real(n, "mu");
+  } else {
+    fail(n, fmt::format("material '{}' must give exactly one pair of elastic constants: E and nu, mu and K, or "
+                        "lambda and mu",
+                        m.name));
+  }
+  m.rho = real(n, "rho");
+  return m;
+}
+
+scene::ElementSet Reader::read_set(pugi::xml_node n) const {
+  check_attributes(n, {"name", "material", "elements"});
+  check_no_text(n);
+  scene::ElementSet es;
+  es.line = line(n);
+  es.material = required(n, "material");
+  es.name = n.attribute("name") ? n.attribute("name").value() : es.material;
+  const std::string list = required(n, "elements");
+  if (scene::trim(list) == "all")
+    es.all = true;
+  else
+    es.elements = ids(n, "elements", list);
+  return es;
+}
+
+Constraint Reader::read_fixed(pugi::xml_node n) const {
+  check_attributes(n, {"nodes", "box-min", "box-max", "plane-point", "plane-normal"});
+  check_no_text(n);
+  Constraint c;
+  c.line = line(n);
+  const bool nodes = n.attribute("nodes"), box = n.attribute("box-min") || n.attribute("box-max"),
+             plane = n.attribute("plane-point") || n.attribute("plane-normal");
+  if (nodes + box + plane != 1)
+    fail(n, "give exactly one kind: nodes=\"ids\", box-min= and box-max=, or plane-point= and plane-normal=");
+  if (nodes) {
+    c.kind = Constraint::Kind::Nodes;
+    c.nodes = ids(n, "nodes", n.attribute("nodes").value());
+  } else if (box) {
+    c.kind = Constraint::Kind::Box;
+    triple(n, "box-min", c.lo);
+    triple(n, "box-max", c.hi);
+  } else {
+    c.kind = Constraint::Kind::Plane;
+    triple(n, "plane-point", c.point);
+    triple(n, "plane-normal", c.normal);
+  }
+  return c;
+}
+
+scene::Tool Reader::read_tool(pugi::xml_node n) const {
+  check_attributes(n, {"name", "radius", "device", "path"});
+  check_children(n, {"waypoint"});
+  scene::Tool t;
+  t.line = line(n);
+  if (n.attribute("name")) t.name = n.attribute("name").value();
+  t.radius = real_or(n, "radius", t.radius);
+  if (n.attribute("device")) t.device = n.attribute("device").value();
+  for (pugi::xml_node w : n.children("waypoint")) {
+    check_attributes(w, {"t", "x", "y", "z"});
+    check_no_text(w);
+    t.path.push_back({real(w, "t"), {real(w, "x"), real(w, "y"), real(w, "z")}});
+  }
+  if (n.attribute("path")) {
+    if (!t.path.empty()) fail(n, "give either path=\"file.csv\" or <waypoint> children, not both");
+    t.path_file = n.attribute("path").value();
+    try {
+      t.path = read_path_csv(resolve(base_dir_, t.path_file));
+    } catch (const PathCsvError& e) {
+      fail(n, fmt::format("tool '{}' path file '{}': {}", t.name, t.path_file, e.what()));
+    }
+  }
+  return t;
+}
+
+scene::Solver Reader::read_solver(pugi::xml_node n) const {
+  check_attributes(n, {"backend", "precision", "dt", "dt-safety", "damping", "depth", "tick", "residual-tol",
+                       "kinetic-tol", "ianp"});
+  check_no_text(n);
+  scene::Solver v;
+  v.line = line(n);
+  if (n.attribute("backend")) v.backend = n.attribute("backend").value();
+  if (const pugi::xml_attribute a = n.attribute("precision")) {
+    const std::string_view p = scene::trim(a.value());
+    if (p != "float" && p != "double") fail(n, fmt::format("precision = '{}' must be float or double", a.value()));
+    v.precision = p == "float" ? Precision::Float : Precision::Double;
+  }
+  v.dt = real_or_auto(n, "dt", v.dt, 0.0);
+  v.dt_safety = real_or(n, "dt-safety", v.dt_safety);
+  v.damping = real_or_auto(n, "damping", v.damping, -1.0);
+  if (const pugi::xml_attribute a = n.attribute("depth")) {
+    const std::string_view d = scene::trim(a.value());
+    const auto k = scene::parse_integer(d);
+    if (d == "all")
+      v.depth = kDepthAll;
+    else if (k && *k >= std::numeric_limits<int>::min() && *k <= std::numeric_limits<int>::max())
+      v.depth = int(*k);
+    else
+      fail(n, fmt::format("depth = '{}' is neither a whole number nor \"all\"", a.value()));
+  }
+  v.tick = real_or(n, "tick", v.tick);
+  v.residual_tol = real_or(n, "residual-tol", v.residual_tol);
+  v.kinetic_tol = real_or(n, "kinetic-tol", v.kinetic_tol);
+  if (const pugi::xml_attribute a = n.attribute("ianp")) {
+    const std::string_view b = scene::trim(a.value());
+    if (b != "true" && b != "false") fail(n, fmt::format("ianp = '{}' must be true or false", a.value()));
+    v.ianp = b == "true";
+  }
+  return v;
+}
+
+scene::Scene Reader::read() {
+  pugi::xml_document doc;
+  const pugi::xml_parse_result r = doc.load_buffer(xml_.data(), xml_.size(), pugi::parse_default);
+  if (!r) fail_at(line_of(r.offset), fmt::format("malformed XML: {}", r.description()));
+  pugi::xml_node root;
+  for (pugi::xml_node c : doc.children()) {
+    if (c.type() != pugi::node_element) continue;
+    if (std::string_view(c.name()) != "tissue-scene")
+      fail_at(line(c), fmt::format("the root element is <{}>; expected <tissue-scene>", c.name()));
+    if (root) fail_at(line(c), "a second <tissue-scene>; a file holds one scene");
+    root = c;
+  }
+  if (!root) fail_at(0, "no <tissue-scene> element");
+  check_attributes(root, {"version"});
+  if (root.attribute("version") && scene::trim(root.attribute("version").value()) != "1")
+    fail(root, fmt::format("version = '{}' is not supported; this reader knows version 1",
+                           root.attribute("version").value()));
+  check_children(root, {"mesh", "material", "element-set", "fixed", "tool", "solver"});
+
+  scene::Scene s;
+  s.source = source_;
+  const pugi::xml_node mesh = root.child("mesh");
+  if (!mesh) fail(root, "no <mesh>; a scene needs one");
+  if (mesh.next_sibling("mesh")) fail_at(line(mesh.next_sibling("mesh")), "a second <mesh>; a scene has one");
+  read_mesh(mesh, s);
+  for (pugi::xml_node n : root.children("material")) s.materials.push_back(read_material(n));
+  for (pugi::xml_node n : root.children("element-set")) s.sets.push_back(read_set(n));
+  for (pugi::xml_node n : root.children("fixed")) s.constraints.push_back(read_fixed(n));
+  for (pugi::xml_node n : root.children("tool")) s.tools.push_back(read_tool(n));
+  if (const pugi::xml_node n = root.child("solver")) {
+    if (n.next_sibling("solver")) fail_at(line(n.next_sibling("solver")), "a second <solver>; a scene has one");
+    s.solver = read_solver(n);
+  }
+  return s;
+}
+
+// ---- writing ---------------------------------------------------------------
+
+std::string num(double v) { return fmt::format("{}", v); }
+
+std::string triple_text(const double v[3]) { return fmt::format("{} {} {}", v[0], v[1], v[2]); }
+
+std::string id_list(const std::vector<index_t>& ids) { return fmt::format("{}", fmt::join(ids, " ")); }
+
+void set(pugi::xml_node n, const char* name, const std::string& value) { n.append_attribute(name) = value.c_str(); }
+
+void write_mesh(pugi::xml_node root, const scene::Scene& s, const std::string& mesh_file) {
+  pugi::xml_node mesh = root.append_child("mesh");
+  if (!mesh_file.empty()) {
+    set(mesh, "file", mesh_file);
+    return;
+  }
+  std::string text = "\n";
+  for (size_t i = 0; i + 2 < s.nodes.size(); i += 3)
+    text += fmt::format("      {} {} {}\n", s.nodes[i], s.nodes[i + 1], s.nodes[i + 2]);
+  mesh.append_child("nodes").text() = (text + "    ").c_str();
+  text = "\n";
+  for (size_t e = 0; e + 3 < s.tets.size(); e += 4)
+    text += fmt::format("      {} {} {} {}\n", s.tets[e], s.tets[e + 1], s.tets[e + 2], s.tets[e + 3]);
+  mesh.append_child("elements").text() = (text + "    ").c_str();
+}
+
+void write_material(pugi::xml_node root, const Material& m) {
+  static constexpr const char* kNames[3][2] = {{"E", "nu"}, {"mu", "K"}, {"lambda", "mu"}};
+  pugi::xml_node n = root.append_child("material");
+  set(n, "name", m.name);
+  set(n, kNames[int(m.form)][0], num(m.a));
+  set(n, kNames[int(m.form)][1], num(m.b));
+  set(n, "rho", num(m.rho));
+}
+
+void write_constraint(pugi::xml_node root, const Constraint& c) {
+  pugi::xml_node n = root.append_child("fixed");
+  switch (c.kind) {
+    case Constraint::Kind::Nodes: set(n, "nodes", id_list(c.nodes)); break;
+    case Constraint::Kind::Box:
+      set(n, "box-min", triple_text(c.lo));
+      set(n, "box-max", triple_text(c.hi));
+      break;
+    case Constraint::Kind::Plane:
+      set(n, "plane-point", triple_text(c.point));
+      set(n, "plane-normal", triple_text(c.normal));
+      break;
+  }
+}
+
+void write_tool(pugi::xml_node root, const scene::Tool& t) {
+  pugi::xml_node n = root.append_child("tool");
+  set(n, "name", t.name);
+  set(n, "radius", num(t.radius));
+  set(n, "device", t.device);
+  if (!t.path_file.empty()) {
+    set(n, "path", t.path_file);
+    return;
+  }
+  for (const Waypoint& w : t.path) {
+    pugi::xml_node p = n.append_child("waypoint");
+    set(p, "t", num(w.t));
+    set(p, "x", num(w.p.x));
+    set(p, "y", num(w.p.y));
+    set(p, "z", num(w.p.z));
+  }
+}
+
+void write_solver(pugi::xml_node root, const scene::Solver& v) {
+  pugi::xml_node n = root.append_child("solver");
+  set(n, "backend", v.backend);
+  set(n, "precision", to_string(v.precision));
+  set(n, "dt", v.dt == 0 ? "auto" : num(v.dt));
+  set(n, "dt-safety", num(v.dt_safety));
+  set(n, "damping", v.damping == -1 ? "auto" : num(v.damping));
+  set(n, "depth", v.depth == kDepthAll ? "all" : std::to_string(v.depth));
+  set(n, "tick", num(v.tick));
+  set(n, "residual-tol", num(v.residual_tol));
+  set(n, "kinetic-tol", num(v.kinetic_tol));
+  set(n, "ianp", v.ianp ? "true" : "false");
+}
+
+}  // namespace
+
+scene::Scene parse_scene(std::string_view xml, const std::string& source, const std::string& base_dir) {
+  return Reader(xml, source, base_dir).read();
+}
+
+scene::Scene read_scene(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw SceneError(path + ": cannot open the scene file");
+  std::ostringstream text;
+  text << in.rdbuf();
+  return parse_scene(text.str(), path, fs::path(path).parent_path().string());
+}
+
+std::string format_scene(const scene::Scene& s, const std::string& mesh_file) {
+  pugi::xml_document doc;
+  pugi::xml_node decl = doc.append_child(pugi::node_declaration);
+  decl.append_attribute("version") = "1.0";
+  decl.append_attribute("encoding") = "UTF-8";
+  pugi::xml_node root = doc.append_child("tissue-scene");
+  root.append_attribute("version") = "1";
+  write_mesh(root, s, mesh_file);
+  for (const Material& m : s.materials) write_material(root, m);
+  for (const scene::ElementSet& es : s.sets) {
+    pugi::xml_node n = root.append_child("element-set");
+    set(n, "name", es.name);
+    set(n, "material", es.material);
+    set(n, "elements", es.all ? "all" : id_list(es.elements));
+  }
+  for (const Constraint& c : s.constraints) write_constraint(root, c);
+  for (const scene::Tool& t : s.tools) write_tool(root, t);
+  write_solver(root, s.solver);
+  std::ostringstream out;
+  doc.save(out, "  ", pugi::format_indent, pugi::encoding_utf8);
+  return out.str();
+}
+
+void write_scene(const scene::Scene& s, const std::string& path, bool inline_mesh) {
+  const fs::path dir = fs::path(path).parent_path();
+  std::string mesh_file;
+  if (!inline_mesh) {
+    mesh_file = s.mesh_file.empty() ? fs::path(path).stem().string() + ".node" : s.mesh_file;
+    write_tetgen((dir / mesh_file).string(), s.nodes, s.tets);
+  }
+  for (const scene::Tool& t : s.tools)
+    if (!t.path_file.empty() && !t.path.empty()) write_path_csv((dir / t.path_file).string(), t.path);
+  std::ofstream out(path, std::ios::binary);
+  if (!out) throw std::runtime_error(path + ": cannot open the scene file for writing");
+  out << format_scene(s, mesh_file);
+  out.flush();
+  if (!out) throw std::runtime_error(path + ": write failed");
+}
+
+}  // namespace tissue::io

@@ -1,0 +1,492 @@
+// Scene validation: one test per rule (each checks that the message gives the
+// file and line, names the offending material / set / element / node / tool /
+// setting, and states the rule), the resolution of a valid scene into a
+// ModelInput, and load_model's reports on bad mesh geometry.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <initializer_list>
+#include <limits>
+#include <string>
+
+#include "core/box_mesh.hpp"
+#include "scene/validate.hpp"
+
+namespace tissue::scene {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+/// A valid scene on a 2 x 1 x 1 box (0.02 x 0.01 x 0.01 m, 12 tets, 12 nodes),
+/// with the source lines a file would give.
+Scene valid_scene() {
+  Scene s;
+  s.source = "organ.xml";
+  ModelInput in;
+  box_mesh(in, 2, 1, 1, 0.02, 0.01, 0.01);
+  s.nodes = in.nodes;
+  s.tets = in.tets;
+  s.mesh_line = 2;
+  s.materials.push_back({.name = "brain", .form = Material::Form::YoungPoisson, .a = 3000, .b = 0.45, .rho = 1000,
+                         .line = 10});
+  s.materials.push_back({.name = "capsule", .form = Material::Form::ShearBulk, .a = 2000, .b = 50000, .rho = 1100,
+                         .line = 11});
+  s.sets.push_back({.name = "left", .material = "brain", .elements = {0, 1, 2, 3, 4, 5}, .line = 12});
+  s.sets.push_back({.name = "right", .material = "capsule", .elements = {6, 7, 8, 9, 10, 11}, .line = 13});
+  Constraint base;
+  base.kind = Constraint::Kind::Box;
+  base.lo[0] = base.lo[1] = base.lo[2] = -1;
+  base.hi[0] = base.hi[1] = 1;
+  base.hi[2] = 0;
+  base.line = 14;
+  s.constraints.push_back(base);
+  Tool t;
+  t.name = "probe";
+  t.path = {{0, {0.01, 0.005, 0.02}}, {0.1, {0.01, 0.005, 0.008}}};
+  t.line = 15;
+  s.tools.push_back(t);
+  s.solver.line = 16;
+  return s;
+}
+
+/// Success when to_model_input(s) throws a SceneError whose message contains
+/// every part; the failure message shows what was thrown.
+testing::AssertionResult rejects(const Scene& s, std::initializer_list<std::string> parts) {
+  try {
+    (void)to_model_input(s);
+  } catch (const SceneError& e) {
+    const std::string msg = e.what();
+    for (const std::string& p : parts)
+      if (msg.find(p) == std::string::npos)
+        return testing::AssertionFailure() << "message \"" << msg << "\" lacks \"" << p << "\"";
+    return testing::AssertionSuccess() << msg;
+  } catch (const std::exception& e) {
+    return testing::AssertionFailure() << "threw a non-SceneError: " << e.what();
+  }
+  return testing::AssertionFailure() << "no error";
+}
+
+TEST(SceneValidate, ValidSceneIsAccepted) { EXPECT_NO_THROW(validate(valid_scene())); }
+
+// ---- mesh ----
+
+TEST(SceneValidate, MeshWithoutElements) {
+  Scene s = valid_scene();
+  s.tets.clear();
+  EXPECT_TRUE(rejects(s, {"organ.xml:2: ", "mesh", "no elements"}));
+}
+
+TEST(SceneValidate, MeshCornerOutOfRange) {
+  Scene s = valid_scene();
+  s.tets[4 * 7 + 2] = 12;
+  EXPECT_TRUE(rejects(s, {"organ.xml:2: ", "element 7 corner 2", "node 12", "out of range", "12 nodes"}));
+}
+
+TEST(SceneValidate, NonFiniteNodeCoordinate) {
+  Scene s = valid_scene();
+  s.nodes[3 * 5 + 1] = kInf;
+  EXPECT_TRUE(rejects(s, {"organ.xml:2: ", "node 5 coordinate y", "not a finite number"}));
+}
+
+// ---- materials ----
+
+TEST(SceneValidate, UnknownMaterialInSet) {
+  Scene s = valid_scene();
+  s.sets[1].material = "capsul";
+  EXPECT_TRUE(rejects(s, {"organ.xml:13: ", "element-set 'right'", "material 'capsul' is not defined", "'capsule'"}));
+}
+
+TEST(SceneValidate, PoissonRatioAtOneHalf) {
+  Scene s = valid_scene();
+  s.materials[0].b = 0.5;
+  EXPECT_TRUE(rejects(s, {"organ.xml:10: ", "material 'brain'", "nu = 0.5", "must be in (-1, 0.5)"}));
+}
+
+TEST(SceneValidate, PoissonRatioAtMinusOne) {
+  Scene s = valid_scene();
+  s.materials[0].b = -1;
+  EXPECT_TRUE(rejects(s, {"organ.xml:10: ", "material 'brain'", "nu = -1", "must be in (-1, 0.5)"}));
+}
+
+TEST(SceneValidate, NonPositiveYoungsModulus) {
+  Scene s = valid_scene();
+  s.materials[0].a = 0;
+  EXPECT_TRUE(rejects(s, {"organ.xml:10: ", "material 'brain'", "Young's modulus E = 0 Pa", "must be > 0"}));
+}
+
+TEST(SceneValidate, NonPositiveDensity) {
+  Scene s = valid_scene();
+  s.materials[1].rho = -5;
+  EXPECT_TRUE(rejects(s, {"organ.xml:11: ", "material 'capsule'", "density rho = -5", "must be > 0"}));
+}
+
+TEST(SceneValidate, ShearBulkNonPositiveMu) {
+  Scene s = valid_scene();
+  s.materials[1].a = -2000;
+  EXPECT_TRUE(rejects(s, {"organ.xml:11: ", "material 'capsule'", "shear modulus mu = -2000 Pa", "must be > 0"}));
+}
+
+TEST(SceneValidate, ShearBulkNonPositiveK) {
+  Scene s = valid_scene();
+  s.materials[1].b = 0;
+  EXPECT_TRUE(rejects(s, {"organ.xml:11: ", "material 'capsule'", "bulk modulus K = 0 Pa", "must be > 0"}));
+}
+
+TEST(SceneValidate, LameNonPositiveMu) {
+  Scene s = valid_scene();
+  s.materials[1] = {.name = "capsule", .form = Material::Form::Lame, .a = 1000, .b = 0, .rho = 1000, .line = 11};
+  EXPECT_TRUE(rejects(s, {"organ.xml:11: ", "material 'capsule'", "mu = 0 Pa", "must be > 0"}));
+}
+
+TEST(SceneValidate, LameNonPositiveBulkModulus) {
+  Scene s = valid_scene();
+  // lambda + 2 mu / 3 = -3000 + 2000 = -1000 Pa
+  s.materials[1] = {.name = "capsule", .form = Material::Form::Lame, .a = -3000, .b = 3000, .rho = 1000, .line = 11};
+  EXPECT_TRUE(rejects(s, {"organ.xml:11: ", "material 'capsule'", "K = lambda + 2 mu / 3 = -1000 Pa", "must be > 0"}));
+}
+
+TEST(SceneValidate, NonFiniteMaterialNumber) {
+  Scene s = valid_scene();
+  s.materials[0].a = kNaN;
+  EXPECT_TRUE(rejects(s, {"organ.xml:10: ", "material 'brain'", "E = nan", "not a finite number"}));
+  s = valid_scene();
+  s.materials[1].rho = kInf;
+  EXPECT_TRUE(rejects(s, {"organ.xml:11: ", "material 'capsule'", "rho = inf", "not a finite number"}));
+}
+
+TEST(SceneValidate, DuplicateMaterialName) {
+  Scene s = valid_scene();
+  s.materials[1].name = "brain";
+  s.sets[1].material = "brain";
+  EXPECT_TRUE(rejects(s, {"organ.xml:11: ", "material 'brain' is defined twice", "organ.xml:10", "unique"}));
+}
+
+TEST(SceneValidate, EmptyMaterialName) {
+  Scene s = valid_scene();
+  s.materials[0].name = "";
+  EXPECT_TRUE(rejects(s, {"organ.xml:10: ", "material", "name is empty"}));
+}
+
+// ---- element sets ----
+
+TEST(SceneValidate, ElementOutOfRangeInSet) {
+  Scene s = valid_scene();
+  s.sets[1].elements.push_back(12);
+  EXPECT_TRUE(rejects(s, {"organ.xml:13: ", "element-set 'right'", "element 12 is out of range", "12 elements"}));
+  s.sets[1].elements.back() = -1;
+  EXPECT_TRUE(rejects(s, {"organ.xml:13: ", "element-set 'right'", "element -1 is out of range"}));
+}
+
+TEST(SceneValidate, ElementInTwoSets) {
+  Scene s = valid_scene();
+  s.sets[1].elements.push_back(4);
+  EXPECT_TRUE(rejects(s, {"organ.xml:13: ", "element-set 'right'", "element 4 is already in element-set 'left'",
+                          "organ.xml:12", "exactly one set"}));
+}
+
+TEST(SceneValidate, AllElementsSetOverlapsAnother) {
+  Scene s = valid_scene();
+  s.sets[0].all = true;
+  s.sets[0].elements.clear();
+  EXPECT_TRUE(rejects(s, {"organ.xml:13: ", "element 6 is already in element-set 'left'"}));
+}
+
+TEST(SceneValidate, ElementListedTwiceInOneSet) {
+  Scene s = valid_scene();
+  s.sets[0].elements.push_back(2);
+  EXPECT_TRUE(rejects(s, {"organ.xml:12: ", "element-set 'left'", "element 2 is listed twice"}));
+}
+
+TEST(SceneValidate, ElementInNoSet) {
+  Scene s = valid_scene();
+  s.sets[1].elements = {6, 7, 8, 10};
+  EXPECT_TRUE(rejects(s, {"organ.xml:2: ", "element 9 (nodes", "is in no element-set", "nor are 1 others",
+                          "needs a material"}));
+}
+
+// ---- constraints ----
+
+TEST(SceneValidate, ConstraintNodeOutOfRange) {
+  Scene s = valid_scene();
+  Constraint c;
+  c.nodes = {0, 3, 40};
+  c.line = 20;
+  s.constraints.push_back(c);
+  EXPECT_TRUE(rejects(s, {"organ.xml:20: ", "fixed nodes", "node 40 is out of range", "12 nodes"}));
+}
+
+TEST(SceneValidate, BoxMinAboveMax) {
+  Scene s = valid_scene();
+  s.constraints[0].lo[1] = 2;
+  EXPECT_TRUE(rejects(s, {"organ.xml:14: ", "fixed box", "box-min y = 2 is greater than box-max y = 1",
+                          "need min <= max"}));
+}
+
+TEST(SceneValidate, PlaneWithZeroNormal) {
+  Scene s = valid_scene();
+  Constraint c;
+  c.kind = Constraint::Kind::Plane;
+  c.normal[2] = 0;
+  c.line = 21;
+  s.constraints.push_back(c);
+  EXPECT_TRUE(rejects(s, {"organ.xml:21: ", "fixed plane", "normal is zero", "non-zero length"}));
+}
+
+TEST(SceneValidate, NonFiniteConstraintNumber) {
+  Scene s = valid_scene();
+  s.constraints[0].hi[2] = kNaN;
+  EXPECT_TRUE(rejects(s, {"organ.xml:14: ", "fixed box", "box-max z = nan", "not a finite number"}));
+}
+
+TEST(SceneValidate, BoxSelectingNoNode) {
+  Scene s = valid_scene();
+  s.constraints[0].lo[2] = 0.5;
+  s.constraints[0].hi[2] = 0.6;
+  EXPECT_TRUE(rejects(s, {"organ.xml:14: ", "fixed box min (-1, -1, 0.5) max (1, 1, 0.6)", "selects no node",
+                          "at least one node"}));
+}
+
+TEST(SceneValidate, PlaneSelectingNoNode) {
+  Scene s = valid_scene();
+  Constraint c;
+  c.kind = Constraint::Kind::Plane;
+  c.point[0] = 0.05;  // beyond the box's x = 0.02 face, normal +x
+  c.normal[0] = 1;
+  c.normal[2] = 0;
+  c.line = 22;
+  s.constraints.push_back(c);
+  EXPECT_TRUE(rejects(s, {"organ.xml:22: ", "fixed plane point (0.05, 0, 0) normal (1, 0, 0)", "selects no node"}));
+}
+
+TEST(SceneValidate, EmptyNodeList) {
+  Scene s = valid_scene();
+  Constraint c;
+  c.line = 23;
+  s.constraints.push_back(c);
+  EXPECT_TRUE(rejects(s, {"organ.xml:23: ", "fixed nodes", "empty", "at least one node"}));
+}
+
+// ---- tools ----
+
+TEST(SceneValidate, ToolRadiusNonPositive) {
+  Scene s = valid_scene();
+  s.tools[0].radius = 0;
+  EXPECT_TRUE(rejects(s, {"organ.xml:15: ", "tool 'probe'", "radius = 0 m", "must be > 0"}));
+}
+
+TEST(SceneValidate, UnknownDevice) {
+  Scene s = valid_scene();
+  s.tools[0].device = "omni";
+  EXPECT_TRUE(rejects(s, {"organ.xml:15: ", "tool 'probe'", "unknown device 'omni'", "scripted, mouse or phantom"}));
+}
+
+TEST(SceneValidate, ScriptedToolWithoutPath) {
+  Scene s = valid_scene();
+  s.tools[0].path.clear();
+  EXPECT_TRUE(rejects(s, {"organ.xml:15: ", "tool 'probe'", "scripted device needs a path"}));
+  s.tools[0].device = "mouse";  // interactive devices need none
+  EXPECT_NO_THROW(validate(s));
+}
+
+TEST(SceneValidate, WaypointTimesMustIncrease) {
+  Scene s = valid_scene();
+  s.tools[0].path.push_back({0.1, {0, 0, 0}});
+  EXPECT_TRUE(rejects(s, {"organ.xml:15: ", "tool 'probe'", "waypoint 2 has t = 0.1 s", "times must increase"}));
+}
+
+TEST(SceneValidate, NonFiniteWaypoint) {
+  Scene s = valid_scene();
+  s.tools[0].path[1].p.z = kNaN;
+  EXPECT_TRUE(rejects(s, {"organ.xml:15: ", "tool 'probe': waypoint 1", "z = nan", "not a finite number"}));
+}
+
+// ---- solver ----
+
+TEST(SceneValidate, UnknownBackend) {
+  Scene s = valid_scene();
+  s.solver.backend = "gpu";
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "unknown backend 'gpu'", "cpu or cuda"}));
+}
+
+TEST(SceneValidate, NegativeTimeStep) {
+  Scene s = valid_scene();
+  s.solver.dt = -1e-4;
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "dt = -0.0001 s", "must be >= 0"}));
+}
+
+TEST(SceneValidate, SafetyFactorOutsideOpenUnitInterval) {
+  for (double bad : {0.0, 1.0, 1.5}) {
+    Scene s = valid_scene();
+    s.solver.dt_safety = bad;
+    EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "dt-safety", "must be in (0, 1)"}));
+  }
+}
+
+TEST(SceneValidate, NegativeDampingOtherThanAuto) {
+  Scene s = valid_scene();
+  s.solver.damping = -0.5;
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "damping = -0.5", "must be >= 0 (or \"auto\")"}));
+  s.solver.damping = -1;  // auto
+  EXPECT_NO_THROW(validate(s));
+}
+
+TEST(SceneValidate, DepthBelowMinusOne) {
+  Scene s = valid_scene();
+  s.solver.depth = -2;
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "depth = -2", "must be >= 0 (or \"all\")"}));
+  s.solver.depth = kDepthAll;
+  EXPECT_NO_THROW(validate(s));
+}
+
+TEST(SceneValidate, TickNonPositive) {
+  Scene s = valid_scene();
+  s.solver.tick = 0;
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "tick = 0 s", "must be > 0"}));
+}
+
+TEST(SceneValidate, TolerancesNonPositive) {
+  Scene s = valid_scene();
+  s.solver.residual_tol = 0;
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "residual-tol = 0", "must be > 0"}));
+  s = valid_scene();
+  s.solver.kinetic_tol = -1e-6;
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "kinetic-tol = -1e-06", "must be > 0"}));
+}
+
+TEST(SceneValidate, NonFiniteSolverNumber) {
+  Scene s = valid_scene();
+  s.solver.tick = kInf;
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "tick = inf", "not a finite number"}));
+}
+
+TEST(SceneValidate, SceneBuiltInCodeHasNoLineNumber) {
+  Scene s = valid_scene();
+  s.materials[0].line = 0;
+  s.materials[0].a = -1;
+  EXPECT_TRUE(rejects(s, {"organ.xml: material 'brain'"}));
+}
+
+// ---- resolution ----
+
+TEST(SceneValidate, ValidSceneGivesModelInput) {
+  Scene s = valid_scene();
+  s.solver.dt = 1e-5;
+  s.solver.dt_safety = 0.3;
+  s.solver.damping = 25;
+  s.solver.ianp = false;
+  const ModelInput in = to_model_input(s);
+  EXPECT_EQ(in.source, "organ.xml");
+  EXPECT_EQ(in.nodes, s.nodes);
+  EXPECT_EQ(in.tets, s.tets);
+  EXPECT_EQ(in.elem_material, (std::vector<index_t>{0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1}));
+  ASSERT_EQ(in.materials.size(), 2u);
+  EXPECT_DOUBLE_EQ(in.materials[0].mu, 3000 / (2 * 1.45));
+  EXPECT_DOUBLE_EQ(in.materials[0].K, 3000 / (3 * (1 - 0.9)));
+  EXPECT_DOUBLE_EQ(in.materials[0].rho, 1000);
+  EXPECT_DOUBLE_EQ(in.materials[1].mu, 2000);
+  EXPECT_DOUBLE_EQ(in.materials[1].K, 50000);
+  EXPECT_DOUBLE_EQ(in.materials[1].rho, 1100);
+  // the box z <= 0 holds the bottom face: grid points (i, j, 0)
+  std::vector<std::uint8_t> fixed(12, 0);
+  for (int j = 0; j <= 1; ++j)
+    for (int i = 0; i <= 2; ++i) fixed[box_node(2, 1, i, j, 0)] = 1;
+  EXPECT_EQ(in.fixed, fixed);
+  EXPECT_EQ(in.dt, 1e-5);
+  EXPECT_EQ(in.dt_safety, 0.3);
+  EXPECT_EQ(in.damping, 25);
+  EXPECT_FALSE(in.ianp);
+}
+
+TEST(SceneValidate, ConstraintsAccumulateIntoOneMask) {
+  Scene s = valid_scene();
+  Constraint c;
+  c.nodes = {box_node(2, 1, 2, 1, 1), box_node(2, 1, 0, 0, 0)};  // one new, one already fixed by the box
+  s.constraints.push_back(c);
+  const ModelInput in = to_model_input(s);
+  EXPECT_EQ(std::count(in.fixed.begin(), in.fixed.end(), 1), 7);
+  EXPECT_EQ(in.fixed[box_node(2, 1, 2, 1, 1)], 1);
+}
+
+TEST(SceneValidate, LoadModelBuildsTheModel) {
+  const TissueModel<double> m = load_model(valid_scene());
+  EXPECT_EQ(m.n_nodes, 12);
+  EXPECT_EQ(m.n_elems, 12);
+  EXPECT_DOUBLE_EQ(m.mu[0], 3000 / 2.9);
+  EXPECT_DOUBLE_EQ(m.mu[11], 2000);
+  EXPECT_EQ(m.node_flags[box_node(2, 1, 1, 0, 0)] & kFixed, kFixed);
+  EXPECT_EQ(m.node_flags[box_node(2, 1, 1, 0, 1)] & kFixed, 0);
+  EXPECT_NEAR(m.total_mass, 0.01 * 0.01 * 0.01 * 1000 + 0.01 * 0.01 * 0.01 * 1100, 1e-15);
+}
+
+TEST(SceneValidate, LoadModelReportsZeroVolumeElement) {
+  Scene s = valid_scene();
+  // element 4 flattened onto the bottom face z = 0
+  const index_t flat[4] = {box_node(2, 1, 0, 0, 0), box_node(2, 1, 1, 0, 0), box_node(2, 1, 0, 1, 0),
+                           box_node(2, 1, 1, 1, 0)};
+  std::copy(flat, flat + 4, s.tets.begin() + 4 * 4);
+  try {
+    (void)load_model(s);
+    FAIL() << "no error for a zero-volume tet";
+  } catch (const ModelError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("organ.xml"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("element 4"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("zero volume"), std::string::npos) << msg;
+  }
+}
+
+TEST(SceneValidate, LoadModelReorientsInvertedElement) {
+  Scene s = valid_scene();
+  std::swap(s.tets[4 * 3 + 0], s.tets[4 * 3 + 1]);  // element 3 inverted
+  const TissueModel<double> m = load_model(s);
+  EXPECT_EQ(m.reoriented, 1);
+  EXPECT_GT(m.volume[3], 0);
+}
+
+TEST(SceneValidate, LoadModelReportsTimeStepAboveLimit) {
+  Scene s = valid_scene();
+  s.solver.dt = 1.0;
+  try {
+    (void)load_model(s);
+    FAIL() << "no error for dt above dt_crit";
+  } catch (const ModelError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("organ.xml"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("above the stable limit"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("element"), std::string::npos) << msg;
+  }
+}
+
+TEST(SceneValidate, SchedulerSettingsFromSolver) {
+  Scene s = valid_scene();
+  s.solver.depth = 3;
+  s.solver.tick = 2e-3;
+  s.solver.residual_tol = 1e-4;
+  s.solver.kinetic_tol = 1e-8;
+  const SchedulerSettings st = scheduler_settings(s);
+  EXPECT_EQ(st.depth, 3);
+  EXPECT_EQ(st.tick, 2e-3);
+  EXPECT_EQ(st.residual_tol, 1e-4);
+  EXPECT_EQ(st.kinetic_tol, 1e-8);
+  s.solver.tick = -1;
+  EXPECT_THROW((void)scheduler_settings(s), SceneError);
+}
+
+TEST(SceneValidate, MaterialParamsOfEachForm) {
+  const MaterialParams yp = Material{.name = "m", .form = Material::Form::YoungPoisson, .a = 3000, .b = 0.25, .rho = 900}.params();
+  EXPECT_DOUBLE_EQ(yp.mu, 1200);
+  EXPECT_DOUBLE_EQ(yp.K, 2000);
+  EXPECT_DOUBLE_EQ(yp.rho, 900);
+  const MaterialParams sb = Material{.name = "m", .form = Material::Form::ShearBulk, .a = 1200, .b = 2000}.params();
+  EXPECT_DOUBLE_EQ(sb.mu, 1200);
+  EXPECT_DOUBLE_EQ(sb.K, 2000);
+  // lambda = K - 2 mu / 3 = 2000 - 800 = 1200
+  const MaterialParams la = Material{.name = "m", .form = Material::Form::Lame, .a = 1200, .b = 1200}.params();
+  EXPECT_DOUBLE_EQ(la.mu, 1200);
+  EXPECT_DOUBLE_EQ(la.K, 2000);
+}
+
+}  // namespace
+}  // namespace tissue::scene
