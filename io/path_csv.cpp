@@ -61,8 +61,9 @@ std::vector<Waypoint> parse_path_csv(std::istream& in, const std::string& source
     }
     const Waypoint w = parse_row(text, source, line);
     if (!path.empty() && !(w.t > path.back().t))
-      fail(source, line, fmt::format("t = {} s is not after the previous waypoint's t = {} s; times must increase",
-                                     w.t, path.back().t));
+      fail(source, line,
+           fmt::format("t = {} s is not after the previous waypoint's t = {} s; times must increase", w.t,
+                       path.back().t));
     path.push_back(w);
   }
   if (!have_header) fail(source, line, "the file is empty; expected the header 't,x,y,z' and waypoints");

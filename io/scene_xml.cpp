@@ -1,13 +1,13 @@
 #include "io/scene_xml.hpp"
 
 #include <fmt/format.h>
-#include <pugixml.hpp>
 
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <initializer_list>
 #include <limits>
+#include <pugixml.hpp>
 #include <sstream>
 
 #include "io/path_csv.hpp"
@@ -113,7 +113,9 @@ void Reader::check_children(pugi::xml_node n, Names allowed) const {
   }
 }
 
-void Reader::check_no_text(pugi::xml_node n) const { check_children(n, {}); }
+void Reader::check_no_text(pugi::xml_node n) const {
+  check_children(n, {});
+}
 
 std::string Reader::required(pugi::xml_node n, const char* name) const {
   const pugi::xml_attribute a = n.attribute(name);
@@ -372,9 +374,9 @@ scene::Scene Reader::read() {
   pugi::xml_node root;
   for (pugi::xml_node c : doc.children()) {
     if (c.type() != pugi::node_element) continue;
+    if (root) fail_at(line(c), fmt::format("a second root element <{}>; a file holds one <tissue-scene>", c.name()));
     if (std::string_view(c.name()) != "tissue-scene")
       fail_at(line(c), fmt::format("the root element is <{}>; expected <tissue-scene>", c.name()));
-    if (root) fail_at(line(c), "a second <tissue-scene>; a file holds one scene");
     root = c;
   }
   if (!root) fail_at(0, "no <tissue-scene> element");
@@ -403,13 +405,21 @@ scene::Scene Reader::read() {
 
 // ---- writing ---------------------------------------------------------------
 
-std::string num(double v) { return fmt::format("{}", v); }
+std::string num(double v) {
+  return fmt::format("{}", v);
+}
 
-std::string triple_text(const double v[3]) { return fmt::format("{} {} {}", v[0], v[1], v[2]); }
+std::string triple_text(const double v[3]) {
+  return fmt::format("{} {} {}", v[0], v[1], v[2]);
+}
 
-std::string id_list(const std::vector<index_t>& ids) { return fmt::format("{}", fmt::join(ids, " ")); }
+std::string id_list(const std::vector<index_t>& ids) {
+  return fmt::format("{}", fmt::join(ids, " "));
+}
 
-void set(pugi::xml_node n, const char* name, const std::string& value) { n.append_attribute(name) = value.c_str(); }
+void set(pugi::xml_node n, const char* name, const std::string& value) {
+  n.append_attribute(name) = value.c_str();
+}
 
 void write_mesh(pugi::xml_node root, const scene::Scene& s, const std::string& mesh_file) {
   pugi::xml_node mesh = root.append_child("mesh");
@@ -439,7 +449,9 @@ void write_material(pugi::xml_node root, const Material& m) {
 void write_constraint(pugi::xml_node root, const Constraint& c) {
   pugi::xml_node n = root.append_child("fixed");
   switch (c.kind) {
-    case Constraint::Kind::Nodes: set(n, "nodes", id_list(c.nodes)); break;
+    case Constraint::Kind::Nodes:
+      set(n, "nodes", id_list(c.nodes));
+      break;
     case Constraint::Kind::Box:
       set(n, "box-min", triple_text(c.lo));
       set(n, "box-max", triple_text(c.hi));

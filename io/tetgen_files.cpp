@@ -74,8 +74,8 @@ int check_id(const DataLines& r, std::string_view token, long long k, int first,
     return int(id);
   }
   if (id != first + k)
-    fail(r.source(), r.line(), fmt::format("{} id {} breaks the numbering; expected {} (ids are consecutive)", what, id,
-                                           first + k));
+    fail(r.source(), r.line(),
+         fmt::format("{} id {} breaks the numbering; expected {} (ids are consecutive)", what, id, first + k));
   return first;
 }
 
@@ -102,8 +102,9 @@ std::vector<double> parse_tetgen_node(std::istream& in, const std::string& sourc
     if (!r.next(tok))
       fail(source, r.line(), fmt::format("the file ends after {} of the {} points its header declares", k, h[0]));
     if (tok.size() != fields)
-      fail(source, r.line(), fmt::format("point line has {} fields; expected {} (id x y z, {} attributes, {} marker)",
-                                         tok.size(), fields, h[2], h[3]));
+      fail(source, r.line(),
+           fmt::format("point line has {} fields; expected {} (id x y z, {} attributes, {} marker)", tok.size(), fields,
+                       h[2], h[3]));
     first_index = check_id(r, tok[0], k, first_index, "point");
     for (int c = 0; c < 3; ++c) xyz.push_back(real_field(r, tok[1 + c], fmt::format("{} coordinate", "xyz"[c])));
   }
@@ -111,8 +112,7 @@ std::vector<double> parse_tetgen_node(std::istream& in, const std::string& sourc
   return xyz;
 }
 
-std::vector<index_t> parse_tetgen_ele(std::istream& in, const std::string& source, index_t n_nodes,
-                                      int first_index) {
+std::vector<index_t> parse_tetgen_ele(std::istream& in, const std::string& source, index_t n_nodes, int first_index) {
   DataLines r(in, source);
   const auto h = header(r, 3, "<tetrahedra> 4 <attributes>");
   if (h[0] == 0) fail(source, r.line(), "the header declares 0 tetrahedra");
@@ -127,14 +127,16 @@ std::vector<index_t> parse_tetgen_ele(std::istream& in, const std::string& sourc
     if (!r.next(tok))
       fail(source, r.line(), fmt::format("the file ends after {} of the {} tetrahedra its header declares", k, h[0]));
     if (tok.size() != fields)
-      fail(source, r.line(), fmt::format("tetrahedron line has {} fields; expected {} (id, 4 corners, {} attributes)",
-                                         tok.size(), fields, h[2]));
+      fail(source, r.line(),
+           fmt::format("tetrahedron line has {} fields; expected {} (id, 4 corners, {} attributes)", tok.size(), fields,
+                       h[2]));
     base = check_id(r, tok[0], k, base, "tetrahedron");
     for (int a = 0; a < 4; ++a) {
       const long long v = integer_field(r, tok[1 + a], fmt::format("corner {}", a));
       if (v < first_index || v >= first_index + (long long)n_nodes)
-        fail(source, r.line(), fmt::format("corner {} refers to point {}, but the points are numbered {}..{}", a, v,
-                                           first_index, first_index + (long long)n_nodes - 1));
+        fail(source, r.line(),
+             fmt::format("corner {} refers to point {}, but the points are numbered {}..{}", a, v, first_index,
+                         first_index + (long long)n_nodes - 1));
       tets.push_back(static_cast<index_t>(v - first_index));
     }
   }
@@ -145,8 +147,8 @@ std::vector<index_t> parse_tetgen_ele(std::istream& in, const std::string& sourc
 std::string ele_path_for(const std::string& node_path) {
   static const std::string kExt = ".node";
   if (node_path.size() <= kExt.size() || node_path.compare(node_path.size() - kExt.size(), kExt.size(), kExt) != 0)
-    throw TetgenFileError(fmt::format("{}: a TetGen mesh is named by its .node file (x.node, with x.ele beside it)",
-                                      node_path));
+    throw TetgenFileError(
+        fmt::format("{}: a TetGen mesh is named by its .node file (x.node, with x.ele beside it)", node_path));
   return node_path.substr(0, node_path.size() - kExt.size()) + ".ele";
 }
 

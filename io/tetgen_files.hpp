@@ -26,9 +26,9 @@ struct TetgenFileError : std::runtime_error {
 
 /// The contents of a .node/.ele pair, renumbered from 0.
 struct TetgenFiles {
-  std::vector<double> nodes;   ///< (n_nodes x 3) m, xyz interleaved
-  std::vector<index_t> tets;   ///< (n_elems x 4) node ids from 0
-  int first_index = 0;         ///< 0 or 1: the numbering the files used
+  std::vector<double> nodes;  ///< (n_nodes x 3) m, xyz interleaved
+  std::vector<index_t> tets;  ///< (n_elems x 4) node ids from 0
+  int first_index = 0;        ///< 0 or 1: the numbering the files used
 };
 
 /// Parses .node text; returns the coordinates (n_nodes x 3) and sets
@@ -37,8 +37,7 @@ std::vector<double> parse_tetgen_node(std::istream& in, const std::string& sourc
 
 /// Parses .ele text whose corner ids count from `first_index` and must lie in
 /// [first_index, first_index + n_nodes); returns 0-based corners (n_elems x 4).
-std::vector<index_t> parse_tetgen_ele(std::istream& in, const std::string& source, index_t n_nodes,
-                                      int first_index);
+std::vector<index_t> parse_tetgen_ele(std::istream& in, const std::string& source, index_t n_nodes, int first_index);
 
 /// The .ele path that pairs with a .node path ("dir/x.node" -> "dir/x.ele").
 /// Throws TetgenFileError if node_path does not end in ".node".

@@ -22,7 +22,9 @@ bool above_plane(const double* x, const Constraint& c, double tol) {
   return d / len >= -tol;
 }
 
-std::string triple(const double* v) { return fmt::format("({}, {}, {})", v[0], v[1], v[2]); }
+std::string triple(const double* v) {
+  return fmt::format("({}, {}, {})", v[0], v[1], v[2]);
+}
 
 }  // namespace
 

@@ -21,8 +21,12 @@ void check_finite(const Scene& s, int line, const std::string& what, std::string
   if (!std::isfinite(value)) fail(s, line, fmt::format("{}: {} = {} is not a finite number", what, field, value));
 }
 
-index_t node_count(const Scene& s) { return static_cast<index_t>(s.nodes.size() / 3); }
-index_t elem_count(const Scene& s) { return static_cast<index_t>(s.tets.size() / 4); }
+index_t node_count(const Scene& s) {
+  return static_cast<index_t>(s.nodes.size() / 3);
+}
+index_t elem_count(const Scene& s) {
+  return static_cast<index_t>(s.tets.size() / 4);
+}
 
 // ---- mesh ------------------------------------------------------------------
 
@@ -31,18 +35,20 @@ void check_mesh(const Scene& s) {
   if (s.nodes.size() % 3 != 0)
     fail(s, ln, fmt::format("mesh: {} node coordinates is not a multiple of 3 (x y z per node)", s.nodes.size()));
   if (s.tets.size() % 4 != 0)
-    fail(s, ln, fmt::format("mesh: {} element corners is not a multiple of 4 (4 node ids per tetrahedron)",
-                            s.tets.size()));
+    fail(s, ln,
+         fmt::format("mesh: {} element corners is not a multiple of 4 (4 node ids per tetrahedron)", s.tets.size()));
   if (s.tets.empty()) fail(s, ln, "mesh: no elements; the mesh needs at least one tetrahedron");
   for (size_t k = 0; k < s.nodes.size(); ++k)
     if (!std::isfinite(s.nodes[k]))
-      fail(s, ln, fmt::format("mesh: node {} coordinate {} = {} is not a finite number", k / 3, "xyz"[k % 3],
-                              s.nodes[k]));
+      fail(s, ln,
+           fmt::format("mesh: node {} coordinate {} = {} is not a finite number", k / 3, "xyz"[k % 3], s.nodes[k]));
   const index_t n = node_count(s);
   for (size_t k = 0; k < s.tets.size(); ++k)
     if (s.tets[k] < 0 || s.tets[k] >= n)
-      fail(s, ln, fmt::format("mesh: element {} corner {} refers to node {}, out of range (the mesh has {} nodes, "
-                              "ids 0..{})", k / 4, k % 4, s.tets[k], n, n - 1));
+      fail(s, ln,
+           fmt::format("mesh: element {} corner {} refers to node {}, out of range (the mesh has {} nodes, "
+                       "ids 0..{})",
+                       k / 4, k % 4, s.tets[k], n, n - 1));
 }
 
 // ---- materials -------------------------------------------------------------
@@ -50,8 +56,10 @@ void check_mesh(const Scene& s) {
 void check_young_poisson(const Scene& s, const Material& m, const std::string& what) {
   if (!(m.a > 0)) fail(s, m.line, fmt::format("{}: Young's modulus E = {} Pa must be > 0", what, m.a));
   if (!(m.b > -1 && m.b < 0.5))
-    fail(s, m.line, fmt::format("{}: Poisson ratio nu = {} must be in (-1, 0.5) (nu >= 0.5 is incompressible, "
-                                "nu <= -1 unstable)", what, m.b));
+    fail(s, m.line,
+         fmt::format("{}: Poisson ratio nu = {} must be in (-1, 0.5) (nu >= 0.5 is incompressible, "
+                     "nu <= -1 unstable)",
+                     what, m.b));
 }
 
 void check_shear_bulk(const Scene& s, const Material& m, const std::string& what) {
@@ -63,8 +71,10 @@ void check_lame(const Scene& s, const Material& m, const std::string& what) {
   if (!(m.b > 0)) fail(s, m.line, fmt::format("{}: Lame shear modulus mu = {} Pa must be > 0", what, m.b));
   const double K = m.a + 2 * m.b / 3;
   if (!(K > 0))
-    fail(s, m.line, fmt::format("{}: bulk modulus K = lambda + 2 mu / 3 = {} Pa (lambda = {} Pa, mu = {} Pa) "
-                                "must be > 0", what, K, m.a, m.b));
+    fail(s, m.line,
+         fmt::format("{}: bulk modulus K = lambda + 2 mu / 3 = {} Pa (lambda = {} Pa, mu = {} Pa) "
+                     "must be > 0",
+                     what, K, m.a, m.b));
 }
 
 void check_material(const Scene& s, const Material& m) {
@@ -76,9 +86,15 @@ void check_material(const Scene& s, const Material& m) {
   check_finite(s, m.line, what, names[1], m.b);
   check_finite(s, m.line, what, "rho", m.rho);
   switch (m.form) {
-    case Material::Form::YoungPoisson: check_young_poisson(s, m, what); break;
-    case Material::Form::ShearBulk: check_shear_bulk(s, m, what); break;
-    case Material::Form::Lame: check_lame(s, m, what); break;
+    case Material::Form::YoungPoisson:
+      check_young_poisson(s, m, what);
+      break;
+    case Material::Form::ShearBulk:
+      check_shear_bulk(s, m, what);
+      break;
+    case Material::Form::Lame:
+      check_lame(s, m, what);
+      break;
   }
   if (!(m.rho > 0)) fail(s, m.line, fmt::format("{}: density rho = {} kg/m^3 must be > 0", what, m.rho));
 }
@@ -91,8 +107,9 @@ std::map<std::string, index_t> check_materials(const Scene& s) {
     check_material(s, m);
     const auto [it, fresh] = index.emplace(m.name, static_cast<index_t>(k));
     if (!fresh)
-      fail(s, m.line, fmt::format("material '{}' is defined twice (first {}); material names must be unique", m.name,
-                                  location(s, s.materials[it->second].line)));
+      fail(s, m.line,
+           fmt::format("material '{}' is defined twice (first {}); material names must be unique", m.name,
+                       location(s, s.materials[it->second].line)));
   }
   return index;
 }
@@ -117,13 +134,15 @@ void claim_elements(const Scene& s, size_t set, std::vector<int>& owner) {
     fail(s, es.line, what + ": the element list is empty; a set needs at least one element (or \"all\")");
   auto claim = [&](index_t e) {
     if (e < 0 || e >= ne)
-      fail(s, es.line, fmt::format("{}: element {} is out of range (the mesh has {} elements, ids 0..{})", what, e,
-                                   ne, ne - 1));
+      fail(s, es.line,
+           fmt::format("{}: element {} is out of range (the mesh has {} elements, ids 0..{})", what, e, ne, ne - 1));
     if (owner[e] == int(set)) fail(s, es.line, fmt::format("{}: element {} is listed twice", what, e));
     if (owner[e] >= 0) {
       const ElementSet& other = s.sets[owner[e]];
-      fail(s, es.line, fmt::format("{}: element {} is already in element-set '{}' ({}); an element belongs to "
-                                   "exactly one set", what, e, other.name, location(s, other.line)));
+      fail(s, es.line,
+           fmt::format("{}: element {} is already in element-set '{}' ({}); an element belongs to "
+                       "exactly one set",
+                       what, e, other.name, location(s, other.line)));
     }
     owner[e] = int(set);
   };
@@ -140,18 +159,20 @@ std::vector<index_t> resolve_sets(const Scene& s, const std::map<std::string, in
   for (size_t k = 0; k < s.sets.size(); ++k) {
     const ElementSet& es = s.sets[k];
     if (!materials.count(es.material))
-      fail(s, es.line, fmt::format("element-set '{}': material '{}' is not defined ({})", es.name, es.material,
-                                   known_materials(s)));
+      fail(
+          s, es.line,
+          fmt::format("element-set '{}': material '{}' is not defined ({})", es.name, es.material, known_materials(s)));
     claim_elements(s, k, owner);
   }
   std::vector<index_t> mat(ne);
   for (index_t e = 0; e < ne; ++e) {
     if (owner[e] < 0) {
       const auto missing = std::count(owner.begin(), owner.end(), -1);
-      fail(s, s.mesh_line, fmt::format("element {} (nodes {} {} {} {}) is in no element-set{}; every element needs "
-                                        "a material (list it in a set, or use elements=\"all\")", e, s.tets[4 * e],
-                                        s.tets[4 * e + 1], s.tets[4 * e + 2], s.tets[4 * e + 3],
-                                        missing > 1 ? fmt::format(" (nor are {} others)", missing - 1) : ""));
+      fail(s, s.mesh_line,
+           fmt::format("element {} (nodes {} {} {} {}) is in no element-set{}; every element needs "
+                       "a material (list it in a set, or use elements=\"all\")",
+                       e, s.tets[4 * e], s.tets[4 * e + 1], s.tets[4 * e + 2], s.tets[4 * e + 3],
+                       missing > 1 ? fmt::format(" (nor are {} others)", missing - 1) : ""));
     }
     mat[e] = materials.at(s.sets[owner[e]].material);
   }
@@ -165,11 +186,12 @@ void check_constraint(const Scene& s, const Constraint& c) {
   const index_t n = node_count(s);
   switch (c.kind) {
     case Constraint::Kind::Nodes:
-      if (c.nodes.empty()) fail(s, c.line, "fixed nodes: the node list is empty; a constraint must fix at least one node");
+      if (c.nodes.empty())
+        fail(s, c.line, "fixed nodes: the node list is empty; a constraint must fix at least one node");
       for (index_t i : c.nodes)
         if (i < 0 || i >= n)
-          fail(s, c.line, fmt::format("fixed nodes: node {} is out of range (the mesh has {} nodes, ids 0..{})", i, n,
-                                      n - 1));
+          fail(s, c.line,
+               fmt::format("fixed nodes: node {} is out of range (the mesh has {} nodes, ids 0..{})", i, n, n - 1));
       break;
     case Constraint::Kind::Box:
       for (int k = 0; k < 3; ++k) {
@@ -178,8 +200,9 @@ void check_constraint(const Scene& s, const Constraint& c) {
       }
       for (int k = 0; k < 3; ++k)
         if (c.lo[k] > c.hi[k])
-          fail(s, c.line, fmt::format("{}: box-min {} = {} is greater than box-max {} = {}; need min <= max", what,
-                                      "xyz"[k], c.lo[k], "xyz"[k], c.hi[k]));
+          fail(s, c.line,
+               fmt::format("{}: box-min {} = {} is greater than box-max {} = {}; need min <= max", what, "xyz"[k],
+                           c.lo[k], "xyz"[k], c.hi[k]));
       break;
     case Constraint::Kind::Plane:
       for (int k = 0; k < 3; ++k) {
@@ -201,8 +224,8 @@ std::vector<std::uint8_t> resolve_constraints(const Scene& s) {
     check_constraint(s, c);
     const std::vector<index_t> sel = constrained_nodes(c, s.nodes, tol);
     if (sel.empty())
-      fail(s, c.line, fmt::format("{} selects no node of the mesh; a constraint must fix at least one node",
-                                  describe(c)));
+      fail(s, c.line,
+           fmt::format("{} selects no node of the mesh; a constraint must fix at least one node", describe(c)));
     for (index_t i : sel) fixed[i] = 1;
   }
   return fixed;
@@ -217,8 +240,9 @@ void check_path(const Scene& s, const Tool& t, const std::string& what) {
     check_finite(s, t.line, wp, "t", w.t);
     for (int c = 0; c < 3; ++c) check_finite(s, t.line, wp, std::string(1, "xyz"[c]), w.p[c]);
     if (k > 0 && !(w.t > t.path[k - 1].t))
-      fail(s, t.line, fmt::format("{} has t = {} s, not after waypoint {} (t = {} s); waypoint times must increase",
-                                  wp, w.t, k - 1, t.path[k - 1].t));
+      fail(s, t.line,
+           fmt::format("{} has t = {} s, not after waypoint {} (t = {} s); waypoint times must increase", wp, w.t,
+                       k - 1, t.path[k - 1].t));
   }
 }
 
@@ -229,8 +253,9 @@ void check_tool(const Scene& s, const Tool& t) {
   if (t.device != "scripted" && t.device != "mouse" && t.device != "phantom")
     fail(s, t.line, fmt::format("{}: unknown device '{}'; expected scripted, mouse or phantom", what, t.device));
   if (t.device == "scripted" && t.path.empty())
-    fail(s, t.line, fmt::format("{}: a scripted device needs a path (path=\"file.csv\" or <waypoint> children){}", what,
-                                t.path_file.empty() ? "" : fmt::format("; '{}' gave no waypoints", t.path_file)));
+    fail(s, t.line,
+         fmt::format("{}: a scripted device needs a path (path=\"file.csv\" or <waypoint> children){}", what,
+                     t.path_file.empty() ? "" : fmt::format("; '{}' gave no waypoints", t.path_file)));
   check_path(s, t, what);
 }
 
@@ -241,18 +266,16 @@ void check_solver(const Scene& s) {
   const int ln = v.line;
   if (v.backend != "cpu" && v.backend != "cuda")
     fail(s, ln, fmt::format("solver: unknown backend '{}'; expected cpu or cuda", v.backend));
-  const std::pair<std::string_view, double> numbers[] = {{"dt", v.dt}, {"dt-safety", v.dt_safety},
-                                                         {"damping", v.damping}, {"tick", v.tick},
-                                                         {"residual-tol", v.residual_tol},
-                                                         {"kinetic-tol", v.kinetic_tol}};
+  const std::pair<std::string_view, double> numbers[] = {
+      {"dt", v.dt},     {"dt-safety", v.dt_safety},       {"damping", v.damping},
+      {"tick", v.tick}, {"residual-tol", v.residual_tol}, {"kinetic-tol", v.kinetic_tol}};
   for (const auto& [name, value] : numbers) check_finite(s, ln, "solver", name, value);
   if (v.dt < 0) fail(s, ln, fmt::format("solver: dt = {} s must be >= 0 (0 or \"auto\" = dt-safety x dt_crit)", v.dt));
   if (!(v.dt_safety > 0 && v.dt_safety < 1))
     fail(s, ln, fmt::format("solver: dt-safety = {} must be in (0, 1) (a fraction of the critical step)", v.dt_safety));
   if (v.damping < 0 && v.damping != -1)
     fail(s, ln, fmt::format("solver: damping = {} 1/s must be >= 0 (or \"auto\")", v.damping));
-  if (v.depth < kDepthAll)
-    fail(s, ln, fmt::format("solver: depth = {} must be >= 0 (or \"all\")", v.depth));
+  if (v.depth < kDepthAll) fail(s, ln, fmt::format("solver: depth = {} must be >= 0 (or \"all\")", v.depth));
   if (!(v.tick > 0)) fail(s, ln, fmt::format("solver: tick = {} s must be > 0", v.tick));
   if (!(v.residual_tol > 0)) fail(s, ln, fmt::format("solver: residual-tol = {} must be > 0", v.residual_tol));
   if (!(v.kinetic_tol > 0)) fail(s, ln, fmt::format("solver: kinetic-tol = {} must be > 0", v.kinetic_tol));
@@ -264,7 +287,9 @@ std::string location(const Scene& scene, int line) {
   return line > 0 ? fmt::format("{}:{}", scene.source, line) : scene.source;
 }
 
-void validate(const Scene& scene) { (void)to_model_input(scene); }
+void validate(const Scene& scene) {
+  (void)to_model_input(scene);
+}
 
 ModelInput to_model_input(const Scene& scene) {
   check_mesh(scene);
@@ -285,7 +310,9 @@ ModelInput to_model_input(const Scene& scene) {
   return in;
 }
 
-TissueModel<double> load_model(const Scene& scene) { return build_model(to_model_input(scene)); }
+TissueModel<double> load_model(const Scene& scene) {
+  return build_model(to_model_input(scene));
+}
 
 SchedulerSettings scheduler_settings(const Scene& scene) {
   check_solver(scene);

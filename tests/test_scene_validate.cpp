@@ -29,10 +29,10 @@ Scene valid_scene() {
   s.nodes = in.nodes;
   s.tets = in.tets;
   s.mesh_line = 2;
-  s.materials.push_back({.name = "brain", .form = Material::Form::YoungPoisson, .a = 3000, .b = 0.45, .rho = 1000,
-                         .line = 10});
-  s.materials.push_back({.name = "capsule", .form = Material::Form::ShearBulk, .a = 2000, .b = 50000, .rho = 1100,
-                         .line = 11});
+  s.materials.push_back(
+      {.name = "brain", .form = Material::Form::YoungPoisson, .a = 3000, .b = 0.45, .rho = 1000, .line = 10});
+  s.materials.push_back(
+      {.name = "capsule", .form = Material::Form::ShearBulk, .a = 2000, .b = 50000, .rho = 1100, .line = 11});
   s.sets.push_back({.name = "left", .material = "brain", .elements = {0, 1, 2, 3, 4, 5}, .line = 12});
   s.sets.push_back({.name = "right", .material = "capsule", .elements = {6, 7, 8, 9, 10, 11}, .line = 13});
   Constraint base;
@@ -68,7 +68,9 @@ testing::AssertionResult rejects(const Scene& s, std::initializer_list<std::stri
   return testing::AssertionFailure() << "no error";
 }
 
-TEST(SceneValidate, ValidSceneIsAccepted) { EXPECT_NO_THROW(validate(valid_scene())); }
+TEST(SceneValidate, ValidSceneIsAccepted) {
+  EXPECT_NO_THROW(validate(valid_scene()));
+}
 
 // ---- mesh ----
 
@@ -202,8 +204,8 @@ TEST(SceneValidate, ElementListedTwiceInOneSet) {
 TEST(SceneValidate, ElementInNoSet) {
   Scene s = valid_scene();
   s.sets[1].elements = {6, 7, 8, 10};
-  EXPECT_TRUE(rejects(s, {"organ.xml:2: ", "element 9 (nodes", "is in no element-set", "nor are 1 others",
-                          "needs a material"}));
+  EXPECT_TRUE(rejects(
+      s, {"organ.xml:2: ", "element 9 (nodes", "is in no element-set", "nor are 1 others", "needs a material"}));
 }
 
 // ---- constraints ----
@@ -220,8 +222,8 @@ TEST(SceneValidate, ConstraintNodeOutOfRange) {
 TEST(SceneValidate, BoxMinAboveMax) {
   Scene s = valid_scene();
   s.constraints[0].lo[1] = 2;
-  EXPECT_TRUE(rejects(s, {"organ.xml:14: ", "fixed box", "box-min y = 2 is greater than box-max y = 1",
-                          "need min <= max"}));
+  EXPECT_TRUE(
+      rejects(s, {"organ.xml:14: ", "fixed box", "box-min y = 2 is greater than box-max y = 1", "need min <= max"}));
 }
 
 TEST(SceneValidate, PlaneWithZeroNormal) {
@@ -244,8 +246,8 @@ TEST(SceneValidate, BoxSelectingNoNode) {
   Scene s = valid_scene();
   s.constraints[0].lo[2] = 0.5;
   s.constraints[0].hi[2] = 0.6;
-  EXPECT_TRUE(rejects(s, {"organ.xml:14: ", "fixed box min (-1, -1, 0.5) max (1, 1, 0.6)", "selects no node",
-                          "at least one node"}));
+  EXPECT_TRUE(rejects(
+      s, {"organ.xml:14: ", "fixed box min (-1, -1, 0.5) max (1, 1, 0.6)", "selects no node", "at least one node"}));
 }
 
 TEST(SceneValidate, PlaneSelectingNoNode) {
@@ -475,7 +477,8 @@ TEST(SceneValidate, SchedulerSettingsFromSolver) {
 }
 
 TEST(SceneValidate, MaterialParamsOfEachForm) {
-  const MaterialParams yp = Material{.name = "m", .form = Material::Form::YoungPoisson, .a = 3000, .b = 0.25, .rho = 900}.params();
+  const MaterialParams yp =
+      Material{.name = "m", .form = Material::Form::YoungPoisson, .a = 3000, .b = 0.25, .rho = 900}.params();
   EXPECT_DOUBLE_EQ(yp.mu, 1200);
   EXPECT_DOUBLE_EQ(yp.K, 2000);
   EXPECT_DOUBLE_EQ(yp.rho, 900);

@@ -1,0 +1,650 @@
+// The scene's file formats: XML scenes (round trip inline and with a mesh
+// file, every material form, constraints resolved to the right nodes, the
+// file:line of syntax errors), TetGen .node/.ele pairs and tool-path CSVs.
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <initializer_list>
+#include <sstream>
+#include <string>
+
+#include "core/box_mesh.hpp"
+#include "io/path_csv.hpp"
+#include "io/scene_xml.hpp"
+#include "io/tetgen_files.hpp"
+#include "scene/validate.hpp"
+
+namespace tissue {
+namespace {
+
+namespace fs = std::filesystem;
+using io::format_scene;
+using io::parse_scene;
+using io::read_scene;
+using io::write_scene;
+using scene::Constraint;
+using scene::Material;
+using scene::Scene;
+using scene::SceneError;
+
+/// A fresh folder for one test, removed afterwards.
+class TempDir {
+ public:
+  TempDir() {
+    const auto* info = testing::UnitTest::GetInstance()->current_test_info();
+    path_ = fs::temp_directory_path() / fmt::format("tissue-{}-{}-{}", info->test_suite_name(), info->name(), getpid());
+    fs::remove_all(path_);
+    fs::create_directories(path_);
+  }
+  ~TempDir() { fs::remove_all(path_); }
+  std::string file(const std::string& name) const { return (path_ / name).string(); }
+  void write(const std::string& name, const std::string& text) const { std::ofstream(file(name)) << text; }
+
+ private:
+  fs::path path_;
+};
+
+/// 1-based line of the first occurrence of `needle` in `text`.
+int line_of(const std::string& text, const std::string& needle) {
+  const size_t at = text.find(needle);
+  EXPECT_NE(at, std::string::npos) << needle;
+  return 1 + int(std::count(text.begin(), text.begin() + std::min(at, text.size()), '\n'));
+}
+
+/// Success when `f` throws an exception of type E whose message contains every part.
+template <class E, class F>
+testing::AssertionResult throws_with(F&& f, std::initializer_list<std::string> parts) {
+  try {
+    f();
+  } catch (const E& e) {
+    const std::string msg = e.what();
+    for (const std::string& p : parts)
+      if (msg.find(p) == std::string::npos)
+        return testing::AssertionFailure() << "message \"" << msg << "\" lacks \"" << p << "\"";
+    return testing::AssertionSuccess();
+  } catch (const std::exception& e) {
+    return testing::AssertionFailure() << "threw another type: " << e.what();
+  }
+  return testing::AssertionFailure() << "no error";
+}
+
+testing::AssertionResult xml_error(const std::string& xml, std::initializer_list<std::string> parts) {
+  return throws_with<SceneError>([&] { (void)parse_scene(xml, "scene.xml", ""); }, parts);
+}
+
+/// Every field of two scenes except source lines, source and mesh_file.
+void expect_same_scene(const Scene& a, const Scene& b) {
+  EXPECT_EQ(a.nodes, b.nodes);
+  EXPECT_EQ(a.tets, b.tets);
+  ASSERT_EQ(a.materials.size(), b.materials.size());
+  for (size_t k = 0; k < a.materials.size(); ++k) {
+    const Material &x = a.materials[k], &y = b.materials[k];
+    EXPECT_EQ(x.name, y.name);
+    EXPECT_EQ(x.form, y.form) << x.name;
+    EXPECT_EQ(x.a, y.a) << x.name;
+    EXPECT_EQ(x.b, y.b) << x.name;
+    EXPECT_EQ(x.rho, y.rho) << x.name;
+  }
+  ASSERT_EQ(a.sets.size(), b.sets.size());
+  for (size_t k = 0; k < a.sets.size(); ++k) {
+    EXPECT_EQ(a.sets[k].name, b.sets[k].name);
+    EXPECT_EQ(a.sets[k].material, b.sets[k].material);
+    EXPECT_EQ(a.sets[k].all, b.sets[k].all);
+    EXPECT_EQ(a.sets[k].elements, b.sets[k].elements);
+  }
+  ASSERT_EQ(a.constraints.size(), b.constraints.size());
+  for (size_t k = 0; k < a.constraints.size(); ++k) {
+    const Constraint &x = a.constraints[k], &y = b.constraints[k];
+    EXPECT_EQ(x.kind, y.kind) << "constraint " << k;
+    EXPECT_EQ(x.nodes, y.nodes) << "constraint " << k;
+    if (x.kind == Constraint::Kind::Box)
+      for (int c = 0; c < 3; ++c) {
+        EXPECT_EQ(x.lo[c], y.lo[c]);
+        EXPECT_EQ(x.hi[c], y.hi[c]);
+      }
+    if (x.kind == Constraint::Kind::Plane)
+      for (int c = 0; c < 3; ++c) {
+        EXPECT_EQ(x.point[c], y.point[c]);
+        EXPECT_EQ(x.normal[c], y.normal[c]);
+      }
+  }
+  ASSERT_EQ(a.tools.size(), b.tools.size());
+  for (size_t k = 0; k < a.tools.size(); ++k) {
+    const scene::Tool &x = a.tools[k], &y = b.tools[k];
+    EXPECT_EQ(x.name, y.name);
+    EXPECT_EQ(x.radius, y.radius);
+    EXPECT_EQ(x.device, y.device);
+    EXPECT_EQ(x.path_file, y.path_file);
+    ASSERT_EQ(x.path.size(), y.path.size()) << x.name;
+    for (size_t w = 0; w < x.path.size(); ++w) {
+      EXPECT_EQ(x.path[w].t, y.path[w].t);
+      for (int c = 0; c < 3; ++c) EXPECT_EQ(x.path[w].p[c], y.path[w].p[c]);
+    }
+  }
+  const scene::Solver &u = a.solver, &v = b.solver;
+  EXPECT_EQ(u.backend, v.backend);
+  EXPECT_EQ(u.precision, v.precision);
+  EXPECT_EQ(u.dt, v.dt);
+  EXPECT_EQ(u.dt_safety, v.dt_safety);
+  EXPECT_EQ(u.damping, v.damping);
+  EXPECT_EQ(u.depth, v.depth);
+  EXPECT_EQ(u.tick, v.tick);
+  EXPECT_EQ(u.residual_tol, v.residual_tol);
+  EXPECT_EQ(u.kinetic_tol, v.kinetic_tol);
+  EXPECT_EQ(u.ianp, v.ianp);
+}
+
+/// A scene using every feature, on a 3 x 2 x 2 box of 0.03 x 0.02 x 0.017 m
+/// (coordinates such as 0.017 / 2 that decimal text must carry exactly).
+Scene rich_scene() {
+  Scene s;
+  s.source = "rich.xml";
+  ModelInput in;
+  box_mesh(in, 3, 2, 2, 0.03, 0.02, 0.017);
+  s.nodes = in.nodes;
+  s.tets = in.tets;
+  s.materials.push_back({.name = "brain", .form = Material::Form::YoungPoisson, .a = 3000, .b = 0.45, .rho = 1000});
+  s.materials.push_back({.name = "capsule", .form = Material::Form::ShearBulk, .a = 1234.5, .b = 6.7e4, .rho = 1040});
+  s.materials.push_back({.name = "fat & vessel", .form = Material::Form::Lame, .a = 1.0 / 3, .b = 2e3, .rho = 950});
+  const index_t ne = static_cast<index_t>(s.tets.size() / 4);
+  scene::ElementSet a, b, c;
+  a.name = "cortex", a.material = "brain";
+  b.name = "rim", b.material = "capsule";
+  c.name = "hilum", c.material = "fat & vessel";
+  for (index_t e = 0; e < ne; ++e) (e % 3 == 0 ? a : e % 3 == 1 ? b : c).elements.push_back(e);
+  s.sets = {a, b, c};
+  Constraint nodes;
+  nodes.nodes = {0, 5, 7};
+  Constraint box;
+  box.kind = Constraint::Kind::Box;
+  box.lo[0] = -1e-3, box.lo[1] = -1e-3, box.lo[2] = -1e-3;
+  box.hi[0] = 0.03, box.hi[1] = 0.0201, box.hi[2] = 1e-3;
+  Constraint plane;
+  plane.kind = Constraint::Kind::Plane;
+  plane.point[0] = 0.03, plane.point[1] = 0.01, plane.point[2] = 0.0085;
+  plane.normal[0] = 1, plane.normal[1] = 0.1, plane.normal[2] = 0;
+  s.constraints = {nodes, box, plane};
+  scene::Tool probe;
+  probe.name = "probe";
+  probe.radius = 1.5e-3;
+  probe.path = press_path({0.015, 0.01, 0.017}, {0, 0, -1}, 3e-3, 1e-2);
+  scene::Tool mouse;
+  mouse.name = "hand";
+  mouse.device = "mouse";
+  mouse.radius = 2e-3;
+  s.tools = {probe, mouse};
+  s.solver.backend = "cuda";
+  s.solver.precision = Precision::Double;
+  s.solver.dt = 2.5e-5;
+  s.solver.dt_safety = 0.4;
+  s.solver.damping = 12.5;
+  s.solver.depth = kDepthAll;
+  s.solver.tick = 5e-4;
+  s.solver.residual_tol = 2e-4;
+  s.solver.kinetic_tol = 3e-7;
+  s.solver.ianp = false;
+  return s;
+}
+
+// ---- round trip ------------------------------------------------------------
+
+TEST(SceneXml, RoundTripInlineMesh) {
+  TempDir dir;
+  const Scene s = rich_scene();
+  write_scene(s, dir.file("rich.xml"), true);
+  EXPECT_FALSE(fs::exists(dir.file("rich.node")));
+  const Scene r = read_scene(dir.file("rich.xml"));
+  EXPECT_EQ(r.source, dir.file("rich.xml"));
+  EXPECT_TRUE(r.mesh_file.empty());
+  expect_same_scene(s, r);
+  EXPECT_NO_THROW(scene::validate(r));
+  // writing what was read gives the same text
+  EXPECT_EQ(format_scene(r, ""), format_scene(s, ""));
+}
+
+TEST(SceneXml, RoundTripWithMeshAndPathFiles) {
+  TempDir dir;
+  Scene s = rich_scene();
+  s.tools[0].path_file = "probe.csv";
+  write_scene(s, dir.file("rich.xml"), false);
+  ASSERT_TRUE(fs::exists(dir.file("rich.node")));
+  ASSERT_TRUE(fs::exists(dir.file("rich.ele")));
+  ASSERT_TRUE(fs::exists(dir.file("probe.csv")));
+  std::ifstream xml(dir.file("rich.xml"));
+  const std::string text((std::istreambuf_iterator<char>(xml)), {});
+  EXPECT_NE(text.find("<mesh file=\"rich.node\""), std::string::npos) << text;
+  EXPECT_NE(text.find("path=\"probe.csv\""), std::string::npos) << text;
+  EXPECT_EQ(text.find("<nodes>"), std::string::npos);
+  EXPECT_EQ(text.find("<waypoint"), std::string::npos);
+
+  // the mesh and path files resolve against the scene file's folder, not the working folder
+  const Scene r = read_scene(dir.file("rich.xml"));
+  EXPECT_EQ(r.mesh_file, "rich.node");
+  expect_same_scene(s, r);
+}
+
+TEST(SceneXml, NamedMeshFileIsKept) {
+  TempDir dir;
+  Scene s = rich_scene();
+  s.mesh_file = "organ.node";
+  write_scene(s, dir.file("scene.xml"), false);
+  EXPECT_TRUE(fs::exists(dir.file("organ.node")));
+  EXPECT_TRUE(fs::exists(dir.file("organ.ele")));
+  const Scene r = read_scene(dir.file("scene.xml"));
+  EXPECT_EQ(r.mesh_file, "organ.node");
+  expect_same_scene(s, r);
+}
+
+TEST(SceneXml, SourceLinesAreRecorded) {
+  TempDir dir;
+  write_scene(rich_scene(), dir.file("rich.xml"), true);
+  std::ifstream in(dir.file("rich.xml"));
+  const std::string text((std::istreambuf_iterator<char>(in)), {});
+  const Scene r = read_scene(dir.file("rich.xml"));
+  EXPECT_EQ(r.mesh_line, line_of(text, "<mesh>"));
+  EXPECT_EQ(r.materials[1].line, line_of(text, "<material name=\"capsule\""));
+  EXPECT_EQ(r.sets[2].line, line_of(text, "<element-set name=\"hilum\""));
+  EXPECT_EQ(r.constraints[2].line, line_of(text, "<fixed plane-point"));
+  EXPECT_EQ(r.tools[1].line, line_of(text, "<tool name=\"hand\""));
+  EXPECT_EQ(r.solver.line, line_of(text, "<solver"));
+}
+
+// ---- materials and defaults ------------------------------------------------
+
+const char* kTet = R"(<mesh>
+    <nodes>0 0 0  1 0 0  0 1 0  0 0 1</nodes>
+    <elements>0 1 2 3</elements>
+  </mesh>)";
+
+TEST(SceneXml, EachMaterialForm) {
+  const std::string xml = fmt::format(R"(<tissue-scene version="1">
+  {}
+  <material name="yp" E="3000" nu="0.25" rho="1000"/>
+  <material name="sb" mu="1200" K="2000" rho="1100"/>
+  <material name="lame" lambda="1200" mu="1200" rho="1200"/>
+  <element-set material="lame" elements="all"/>
+</tissue-scene>)",
+                                      kTet);
+  const Scene s = parse_scene(xml, "m.xml", "");
+  ASSERT_EQ(s.materials.size(), 3u);
+  EXPECT_EQ(s.materials[0].form, Material::Form::YoungPoisson);
+  EXPECT_EQ(s.materials[1].form, Material::Form::ShearBulk);
+  EXPECT_EQ(s.materials[2].form, Material::Form::Lame);
+  for (const Material& m : s.materials) {
+    const MaterialParams p = m.params();
+    EXPECT_DOUBLE_EQ(p.mu, 1200) << m.name;
+    EXPECT_DOUBLE_EQ(p.K, 2000) << m.name;
+  }
+  EXPECT_EQ(s.materials[2].rho, 1200);
+  EXPECT_EQ(s.sets[0].name, "lame");  // defaults to the material's name
+  EXPECT_TRUE(s.sets[0].all);
+  const ModelInput in = scene::to_model_input(s);
+  EXPECT_EQ(in.elem_material, std::vector<index_t>{2});
+}
+
+TEST(SceneXml, SolverDefaultsAndKeywords) {
+  const std::string xml = fmt::format(R"(<tissue-scene>{}
+  <material name="m" E="3000" nu="0.45" rho="1000"/>
+  <element-set material="m" elements="0"/>
+  <solver dt="auto" damping="auto" depth="all" precision="double"/>
+</tissue-scene>)",
+                                      kTet);
+  const Scene s = parse_scene(xml, "s.xml", "");
+  const scene::Solver def;
+  EXPECT_EQ(s.solver.dt, 0);
+  EXPECT_EQ(s.solver.damping, -1);
+  EXPECT_EQ(s.solver.depth, kDepthAll);
+  EXPECT_EQ(s.solver.precision, Precision::Double);
+  EXPECT_EQ(s.solver.backend, def.backend);
+  EXPECT_EQ(s.solver.dt_safety, def.dt_safety);
+  EXPECT_EQ(s.solver.tick, def.tick);
+  EXPECT_TRUE(s.solver.ianp);
+  const Scene plain = parse_scene(fmt::format(R"(<tissue-scene>{}
+  <solver depth="7" dt="1e-5" damping="0"/></tissue-scene>)",
+                                              kTet),
+                                  "s.xml", "");
+  EXPECT_EQ(plain.solver.depth, 7);
+  EXPECT_EQ(plain.solver.dt, 1e-5);
+  EXPECT_EQ(plain.solver.damping, 0);
+}
+
+// ---- constraints resolved on a box mesh ------------------------------------
+
+TEST(SceneXml, ConstraintsSelectTheRightNodes) {
+  // 3 x 2 x 2 cells on 0.3 x 0.2 x 0.2 m: grid coordinates like 0.3 * 3 / 3
+  // carry rounding, which the selection tolerance absorbs.
+  const int nx = 3, ny = 2, nz = 2;
+  ModelInput box;
+  box_mesh(box, nx, ny, nz, 0.3, 0.2, 0.2);
+  std::string nodes, elems;
+  for (size_t i = 0; i < box.nodes.size(); i += 3)
+    nodes += fmt::format("      {} {} {}\n", box.nodes[i], box.nodes[i + 1], box.nodes[i + 2]);
+  for (index_t v : box.tets) elems += fmt::format("{} ", v);
+  const std::string xml = fmt::format(R"(<tissue-scene version="1">
+  <mesh><nodes>
+{}</nodes><elements>{}</elements></mesh>
+  <material name="m" E="3000" nu="0.45" rho="1000"/>
+  <element-set name="all" material="m" elements="all"/>
+  <fixed nodes="{} {}"/>
+  <fixed box-min="-1 -1 -1" box-max="1 1 0"/>
+  <fixed plane-point="0.3 0 0" plane-normal="2 0 0"/>
+</tissue-scene>)",
+                                      nodes, elems, box_node(nx, ny, 1, 1, 2), box_node(nx, ny, 0, 2, 1));
+  const Scene s = parse_scene(xml, "box.xml", "");
+  ASSERT_EQ(s.constraints.size(), 3u);
+  EXPECT_EQ(s.constraints[0].kind, Constraint::Kind::Nodes);
+  EXPECT_EQ(s.constraints[1].kind, Constraint::Kind::Box);
+  EXPECT_EQ(s.constraints[2].kind, Constraint::Kind::Plane);
+
+  std::vector<std::uint8_t> expect((nx + 1) * (ny + 1) * (nz + 1), 0);
+  expect[box_node(nx, ny, 1, 1, 2)] = expect[box_node(nx, ny, 0, 2, 1)] = 1;  // the id list
+  for (int j = 0; j <= ny; ++j)
+    for (int i = 0; i <= nx; ++i) expect[box_node(nx, ny, i, j, 0)] = 1;  // the box: bottom face z = 0
+  for (int k = 0; k <= nz; ++k)
+    for (int j = 0; j <= ny; ++j) expect[box_node(nx, ny, nx, j, k)] = 1;  // the plane: face x = 0.3
+  const ModelInput in = scene::to_model_input(s);
+  EXPECT_EQ(in.fixed, expect);
+  EXPECT_EQ(std::count(in.fixed.begin(), in.fixed.end(), 1), 2 + 12 + 9 - 3);  // the box and plane share 3
+}
+
+TEST(SceneXml, ObliquePlaneFixesTheNodesOnItsNormalSide) {
+  ModelInput box;
+  box_mesh(box, 2, 2, 2, 1, 1, 1);
+  Scene s;
+  s.nodes = box.nodes;
+  s.tets = box.tets;
+  s.materials.push_back({.name = "m", .a = 3000, .b = 0.3});
+  s.sets.push_back({.name = "all", .material = "m", .all = true, .elements = {}});
+  Constraint c;
+  c.kind = Constraint::Kind::Plane;
+  c.point[0] = 0.5;  // x + y >= 0.5 + 0.5: on or above the diagonal plane through (0.5, 0.5, .)
+  c.point[1] = 0.5;
+  c.normal[0] = c.normal[1] = 1;
+  c.normal[2] = 0;
+  s.constraints.push_back(c);
+  const ModelInput in = scene::to_model_input(s);
+  for (int k = 0; k <= 2; ++k)
+    for (int j = 0; j <= 2; ++j)
+      for (int i = 0; i <= 2; ++i)
+        EXPECT_EQ(in.fixed[box_node(2, 2, i, j, k)], i + j >= 2 ? 1 : 0) << i << " " << j << " " << k;
+}
+
+// ---- syntax errors ---------------------------------------------------------
+
+TEST(SceneXml, MalformedXmlGivesParserMessageAndLine) {
+  const std::string xml = R"(<?xml version="1.0"?>
+<tissue-scene version="1">
+  <mesh>
+    <nodes>0 0 0 1 0 0 0 1 0 0 0 1</nodes>
+    <elements>0 1 2 3</element>
+  </mesh>
+</tissue-scene>)";
+  EXPECT_TRUE(xml_error(xml, {"scene.xml:5: ", "malformed XML", "mismatch"}));
+  EXPECT_TRUE(xml_error("<tissue-scene>\n<mesh>\n<material name=\"a\" E=3000/>\n</mesh></tissue-scene>",
+                        {"scene.xml:3: ", "malformed XML"}));
+  EXPECT_TRUE(xml_error("", {"scene.xml", "No document element"}));
+}
+
+TEST(SceneXml, UnknownAttributeIsAnError) {
+  const std::string xml = fmt::format(R"(<tissue-scene version="1">
+  {}
+  <material name="soft" E="3000" nu="0.45" rho="1000" colour="red"/>
+</tissue-scene>)",
+                                      kTet);
+  EXPECT_TRUE(xml_error(xml, {fmt::format("scene.xml:{}: ", line_of(xml, "colour")), "<material>",
+                              "unknown attribute 'colour'", "allowed: name, E, nu, mu, K, lambda, rho"}));
+  const std::string solver = fmt::format("<tissue-scene>{}\n<solver dt_safety=\"0.3\"/></tissue-scene>", kTet);
+  EXPECT_TRUE(xml_error(solver, {"scene.xml:5: ", "<solver>", "unknown attribute 'dt_safety'", "dt-safety"}));
+}
+
+TEST(SceneXml, UnknownElementIsAnError) {
+  const std::string xml = fmt::format(R"(<tissue-scene version="1">
+  {}
+  <materail name="soft" E="3000" nu="0.45" rho="1000"/>
+</tissue-scene>)",
+                                      kTet);
+  EXPECT_TRUE(xml_error(xml, {fmt::format("scene.xml:{}: ", line_of(xml, "materail")), "unknown element <materail>",
+                              "in <tissue-scene>", "material"}));
+  EXPECT_TRUE(xml_error("<scene/>", {"scene.xml:1: ", "root element is <scene>", "<tissue-scene>"}));
+}
+
+TEST(SceneXml, BadNumbersNameTheAttribute) {
+  const auto material = [](const std::string& attrs) {
+    return fmt::format("<tissue-scene>{}\n<material name=\"m\" {}/></tissue-scene>", kTet, attrs);
+  };
+  EXPECT_TRUE(xml_error(material("E=\"3e\" nu=\"0.45\" rho=\"1000\""),
+                        {"scene.xml:5: ", "<material>", "attribute E = '3e' is not a number"}));
+  EXPECT_TRUE(xml_error(material("E=\"3000\" nu=\"0.45\" rho=\"abc\""), {"attribute rho = 'abc' is not a number"}));
+  EXPECT_TRUE(xml_error(material("E=\"3000 Pa\" nu=\"0.45\" rho=\"1000\""), {"attribute E = '3000 Pa'"}));
+  EXPECT_TRUE(xml_error(material("E=\"\" nu=\"0.45\" rho=\"1000\""), {"attribute E = '' is not a number"}));
+  const std::string fixed =
+      fmt::format("<tissue-scene>{}\n<fixed box-min=\"0 0\" box-max=\"1 1 1\"/></tissue-scene>", kTet);
+  EXPECT_TRUE(xml_error(fixed, {"scene.xml:5: ", "<fixed>", "box-min", "three numbers"}));
+  const std::string set = fmt::format(
+      "<tissue-scene>{}\n<element-set material=\"m\" elements=\"0 1.5\"/>"
+      "</tissue-scene>",
+      kTet);
+  EXPECT_TRUE(xml_error(set, {"scene.xml:5: ", "<element-set>", "elements: '1.5' is not a whole number"}));
+  const std::string depth = fmt::format("<tissue-scene>{}\n<solver depth=\"five\"/></tissue-scene>", kTet);
+  EXPECT_TRUE(xml_error(depth, {"scene.xml:5: ", "<solver>", "depth = 'five'", "\"all\""}));
+  const std::string damping = fmt::format("<tissue-scene>{}\n<solver damping=\"none\"/></tissue-scene>", kTet);
+  EXPECT_TRUE(xml_error(damping, {"scene.xml:5: ", "damping = 'none' is neither a number nor \"auto\""}));
+}
+
+TEST(SceneXml, BadNumberInMeshTextGivesItsOwnLine) {
+  const std::string xml = R"(<tissue-scene>
+  <mesh>
+    <nodes>
+      0 0 0
+      1 0 0
+      0 1x 0
+      0 0 1
+    </nodes>
+    <elements>0 1 2 3</elements>
+  </mesh>
+</tissue-scene>)";
+  EXPECT_TRUE(xml_error(xml, {"scene.xml:6: ", "node 2 coordinate y = '1x' is not a number"}));
+  const std::string elems = R"(<tissue-scene>
+  <mesh>
+    <nodes>0 0 0 1 0 0 0 1 0 0 0 1</nodes>
+    <elements>
+      0 1 2
+    </elements>
+  </mesh>
+</tissue-scene>)";
+  EXPECT_TRUE(xml_error(elems, {"scene.xml:4: ", "3 node ids is not a multiple of 4"}));
+}
+
+TEST(SceneXml, StructureErrors) {
+  EXPECT_TRUE(xml_error("<tissue-scene>\n<material name=\"m\" E=\"1\" nu=\"0.3\" rho=\"1\"/>\n</tissue-scene>",
+                        {"scene.xml:1: ", "no <mesh>"}));
+  EXPECT_TRUE(
+      xml_error(fmt::format("<tissue-scene>{}\n{}</tissue-scene>", kTet, kTet), {"scene.xml:5: ", "a second <mesh>"}));
+  EXPECT_TRUE(xml_error(fmt::format("<tissue-scene>{}\n<material name=\"m\" E=\"1\" nu=\"0.3\"/></tissue-scene>", kTet),
+                        {"scene.xml:5: ", "missing required attribute 'rho'"}));
+  EXPECT_TRUE(xml_error(fmt::format("<tissue-scene>{}\n<material name=\"m\" E=\"1\" K=\"3\" rho=\"1\"/>"
+                                    "</tissue-scene>",
+                                    kTet),
+                        {"scene.xml:5: ", "material 'm' must give exactly one pair", "E and nu, mu and K"}));
+  EXPECT_TRUE(xml_error(fmt::format("<tissue-scene>{}\n<fixed nodes=\"1\" box-min=\"0 0 0\" box-max=\"1 1 1\"/>"
+                                    "</tissue-scene>",
+                                    kTet),
+                        {"scene.xml:5: ", "<fixed>", "exactly one kind"}));
+  EXPECT_TRUE(xml_error(fmt::format("<tissue-scene>{}\n<tool path=\"p.csv\"><waypoint t=\"0\" x=\"0\" y=\"0\" "
+                                    "z=\"0\"/></tool></tissue-scene>",
+                                    kTet),
+                        {"scene.xml:5: ", "<tool>", "not both"}));
+  EXPECT_TRUE(xml_error(fmt::format("<tissue-scene>{}\n<solver/>\n<solver/></tissue-scene>", kTet),
+                        {"scene.xml:6: ", "a second <solver>"}));
+  EXPECT_TRUE(xml_error(fmt::format("<tissue-scene version=\"2\">{}</tissue-scene>", kTet),
+                        {"scene.xml:1: ", "version = '2' is not supported"}));
+  EXPECT_TRUE(xml_error(fmt::format("<tissue-scene>{}\n<material name=\"m\" E=\"1\" nu=\"0.3\" rho=\"1\">soft"
+                                    "</material></tissue-scene>",
+                                    kTet),
+                        {"scene.xml:5: ", "unexpected text 'soft'"}));
+  EXPECT_TRUE(xml_error(fmt::format("<tissue-scene>{}\n<solver precision=\"half\"/></tissue-scene>", kTet),
+                        {"scene.xml:5: ", "precision = 'half' must be float or double"}));
+}
+
+TEST(SceneXml, RuleErrorsFromValidationCiteTheXmlLine) {
+  const std::string xml = fmt::format(R"(<tissue-scene version="1">
+  {}
+  <material name="soft" E="3000" nu="0.5" rho="1000"/>
+  <element-set material="soft" elements="all"/>
+</tissue-scene>)",
+                                      kTet);
+  const Scene s = parse_scene(xml, "scene.xml", "");
+  EXPECT_TRUE(throws_with<SceneError>(
+      [&] { (void)scene::to_model_input(s); },
+      {fmt::format("scene.xml:{}: ", line_of(xml, "<material")), "material 'soft'", "nu = 0.5"}));
+}
+
+TEST(SceneXml, MissingFilesAreNamed) {
+  TempDir dir;
+  dir.write("scene.xml", "<tissue-scene>\n  <mesh file=\"nope.node\"/>\n</tissue-scene>\n");
+  EXPECT_TRUE(throws_with<SceneError>([&] { (void)read_scene(dir.file("scene.xml")); },
+                                      {"scene.xml:2: ", "<mesh>", "mesh file 'nope.node'", "cannot open"}));
+  dir.write("tool.xml", fmt::format("<tissue-scene>{}\n<tool path=\"gone.csv\"/></tissue-scene>\n", kTet));
+  EXPECT_TRUE(throws_with<SceneError>([&] { (void)read_scene(dir.file("tool.xml")); },
+                                      {"tool.xml:5: ", "tool 'probe' path file 'gone.csv'", "cannot open"}));
+  EXPECT_TRUE(
+      throws_with<SceneError>([&] { (void)read_scene(dir.file("absent.xml")); }, {"absent.xml", "cannot open"}));
+}
+
+// ---- TetGen .node/.ele -----------------------------------------------------
+
+TEST(TetgenFiles, ReadsOneBasedFilesWithCommentsAttributesAndMarkers) {
+  TempDir dir;
+  dir.write("organ.node", R"(# a unit tet and its mirror
+5 3 1 1   # points, dim, attributes, markers
+1  0 0 0   7.5  1
+2  1 0 0   7.5  1
+# interior comment
+3  0 1 0   7.5  0
+
+4  0 0 1   7.5  1
+5  0 0 -1  7.5  1
+)");
+  dir.write("organ.ele", R"(2 4 1
+1  1 2 3 4  3
+2  1 3 2 5  3
+# Generated by tetgen
+)");
+  const io::TetgenFiles m = io::read_tetgen(dir.file("organ.node"));
+  EXPECT_EQ(m.first_index, 1);
+  EXPECT_EQ(m.nodes, (std::vector<double>{0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, -1}));
+  EXPECT_EQ(m.tets, (std::vector<index_t>{0, 1, 2, 3, 0, 2, 1, 4}));
+
+  dir.write("scene.xml", R"(<tissue-scene>
+  <mesh file="organ.node"/>
+  <material name="m" E="3000" nu="0.45" rho="1000"/>
+  <element-set material="m" elements="all"/>
+</tissue-scene>)");
+  const Scene s = read_scene(dir.file("scene.xml"));
+  EXPECT_EQ(s.nodes, m.nodes);
+  EXPECT_EQ(s.tets, m.tets);
+  const TissueModel<double> model = scene::load_model(s);
+  EXPECT_EQ(model.n_elems, 2);
+  EXPECT_EQ(model.reoriented, 0);
+}
+
+TEST(TetgenFiles, WriteThenReadIsExact) {
+  TempDir dir;
+  ModelInput box;
+  box_mesh(box, 2, 3, 1, 0.1, 0.07, 0.013);
+  io::write_tetgen(dir.file("box.node"), box.nodes, box.tets);
+  const io::TetgenFiles m = io::read_tetgen(dir.file("box.node"));
+  EXPECT_EQ(m.first_index, 0);
+  EXPECT_EQ(m.nodes, box.nodes);
+  EXPECT_EQ(m.tets, box.tets);
+}
+
+testing::AssertionResult node_error(const std::string& text, std::initializer_list<std::string> parts) {
+  return throws_with<io::TetgenFileError>(
+      [&] {
+        std::istringstream in(text);
+        int first = -1;
+        (void)io::parse_tetgen_node(in, "m.node", first);
+      },
+      parts);
+}
+
+testing::AssertionResult ele_error(const std::string& text, std::initializer_list<std::string> parts) {
+  return throws_with<io::TetgenFileError>(
+      [&] {
+        std::istringstream in(text);
+        (void)io::parse_tetgen_ele(in, "m.ele", 4, 0);
+      },
+      parts);
+}
+
+TEST(TetgenFiles, ErrorsNameFileAndLine) {
+  EXPECT_TRUE(node_error("", {"m.node:0: ", "empty"}));
+  EXPECT_TRUE(node_error("2 3 0 0\n0 0 0 0\n1 0 abc 0\n", {"m.node:3: ", "y coordinate 'abc' is not a number"}));
+  EXPECT_TRUE(node_error("2 3 0 0\n0 0 0 0\n1 0 3e 0\n", {"m.node:3: ", "'3e'"}));
+  EXPECT_TRUE(node_error("2 2 0 0\n", {"m.node:1: ", "dimension is 2"}));
+  EXPECT_TRUE(node_error("2 3 0\n", {"m.node:1: ", "header has 3 fields"}));
+  EXPECT_TRUE(node_error("3 3 0 0\n0 0 0 0\n1 1 0 0\n", {"m.node:3: ", "ends after 2 of the 3 points"}));
+  EXPECT_TRUE(node_error("1 3 0 0\n0 0 0 0\n1 1 0 0\n", {"m.node:3: ", "more points than the 1"}));
+  EXPECT_TRUE(
+      node_error("2 3 0 0\n0 0 0 0\n2 1 0 0\n", {"m.node:3: ", "point id 2 breaks the numbering", "expected 1"}));
+  EXPECT_TRUE(node_error("1 3 0 0\n5 0 0 0\n", {"m.node:2: ", "first point id is 5", "0 or 1"}));
+  EXPECT_TRUE(node_error("1 3 1 0\n0 0 0 0\n", {"m.node:2: ", "4 fields; expected 5"}));
+
+  EXPECT_TRUE(ele_error("1 4 0\n0 0 1 2 4\n", {"m.ele:2: ", "corner 3 refers to point 4", "numbered 0..3"}));
+  EXPECT_TRUE(ele_error("1 10 0\n", {"m.ele:1: ", "10 nodes per tetrahedron", "linear 4-node"}));
+  EXPECT_TRUE(ele_error("1 4 0\n0 0 1 x 3\n", {"m.ele:2: ", "corner 2 'x' is not a whole number"}));
+  EXPECT_TRUE(ele_error("2 4 0\n0 0 1 2 3\n", {"m.ele:2: ", "ends after 1 of the 2 tetrahedra"}));
+  EXPECT_TRUE(throws_with<io::TetgenFileError>([] { (void)io::ele_path_for("organ.stl"); }, {"organ.stl", ".node"}));
+}
+
+// ---- tool path CSV ---------------------------------------------------------
+
+TEST(PathCsv, ReadsWaypoints) {
+  std::istringstream in("# press path\nt, x, y, z\n0,0,0,0.02\n\n0.1, 0.001, -2e-3, 0.01\n");
+  const std::vector<Waypoint> p = io::parse_path_csv(in, "p.csv");
+  ASSERT_EQ(p.size(), 2u);
+  EXPECT_EQ(p[1].t, 0.1);
+  EXPECT_EQ(p[1].p.x, 0.001);
+  EXPECT_EQ(p[1].p.y, -2e-3);
+  EXPECT_EQ(p[1].p.z, 0.01);
+}
+
+TEST(PathCsv, WriteThenReadIsExact) {
+  TempDir dir;
+  const std::vector<Waypoint> path = press_path({0.1 / 3, 0.02, 0.017}, {0, 0, -1}, 3e-3, 1e-2);
+  io::write_path_csv(dir.file("p.csv"), path);
+  const std::vector<Waypoint> r = io::read_path_csv(dir.file("p.csv"));
+  ASSERT_EQ(r.size(), path.size());
+  for (size_t k = 0; k < r.size(); ++k) {
+    EXPECT_EQ(r[k].t, path[k].t);
+    for (int c = 0; c < 3; ++c) EXPECT_EQ(r[k].p[c], path[k].p[c]);
+  }
+}
+
+testing::AssertionResult csv_error(const std::string& text, std::initializer_list<std::string> parts) {
+  return throws_with<io::PathCsvError>(
+      [&] {
+        std::istringstream in(text);
+        (void)io::parse_path_csv(in, "p.csv");
+      },
+      parts);
+}
+
+TEST(PathCsv, ErrorsNameFileAndLine) {
+  EXPECT_TRUE(csv_error("time,x,y,z\n0,0,0,0\n", {"p.csv:1: ", "header is 'time,x,y,z'", "t,x,y,z"}));
+  EXPECT_TRUE(csv_error("t,x,y,z\n0,0,0,0\n0.1,0,0\n", {"p.csv:3: ", "3 fields; expected 4"}));
+  EXPECT_TRUE(csv_error("t,x,y,z\n0,0,0,0\n0.1s,0,0,0\n", {"p.csv:3: ", "t '0.1s' is not a number"}));
+  EXPECT_TRUE(csv_error("t,x,y,z\n0,0,0,0\n0.2,0,0,0\n0.2,0,0,1\n",
+                        {"p.csv:4: ", "t = 0.2 s is not after", "times must increase"}));
+  EXPECT_TRUE(csv_error("t,x,y,z\n0,nan,0,0\n", {"p.csv:2: ", "x = nan is not a finite number"}));
+  EXPECT_TRUE(csv_error("t,x,y,z\n", {"p.csv:1: ", "no waypoints"}));
+  EXPECT_TRUE(csv_error("", {"p.csv:0: ", "empty"}));
+}
+
+}  // namespace
+}  // namespace tissue
