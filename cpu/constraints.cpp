@@ -50,8 +50,8 @@ void install_region(const TissueModel<T>& m, TissueState<T>& s, Region region) {
     s.held[a] = 0;
     if (role == kHalo) {
       stop_node(s, n, a);
-      set_all(s.u_held, n, a, s.u[a], s.u[n + a], s.u[2 * n + a]);
       s.held[a] = 1;
+      if (!s.driven[a]) set_all(s.u_held, n, a, s.u[a], s.u[n + a], s.u[2 * n + a]);
     }
     if (s.driven[a]) s.held[a] = 1;  // its target in u_held is kept
     if (is_fixed(m, a)) {
