@@ -60,20 +60,29 @@ class Reader {
     fail_at(line(n), fmt::format("<{}>: {}", n.name(), what));
   }
 
-  // -- structure checks
+  // -- structure checks (each throws naming the element and its line)
+  /// Every attribute of n is in `allowed`, none twice.
   void check_attributes(pugi::xml_node n, Names allowed) const;
+  /// Every child element of n is in `allowed`; n holds no text.
   void check_children(pugi::xml_node n, Names allowed) const;
+  /// n has no child elements and no text.
   void check_no_text(pugi::xml_node n) const;
 
-  // -- attribute values
+  // -- attribute values (strict: the whole text must be the value)
+  /// The attribute's text; throws when it is missing.
   std::string required(pugi::xml_node n, const char* name) const;
+  /// A required real number.
   double real(pugi::xml_node n, const char* name) const;
+  /// An optional real number (fallback when absent).
   double real_or(pugi::xml_node n, const char* name, double fallback) const;
+  /// An optional real number or the keyword "auto" (-> auto_value).
   double real_or_auto(pugi::xml_node n, const char* name, double fallback, double auto_value) const;
+  /// A required "x y z" triple.
   void triple(pugi::xml_node n, const char* name, double out[3]) const;
+  /// A blank-separated list of ids (node or element) held by attribute `name`.
   std::vector<index_t> ids(pugi::xml_node n, const char* name, std::string_view text) const;
 
-  // -- elements
+  // -- one reader per element kind
   void read_mesh(pugi::xml_node n, scene::Scene& s) const;
   std::vector<double> read_node_text(pugi::xml_node n) const;
   std::vector<index_t> read_element_text(pugi::xml_node n) const;

@@ -35,7 +35,7 @@ struct ElementSet {
   std::string material;             ///< Material::name
   bool all = false;
   std::vector<index_t> elements;    ///< element ids
-  int line = 0;
+  int line = 0;                     ///< source line, for messages (0 = unknown)
 };
 
 /// Fixed nodes: by id list, by an axis-aligned box, or by the side of a plane.
@@ -45,17 +45,17 @@ struct Constraint {
   std::vector<index_t> nodes;       ///< Kind::Nodes
   double lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};   ///< Kind::Box (m)
   double point[3] = {0, 0, 0}, normal[3] = {0, 0, 1};  ///< Kind::Plane: fixes nodes with (x - point).normal >= 0
-  int line = 0;
+  int line = 0;                     ///< source line, for messages (0 = unknown)
 };
 
-/// A rigid probe.
+/// A rigid probe and the device that drives it.
 struct Tool {
   std::string name = "probe";
   double radius = 1e-3;             ///< tip radius (m), for display
   std::string device = "scripted";  ///< "scripted" | "mouse" | "phantom"
   std::string path_file;            ///< CSV t,x,y,z (io/path_csv) relative to the scene file; empty = inline
   std::vector<Waypoint> path;       ///< scripted path (inline, or loaded from path_file by read_scene)
-  int line = 0;
+  int line = 0;                     ///< source line, for messages (0 = unknown)
 };
 
 /// Solver and loop settings; io/scene_xml's <solver> element.
@@ -84,7 +84,7 @@ struct Scene {
   std::vector<ElementSet> sets;
   std::vector<Constraint> constraints;
   std::vector<Tool> tools;
-  Solver solver;
+  Solver solver;                    ///< defaults when the file has no <solver>
 };
 
 }  // namespace tissue::scene

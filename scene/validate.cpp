@@ -37,6 +37,7 @@ void check_mesh(const Scene& s) {
   if (s.tets.size() % 4 != 0)
     fail(s, ln,
          fmt::format("mesh: {} element corners is not a multiple of 4 (4 node ids per tetrahedron)", s.tets.size()));
+  if (s.nodes.empty()) fail(s, ln, "mesh: no nodes; the mesh needs at least the 4 corners of one tetrahedron");
   if (s.tets.empty()) fail(s, ln, "mesh: no elements; the mesh needs at least one tetrahedron");
   for (size_t k = 0; k < s.nodes.size(); ++k)
     if (!std::isfinite(s.nodes[k]))

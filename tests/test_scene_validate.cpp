@@ -80,6 +80,18 @@ TEST(SceneValidate, MeshWithoutElements) {
   EXPECT_TRUE(rejects(s, {"organ.xml:2: ", "mesh", "no elements"}));
 }
 
+TEST(SceneValidate, MeshWithoutNodes) {
+  Scene s = valid_scene();
+  s.nodes.clear();
+  EXPECT_TRUE(rejects(s, {"organ.xml:2: ", "mesh", "no nodes"}));
+}
+
+TEST(SceneValidate, MeshCoordinateCountNotMultipleOfThree) {
+  Scene s = valid_scene();
+  s.nodes.pop_back();
+  EXPECT_TRUE(rejects(s, {"organ.xml:2: ", "mesh", "35 node coordinates", "multiple of 3"}));
+}
+
 TEST(SceneValidate, MeshCornerOutOfRange) {
   Scene s = valid_scene();
   s.tets[4 * 7 + 2] = 12;
