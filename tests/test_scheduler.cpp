@@ -113,7 +113,9 @@ TEST_P(PressedBox, HeldIndentationConverges) {
   // Over the whole mesh the internal forces sum to ~0 (each element's nodal
   // forces do); a limited region's sum is instead minus the halo's support,
   // so there it is no equilibrium measure (the residual above is).
-  if (GetParam().second == kDepthAll) EXPECT_LT(norm(end.internal), 1e-6 * norm(end.force));
+  if (GetParam().second == kDepthAll) {
+    EXPECT_LT(norm(end.internal), 1e-6 * norm(end.force));
+  }
 }
 
 TEST_P(PressedBox, ContactEndsAndTissueRelaxes) {
