@@ -161,7 +161,7 @@ TissueModel<double> build_model(const ModelInput& in) {
     }
     Vec3<double> X[4];
     for (int a = 0; a < 4; ++a) X[a] = node_pos(in.nodes, c[a]);
-    double dN[12];
+    double dN[12] = {};
     double V = tet_shape_gradients(X, dN);
     if (std::fabs(V) <= vol_eps)
       throw ModelError(fmt::format("{}: element {} (nodes {} {} {} {}): zero volume {:.3g} m^3; tets must have V > 0",
