@@ -24,14 +24,14 @@ namespace {
 
 struct MeshOptions {
   std::string surface, out, unit = "m";
-  MeshingOptions meshing;
+  io::MeshingOptions meshing;
   double E = 3000, nu = 0.45, rho = 1000;
   double fix_fraction = 0.05;
 };
 
 /// Topmost surface point straight above or below (cx, cy), by a vertical
 /// segment through the whole surface; throws if the vertical misses.
-Vec3<double> top_point(const SurfaceMesh& s, double cx, double cy, double zlo, double zhi) {
+Vec3<double> top_point(const io::SurfaceMesh& s, double cx, double cy, double zlo, double zhi) {
   const Vec3<double> a{cx, cy, zhi + 1.0}, b{cx, cy, zlo - 1.0};
   double best = 2.0;
   for (size_t t = 0; t < s.triangles.size() / 3; ++t) {
@@ -49,10 +49,10 @@ Vec3<double> top_point(const SurfaceMesh& s, double cx, double cy, double zlo, d
 }
 
 scene::Scene make_scene(const MeshOptions& o) {
-  const double unit = parse_unit(o.unit);
+  const double unit = io::parse_unit(o.unit);
   fmt::print("reading {} (unit: {}, {} m per file unit)\n", o.surface, o.unit, unit);
-  SurfaceMesh surf = load_surface(o.surface, unit);
-  VolumeMesh vol = tetrahedralize_surface(surf, o.meshing, o.surface);
+  io::SurfaceMesh surf = io::load_surface(o.surface, unit);
+  io::VolumeMesh vol = io::tetrahedralize_surface(surf, o.meshing, o.surface);
   scene::Scene s;
   s.source = o.out;
   s.nodes = vol.nodes;
@@ -95,8 +95,8 @@ void add_mesh_command(CLI::App& app, int& rc) {
   cmd->add_option("--nu", o->nu, "Poisson's ratio")->default_val(0.45);
   cmd->add_option("--rho", o->rho, "Density (kg/m^3)")->default_val(1000);
   cmd->callback([o, &rc] {
-    scene::Scene s = o->surface == "@kidney" ? default_kidney_scene() : make_scene(*o);
-    write_scene(s, o->out, true);
+    scene::Scene s = o->surface == "@kidney" ? io::default_kidney_scene() : make_scene(*o);
+    io::write_scene(s, o->out, true);
     fmt::print("wrote {} ({} tets)\n", o->out, s.tets.size() / 4);
     rc = 0;
   });

@@ -10,8 +10,8 @@
 namespace tissue::app {
 
 scene::Scene load_scene_arg(const std::string& arg) {
-  if (arg == "@kidney") return default_kidney_scene();
-  return read_scene(arg);
+  if (arg == "@kidney") return io::default_kidney_scene();
+  return io::read_scene(arg);
 }
 
 Precision parse_precision(const std::string& s) {

@@ -11,7 +11,6 @@
 #include "apps/commands.hpp"
 #include "backends/registry.hpp"
 #include "io/csv_log.hpp"
-#include "io/path_csv.hpp"
 #include "io/vtu_writer.hpp"
 #include "scene/validate.hpp"
 
@@ -30,8 +29,7 @@ ScriptedDevice scripted_device(const scene::Scene& s) {
     throw std::runtime_error(fmt::format("{}: tool '{}' uses the '{}' device; `tissue run` needs a scripted tool "
                                          "(use `tissue view` for interactive devices)",
                                          s.source, tool.name, tool.device));
-  if (!tool.path.empty()) return ScriptedDevice(tool.path);
-  return ScriptedDevice(read_path_csv(tool.path_file));
+  return ScriptedDevice(tool.path);  // read_scene has loaded a path file into `path`
 }
 
 void print_summary(const RunSummary& r, const Backend& b, const TissueModel<double>& m, int steps_per_tick) {
@@ -84,8 +82,8 @@ int run_scene(const RunOptions& o) {
   fmt::print("running {} ticks of {} on {} ({}), region depth {}\n", n_ticks, s.source, backend->name(),
              to_string(backend->precision()), settings.depth == kDepthAll ? "all" : std::to_string(settings.depth));
 
-  std::optional<TickLog> log;
-  std::optional<VtuSeries> frames;
+  std::optional<io::TickLog> log;
+  std::optional<io::VtuSeries> frames;
   long frame_every = 0;
   if (!o.out_dir.empty()) {
     std::filesystem::create_directories(o.out_dir);

@@ -39,7 +39,7 @@ struct NamedModel {
 };
 
 NamedModel mesh_by_name(const std::string& name, bool quick) {
-  if (name == "kidney") return {name, scene::load_model(default_kidney_scene())};
+  if (name == "kidney") return {name, scene::load_model(io::default_kidney_scene())};
   // cells per side of a cube with 6 c^3 ~ the asked count
   const long want = name == "100k" ? 100'000 : name == "1m" ? 1'000'000 : name == "4m" ? 4'000'000 : -1;
   if (want < 0) throw std::invalid_argument("unknown bench mesh '" + name + "' (kidney, 100k, 1m, 4m)");
@@ -188,7 +188,7 @@ void bench_collision(Context& c, long want_tris, Precision p) {
 }
 
 void bench_tick(Context& c, Precision p, int depth) {
-  const scene::Scene s = default_kidney_scene();
+  const scene::Scene s = io::default_kidney_scene();
   const TissueModel<double> m = scene::load_model(s);
   SchedulerSettings st = scene::scheduler_settings(s);
   st.depth = depth;
