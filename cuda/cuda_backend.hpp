@@ -1,5 +1,5 @@
 // The cuda backend. This header has no CUDA includes: the registry and the
-// apps see only the Backend interface.
+// apps see only the Backend interface and the few CUDA-free extras below.
 #pragma once
 
 #include <memory>
@@ -14,5 +14,25 @@ std::unique_ptr<Backend> make_cuda_backend(Precision precision);
 /// True when a CUDA device can be used; otherwise *why says why not.
 /// On success *why holds the device name.
 bool cuda_available(std::string* why);
+
+/// Device-to-device copy bandwidth of the current GPU (bytes/s, bytes read
+/// plus bytes written), timed with CUDA events over a 2 x 512 MiB copy
+/// (median of several repeats). Throws std::runtime_error without a GPU.
+double cuda_copy_bandwidth();
+
+/// How the cuda backend runs advance(n); every mode gives the same results
+/// (see cuda/stepper.hpp). Auto: Cluster for regions one thread-block cluster
+/// covers, Graph above that.
+enum class CudaStepMode { Auto, Launch, Graph, Grid, Cluster };
+
+const char* to_string(CudaStepMode mode);
+
+/// Selects the step mode of a backend made by make_cuda_backend. Throws
+/// std::invalid_argument when `backend` is not a cuda backend or the device
+/// cannot run the mode (no cooperative launch, no clusters).
+void set_cuda_step_mode(Backend& backend, CudaStepMode mode);
+
+/// The mode advance() uses for the backend's current region (Auto resolved).
+CudaStepMode cuda_step_mode(Backend& backend);
 
 }  // namespace tissue

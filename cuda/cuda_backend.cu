@@ -1,0 +1,349 @@
+// The cuda backend: the Backend interface over the device store, as a list
+// of stages, each one kernel module (stepper, region_fill, collide, reduce).
+// Semantics match the cpu backend's:
+//   held = fixed | driven | halo; a fixed node is always held at 0 (also
+//   when driven); a halo node is held at its displacement when the region
+//   was built; a node leaving the region is frozen (u_prev = u_next = u);
+//   after a region build pass 1 is recomputed over all elements, so pass 2
+//   averages valid p_e V_e on halo nodes too.
+// The internal force f of a halo node also gathers the last forces of its
+// elements outside the region: only inner nodes' f are meaningful (the
+// reductions use inner nodes only).
+#include "cuda/cuda_backend.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <vector>
+
+#include "cuda/collide.hpp"
+#include "cuda/device_store.hpp"
+#include "cuda/launch.cuh"
+#include "cuda/reduce.hpp"
+#include "cuda/region_fill.hpp"
+#include "cuda/stepper.hpp"
+#include "cuda/text.hpp"
+
+namespace tissue {
+namespace gpu {
+namespace {
+
+__global__ void undrive_kernel(index_t n, const index_t* list, const std::uint8_t* flags, const std::uint8_t* role,
+                               std::uint8_t* held, std::uint8_t* driven) {
+  const index_t i = thread_index();
+  if (i >= n) return;
+  const index_t a = list[i];
+  driven[a] = 0;
+  held[a] = (flags[a] & kFixed) || role[a] == kHalo;
+}
+
+template <class T>
+__global__ void drive_kernel(index_t n, const T* values, const index_t* nodes, const std::uint8_t* flags,
+                             index_t* list, std::uint8_t* held, std::uint8_t* driven, Packed3<T>* u_held) {
+  const index_t i = thread_index();
+  if (i >= n) return;
+  const index_t a = nodes[i];
+  list[i] = a;
+  driven[a] = 1;
+  held[a] = 1;
+  u_held[a] = (flags[a] & kFixed) ? Packed3<T>{T(0), T(0), T(0), T(0)}
+                                   : Packed3<T>{values[3 * i], values[3 * i + 1], values[3 * i + 2], T(0)};
+}
+
+/// u^n = u^{n-1} = u^{n+1} = src (src: 3 x n component-major, double).
+template <class T>
+__global__ void set_displacements_kernel(index_t n, const double* src, StepBuffers<T> b) {
+  const index_t a = thread_index();
+  if (a >= n) return;
+  const Packed3<T> u = {T(src[a]), T(src[n + a]), T(src[2 * n + a]), T(0)};
+  b.u_prev[a] = u;
+  b.u[a] = u;
+  b.u_next[a] = u;
+}
+
+/// Fields in double into dst: u (3 x n), node_p (n), f (3 x n), elem_J (ne).
+template <class T>
+__global__ void download_kernel(ModelView<T> m, StateView<T> s, const Packed3<T>* u, double* dst) {
+  const index_t i = thread_index();
+  const index_t n = m.n_nodes;
+  if (i < n) {
+    const Packed3<T> ui = u[i], fi = s.f[i];
+    dst[i] = ui.x;
+    dst[n + i] = ui.y;
+    dst[2 * n + i] = ui.z;
+    dst[3 * n + i] = s.node_p[i];
+    dst[4 * n + i] = fi.x;
+    dst[5 * n + i] = fi.y;
+    dst[6 * n + i] = fi.z;
+  }
+  if (i < m.n_elems) dst[7 * n + i] = s.elem_J[i];
+}
+
+template <class T>
+__global__ void positions_kernel(index_t n, const Packed3<T>* X, const Packed3<T>* u, float* dst) {
+  const index_t a = thread_index();
+  if (a >= n) return;
+  const Packed3<T> x = X[a], d = u[a];
+  dst[3 * a] = static_cast<float>(x.x + d.x);
+  dst[3 * a + 1] = static_cast<float>(x.y + d.y);
+  dst[3 * a + 2] = static_cast<float>(x.z + d.z);
+}
+
+std::string current_device_name() {
+  int dev = 0;
+  CUDA_CHECK(cudaGetDevice(&dev));
+  cudaDeviceProp p;
+  CUDA_CHECK(cudaGetDeviceProperties(&p, dev));
+  return str(p.name, " (sm_", p.major, p.minor, ", ", p.multiProcessorCount, " SMs, ",
+             (p.totalGlobalMem + (size_t(1) << 29)) >> 30, " GiB)");
+}
+
+template <class T>
+class CudaBackend final : public Backend {
+ public:
+  CudaBackend() {
+    std::string why;
+    if (!cuda_available(&why)) throw std::runtime_error("backend 'cuda' cannot run here: " + why);
+    device_name_ = current_device_name();
+    stepper_.init();
+  }
+
+  std::string name() const override { return "cuda"; }
+  Precision precision() const override { return sizeof(T) == 4 ? Precision::Float : Precision::Double; }
+  std::string device_name() const override { return device_name_; }
+
+  void upload(const TissueModel<double>& model) override {
+    const TissueModel<T> m = convert<T>(model);
+    uploaded_ = false;
+    store_.upload(m, log_, stream());
+    const index_t n = m.n_nodes;
+    region_.allocate(n, m.n_elems, stream());
+    collider_.allocate(m.n_tris);
+    reducer_.allocate();
+    driven_list_.allocate(n);
+    drive_dev_.allocate(n * (3 * sizeof(T) + sizeof(index_t)));
+    drive_host_.allocate(drive_dev_.size());
+    scratch_.allocate(7 * size_t(n) + m.n_elems);
+    n_driven_ = 0;
+    uploaded_ = true;
+    build_region({}, kDepthAll);
+    stream_.sync();
+  }
+
+  void set_displacements(std::span<const double> u) override {
+    require_model("set_displacements");
+    const index_t n = store_.n_nodes();
+    if (u.size() != 3 * size_t(n))
+      throw std::invalid_argument(str("set_displacements: ", u.size(), " values for ", n, " nodes (need 3 x n_nodes = ",
+                                      3 * size_t(n), ")"));
+    for (size_t k = 0; k < u.size(); ++k)
+      if (!std::isfinite(u[k]))
+        throw std::invalid_argument(
+            str("set_displacements: node ", k % n, " axis ", "xyz"[k / n], " is not finite (", u[k], ")"));
+    log_.to_device_now(scratch_.data(), u.data(), u.size_bytes(), stream());
+    launch(n, stream(), set_displacements_kernel<T>, n, scratch_.data(), store_.u.current());
+  }
+
+  RegionSizes build_region(std::span<const index_t> seeds, int depth) override {
+    require_model("build_region");
+    const Topology topo = topology(store_.model());
+    StateView<T> s = store_.state();
+    RegionSizes sizes;
+    if (depth == kDepthAll) {
+      sizes = region_.whole(topo, s.role, stream());
+    } else {
+      if (depth < 0) throw std::invalid_argument(str("region depth ", depth, " must be >= 0 or 'all'"));
+      for (index_t a : seeds)
+        if (a < 0 || a >= topo.n_nodes)
+          throw std::out_of_range(str("region seed node ", a, " out of range (0..", topo.n_nodes - 1, ")"));
+      sizes = region_.build(topo, seeds, depth, s.role, log_, stream());
+    }
+    seeds_.assign(seeds.begin(), seeds.end());
+    apply_region(store_.model(), s, store_.u.current(), stream());
+    const RegionView all = {nullptr, nullptr, topo.n_nodes, topo.n_elems};
+    stepper_.element_pressure(store_.model(), s, all, store_.u.current().u, stream());
+    stepper_.invalidate();
+    return sizes;
+  }
+
+  Region region() override {
+    require_model("region");
+    return region_.download(topology(store_.model()), store_.state().role, seeds_, log_, stream());
+  }
+
+  void set_driven(std::span<const index_t> nodes, std::span<const double> u) override {
+    require_model("set_driven");
+    check_driven(nodes, u);
+    const auto n = static_cast<index_t>(nodes.size());
+    if (drive_pending_) drive_copied_.sync();  // the staging buffer is free again
+    T* values = reinterpret_cast<T*>(drive_host_.data());
+    index_t* ids = reinterpret_cast<index_t*>(values + 3 * size_t(n));
+    for (size_t k = 0; k < u.size(); ++k) values[k] = static_cast<T>(u[k]);
+    std::copy(nodes.begin(), nodes.end(), ids);
+    const size_t bytes = n * (3 * sizeof(T) + sizeof(index_t));
+    log_.to_device(drive_dev_.data(), drive_host_.data(), bytes, stream());
+    drive_copied_.record(stream());
+    drive_pending_ = true;
+    clear_driven();
+    const T* dvalues = reinterpret_cast<const T*>(drive_dev_.data());
+    const index_t* dids = reinterpret_cast<const index_t*>(dvalues + 3 * size_t(n));
+    StateView<T> s = store_.state();
+    launch(n, stream(), drive_kernel<T>, n, dvalues, dids, store_.model().node_flags, driven_list_.data(), s.held,
+           s.driven, s.u_held);
+    n_driven_ = n;
+  }
+
+  void clear_driven() override {
+    require_model("clear_driven");
+    StateView<T> s = store_.state();
+    launch(n_driven_, stream(), undrive_kernel, n_driven_, driven_list_.data(), store_.model().node_flags, s.role,
+           s.held, s.driven);
+    n_driven_ = 0;
+  }
+
+  void element_pressure() override {
+    require_model("element_pressure");
+    stepper_.element_pressure(store_.model(), store_.state(), region_.view(), store_.u.current().u, stream());
+  }
+  void nodal_pressure() override {
+    require_model("nodal_pressure");
+    stepper_.nodal_pressure(store_.model(), store_.state(), region_.view(), stream());
+  }
+  void element_forces() override {
+    require_model("element_forces");
+    stepper_.element_forces(store_.model(), store_.state(), region_.view(), store_.u.current().u, stream());
+  }
+  void node_update() override {
+    require_model("node_update");
+    stepper_.node_update(store_.model(), store_.state(), region_.view(), store_.u.current(), stream());
+    store_.u.advance(1);
+  }
+
+  void advance(int steps) override {
+    require_model("advance");
+    if (steps < 0) throw std::invalid_argument(str("advance: step count ", steps, " must be >= 0"));
+    stepper_.advance(store_.model(), store_.state(), region_.view(), store_.u, steps, stream());
+  }
+
+  Hit collide(Vec3<double> a, Vec3<double> b) override {
+    require_model("collide");
+    return collider_.query(store_.model(), store_.u.current().u, a, b, log_, stream());
+  }
+
+  Reductions reduce() override {
+    require_model("reduce");
+    return reducer_.run(store_.model(), store_.state(), region_.view(), store_.u.current(), log_, stream());
+  }
+
+  Fields download() override {
+    require_model("download");
+    const index_t n = store_.n_nodes(), ne = store_.n_elems();
+    launch(std::max(n, ne), stream(), download_kernel<T>, store_.model(), store_.state(), store_.u.current().u,
+           scratch_.data());
+    std::vector<double> all(scratch_.size());
+    log_.to_host(all.data(), scratch_.data(), scratch_.bytes(), stream());
+    Fields f;
+    const auto at = [&](size_t k) { return all.begin() + k * n; };
+    f.u.assign(at(0), at(3));
+    f.node_p.assign(at(3), at(4));
+    f.f.assign(at(4), at(7));
+    f.elem_J.assign(at(7), at(7) + ne);
+    return f;
+  }
+
+  void write_positions(float* dst) override {
+    require_model("write_positions");
+    cudaPointerAttributes attr;
+    if (dst == nullptr || cudaPointerGetAttributes(&attr, dst) != cudaSuccess ||
+        (attr.type != cudaMemoryTypeDevice && attr.type != cudaMemoryTypeManaged)) {
+      cudaGetLastError();
+      throw std::invalid_argument("cuda write_positions: dst must be device memory (n_nodes x 3 floats)");
+    }
+    const index_t n = store_.n_nodes();
+    launch(n, stream(), positions_kernel<T>, n, store_.model().X, store_.u.current().u, dst);
+    stream_.sync();  // the caller (a GL interop unmap) may use dst right away
+  }
+
+  TransferCounters transfers() const override { return log_.counters(); }
+
+  Stepper<T>& stepper() { return stepper_; }
+  RegionView region_view() const { return region_.view(); }
+
+ private:
+  cudaStream_t stream() const { return stream_.get(); }
+
+  void require_model(const char* what) const {
+    if (!uploaded_) throw std::logic_error(str("cuda backend: ", what, "() called before upload()"));
+  }
+
+  void check_driven(std::span<const index_t> nodes, std::span<const double> u) const {
+    if (u.size() != 3 * nodes.size())
+      throw std::invalid_argument(
+          str("set_driven: ", u.size(), " values for ", nodes.size(), " nodes (need 3 per node)"));
+    const index_t n = store_.n_nodes();
+    for (size_t i = 0; i < nodes.size(); ++i) {
+      if (nodes[i] < 0 || nodes[i] >= n)
+        throw std::out_of_range(str("set_driven: node ", nodes[i], " out of range (0..", n - 1, ")"));
+      for (size_t j = 0; j < i; ++j)
+        if (nodes[j] == nodes[i]) throw std::invalid_argument(str("set_driven: node ", nodes[i], " given twice"));
+      for (int c = 0; c < 3; ++c)
+        if (!std::isfinite(u[3 * i + c]))
+          throw std::invalid_argument(
+              str("set_driven: node ", nodes[i], " axis ", "xyz"[c], " is not finite (", u[3 * i + c], ")"));
+    }
+  }
+
+  Stream stream_;
+  Transfers log_;
+  DeviceStore<T> store_;
+  RegionFill region_;
+  Collider<T> collider_;
+  Reducer<T> reducer_;
+  Stepper<T> stepper_;
+  std::vector<index_t> seeds_;
+  DeviceArray<index_t> driven_list_;      ///< current driven nodes (n_driven_)
+  DeviceArray<unsigned char> drive_dev_;  ///< set_driven upload: values (3n T), then ids (n)
+  PinnedArray<unsigned char> drive_host_; ///< its pinned staging
+  Event drive_copied_;                    ///< the staging's last upload has been read
+  bool drive_pending_ = false;
+  index_t n_driven_ = 0;
+  DeviceArray<double> scratch_;           ///< set_displacements / download staging (7 n + ne)
+  bool uploaded_ = false;
+  std::string device_name_;
+};
+
+template <class F>
+decltype(auto) with_cuda_backend(Backend& b, F&& f) {
+  if (auto* p = dynamic_cast<CudaBackend<float>*>(&b)) return f(*p);
+  if (auto* p = dynamic_cast<CudaBackend<double>*>(&b)) return f(*p);
+  throw std::invalid_argument("backend '" + b.name() + "' is not a cuda backend");
+}
+
+}  // namespace
+}  // namespace gpu
+
+std::unique_ptr<Backend> make_cuda_backend(Precision precision) {
+  if (precision == Precision::Float) return std::make_unique<gpu::CudaBackend<float>>();
+  return std::make_unique<gpu::CudaBackend<double>>();
+}
+
+const char* to_string(CudaStepMode mode) {
+  switch (mode) {
+    case CudaStepMode::Auto: return "auto";
+    case CudaStepMode::Launch: return "launch";
+    case CudaStepMode::Graph: return "graph";
+    case CudaStepMode::Grid: return "grid";
+    case CudaStepMode::Cluster: return "cluster";
+  }
+  return "?";
+}
+
+void set_cuda_step_mode(Backend& backend, CudaStepMode mode) {
+  gpu::with_cuda_backend(backend, [&](auto& b) { b.stepper().set_mode(mode); });
+}
+
+CudaStepMode cuda_step_mode(Backend& backend) {
+  return gpu::with_cuda_backend(backend, [](auto& b) { return b.stepper().choose(b.region_view()); });
+}
+
+}  // namespace tissue

@@ -1,0 +1,128 @@
+#include "cuda/device_store.hpp"
+
+#include <vector>
+
+#include "core/region.hpp"
+#include "cuda/launch.cuh"
+
+namespace tissue::gpu {
+namespace {
+
+/// Allocates `dst` for v.size() elements and queues the upload of v.
+template <class T>
+void upload_array(DeviceArray<T>& dst, const std::vector<T>& v, Transfers& log, cudaStream_t stream) {
+  dst.allocate(v.size());
+  log.to_device(dst.data(), v.data(), dst.bytes(), stream);
+}
+
+template <class T>
+__global__ void reset_nodes_kernel(index_t n, const std::uint8_t* flags, std::uint8_t* held, std::uint8_t* driven,
+                                   std::uint8_t* role) {
+  const index_t a = thread_index();
+  if (a >= n) return;
+  held[a] = (flags[a] & kFixed) ? 1 : 0;
+  driven[a] = 0;
+  role[a] = kInner;
+}
+
+template <class T>
+__global__ void reset_elems_kernel(index_t ne, const T* volume, T* elem_J, PressureVolume<T>* elem_pv) {
+  const index_t e = thread_index();
+  if (e >= ne) return;
+  elem_J[e] = T(1);
+  elem_pv[e] = {T(0), volume[e]};
+}
+
+}  // namespace
+
+template <class T>
+void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_t stream) {
+  const index_t n = m.n_nodes, ne = m.n_elems;
+  std::vector<Packed3<T>> X(n);
+  for (index_t i = 0; i < n; ++i) X[i] = {m.X[i], m.X[n + i], m.X[2 * size_t(n) + i], T(0)};
+  upload_array(X_, X, log, stream);
+  upload_array(elem_nodes_, m.elem_nodes, log, stream);
+  upload_array(node_elem_start_, m.node_elem_start, log, stream);
+  upload_array(node_elem_, m.node_elem, log, stream);
+  upload_array(tris_, m.tris, log, stream);
+  upload_array(dndx_, m.dndx, log, stream);
+  upload_array(volume_, m.volume, log, stream);
+  upload_array(mu_, m.mu, log, stream);
+  upload_array(K_, m.K, log, stream);
+  upload_array(mass_, m.mass, log, stream);
+  upload_array(cd_A_, m.cd_A, log, stream);
+  upload_array(cd_B_, m.cd_B, log, stream);
+  upload_array(cd_C_, m.cd_C, log, stream);
+  upload_array(node_flags_, m.node_flags, log, stream);
+  CUDA_CHECK(cudaStreamSynchronize(stream));  // the host sources (X above) must outlive the copies
+
+  model_ = {};
+  model_.n_nodes = n;
+  model_.n_elems = ne;
+  model_.n_tris = m.n_tris;
+  model_.X = X_.data();
+  model_.elem_nodes = elem_nodes_.data();
+  model_.dndx = dndx_.data();
+  model_.volume = volume_.data();
+  model_.mu = mu_.data();
+  model_.K = K_.data();
+  model_.mass = mass_.data();
+  model_.cd_A = cd_A_.data();
+  model_.cd_B = cd_B_.data();
+  model_.cd_C = cd_C_.data();
+  model_.node_elem_start = node_elem_start_.data();
+  model_.node_elem = node_elem_.data();
+  model_.tris = tris_.data();
+  model_.node_flags = node_flags_.data();
+  model_.dt = m.dt;
+  model_.ianp = m.ianp;
+
+  for (auto& b : u.buf) b.allocate(n);
+  u_held_.allocate(n);
+  f_.allocate(n);
+  elem_f_.allocate(4 * size_t(ne));
+  held_.allocate(n);
+  driven_.allocate(n);
+  role_.allocate(n);
+  elem_pv_.allocate(ne);
+  elem_J_.allocate(ne);
+  node_p_.allocate(n);
+  bad_.allocate(1);
+  reset_state(stream);
+}
+
+template <class T>
+void DeviceStore<T>::reset_state(cudaStream_t stream) {
+  for (auto& b : u.buf) b.fill_bytes(0, stream);
+  u.phase = 0;
+  u_held_.fill_bytes(0, stream);
+  f_.fill_bytes(0, stream);
+  elem_f_.fill_bytes(0, stream);
+  node_p_.fill_bytes(0, stream);
+  bad_.fill_bytes(0xff, stream);
+  launch(model_.n_nodes, stream, reset_nodes_kernel<T>, model_.n_nodes, model_.node_flags, held_.data(),
+         driven_.data(), role_.data());
+  launch(model_.n_elems, stream, reset_elems_kernel<T>, model_.n_elems, model_.volume, elem_J_.data(),
+         elem_pv_.data());
+}
+
+template <class T>
+StateView<T> DeviceStore<T>::state() {
+  StateView<T> s;
+  s.u_held = u_held_.data();
+  s.held = held_.data();
+  s.driven = driven_.data();
+  s.role = role_.data();
+  s.elem_pv = elem_pv_.data();
+  s.elem_J = elem_J_.data();
+  s.node_p = node_p_.data();
+  s.elem_f = elem_f_.data();
+  s.f = f_.data();
+  s.bad = bad_.data();
+  return s;
+}
+
+template class DeviceStore<float>;
+template class DeviceStore<double>;
+
+}  // namespace tissue::gpu

@@ -1,0 +1,67 @@
+// The device mirror of the tissue store: every model and state array of
+// core/model.hpp and core/state.hpp as one DeviceArray each, allocated and
+// uploaded once per scene by upload(), and handed to kernels as views
+// (cuda/views.hpp, which also gives the device layouts).
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <array>
+#include <cstdint>
+
+#include "core/model.hpp"
+#include "cuda/device_array.hpp"
+#include "cuda/views.hpp"
+
+namespace tissue::gpu {
+
+/// The three rotating displacement buffers: roles (u_prev, u, u_next) are
+/// (buf[p], buf[p+1], buf[p+2]) mod 3 for phase p; a step advances p by one.
+/// A captured graph bakes the pointers of its starting phase into its
+/// kernels, so graphs are cached per phase (cuda/stepper.hpp).
+template <class T>
+struct BufferRing {
+  std::array<DeviceArray<Packed3<T>>, 3> buf;
+  int phase = 0;  ///< 0..2
+
+  StepBuffers<T> at(int p) { return {buf[p % 3].data(), buf[(p + 1) % 3].data(), buf[(p + 2) % 3].data()}; }
+  StepBuffers<T> current() { return at(phase); }
+  void advance(int steps) { phase = (phase + steps % 3) % 3; }
+};
+
+template <class T>
+class DeviceStore {
+ public:
+  /// Allocates every array for the model's sizes and uploads the model
+  /// (counted in `log`); the state is then reset (reset_state()).
+  void upload(const TissueModel<T>& m, Transfers& log, cudaStream_t stream);
+
+  /// u = u_prev = u_next = 0, u_held = 0, f = elem_f = node_p = 0,
+  /// elem_J = 1, held = fixed flags, driven = 0, every node inner, no bad element.
+  void reset_state(cudaStream_t stream);
+
+  ModelView<T> model() const { return model_; }
+  StateView<T> state();
+
+  index_t n_nodes() const { return model_.n_nodes; }
+  index_t n_elems() const { return model_.n_elems; }
+  index_t n_tris() const { return model_.n_tris; }
+
+  BufferRing<T> u;  ///< u^{n-1}, u^n, u^{n+1}
+
+ private:
+  ModelView<T> model_;
+  // model (read-only after upload)
+  DeviceArray<Packed3<T>> X_;
+  DeviceArray<index_t> elem_nodes_, node_elem_start_, node_elem_, tris_;
+  DeviceArray<T> dndx_, volume_, mu_, K_, mass_, cd_A_, cd_B_, cd_C_;
+  DeviceArray<std::uint8_t> node_flags_;
+  // state
+  DeviceArray<Packed3<T>> u_held_, elem_f_, f_;
+  DeviceArray<std::uint8_t> held_, driven_, role_;
+  DeviceArray<PressureVolume<T>> elem_pv_;
+  DeviceArray<T> elem_J_, node_p_;
+  DeviceArray<unsigned long long> bad_;
+};
+
+}  // namespace tissue::gpu

@@ -1,0 +1,42 @@
+// The one launch helper of the cuda backend: zero-size guard, grid from the
+// item count and block size, the backend's stream, and an error check after
+// every launch (cudaGetLastError: launch-configuration errors, no sync). With
+// TISSUE_CUDA_SYNC_CHECK defined, it also synchronises the stream and checks
+// for faults raised inside the kernel (debugging aid; slow). nvcc only.
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include "core/hd.hpp"
+#include "cuda/check.hpp"
+
+namespace tissue::gpu {
+
+/// Threads per block of the per-item kernels.
+inline constexpr int kBlock = 256;
+
+/// Blocks needed for n items at `block` threads each.
+inline int grid_for(index_t n, int block = kBlock) { return static_cast<int>((n + block - 1) / block); }
+
+/// Launches kernel<<<blocks, block, 0, stream>>>(args...) when blocks > 0.
+template <class Kernel, class... Args>
+void launch_blocks(int blocks, int block, cudaStream_t stream, Kernel kernel, Args... args) {
+  if (blocks <= 0) return;
+  kernel<<<blocks, block, 0, stream>>>(args...);
+  CUDA_CHECK(cudaGetLastError());
+#ifdef TISSUE_CUDA_SYNC_CHECK
+  CUDA_CHECK(cudaStreamSynchronize(stream));  // not during graph capture
+#endif
+}
+
+/// Launches one thread per item (n items, kBlock threads per block) when n > 0.
+template <class Kernel, class... Args>
+void launch(index_t n, cudaStream_t stream, Kernel kernel, Args... args) {
+  launch_blocks(n > 0 ? grid_for(n) : 0, kBlock, stream, kernel, args...);
+}
+
+/// Grid-stride index of the calling thread and the stride.
+__device__ __forceinline__ index_t thread_index() { return static_cast<index_t>(blockIdx.x * blockDim.x + threadIdx.x); }
+__device__ __forceinline__ index_t thread_stride() { return static_cast<index_t>(gridDim.x * blockDim.x); }
+
+}  // namespace tissue::gpu

@@ -1,0 +1,161 @@
+#include "cuda/region_fill.hpp"
+
+#include <cub/device/device_select.cuh>
+#include <thrust/iterator/counting_iterator.h>
+
+#include <algorithm>
+#include <numeric>
+#include <vector>
+
+#include "cuda/launch.cuh"
+
+namespace tissue::gpu {
+namespace {
+
+__global__ void seed_kernel(index_t n_seeds, const index_t* seeds, int* ring) {
+  const index_t i = thread_index();
+  if (i < n_seeds) ring[seeds[i]] = 0;
+}
+
+/// One ring: every node reached at ring r claims its unreached neighbours for r + 1.
+__global__ void expand_kernel(Topology t, int r, int* ring) {
+  const index_t a = thread_index();
+  if (a >= t.n_nodes || ring[a] != r) return;
+  for (index_t k = t.node_elem_start[a]; k < t.node_elem_start[a + 1]; ++k) {
+    const index_t e = t.node_elem[k] >> 2;
+    for (int c = 0; c < 4; ++c) {
+      const index_t b = t.elem_nodes[c * t.n_elems + e];
+      if (ring[b] < 0) atomicCAS(&ring[b], -1, r + 1);
+    }
+  }
+}
+
+/// Elements with an inner corner are computed; their other corners are halo.
+__global__ void mark_elems_kernel(Topology t, const int* ring, std::uint8_t* elem_sel, std::uint8_t* halo) {
+  const index_t e = thread_index();
+  if (e >= t.n_elems) return;
+  index_t c[4];
+  bool on = false;
+  for (int a = 0; a < 4; ++a) {
+    c[a] = t.elem_nodes[a * t.n_elems + e];
+    on = on || ring[c[a]] >= 0;
+  }
+  elem_sel[e] = on;
+  if (on)
+    for (int a = 0; a < 4; ++a)
+      if (ring[c[a]] < 0) halo[c[a]] = 1;  // every writer writes 1
+}
+
+__global__ void roles_kernel(index_t n, const int* ring, const std::uint8_t* halo, std::uint8_t* role,
+                             std::uint8_t* node_sel, int* counts) {
+  const index_t a = thread_index();
+  if (a >= n) return;
+  const std::uint8_t r = ring[a] >= 0 ? kInner : (halo[a] ? kHalo : kOutside);
+  role[a] = r;
+  node_sel[a] = r != kOutside;
+  if (r == kInner) atomicAdd(&counts[0], 1);
+  if (r == kHalo) atomicAdd(&counts[1], 1);
+}
+
+template <class T>
+__global__ void apply_region_kernel(index_t n, const std::uint8_t* flags, StateView<T> s, StepBuffers<T> b) {
+  const index_t a = thread_index();
+  if (a >= n) return;
+  const bool fixed = flags[a] & kFixed, driven = s.driven[a], halo = s.role[a] == kHalo;
+  s.held[a] = fixed || driven || halo;
+  if (fixed) s.u_held[a] = {T(0), T(0), T(0), T(0)};
+  else if (halo && !driven) s.u_held[a] = b.u[a];
+  if (s.role[a] == kOutside) {
+    const Packed3<T> u = b.u[a];
+    b.u_prev[a] = u;
+    b.u_next[a] = u;
+  }
+}
+
+size_t select_temp_bytes(index_t n) {
+  size_t bytes = 0;
+  CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, thrust::counting_iterator<index_t>(0),
+                                        static_cast<const std::uint8_t*>(nullptr), static_cast<index_t*>(nullptr),
+                                        static_cast<int*>(nullptr), n));
+  return bytes;
+}
+
+}  // namespace
+
+void RegionFill::allocate(index_t n_nodes, index_t n_elems, cudaStream_t) {
+  nodes_.allocate(n_nodes);
+  elems_.allocate(n_elems);
+  seeds_.allocate(std::max<index_t>(n_nodes, 3));
+  ring_.allocate(n_nodes);
+  node_sel_.allocate(n_nodes);
+  elem_sel_.allocate(n_elems);
+  halo_.allocate(n_nodes);
+  counts_.allocate(4);
+  counts_host_.allocate(4);
+  cub_temp_.allocate(std::max({select_temp_bytes(n_nodes), select_temp_bytes(n_elems), size_t(1)}));
+  view_ = {};
+  sizes_ = {};
+}
+
+RegionSizes RegionFill::whole(const Topology& t, std::uint8_t* role, cudaStream_t stream) {
+  CUDA_CHECK(cudaMemsetAsync(role, kInner, t.n_nodes, stream));
+  view_ = {nullptr, nullptr, t.n_nodes, t.n_elems};
+  sizes_ = {kDepthAll, t.n_nodes, 0, t.n_elems};
+  return sizes_;
+}
+
+RegionSizes RegionFill::build(const Topology& t, std::span<const index_t> seeds, int depth, std::uint8_t* role,
+                              Transfers& log, cudaStream_t stream) {
+  if (seeds.size() > seeds_.size()) seeds_.allocate(seeds.size());  // only for duplicate-laden seed lists
+  ring_.fill_bytes(0xff, stream);  // -1: not reached
+  halo_.fill_bytes(0, stream);
+  counts_.fill_bytes(0, stream);
+  const auto n_seeds = static_cast<index_t>(seeds.size());
+  log.to_device_now(seeds_.data(), seeds.data(), seeds.size_bytes(), stream);
+  launch(n_seeds, stream, seed_kernel, n_seeds, seeds_.data(), ring_.data());
+  for (int r = 0; r < depth; ++r) launch(t.n_nodes, stream, expand_kernel, t, r, ring_.data());
+  launch(t.n_elems, stream, mark_elems_kernel, t, ring_.data(), elem_sel_.data(), halo_.data());
+  launch(t.n_nodes, stream, roles_kernel, t.n_nodes, ring_.data(), halo_.data(), role, node_sel_.data(),
+         counts_.data());
+  size_t bytes = cub_temp_.bytes();
+  CUDA_CHECK(cub::DeviceSelect::Flagged(cub_temp_.data(), bytes, thrust::counting_iterator<index_t>(0),
+                                        node_sel_.data(), nodes_.data(), counts_.data() + 2, t.n_nodes, stream));
+  bytes = cub_temp_.bytes();
+  CUDA_CHECK(cub::DeviceSelect::Flagged(cub_temp_.data(), bytes, thrust::counting_iterator<index_t>(0),
+                                        elem_sel_.data(), elems_.data(), counts_.data() + 3, t.n_elems, stream));
+  log.to_host(counts_host_.data(), counts_.data(), 4 * sizeof(int), stream);
+  sizes_ = {depth, counts_host_[0], counts_host_[1], counts_host_[3]};
+  view_ = {nodes_.data(), elems_.data(), counts_host_[2], counts_host_[3]};
+  return sizes_;
+}
+
+Region RegionFill::download(const Topology& t, const std::uint8_t* role, std::span<const index_t> seeds,
+                            Transfers& log, cudaStream_t stream) const {
+  Region r;
+  r.depth = sizes_.depth;
+  r.seeds.assign(seeds.begin(), seeds.end());
+  r.n_inner = sizes_.n_inner;
+  r.n_halo = sizes_.n_halo;
+  r.role.resize(t.n_nodes);
+  log.to_host(r.role.data(), role, r.role.size(), stream);
+  r.nodes.resize(view_.n_nodes);
+  r.elems.resize(view_.n_elems);
+  if (view_.nodes) {
+    log.to_host(r.nodes.data(), view_.nodes, r.nodes.size() * sizeof(index_t), stream);
+    log.to_host(r.elems.data(), view_.elems, r.elems.size() * sizeof(index_t), stream);
+  } else {
+    std::iota(r.nodes.begin(), r.nodes.end(), 0);
+    std::iota(r.elems.begin(), r.elems.end(), 0);
+  }
+  return r;
+}
+
+template <class T>
+void apply_region(const ModelView<T>& m, const StateView<T>& s, StepBuffers<T> b, cudaStream_t stream) {
+  launch(m.n_nodes, stream, apply_region_kernel<T>, m.n_nodes, m.node_flags, s, b);
+}
+
+template void apply_region(const ModelView<float>&, const StateView<float>&, StepBuffers<float>, cudaStream_t);
+template void apply_region(const ModelView<double>&, const StateView<double>&, StepBuffers<double>, cudaStream_t);
+
+}  // namespace tissue::gpu

@@ -1,0 +1,72 @@
+// The deformation region on the device (DESIGN.md section 3; the host
+// reference is core/region.cpp, whose lists these match element for
+// element): rings of node -> element -> node expansion from the seeds, the
+// computed elements and the halo, then ascending compacted node and element
+// lists (cub::DeviceSelect::Flagged keeps the order). Only the four counts
+// come back to the host.
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstdint>
+#include <span>
+
+#include "core/region.hpp"
+#include "cuda/device_array.hpp"
+#include "cuda/views.hpp"
+
+namespace tissue::gpu {
+
+/// Mesh adjacency the flood fill walks (device pointers, model layouts).
+struct Topology {
+  index_t n_nodes = 0, n_elems = 0;
+  const index_t* elem_nodes = nullptr;       ///< (4 x n_elems)
+  const index_t* node_elem_start = nullptr;  ///< (n_nodes + 1)
+  const index_t* node_elem = nullptr;        ///< element * 4 + corner
+};
+
+template <class T>
+Topology topology(const ModelView<T>& m) {
+  return {m.n_nodes, m.n_elems, m.elem_nodes, m.node_elem_start, m.node_elem};
+}
+
+class RegionFill {
+ public:
+  /// Allocates the lists, flags and CUB scratch for a mesh of this size.
+  void allocate(index_t n_nodes, index_t n_elems, cudaStream_t stream);
+
+  /// Whole mesh: every node inner, identity lists (no copies).
+  RegionSizes whole(const Topology& t, std::uint8_t* role, cudaStream_t stream);
+
+  /// Flood fill from `seeds` (validated on the host: ids in range) for
+  /// depth >= 0 rings; writes NodeRole into role (n_nodes) and the lists.
+  /// One upload (the seeds) and one download (the four counts).
+  RegionSizes build(const Topology& t, std::span<const index_t> seeds, int depth, std::uint8_t* role,
+                    Transfers& log, cudaStream_t stream);
+
+  /// The active lists for kernels (null lists for the whole mesh).
+  RegionView view() const { return view_; }
+  const RegionSizes& sizes() const { return sizes_; }
+
+  /// Downloads role and lists into a host Region (tests and output).
+  Region download(const Topology& t, const std::uint8_t* role, std::span<const index_t> seeds, Transfers& log,
+                  cudaStream_t stream) const;
+
+ private:
+  DeviceArray<index_t> nodes_, elems_, seeds_;
+  DeviceArray<int> ring_;                 ///< ring at which a node was reached, -1 none (n_nodes)
+  DeviceArray<std::uint8_t> node_sel_, elem_sel_, halo_;
+  DeviceArray<int> counts_;               ///< n_inner, n_halo, n_nodes, n_elems
+  DeviceArray<unsigned char> cub_temp_;
+  PinnedArray<int> counts_host_;
+  RegionView view_;
+  RegionSizes sizes_;
+};
+
+/// After a region build: held = fixed | driven | halo; fixed targets 0, a new
+/// halo node (not driven) is held at its current displacement; nodes outside
+/// the region are frozen (u_prev = u_next = u) so buffer rotation keeps them.
+template <class T>
+void apply_region(const ModelView<T>& m, const StateView<T>& s, StepBuffers<T> b, cudaStream_t stream);
+
+}  // namespace tissue::gpu

@@ -1,0 +1,200 @@
+#include "cuda/stepper.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+
+#include "cuda/tled.cuh"
+
+namespace tissue::gpu {
+namespace {
+
+/// Items per thread up to which Auto prefers the cluster kernel. Larger
+/// regions leave the cluster's 16 SMs looping while the rest of the GPU
+/// idles; a graph of per-pass kernels then uses the whole device.
+constexpr int kClusterItemsPerThread = 2;
+
+int current_device_attribute(cudaDeviceAttr attr) {
+  int dev = 0, v = 0;
+  CUDA_CHECK(cudaGetDevice(&dev));
+  CUDA_CHECK(cudaDeviceGetAttribute(&v, attr, dev));
+  return v;
+}
+
+template <class T>
+int largest_cluster() {
+  if (current_device_attribute(cudaDevAttrComputeCapabilityMajor) < 9) return 0;
+  if (cudaFuncSetAttribute(persistent_cluster_kernel<T>, cudaFuncAttributeNonPortableClusterSizeAllowed, 1) !=
+      cudaSuccess) {
+    cudaGetLastError();  // clear: clusters are then limited to the portable size
+  }
+  for (int size : {16, 8, 4, 2}) {
+    cudaLaunchConfig_t cfg = {};
+    cfg.gridDim = dim3(size);
+    cfg.blockDim = dim3(kPersistentBlock);
+    cudaLaunchAttribute attr;
+    attr.id = cudaLaunchAttributeClusterDimension;
+    attr.val.clusterDim.x = size;
+    attr.val.clusterDim.y = 1;
+    attr.val.clusterDim.z = 1;
+    cfg.attrs = &attr;
+    cfg.numAttrs = 1;
+    int clusters = 0;
+    if (cudaOccupancyMaxActiveClusters(&clusters, persistent_cluster_kernel<T>, &cfg) != cudaSuccess) {
+      cudaGetLastError();
+      continue;
+    }
+    if (clusters >= 1) return size;
+  }
+  return 0;
+}
+
+}  // namespace
+
+template <class T>
+void Stepper<T>::init() {
+  graphs_.clear();
+  limits_ = {};
+  limits_.block = kPersistentBlock;
+  if (current_device_attribute(cudaDevAttrCooperativeLaunch)) {
+    int per_sm = 0;
+    CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, persistent_grid_kernel<T>, kPersistentBlock, 0));
+    limits_.grid_blocks = per_sm * current_device_attribute(cudaDevAttrMultiProcessorCount);
+  }
+  limits_.cluster_size = largest_cluster<T>();
+}
+
+template <class T>
+void Stepper<T>::set_mode(CudaStepMode mode) {
+  if (mode == CudaStepMode::Grid && limits_.grid_blocks == 0)
+    throw std::invalid_argument("cuda step mode 'grid': this device does not support cooperative launches");
+  if (mode == CudaStepMode::Cluster && limits_.cluster_size == 0)
+    throw std::invalid_argument("cuda step mode 'cluster': this device has no thread-block clusters (needs sm_90+)");
+  mode_ = mode;
+}
+
+template <class T>
+CudaStepMode Stepper<T>::choose(const RegionView& r) const {
+  if (mode_ != CudaStepMode::Auto) return mode_;
+  const long items = std::max(r.n_elems, r.n_nodes);
+  if (limits_.cluster_size > 0 && items <= long(limits_.cluster_size) * limits_.block * kClusterItemsPerThread)
+    return CudaStepMode::Cluster;
+  return CudaStepMode::Graph;
+}
+
+template <class T>
+void Stepper<T>::element_pressure(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
+                                  const Packed3<T>* u, cudaStream_t stream) {
+  launch(r.n_elems, stream, element_pressure_kernel<T>, m, s, r, u);
+}
+
+template <class T>
+void Stepper<T>::nodal_pressure(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
+                                cudaStream_t stream) {
+  launch(r.n_nodes, stream, nodal_pressure_kernel<T>, m, s, r);
+}
+
+template <class T>
+void Stepper<T>::element_forces(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
+                                const Packed3<T>* u, cudaStream_t stream) {
+  launch(r.n_elems, stream, element_forces_kernel<T>, m, s, r, u);
+}
+
+template <class T>
+void Stepper<T>::node_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
+                             cudaStream_t stream) {
+  launch(r.n_nodes, stream, node_update_kernel<T>, m, s, r, b);
+}
+
+template <class T>
+void Stepper<T>::launch_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
+                              int steps, cudaStream_t stream) {
+  for (int k = 0; k < steps; ++k) {
+    element_pressure(m, s, r, b.u, stream);
+    nodal_pressure(m, s, r, stream);
+    element_forces(m, s, r, b.u, stream);
+    node_update(m, s, r, b, stream);
+    b = b.rotated();
+  }
+}
+
+template <class T>
+cudaGraphExec_t Stepper<T>::graph(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
+                                  BufferRing<T>& ring, int steps, cudaStream_t stream) {
+  const std::pair<int, int> key{ring.phase, steps};
+  if (auto it = graphs_.find(key); it != graphs_.end()) return it->second.get();
+  cudaGraph_t g = nullptr;
+  CUDA_CHECK(cudaStreamBeginCapture(stream, cudaStreamCaptureModeThreadLocal));
+  try {
+    launch_steps(m, s, r, ring.current(), steps, stream);
+  } catch (...) {
+    cudaStreamEndCapture(stream, &g);
+    if (g) cudaGraphDestroy(g);
+    throw;
+  }
+  CUDA_CHECK(cudaStreamEndCapture(stream, &g));
+  cudaGraphExec_t exec = nullptr;
+  const cudaError_t err = cudaGraphInstantiate(&exec, g, 0);
+  cudaGraphDestroy(g);
+  CUDA_CHECK(err);
+  return graphs_.emplace(key, GraphExec(exec)).first->second.get();
+}
+
+template <class T>
+void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, BufferRing<T>& ring,
+                         int steps, cudaStream_t stream) {
+  if (steps <= 0) return;
+  if (r.n_elems == 0 && r.n_nodes == 0) {  // nothing moves; every buffer holds the same (frozen) values
+    ring.advance(steps);
+    return;
+  }
+  switch (choose(r)) {
+    case CudaStepMode::Auto:  // resolved by choose()
+    case CudaStepMode::Launch:
+      launch_steps(m, s, r, ring.current(), steps, stream);
+      ring.advance(steps);
+      break;
+    case CudaStepMode::Graph:
+      while (steps > 0) {
+        const int k = std::min(steps, kMaxGraphSteps);
+        CUDA_CHECK(cudaGraphLaunch(graph(m, s, r, ring, k, stream), stream));
+        ring.advance(k);
+        steps -= k;
+      }
+      break;
+    case CudaStepMode::Grid: {
+      const int blocks = std::clamp(grid_for(std::max(r.n_elems, r.n_nodes), kPersistentBlock), 1, limits_.grid_blocks);
+      ModelView<T> ma = m;
+      StateView<T> sa = s;
+      RegionView ra = r;
+      StepBuffers<T> b = ring.current();
+      void* args[] = {&ma, &sa, &ra, &b, &steps};
+      CUDA_CHECK(cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(persistent_grid_kernel<T>), dim3(blocks),
+                                             dim3(kPersistentBlock), args, 0, stream));
+      ring.advance(steps);
+      break;
+    }
+    case CudaStepMode::Cluster: {
+      const int blocks =
+          std::clamp(grid_for(std::max(r.n_elems, r.n_nodes), kPersistentBlock), 1, limits_.cluster_size);
+      cudaLaunchConfig_t cfg = {};
+      cfg.gridDim = dim3(blocks);
+      cfg.blockDim = dim3(kPersistentBlock);
+      cfg.stream = stream;
+      cudaLaunchAttribute attr;
+      attr.id = cudaLaunchAttributeClusterDimension;
+      attr.val.clusterDim.x = blocks;
+      attr.val.clusterDim.y = 1;
+      attr.val.clusterDim.z = 1;
+      cfg.attrs = &attr;
+      cfg.numAttrs = 1;
+      CUDA_CHECK(cudaLaunchKernelEx(&cfg, persistent_cluster_kernel<T>, m, s, r, ring.current(), steps));
+      ring.advance(steps);
+      break;
+    }
+  }
+}
+
+template class Stepper<float>;
+template class Stepper<double>;
+
+}  // namespace tissue::gpu

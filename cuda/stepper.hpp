@@ -1,0 +1,95 @@
+// Runs the four IANP passes on the device, one pass at a time (the
+// Backend's per-pass calls) or n whole steps (advance), in one of four ways
+// that give identical results:
+//   Launch   four kernel launches per step;
+//   Graph    the launches of up to kMaxGraphSteps steps captured once into a
+//            CUDA graph per (starting buffer phase, step count) and replayed;
+//            captured lazily, dropped when the region changes;
+//   Grid     one persistent cooperative kernel over all co-resident blocks,
+//            grid.sync() between passes (cudaLaunchCooperativeKernel);
+//   Cluster  one persistent kernel on a single thread-block cluster (up to
+//            16 blocks on Hopper), cluster.sync() between passes: the
+//            cheapest barrier, for regions a cluster can cover.
+// Auto picks by region size (see choose()).
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <map>
+#include <utility>
+
+#include "cuda/cuda_backend.hpp"
+#include "cuda/device_store.hpp"
+
+namespace tissue::gpu {
+
+/// Owns an instantiated CUDA graph; move-only.
+class GraphExec {
+ public:
+  GraphExec() = default;
+  explicit GraphExec(cudaGraphExec_t e) : e_(e) {}
+  GraphExec(GraphExec&& o) noexcept : e_(std::exchange(o.e_, nullptr)) {}
+  GraphExec& operator=(GraphExec&& o) noexcept {
+    std::swap(e_, o.e_);
+    return *this;
+  }
+  GraphExec(const GraphExec&) = delete;
+  GraphExec& operator=(const GraphExec&) = delete;
+  ~GraphExec() {
+    if (e_) cudaGraphExecDestroy(e_);
+  }
+  cudaGraphExec_t get() const { return e_; }
+
+ private:
+  cudaGraphExec_t e_ = nullptr;
+};
+
+/// What the device allows for the persistent modes.
+struct PersistentLimits {
+  int grid_blocks = 0;   ///< co-resident blocks of the grid kernel (0: no cooperative launch)
+  int cluster_size = 0;  ///< blocks of the largest schedulable cluster (0: no clusters)
+  int block = 0;         ///< threads per block of both persistent kernels
+};
+
+template <class T>
+class Stepper {
+ public:
+  /// Most steps captured in one graph (a multiple of 3 keeps the phase).
+  static constexpr int kMaxGraphSteps = 30;
+
+  /// Queries the device's limits for the persistent kernels.
+  void init();
+  /// Drops captured graphs (the region, and so the kernel arguments, changed).
+  void invalidate() { graphs_.clear(); }
+
+  void set_mode(CudaStepMode mode);
+  CudaStepMode mode() const { return mode_; }
+  /// The mode advance() uses for a region of this size (Auto resolved).
+  CudaStepMode choose(const RegionView& r) const;
+  const PersistentLimits& limits() const { return limits_; }
+
+  // Single passes over region r (pass 1 of a region build passes the whole mesh).
+  void element_pressure(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, const Packed3<T>* u,
+                        cudaStream_t stream);
+  void nodal_pressure(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, cudaStream_t stream);
+  void element_forces(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, const Packed3<T>* u,
+                      cudaStream_t stream);
+  void node_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
+                   cudaStream_t stream);
+
+  /// `steps` whole steps from ring's current phase; advances the phase.
+  void advance(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, BufferRing<T>& ring, int steps,
+               cudaStream_t stream);
+
+ private:
+  void launch_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b, int steps,
+                    cudaStream_t stream);
+  cudaGraphExec_t graph(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, BufferRing<T>& ring,
+                        int steps, cudaStream_t stream);
+
+  CudaStepMode mode_ = CudaStepMode::Auto;
+  PersistentLimits limits_;
+  std::map<std::pair<int, int>, GraphExec> graphs_;  ///< (phase, steps) -> graph
+};
+
+}  // namespace tissue::gpu

@@ -1,0 +1,164 @@
+// cuda_step_timing: steps/s of whole-mesh TLED advance on the cuda backend
+// for every step mode (launch, graph, grid, cluster), float and double, on
+// box meshes of about 8.6k, 100k, 1M and 4M tets, plus the time of one
+// collide and one full Scheduler tick. Not a test: a measurement to run on
+// a GPU machine (docs/cuda.md records the results).
+//   cuda_step_timing [--quick] [sizes...]   sizes: 8k 100k 1m 4m
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "core/box_mesh.hpp"
+#include "core/scheduler.hpp"
+#include "cuda/cuda_backend.hpp"
+
+using namespace tissue;
+
+namespace {
+
+struct BoxSize {
+  std::string name;
+  int nx, ny, nz;
+};
+
+/// Brain-tissue-like material (E = 3000 Pa, nu = 0.45, rho = 1000) on a
+/// 0.1 m box fixed at z = 0.
+TissueModel<double> box_model(const BoxSize& b) {
+  ModelInput in;
+  box_mesh(in, b.nx, b.ny, b.nz, 0.1, 0.1, 0.1 * b.nz / b.nx);
+  const double E = 3000, nu = 0.45;
+  in.materials = {{E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu)), 1000}};
+  in.fixed.assign(in.nodes.size() / 3, 0);
+  for (size_t i = 0; i < in.fixed.size(); ++i) in.fixed[i] = in.nodes[3 * i + 2] == 0.0;
+  in.source = "box " + b.name;
+  return build_model(in);
+}
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+/// Median steps/s of advance(batch) + reduce() (the reduce synchronises).
+double steps_per_second(Backend& be, double min_seconds) {
+  be.advance(30);
+  be.reduce();
+  int batch = 30;
+  for (;;) {  // grow the batch until one takes >= 20 ms
+    const auto t0 = std::chrono::steady_clock::now();
+    be.advance(batch);
+    be.reduce();
+    if (seconds_since(t0) > 0.02 || batch > (1 << 22)) break;
+    batch *= 2;
+  }
+  std::vector<double> rates;
+  const auto t_all = std::chrono::steady_clock::now();
+  while (rates.size() < 5 || seconds_since(t_all) < min_seconds) {
+    const auto t0 = std::chrono::steady_clock::now();
+    be.advance(batch);
+    be.reduce();
+    rates.push_back(batch / seconds_since(t0));
+  }
+  std::sort(rates.begin(), rates.end());
+  return rates[rates.size() / 2];
+}
+
+/// Fewest bytes one whole-mesh step moves through memory in the device
+/// layouts (each array touched once per pass that touches it; s = scalar
+/// bytes): see docs/cuda.md for the list.
+double step_bytes(double n, double ne, int s) {
+  return ne * (64 + 66.0 * s) + n * (9 + 33.0 * s);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string why;
+  if (!cuda_available(&why)) {
+    fmt::print("no GPU: {}\n", why);
+    return 1;
+  }
+  bool quick = false;
+  std::vector<std::string> want;
+  for (int k = 1; k < argc; ++k) {
+    if (std::string(argv[k]) == "--quick") quick = true;
+    else want.push_back(argv[k]);
+  }
+  const std::vector<BoxSize> sizes = {{"8k", 12, 12, 10}, {"100k", 26, 26, 25}, {"1m", 55, 55, 55}, {"4m", 88, 88, 86}};
+  const double bw = cuda_copy_bandwidth();
+  fmt::print("device: {}\ncopy bandwidth: {:.1f} GB/s (read + write)\n", why, bw * 1e-9);
+  const double min_seconds = quick ? 0.1 : 0.4;
+  std::vector<std::string> rows;
+  for (const auto& b : sizes) {
+    if (!want.empty() && std::find(want.begin(), want.end(), b.name) == want.end()) continue;
+    const TissueModel<double> model = box_model(b);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> dist(-1e-5, 1e-5);
+    std::vector<double> u0(3 * size_t(model.n_nodes));
+    for (auto& v : u0) v = dist(rng);
+    for (Precision p : {Precision::Float, Precision::Double}) {
+      auto be = make_cuda_backend(p);
+      be->upload(model);
+      for (CudaStepMode mode : {CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Grid, CudaStepMode::Cluster,
+                                CudaStepMode::Auto}) {
+        try {
+          set_cuda_step_mode(*be, mode);
+        } catch (const std::exception& e) {
+          fmt::print("{} {} {}: skipped ({})\n", b.name, to_string(p), to_string(mode), e.what());
+          continue;
+        }
+        if (mode == CudaStepMode::Cluster && model.n_elems > 200000) continue;  // one cluster: far too slow
+        be->set_displacements(u0);
+        const double sps = steps_per_second(*be, min_seconds);
+        const Reductions r = be->reduce();
+        const double frac = sps * step_bytes(model.n_nodes, model.n_elems, p == Precision::Float ? 4 : 8) / bw;
+        rows.push_back(fmt::format("{:>5} {:>8} {:>7} {:>6} {:>8} {:>12.0f} {:>10.3g} {:>6.3f} {}", b.name,
+                                   model.n_elems, model.n_nodes, to_string(p), to_string(cuda_step_mode(*be)), sps,
+                                   sps * model.n_elems, frac, r.finite && r.bad_elem < 0 ? "ok" : "NONFINITE/BAD"));
+        fmt::print("{}\n", rows.back());
+      }
+      // collision latency and one full haptic tick (press on the top face, depth 5)
+      set_cuda_step_mode(*be, CudaStepMode::Auto);
+      be->upload(model);
+      const double top = 0.1 * b.nz / b.nx;
+      const Vec3<double> a = {0.0503, 0.0497, top + 0.01}, c = {0.0503, 0.0497, top - 0.002};
+      std::vector<double> ct;
+      for (int k = 0; k < 50; ++k) {
+        const auto t0 = std::chrono::steady_clock::now();
+        const Hit h = be->collide(a, c);
+        ct.push_back(seconds_since(t0));
+        if (!h.hit()) fmt::print("collide: no hit?\n");
+      }
+      std::sort(ct.begin(), ct.end());
+      ScriptedDevice dev(press_path({0.0503, 0.0497, top}, {0, 0, -1}, 0.003, 0.01));
+      SchedulerSettings st;
+      st.depth = 5;
+      Scheduler sched(*be, model, st);
+      std::vector<double> tt;
+      const TransferCounters t_before = be->transfers();
+      const int ticks = quick ? 100 : 400;
+      for (int k = 0; k < ticks; ++k) {
+        const auto t0 = std::chrono::steady_clock::now();
+        sched.tick(dev);
+        tt.push_back(seconds_since(t0));
+      }
+      const TransferCounters t_after = be->transfers();
+      std::sort(tt.begin(), tt.end());
+      rows.push_back(fmt::format(
+          "{:>5} {:>6} collide {:.1f} us ({} tris); tick median {:.1f} us p99 {:.1f} us ({} steps/tick, region "
+          "{} elems); copies/tick h2d {:.2f} d2h {:.2f}",
+          b.name, to_string(p), ct[ct.size() / 2] * 1e6, model.n_tris, tt[tt.size() / 2] * 1e6,
+          tt[tt.size() * 99 / 100] * 1e6, sched.steps_per_tick(), sched.region().n_elems,
+          double(t_after.h2d - t_before.h2d) / ticks, double(t_after.d2h - t_before.d2h) / ticks));
+      fmt::print("{}\n", rows.back());
+    }
+  }
+  fmt::print("\n{:>5} {:>8} {:>7} {:>6} {:>8} {:>12} {:>10} {:>6}\n", "mesh", "tets", "nodes", "prec", "mode",
+             "steps/s", "elem-st/s", "bw-fr");
+  for (const auto& r : rows) fmt::print("{}\n", r);
+  return 0;
+}

@@ -1,0 +1,95 @@
+// Non-owning views of the device store, passed to kernels by value. The
+// arrays are owned by DeviceStore (cuda/device_store.hpp).
+//
+// Device layouts. Model arrays keep core/model.hpp's component-major
+// layouts (coalesced per-element loads), except two that kernels gather:
+//   X, u, u_prev, u_next, u_held, f   one Packed3 per node (x, y, z, pad)
+//   elem_f                            one Packed3 per (element, corner) at
+//                                     4 * e + a: exactly the values stored in
+//                                     node_elem, so the pass-4 gather is one
+//                                     vector load per incident corner
+//   elem_pv                           (p_e V_e, V_e) pairs for pass 2
+// The padded layouts make every gathered node or corner one 16-byte (float)
+// or two 16-byte (double) loads instead of three scattered 4/8-byte ones.
+#pragma once
+
+#include <cstdint>
+
+#include "core/hd.hpp"
+#include "core/vec.hpp"
+
+namespace tissue::gpu {
+
+/// A 3-vector padded to 4 scalars: one aligned vector load per node.
+template <class T>
+struct alignas(4 * sizeof(T)) Packed3 {
+  T x, y, z, w;
+  TISSUE_HD Vec3<T> vec() const { return {x, y, z}; }
+  TISSUE_HD static Packed3 of(Vec3<T> v) { return {v.x, v.y, v.z, T(0)}; }
+};
+
+/// Pass-1 output per element: p_e V_e (N m) and V_e (m^3), read together by pass 2.
+template <class T>
+struct alignas(2 * sizeof(T)) PressureVolume {
+  T pv, v;
+};
+
+/// Read-only model on the device (shapes as core/model.hpp unless noted).
+template <class T>
+struct ModelView {
+  index_t n_nodes = 0, n_elems = 0, n_tris = 0;
+  const Packed3<T>* X = nullptr;          ///< reference positions (n_nodes) m
+  const index_t* elem_nodes = nullptr;    ///< (4 x n_elems)
+  const T* dndx = nullptr;                ///< (12 x n_elems) 1/m
+  const T* volume = nullptr;              ///< (n_elems) m^3
+  const T* mu = nullptr;                  ///< (n_elems) Pa
+  const T* K = nullptr;                   ///< (n_elems) Pa
+  const T* mass = nullptr;                ///< (n_nodes) kg
+  const T* cd_A = nullptr;                ///< central-difference constants (n_nodes each)
+  const T* cd_B = nullptr;
+  const T* cd_C = nullptr;
+  const index_t* node_elem_start = nullptr;  ///< (n_nodes + 1)
+  const index_t* node_elem = nullptr;        ///< element * 4 + corner (nnz)
+  const index_t* tris = nullptr;          ///< (3 x n_tris)
+  const std::uint8_t* node_flags = nullptr;  ///< NodeFlag bits (n_nodes)
+  double dt = 0;                          ///< s
+  bool ianp = true;
+};
+
+/// The three displacement buffers of one step: pass 4 writes u_next from u
+/// and u_prev; the backend then rotates the roles (prev <- u <- next <- prev).
+template <class T>
+struct StepBuffers {
+  Packed3<T>* u_prev = nullptr;  ///< u^{n-1} (n_nodes) m
+  Packed3<T>* u = nullptr;       ///< u^n (n_nodes) m
+  Packed3<T>* u_next = nullptr;  ///< u^{n+1} (n_nodes) m
+  TISSUE_HD StepBuffers rotated() const { return {u, u_next, u_prev}; }
+};
+
+/// The region's active lists; a null list means the identity (whole mesh).
+struct RegionView {
+  const index_t* nodes = nullptr;  ///< inner and halo nodes, ascending (n_nodes)
+  const index_t* elems = nullptr;  ///< computed elements, ascending (n_elems)
+  index_t n_nodes = 0, n_elems = 0;
+  TISSUE_HD index_t node(index_t i) const { return nodes ? nodes[i] : i; }
+  TISSUE_HD index_t elem(index_t i) const { return elems ? elems[i] : i; }
+};
+
+/// Mutable per-step state on the device (shapes as core/state.hpp, layouts
+/// as described at the top of this file). Pointers are deliberately not
+/// __restrict__/read-only: persistent kernels read what other blocks wrote.
+template <class T>
+struct StateView {
+  Packed3<T>* u_held = nullptr;        ///< target of held nodes (n_nodes) m
+  std::uint8_t* held = nullptr;        ///< 1 = displacement set, not integrated (n_nodes)
+  std::uint8_t* driven = nullptr;      ///< 1 = tool-driven (n_nodes)
+  std::uint8_t* role = nullptr;        ///< NodeRole (n_nodes)
+  PressureVolume<T>* elem_pv = nullptr;///< pass 1 (n_elems)
+  T* elem_J = nullptr;                 ///< pass 1: J_e (n_elems)
+  T* node_p = nullptr;                 ///< pass 2: p_a (n_nodes) Pa
+  Packed3<T>* elem_f = nullptr;        ///< pass 3: f_a^e at 4 e + a (4 n_elems) N
+  Packed3<T>* f = nullptr;             ///< pass 4: internal force (n_nodes) N
+  unsigned long long* bad = nullptr;   ///< lowest bad element key (see bad_key), ~0 = none
+};
+
+}  // namespace tissue::gpu
