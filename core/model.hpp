@@ -34,7 +34,8 @@ struct ModelInput {
   double dt = 0;                         ///< requested step (s); 0 = safety * dt_crit
   double dt_safety = 0.5;                ///< fraction of dt_crit used when dt = 0
   double damping = -1;                   ///< mass-proportional damping alpha (1/s); < 0 = from the lowest-mode estimate
-  bool ianp = true;                      ///< improved average nodal pressure; false = plain (locking-prone) tets
+  bool ianp = true;                      ///< improved average nodal pressure; false = plain (locking-prone) tets,
+                                         ///< whose dt_crit uses 0.85 x the smallest altitude (their measured limit)
   std::string source = "<model>";        ///< names the input in error messages
 };
 
@@ -86,6 +87,11 @@ TissueModel<double> build_model(const ModelInput& in);
 /// Recomputes dt-dependent integration constants for a new step or damping
 /// (checks dt against dt_crit as build_model does).
 void set_time_step(TissueModel<double>& m, double dt, double damping);
+
+/// Shortens dt (never lengthens it) so that a whole number of steps fills
+/// one haptic tick: dt = tick / ceil(tick / dt). The tissue then keeps
+/// time with the tool exactly.
+void align_time_step(TissueModel<double>& m, double tick);
 
 /// Lowest-mode estimate (rad/s) used for the default damping: the first
 /// shear mode of a clamped-free body of the model's largest extent,

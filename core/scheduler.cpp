@@ -11,8 +11,8 @@ Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, Schedul
     : backend_(backend), model_(model), settings_(settings) {
   if (!(settings_.tick > 0)) throw std::invalid_argument("haptic tick must be > 0 s");
   steps_per_tick_ = std::max(1, static_cast<int>(std::lround(settings_.tick / model.dt)));
-  if (settings_.depth == kDepthAll) region_ = backend_.build_region({}, kDepthAll);
-  else region_.depth = settings_.depth;  // empty until the first contact
+  // depth N: an empty region (nothing moves) until the first contact seeds it
+  region_ = backend_.build_region({}, settings_.depth);
 }
 
 void Scheduler::start_contact(const Hit& hit, const Vec3<double>& tip) {
@@ -52,7 +52,9 @@ TickReport Scheduler::tick(Device& device) {
   // collide -> contact
   if (contact_tri_ < 0) {
     const Hit hit = backend_.collide(prev_, tip);
-    if (hit.hit()) start_contact(hit, tip);
+    // only an entering crossing starts a contact (a segment leaving the
+    // tissue, e.g. a tool withdrawing through relaxing tissue, does not)
+    if (hit.hit() && dot(tip - prev_, hit.normal) < 0) start_contact(hit, tip);
   } else if (dot(tip - p0_, n0_) > 0) {
     backend_.clear_driven();
     contact_tri_ = -1;

@@ -312,7 +312,9 @@ ModelInput to_model_input(const Scene& scene) {
 }
 
 TissueModel<double> load_model(const Scene& scene) {
-  return build_model(to_model_input(scene));
+  TissueModel<double> m = build_model(to_model_input(scene));
+  align_time_step(m, scene.solver.tick);  // whole steps per haptic tick
+  return m;
 }
 
 SchedulerSettings scheduler_settings(const Scene& scene) {

@@ -53,6 +53,8 @@ ModelInput to_model_input(const Scene& scene);
 /// build_model(to_model_input(scene)): throws SceneError for scene rules and
 /// core ModelError (naming the source and the element or node) for the mesh
 /// geometry: zero-volume tets, unused nodes, a dt above the stable limit.
+/// The step is then shortened so that whole steps fill one haptic tick
+/// (core align_time_step).
 TissueModel<double> load_model(const Scene& scene);
 
 /// The Scheduler's settings from the validated solver section (depth, tick,
