@@ -3,10 +3,13 @@
 #include <cub/device/device_reduce.cuh>
 
 #include <algorithm>
+#include <cmath>
+#include <stdexcept>
 #include <cuda/std/limits>
 
 #include "core/tet.hpp"
 #include "cuda/launch.cuh"
+#include "cuda/text.hpp"
 
 namespace tissue::gpu {
 namespace {
@@ -29,35 +32,35 @@ __global__ void hit_distance_kernel(ModelView<T> m, const Packed3<T>* u, Vec3<T>
   triangle_corners(m, u, t, c, P);
   T bary[2];
   const T s = segment_triangle(a, b, P[0], P[1], P[2], bary);
-  key[t] = s >= T(0) ? s * norm(b - a) : ::cuda::std::numeric_limits<T>::infinity();
+  key[t] = s >= T(0) ? s : ::cuda::std::numeric_limits<T>::infinity();
 }
 
 template <class T>
-__global__ void finish_hit_kernel(ModelView<T> m, const Packed3<T>* u, Vec3<double> a, Vec3<double> b,
-                                  const T* key, const std::int64_t* index, Hit* out) {
+__global__ void finish_hit_kernel(ModelView<T> m, const Packed3<T>* u, Vec3<T> aT, Vec3<T> bT, const T* key,
+                                  const std::int64_t* index, Hit* out) {
   Hit h;
   const std::int64_t t = *index;
   if (t >= 0 && t < m.n_tris && key[t] < ::cuda::std::numeric_limits<T>::infinity()) {
     index_t c[3];
     Vec3<T> P[3];
     triangle_corners(m, u, static_cast<index_t>(t), c, P);
-    const Vec3<T> aT = {T(a.x), T(a.y), T(a.z)}, bT = {T(b.x), T(b.y), T(b.z)};
     T bary[2] = {T(0), T(0)};
     const T s = segment_triangle(aT, bT, P[0], P[1], P[2], bary);
     h.tri = static_cast<index_t>(t);
     h.t = s;
     h.bary[0] = bary[0];
     h.bary[1] = bary[1];
-    Vec3<double> Pd[3];
     for (int k = 0; k < 3; ++k) {
       h.nodes[k] = c[k];
       const Packed3<T> uk = u[c[k]];
       h.u[k] = {double(uk.x), double(uk.y), double(uk.z)};
-      Pd[k] = {double(P[k].x), double(P[k].y), double(P[k].z)};
     }
-    h.point = a + h.t * (b - a);
-    const Vec3<double> n = cross(Pd[1] - Pd[0], Pd[2] - Pd[0]);
-    h.normal = (1.0 / norm(n)) * n;
+    // point and normal in T, as the cpu backend computes them
+    const Vec3<T> p = P[0] + bary[0] * (P[1] - P[0]) + bary[1] * (P[2] - P[0]);
+    h.point = {double(p.x), double(p.y), double(p.z)};
+    const Vec3<T> nrm = cross(P[1] - P[0], P[2] - P[0]);
+    const Vec3<double> nd = {double(nrm.x), double(nrm.y), double(nrm.z)};
+    h.normal = (1.0 / norm(nd)) * nd;
   }
   *out = h;
 }
@@ -80,13 +83,17 @@ void Collider<T>::allocate(index_t n_tris) {
 template <class T>
 Hit Collider<T>::query(const ModelView<T>& m, const Packed3<T>* u, Vec3<double> a, Vec3<double> b, Transfers& log,
                        cudaStream_t stream) {
-  if (m.n_tris == 0) return Hit{};
+  for (int c = 0; c < 3; ++c)
+    if (!std::isfinite(a[c]) || !std::isfinite(b[c]))
+      throw std::invalid_argument(str("collide: tool segment (", a.x, ", ", a.y, ", ", a.z, ") -> (", b.x, ", ", b.y,
+                                      ", ", b.z, ") is not finite"));
+  if (m.n_tris == 0 || (a.x == b.x && a.y == b.y && a.z == b.z)) return Hit{};
   const Vec3<T> aT = {T(a.x), T(a.y), T(a.z)}, bT = {T(b.x), T(b.y), T(b.z)};
   launch(m.n_tris, stream, hit_distance_kernel<T>, m, u, aT, bT, key_.data());
   size_t bytes = cub_temp_.bytes();
   CUDA_CHECK(cub::DeviceReduce::ArgMin(cub_temp_.data(), bytes, key_.data(), min_key_.data(), min_index_.data(),
                                        m.n_tris, stream));
-  launch(1, stream, finish_hit_kernel<T>, m, u, a, b, key_.data(), min_index_.data(), hit_.data());
+  launch(1, stream, finish_hit_kernel<T>, m, u, aT, bT, key_.data(), min_index_.data(), hit_.data());
   log.to_host(hit_host_.data(), hit_.data(), sizeof(Hit), stream);
   return hit_host_[0];
 }

@@ -1,14 +1,14 @@
 // The cuda backend: the Backend interface over the device store, as a list
 // of stages, each one kernel module (stepper, region_fill, collide, reduce).
-// Semantics match the cpu backend's:
+// Semantics are the cpu backend's (cpu/constraints.hpp states the rule):
 //   held = fixed | driven | halo; a fixed node is always held at 0 (also
-//   when driven); a halo node is held at its displacement when the region
-//   was built; a node leaving the region is frozen (u_prev = u_next = u);
-//   after a region build pass 1 is recomputed over all elements, so pass 2
-//   averages valid p_e V_e on halo nodes too.
-// The internal force f of a halo node also gathers the last forces of its
-// elements outside the region: only inner nodes' f are meaningful (the
-// reductions use inner nodes only).
+//   when driven); a halo node is held (and stopped) at its displacement when
+//   the region was built; a node leaving the region is frozen
+//   (u_prev = u_next = u, f = 0), elements leaving it get elem_f = 0; after
+//   a region build or set_displacements pass 1 is recomputed over all
+//   elements, so pass 2 averages valid p_e V_e on halo nodes too.
+// Per haptic tick the only copies are set_driven's targets (up) and the Hit
+// and Reductions structs (down); see transfers().
 #include "cuda/cuda_backend.hpp"
 
 #include <algorithm>
@@ -28,13 +28,30 @@ namespace tissue {
 namespace gpu {
 namespace {
 
-__global__ void undrive_kernel(index_t n, const index_t* list, const std::uint8_t* flags, const std::uint8_t* role,
-                               std::uint8_t* held, std::uint8_t* driven) {
+/// Releases driven nodes (cpu/constraints.hpp's rule): a released node stays
+/// held only if fixed (at 0) or halo (at its current u).
+template <class T>
+__global__ void undrive_kernel(index_t n, const index_t* list, const std::uint8_t* flags, StateView<T> s,
+                               const Packed3<T>* u) {
   const index_t i = thread_index();
   if (i >= n) return;
   const index_t a = list[i];
-  driven[a] = 0;
-  held[a] = (flags[a] & kFixed) || role[a] == kHalo;
+  s.driven[a] = 0;
+  s.held[a] = 0;
+  if (s.role[a] == kHalo) {
+    s.u_held[a] = u[a];
+    s.held[a] = 1;
+  }
+  if (flags[a] & kFixed) {
+    s.u_held[a] = {T(0), T(0), T(0), T(0)};
+    s.held[a] = 1;
+  }
+}
+
+/// Roles of the given nodes (the region check of set_driven).
+__global__ void probe_roles_kernel(index_t n, const index_t* nodes, const std::uint8_t* role, std::uint8_t* out) {
+  const index_t i = thread_index();
+  if (i < n) out[i] = role[nodes[i]];
 }
 
 template <class T>
@@ -50,15 +67,18 @@ __global__ void drive_kernel(index_t n, const T* values, const index_t* nodes, c
                                    : Packed3<T>{values[3 * i], values[3 * i + 1], values[3 * i + 2], T(0)};
 }
 
-/// u^n = u^{n-1} = u^{n+1} = src (src: 3 x n component-major, double).
+/// u^n = u^{n-1} = u^{n+1} = src (src: 3 x n component-major, double);
+/// halo nodes that are neither driven nor fixed are held at the new u.
 template <class T>
-__global__ void set_displacements_kernel(index_t n, const double* src, StepBuffers<T> b) {
+__global__ void set_displacements_kernel(index_t n, const double* src, const std::uint8_t* flags, StateView<T> s,
+                                         StepBuffers<T> b) {
   const index_t a = thread_index();
   if (a >= n) return;
   const Packed3<T> u = {T(src[a]), T(src[n + a]), T(src[2 * n + a]), T(0)};
   b.u_prev[a] = u;
   b.u[a] = u;
   b.u_next[a] = u;
+  if (s.role[a] == kHalo && !s.driven[a] && !(flags[a] & kFixed)) s.u_held[a] = u;
 }
 
 /// Fields in double into dst: u (3 x n), node_p (n), f (3 x n), elem_J (ne).
@@ -122,8 +142,13 @@ class CudaBackend final : public Backend {
     reducer_.allocate();
     driven_list_.allocate(n);
     drive_dev_.allocate(n * (3 * sizeof(T) + sizeof(index_t)));
+    if (drive_pending_) drive_copied_.sync();  // before its staging is freed
+    drive_pending_ = false;
     drive_host_.allocate(drive_dev_.size());
     scratch_.allocate(7 * size_t(n) + m.n_elems);
+    probe_dev_.allocate(n);
+    probe_host_.allocate(n);
+    drive_keep_.reserve(64);
     n_driven_ = 0;
     uploaded_ = true;
     build_region({}, kDepthAll);
@@ -141,7 +166,9 @@ class CudaBackend final : public Backend {
         throw std::invalid_argument(
             str("set_displacements: node ", k % n, " axis ", "xyz"[k / n], " is not finite (", u[k], ")"));
     log_.to_device_now(scratch_.data(), u.data(), u.size_bytes(), stream());
-    launch(n, stream(), set_displacements_kernel<T>, n, scratch_.data(), store_.u.current());
+    launch(n, stream(), set_displacements_kernel<T>, n, scratch_.data(), store_.model().node_flags, store_.state(),
+           store_.u.current());
+    pass1_all();
   }
 
   RegionSizes build_region(std::span<const index_t> seeds, int depth) override {
@@ -159,9 +186,8 @@ class CudaBackend final : public Backend {
       sizes = region_.build(topo, seeds, depth, s.role, log_, stream());
     }
     seeds_.assign(seeds.begin(), seeds.end());
-    apply_region(store_.model(), s, store_.u.current(), stream());
-    const RegionView all = {nullptr, nullptr, topo.n_nodes, topo.n_elems};
-    stepper_.element_pressure(store_.model(), s, all, store_.u.current().u, stream());
+    region_.apply(store_.model(), s, store_.u.current(), stream());
+    pass1_all();
     stepper_.invalidate();
     return sizes;
   }
@@ -171,22 +197,32 @@ class CudaBackend final : public Backend {
     return region_.download(topology(store_.model()), store_.state().role, seeds_, log_, stream());
   }
 
+  /// One upload per call (targets and ids in one pinned block). The nodes
+  /// must lie in the region: checked on the host when they are seeds (the
+  /// Scheduler's case), else by one small download of their roles.
+  /// Duplicates: the last target of a node wins (as on the cpu).
   void set_driven(std::span<const index_t> nodes, std::span<const double> u) override {
     require_model("set_driven");
     check_driven(nodes, u);
-    const auto n = static_cast<index_t>(nodes.size());
     if (drive_pending_) drive_copied_.sync();  // the staging buffer is free again
+    std::vector<index_t>& keep = drive_keep_;  // the last occurrence of each node
+    keep.clear();
+    for (size_t i = nodes.size(); i-- > 0;)
+      if (std::find(keep.begin(), keep.end(), nodes[i]) == keep.end()) keep.push_back(index_t(i));
+    const auto n = static_cast<index_t>(keep.size());
     T* values = reinterpret_cast<T*>(drive_host_.data());
     index_t* ids = reinterpret_cast<index_t*>(values + 3 * size_t(n));
-    for (size_t k = 0; k < u.size(); ++k) values[k] = static_cast<T>(u[k]);
-    std::copy(nodes.begin(), nodes.end(), ids);
-    const size_t bytes = n * (3 * sizeof(T) + sizeof(index_t));
-    log_.to_device(drive_dev_.data(), drive_host_.data(), bytes, stream());
-    drive_copied_.record(stream());
-    drive_pending_ = true;
-    clear_driven();
+    for (index_t k = 0; k < n; ++k) {
+      ids[k] = nodes[keep[k]];
+      for (int c = 0; c < 3; ++c) values[3 * k + c] = static_cast<T>(u[3 * keep[k] + c]);
+    }
     const T* dvalues = reinterpret_cast<const T*>(drive_dev_.data());
     const index_t* dids = reinterpret_cast<const index_t*>(dvalues + 3 * size_t(n));
+    log_.to_device(drive_dev_.data(), drive_host_.data(), n * (3 * sizeof(T) + sizeof(index_t)), stream());
+    drive_copied_.record(stream());
+    drive_pending_ = true;
+    check_in_region(n, ids, dids);
+    clear_driven();
     StateView<T> s = store_.state();
     launch(n, stream(), drive_kernel<T>, n, dvalues, dids, store_.model().node_flags, driven_list_.data(), s.held,
            s.driven, s.u_held);
@@ -195,9 +231,8 @@ class CudaBackend final : public Backend {
 
   void clear_driven() override {
     require_model("clear_driven");
-    StateView<T> s = store_.state();
-    launch(n_driven_, stream(), undrive_kernel, n_driven_, driven_list_.data(), store_.model().node_flags, s.role,
-           s.held, s.driven);
+    launch(n_driven_, stream(), undrive_kernel<T>, n_driven_, driven_list_.data(), store_.model().node_flags,
+           store_.state(), store_.u.current().u);
     n_driven_ = 0;
   }
 
@@ -276,6 +311,27 @@ class CudaBackend final : public Backend {
     if (!uploaded_) throw std::logic_error(str("cuda backend: ", what, "() called before upload()"));
   }
 
+  /// Pass 1 over every element (after a region build or new displacements).
+  void pass1_all() {
+    const RegionView all = {nullptr, nullptr, store_.n_nodes(), store_.n_elems()};
+    stepper_.element_pressure(store_.model(), store_.state(), all, store_.u.current().u, stream());
+  }
+
+  /// Throws std::invalid_argument if a node to drive lies outside the region.
+  void check_in_region(index_t n, const index_t* ids, const index_t* dids) {
+    if (region_.sizes().whole()) return;
+    bool all_seeds = true;
+    for (index_t k = 0; k < n; ++k)
+      all_seeds = all_seeds && std::find(seeds_.begin(), seeds_.end(), ids[k]) != seeds_.end();
+    if (all_seeds) return;  // seeds are inner nodes
+    launch(n, stream(), probe_roles_kernel, n, dids, store_.state().role, probe_dev_.data());
+    log_.to_host(probe_host_.data(), probe_dev_.data(), n, stream());
+    for (index_t k = 0; k < n; ++k)
+      if (probe_host_[k] == kOutside)
+        throw std::invalid_argument(
+            str("set_driven: node ", ids[k], " is outside the deformation region (build_region from it first)"));
+  }
+
   void check_driven(std::span<const index_t> nodes, std::span<const double> u) const {
     if (u.size() != 3 * nodes.size())
       throw std::invalid_argument(
@@ -283,13 +339,11 @@ class CudaBackend final : public Backend {
     const index_t n = store_.n_nodes();
     for (size_t i = 0; i < nodes.size(); ++i) {
       if (nodes[i] < 0 || nodes[i] >= n)
-        throw std::out_of_range(str("set_driven: node ", nodes[i], " out of range (0..", n - 1, ")"));
-      for (size_t j = 0; j < i; ++j)
-        if (nodes[j] == nodes[i]) throw std::invalid_argument(str("set_driven: node ", nodes[i], " given twice"));
+        throw std::invalid_argument(str("set_driven: node ", nodes[i], " out of range (0..", n - 1, ")"));
       for (int c = 0; c < 3; ++c)
         if (!std::isfinite(u[3 * i + c]))
-          throw std::invalid_argument(
-              str("set_driven: node ", nodes[i], " axis ", "xyz"[c], " is not finite (", u[3 * i + c], ")"));
+          throw std::invalid_argument(str("set_driven: node ", nodes[i], ": displacement ", "xyz"[c], " = ",
+                                          u[3 * i + c], " is not finite"));
     }
   }
 
@@ -307,6 +361,9 @@ class CudaBackend final : public Backend {
   Event drive_copied_;                    ///< the staging's last upload has been read
   bool drive_pending_ = false;
   index_t n_driven_ = 0;
+  std::vector<index_t> drive_keep_;       ///< set_driven's dedup scratch (host)
+  DeviceArray<std::uint8_t> probe_dev_;   ///< roles of nodes to drive (n_nodes)
+  PinnedArray<std::uint8_t> probe_host_;
   DeviceArray<double> scratch_;           ///< set_displacements / download staging (7 n + ne)
   bool uploaded_ = false;
   std::string device_name_;

@@ -49,18 +49,21 @@ __device__ void accumulate(const ModelView<T>& m, const StateView<T>& s, const S
   const Packed3<T> fp = s.f[a], up = b.u[a], pp = b.u_prev[a];
   const double f[3] = {fp.x, fp.y, fp.z};
   const double u[3] = {up.x, up.y, up.z};
-  const double v[3] = {(u[0] - pp.x) / m.dt, (u[1] - pp.y) / m.dt, (u[2] - pp.z) / m.dt};
+  const double inv_dt = 1.0 / m.dt;
+  const double v[3] = {(u[0] - double(pp.x)) * inv_dt, (u[1] - double(pp.y)) * inv_dt,
+                       (u[2] - double(pp.z)) * inv_dt};
   const double f2 = f[0] * f[0] + f[1] * f[1] + f[2] * f[2];
+  const double v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
   if (s.driven[a])
     for (int c = 0; c < 3; ++c) p.reaction[c] += f[c];
   if (s.role[a] == kInner) {
     for (int c = 0; c < 3; ++c) p.internal[c] += f[c];
     (s.held[a] ? p.held2 : p.free2) += f2;
   }
-  p.kinetic += 0.5 * double(m.mass[a]) * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  p.kinetic += 0.5 * double(m.mass[a]) * v2;
   const double d = sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
   p.max_disp = fmax(p.max_disp, d);
-  if (!isfinite(d) || !isfinite(f2)) ++p.nonfinite;
+  if (!isfinite(d) || !isfinite(f2) || !isfinite(v2)) ++p.nonfinite;
 }
 
 template <class T>

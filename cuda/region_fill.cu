@@ -61,15 +61,26 @@ template <class T>
 __global__ void apply_region_kernel(index_t n, const std::uint8_t* flags, StateView<T> s, StepBuffers<T> b) {
   const index_t a = thread_index();
   if (a >= n) return;
-  const bool fixed = flags[a] & kFixed, driven = s.driven[a], halo = s.role[a] == kHalo;
-  s.held[a] = fixed || driven || halo;
-  if (fixed) s.u_held[a] = {T(0), T(0), T(0), T(0)};
-  else if (halo && !driven) s.u_held[a] = b.u[a];
-  if (s.role[a] == kOutside) {
+  const std::uint8_t role = s.role[a];
+  const bool fixed = flags[a] & kFixed, driven = s.driven[a];
+  if (role == kOutside || role == kHalo) {  // frozen, or held in place: stopped
     const Packed3<T> u = b.u[a];
     b.u_prev[a] = u;
     b.u_next[a] = u;
+    if (role == kOutside) s.f[a] = {T(0), T(0), T(0), T(0)};
+    if (role == kHalo && !driven) s.u_held[a] = u;
   }
+  if (fixed) s.u_held[a] = {T(0), T(0), T(0), T(0)};
+  s.held[a] = fixed || driven || role == kHalo;
+}
+
+/// Elements outside the region get zero forces, so a halo node's f sums
+/// computed elements only.
+template <class T>
+__global__ void clear_outside_forces_kernel(index_t ne, const std::uint8_t* elem_sel, Packed3<T>* elem_f) {
+  const index_t e = thread_index();
+  if (e >= ne || elem_sel[e]) return;
+  for (int a = 0; a < 4; ++a) elem_f[4 * e + a] = {T(0), T(0), T(0), T(0)};
 }
 
 size_t select_temp_bytes(index_t n) {
@@ -151,11 +162,14 @@ Region RegionFill::download(const Topology& t, const std::uint8_t* role, std::sp
 }
 
 template <class T>
-void apply_region(const ModelView<T>& m, const StateView<T>& s, StepBuffers<T> b, cudaStream_t stream) {
+void RegionFill::apply(const ModelView<T>& m, const StateView<T>& s, StepBuffers<T> b, cudaStream_t stream) const {
   launch(m.n_nodes, stream, apply_region_kernel<T>, m.n_nodes, m.node_flags, s, b);
+  if (view_.elems) launch(m.n_elems, stream, clear_outside_forces_kernel<T>, m.n_elems, elem_sel_.data(), s.elem_f);
 }
 
-template void apply_region(const ModelView<float>&, const StateView<float>&, StepBuffers<float>, cudaStream_t);
-template void apply_region(const ModelView<double>&, const StateView<double>&, StepBuffers<double>, cudaStream_t);
+template void RegionFill::apply(const ModelView<float>&, const StateView<float>&, StepBuffers<float>,
+                                cudaStream_t) const;
+template void RegionFill::apply(const ModelView<double>&, const StateView<double>&, StepBuffers<double>,
+                                cudaStream_t) const;
 
 }  // namespace tissue::gpu

@@ -48,6 +48,14 @@ class RegionFill {
   RegionView view() const { return view_; }
   const RegionSizes& sizes() const { return sizes_; }
 
+  /// Installs the region built last into the state (the cpu backend's
+  /// holding rule, cpu/constraints.hpp): held = fixed | driven | halo; fixed
+  /// targets 0; halo nodes are stopped (u_prev = u_next = u) and, unless
+  /// driven, held at u; nodes outside are frozen (u_prev = u_next = u, f = 0)
+  /// so buffer rotation keeps them; elements outside get elem_f = 0.
+  template <class T>
+  void apply(const ModelView<T>& m, const StateView<T>& s, StepBuffers<T> b, cudaStream_t stream) const;
+
   /// Downloads role and lists into a host Region (tests and output).
   Region download(const Topology& t, const std::uint8_t* role, std::span<const index_t> seeds, Transfers& log,
                   cudaStream_t stream) const;
@@ -62,11 +70,5 @@ class RegionFill {
   RegionView view_;
   RegionSizes sizes_;
 };
-
-/// After a region build: held = fixed | driven | halo; fixed targets 0, a new
-/// halo node (not driven) is held at its current displacement; nodes outside
-/// the region are frozen (u_prev = u_next = u) so buffer rotation keeps them.
-template <class T>
-void apply_region(const ModelView<T>& m, const StateView<T>& s, StepBuffers<T> b, cudaStream_t stream);
 
 }  // namespace tissue::gpu

@@ -61,7 +61,8 @@ __device__ void nodal_pressure_at(const ModelView<T>& m, const StateView<T>& s, 
 
 /// Pass 3 for element e: pbar = (1/4) sum_a p_a, then IANP forces (or plain
 /// tet forces when the model has ianp off) into elem_f[4 e + a]. An element
-/// with J <= 0, Jbar <= 0 or a non-finite J is recorded in s.bad (lowest wins).
+/// with J <= 0, Jbar <= 0 or a non-finite J is recorded in s.bad (lowest wins;
+/// its forces are zero, as core's element functions return them).
 template <class T>
 __device__ void element_forces_at(const ModelView<T>& m, const StateView<T>& s, const Packed3<T>* u, index_t e) {
   index_t c[4];
@@ -76,7 +77,7 @@ __device__ void element_forces_at(const ModelView<T>& m, const StateView<T>& s, 
   } else {
     J = plain_element_forces(ue, dN, m.volume[e], m.mu[e], m.K[e], f);
   }
-  if (!(J > T(0))) atomicMin(s.bad, bad_key(e, static_cast<float>(J)));
+  if (!(J > T(0)) || !isfinite(J)) atomicMin(s.bad, bad_key(e, static_cast<float>(J)));
 #pragma unroll
   for (int a = 0; a < 4; ++a) s.elem_f[4 * e + a] = Packed3<T>::of(f[a]);
 }
