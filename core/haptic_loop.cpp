@@ -1,0 +1,362 @@
+#include "core/haptic_loop.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <type_traits>
+
+namespace tissue {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+static_assert(std::is_trivially_copyable_v<HapticSnapshot>, "snapshots are copied under a short lock");
+
+/// Session histogram of tick work times: kHistBin-wide bins up to kHistBins * kHistBin.
+constexpr double kHistBin = 5e-6;  // s
+constexpr int kHistBins = 20000;   // 100 ms
+
+double now_s() { return std::chrono::duration<double>(Clock::now().time_since_epoch()).count(); }
+
+/// The q-quantile (0..1) of v, reordering v.
+double quantile(std::vector<double>& v, double q) {
+  if (v.empty()) return 0;
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(std::ceil(q * double(v.size())) - 1));
+  std::nth_element(v.begin(), v.begin() + long(k), v.end());
+  return v[k];
+}
+
+/// The q-quantile of the session histogram (upper edge of the bin), or `max` past the last bin.
+double histogram_quantile(const std::vector<std::uint32_t>& h, long total, double q, double max) {
+  if (total <= 0) return 0;
+  const long want = std::max(1L, static_cast<long>(std::ceil(q * double(total))));
+  long seen = 0;
+  for (int b = 0; b < kHistBins; ++b) {
+    seen += h[b];
+    if (seen >= want) return std::min(max, (b + 1) * kHistBin);
+  }
+  return max;
+}
+
+CouplingParams with_period(CouplingParams p, double period) {
+  p.period = period;
+  return p;
+}
+
+Simulation checked(Simulation s) {
+  if (!s.model || !s.backend || !s.scheduler)
+    throw std::invalid_argument("haptic loop: the simulation factory returned an incomplete simulation");
+  return s;
+}
+
+}  // namespace
+
+std::string describe(const HapticStats& s) {
+  const double ms = 1e3;
+  std::string line = fmt::format(
+      "haptic {:.1f} Hz (target {:.0f} Hz), tick work p50 {:.3f} ms, p99 {:.3f} ms, max {:.3f} ms, "
+      "wake-up jitter p99 {:.3f} ms; late {} of the last {} ticks (session: {} late, {} overruns, {} skipped "
+      "of {} ticks, work p99 {:.3f} ms)",
+      s.rate_hz, 1.0 / s.period, ms * s.work_p50, ms * s.work_p99, ms * s.work_max, ms * s.wake_p99, s.window_late,
+      s.window_ticks, s.late, s.overruns, s.skipped, s.ticks, ms * s.session_p99);
+  if (s.keeping_up) return line;
+  return fmt::format(
+      "SOLVER CANNOT KEEP UP: {} of the last {} ticks ended after the next deadline and the loop runs at {:.1f} Hz "
+      "instead of {:.0f} Hz (tick work p99 {:.3f} ms for a {:.3f} ms period): reduce the region depth, use float, "
+      "or a faster backend. {}",
+      s.window_late, s.window_ticks, s.rate_hz, 1.0 / s.period, ms * s.work_p99, ms * s.period, line);
+}
+
+HapticLoop::HapticLoop(Device& device, SimulationFactory factory, LiveParams params, Options options)
+    : device_(device),
+      factory_(std::move(factory)),
+      options_(options),
+      params_(params),
+      sim_(checked(factory_(params))),
+      period_(sim_.scheduler->settings().tick),
+      coupled_(device_, with_period(options.coupling, period_)) {
+  if (options_.window < 2 || options_.stats_every < 1 || options_.max_lag < 1)
+    throw std::invalid_argument(fmt::format(
+        "haptic loop: window = {} must be >= 2, stats_every = {} >= 1 and max_lag = {} >= 1", options_.window,
+        options_.stats_every, options_.max_lag));
+  options_.coupling.period = period_;
+  for (auto* v : {&work_ring_, &wake_ring_, &start_ring_, &scratch_}) v->assign(options_.window, 0.0);
+  late_ring_.assign(options_.window, 0);
+  histogram_.assign(kHistBins, 0);
+  local_.params = params_;
+  local_.sim_version = 1;
+  local_.region = sim_.scheduler->region();
+  local_.steps_per_tick = sim_.scheduler->steps_per_tick();
+  local_.stats.period = period_;
+  last_region_ = local_.region;
+  session_start_ = now_s();
+  publish();
+}
+
+HapticLoop::~HapticLoop() { stop(); }
+
+void HapticLoop::start() {
+  if (running_) return;
+  ring_pos_ = ring_count_ = 0;
+  std::fill(histogram_.begin(), histogram_.end(), 0);
+  const HapticStats fresh{.period = period_};
+  local_.stats = fresh;
+  session_start_ = now_s();
+  stop_ = false;
+  running_ = true;
+  thread_ = std::thread(&HapticLoop::thread_main, this);
+}
+
+void HapticLoop::stop() {
+  if (!running_) return;
+  {
+    std::lock_guard lk(req_mutex_);
+    stop_ = true;
+  }
+  req_cv_.notify_all();
+  thread_.join();
+  running_ = false;
+  serve_requests();  // nobody else will: run what the display still waits for
+  publish();
+}
+
+void HapticLoop::run_ticks(long n) {
+  if (running_) throw std::logic_error("HapticLoop::run_ticks: stop the haptic thread first");
+  serve_requests();
+  for (long k = 0; k < n; ++k) {
+    const double t0 = now_s();
+    const bool ok = tick_once();
+    record_timing(now_s() - t0, 0.0, false);
+    if (!ok) {
+      publish();
+      throw SimulationError(status());
+    }
+  }
+  update_stats();
+  publish();
+}
+
+HapticSnapshot HapticLoop::snapshot() const {
+  std::lock_guard lk(snap_mutex_);
+  return published_;
+}
+
+void HapticLoop::request_params(const LiveParams& params) {
+  if (!running_) {
+    rebuild(params);
+    publish();
+    return;
+  }
+  {
+    std::lock_guard lk(req_mutex_);
+    pending_params_ = params;
+    has_requests_ = true;
+  }
+  req_cv_.notify_all();
+}
+
+std::future<void> HapticLoop::post(std::function<void(Simulation&)> task) {
+  std::packaged_task<void(Simulation&)> job(std::move(task));
+  std::future<void> done = job.get_future();
+  if (!running_) {
+    job(sim_);
+    return done;
+  }
+  {
+    std::lock_guard lk(req_mutex_);
+    tasks_.push_back(std::move(job));
+    has_requests_ = true;
+  }
+  req_cv_.notify_all();
+  return done;
+}
+
+std::string HapticLoop::status() const {
+  std::lock_guard lk(req_mutex_);
+  return status_;
+}
+
+void HapticLoop::set_status(std::string s) {
+  std::lock_guard lk(req_mutex_);
+  status_ = std::move(s);
+}
+
+void HapticLoop::serve_requests() {
+  std::vector<std::packaged_task<void(Simulation&)>> tasks;
+  std::optional<LiveParams> params;
+  {
+    std::lock_guard lk(req_mutex_);
+    tasks.swap(tasks_);
+    params.swap(pending_params_);
+    has_requests_ = false;
+  }
+  if (params) rebuild(*params);
+  for (auto& t : tasks) t(sim_);
+}
+
+void HapticLoop::rebuild(const LiveParams& params) {
+  Simulation next;
+  try {
+    next = checked(factory_(params));
+    if (std::abs(next.scheduler->settings().tick - period_) > 1e-12)
+      throw std::invalid_argument(fmt::format("the haptic tick changed from {} s to {} s", period_,
+                                              next.scheduler->settings().tick));
+  } catch (const std::exception& e) {
+    set_status(fmt::format("parameters refused (E = {} Pa, nu = {}, depth {}, {}); keeping the running simulation: {}",
+                           params.E, params.nu, params.depth == kDepthAll ? "all" : std::to_string(params.depth),
+                           to_string(params.precision), e.what()));
+    return;
+  }
+  sim_.scheduler.reset();  // it refers to the backend and the model
+  sim_.backend.reset();
+  sim_.model.reset();
+  sim_ = std::move(next);
+  params_ = params;
+  failed_ = false;
+  set_status("");
+  local_.params = params_;
+  local_.failed = false;
+  local_.tick = -1;
+  local_.contact_tri = -1;
+  local_.tissue_force = {};
+  local_.sim_version += 1;
+  local_.region_version += 1;
+  local_.region = last_region_ = sim_.scheduler->region();
+  local_.steps_per_tick = sim_.scheduler->steps_per_tick();
+  last_seeds_.clear();
+}
+
+bool HapticLoop::tick_once() {
+  Scheduler& sched = *sim_.scheduler;
+  try {
+    const TickReport rep = sched.tick(coupled_);
+    const CouplingState& c = coupled_.state();
+    local_.tick = sched.ticks();
+    local_.time = rep.time;
+    local_.device = c.device;
+    local_.tool = rep.tool;
+    local_.tissue_force = rep.force;
+    local_.rendered_force = c.rendered;
+    local_.clamped = c.clamped;
+    local_.contact_tri = rep.contact_tri;
+    local_.max_disp = rep.max_disp;
+    local_.residual = rep.residual;
+    local_.equilibrium = rep.equilibrium;
+    const RegionSizes& r = sched.region();
+    if (r.depth != last_region_.depth || r.n_inner != last_region_.n_inner || r.n_halo != last_region_.n_halo ||
+        r.n_elems != last_region_.n_elems || sched.seeds() != last_seeds_) {
+      last_region_ = r;
+      last_seeds_ = sched.seeds();
+      local_.region = r;
+      local_.region_version += 1;
+    }
+    return true;
+  } catch (const std::exception& e) {
+    failed_ = true;
+    local_.failed = true;
+    set_status(fmt::format("the solver stopped at tick {}: {}", sched.ticks(), e.what()));
+    return false;
+  }
+}
+
+void HapticLoop::record_timing(double work, double wake, bool late) {
+  const long w = options_.window;
+  const long i = ring_pos_;
+  work_ring_[i] = work;
+  wake_ring_[i] = wake;
+  start_ring_[i] = now_s();
+  late_ring_[i] = late ? 1 : 0;
+  ring_pos_ = (i + 1) % w;
+  ring_count_ = std::min(ring_count_ + 1, w);
+  const int bin = std::min(kHistBins - 1, static_cast<int>(work / kHistBin));
+  histogram_[bin] += 1;
+  HapticStats& s = local_.stats;
+  s.ticks += 1;
+  s.late += late ? 1 : 0;
+  s.overruns += work > period_ ? 1 : 0;
+  s.session_max = std::max(s.session_max, work);
+  if (s.ticks % options_.stats_every == 0) update_stats();
+}
+
+void HapticLoop::update_stats() {
+  HapticStats& s = local_.stats;
+  const long n = ring_count_;
+  s.window_ticks = n;
+  if (n == 0) return;
+  scratch_.assign(work_ring_.begin(), work_ring_.begin() + n);
+  s.work_p50 = quantile(scratch_, 0.50);
+  s.work_p99 = quantile(scratch_, 0.99);
+  s.work_max = *std::max_element(scratch_.begin(), scratch_.end());
+  scratch_.assign(wake_ring_.begin(), wake_ring_.begin() + n);
+  s.wake_p99 = quantile(scratch_, 0.99);
+  s.wake_max = *std::max_element(scratch_.begin(), scratch_.end());
+  s.window_late = 0;
+  for (long k = 0; k < n; ++k) s.window_late += late_ring_[k];
+  // oldest entry: ring_pos_ once the ring is full, else 0; newest: just before ring_pos_
+  const long w = options_.window;
+  const double oldest = start_ring_[n < w ? 0 : ring_pos_];
+  const double newest = start_ring_[(ring_pos_ + w - 1) % w];
+  s.rate_hz = n > 1 && newest > oldest ? double(n - 1) / (newest - oldest) : 0;
+  s.steps_per_s = s.rate_hz * local_.steps_per_tick;
+  s.session_p50 = histogram_quantile(histogram_, s.ticks, 0.50, s.session_max);
+  s.session_p99 = histogram_quantile(histogram_, s.ticks, 0.99, s.session_max);
+  const double elapsed = now_s() - session_start_;
+  s.session_rate_hz = elapsed > 0 ? double(s.ticks) / elapsed : 0;
+  const bool rate_ok = !running_ || n < 100 || s.rate_hz >= 0.98 / period_;
+  s.keeping_up = s.window_late * 100 <= n && rate_ok;
+}
+
+void HapticLoop::publish(bool haptic_thread) {
+  std::unique_lock lk(snap_mutex_, std::defer_lock);
+  if (haptic_thread) {
+    if (!lk.try_lock()) return;  // the display is copying: the next tick publishes
+  } else {
+    lk.lock();
+  }
+  published_ = local_;
+}
+
+void HapticLoop::thread_main() {
+  const auto T = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(period_));
+  const Clock::time_point t0 = Clock::now();
+  long k = 0;  // index of the next deadline t0 + k T
+  while (!stop_) {
+    if (has_requests_) {
+      const long sim_before = local_.sim_version;
+      serve_requests();
+      if (local_.sim_version != sim_before) {
+        // a rebuild paused the loop: resume at the next grid point, not late
+        k = std::max(k, static_cast<long>((Clock::now() - t0) / T) + 1);
+        publish(true);
+      }
+    }
+    if (failed_) {
+      publish();  // blocking: the failure must reach the display
+      std::unique_lock lk(req_mutex_);
+      req_cv_.wait(lk, [&] { return stop_ || has_requests_; });
+      continue;
+    }
+    Clock::time_point deadline = t0 + k * T;
+    const Clock::time_point now = Clock::now();
+    if (now - deadline > options_.max_lag * T) {
+      const long behind = static_cast<long>((now - deadline) / T);
+      local_.stats.skipped += behind;
+      k += behind;
+      deadline = t0 + k * T;
+    }
+    std::this_thread::sleep_until(deadline);
+    const Clock::time_point start = Clock::now();
+    tick_once();
+    const Clock::time_point end = Clock::now();
+    const double work = std::chrono::duration<double>(end - start).count();
+    const double wake = std::chrono::duration<double>(start - deadline).count();
+    record_timing(work, wake, end > deadline + T);
+    publish(true);
+    ++k;
+  }
+}
+
+}  // namespace tissue

@@ -1,0 +1,215 @@
+// The haptic loop (DESIGN.md section 3, "Loops"): its own thread runs one
+// Scheduler tick per period (1 ms) on a steady clock, with the tool driven
+// through the virtual coupling of core/force_coupling.hpp.
+//
+// Timing. Deadline k is t0 + k T (T = the scheduler's tick); the thread
+// sleeps until it (std::this_thread::sleep_until on steady_clock), runs the
+// tick, and moves to deadline k + 1, so timing errors never accumulate
+// (no drift). A tick is *late* when it ends after the next tick's deadline
+// (its work took longer than the period, or it started too late); an
+// *overrun* is a tick whose work alone exceeded T. When the loop has fallen
+// more than `max_lag` periods behind it drops the missed deadlines (counted
+// as skipped) instead of running a burst of ticks: the grid stays the same,
+// and simulated time (one T per executed tick) falls behind wall time. The
+// loop measures its achieved rate, the tick work time (p50, p99, max) and the
+// start lateness (jitter), over a sliding window and over the whole session,
+// and says clearly when the solver cannot keep up (describe()).
+//
+// Sharing with the display thread, without data races:
+// - the haptic thread publishes a HapticSnapshot (tool, forces, contact,
+//   region, statistics) after every tick: it copies it under a mutex taken
+//   with try_lock, so it never waits for the display (if the display is
+//   copying at that instant, the next tick publishes); the display's copy
+//   holds the mutex for the time of a ~400-byte memcpy;
+// - everything else that touches the simulation (Backend::write_positions
+//   into a mapped vertex buffer, Backend::region() when the region changed)
+//   is posted as a task, which the haptic thread runs between two ticks; the
+//   display waits on the returned future, the haptic thread never waits;
+// - parameter changes (E, nu, region depth, precision) are requested by the
+//   display and applied by the haptic thread between ticks: it builds a new
+//   Simulation through the factory (a new model and backend; the tissue
+//   restarts from rest), and keeps the old one, reporting why, when the
+//   factory throws.
+// The owner thread (the one that constructs the loop) calls start, stop,
+// post, request_params and run_ticks; snapshot() may be called from any
+// thread.
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <future>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "core/backend.hpp"
+#include "core/force_coupling.hpp"
+#include "core/scheduler.hpp"
+
+namespace tissue {
+
+/// Solver parameters the display may change while the loop runs.
+struct LiveParams {
+  double E = 3000;    ///< Young's modulus for every element set (Pa); <= 0: keep the scene's materials
+  double nu = 0.45;   ///< Poisson's ratio (with E)
+  int depth = 5;      ///< region depth; kDepthAll = whole mesh
+  Precision precision = Precision::Float;
+};
+
+/// What the haptic loop runs: the model, a backend holding it, and the
+/// scheduler over both (built together, destroyed together).
+struct Simulation {
+  std::unique_ptr<TissueModel<double>> model;
+  std::unique_ptr<Backend> backend;
+  std::unique_ptr<Scheduler> scheduler;
+};
+
+/// Builds a Simulation for the parameters (the app supplies it: scene ->
+/// model -> backend -> scheduler). Throws, with a message naming the rule
+/// broken, for parameters it cannot use.
+using SimulationFactory = std::function<Simulation(const LiveParams&)>;
+
+/// Timing of the loop. Window figures cover the last `window` ticks;
+/// session figures every tick since start() (or the first run_ticks()).
+struct HapticStats {
+  double period = 1e-3;        ///< T (s)
+  long ticks = 0;              ///< ticks run this session
+  long late = 0;               ///< ticks that ended after the next tick's deadline
+  long overruns = 0;           ///< ticks whose work alone took longer than T
+  long skipped = 0;            ///< deadlines dropped after falling > max_lag periods behind
+  long window_ticks = 0;       ///< ticks in the window
+  long window_late = 0;        ///< late ticks in the window
+  double rate_hz = 0;          ///< achieved tick rate over the window (1/s)
+  double work_p50 = 0, work_p99 = 0, work_max = 0;           ///< tick work time, window (s)
+  double wake_p99 = 0, wake_max = 0;                         ///< start lateness (jitter), window (s)
+  double session_p50 = 0, session_p99 = 0, session_max = 0;  ///< tick work time, session (s)
+  double session_rate_hz = 0;  ///< ticks per wall second since start (1/s)
+  double steps_per_s = 0;      ///< TLED steps per wall second over the window
+  bool keeping_up = true;      ///< window: <= 1% late and rate within 2% of 1/T
+};
+
+/// One line: rate, work percentiles, jitter and late ticks; starts with
+/// "SOLVER CANNOT KEEP UP" when keeping_up is false.
+std::string describe(const HapticStats& s);
+
+/// What the display reads after each tick.
+struct HapticSnapshot {
+  long tick = -1;                      ///< scheduler ticks done (-1: none yet)
+  double time = 0;                     ///< simulated time (s)
+  Vec3<double> device = {};            ///< device (hand) position (m)
+  Vec3<double> tool = {};              ///< proxy: the tool the tissue feels (m)
+  Vec3<double> tissue_force = {};      ///< raw solver force on the tool (N)
+  Vec3<double> rendered_force = {};    ///< force sent to the device: coupled and clamped (N)
+  bool clamped = false;                ///< the coupling force exceeded the device maximum
+  index_t contact_tri = -1;            ///< driving surface triangle, -1 none
+  RegionSizes region;                  ///< current deformation region
+  long region_version = 0;             ///< changes whenever the region changes
+  long sim_version = 0;                ///< changes on every (re)build of the simulation
+  int steps_per_tick = 0;              ///< TLED steps per tick
+  double max_disp = 0;                 ///< m
+  double residual = 0;                 ///< relative free-node residual
+  bool equilibrium = false;
+  bool failed = false;                 ///< the solver stopped (see HapticLoop::status())
+  LiveParams params;                   ///< parameters of the running simulation
+  HapticStats stats;
+};
+
+class HapticLoop {
+ public:
+  struct Options {
+    CouplingParams coupling;  ///< its period is replaced by the scheduler's tick
+    int window = 1000;        ///< ticks in the statistics window
+    int stats_every = 100;    ///< ticks between statistics updates
+    int max_lag = 10;         ///< periods behind before deadlines are dropped
+  };
+
+  /// Builds the first simulation synchronously (factory exceptions reach the
+  /// caller). `device` must outlive the loop; it is read and sent forces on
+  /// the haptic thread only, so a device shared with the display must
+  /// synchronise itself (viewer's MouseDevice does).
+  HapticLoop(Device& device, SimulationFactory factory, LiveParams params, Options options);
+  HapticLoop(Device& device, SimulationFactory factory, LiveParams params)
+      : HapticLoop(device, std::move(factory), params, Options{}) {}
+  ~HapticLoop();
+  HapticLoop(const HapticLoop&) = delete;
+  HapticLoop& operator=(const HapticLoop&) = delete;
+
+  /// Starts the haptic thread (no-op when running); statistics restart.
+  void start();
+  /// Stops and joins the haptic thread, then runs requests still queued.
+  void stop();
+  bool running() const { return running_; }
+
+  /// Runs n ticks on the calling thread as fast as possible (headless
+  /// pictures, tests); the loop must be stopped. Throws SimulationError.
+  void run_ticks(long n);
+
+  /// The latest published snapshot (any thread).
+  HapticSnapshot snapshot() const;
+
+  /// Requests new parameters; applied between ticks (immediately when
+  /// stopped). A failed rebuild keeps the running simulation; status() says why.
+  void request_params(const LiveParams& params);
+
+  /// Runs task(simulation) on the haptic thread between two ticks (on the
+  /// calling thread when stopped). The future carries its exception.
+  std::future<void> post(std::function<void(Simulation&)> task);
+
+  /// "" when all is well; otherwise why the solver stopped or a parameter
+  /// change was refused (any thread).
+  std::string status() const;
+
+  /// The coupled device the scheduler drives (owner thread, loop stopped).
+  const CoupledDevice& coupled() const { return coupled_; }
+  double period() const { return period_; }
+
+ private:
+  void thread_main();
+  void serve_requests();
+  void rebuild(const LiveParams& params);
+  bool tick_once();  ///< one tick + publish; false when the solver failed
+  void record_timing(double work, double wake, bool late);
+  void update_stats();
+  void publish(bool haptic_thread = false);  ///< haptic thread: try_lock, may skip
+  void set_status(std::string s);
+
+  // owned by the haptic thread while running, by the owner otherwise
+  // (declaration order matters: sim_ is built before coupled_ needs its tick)
+  Device& device_;
+  SimulationFactory factory_;
+  Options options_;
+  LiveParams params_;
+  Simulation sim_;
+  double period_ = 1e-3;
+  CoupledDevice coupled_;
+  HapticSnapshot local_;
+  std::vector<index_t> last_seeds_;
+  RegionSizes last_region_;
+  std::vector<double> work_ring_, wake_ring_, start_ring_;
+  std::vector<std::uint8_t> late_ring_;
+  std::vector<double> scratch_;
+  std::vector<std::uint32_t> histogram_;  ///< session work times, kHistBin bins
+  long ring_pos_ = 0, ring_count_ = 0;
+  double session_start_ = 0;
+  bool failed_ = false;
+
+  // shared
+  std::thread thread_;
+  std::atomic<bool> running_{false};
+  std::atomic<bool> stop_{false};
+  mutable std::mutex snap_mutex_;
+  HapticSnapshot published_;
+  mutable std::mutex req_mutex_;
+  std::condition_variable req_cv_;
+  std::atomic<bool> has_requests_{false};
+  std::vector<std::packaged_task<void(Simulation&)>> tasks_;
+  std::optional<LiveParams> pending_params_;
+  std::string status_;
+};
+
+}  // namespace tissue
