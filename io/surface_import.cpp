@@ -1,0 +1,222 @@
+#include "io/surface_import.hpp"
+
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <array>
+#include <assimp/Importer.hpp>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <unordered_map>
+
+#include "core/vec.hpp"
+
+namespace tissue::io {
+namespace {
+
+Vec3<double> vertex(const SurfaceMesh& s, index_t i) {
+  return {s.vertices[3 * i], s.vertices[3 * i + 1], s.vertices[3 * i + 2]};
+}
+
+/// Length of the bounding-box diagonal (m); 0 for an empty mesh.
+double bbox_diagonal(const SurfaceMesh& s) {
+  if (s.vertices.empty()) return 0;
+  double lo[3] = {s.vertices[0], s.vertices[1], s.vertices[2]}, hi[3] = {lo[0], lo[1], lo[2]};
+  for (size_t k = 0; k < s.vertices.size(); ++k) {
+    lo[k % 3] = std::min(lo[k % 3], s.vertices[k]);
+    hi[k % 3] = std::max(hi[k % 3], s.vertices[k]);
+  }
+  return std::sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                   (hi[2] - lo[2]) * (hi[2] - lo[2]));
+}
+
+/// Appends the triangles of every mesh under `node`, transformed by the
+/// accumulated node transform.
+void collect(const aiScene& scene, const aiNode& node, const aiMatrix4x4& parent, double scale, SurfaceMesh& out) {
+  const aiMatrix4x4 xf = parent * node.mTransformation;
+  for (unsigned k = 0; k < node.mNumMeshes; ++k) {
+    const aiMesh& mesh = *scene.mMeshes[node.mMeshes[k]];
+    const index_t base = out.n_vertices();
+    for (unsigned v = 0; v < mesh.mNumVertices; ++v) {
+      const aiVector3D p = xf * mesh.mVertices[v];
+      out.vertices.insert(out.vertices.end(), {scale * p.x, scale * p.y, scale * p.z});
+    }
+    for (unsigned f = 0; f < mesh.mNumFaces; ++f) {
+      const aiFace& face = mesh.mFaces[f];
+      if (face.mNumIndices != 3) continue;  // points and lines carry no surface
+      for (int c = 0; c < 3; ++c) out.triangles.push_back(base + static_cast<index_t>(face.mIndices[c]));
+    }
+  }
+  for (unsigned c = 0; c < node.mNumChildren; ++c) collect(scene, *node.mChildren[c], xf, scale, out);
+}
+
+/// Drops vertices no triangle uses and renumbers the triangles.
+void compact_vertices(SurfaceMesh& s) {
+  std::vector<index_t> map(s.n_vertices(), -1);
+  std::vector<double> kept;
+  for (index_t& v : s.triangles) {
+    if (map[v] < 0) {
+      map[v] = static_cast<index_t>(kept.size() / 3);
+      kept.insert(kept.end(), s.vertices.begin() + 3 * v, s.vertices.begin() + 3 * v + 3);
+    }
+    v = map[v];
+  }
+  s.vertices.swap(kept);
+}
+
+/// Assimp 5.2's PLY reader loops forever on a header without an end_header
+/// line (a truncated or hand-edited file). Refuse such files before Assimp
+/// sees them. Headers are a few hundred bytes; the first 1 MiB is searched.
+void guard_ply_header(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) return;  // Assimp reports unreadable files itself
+  std::string head(1 << 20, '\0');
+  f.read(head.data(), static_cast<std::streamsize>(head.size()));
+  head.resize(static_cast<size_t>(f.gcount()));
+  if (head.rfind("ply", 0) != 0) return;
+  if (head.find("\nend_header") == std::string::npos)
+    throw MeshError(fmt::format("{}: cannot read the surface: PLY header has no end_header line", path));
+}
+
+struct CellHash {
+  size_t operator()(const std::array<long long, 3>& c) const {
+    return std::hash<long long>()(c[0] * 73856093LL ^ c[1] * 19349663LL ^ c[2] * 83492791LL);
+  }
+};
+
+}  // namespace
+
+double parse_unit(const std::string& unit) {
+  if (unit == "m") return 1.0;
+  if (unit == "cm") return 0.01;
+  if (unit == "mm") return 0.001;
+  throw MeshError(fmt::format("unknown length unit '{}' (use m, cm or mm)", unit));
+}
+
+index_t weld_vertices(SurfaceMesh& s, double tolerance) {
+  if (tolerance < 0) tolerance = 1e-9 * bbox_diagonal(s);
+  const index_t n = s.n_vertices();
+  std::vector<index_t> rep(n);
+  if (tolerance > 0) {
+    // Uniform grid of cell size `tolerance`: a vertex's partner lies in one of
+    // the 27 cells around it.
+    std::unordered_map<std::array<long long, 3>, std::vector<index_t>, CellHash> grid;
+    for (index_t i = 0; i < n; ++i) {
+      const Vec3<double> p = vertex(s, i);
+      const std::array<long long, 3> cell{std::llround(p.x / tolerance), std::llround(p.y / tolerance),
+                                          std::llround(p.z / tolerance)};
+      rep[i] = i;
+      for (int dx = -1; dx <= 1 && rep[i] == i; ++dx)
+        for (int dy = -1; dy <= 1 && rep[i] == i; ++dy)
+          for (int dz = -1; dz <= 1 && rep[i] == i; ++dz) {
+            auto it = grid.find({cell[0] + dx, cell[1] + dy, cell[2] + dz});
+            if (it == grid.end()) continue;
+            for (index_t j : it->second)
+              if (norm(vertex(s, j) - p) <= tolerance) {
+                rep[i] = j;
+                break;
+              }
+          }
+      if (rep[i] == i) grid[cell].push_back(i);
+    }
+  } else {  // zero tolerance: exact coordinate equality
+    std::map<std::array<double, 3>, index_t> seen;
+    for (index_t i = 0; i < n; ++i)
+      rep[i] = seen.emplace(std::array<double, 3>{s.vertices[3 * i], s.vertices[3 * i + 1], s.vertices[3 * i + 2]}, i)
+                   .first->second;
+  }
+  std::vector<index_t> tris;
+  tris.reserve(s.triangles.size());
+  index_t dropped = 0;
+  for (index_t t = 0; t < s.n_triangles(); ++t) {
+    const index_t a = rep[s.triangles[3 * t]], b = rep[s.triangles[3 * t + 1]], c = rep[s.triangles[3 * t + 2]];
+    if (a == b || b == c || a == c) {
+      ++dropped;
+      continue;
+    }
+    tris.insert(tris.end(), {a, b, c});
+  }
+  s.triangles.swap(tris);
+  compact_vertices(s);
+  return dropped;
+}
+
+SurfaceMesh load_surface(const std::string& path, double metres_per_unit) {
+  if (!(metres_per_unit > 0) || !std::isfinite(metres_per_unit))
+    throw MeshError(fmt::format("{}: unit scale {} m per unit must be > 0", path, metres_per_unit));
+  guard_ply_header(path);
+  Assimp::Importer importer;
+  const aiScene* scene = importer.ReadFile(
+      path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_ValidateDataStructure);
+  if (!scene) throw MeshError(fmt::format("{}: cannot read the surface: {}", path, importer.GetErrorString()));
+  if ((scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE) || !scene->mRootNode)
+    throw MeshError(fmt::format("{}: the file holds no complete mesh (Assimp: {})", path,
+                                *importer.GetErrorString() ? importer.GetErrorString() : "incomplete scene"));
+  SurfaceMesh out;
+  collect(*scene, *scene->mRootNode, aiMatrix4x4(), metres_per_unit, out);
+  if (out.triangles.empty())
+    throw MeshError(fmt::format("{}: the file holds no triangles ({} meshes, none with faces)", path,
+                                scene->mNumMeshes));
+  weld_vertices(out);
+  if (out.triangles.empty()) throw MeshError(fmt::format("{}: every triangle is degenerate", path));
+  return out;
+}
+
+void check_closed(const SurfaceMesh& s, const std::string& source) {
+  const index_t n = s.n_vertices(), nt = s.n_triangles();
+  if (nt == 0) throw MeshError(source + ": the surface has no triangles");
+  if (s.triangles.size() % 3 != 0 || s.vertices.size() % 3 != 0)
+    throw MeshError(source + ": vertex or corner count is not a multiple of 3");
+  const double diag = bbox_diagonal(s);
+  const double area_eps = 1e-14 * diag * diag;
+  // directed edge (a, b) -> triangles using it; keyed by the sorted pair
+  std::map<std::pair<index_t, index_t>, std::vector<std::pair<index_t, bool>>> edges;
+  for (index_t t = 0; t < nt; ++t) {
+    const index_t* c = &s.triangles[3 * t];
+    for (int k = 0; k < 3; ++k)
+      if (c[k] < 0 || c[k] >= n)
+        throw MeshError(fmt::format("{}: triangle {}: corner {} refers to vertex {}, but there are {} vertices",
+                                    source, t, k, c[k], n));
+    if (c[0] == c[1] || c[1] == c[2] || c[0] == c[2])
+      throw MeshError(fmt::format("{}: triangle {} ({}, {}, {}) repeats a vertex: degenerate triangles are not allowed",
+                                  source, t, c[0], c[1], c[2]));
+    const Vec3<double> p0 = vertex(s, c[0]);
+    const double area = 0.5 * norm(cross(vertex(s, c[1]) - p0, vertex(s, c[2]) - p0));
+    if (!(area > area_eps))
+      throw MeshError(fmt::format("{}: triangle {} ({}, {}, {}) has zero area ({:.3g} m^2): degenerate triangles are "
+                                  "not allowed",
+                                  source, t, c[0], c[1], c[2], area));
+    for (int k = 0; k < 3; ++k) {
+      const index_t a = c[k], b = c[(k + 1) % 3];
+      edges[{std::min(a, b), std::max(a, b)}].push_back({t, a < b});
+    }
+  }
+  for (const auto& [e, uses] : edges) {
+    if (uses.size() == 1)
+      throw MeshError(fmt::format("{}: edge ({}, {}) is used by 1 triangle ({}): the surface is open", source, e.first,
+                                  e.second, uses[0].first));
+    if (uses.size() > 2)
+      throw MeshError(fmt::format("{}: edge ({}, {}) is used by {} triangles ({}, {}, ...): the surface is not a "
+                                  "manifold (each edge needs exactly 2)",
+                                  source, e.first, e.second, uses.size(), uses[0].first, uses[1].first));
+    if (uses[0].second == uses[1].second)
+      throw MeshError(fmt::format("{}: edge ({}, {}) is traversed in the same direction by triangles {} and {}: the "
+                                  "orientation is inconsistent",
+                                  source, e.first, e.second, uses[0].first, uses[1].first));
+  }
+}
+
+double enclosed_volume(const SurfaceMesh& s) {
+  double v = 0;
+  for (index_t t = 0; t < s.n_triangles(); ++t) {
+    const Vec3<double> a = vertex(s, s.triangles[3 * t]), b = vertex(s, s.triangles[3 * t + 1]),
+                       c = vertex(s, s.triangles[3 * t + 2]);
+    v += dot(a, cross(b, c));
+  }
+  return v / 6.0;
+}
+
+}  // namespace tissue::io
