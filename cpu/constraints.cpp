@@ -1,8 +1,9 @@
 #include "cpu/constraints.hpp"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
-#include <fmt/format.h>
 #include <stdexcept>
 
 namespace tissue::cpu {
@@ -94,11 +95,10 @@ void drive_nodes(const TissueModel<T>& m, TissueState<T>& s, std::vector<index_t
         fmt::format("set_driven: {} displacement values for {} nodes (need 3 per node)", u.size(), nodes.size()));
   for (std::size_t k = 0; k < nodes.size(); ++k) {
     const index_t a = nodes[k];
-    if (a < 0 || a >= n)
-      throw std::invalid_argument(fmt::format("set_driven: node {} out of range (0..{})", a, n - 1));
+    if (a < 0 || a >= n) throw std::invalid_argument(fmt::format("set_driven: node {} out of range (0..{})", a, n - 1));
     if (s.region.role[a] == kOutside)
-      throw std::invalid_argument(fmt::format(
-          "set_driven: node {} is outside the deformation region (build_region from it first)", a));
+      throw std::invalid_argument(
+          fmt::format("set_driven: node {} is outside the deformation region (build_region from it first)", a));
     for (int c = 0; c < 3; ++c)
       if (!std::isfinite(u[3 * k + c]))
         throw std::invalid_argument(
@@ -115,12 +115,12 @@ void drive_nodes(const TissueModel<T>& m, TissueState<T>& s, std::vector<index_t
   }
 }
 
-#define TISSUE_CPU_CONSTRAINTS(T)                                                                           \
-  template void init_constraints(const TissueModel<T>&, TissueState<T>&);                                  \
-  template void install_region(const TissueModel<T>&, TissueState<T>&, Region);                           \
-  template void release_driven(const TissueModel<T>&, TissueState<T>&, std::vector<index_t>&);             \
-  template void drive_nodes(const TissueModel<T>&, TissueState<T>&, std::vector<index_t>&,                 \
-                            std::span<const index_t>, std::span<const double>);
+#define TISSUE_CPU_CONSTRAINTS(T)                                                                                    \
+  template void init_constraints(const TissueModel<T>&, TissueState<T>&);                                            \
+  template void install_region(const TissueModel<T>&, TissueState<T>&, Region);                                      \
+  template void release_driven(const TissueModel<T>&, TissueState<T>&, std::vector<index_t>&);                       \
+  template void drive_nodes(const TissueModel<T>&, TissueState<T>&, std::vector<index_t>&, std::span<const index_t>, \
+                            std::span<const double>);
 TISSUE_CPU_CONSTRAINTS(float)
 TISSUE_CPU_CONSTRAINTS(double)
 #undef TISSUE_CPU_CONSTRAINTS

@@ -81,8 +81,8 @@ void CpuBackend<T>::set_displacements(std::span<const double> u) {
         fmt::format("set_displacements: {} values for {} nodes (need 3 x n_nodes = {})", u.size(), n, 3 * n));
   for (std::size_t k = 0; k < u.size(); ++k)
     if (!std::isfinite(u[k]))
-      throw std::invalid_argument(fmt::format("set_displacements: node {}: displacement {} = {} is not finite",
-                                              k % n, "xyz"[k / n], u[k]));
+      throw std::invalid_argument(
+          fmt::format("set_displacements: node {}: displacement {} = {} is not finite", k % n, "xyz"[k / n], u[k]));
   for (std::size_t k = 0; k < u.size(); ++k) state_.u[k] = state_.u_prev[k] = state_.u_next[k] = T(u[k]);
   for (index_t a = 0; a < n; ++a)
     if (state_.region.role[a] == kHalo && !state_.driven[a] && !(model_.node_flags[a] & kFixed))

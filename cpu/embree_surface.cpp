@@ -92,7 +92,8 @@ EmbreeSurface<T>::EmbreeSurface(const TissueModel<T>& m) : m_(m), rtc_(std::make
   Embree& r = *rtc_;
   r.device = rtcNewDevice(nullptr);
   if (!r.device)
-    throw std::runtime_error(fmt::format("cpu backend: rtcNewDevice failed (RTCError {})", int(rtcGetDeviceError(nullptr))));
+    throw std::runtime_error(
+        fmt::format("cpu backend: rtcNewDevice failed (RTCError {})", int(rtcGetDeviceError(nullptr))));
   r.scene = rtcNewScene(r.device);
   rtcSetSceneFlags(r.scene, RTC_SCENE_FLAG_DYNAMIC | RTC_SCENE_FLAG_ROBUST);
   rtcSetSceneBuildQuality(r.scene, RTC_BUILD_QUALITY_LOW);

@@ -1,10 +1,10 @@
 #include "cpu/passes.hpp"
 
-#include <cmath>
-#include <utility>
-
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+
+#include <cmath>
+#include <utility>
 
 #include "core/tet.hpp"
 
@@ -133,8 +133,8 @@ void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const ind
       u_next[c * n + a] = central_difference_update(cd, -f[c], u[c * n + a], u_prev[c * n + a]);
     }
   });
-  std::swap(s.u_prev, s.u);   // u_prev <- u^n
-  std::swap(s.u, s.u_next);   // u <- u^{n+1}; u_next now holds u^{n-1} (scratch)
+  std::swap(s.u_prev, s.u);  // u_prev <- u^n
+  std::swap(s.u, s.u_next);  // u <- u^{n+1}; u_next now holds u^{n-1} (scratch)
 }
 
 template <class T>
@@ -145,15 +145,15 @@ std::vector<T> node_volumes(const TissueModel<T>& m) {
   return v;
 }
 
-#define TISSUE_CPU_PASSES(T)                                                                                       \
-  template void element_pressure(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>,                 \
-                                 tbb::affinity_partitioner&);                                                      \
-  template void nodal_pressure(const TissueModel<T>&, TissueState<T>&, const std::vector<T>&,                      \
-                               std::span<const index_t>, tbb::affinity_partitioner&);                              \
+#define TISSUE_CPU_PASSES(T)                                                                                      \
+  template void element_pressure(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>,                \
+                                 tbb::affinity_partitioner&);                                                     \
+  template void nodal_pressure(const TissueModel<T>&, TissueState<T>&, const std::vector<T>&,                     \
+                               std::span<const index_t>, tbb::affinity_partitioner&);                             \
   template void element_forces(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>, BadElementFlag&, \
-                               tbb::affinity_partitioner&);                                                        \
-  template void node_update(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>,                      \
-                            tbb::affinity_partitioner&);                                                           \
+                               tbb::affinity_partitioner&);                                                       \
+  template void node_update(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>,                     \
+                            tbb::affinity_partitioner&);                                                          \
   template std::vector<T> node_volumes(const TissueModel<T>&);
 TISSUE_CPU_PASSES(float)
 TISSUE_CPU_PASSES(double)

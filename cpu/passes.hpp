@@ -6,10 +6,10 @@
 // count or the schedule.
 #pragma once
 
+#include <tbb/partitioner.h>
+
 #include <span>
 #include <vector>
-
-#include <tbb/partitioner.h>
 
 #include "core/state.hpp"
 #include "cpu/bad_element.hpp"
@@ -19,9 +19,9 @@ namespace tissue::cpu {
 /// Minimum loop chunks (iterations per task). Chosen so a chunk costs a few
 /// microseconds: small enough to spread an 8k-element kidney over 8 to 16
 /// threads, large enough that task overhead stays negligible at 1M elements.
-inline constexpr std::size_t kElemGrain = 512;    ///< pass 1 (about 40 flops per element)
-inline constexpr std::size_t kForceGrain = 128;   ///< pass 3 (about 400 flops, cbrt and pow)
-inline constexpr std::size_t kNodeGrain = 512;    ///< passes 2 and 4 (one node->element list each)
+inline constexpr std::size_t kElemGrain = 512;   ///< pass 1 (about 40 flops per element)
+inline constexpr std::size_t kForceGrain = 128;  ///< pass 3 (about 400 flops, cbrt and pow)
+inline constexpr std::size_t kNodeGrain = 512;   ///< passes 2 and 4 (one node->element list each)
 
 /// Per-pass partitioners kept across steps, so that each pass hands the same
 /// chunks to the same threads every step (their data stays in that core's cache).

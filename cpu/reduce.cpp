@@ -1,10 +1,10 @@
 #include "cpu/reduce.hpp"
 
-#include <algorithm>
-#include <cmath>
-
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <cmath>
 
 namespace tissue::cpu {
 namespace {

@@ -48,7 +48,7 @@ TYPED_TEST(SegmentTriangle, HitInsideGivesFractionAndBarycentrics) {
 
 TYPED_TEST(SegmentTriangle, MissBesideTheTriangle) {
   using T = TypeParam;
-  EXPECT_LT(this->hit({T(0.6), T(0.6), T(1)}, {T(0.6), T(0.6), T(-1)}), T(0));   // past the hypotenuse
+  EXPECT_LT(this->hit({T(0.6), T(0.6), T(1)}, {T(0.6), T(0.6), T(-1)}), T(0));    // past the hypotenuse
   EXPECT_LT(this->hit({T(-0.1), T(0.5), T(1)}, {T(-0.1), T(0.5), T(-1)}), T(0));  // left of the y edge
   EXPECT_LT(this->hit({T(2), T(2), T(1)}, {T(2), T(2), T(-1)}), T(0));
 }
@@ -171,10 +171,10 @@ TEST_P(Collide, SegmentThroughTheBoxHitsTheNearFace) {
 }
 
 TEST_P(Collide, MissesAndDegenerateSegments) {
-  EXPECT_FALSE(backend->collide({0.03, 0.01, 0.05}, {0.03, 0.01, -0.05}).hit());   // beside the box
-  EXPECT_FALSE(backend->collide({0.01, 0.01, 0.05}, {0.01, 0.01, 0.021}).hit());   // stops above the top
-  EXPECT_FALSE(backend->collide({0.01, 0.01, 0.01}, {0.012, 0.011, 0.009}).hit()); // inside, crossing nothing
-  EXPECT_FALSE(backend->collide({0.01, 0.01, 0.05}, {0.01, 0.01, 0.05}).hit());    // A == B
+  EXPECT_FALSE(backend->collide({0.03, 0.01, 0.05}, {0.03, 0.01, -0.05}).hit());    // beside the box
+  EXPECT_FALSE(backend->collide({0.01, 0.01, 0.05}, {0.01, 0.01, 0.021}).hit());    // stops above the top
+  EXPECT_FALSE(backend->collide({0.01, 0.01, 0.01}, {0.012, 0.011, 0.009}).hit());  // inside, crossing nothing
+  EXPECT_FALSE(backend->collide({0.01, 0.01, 0.05}, {0.01, 0.01, 0.05}).hit());     // A == B
   EXPECT_THROW(backend->collide({std::nan(""), 0, 0}, {0, 0, 0}), std::invalid_argument);
 }
 

@@ -14,9 +14,9 @@
 #include <vector>
 
 #include "core/box_mesh.hpp"
+#include "core/device.hpp"
 #include "core/scheduler.hpp"
 #include "core/tet.hpp"
-#include "core/device.hpp"
 #include "cpu/cpu_backend.hpp"
 #include "cpu/host_backend.hpp"
 
@@ -65,7 +65,9 @@ double max_diff(const std::vector<double>& a, const std::vector<double>& b) {
   return r;
 }
 
-Vec3<double> node_u(const std::vector<double>& u, index_t n, index_t a) { return {u[a], u[n + a], u[2 * n + a]}; }
+Vec3<double> node_u(const std::vector<double>& u, index_t n, index_t a) {
+  return {u[a], u[n + a], u[2 * n + a]};
+}
 
 /// Serial, scatter-based reference of one TLED step over the whole mesh,
 /// straight from DESIGN.md section 2 and core/tet.hpp (R = 0). Held nodes
@@ -463,7 +465,7 @@ TEST_P(CpuBackendTest, InvertedElementIsReportedOnceThenCleared) {
     const Reductions r = b->reduce();
     EXPECT_EQ(r.bad_elem, e) << "ianp " << ianp;
     EXPECT_NEAR(r.bad_J, J, 1e-6 * std::fabs(J) + 1e-6);  // recorded as float
-    EXPECT_EQ(b->reduce().bad_elem, -1);  // reduce() cleared the flag
+    EXPECT_EQ(b->reduce().bad_elem, -1);                  // reduce() cleared the flag
   }
 }
 

@@ -6,9 +6,8 @@
 // (i,0,0) along axis a is only in the two tets whose path starts with a; a
 // corner two steps away only in the two tets whose path passes through it.
 // The expected sets below were derived by hand from those rules.
-#include <gtest/gtest.h>
-
 #include <fmt/format.h>
+#include <gtest/gtest.h>
 
 #include <algorithm>
 #include <stdexcept>

@@ -20,10 +20,10 @@
 namespace tissue {
 namespace {
 
-constexpr double kLx = 0.04, kLz = 0.02;         // box (m)
-const Vec3<double> kTarget{0.013, 0.016, kLz};   // inside a top-face triangle, off its edges
+constexpr double kLx = 0.04, kLz = 0.02;        // box (m)
+const Vec3<double> kTarget{0.013, 0.016, kLz};  // inside a top-face triangle, off its edges
 const Vec3<double> kDown{0, 0, -1};
-constexpr double kDepth = 0.003, kApproach = 0.005;  // m
+constexpr double kDepth = 0.003, kApproach = 0.005;                                                   // m
 constexpr double kPressStart = 0.1, kPressEnd = 0.3, kHoldEnd = 0.8, kRetractEnd = 0.82, kEnd = 1.2;  // s
 
 TissueModel<double> pressed_box() {
@@ -53,7 +53,9 @@ std::vector<TickReport> run_press(Precision p, int depth, const TissueModel<doub
   return out;
 }
 
-const TickReport& at(const std::vector<TickReport>& r, double t) { return r.at(size_t(std::lround(t / 1e-3)) - 1); }
+const TickReport& at(const std::vector<TickReport>& r, double t) {
+  return r.at(size_t(std::lround(t / 1e-3)) - 1);
+}
 
 class PressedBox : public ::testing::TestWithParam<std::pair<Precision, int>> {
  protected:
@@ -64,8 +66,8 @@ class PressedBox : public ::testing::TestWithParam<std::pair<Precision, int>> {
 TissueModel<double>* PressedBox::model_ = nullptr;
 
 INSTANTIATE_TEST_SUITE_P(Runs, PressedBox,
-                         ::testing::Values(std::pair{Precision::Double, kDepthAll}, std::pair{Precision::Float, kDepthAll},
-                                           std::pair{Precision::Double, 1}),
+                         ::testing::Values(std::pair{Precision::Double, kDepthAll},
+                                           std::pair{Precision::Float, kDepthAll}, std::pair{Precision::Double, 1}),
                          [](const auto& info) {
                            return std::string(to_string(info.param.first)) + "_depth_" +
                                   (info.param.second == kDepthAll ? std::string("all")
