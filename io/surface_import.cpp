@@ -158,8 +158,8 @@ SurfaceMesh load_surface(const std::string& path, double metres_per_unit) {
   SurfaceMesh out;
   collect(*scene, *scene->mRootNode, aiMatrix4x4(), metres_per_unit, out);
   if (out.triangles.empty())
-    throw MeshError(fmt::format("{}: the file holds no triangles ({} meshes, none with faces)", path,
-                                scene->mNumMeshes));
+    throw MeshError(
+        fmt::format("{}: the file holds no triangles ({} meshes, none with faces)", path, scene->mNumMeshes));
   weld_vertices(out);
   if (out.triangles.empty()) throw MeshError(fmt::format("{}: every triangle is degenerate", path));
   return out;
@@ -178,17 +178,18 @@ void check_closed(const SurfaceMesh& s, const std::string& source) {
     const index_t* c = &s.triangles[3 * t];
     for (int k = 0; k < 3; ++k)
       if (c[k] < 0 || c[k] >= n)
-        throw MeshError(fmt::format("{}: triangle {}: corner {} refers to vertex {}, but there are {} vertices",
-                                    source, t, k, c[k], n));
+        throw MeshError(fmt::format("{}: triangle {}: corner {} refers to vertex {}, but there are {} vertices", source,
+                                    t, k, c[k], n));
     if (c[0] == c[1] || c[1] == c[2] || c[0] == c[2])
       throw MeshError(fmt::format("{}: triangle {} ({}, {}, {}) repeats a vertex: degenerate triangles are not allowed",
                                   source, t, c[0], c[1], c[2]));
     const Vec3<double> p0 = vertex(s, c[0]);
     const double area = 0.5 * norm(cross(vertex(s, c[1]) - p0, vertex(s, c[2]) - p0));
     if (!(area > area_eps))
-      throw MeshError(fmt::format("{}: triangle {} ({}, {}, {}) has zero area ({:.3g} m^2): degenerate triangles are "
-                                  "not allowed",
-                                  source, t, c[0], c[1], c[2], area));
+      throw MeshError(
+          fmt::format("{}: triangle {} ({}, {}, {}) has zero area ({:.3g} m^2): degenerate triangles are "
+                      "not allowed",
+                      source, t, c[0], c[1], c[2], area));
     for (int k = 0; k < 3; ++k) {
       const index_t a = c[k], b = c[(k + 1) % 3];
       edges[{std::min(a, b), std::max(a, b)}].push_back({t, a < b});
@@ -196,16 +197,18 @@ void check_closed(const SurfaceMesh& s, const std::string& source) {
   }
   for (const auto& [e, uses] : edges) {
     if (uses.size() == 1)
-      throw MeshError(fmt::format("{}: edge ({}, {}) is used by 1 triangle ({}): the surface is open", source, e.first,
-                                  e.second, uses[0].first));
+      throw MeshError(fmt::format("{}: edge ({}, {}) is used by 1 triangle: the surface is open (triangle {})", source,
+                                  e.first, e.second, uses[0].first));
     if (uses.size() > 2)
-      throw MeshError(fmt::format("{}: edge ({}, {}) is used by {} triangles ({}, {}, ...): the surface is not a "
-                                  "manifold (each edge needs exactly 2)",
-                                  source, e.first, e.second, uses.size(), uses[0].first, uses[1].first));
+      throw MeshError(
+          fmt::format("{}: edge ({}, {}) is used by {} triangles ({}, {}, ...): the surface is not a "
+                      "manifold (each edge needs exactly 2)",
+                      source, e.first, e.second, uses.size(), uses[0].first, uses[1].first));
     if (uses[0].second == uses[1].second)
-      throw MeshError(fmt::format("{}: edge ({}, {}) is traversed in the same direction by triangles {} and {}: the "
-                                  "orientation is inconsistent",
-                                  source, e.first, e.second, uses[0].first, uses[1].first));
+      throw MeshError(
+          fmt::format("{}: edge ({}, {}) is traversed in the same direction by triangles {} and {}: the "
+                      "orientation is inconsistent",
+                      source, e.first, e.second, uses[0].first, uses[1].first));
   }
 }
 

@@ -26,13 +26,16 @@ namespace {
 // as outward (counter-clockwise seen from outside) quads.
 constexpr int kQuads[6][4] = {{0, 4, 6, 2}, {1, 3, 7, 5}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 2, 3, 1}, {4, 5, 7, 6}};
 
-double corner(int v, int axis, double side) { return side * ((v >> axis) & 1); }
+double corner(int v, int axis, double side) {
+  return side * ((v >> axis) & 1);
+}
 
 struct TempDir {
   fs::path dir;
   TempDir() {
-    dir = fs::temp_directory_path() / ("tissue_surface_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) +
-                                       "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    dir = fs::temp_directory_path() /
+          ("tissue_surface_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) + "_" +
+           ::testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::remove_all(dir);
     fs::create_directories(dir);
   }
@@ -327,7 +330,9 @@ TEST(CheckClosed, OpenSurfaceNamesEdge) {
       << msg;
 }
 
-TEST(CheckClosed, ClosedCubePasses) { EXPECT_EQ(closed_error(cube_surface()), ""); }
+TEST(CheckClosed, ClosedCubePasses) {
+  EXPECT_EQ(closed_error(cube_surface()), "");
+}
 
 TEST(CheckClosed, FlippedTriangleIsInconsistent) {
   SurfaceMesh s = cube_surface();

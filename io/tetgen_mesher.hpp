@@ -1,0 +1,68 @@
+// Volume meshing of a closed surface through the TetGen library (tetgen.h,
+// tetrahedralize(char* switches, ...)), not its executable.
+//
+// Switches used: p (the input is a piecewise linear complex), z (zero-based
+// ids), Q (quiet), q<ratio> (quality), a<volume> (maximum tet volume) and,
+// for the self-intersection pre-check, d. Debian's libtet is built with
+// TETLIBRARY, so TetGen reports failure by throwing an int; every such code is
+// caught and turned into a MeshError naming the source and the cause.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/hd.hpp"
+#include "io/surface_import.hpp"
+
+namespace tissue::io {
+
+/// TetGen settings.
+struct MeshingOptions {
+  double quality = 1.414;  ///< maximum radius-edge ratio (q switch); must be >= 1 (TetGen may not end below); 0 = no q
+  double max_volume = 0;   ///< maximum tet volume (a switch) m^3; 0 = none
+  int target_tets = 0;     ///< aim at this many tets by iterating max_volume (see kTargetTolerance); 0 = off.
+                           ///< When > 0 it replaces max_volume.
+};
+
+/// A tetrahedral mesh in SI units. Every tet is positively oriented
+/// (signed volume > 0 with core/tet.hpp's convention) and every node is a
+/// corner of some tet.
+struct VolumeMesh {
+  std::vector<double> nodes;  ///< positions (n_nodes x 3, xyz interleaved) m
+  std::vector<index_t> tets;  ///< corner node ids (n_tets x 4)
+  double max_volume = 0;      ///< the a switch of the run that produced it (m^3); 0 = none
+  int runs = 0;               ///< TetGen runs it took (1 without a target)
+
+  index_t n_nodes() const { return static_cast<index_t>(nodes.size() / 3); }
+  index_t n_tets() const { return static_cast<index_t>(tets.size() / 4); }
+};
+
+/// Relative tolerance of the target-count helper: the iteration stops as soon
+/// as |n_tets - target| <= kTargetTolerance * target; otherwise it returns
+/// the closest of kTargetRounds runs. Targets well above the count the
+/// surface alone forces (a few times its triangle count) land inside it.
+inline constexpr double kTargetTolerance = 0.05;
+/// Most TetGen runs the target-count helper makes.
+inline constexpr int kTargetRounds = 8;
+
+/// Tetrahedralises the closed surface: check_closed() first, then a TetGen
+/// self-intersection check (d switch), then the meshing run (or, with
+/// target_tets > 0, the target-count iteration: max_volume starts at the
+/// enclosed volume / target and is multiplied by n_tets / target after each
+/// run, up to kTargetRounds runs). Throws MeshError starting with `source`
+/// for an open or self-intersecting surface, bad options or any TetGen
+/// failure, e.g. "part.stl: the surface intersects itself (24 triangles
+/// involved, e.g. 3, 4, 17, 18)". Each TetGen run happens in a forked child
+/// process (libtet 1.5.0 double-frees after its own errors; see the .cpp), so
+/// no TetGen failure can take the caller down.
+VolumeMesh tetrahedralize_surface(const SurfaceMesh& surface, const MeshingOptions& options, const std::string& source);
+
+/// The TetGen switch string for one meshing run ("pzQq1.414a1e-08", ...);
+/// throws MeshError for a quality in (0, 1), a negative or non-finite
+/// max_volume.
+std::string tetgen_switches(const MeshingOptions& options, const std::string& source);
+
+/// Sum of the tets' volumes (m^3).
+double total_volume(const VolumeMesh& mesh);
+
+}  // namespace tissue::io
