@@ -31,7 +31,9 @@ struct Hit {
 /// Reductions over the region after a batch of steps (one call per tick).
 struct Reductions {
   Vec3<double> reaction = {};  ///< sum of internal forces on tool-driven nodes (N)
-  Vec3<double> internal = {};  ///< sum of internal forces on inner nodes (N); -> 0 at equilibrium
+  Vec3<double> internal = {};  ///< sum of internal forces on inner nodes (N): zero by construction over the
+                               ///< whole mesh, minus the halo's support in a limited region; the
+                               ///< equilibrium measure is the free-node residual below
   double free_force2 = 0;      ///< sum |f_a|^2 over free (integrated) inner nodes (N^2)
   double held_force2 = 0;      ///< sum |f_a|^2 over held inner nodes: fixed or driven (N^2)
   double kinetic = 0;          ///< 0.5 sum m_a |(u^n - u^{n-1}) / dt|^2 over region nodes (J)
