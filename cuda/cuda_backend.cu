@@ -121,9 +121,8 @@ std::string current_device_name() {
 template <class T>
 class CudaBackend final : public Backend {
  public:
+  /// Needs a usable device (make_cuda_backend checks first).
   CudaBackend() {
-    std::string why;
-    if (!cuda_available(&why)) throw std::runtime_error("backend 'cuda' cannot run here: " + why);
     device_name_ = current_device_name();
     stepper_.init();
   }
@@ -380,6 +379,8 @@ decltype(auto) with_cuda_backend(Backend& b, F&& f) {
 }  // namespace gpu
 
 std::unique_ptr<Backend> make_cuda_backend(Precision precision) {
+  std::string why;  // checked before any CUDA object is made, for a clear message
+  if (!cuda_available(&why)) throw std::runtime_error("backend 'cuda' cannot run here: " + why);
   if (precision == Precision::Float) return std::make_unique<gpu::CudaBackend<float>>();
   return std::make_unique<gpu::CudaBackend<double>>();
 }

@@ -85,8 +85,9 @@ __global__ void clear_outside_forces_kernel(index_t ne, const std::uint8_t* elem
 
 size_t select_temp_bytes(index_t n) {
   size_t bytes = 0;
+  // the same argument types as the calls in build(), so the same instantiation
   CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, thrust::counting_iterator<index_t>(0),
-                                        static_cast<const std::uint8_t*>(nullptr), static_cast<index_t*>(nullptr),
+                                        static_cast<std::uint8_t*>(nullptr), static_cast<index_t*>(nullptr),
                                         static_cast<int*>(nullptr), n));
   return bytes;
 }

@@ -1,0 +1,477 @@
+// Unit tests of each cuda backend stage against the cpu backend and the core
+// host references, on random non-zero displacement fields: the four passes,
+// the device flood fill, the collision query, the reductions, the
+// bad-element flag, write_positions, the step modes (identical bits), the
+// per-tick transfer counts and the bad-input errors. Every test skips when
+// no usable GPU is present, except the one that checks how the backend
+// refuses to run without one.
+#include <cuda_runtime.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <numeric>
+#include <stdexcept>
+
+#include "backends/registry.hpp"
+#include "core/device.hpp"
+#include "core/region.hpp"
+#include "core/scheduler.hpp"
+#include "core/tet.hpp"
+#include "tests/cuda/cuda_test_support.hpp"
+
+namespace tissue::cuda_test {
+namespace {
+
+/// Stage-by-stage tolerances, relative to the field's magnitude. Both
+/// backends evaluate the same core functions over the same gather orders;
+/// what differs is the compiler's FMA contraction and the device's pow/cbrt
+/// (a few ulp), so double agrees to ~1e-14 and float to ~1e-6 per pass. The
+/// bounds leave margin over the values measured on an H100 (docs/cuda.md).
+double pass_tol(Precision p) { return p == Precision::Double ? 1e-11 : 2e-5; }
+
+void report(const char* what, Precision p, double value) {
+  std::printf("[measured] %s (%s): %.3g\n", what, to_string(p), value);
+}
+
+std::vector<double> minus_one(std::vector<double> v) {
+  for (auto& x : v) x -= 1;
+  return v;
+}
+
+class Stages : public ::testing::TestWithParam<Precision> {};
+
+INSTANTIATE_TEST_SUITE_P(Precisions, Stages, ::testing::Values(Precision::Float, Precision::Double),
+                         [](const auto& info) { return name_of(info.param); });
+
+TEST_P(Stages, EachPassMatchesCpuOnRandomField) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  const auto m = box_model(5, 4, 3, 0.05, 0.04, 0.03);
+  auto cpu = make_cpu_backend(p), gpu = make_cuda_backend(p);
+  cpu->upload(m);
+  gpu->upload(m);
+  const index_t seeds[3] = {m.tris[7], m.tris[m.n_tris + 7], m.tris[2 * m.n_tris + 7]};
+  unsigned seed = 1;
+  for (int depth : {kDepthAll, 1, 0}) {
+    SCOPED_TRACE(depth);
+    if (depth != kDepthAll) {
+      EXPECT_EQ(gpu->build_region(seeds, depth).nodes(), cpu->build_region(seeds, depth).nodes());
+    }
+    const auto u = random_field(m.n_nodes, 2e-4, seed++);  // strains of a few percent
+    cpu->set_displacements(u);
+    gpu->set_displacements(u);
+    cpu->element_pressure();
+    gpu->element_pressure();
+    const Fields c1 = cpu->download(), g1 = gpu->download();
+    ASSERT_GT(*std::max_element(c1.elem_J.begin(), c1.elem_J.end()), 1.0);  // really deformed
+    const double dJ = rel_diff(minus_one(g1.elem_J), minus_one(c1.elem_J));
+    report("pass 1 J - 1", p, dJ);
+    EXPECT_LT(dJ, pass_tol(p));
+
+    cpu->nodal_pressure();
+    gpu->nodal_pressure();
+    const double dp = rel_diff(gpu->download().node_p, cpu->download().node_p);
+    report("pass 2 p", p, dp);
+    EXPECT_LT(dp, pass_tol(p));
+
+    cpu->element_forces();
+    gpu->element_forces();
+    cpu->node_update();
+    gpu->node_update();
+    const Fields c4 = cpu->download(), g4 = gpu->download();
+    const double df = rel_diff(g4.f, c4.f), du = rel_diff(g4.u, c4.u);
+    report("passes 3+4 f", p, df);
+    report("pass 4 u", p, du);
+    EXPECT_LT(df, 10 * pass_tol(p));
+    EXPECT_LT(du, pass_tol(p));
+    EXPECT_GT(*std::max_element(c4.f.begin(), c4.f.end()), 0.0);
+  }
+}
+
+TEST_P(Stages, PlainTetForcesMatchCpu) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  const auto m = box_model(3, 3, 3, 0.03, 0.03, 0.03, /*ianp=*/false);
+  auto cpu = make_cpu_backend(p), gpu = make_cuda_backend(p);
+  cpu->upload(m);
+  gpu->upload(m);
+  const auto u = random_field(m.n_nodes, 2e-4, 11);
+  cpu->set_displacements(u);
+  gpu->set_displacements(u);
+  cpu->advance(3);
+  gpu->advance(3);
+  const double df = rel_diff(gpu->download().f, cpu->download().f);
+  report("plain tet f after 3 steps", p, df);
+  EXPECT_LT(df, 10 * pass_tol(p));
+}
+
+TEST_P(Stages, FloodFillMatchesCoreForEveryDepth) {
+  SKIP_WITHOUT_GPU();
+  const auto m = box_model(6, 5, 4, 0.06, 0.05, 0.04);
+  auto gpu = make_cuda_backend(GetParam());
+  gpu->upload(m);
+  for (index_t t : {index_t(0), m.n_tris / 3, m.n_tris - 1}) {
+    const std::vector<index_t> seeds = {m.tris[t], m.tris[m.n_tris + t], m.tris[2 * m.n_tris + t]};
+    for (int depth : {0, 1, 2, 3, kDepthAll}) {
+      SCOPED_TRACE(::testing::Message() << "triangle " << t << " depth " << depth);
+      const Region ref = flood_fill(m, seeds, depth);
+      const RegionSizes s = gpu->build_region(seeds, depth);
+      EXPECT_EQ(s.n_inner, ref.n_inner);
+      EXPECT_EQ(s.n_halo, ref.n_halo);
+      EXPECT_EQ(s.n_elems, index_t(ref.elems.size()));
+      EXPECT_EQ(s.depth, depth);
+      const Region r = gpu->region();
+      EXPECT_EQ(r.role, ref.role);
+      EXPECT_EQ(r.nodes, ref.nodes);
+      EXPECT_EQ(r.elems, ref.elems);
+      EXPECT_EQ(r.seeds, ref.seeds);
+      EXPECT_EQ(r.n_inner, ref.n_inner);
+      EXPECT_EQ(r.n_halo, ref.n_halo);
+      if (depth == 1) {
+        EXPECT_GT(ref.n_halo, 0);  // the test exercises all three roles
+        EXPECT_LT(ref.nodes.size(), size_t(m.n_nodes));
+      }
+    }
+  }
+  // empty seeds at a finite depth: an empty region
+  const RegionSizes e = gpu->build_region({}, 3);
+  EXPECT_EQ(e.nodes(), 0);
+  EXPECT_EQ(e.n_elems, 0);
+}
+
+/// Nearest hit of segment a->b over every triangle of the surface deformed
+/// by u, in T (core segment_triangle; ties to the lowest index). Returns
+/// (triangle, t) or (-1, inf).
+template <class T>
+std::pair<index_t, T> brute_force_hit(const TissueModel<double>& md, const std::vector<double>& u, Vec3<double> a,
+                                      Vec3<double> b) {
+  const TissueModel<T> m = convert<T>(md);
+  const index_t n = m.n_nodes, nt = m.n_tris;
+  auto pos = [&](index_t i) {
+    return Vec3<T>{m.X[i] + T(u[i]), m.X[n + i] + T(u[n + i]), m.X[2 * n + i] + T(u[2 * n + i])};
+  };
+  const Vec3<T> aT = {T(a.x), T(a.y), T(a.z)}, bT = {T(b.x), T(b.y), T(b.z)};
+  std::pair<index_t, T> best = {-1, std::numeric_limits<T>::infinity()};
+  for (index_t t = 0; t < nt; ++t) {
+    T bary[2];
+    const T s = segment_triangle(aT, bT, pos(m.tris[t]), pos(m.tris[nt + t]), pos(m.tris[2 * nt + t]), bary);
+    if (s >= T(0) && s < best.second) best = {t, s};
+  }
+  return best;
+}
+
+TEST_P(Stages, CollisionMatchesBruteForceAndCpu) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  const auto m = box_model(6, 6, 4, 0.06, 0.06, 0.04);
+  auto cpu = make_cpu_backend(p), gpu = make_cuda_backend(p);
+  cpu->upload(m);
+  gpu->upload(m);
+  const auto u = random_field(m.n_nodes, 1e-3, 5);
+  cpu->set_displacements(u);
+  gpu->set_displacements(u);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> pos(-0.02, 0.08), len(0.0, 0.06), dir(-1, 1);
+  int hits = 0, misses = 0;
+  for (int k = 0; k < 400; ++k) {
+    const Vec3<double> a = {pos(rng), pos(rng), pos(rng)};
+    Vec3<double> d = {dir(rng), dir(rng), dir(rng)};
+    d = (len(rng) / norm(d)) * d;
+    const Vec3<double> b = a + d;
+    const Hit h = gpu->collide(a, b);
+    const Hit hc = cpu->collide(a, b);
+    const auto ref = p == Precision::Float ? [&] {
+      auto r = brute_force_hit<float>(m, u, a, b);
+      return std::pair<index_t, double>{r.first, r.second};
+    }()
+                                           : brute_force_hit<double>(m, u, a, b);
+    SCOPED_TRACE(::testing::Message() << "segment " << k);
+    ASSERT_EQ(h.tri, ref.first);
+    EXPECT_EQ(h.tri, hc.tri);
+    if (!h.hit()) {
+      ++misses;
+      continue;
+    }
+    ++hits;
+    EXPECT_NEAR(h.t, ref.second, p == Precision::Float ? 1e-5 : 1e-12);
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_EQ(h.nodes[c], m.tris[c * m.n_tris + h.tri]);
+      EXPECT_EQ(h.nodes[c], hc.nodes[c]);
+      EXPECT_NEAR(h.point[c], (a + h.t * d)[c], 1e-5);
+      EXPECT_NEAR(h.point[c], hc.point[c], p == Precision::Float ? 1e-6 : 1e-14);
+      EXPECT_NEAR(h.normal[c], hc.normal[c], 1e-5);
+      for (int k2 = 0; k2 < 3; ++k2) EXPECT_EQ(h.u[k2][c], hc.u[k2][c]);
+    }
+    EXPECT_NEAR(norm(h.normal), 1.0, 1e-9);
+  }
+  EXPECT_GT(hits, 50);
+  EXPECT_GT(misses, 50);
+  // a zero-length segment hits nothing
+  EXPECT_FALSE(gpu->collide({0.03, 0.03, 0.05}, {0.03, 0.03, 0.05}).hit());
+}
+
+TEST_P(Stages, ReductionsMatchCpuUnderDrivenNodes) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  const auto m = box_model(5, 5, 3, 0.05, 0.05, 0.03);
+  auto cpu = make_cpu_backend(p), gpu = make_cuda_backend(p);
+  const index_t t = m.n_tris / 2;
+  const index_t nodes[3] = {m.tris[t], m.tris[m.n_tris + t], m.tris[2 * m.n_tris + t]};
+  const double target[9] = {1e-4, -2e-4, -1e-3, 2e-4, 0, -1e-3, -1e-4, 1e-4, -1.2e-3};
+  for (int depth : {kDepthAll, 2}) {
+    SCOPED_TRACE(depth);
+    cpu->upload(m);
+    gpu->upload(m);
+    const auto u = random_field(m.n_nodes, 5e-5, 17);
+    cpu->set_displacements(u);
+    gpu->set_displacements(u);
+    cpu->build_region(nodes, depth);
+    gpu->build_region(nodes, depth);
+    cpu->set_driven(nodes, target);
+    gpu->set_driven(nodes, target);
+    cpu->advance(6);
+    gpu->advance(6);
+    const Reductions rc = cpu->reduce(), rg = gpu->reduce();
+    const double fscale = std::max(norm(rc.reaction), std::sqrt(rc.held_force2));
+    ASSERT_GT(norm(rc.reaction), 0.0);
+    const double tol = 10 * pass_tol(p);
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_NEAR(rg.reaction[c], rc.reaction[c], tol * fscale);
+      EXPECT_NEAR(rg.internal[c], rc.internal[c], tol * fscale);
+    }
+    report("reaction", p, norm(rg.reaction - rc.reaction) / fscale);
+    EXPECT_NEAR(rg.free_force2, rc.free_force2, 20 * tol * rc.free_force2);
+    EXPECT_NEAR(rg.held_force2, rc.held_force2, 20 * tol * rc.held_force2);
+    // kinetic energy differences (u - u_prev) / dt of nearly equal values
+    EXPECT_NEAR(rg.kinetic, rc.kinetic, (p == Precision::Float ? 1e-2 : 1e-6) * rc.kinetic);
+    EXPECT_NEAR(rg.max_disp, rc.max_disp, tol * rc.max_disp);
+    EXPECT_TRUE(rg.finite);
+    EXPECT_EQ(rg.bad_elem, -1);
+    EXPECT_GT(rg.kinetic, 0.0);
+    // release: the reaction sums no node any more
+    cpu->clear_driven();
+    gpu->clear_driven();
+    cpu->advance(2);
+    gpu->advance(2);
+    EXPECT_EQ(norm(gpu->reduce().reaction), 0.0);
+    EXPECT_NEAR(rel_diff(gpu->download().u, cpu->download().u), 0.0, pass_tol(p) * 10);
+  }
+}
+
+TEST_P(Stages, BadElementFlagNamesLowestInvertedElementAndClears) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  const auto m = box_model(3, 3, 3, 0.03, 0.03, 0.03);
+  auto cpu = make_cpu_backend(p), gpu = make_cuda_backend(p);
+  cpu->upload(m);
+  gpu->upload(m);
+  std::vector<double> u(3 * size_t(m.n_nodes), 0.0);
+  const index_t node = box_node(3, 3, 1, 1, 1);  // interior: pushed through its neighbours
+  u[2 * m.n_nodes + node] = -0.018;
+  u[node] = 0.004;
+  for (Backend* b : {cpu.get(), gpu.get()}) {
+    b->set_displacements(u);
+    b->element_pressure();
+    b->nodal_pressure();
+    b->element_forces();
+  }
+  const Reductions rc = cpu->reduce(), rg = gpu->reduce();
+  ASSERT_GE(rc.bad_elem, 0);
+  EXPECT_EQ(rg.bad_elem, rc.bad_elem);
+  EXPECT_NEAR(rg.bad_J, rc.bad_J, 1e-4 * std::fabs(rc.bad_J) + 1e-6);
+  // no element below it is inverted; it is (J <= 0 or its IANP Jbar <= 0)
+  const Fields f = gpu->download();
+  for (index_t e = 0; e < rg.bad_elem; ++e) EXPECT_GT(f.elem_J[e], 0.0) << "element " << e;
+  EXPECT_LE(std::min(f.elem_J[rg.bad_elem], rg.bad_J), 0.0);
+  EXPECT_EQ(gpu->reduce().bad_elem, -1);  // read and cleared
+}
+
+TEST_P(Stages, WritePositionsWritesDeformedNodesToDeviceMemory) {
+  SKIP_WITHOUT_GPU();
+  const auto m = box_model(4, 3, 2, 0.04, 0.03, 0.02);
+  auto gpu = make_cuda_backend(GetParam());
+  gpu->upload(m);
+  const auto u = random_field(m.n_nodes, 1e-3, 23);
+  gpu->set_displacements(u);
+  float* dst = nullptr;
+  ASSERT_EQ(cudaMalloc(&dst, 3 * sizeof(float) * m.n_nodes), cudaSuccess);
+  ASSERT_EQ(cudaMemset(dst, 0xff, 3 * sizeof(float) * m.n_nodes), cudaSuccess);  // NaN poison
+  gpu->write_positions(dst);
+  std::vector<float> host(3 * size_t(m.n_nodes));
+  ASSERT_EQ(cudaMemcpy(host.data(), dst, host.size() * sizeof(float), cudaMemcpyDeviceToHost), cudaSuccess);
+  cudaFree(dst);
+  const Fields f = gpu->download();
+  for (index_t i = 0; i < m.n_nodes; ++i)
+    for (int c = 0; c < 3; ++c)
+      ASSERT_NEAR(host[3 * i + c], m.X[c * m.n_nodes + i] + f.u[c * m.n_nodes + i], 1e-6) << "node " << i;
+  std::vector<float> on_host(3 * size_t(m.n_nodes));
+  EXPECT_THROW(gpu->write_positions(on_host.data()), std::invalid_argument);
+}
+
+TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  const auto m = box_model(6, 6, 4, 0.06, 0.06, 0.04);
+  const index_t t = m.n_tris / 3;
+  const index_t seeds[3] = {m.tris[t], m.tris[m.n_tris + t], m.tris[2 * m.n_tris + t]};
+  const auto u = random_field(m.n_nodes, 1e-4, 29);
+  for (int depth : {kDepthAll, 2}) {
+    std::vector<double> ref_u, ref_f;
+    for (CudaStepMode mode : {CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Grid, CudaStepMode::Cluster,
+                              CudaStepMode::Auto}) {
+      SCOPED_TRACE(::testing::Message() << "depth " << depth << " mode " << to_string(mode));
+      auto gpu = make_cuda_backend(p);
+      set_cuda_step_mode(*gpu, mode);
+      gpu->upload(m);
+      gpu->set_displacements(u);
+      gpu->build_region(seeds, depth);
+      gpu->set_driven(seeds, std::vector<double>(9, -5e-4));
+      gpu->advance(7);   // graph: a 7-step graph from phase 0
+      gpu->advance(1);   // then phase 1
+      gpu->advance(33);  // a 30-step chunk and 3 more
+      gpu->reduce();
+      const Fields f = gpu->download();
+      if (ref_u.empty()) {
+        ref_u = f.u;
+        ref_f = f.f;
+        continue;
+      }
+      EXPECT_EQ(f.u, ref_u);
+      EXPECT_EQ(f.f, ref_f);
+    }
+  }
+}
+
+TEST_P(Stages, PerTickTrafficIsFixedAndIndependentOfMeshSize) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  const size_t scalar = p == Precision::Float ? 4 : 8;
+  const Vec3<double> target = {0.0131, 0.0162, 0.02};
+  std::vector<TransferCounters> totals;
+  for (int cells : {4, 12}) {
+    SCOPED_TRACE(cells);
+    const auto m = box_model(cells, cells, cells / 2, 0.04, 0.04, 0.02);
+    auto gpu = make_cuda_backend(p);
+    gpu->upload(m);
+    SchedulerSettings st;
+    st.depth = 2;
+    Scheduler sched(*gpu, m, st);
+    ScriptedDevice tool(press_path(target, {0, 0, -1}, 0.003, 0.005, 0.05, 0.1, 0.1, 0.05));
+    const TransferCounters start = gpu->transfers();
+    int steady = 0;
+    bool was_in_contact = false;
+    while (sched.time() < 0.4 - 1e-9) {
+      const TransferCounters before = gpu->transfers();
+      sched.tick(tool);
+      const TransferCounters after = gpu->transfers();
+      const auto h2d = after.h2d - before.h2d, d2h = after.d2h - before.d2h;
+      const auto h2d_bytes = after.h2d_bytes - before.h2d_bytes, d2h_bytes = after.d2h_bytes - before.d2h_bytes;
+      if (was_in_contact && sched.in_contact()) {  // a tick of a running contact: targets up, reductions down
+        ++steady;
+        EXPECT_EQ(h2d, 1u);
+        EXPECT_EQ(h2d_bytes, 3 * (3 * scalar + sizeof(index_t)));
+        EXPECT_EQ(d2h, 1u);
+        EXPECT_EQ(d2h_bytes, sizeof(Reductions));
+      } else {  // hit query, region build on contact start, release
+        EXPECT_LE(h2d, 2u);
+        EXPECT_LE(d2h, 3u);
+        EXPECT_LE(h2d_bytes + d2h_bytes, 1024u);
+      }
+      was_in_contact = sched.in_contact();
+    }
+    EXPECT_GT(steady, 100);
+    const TransferCounters end = gpu->transfers();
+    totals.push_back({end.h2d - start.h2d, end.d2h - start.d2h, end.h2d_bytes - start.h2d_bytes,
+                      end.d2h_bytes - start.d2h_bytes});
+    std::printf("[measured] %d cells (%d tets): %llu h2d (%llu B), %llu d2h (%llu B) over %ld ticks\n", cells,
+                m.n_elems, (unsigned long long)totals.back().h2d, (unsigned long long)totals.back().h2d_bytes,
+                (unsigned long long)totals.back().d2h, (unsigned long long)totals.back().d2h_bytes, sched.ticks());
+  }
+  EXPECT_EQ(totals[0].h2d, totals[1].h2d);
+  EXPECT_EQ(totals[0].d2h, totals[1].d2h);
+  EXPECT_EQ(totals[0].h2d_bytes, totals[1].h2d_bytes);
+  EXPECT_EQ(totals[0].d2h_bytes, totals[1].d2h_bytes);
+}
+
+TEST_P(Stages, BadInputGivesClearErrors) {
+  SKIP_WITHOUT_GPU();
+  auto gpu = make_cuda_backend(GetParam());
+  EXPECT_THROW(gpu->advance(1), std::logic_error);  // before upload
+  const auto m = box_model(4, 4, 2, 0.04, 0.04, 0.02);
+  gpu->upload(m);
+  const index_t n = m.n_nodes;
+  EXPECT_THROW(gpu->set_displacements(std::vector<double>(3 * n - 1, 0.0)), std::invalid_argument);
+  std::vector<double> u(3 * size_t(n), 0.0);
+  u[5] = std::nan("");
+  try {
+    gpu->set_displacements(u);
+    ADD_FAILURE() << "NaN displacement accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("node 5"), std::string::npos) << e.what();
+  }
+  const index_t bad_node[1] = {n};
+  const double target[3] = {0, 0, 0};
+  EXPECT_THROW(gpu->set_driven(bad_node, target), std::invalid_argument);
+  const index_t one[1] = {3};
+  const double nan3[3] = {0, std::nan(""), 0};
+  EXPECT_THROW(gpu->set_driven(one, nan3), std::invalid_argument);
+  EXPECT_THROW(gpu->set_driven(one, std::vector<double>(2, 0.0)), std::invalid_argument);
+  EXPECT_THROW(gpu->build_region(one, -3), std::invalid_argument);
+  EXPECT_THROW(gpu->build_region(bad_node, 1), std::out_of_range);
+  // a node outside the region cannot be driven (found with one role download)
+  const index_t seed[1] = {box_node(4, 4, 0, 0, 2)};
+  gpu->build_region(seed, 0);
+  const index_t far[1] = {box_node(4, 4, 4, 4, 2)};
+  try {
+    gpu->set_driven(far, target);
+    ADD_FAILURE() << "drove a node outside the region";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("outside the deformation region"), std::string::npos) << e.what();
+  }
+  EXPECT_NO_THROW(gpu->set_driven(seed, target));
+  EXPECT_THROW(gpu->collide({0, 0, std::nan("")}, {0, 0, 0}), std::invalid_argument);
+  EXPECT_THROW(gpu->advance(-1), std::invalid_argument);
+  auto cpu = make_cpu_backend(GetParam());
+  EXPECT_THROW(set_cuda_step_mode(*cpu, CudaStepMode::Graph), std::invalid_argument);
+}
+
+TEST(NoGpu, BackendRefusesWithReason) {
+  std::string why;
+  if (cuda_available(&why)) GTEST_SKIP() << "a GPU is present: " << why;
+  EXPECT_FALSE(why.empty());
+  EXPECT_THROW(make_cuda_backend(Precision::Float), std::runtime_error);
+  try {
+    create_backend("cuda", Precision::Float);
+    ADD_FAILURE() << "created a cuda backend without a GPU";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("cannot run here"), std::string::npos) << e.what();
+  }
+  bool listed = false;
+  for (const auto& b : list_backends())
+    if (b.name == "cuda") {
+      listed = true;
+      EXPECT_TRUE(b.built);
+      EXPECT_FALSE(b.available);
+      EXPECT_EQ(b.detail, why);
+    }
+  EXPECT_TRUE(listed);
+}
+
+TEST(Gpu, AvailableNamesTheDeviceAndMeasuresBandwidth) {
+  SKIP_WITHOUT_GPU();
+  std::string why;
+  ASSERT_TRUE(cuda_available(&why));
+  EXPECT_FALSE(why.empty());
+  auto gpu = make_cuda_backend(Precision::Float);
+  EXPECT_EQ(gpu->name(), "cuda");
+  EXPECT_NE(gpu->device_name().find(why), std::string::npos);
+  const double bw = cuda_copy_bandwidth();
+  std::printf("[measured] device %s copy bandwidth %.1f GB/s\n", why.c_str(), bw * 1e-9);
+  EXPECT_GT(bw, 1e11);  // any Hopper GPU copies > 100 GB/s
+}
+
+}  // namespace
+}  // namespace tissue::cuda_test
