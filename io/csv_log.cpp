@@ -1,0 +1,35 @@
+#include "io/csv_log.hpp"
+
+#include <fmt/format.h>
+
+#include <stdexcept>
+
+namespace tissue::io {
+
+const char* TickLog::header() {
+  return "tick,time,tool_x,tool_y,tool_z,contact_tri,force_x,force_y,force_z,internal_x,internal_y,internal_z,"
+         "region_nodes,region_elems,residual,kinetic,max_disp,equilibrium,steps";
+}
+
+TickLog::TickLog(const std::string& path) : path_(path), out_(path) {
+  if (!out_) throw std::runtime_error(fmt::format("{}: cannot open the tick log for writing", path_));
+  out_ << header() << '\n';
+  if (!out_) throw std::runtime_error(fmt::format("{}: cannot write the tick log header", path_));
+}
+
+void TickLog::write(const TickReport& r) {
+  out_ << fmt::format(
+      "{},{:.9g},{:.9g},{:.9g},{:.9g},{},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{},{},{:.6g},{:.6g},{:.9g},{},{}\n",
+      r.tick, r.time, r.tool.x, r.tool.y, r.tool.z, r.contact_tri, r.force.x, r.force.y, r.force.z, r.internal.x,
+      r.internal.y, r.internal.z, r.region_nodes, r.region_elems, r.residual, r.kinetic, r.max_disp,
+      r.equilibrium ? 1 : 0, r.steps);
+  if (!out_) throw std::runtime_error(fmt::format("{}: write failed at tick {}", path_, r.tick));
+  ++rows_;
+}
+
+void TickLog::flush() {
+  out_.flush();
+  if (!out_) throw std::runtime_error(fmt::format("{}: flush failed", path_));
+}
+
+}  // namespace tissue::io

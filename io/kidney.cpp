@@ -1,0 +1,240 @@
+#include "io/kidney.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <map>
+#include <stdexcept>
+#include <utility>
+
+#include "core/device.hpp"
+#include "core/tet.hpp"
+#include "io/tetgen_mesher.hpp"
+
+namespace tissue::io {
+namespace {
+
+Vec3<double> unit(Vec3<double> v) {
+  return (1.0 / norm(v)) * v;
+}
+
+Vec3<double> vertex(const SurfaceMesh& s, index_t i) {
+  return {s.vertices[3 * i], s.vertices[3 * i + 1], s.vertices[3 * i + 2]};
+}
+
+/// Unit icosahedron: 12 vertices, 20 outward triangles.
+SurfaceMesh icosahedron() {
+  const double t = (1.0 + std::sqrt(5.0)) / 2.0;
+  const double v[12][3] = {{-1, t, 0},  {1, t, 0},  {-1, -t, 0}, {1, -t, 0}, {0, -1, t},  {0, 1, t},
+                           {0, -1, -t}, {0, 1, -t}, {t, 0, -1},  {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
+  SurfaceMesh s;
+  for (const auto& p : v) {
+    const Vec3<double> u = unit({p[0], p[1], p[2]});
+    s.vertices.insert(s.vertices.end(), {u.x, u.y, u.z});
+  }
+  s.triangles = {0, 11, 5, 0, 5, 1, 0, 1, 7, 0, 7, 10, 0, 10, 11, 1, 5, 9, 5, 11, 4,  11, 10, 2,  10, 7, 6, 7, 1, 8,
+                 3, 9,  4, 3, 4, 2, 3, 2, 6, 3, 6, 8,  3, 8,  9,  4, 9, 5, 2, 4,  11, 6,  2,  10, 8,  6, 7, 9, 8, 1};
+  return s;
+}
+
+/// Geodesic sphere of the given frequency: every icosahedron face split
+/// into frequency^2 triangles on a barycentric grid, the grid points
+/// projected onto the unit sphere. Points on an icosahedron edge are computed
+/// once from the edge's canonical (lower id first) end points, so the two
+/// faces sharing the edge share them exactly.
+SurfaceMesh geodesic_sphere(int frequency) {
+  const SurfaceMesh ico = icosahedron();
+  const int f = frequency;
+  SurfaceMesh out;
+  out.vertices = ico.vertices;
+  std::map<std::array<index_t, 3>, index_t> edge_points;  // (lo corner, hi corner, steps from lo) -> id
+  auto add = [&](Vec3<double> p) {
+    const Vec3<double> u = unit(p);
+    out.vertices.insert(out.vertices.end(), {u.x, u.y, u.z});
+    return out.n_vertices() - 1;
+  };
+  for (index_t t = 0; t < ico.n_triangles(); ++t) {
+    const index_t c[3] = {ico.triangles[3 * t], ico.triangles[3 * t + 1], ico.triangles[3 * t + 2]};
+    // grid point (i, j): weights (f - i - j, i, j) on corners (c0, c1, c2)
+    std::vector<index_t> grid((f + 1) * (f + 1), -1);
+    auto at = [&](int i, int j) -> index_t& { return grid[i * (f + 1) + j]; };
+    for (int i = 0; i <= f; ++i)
+      for (int j = 0; i + j <= f; ++j) {
+        const int w[3] = {f - i - j, i, j};
+        int nonzero = 0, first = -1, second = -1;
+        for (int k = 0; k < 3; ++k)
+          if (w[k] > 0) {
+            ++nonzero;
+            (first < 0 ? first : second) = k;
+          }
+        if (nonzero == 1) {
+          at(i, j) = c[first];
+        } else if (nonzero == 2) {
+          const bool swap = c[first] > c[second];
+          const index_t lo = swap ? c[second] : c[first], hi = swap ? c[first] : c[second];
+          const int steps = swap ? w[first] : w[second];  // weight on hi = steps from lo
+          auto it = edge_points.find({lo, hi, steps});
+          if (it == edge_points.end())
+            it = edge_points
+                     .emplace(std::array<index_t, 3>{lo, hi, steps},
+                              add((double(f - steps) / f) * vertex(ico, lo) + (double(steps) / f) * vertex(ico, hi)))
+                     .first;
+          at(i, j) = it->second;
+        } else {
+          at(i, j) = add((double(w[0]) / f) * vertex(ico, c[0]) + (double(w[1]) / f) * vertex(ico, c[1]) +
+                         (double(w[2]) / f) * vertex(ico, c[2]));
+        }
+      }
+    for (int i = 0; i < f; ++i)
+      for (int j = 0; i + j < f; ++j) {
+        out.triangles.insert(out.triangles.end(), {at(i, j), at(i + 1, j), at(i, j + 1)});
+        if (i + j < f - 1) out.triangles.insert(out.triangles.end(), {at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)});
+      }
+  }
+  return out;
+}
+
+/// Nearest hit of the ray from the origin along dir with the surface:
+/// (triangle, distance along the unit direction).
+std::pair<index_t, double> ray_hit(const SurfaceMesh& s, Vec3<double> dir) {
+  double reach = 0;
+  for (double x : s.vertices) reach = std::max(reach, std::fabs(x));
+  reach = 4 * reach + 1;
+  const Vec3<double> A{0, 0, 0}, B = reach * unit(dir);
+  index_t best = -1;
+  double best_t = 2;
+  for (index_t t = 0; t < s.n_triangles(); ++t) {
+    double bary[2];
+    const double h = segment_triangle(A, B, vertex(s, s.triangles[3 * t]), vertex(s, s.triangles[3 * t + 1]),
+                                      vertex(s, s.triangles[3 * t + 2]), bary);
+    if (h >= 0 && h < best_t) {
+      best_t = h;
+      best = t;
+    }
+  }
+  if (best < 0)
+    throw std::runtime_error(
+        fmt::format("the ray from the origin along ({}, {}, {}) misses the surface", dir.x, dir.y, dir.z));
+  return {best, best_t * reach};
+}
+
+/// Maps the unit-sphere point p onto the kidney: s(p) (a p_x, b p_y, c p_z).
+Vec3<double> on_kidney(const KidneyShape& k, Vec3<double> p) {
+  const double r = kidney_radial_scale(k, p);
+  return {r * k.a * p.x, r * k.b * p.y, r * k.c * p.z};
+}
+
+}  // namespace
+
+double kidney_radial_scale(const KidneyShape& k, Vec3<double> p) {
+  const double medial = std::pow(0.5 * (1.0 - p.y), 4) * std::exp(-(p.x / k.bean_width) * (p.x / k.bean_width));
+  const double dent = std::exp(-(1.0 + p.y) / k.hilum_width);
+  return 1.0 - k.bean * medial - k.hilum * dent;
+}
+
+SurfaceMesh kidney_surface(int frequency, const KidneyShape& k) {
+  if (frequency < 1 || frequency > 64)
+    throw std::invalid_argument(fmt::format("kidney_surface: frequency {} must be in 1..64", frequency));
+  if (!(k.a > 0 && k.b > 0 && k.c > 0 && k.bean_width > 0 && k.hilum_width > 0 && k.bean >= 0 && k.hilum >= 0 &&
+        k.bean + k.hilum < 1))
+    throw std::invalid_argument("kidney_surface: semi-axes and widths must be > 0, bean + hilum in [0, 1)");
+  SurfaceMesh s = geodesic_sphere(frequency);
+  for (index_t i = 0; i < s.n_vertices(); ++i) {
+    const Vec3<double> x = on_kidney(k, vertex(s, i));
+    s.vertices[3 * i] = x.x;
+    s.vertices[3 * i + 1] = x.y;
+    s.vertices[3 * i + 2] = x.z;
+  }
+  // Star-shapedness of the polyhedron: every triangle faces away from the
+  // origin (its cone from the origin is positively oriented).
+  for (index_t t = 0; t < s.n_triangles(); ++t) {
+    const Vec3<double> a = vertex(s, s.triangles[3 * t]), b = vertex(s, s.triangles[3 * t + 1]),
+                       c = vertex(s, s.triangles[3 * t + 2]);
+    if (!(dot(a, cross(b, c)) > 0))
+      throw std::invalid_argument(
+          fmt::format("kidney_surface: triangle {} faces the centre; the shape is too deep", t));
+  }
+  return s;
+}
+
+Vec3<double> surface_point_along(const SurfaceMesh& s, Vec3<double> dir) {
+  return ray_hit(s, dir).second * unit(dir);
+}
+
+index_t surface_triangle_along(const SurfaceMesh& s, Vec3<double> dir) {
+  return ray_hit(s, dir).first;
+}
+
+Vec3<double> kidney_hilum_centre() {
+  return surface_point_along(kidney_surface(KidneyScene::frequency), {0, -1, 0});
+}
+
+scene::Scene default_kidney_scene() {
+  using K = KidneyScene;
+  const SurfaceMesh surface = kidney_surface(K::frequency);
+  MeshingOptions meshing;
+  meshing.quality = K::quality;
+  meshing.target_tets = K::target_tets;
+  VolumeMesh mesh = tetrahedralize_surface(surface, meshing, "built-in kidney");
+
+  scene::Scene s;
+  s.source = "@kidney";
+  s.nodes = std::move(mesh.nodes);
+  s.tets = std::move(mesh.tets);
+  scene::Material brain;
+  brain.name = "brain";
+  brain.form = scene::Material::Form::YoungPoisson;
+  brain.a = K::E;
+  brain.b = K::nu;
+  brain.rho = K::rho;
+  s.materials.push_back(brain);
+  scene::ElementSet all;
+  all.name = "kidney";
+  all.material = "brain";
+  all.all = true;
+  s.sets.push_back(all);
+
+  // The hilum: nodes within fix_radius of the surface point along -y.
+  const Vec3<double> hilum = surface_point_along(surface, {0, -1, 0});
+  scene::Constraint fix;
+  fix.kind = scene::Constraint::Kind::Nodes;
+  for (index_t i = 0; i < static_cast<index_t>(s.nodes.size() / 3); ++i) {
+    const Vec3<double> x{s.nodes[3 * i], s.nodes[3 * i + 1], s.nodes[3 * i + 2]};
+    if (norm(x - hilum) <= K::fix_radius) fix.nodes.push_back(i);
+  }
+  s.constraints.push_back(std::move(fix));
+
+  // The probe: at the centroid of the lateral surface triangle (+y), along
+  // its inward normal (a triangle's interior point, so the normal is
+  // unambiguous; TetGen's boundary Steiner points keep the facet's plane).
+  // The approach ends touch_overshoot inside the surface, so the tick that
+  // reaches the "touch" point crosses the surface by a margin far above
+  // rounding (in float and double) instead of ending exactly on it; the
+  // deepest point is still press_depth below the surface.
+  const index_t lateral = surface_triangle_along(surface, {0, 1, 0});
+  const Vec3<double> c0 = vertex(surface, surface.triangles[3 * lateral]),
+                     c1 = vertex(surface, surface.triangles[3 * lateral + 1]),
+                     c2 = vertex(surface, surface.triangles[3 * lateral + 2]);
+  const Vec3<double> touch = (1.0 / 3.0) * (c0 + c1 + c2);
+  const Vec3<double> inward = -1.0 * unit(cross(c1 - c0, c2 - c0));
+  scene::Tool tool;
+  tool.name = "probe";
+  tool.radius = K::tool_radius;
+  tool.device = "scripted";
+  tool.path = press_path(touch + K::touch_overshoot * inward, inward, K::press_depth - K::touch_overshoot,
+                         K::approach + K::touch_overshoot);
+  s.tools.push_back(std::move(tool));
+
+  s.solver.backend = "cpu";
+  s.solver.precision = Precision::Float;
+  s.solver.dt = 0;
+  s.solver.dt_safety = 0.5;
+  s.solver.damping = -1;
+  s.solver.depth = 5;
+  s.solver.tick = 1e-3;
+  return s;
+}
+
+}  // namespace tissue::io

@@ -1,0 +1,78 @@
+// The built-in default scene: a kidney-shaped organ generated here (no data
+// file), meshed by TetGen, with brain-tissue Neo-Hookean parameters, a fixed
+// hilum and a scripted press-and-release probe. docs/kidney.md describes the
+// construction and the sources of the numbers.
+#pragma once
+
+#include "core/vec.hpp"
+#include "io/surface_import.hpp"
+#include "scene/scene.hpp"
+
+namespace tissue::io {
+
+/// The bean shape: an ellipsoid with semi-axes (a, b, c) along x (long,
+/// superior-inferior), y (medial -y to lateral +y) and z (thickness), then
+/// scaled radially by s(p) = 1 - bean * m(p) - hilum * h(p), where p is the
+/// unit-sphere point, m(p) = ((1 - p_y) / 2)^4 exp(-(p_x / bean_width)^2)
+/// pulls the middle of the medial side in (the bean's concavity) and
+/// h(p) = exp(-(1 + p_y) / hilum_width) is the hilum dent centred on the
+/// medial direction -y. s >= 1 - bean - hilum > 0 everywhere.
+struct KidneyShape {
+  double a = 0.055, b = 0.03, c = 0.022;  ///< ellipsoid semi-axes (m): about 11 x 6 x 4.4 cm
+  double bean = 0.2;                      ///< depth of the medial concavity (fraction of the radius)
+  double bean_width = 0.5;                ///< its extent along the long axis (unit-sphere x)
+  double hilum = 0.2;                     ///< depth of the hilum dent (fraction of the radius)
+  double hilum_width = 0.08;              ///< its angular size: 1 - cos(angle) scale
+};
+
+/// Radial scale s(p) of the shape at the unit-sphere point p (in (0, 1]).
+double kidney_radial_scale(const KidneyShape& shape, Vec3<double> p);
+
+/// Closed, outward-oriented kidney surface (m), centred at the origin: a
+/// geodesic sphere of the given frequency (1..64: each icosahedron edge cut
+/// into `frequency` segments, 10 f^2 + 2 vertices, 20 f^2 triangles; an
+/// icosphere subdivided n times is frequency 2^n), each vertex p mapped to
+/// s(p) (a p_x, b p_y, c p_z).
+/// The map is radial from the origin (x/|x| is a bijection of the sphere),
+/// so the surface is star-shaped and cannot intersect itself; every triangle
+/// is also checked to face away from the origin. Throws std::invalid_argument
+/// for a frequency outside 1..64 or a shape with s <= 0.
+SurfaceMesh kidney_surface(int frequency, const KidneyShape& shape = {});
+
+/// The point where the ray from the origin along `dir` leaves the closed
+/// star-shaped surface (m). Throws std::runtime_error if the ray misses.
+Vec3<double> surface_point_along(const SurfaceMesh& surface, Vec3<double> dir);
+
+/// The surface triangle that the ray from the origin along `dir` crosses
+/// first (the lowest id when the ray passes through an edge or a vertex).
+index_t surface_triangle_along(const SurfaceMesh& surface, Vec3<double> dir);
+
+/// Construction constants of the default kidney scene.
+struct KidneyScene {
+  static constexpr int frequency = 6;              ///< geodesic frequency: 362 vertices, 720 triangles
+  static constexpr double quality = 2.0;           ///< TetGen radius-edge bound (1.414 would force ~9,300 tets)
+  static constexpr int target_tets = 8400;         ///< the reference paper's kidney had 8,427
+  static constexpr double fix_radius = 0.01;       ///< nodes within this distance of the hilum centre are fixed (m)
+  static constexpr double tool_radius = 0.002;     ///< probe tip radius (m)
+  static constexpr double approach = 0.01;         ///< tool starts this far outside the surface (m)
+  static constexpr double press_depth = 0.005;     ///< indentation below the touched surface point (m)
+  static constexpr double touch_overshoot = 2e-5;  ///< the approach ends this far inside the surface (m); see .cpp
+  static constexpr double E = 3000, nu = 0.45, rho = 1000;  ///< brain tissue (Pa, -, kg/m^3)
+};
+
+/// Hilum centre of the default kidney (m): the surface point along -y.
+Vec3<double> kidney_hilum_centre();
+
+/// The built-in default scene: the kidney surface (KidneyScene::frequency)
+/// tetrahedralised by TetGen (KidneyScene::quality) to about
+/// KidneyScene::target_tets tets; one Neo-Hookean material (E = 3000 Pa,
+/// nu = 0.45, rho = 1000 kg/m^3) on every element; a Nodes constraint fixing
+/// the nodes within fix_radius of the hilum centre; one scripted probe
+/// (radius 2 mm) on core press_path: aimed at the centroid of the surface
+/// triangle on the convex lateral side (+y), along that triangle's inward
+/// normal, from 1 cm outside: touch, press 5 mm, hold, retract (1 s);
+/// solver: cpu, float, dt = 0.5 dt_crit, automatic damping, depth 5, 1 ms
+/// tick. Deterministic; the mesh is inline (Scene::nodes, Scene::tets).
+scene::Scene default_kidney_scene();
+
+}  // namespace tissue::io

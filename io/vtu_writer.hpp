@@ -1,0 +1,52 @@
+// Result export for ParaView: VTK XML UnstructuredGrid files (.vtu, ASCII)
+// of the tissue in its reference configuration with the solver's fields, and
+// a frame series with a .pvd collection that carries the simulated times.
+// In ParaView, "Warp By Vector" on "displacement" shows the deformed shape.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/backend.hpp"
+#include "core/model.hpp"
+
+namespace tissue::io {
+
+/// Writes one .vtu file: points = reference positions X (n_nodes), cells =
+/// the tets as VTK_TETRA (type 10), PointData "displacement" (3 components,
+/// m), "nodal_pressure" (Pa) and "internal_force" (3 components, N), CellData
+/// "J" (det F). The fields' sizes must match the model (u, f: 3 x n_nodes
+/// component-major as in core/backend.hpp; node_p: n_nodes; elem_J:
+/// n_elems). Throws std::runtime_error naming the path on a size mismatch or
+/// a write failure.
+void write_vtu(const std::string& path, const TissueModel<double>& model, const Fields& fields);
+
+/// A numbered series of frames, frame_0000.vtu, frame_0001.vtu, ... in one
+/// directory (created if missing), and series.pvd listing them with their
+/// times. The .pvd is rewritten after each frame, so it stays valid if the
+/// run stops early.
+class VtuSeries {
+ public:
+  /// Creates `directory` (and parents); throws std::runtime_error naming it
+  /// when that fails.
+  explicit VtuSeries(std::string directory);
+
+  /// Writes the next frame (write_vtu) at simulated time `time` (s, not
+  /// before the previous frame's) and updates series.pvd. Returns the
+  /// frame's path.
+  std::string write(const TissueModel<double>& model, const Fields& fields, double time);
+
+  /// Frames written so far.
+  int frames() const { return static_cast<int>(times_.size()); }
+  /// Path of the collection file (directory/series.pvd).
+  std::string pvd_path() const;
+
+ private:
+  void write_pvd() const;
+
+  std::string directory_;
+  std::vector<double> times_;       ///< (frames) s
+  std::vector<std::string> files_;  ///< frame file names, relative to directory_
+};
+
+}  // namespace tissue::io
