@@ -4,7 +4,7 @@
 //   held = fixed | driven | halo; a fixed node is always held at 0 (also
 //   when driven); a halo node is held (and stopped) at its displacement when
 //   the region was built; a node leaving the region is frozen
-//   (u_prev = u_next = u, f = 0), elements leaving it get elem_f = 0; after
+//   (u_prev = u_next = u, f = 0), elements leaving it get zero forces; after
 //   a region build or set_displacements pass 1 is recomputed over all
 //   elements, so pass 2 averages valid p_e V_e on halo nodes too.
 // Per haptic tick the only copies are set_driven's targets (up) and the Hit

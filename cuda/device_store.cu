@@ -26,11 +26,29 @@ __global__ void reset_nodes_kernel(index_t n, const std::uint8_t* flags, std::ui
 }
 
 template <class T>
-__global__ void reset_elems_kernel(index_t ne, const T* volume, T* elem_J, PressureVolume<T>* elem_pv) {
+__global__ void reset_elems_kernel(index_t ne, T* elem_J) {
   const index_t e = thread_index();
-  if (e >= ne) return;
-  elem_J[e] = T(1);
-  elem_pv[e] = {T(0), volume[e]};
+  if (e < ne) elem_J[e] = T(1);
+}
+
+/// slot_of[a * ne + e] = k where node_elem[k] == 4 e + a (the inverse permutation).
+std::vector<index_t> slot_positions(const std::vector<index_t>& node_elem, index_t ne) {
+  std::vector<index_t> slot(node_elem.size());
+  for (size_t k = 0; k < node_elem.size(); ++k) {
+    const index_t e = node_elem[k] >> 2, a = node_elem[k] & 3;
+    slot[size_t(a) * ne + e] = static_cast<index_t>(k);
+  }
+  return slot;
+}
+
+/// sum_e V_e over each node's node_elem list in stored order, in T: the
+/// denominator of pass 2, computed exactly as the cpu backend does.
+template <class T>
+std::vector<T> node_volumes(const TissueModel<T>& m) {
+  std::vector<T> v(m.n_nodes, T(0));
+  for (index_t a = 0; a < m.n_nodes; ++a)
+    for (index_t k = m.node_elem_start[a]; k < m.node_elem_start[a + 1]; ++k) v[a] += m.volume[m.node_elem[k] >> 2];
+  return v;
 }
 
 }  // namespace
@@ -54,7 +72,11 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   upload_array(cd_B_, m.cd_B, log, stream);
   upload_array(cd_C_, m.cd_C, log, stream);
   upload_array(node_flags_, m.node_flags, log, stream);
-  CUDA_CHECK(cudaStreamSynchronize(stream));  // the host sources (X above) must outlive the copies
+  const std::vector<index_t> slot_of = slot_positions(m.node_elem, ne);
+  const std::vector<T> node_volume = node_volumes(m);
+  upload_array(slot_of_, slot_of, log, stream);
+  upload_array(node_volume_, node_volume, log, stream);
+  CUDA_CHECK(cudaStreamSynchronize(stream));  // the host sources above must outlive the copies
 
   model_ = {};
   model_.n_nodes = n;
@@ -72,6 +94,8 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   model_.cd_C = cd_C_.data();
   model_.node_elem_start = node_elem_start_.data();
   model_.node_elem = node_elem_.data();
+  model_.slot_of = slot_of_.data();
+  model_.node_volume = node_volume_.data();
   model_.tris = tris_.data();
   model_.node_flags = node_flags_.data();
   model_.dt = m.dt;
@@ -80,11 +104,11 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   for (auto& b : u.buf) b.allocate(n);
   u_held_.allocate(n);
   f_.allocate(n);
-  elem_f_.allocate(4 * size_t(ne));
+  f_slot_.allocate(4 * size_t(ne));
+  pv_slot_.allocate(4 * size_t(ne));
   held_.allocate(n);
   driven_.allocate(n);
   role_.allocate(n);
-  elem_pv_.allocate(ne);
   elem_J_.allocate(ne);
   node_p_.allocate(n);
   bad_.allocate(1);
@@ -97,13 +121,13 @@ void DeviceStore<T>::reset_state(cudaStream_t stream) {
   u.phase = 0;
   u_held_.fill_bytes(0, stream);
   f_.fill_bytes(0, stream);
-  elem_f_.fill_bytes(0, stream);
+  f_slot_.fill_bytes(0, stream);
+  pv_slot_.fill_bytes(0, stream);
   node_p_.fill_bytes(0, stream);
   bad_.fill_bytes(0xff, stream);
   launch(model_.n_nodes, stream, reset_nodes_kernel<T>, model_.n_nodes, model_.node_flags, held_.data(),
          driven_.data(), role_.data());
-  launch(model_.n_elems, stream, reset_elems_kernel<T>, model_.n_elems, model_.volume, elem_J_.data(),
-         elem_pv_.data());
+  launch(model_.n_elems, stream, reset_elems_kernel<T>, model_.n_elems, elem_J_.data());
 }
 
 template <class T>
@@ -113,10 +137,10 @@ StateView<T> DeviceStore<T>::state() {
   s.held = held_.data();
   s.driven = driven_.data();
   s.role = role_.data();
-  s.elem_pv = elem_pv_.data();
+  s.pv_slot = pv_slot_.data();
   s.elem_J = elem_J_.data();
   s.node_p = node_p_.data();
-  s.elem_f = elem_f_.data();
+  s.f_slot = f_slot_.data();
   s.f = f_.data();
   s.bad = bad_.data();
   return s;

@@ -35,6 +35,29 @@ void launch(index_t n, cudaStream_t stream, Kernel kernel, Args... args) {
   launch_blocks(n > 0 ? grid_for(n) : 0, kBlock, stream, kernel, args...);
 }
 
+/// Like launch(), with programmatic dependent launch: the grid may be
+/// scheduled while the previous kernel in the stream still runs; the kernel
+/// must wait (cudaGridDependencySynchronize) before touching anything that
+/// kernel writes. Captured into graphs as programmatic edges. The four pass
+/// kernels (cuda/tled.cuh) are launched this way.
+template <class... Params, class... Args>
+void launch_chained(index_t n, cudaStream_t stream, void (*kernel)(Params...), Args... args) {
+  if (n <= 0) return;
+  cudaLaunchConfig_t cfg = {};
+  cfg.gridDim = dim3(grid_for(n));
+  cfg.blockDim = dim3(kBlock);
+  cfg.stream = stream;
+  cudaLaunchAttribute attr;
+  attr.id = cudaLaunchAttributeProgrammaticStreamSerialization;
+  attr.val.programmaticStreamSerializationAllowed = 1;
+  cfg.attrs = &attr;
+  cfg.numAttrs = 1;
+  CUDA_CHECK(cudaLaunchKernelEx(&cfg, kernel, args...));
+#ifdef TISSUE_CUDA_SYNC_CHECK
+  CUDA_CHECK(cudaStreamSynchronize(stream));
+#endif
+}
+
 /// Grid-stride index of the calling thread and the stride.
 __device__ __forceinline__ index_t thread_index() { return static_cast<index_t>(blockIdx.x * blockDim.x + threadIdx.x); }
 __device__ __forceinline__ index_t thread_stride() { return static_cast<index_t>(gridDim.x * blockDim.x); }

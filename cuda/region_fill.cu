@@ -77,10 +77,11 @@ __global__ void apply_region_kernel(index_t n, const std::uint8_t* flags, StateV
 /// Elements outside the region get zero forces, so a halo node's f sums
 /// computed elements only.
 template <class T>
-__global__ void clear_outside_forces_kernel(index_t ne, const std::uint8_t* elem_sel, Packed3<T>* elem_f) {
+__global__ void clear_outside_forces_kernel(index_t ne, const std::uint8_t* elem_sel, const index_t* slot_of,
+                                            Packed3<T>* f_slot) {
   const index_t e = thread_index();
   if (e >= ne || elem_sel[e]) return;
-  for (int a = 0; a < 4; ++a) elem_f[4 * e + a] = {T(0), T(0), T(0), T(0)};
+  for (int a = 0; a < 4; ++a) f_slot[slot_of[a * ne + e]] = {T(0), T(0), T(0), T(0)};
 }
 
 size_t select_temp_bytes(index_t n) {
@@ -165,7 +166,8 @@ Region RegionFill::download(const Topology& t, const std::uint8_t* role, std::sp
 template <class T>
 void RegionFill::apply(const ModelView<T>& m, const StateView<T>& s, StepBuffers<T> b, cudaStream_t stream) const {
   launch(m.n_nodes, stream, apply_region_kernel<T>, m.n_nodes, m.node_flags, s, b);
-  if (view_.elems) launch(m.n_elems, stream, clear_outside_forces_kernel<T>, m.n_elems, elem_sel_.data(), s.elem_f);
+  if (view_.elems)
+    launch(m.n_elems, stream, clear_outside_forces_kernel<T>, m.n_elems, elem_sel_.data(), m.slot_of, s.f_slot);
 }
 
 template void RegionFill::apply(const ModelView<float>&, const StateView<float>&, StepBuffers<float>,

@@ -52,7 +52,7 @@ class RegionFill {
   /// holding rule, cpu/constraints.hpp): held = fixed | driven | halo; fixed
   /// targets 0; halo nodes are stopped (u_prev = u_next = u) and, unless
   /// driven, held at u; nodes outside are frozen (u_prev = u_next = u, f = 0)
-  /// so buffer rotation keeps them; elements outside get elem_f = 0.
+  /// so buffer rotation keeps them; elements outside get zero forces.
   template <class T>
   void apply(const ModelView<T>& m, const StateView<T>& s, StepBuffers<T> b, cudaStream_t stream) const;
 

@@ -30,7 +30,7 @@ int largest_cluster() {
   for (int size : {16, 8, 4, 2}) {
     cudaLaunchConfig_t cfg = {};
     cfg.gridDim = dim3(size);
-    cfg.blockDim = dim3(kPersistentBlock);
+    cfg.blockDim = dim3(kPersistentBlock<T>);
     cudaLaunchAttribute attr;
     attr.id = cudaLaunchAttributeClusterDimension;
     attr.val.clusterDim.x = size;
@@ -54,10 +54,10 @@ template <class T>
 void Stepper<T>::init() {
   graphs_.clear();
   limits_ = {};
-  limits_.block = kPersistentBlock;
+  limits_.block = kPersistentBlock<T>;
   if (current_device_attribute(cudaDevAttrCooperativeLaunch)) {
     int per_sm = 0;
-    CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, persistent_grid_kernel<T>, kPersistentBlock, 0));
+    CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, persistent_grid_kernel<T>, kPersistentBlock<T>, 0));
     limits_.grid_blocks = per_sm * current_device_attribute(cudaDevAttrMultiProcessorCount);
   }
   limits_.cluster_size = largest_cluster<T>();
@@ -84,25 +84,25 @@ CudaStepMode Stepper<T>::choose(const RegionView& r) const {
 template <class T>
 void Stepper<T>::element_pressure(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                                   const Packed3<T>* u, cudaStream_t stream) {
-  launch(r.n_elems, stream, element_pressure_kernel<T>, m, s, r, u);
+  launch_chained(r.n_elems, stream, element_pressure_kernel<T>, m, s, r, u);
 }
 
 template <class T>
 void Stepper<T>::nodal_pressure(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                                 cudaStream_t stream) {
-  launch(r.n_nodes, stream, nodal_pressure_kernel<T>, m, s, r);
+  launch_chained(r.n_nodes, stream, nodal_pressure_kernel<T>, m, s, r);
 }
 
 template <class T>
 void Stepper<T>::element_forces(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                                 const Packed3<T>* u, cudaStream_t stream) {
-  launch(r.n_elems, stream, element_forces_kernel<T>, m, s, r, u);
+  launch_chained(r.n_elems, stream, element_forces_kernel<T>, m, s, r, u);
 }
 
 template <class T>
 void Stepper<T>::node_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
                              cudaStream_t stream) {
-  launch(r.n_nodes, stream, node_update_kernel<T>, m, s, r, b);
+  launch_chained(r.n_nodes, stream, node_update_kernel<T>, m, s, r, b);
 }
 
 template <class T>
@@ -162,23 +162,23 @@ void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, const Reg
       }
       break;
     case CudaStepMode::Grid: {
-      const int blocks = std::clamp(grid_for(std::max(r.n_elems, r.n_nodes), kPersistentBlock), 1, limits_.grid_blocks);
+      const int blocks = std::clamp(grid_for(std::max(r.n_elems, r.n_nodes), kPersistentBlock<T>), 1, limits_.grid_blocks);
       ModelView<T> ma = m;
       StateView<T> sa = s;
       RegionView ra = r;
       StepBuffers<T> b = ring.current();
       void* args[] = {&ma, &sa, &ra, &b, &steps};
       CUDA_CHECK(cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(persistent_grid_kernel<T>), dim3(blocks),
-                                             dim3(kPersistentBlock), args, 0, stream));
+                                             dim3(kPersistentBlock<T>), args, 0, stream));
       ring.advance(steps);
       break;
     }
     case CudaStepMode::Cluster: {
       const int blocks =
-          std::clamp(grid_for(std::max(r.n_elems, r.n_nodes), kPersistentBlock), 1, limits_.cluster_size);
+          std::clamp(grid_for(std::max(r.n_elems, r.n_nodes), kPersistentBlock<T>), 1, limits_.cluster_size);
       cudaLaunchConfig_t cfg = {};
       cfg.gridDim = dim3(blocks);
-      cfg.blockDim = dim3(kPersistentBlock);
+      cfg.blockDim = dim3(kPersistentBlock<T>);
       cfg.stream = stream;
       cudaLaunchAttribute attr;
       attr.id = cudaLaunchAttributeClusterDimension;

@@ -2,15 +2,18 @@
 // arrays are owned by DeviceStore (cuda/device_store.hpp).
 //
 // Device layouts. Model arrays keep core/model.hpp's component-major
-// layouts (coalesced per-element loads), except two that kernels gather:
-//   X, u, u_prev, u_next, u_held, f   one Packed3 per node (x, y, z, pad)
-//   elem_f                            one Packed3 per (element, corner) at
-//                                     4 * e + a: exactly the values stored in
-//                                     node_elem, so the pass-4 gather is one
-//                                     vector load per incident corner
-//   elem_pv                           (p_e V_e, V_e) pairs for pass 2
-// The padded layouts make every gathered node or corner one 16-byte (float)
-// or two 16-byte (double) loads instead of three scattered 4/8-byte ones.
+// layouts (coalesced per-element loads), except those kernels gather:
+//   X, u, u_prev, u_next, u_held, f   one Packed3 per node (x, y, z, pad):
+//                                     one 16-byte (float) or two (double)
+//                                     loads per gathered corner
+//   pv_slot, f_slot                   per (element, corner) values stored in
+//                                     node order: slot k holds the value of
+//                                     node_elem[k], so passes 2 and 4 read a
+//                                     node's values contiguously, in the
+//                                     stored order (the cpu backend's
+//                                     summation order), with no index
+//                                     indirection. Passes 1 and 3 write them
+//                                     through slot_of (the inverse of node_elem).
 #pragma once
 
 #include <cstdint>
@@ -26,12 +29,6 @@ struct alignas(4 * sizeof(T)) Packed3 {
   T x, y, z, w;
   TISSUE_HD Vec3<T> vec() const { return {x, y, z}; }
   TISSUE_HD static Packed3 of(Vec3<T> v) { return {v.x, v.y, v.z, T(0)}; }
-};
-
-/// Pass-1 output per element: p_e V_e (N m) and V_e (m^3), read together by pass 2.
-template <class T>
-struct alignas(2 * sizeof(T)) PressureVolume {
-  T pv, v;
 };
 
 /// Read-only model on the device (shapes as core/model.hpp unless noted).
@@ -50,6 +47,8 @@ struct ModelView {
   const T* cd_C = nullptr;
   const index_t* node_elem_start = nullptr;  ///< (n_nodes + 1)
   const index_t* node_elem = nullptr;        ///< element * 4 + corner (nnz)
+  const index_t* slot_of = nullptr;       ///< position of (e, a) in node_elem (4 x n_elems, [a * n_elems + e])
+  const T* node_volume = nullptr;         ///< sum_e V_e over node_elem in stored order (n_nodes) m^3
   const index_t* tris = nullptr;          ///< (3 x n_tris)
   const std::uint8_t* node_flags = nullptr;  ///< NodeFlag bits (n_nodes)
   double dt = 0;                          ///< s
@@ -84,10 +83,10 @@ struct StateView {
   std::uint8_t* held = nullptr;        ///< 1 = displacement set, not integrated (n_nodes)
   std::uint8_t* driven = nullptr;      ///< 1 = tool-driven (n_nodes)
   std::uint8_t* role = nullptr;        ///< NodeRole (n_nodes)
-  PressureVolume<T>* elem_pv = nullptr;///< pass 1 (n_elems)
+  T* pv_slot = nullptr;                ///< pass 1: p_e V_e per node_elem slot (4 n_elems) N m
   T* elem_J = nullptr;                 ///< pass 1: J_e (n_elems)
   T* node_p = nullptr;                 ///< pass 2: p_a (n_nodes) Pa
-  Packed3<T>* elem_f = nullptr;        ///< pass 3: f_a^e at 4 e + a (4 n_elems) N
+  Packed3<T>* f_slot = nullptr;        ///< pass 3: f_a^e per node_elem slot (4 n_elems) N
   Packed3<T>* f = nullptr;             ///< pass 4: internal force (n_nodes) N
   unsigned long long* bad = nullptr;   ///< lowest bad element key (see bad_key), ~0 = none
 };

@@ -1,9 +1,10 @@
 // cuda_step_timing: steps/s of whole-mesh TLED advance on the cuda backend
-// for every step mode (launch, graph, grid, cluster), float and double, on
-// box meshes of about 8.6k, 100k, 1M and 4M tets, plus the time of one
-// collide and one full Scheduler tick. Not a test: a measurement to run on
-// a GPU machine (docs/cuda.md records the results).
-//   cuda_step_timing [--quick] [sizes...]   sizes: 8k 100k 1m 4m
+// for every step mode (launch, graph, grid, cluster, auto), float and
+// double, on the default kidney (~8.4k tets) and box meshes of about 8.6k,
+// 100k, 1M and 4M tets, plus the latency of one collide and of one full
+// Scheduler tick (depth 5) along a press path. Not a test: a measurement to
+// run on a GPU machine (docs/cuda.md records the results).
+//   cuda_step_timing [--quick] [cases...]   cases: kidney 8k 100k 1m 4m
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -16,27 +17,38 @@
 #include "core/box_mesh.hpp"
 #include "core/scheduler.hpp"
 #include "cuda/cuda_backend.hpp"
+#include "io/kidney.hpp"
+#include "scene/validate.hpp"
 
 using namespace tissue;
 
 namespace {
 
-struct BoxSize {
+/// A timed mesh: its model and a tool path that presses its surface.
+struct Case {
   std::string name;
-  int nx, ny, nz;
+  TissueModel<double> model;
+  std::vector<Waypoint> path;
 };
 
-/// Brain-tissue-like material (E = 3000 Pa, nu = 0.45, rho = 1000) on a
-/// 0.1 m box fixed at z = 0.
-TissueModel<double> box_model(const BoxSize& b) {
+/// Brain-tissue-like material (E = 3000 Pa, nu = 0.45, rho = 1000) on a box
+/// 0.1 m wide (nx x ny x nz cells, 6 tets each) fixed at z = 0, pressed 3 mm
+/// at the middle of its top face.
+Case box_case(const std::string& name, int nx, int ny, int nz) {
   ModelInput in;
-  box_mesh(in, b.nx, b.ny, b.nz, 0.1, 0.1, 0.1 * b.nz / b.nx);
+  const double top = 0.1 * nz / nx;
+  box_mesh(in, nx, ny, nz, 0.1, 0.1, top);
   const double E = 3000, nu = 0.45;
   in.materials = {{E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu)), 1000}};
   in.fixed.assign(in.nodes.size() / 3, 0);
   for (size_t i = 0; i < in.fixed.size(); ++i) in.fixed[i] = in.nodes[3 * i + 2] == 0.0;
-  in.source = "box " + b.name;
-  return build_model(in);
+  in.source = "box " + name;
+  return {name, build_model(in), press_path({0.0503, 0.0497, top}, {0, 0, -1}, 0.003, 0.01, 0.1005)};
+}
+
+Case kidney_case() {
+  const scene::Scene sc = io::default_kidney_scene();
+  return {"kidney", scene::load_model(sc), sc.tools.at(0).path};
 }
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
@@ -67,11 +79,78 @@ double steps_per_second(Backend& be, double min_seconds) {
   return rates[rates.size() / 2];
 }
 
-/// Fewest bytes one whole-mesh step moves through memory in the device
-/// layouts (each array touched once per pass that touches it; s = scalar
-/// bytes): see docs/cuda.md for the list.
-double step_bytes(double n, double ne, int s) {
-  return ne * (64 + 66.0 * s) + n * (9 + 33.0 * s);
+/// Fewest bytes one whole-mesh step moves through device memory in the
+/// device layouts (each array touched once per pass that touches it; s =
+/// scalar bytes): docs/cuda.md lists the terms.
+double step_bytes(double n, double ne, int s) { return ne * (64 + 66.0 * s) + n * (9 + 33.0 * s); }
+
+template <class T>
+T median(std::vector<T> v) {
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+void time_case(const Case& cs, double bw, double min_seconds, bool quick, std::vector<std::string>& rows) {
+  const TissueModel<double>& model = cs.model;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> dist(-1e-5, 1e-5);  // a non-zero start: no timing on zeros
+  std::vector<double> u0(3 * size_t(model.n_nodes));
+  for (auto& v : u0) v = dist(rng);
+  for (Precision p : {Precision::Float, Precision::Double}) {
+    auto be = make_cuda_backend(p);
+    be->upload(model);
+    for (CudaStepMode mode : {CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Grid, CudaStepMode::Cluster,
+                              CudaStepMode::Auto}) {
+      try {
+        set_cuda_step_mode(*be, mode);
+      } catch (const std::exception& e) {
+        fmt::print("{} {} {}: skipped ({})\n", cs.name, to_string(p), to_string(mode), e.what());
+        continue;
+      }
+      if (mode == CudaStepMode::Cluster && model.n_elems > 200000) continue;  // one cluster: far too slow
+      be->set_displacements(u0);
+      const double sps = steps_per_second(*be, min_seconds);
+      const Reductions r = be->reduce();
+      const double frac = sps * step_bytes(model.n_nodes, model.n_elems, p == Precision::Float ? 4 : 8) / bw;
+      rows.push_back(fmt::format("{:>6} {:>8} {:>7} {:>6} {:>8}{} {:>12.0f} {:>10.3g} {:>6.3f} {}", cs.name,
+                                 model.n_elems, model.n_nodes, to_string(p), to_string(cuda_step_mode(*be)),
+                                 mode == CudaStepMode::Auto ? "*" : " ", sps, sps * model.n_elems, frac,
+                                 r.finite && r.bad_elem < 0 ? "ok" : "NONFINITE/BAD"));
+      fmt::print("{}\n", rows.back());
+    }
+    // collision latency (the path's approach segment) and full haptic ticks
+    set_cuda_step_mode(*be, CudaStepMode::Auto);
+    be->upload(model);
+    std::vector<double> ct;
+    for (int k = 0; k < 50; ++k) {
+      const auto t0 = std::chrono::steady_clock::now();
+      const Hit h = be->collide(cs.path[0].p, cs.path[1].p);
+      ct.push_back(seconds_since(t0));
+      if (!h.hit()) fmt::print("collide: no hit?\n");
+    }
+    ScriptedDevice dev(cs.path);
+    SchedulerSettings st;
+    st.depth = 5;
+    Scheduler sched(*be, model, st);
+    std::vector<double> tt;
+    const TransferCounters t_before = be->transfers();
+    const int ticks = quick ? 200 : 600;
+    for (int k = 0; k < ticks; ++k) {
+      const auto t0 = std::chrono::steady_clock::now();
+      sched.tick(dev);
+      tt.push_back(seconds_since(t0));
+    }
+    const TransferCounters t_after = be->transfers();
+    std::vector<double> sorted = tt;
+    std::sort(sorted.begin(), sorted.end());
+    rows.push_back(fmt::format(
+        "{:>6} {:>6} collide {:.1f} us ({} tris); tick median {:.1f} us p99 {:.1f} us ({} steps/tick, depth-5 "
+        "region {} elems); copies/tick h2d {:.2f} d2h {:.2f}",
+        cs.name, to_string(p), median(ct) * 1e6, model.n_tris, sorted[sorted.size() / 2] * 1e6,
+        sorted[sorted.size() * 99 / 100] * 1e6, sched.steps_per_tick(), sched.region().n_elems,
+        double(t_after.h2d - t_before.h2d) / ticks, double(t_after.d2h - t_before.d2h) / ticks));
+    fmt::print("{}\n", rows.back());
+  }
 }
 
 }  // namespace
@@ -88,76 +167,21 @@ int main(int argc, char** argv) {
     if (std::string(argv[k]) == "--quick") quick = true;
     else want.push_back(argv[k]);
   }
-  const std::vector<BoxSize> sizes = {{"8k", 12, 12, 10}, {"100k", 26, 26, 25}, {"1m", 55, 55, 55}, {"4m", 88, 88, 86}};
+  auto wanted = [&](const std::string& name) {
+    return want.empty() || std::find(want.begin(), want.end(), name) != want.end();
+  };
   const double bw = cuda_copy_bandwidth();
   fmt::print("device: {}\ncopy bandwidth: {:.1f} GB/s (read + write)\n", why, bw * 1e-9);
   const double min_seconds = quick ? 0.1 : 0.4;
   std::vector<std::string> rows;
-  for (const auto& b : sizes) {
-    if (!want.empty() && std::find(want.begin(), want.end(), b.name) == want.end()) continue;
-    const TissueModel<double> model = box_model(b);
-    std::mt19937 rng(7);
-    std::uniform_real_distribution<double> dist(-1e-5, 1e-5);
-    std::vector<double> u0(3 * size_t(model.n_nodes));
-    for (auto& v : u0) v = dist(rng);
-    for (Precision p : {Precision::Float, Precision::Double}) {
-      auto be = make_cuda_backend(p);
-      be->upload(model);
-      for (CudaStepMode mode : {CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Grid, CudaStepMode::Cluster,
-                                CudaStepMode::Auto}) {
-        try {
-          set_cuda_step_mode(*be, mode);
-        } catch (const std::exception& e) {
-          fmt::print("{} {} {}: skipped ({})\n", b.name, to_string(p), to_string(mode), e.what());
-          continue;
-        }
-        if (mode == CudaStepMode::Cluster && model.n_elems > 200000) continue;  // one cluster: far too slow
-        be->set_displacements(u0);
-        const double sps = steps_per_second(*be, min_seconds);
-        const Reductions r = be->reduce();
-        const double frac = sps * step_bytes(model.n_nodes, model.n_elems, p == Precision::Float ? 4 : 8) / bw;
-        rows.push_back(fmt::format("{:>5} {:>8} {:>7} {:>6} {:>8} {:>12.0f} {:>10.3g} {:>6.3f} {}", b.name,
-                                   model.n_elems, model.n_nodes, to_string(p), to_string(cuda_step_mode(*be)), sps,
-                                   sps * model.n_elems, frac, r.finite && r.bad_elem < 0 ? "ok" : "NONFINITE/BAD"));
-        fmt::print("{}\n", rows.back());
-      }
-      // collision latency and one full haptic tick (press on the top face, depth 5)
-      set_cuda_step_mode(*be, CudaStepMode::Auto);
-      be->upload(model);
-      const double top = 0.1 * b.nz / b.nx;
-      const Vec3<double> a = {0.0503, 0.0497, top + 0.01}, c = {0.0503, 0.0497, top - 0.002};
-      std::vector<double> ct;
-      for (int k = 0; k < 50; ++k) {
-        const auto t0 = std::chrono::steady_clock::now();
-        const Hit h = be->collide(a, c);
-        ct.push_back(seconds_since(t0));
-        if (!h.hit()) fmt::print("collide: no hit?\n");
-      }
-      std::sort(ct.begin(), ct.end());
-      ScriptedDevice dev(press_path({0.0503, 0.0497, top}, {0, 0, -1}, 0.003, 0.01));
-      SchedulerSettings st;
-      st.depth = 5;
-      Scheduler sched(*be, model, st);
-      std::vector<double> tt;
-      const TransferCounters t_before = be->transfers();
-      const int ticks = quick ? 100 : 400;
-      for (int k = 0; k < ticks; ++k) {
-        const auto t0 = std::chrono::steady_clock::now();
-        sched.tick(dev);
-        tt.push_back(seconds_since(t0));
-      }
-      const TransferCounters t_after = be->transfers();
-      std::sort(tt.begin(), tt.end());
-      rows.push_back(fmt::format(
-          "{:>5} {:>6} collide {:.1f} us ({} tris); tick median {:.1f} us p99 {:.1f} us ({} steps/tick, region "
-          "{} elems); copies/tick h2d {:.2f} d2h {:.2f}",
-          b.name, to_string(p), ct[ct.size() / 2] * 1e6, model.n_tris, tt[tt.size() / 2] * 1e6,
-          tt[tt.size() * 99 / 100] * 1e6, sched.steps_per_tick(), sched.region().n_elems,
-          double(t_after.h2d - t_before.h2d) / ticks, double(t_after.d2h - t_before.d2h) / ticks));
-      fmt::print("{}\n", rows.back());
-    }
-  }
-  fmt::print("\n{:>5} {:>8} {:>7} {:>6} {:>8} {:>12} {:>10} {:>6}\n", "mesh", "tets", "nodes", "prec", "mode",
+  if (wanted("kidney")) time_case(kidney_case(), bw, min_seconds, quick, rows);
+  const struct {
+    const char* name;
+    int nx, ny, nz;
+  } boxes[] = {{"8k", 12, 12, 10}, {"100k", 26, 26, 25}, {"1m", 55, 55, 55}, {"4m", 88, 88, 86}};
+  for (const auto& b : boxes)
+    if (wanted(b.name)) time_case(box_case(b.name, b.nx, b.ny, b.nz), bw, min_seconds, quick, rows);
+  fmt::print("\n{:>6} {:>8} {:>7} {:>6} {:>9} {:>12} {:>10} {:>6}\n", "mesh", "tets", "nodes", "prec", "mode",
              "steps/s", "elem-st/s", "bw-fr");
   for (const auto& r : rows) fmt::print("{}\n", r);
   return 0;
