@@ -58,7 +58,11 @@ scene::Scene make_scene(const MeshOptions& o) {
   s.nodes = vol.nodes;
   s.tets = vol.tets;
   s.materials.push_back({.name = "tissue", .form = scene::Material::Form::YoungPoisson, .a = o.E, .b = o.nu, .rho = o.rho});
-  s.sets.push_back({.name = "all", .material = "tissue", .all = true});
+  scene::ElementSet all;
+  all.name = "all";
+  all.material = "tissue";
+  all.all = true;
+  s.sets.push_back(all);
   double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
   for (size_t i = 0; i < s.nodes.size(); ++i) {
     lo[i % 3] = std::min(lo[i % 3], s.nodes[i]);
