@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <span>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -30,14 +31,19 @@ struct Hit {
 
 /// Reductions over the region after a batch of steps (one call per tick).
 struct Reductions {
-  Vec3<double> reaction = {};  ///< sum of internal forces on tool-driven nodes (N)
+  Vec3<double> reaction = {};  ///< sum of internal forces on tool-driven nodes, driven components only (N)
   Vec3<double> internal = {};  ///< sum of internal forces on inner nodes (N): zero by construction over the
                                ///< whole mesh, minus the halo's support in a limited region; the
                                ///< equilibrium measure is the free-node residual below
-  double free_force2 = 0;      ///< sum |f_a|^2 over free (integrated) inner nodes (N^2)
-  double held_force2 = 0;      ///< sum |f_a|^2 over held inner nodes: fixed or driven (N^2)
+  double free_force2 = 0;      ///< sum f_ac^2 over free (integrated) components of inner nodes (N^2)
+  double held_force2 = 0;      ///< sum f_ac^2 over held components of inner nodes: fixed or driven (N^2)
   double kinetic = 0;          ///< 0.5 sum m_a |(u^n - u^{n-1}) / dt|^2 over region nodes (J)
   double max_disp = 0;         ///< max |u_a| over region nodes (m)
+  double strain_energy = -1;   ///< sum_e V_e W(Fbar_e) over computed elements at the current u (J; plain
+                               ///< tets: W(F_e)); W is DESIGN.md section 2's energy. -1 = not computed
+                               ///< by this backend
+  double front_disp = -1;      ///< max |u_a| over the region's front ring (Region::front; 0 when it is
+                               ///< empty), the adaptive region's truncation indicator (m); -1 = not computed
   index_t bad_elem = -1;       ///< lowest element with J <= 0 or non-finite since the last reduce; -1 none
   double bad_J = 1;            ///< its J
   bool finite = true;          ///< every reduced value finite
@@ -87,6 +93,15 @@ class Backend {
   virtual void set_driven(std::span<const index_t> nodes, std::span<const double> u) = 0;
   virtual void clear_driven() = 0;
 
+  /// set_driven with a component mask per node (a roller boundary): bit c of
+  /// axes[k] (1..7) set = component c of nodes[k] is prescribed to u[3k + c];
+  /// the other components are integrated. set_driven(nodes, u) is this with
+  /// every mask kAllAxes. The reaction (Reductions::reaction) sums only the
+  /// driven components. The default throws std::logic_error: a backend
+  /// without per-component driving says so rather than driving all three.
+  virtual void set_driven_axes(std::span<const index_t> nodes, std::span<const double> u,
+                               std::span<const std::uint8_t> axes);
+
   /// The four IANP passes of DESIGN.md section 2 over the region.
   virtual void element_pressure() = 0;  ///< pass 1: J_e, p_e V_e
   virtual void nodal_pressure() = 0;    ///< pass 2: p_a
@@ -122,5 +137,10 @@ class Backend {
 
   virtual TransferCounters transfers() const { return {}; }
 };
+
+inline void Backend::set_driven_axes(std::span<const index_t>, std::span<const double>,
+                                     std::span<const std::uint8_t>) {
+  throw std::logic_error(name() + " backend: per-component driving (set_driven_axes) is not implemented");
+}
 
 }  // namespace tissue

@@ -133,6 +133,12 @@ TissueModel<double> build_model(const ModelInput& in) {
     throw ModelError(fmt::format("{}: {} element material ids for {} elements", in.source, in.elem_material.size(), ne));
   if (!in.fixed.empty() && in.fixed.size() != size_t(n))
     throw ModelError(fmt::format("{}: {} fixed flags for {} nodes", in.source, in.fixed.size(), n));
+  if (!in.fixed_axes.empty() && in.fixed_axes.size() != size_t(n))
+    throw ModelError(fmt::format("{}: {} fixed-axis masks for {} nodes", in.source, in.fixed_axes.size(), n));
+  for (size_t i = 0; i < in.fixed_axes.size(); ++i)
+    if (in.fixed_axes[i] > kAllAxes)
+      throw ModelError(fmt::format("{}: node {}: fixed-axis mask {} has bits beyond x, y, z (must be 0..7)", in.source,
+                                   i, int(in.fixed_axes[i])));
 
   m.X.resize(3 * n);
   for (index_t i = 0; i < n; ++i)
@@ -209,6 +215,8 @@ TissueModel<double> build_model(const ModelInput& in) {
       throw ModelError(fmt::format("{}: node {} belongs to no element (every node needs mass)", in.source, i));
     else if (!in.fixed.empty() && in.fixed[i])
       m.node_flags[i] |= kFixed;
+    else if (!in.fixed_axes.empty())
+      m.node_flags[i] |= std::uint8_t(in.fixed_axes[i] << 2);
 
   // node -> (element, corner) lists, sorted by element for a deterministic gather
   m.node_elem_start.assign(n + 1, 0);

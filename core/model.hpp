@@ -31,6 +31,8 @@ struct ModelInput {
   std::vector<index_t> elem_material;    ///< material index per element (n_elems); empty = all 0
   std::vector<MaterialParams> materials; ///< (n_materials)
   std::vector<std::uint8_t> fixed;       ///< 1 = node held at zero displacement (n_nodes); empty = none
+  std::vector<std::uint8_t> fixed_axes;  ///< axis mask per node, bit c = component c held at zero (a symmetry
+                                         ///< plane or roller: fix only the normal component) (n_nodes); empty = none
   double dt = 0;                         ///< requested step (s); 0 = safety * dt_crit
   double dt_safety = 0.5;                ///< fraction of dt_crit used when dt = 0
   double damping = -1;                   ///< mass-proportional damping alpha (1/s); < 0 = from the lowest-mode estimate
@@ -49,7 +51,19 @@ struct ModelError : std::runtime_error {
 enum NodeFlag : std::uint8_t {
   kFixed = 1,     ///< held at zero displacement by a scene constraint
   kSurface = 2,   ///< a corner of a surface triangle
+  kFixedX = 4,    ///< x component held at zero (symmetry plane / roller); kFixed wins
+  kFixedY = 8,    ///< y component held at zero
+  kFixedZ = 16,   ///< z component held at zero
 };
+
+/// Axis mask (one byte): bit c set = component c (x, y, z). kAllAxes = every component.
+inline constexpr std::uint8_t kAllAxes = 7;
+
+/// The components a node's flags hold at zero, as an axis mask: kAllAxes
+/// for kFixed, else the kFixedX/Y/Z bits.
+TISSUE_HD std::uint8_t fixed_axes(std::uint8_t flags) {
+  return (flags & kFixed) ? kAllAxes : std::uint8_t((flags >> 2) & kAllAxes);
+}
 
 template <class T>
 struct TissueModel {

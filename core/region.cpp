@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <numeric>
 #include <stdexcept>
 
@@ -32,7 +33,8 @@ Region flood_fill(const TissueModel<T>& m, std::span<const index_t> seeds, int d
     if (r.role[s] == kOutside) frontier.push_back(s);
     r.role[s] = kInner;
   }
-  for (int ring = 0; ring < depth && !frontier.empty(); ++ring) {
+  int ring = 0;
+  for (; ring < depth && !frontier.empty(); ++ring) {
     next.clear();
     for (index_t a : frontier)
       for (index_t k = m.node_elem_start[a]; k < m.node_elem_start[a + 1]; ++k) {
@@ -46,6 +48,10 @@ Region flood_fill(const TissueModel<T>& m, std::span<const index_t> seeds, int d
         }
       }
     frontier.swap(next);
+  }
+  if (ring == depth) {  // the last ring reached nodes (or depth 0): it is the front
+    r.front = frontier;
+    std::sort(r.front.begin(), r.front.end());
   }
   std::vector<std::uint8_t> elem_on(ne, 0);
   for (index_t a = 0; a < n; ++a)

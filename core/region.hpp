@@ -17,6 +17,12 @@ template <class T> struct TissueModel;
 /// Region depth meaning "the whole mesh".
 inline constexpr int kDepthAll = -1;
 
+/// Region depth meaning "adaptive": the Scheduler grows the depth while the
+/// displacement on the region's front ring is too large (scheduler.hpp).
+/// Never passed to flood_fill or a backend: the Scheduler turns it into a
+/// number of rings.
+inline constexpr int kDepthAuto = -2;
+
 /// Role of a node in the region (one byte per node).
 enum NodeRole : std::uint8_t { kOutside = 0, kInner = 1, kHalo = 2 };
 
@@ -35,6 +41,9 @@ struct Region {
   std::vector<std::uint8_t> role;       ///< NodeRole (n_nodes)
   std::vector<index_t> nodes;           ///< inner and halo nodes, ascending
   std::vector<index_t> elems;           ///< computed elements, ascending
+  std::vector<index_t> front;           ///< front ring: inner nodes first reached by the last ring (ring ==
+                                        ///< depth; the seeds when depth is 0), ascending; empty for the whole
+                                        ///< mesh or when the fill ran out of nodes before depth rings
   index_t n_inner = 0, n_halo = 0;
 
   bool whole() const { return depth == kDepthAll; }

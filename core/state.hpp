@@ -17,8 +17,9 @@ struct TissueState {
   std::vector<T> u_prev;   ///< u^{n-1} (3 x n_nodes) m
   std::vector<T> u_next;   ///< u^{n+1}, written by pass 4 (3 x n_nodes) m
   std::vector<T> u_held;   ///< target of held nodes: fixed, tool-driven, halo (3 x n_nodes) m
-  std::vector<std::uint8_t> held;  ///< 1 = node displacement set, not integrated (n_nodes)
-  std::vector<std::uint8_t> driven;///< 1 = node driven by the tool (n_nodes)
+  std::vector<std::uint8_t> held;  ///< axis mask (model.hpp kAllAxes): bit c = component c set, not
+                                   ///< integrated; kAllAxes for fixed, halo and fully driven nodes (n_nodes)
+  std::vector<std::uint8_t> driven;///< axis mask of the components the tool drives; 0 = not driven (n_nodes)
   std::vector<T> elem_pv;  ///< pass 1: p_e V_e (n_elems) N m
   std::vector<T> elem_J;   ///< pass 1: J_e = det F (n_elems)
   std::vector<T> node_p;   ///< pass 2: nodal pressure p_a (n_nodes) Pa

@@ -22,9 +22,25 @@ void stop_node(TissueState<T>& s, index_t n, index_t a) {
   for (int c = 0; c < 3; ++c) s.u_prev[c * n + a] = s.u_next[c * n + a] = s.u[c * n + a];
 }
 
+/// Components of node a the model holds at zero (kAllAxes for kFixed).
 template <class T>
-bool is_fixed(const TissueModel<T>& m, index_t a) {
-  return (m.node_flags[a] & kFixed) != 0;
+std::uint8_t model_axes(const TissueModel<T>& m, index_t a) {
+  return fixed_axes(m.node_flags[a]);
+}
+
+/// Holds every component of halo node a: at 0 where the model fixes it, at
+/// the tool's target where it is driven, else at its current u.
+template <class T>
+void hold_halo(const TissueModel<T>& m, TissueState<T>& s, index_t a) {
+  const index_t n = m.n_nodes;
+  const std::uint8_t fixed = model_axes(m, a), driven = s.driven[a];
+  for (int c = 0; c < 3; ++c) {
+    if (fixed >> c & 1)
+      s.u_held[c * n + a] = T(0);
+    else if (!(driven >> c & 1))
+      s.u_held[c * n + a] = s.u[c * n + a];
+  }
+  s.held[a] = kAllAxes;
 }
 
 }  // namespace
@@ -33,7 +49,7 @@ template <class T>
 void init_constraints(const TissueModel<T>& m, TissueState<T>& s) {
   const index_t n = m.n_nodes;
   for (index_t a = 0; a < n; ++a) {
-    s.held[a] = is_fixed(m, a) ? 1 : 0;
+    s.held[a] = model_axes(m, a);
     s.driven[a] = 0;
     set_all(s.u_held, n, a, T(0), T(0), T(0));
   }
@@ -48,17 +64,16 @@ void install_region(const TissueModel<T>& m, TissueState<T>& s, Region region) {
       stop_node(s, n, a);
       for (int c = 0; c < 3; ++c) s.f[c * n + a] = T(0);
     }
-    s.held[a] = 0;
     if (role == kHalo) {
       stop_node(s, n, a);
-      s.held[a] = 1;
-      if (!s.driven[a]) set_all(s.u_held, n, a, s.u[a], s.u[n + a], s.u[2 * n + a]);
+      hold_halo(m, s, a);
+      continue;
     }
-    if (s.driven[a]) s.held[a] = 1;  // its target in u_held is kept
-    if (is_fixed(m, a)) {
-      set_all(s.u_held, n, a, T(0), T(0), T(0));
-      s.held[a] = 1;
-    }
+    // driven components keep their targets in u_held; fixed ones are at 0
+    const std::uint8_t fixed = model_axes(m, a);
+    for (int c = 0; c < 3; ++c)
+      if (fixed >> c & 1) s.u_held[c * n + a] = T(0);
+    s.held[a] = std::uint8_t(s.driven[a] | fixed);
   }
   std::vector<std::uint8_t> in_region(ne, 0);
   for (index_t e : region.elems) in_region[e] = 1;
@@ -70,35 +85,35 @@ void install_region(const TissueModel<T>& m, TissueState<T>& s, Region region) {
 
 template <class T>
 void release_driven(const TissueModel<T>& m, TissueState<T>& s, std::vector<index_t>& driven_list) {
-  const index_t n = m.n_nodes;
   for (index_t a : driven_list) {
     s.driven[a] = 0;
-    s.held[a] = 0;
-    if (s.region.role[a] == kHalo) {
-      set_all(s.u_held, n, a, s.u[a], s.u[n + a], s.u[2 * n + a]);
-      s.held[a] = 1;
-    }
-    if (is_fixed(m, a)) {
-      set_all(s.u_held, n, a, T(0), T(0), T(0));
-      s.held[a] = 1;
-    }
+    if (s.region.role[a] == kHalo)
+      hold_halo(m, s, a);  // at its current u
+    else
+      s.held[a] = model_axes(m, a);  // their targets are already 0
   }
   driven_list.clear();
 }
 
 template <class T>
 void drive_nodes(const TissueModel<T>& m, TissueState<T>& s, std::vector<index_t>& driven_list,
-                 std::span<const index_t> nodes, std::span<const double> u) {
+                 std::span<const index_t> nodes, std::span<const double> u, std::span<const std::uint8_t> axes) {
   const index_t n = m.n_nodes;
   if (u.size() != 3 * nodes.size())
     throw std::invalid_argument(
         fmt::format("set_driven: {} displacement values for {} nodes (need 3 per node)", u.size(), nodes.size()));
+  if (!axes.empty() && axes.size() != nodes.size())
+    throw std::invalid_argument(
+        fmt::format("set_driven_axes: {} axis masks for {} nodes (need one per node)", axes.size(), nodes.size()));
   for (std::size_t k = 0; k < nodes.size(); ++k) {
     const index_t a = nodes[k];
     if (a < 0 || a >= n) throw std::invalid_argument(fmt::format("set_driven: node {} out of range (0..{})", a, n - 1));
     if (s.region.role[a] == kOutside)
       throw std::invalid_argument(
           fmt::format("set_driven: node {} is outside the deformation region (build_region from it first)", a));
+    if (!axes.empty() && (axes[k] == 0 || axes[k] > kAllAxes))
+      throw std::invalid_argument(fmt::format(
+          "set_driven_axes: node {}: axis mask {} must be 1..7 (bit 0 = x, 1 = y, 2 = z)", a, int(axes[k])));
     for (int c = 0; c < 3; ++c)
       if (!std::isfinite(u[3 * k + c]))
         throw std::invalid_argument(
@@ -107,11 +122,13 @@ void drive_nodes(const TissueModel<T>& m, TissueState<T>& s, std::vector<index_t
   release_driven(m, s, driven_list);
   for (std::size_t k = 0; k < nodes.size(); ++k) {
     const index_t a = nodes[k];
-    if (std::find(driven_list.begin(), driven_list.end(), a) == driven_list.end()) driven_list.push_back(a);
-    s.driven[a] = 1;
-    s.held[a] = 1;
-    if (is_fixed(m, a)) continue;  // a fixed node stays at 0 even under the tool
-    set_all(s.u_held, n, a, T(u[3 * k]), T(u[3 * k + 1]), T(u[3 * k + 2]));
+    const std::uint8_t mask = axes.empty() ? kAllAxes : axes[k];
+    if (!s.driven[a]) driven_list.push_back(a);
+    s.driven[a] |= mask;
+    s.held[a] |= mask;
+    const std::uint8_t fixed = model_axes(m, a);  // a fixed component stays at 0 even under the tool
+    for (int c = 0; c < 3; ++c)
+      if ((mask >> c & 1) && !(fixed >> c & 1)) s.u_held[c * n + a] = T(u[3 * k + c]);
   }
 }
 
@@ -120,7 +137,7 @@ void drive_nodes(const TissueModel<T>& m, TissueState<T>& s, std::vector<index_t
   template void install_region(const TissueModel<T>&, TissueState<T>&, Region);                                      \
   template void release_driven(const TissueModel<T>&, TissueState<T>&, std::vector<index_t>&);                       \
   template void drive_nodes(const TissueModel<T>&, TissueState<T>&, std::vector<index_t>&, std::span<const index_t>, \
-                            std::span<const double>);
+                            std::span<const double>, std::span<const std::uint8_t>);
 TISSUE_CPU_CONSTRAINTS(float)
 TISSUE_CPU_CONSTRAINTS(double)
 #undef TISSUE_CPU_CONSTRAINTS

@@ -3,11 +3,12 @@
 // Backend::set_driven / clear_driven. Host functions of (const model&,
 // state&), called once per contact or tick, never inside the step loop.
 //
-// Holding rule (a node's held flag and u_held target):
-//   fixed  (model.node_flags & kFixed)  held, u_held = 0 (wins over everything)
-//   driven (state.driven)               held, u_held = the tool's target
-//   halo   (region role kHalo)          held, u_held = u at the time it became halo
-//   other region nodes                  integrated
+// Holding rule, per component (a node's held axis mask and u_held target):
+//   fixed  (kFixed, or kFixedX/Y/Z for one component)  held, u_held = 0 (wins over everything)
+//   driven (state.driven's axis mask)                   held, u_held = the tool's target
+//   halo   (region role kHalo)                          every component held, the others at
+//                                                       u at the time it became halo
+//   anything else in the region                         integrated
 // Nodes outside the region are "frozen": u == u_prev == u_next, so the
 // vector rotation of pass 4 leaves them where they are.
 #pragma once
@@ -20,29 +21,31 @@ namespace tissue::cpu {
 
 /// Installs `region` (a flood_fill result) into the state: nodes outside it
 /// are frozen (u_prev = u_next = u, f = 0); halo nodes are held at their
-/// current u (and stopped: u_prev = u_next = u); fixed and driven nodes stay
-/// held; every other region node is released. Elements outside the region
+/// current u (and stopped: u_prev = u_next = u); fixed and driven components
+/// stay held; every other component of a region node is released. Elements outside the region
 /// get elem_f = 0, so a halo node's f sums only computed elements. The
 /// caller recomputes pass 1 over all elements afterwards.
 template <class T>
 void install_region(const TissueModel<T>& m, TissueState<T>& s, Region region);
 
-/// Makes `nodes` tool-driven with targets u (3 per node, xyz interleaved, m),
+/// Makes `nodes` tool-driven with targets u (3 per node, xyz interleaved, m)
+/// on the components of axes (one mask 1..7 per node; empty = all three),
 /// releasing the previously driven nodes in `driven_list` first (see
-/// release_driven); driven_list then holds `nodes`. Throws
-/// std::invalid_argument for a size mismatch, a node out of range or outside
-/// the region, or a non-finite target.
+/// release_driven); driven_list then holds `nodes` (once each; masks of a
+/// repeated node are combined). Throws std::invalid_argument for a size
+/// mismatch, a node out of range or outside the region, a mask outside
+/// 1..7, or a non-finite target.
 template <class T>
 void drive_nodes(const TissueModel<T>& m, TissueState<T>& s, std::vector<index_t>& driven_list,
-                 std::span<const index_t> nodes, std::span<const double> u);
+                 std::span<const index_t> nodes, std::span<const double> u, std::span<const std::uint8_t> axes = {});
 
 /// Releases every node in driven_list (then empties it): a released node
-/// stays held only if it is fixed (at 0) or halo (at its current u).
+/// stays held only where it is fixed (at 0) or halo (at its current u).
 template <class T>
 void release_driven(const TissueModel<T>& m, TissueState<T>& s, std::vector<index_t>& driven_list);
 
-/// Held flags and targets of fixed nodes from the model (upload): held =
-/// fixed, u_held = 0, nothing driven.
+/// Held masks and targets of fixed nodes from the model (upload): held =
+/// the model's fixed axes, u_held = 0, nothing driven.
 template <class T>
 void init_constraints(const TissueModel<T>& m, TissueState<T>& s);
 

@@ -85,8 +85,11 @@ void CpuBackend<T>::set_displacements(std::span<const double> u) {
           fmt::format("set_displacements: node {}: displacement {} = {} is not finite", k % n, "xyz"[k / n], u[k]));
   for (std::size_t k = 0; k < u.size(); ++k) state_.u[k] = state_.u_prev[k] = state_.u_next[k] = T(u[k]);
   for (index_t a = 0; a < n; ++a)
-    if (state_.region.role[a] == kHalo && !state_.driven[a] && !(model_.node_flags[a] & kFixed))
-      for (int c = 0; c < 3; ++c) state_.u_held[c * n + a] = state_.u[c * n + a];
+    if (state_.region.role[a] == kHalo) {
+      const std::uint8_t keep = state_.driven[a] | fixed_axes(model_.node_flags[a]);
+      for (int c = 0; c < 3; ++c)
+        if (!(keep >> c & 1)) state_.u_held[c * n + a] = state_.u[c * n + a];
+    }
   cpu::element_pressure(model_, state_, all_elems_, all_elems_part_);
   surface_->mark_dirty();
 }
@@ -103,6 +106,16 @@ template <class T>
 void CpuBackend<T>::set_driven(std::span<const index_t> nodes, std::span<const double> u) {
   require_upload("set_driven");
   drive_nodes(model_, state_, driven_list_, nodes, u);
+}
+
+template <class T>
+void CpuBackend<T>::set_driven_axes(std::span<const index_t> nodes, std::span<const double> u,
+                                    std::span<const std::uint8_t> axes) {
+  require_upload("set_driven_axes");
+  if (axes.size() != nodes.size())
+    throw std::invalid_argument(
+        fmt::format("set_driven_axes: {} axis masks for {} nodes (need one per node)", axes.size(), nodes.size()));
+  drive_nodes(model_, state_, driven_list_, nodes, u, axes);
 }
 
 template <class T>
@@ -156,6 +169,8 @@ template <class T>
 Reductions CpuBackend<T>::reduce() {
   require_upload("reduce");
   Reductions r = reduce_region(model_, state_, state_.region.nodes);
+  r.strain_energy = strain_energy(model_, state_, node_volume_, energy_);
+  r.front_disp = front_displacement(model_, state_);
   r.bad_elem = bad_.take(&r.bad_J);
   if (r.bad_elem < 0) r.bad_J = 1;
   return r;

@@ -15,6 +15,7 @@
 #include "cpu/bad_element.hpp"
 #include "cpu/embree_surface.hpp"
 #include "cpu/passes.hpp"
+#include "cpu/reduce.hpp"
 
 namespace tissue::cpu {
 
@@ -34,6 +35,8 @@ class CpuBackend final : public Backend {
   Region region() override { return state_.region; }
   void set_driven(std::span<const index_t> nodes, std::span<const double> u) override;
   void clear_driven() override;
+  void set_driven_axes(std::span<const index_t> nodes, std::span<const double> u,
+                       std::span<const std::uint8_t> axes) override;
 
   void element_pressure() override;
   void nodal_pressure() override;
@@ -42,6 +45,8 @@ class CpuBackend final : public Backend {
   void advance(int steps) override;
 
   Hit collide(Vec3<double> a, Vec3<double> b) override;
+  /// Also the strain energy over the region's elements and the front
+  /// ring's displacement (cpu/reduce.hpp).
   Reductions reduce() override;
   Fields download() override;
   void write_positions(float* dst) override;
@@ -62,6 +67,7 @@ class CpuBackend final : public Backend {
   std::vector<index_t> all_elems_;    ///< 0..n_elems-1: pass 1 over every element
   std::vector<index_t> driven_list_;  ///< currently driven nodes
   std::unique_ptr<EmbreeSurface<T>> surface_;
+  EnergyScratch<T> energy_;           ///< strain_energy's pass 1-2 scratch
   BadElementFlag bad_;
   PassPartitioners parts_;
   tbb::affinity_partitioner all_elems_part_;

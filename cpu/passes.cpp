@@ -120,7 +120,8 @@ void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const ind
       const index_t e = list[k] >> 2, corner = list[k] & 3;
       for (int c = 0; c < 3; ++c) f[c] += ef[(3 * corner + c) * ne + e];
     }
-    if (held[a]) {
+    const std::uint8_t h = held[a];
+    if (h == kAllAxes) {
       for (int c = 0; c < 3; ++c) {
         f_out[c * n + a] = f[c];
         u_next[c * n + a] = u_held[c * n + a];
@@ -130,7 +131,8 @@ void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const ind
     const CentralDifference<T> cd{m.cd_A[a], m.cd_B[a], m.cd_C[a]};
     for (int c = 0; c < 3; ++c) {
       f_out[c * n + a] = f[c];
-      u_next[c * n + a] = central_difference_update(cd, -f[c], u[c * n + a], u_prev[c * n + a]);
+      u_next[c * n + a] = (h >> c & 1) ? u_held[c * n + a]
+                                       : central_difference_update(cd, -f[c], u[c * n + a], u_prev[c * n + a]);
     }
   });
   std::swap(s.u_prev, s.u);  // u_prev <- u^n

@@ -51,8 +51,9 @@ void element_forces(const TissueModel<T>& m, TissueState<T>& s, std::span<const 
                     tbb::affinity_partitioner& part);
 
 /// Pass 4 over `nodes`: f_a = sum of elem_f over the node's (element, corner)
-/// list in stored order (no atomics), stored in state.f; held nodes get
-/// u_next = u_held, the others the central difference with R = 0. Then
+/// list in stored order (no atomics), stored in state.f; held components
+/// (state.held's axis mask) get u_next = u_held, the others the central
+/// difference with R = 0. Then
 /// rotates u_prev <- u <- u_next by swapping the vectors (nodes outside the
 /// region must have u == u_prev == u_next, which build_region guarantees).
 template <class T>

@@ -1,10 +1,15 @@
 #include "cpu/reduce.hpp"
 
 #include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
+
+#include "core/energy.hpp"
+#include "core/tet.hpp"
 
 namespace tissue::cpu {
 namespace {
@@ -53,11 +58,15 @@ Reductions reduce_region(const TissueModel<T>& m, const TissueState<T>& s, std::
           p.finite = p.finite && std::isfinite(f2) && std::isfinite(u2) && std::isfinite(v2);
           p.kinetic += 0.5 * double(m.mass[a]) * v2;
           p.max_disp = std::max(p.max_disp, std::sqrt(u2));
-          if (s.driven[a])
-            for (int c = 0; c < 3; ++c) p.reaction[c] += f[c];
+          if (const std::uint8_t d = s.driven[a])
+            for (int c = 0; c < 3; ++c)
+              if (d >> c & 1) p.reaction[c] += f[c];
           if (s.region.role[a] != kInner) continue;
-          for (int c = 0; c < 3; ++c) p.internal[c] += f[c];
-          (s.held[a] ? p.held2 : p.free2) += f2;
+          const std::uint8_t h = s.held[a];
+          for (int c = 0; c < 3; ++c) {
+            p.internal[c] += f[c];
+            ((h >> c & 1) ? p.held2 : p.free2) += f[c] * f[c];
+          }
         }
         return p;
       },
@@ -74,7 +83,89 @@ Reductions reduce_region(const TissueModel<T>& m, const TissueState<T>& s, std::
   return out;
 }
 
-template Reductions reduce_region(const TissueModel<float>&, const TissueState<float>&, std::span<const index_t>);
-template Reductions reduce_region(const TissueModel<double>&, const TissueState<double>&, std::span<const index_t>);
+template <class T>
+double front_displacement(const TissueModel<T>& m, const TissueState<T>& s) {
+  const index_t n = m.n_nodes;
+  double max2 = 0;
+  for (index_t a : s.region.front) {
+    double u2 = 0;
+    for (int c = 0; c < 3; ++c) u2 += double(s.u[c * n + a]) * double(s.u[c * n + a]);
+    max2 = std::max(max2, u2);
+  }
+  return std::sqrt(max2);
+}
+
+template <class T>
+double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<T>& node_volume,
+                     EnergyScratch<T>& scratch) {
+  const index_t n = m.n_nodes, ne = m.n_elems;
+  const std::span<const index_t> elems = s.region.elems, nodes = s.region.nodes;
+  const index_t* en = m.elem_nodes.data();
+  const T* u = s.u.data();
+  auto gradient = [&](index_t e, T* J) {
+    Vec3<T> ue[4];
+    T dN[12];
+    for (int a = 0; a < 4; ++a) {
+      const index_t i = en[a * ne + e];
+      ue[a] = {u[i], u[n + i], u[2 * n + i]};
+    }
+    for (int k = 0; k < 12; ++k) dN[k] = m.dndx[k * ne + e];
+    const Mat3<T> F = deformation_gradient(ue, dN);
+    *J = det(F);
+    return F;
+  };
+  if (m.ianp) {
+    // passes 1 and 2 at the current u, into scratch (elements outside the
+    // region keep the state's values: their nodes do not move)
+    scratch.elem_pv.assign(s.elem_pv.begin(), s.elem_pv.end());
+    scratch.node_p.resize(n);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, elems.size(), kReduceGrain),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t k = r.begin(); k != r.end(); ++k) {
+                          const index_t e = elems[k];
+                          T J;
+                          gradient(e, &J);
+                          scratch.elem_pv[e] = volumetric_pressure(J, m.K[e]) * m.volume[e];
+                        }
+                      });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nodes.size(), kReduceGrain),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t k = r.begin(); k != r.end(); ++k) {
+                          const index_t a = nodes[k];
+                          T sum = 0;
+                          for (index_t j = m.node_elem_start[a]; j < m.node_elem_start[a + 1]; ++j)
+                            sum += scratch.elem_pv[m.node_elem[j] >> 2];
+                          scratch.node_p[a] = sum / node_volume[a];
+                        }
+                      });
+  }
+  return tbb::parallel_deterministic_reduce(
+      tbb::blocked_range<std::size_t>(0, elems.size(), kReduceGrain), 0.0,
+      [&](const tbb::blocked_range<std::size_t>& r, double sum) {
+        for (std::size_t k = r.begin(); k != r.end(); ++k) {
+          const index_t e = elems[k];
+          T J;
+          const Mat3<T> F = gradient(e, &J);
+          T Jbar = J;
+          if (m.ianp) {
+            const T* p = scratch.node_p.data();
+            const T pbar = T(0.25) * (((p[en[e]] + p[en[ne + e]]) + p[en[2 * ne + e]]) + p[en[3 * ne + e]]);
+            Jbar = T(1) + pbar / m.K[e];
+          }
+          sum += double(element_strain_energy(F, J, Jbar, m.volume[e], m.mu[e], m.K[e]));
+        }
+        return sum;
+      },
+      std::plus<double>());
+}
+
+#define TISSUE_CPU_REDUCE(T)                                                                                 \
+  template Reductions reduce_region(const TissueModel<T>&, const TissueState<T>&, std::span<const index_t>); \
+  template double front_displacement(const TissueModel<T>&, const TissueState<T>&);                          \
+  template double strain_energy(const TissueModel<T>&, const TissueState<T>&, const std::vector<T>&,         \
+                                EnergyScratch<T>&);
+TISSUE_CPU_REDUCE(float)
+TISSUE_CPU_REDUCE(double)
+#undef TISSUE_CPU_REDUCE
 
 }  // namespace tissue::cpu

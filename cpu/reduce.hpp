@@ -5,6 +5,7 @@
 #pragma once
 
 #include <span>
+#include <vector>
 
 #include "core/backend.hpp"
 #include "core/state.hpp"
@@ -16,15 +17,38 @@ inline constexpr std::size_t kReduceGrain = 1024;
 
 /// Reductions over `nodes` (the region's inner and halo nodes) from
 /// state.f, u, u_prev, driven, held and region.role:
-///   reaction     sum f_a over driven nodes
+///   reaction     sum f_a over driven nodes, driven components only
 ///   internal     sum f_a over inner nodes
-///   free_force2  sum |f_a|^2 over inner nodes that are not held
-///   held_force2  sum |f_a|^2 over inner nodes that are held (fixed or driven)
+///   free_force2  sum f_ac^2 over the components of inner nodes that are not held
+///   held_force2  sum f_ac^2 over the held components of inner nodes (fixed or driven)
 ///   kinetic      0.5 sum m_a |(u_a - u_prev_a) / dt|^2 over all `nodes`
 ///   max_disp     max |u_a| over all `nodes`
 ///   finite       false if any f_a or u_a visited is not finite
-/// bad_elem / bad_J are left at "none"; the caller fills them.
+/// bad_elem / bad_J are left at "none", strain_energy and front_disp at
+/// "not computed"; the caller fills them.
 template <class T>
 Reductions reduce_region(const TissueModel<T>& m, const TissueState<T>& s, std::span<const index_t> nodes);
+
+/// max |u_a| over the region's front ring (state.region.front), m; 0 when it is empty.
+template <class T>
+double front_displacement(const TissueModel<T>& m, const TissueState<T>& s);
+
+/// Scratch for strain_energy (sized on first use, then reused: no
+/// allocation per tick).
+template <class T>
+struct EnergyScratch {
+  std::vector<T> elem_pv;  ///< p_e V_e at the current u (n_elems) N m
+  std::vector<T> node_p;   ///< nodal pressure at the current u (n_nodes) Pa
+};
+
+/// Strain energy sum_e V_e W(Fbar_e) over the region's elements at the
+/// current u (J; core/energy.hpp), summed in double by a deterministic
+/// reduction. For IANP the nodal pressures are recomputed from the current
+/// u into `scratch` (passes 1 and 2; the state's own pass arrays are left as
+/// the last step wrote them, so download() is unchanged); node_volume is
+/// pass 2's denominator (n_nodes, m^3).
+template <class T>
+double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<T>& node_volume,
+                     EnergyScratch<T>& scratch);
 
 }  // namespace tissue::cpu

@@ -1,0 +1,29 @@
+// Strain energy of one element (DESIGN.md section 2's Neo-Hookean W), written
+// once for every backend like core/tet.hpp. The energy a TLED step actually
+// uses is W(Fbar): for IANP Fbar = (Jbar / J)^(1/3) F with Jbar = 1 + pbar / K,
+// and since the isochoric part J^(-2/3) I1 is unchanged by scaling F,
+//     V W(Fbar) = V [mu/2 (J^(-2/3) I1 - 3) + K/2 (Jbar - 1)^2],
+// with J and I1 of the unmodified F. For plain tets Jbar = J and this is V W(F).
+#pragma once
+
+#include <cmath>
+
+#include "core/vec.hpp"
+
+namespace tissue {
+
+/// Strain energy (J) of an element of reference volume V (m^3), shear and
+/// bulk moduli mu, K (Pa), deformation gradient F with J = det F, and the
+/// modified Jacobian Jbar of its volumetric term (Jbar = J for plain tets).
+/// Returns 0 when J <= 0 or is not finite: an inverted element has no
+/// energy of this law; the bad-element flag reports it.
+template <class T>
+TISSUE_HD T element_strain_energy(const Mat3<T>& F, T J, T Jbar, T volume, T mu, T K) {
+  if (!(J > T(0)) || !std::isfinite(J)) return T(0);
+  const T I1 = trace(transpose(F) * F);
+  const T iso = mu / T(2) * (std::pow(J, T(-2) / T(3)) * I1 - T(3));
+  const T vol = K / T(2) * (Jbar - T(1)) * (Jbar - T(1));
+  return volume * (iso + vol);
+}
+
+}  // namespace tissue
