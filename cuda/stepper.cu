@@ -8,11 +8,6 @@
 namespace tissue::gpu {
 namespace {
 
-/// Items per thread up to which Auto prefers the cluster kernel. Larger
-/// regions leave the cluster's 16 SMs looping while the rest of the GPU
-/// idles; a graph of per-pass kernels then uses the whole device.
-constexpr int kClusterItemsPerThread = 2;
-
 int current_device_attribute(cudaDeviceAttr attr) {
   int dev = 0, v = 0;
   CUDA_CHECK(cudaGetDevice(&dev));
@@ -30,7 +25,7 @@ int largest_cluster() {
   for (int size : {16, 8, 4, 2}) {
     cudaLaunchConfig_t cfg = {};
     cfg.gridDim = dim3(size);
-    cfg.blockDim = dim3(kPersistentBlock<T>);
+    cfg.blockDim = dim3(kClusterBlock<T>);
     cudaLaunchAttribute attr;
     attr.id = cudaLaunchAttributeClusterDimension;
     attr.val.clusterDim.x = size;
@@ -54,10 +49,10 @@ template <class T>
 void Stepper<T>::init() {
   graphs_.clear();
   limits_ = {};
-  limits_.block = kPersistentBlock<T>;
+  limits_.block = kClusterBlock<T>;
   if (current_device_attribute(cudaDevAttrCooperativeLaunch)) {
     int per_sm = 0;
-    CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, persistent_grid_kernel<T>, kPersistentBlock<T>, 0));
+    CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, persistent_grid_kernel<T>, kGridBlock, 0));
     limits_.grid_blocks = per_sm * current_device_attribute(cudaDevAttrMultiProcessorCount);
   }
   limits_.cluster_size = largest_cluster<T>();
@@ -75,9 +70,7 @@ void Stepper<T>::set_mode(CudaStepMode mode) {
 template <class T>
 CudaStepMode Stepper<T>::choose(const RegionView& r) const {
   if (mode_ != CudaStepMode::Auto) return mode_;
-  const long items = std::max(r.n_elems, r.n_nodes);
-  if (limits_.cluster_size > 0 && items <= long(limits_.cluster_size) * limits_.block * kClusterItemsPerThread)
-    return CudaStepMode::Cluster;
+  if (sizeof(T) == 8 && limits_.grid_blocks > 0 && r.n_elems >= kGridMinElems) return CudaStepMode::Grid;
   return CudaStepMode::Graph;
 }
 
@@ -90,7 +83,7 @@ void Stepper<T>::element_pressure(const ModelView<T>& m, const StateView<T>& s, 
 template <class T>
 void Stepper<T>::nodal_pressure(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                                 cudaStream_t stream) {
-  launch_chained(r.n_nodes, stream, nodal_pressure_kernel<T>, m, s, r);
+  launch_chained(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, s, r);
 }
 
 template <class T>
@@ -102,7 +95,7 @@ void Stepper<T>::element_forces(const ModelView<T>& m, const StateView<T>& s, co
 template <class T>
 void Stepper<T>::node_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
                              cudaStream_t stream) {
-  launch_chained(r.n_nodes, stream, node_update_kernel<T>, m, s, r, b);
+  launch_chained(kNodeLanes * r.n_nodes, stream, node_update_kernel<T>, m, s, r, b);
 }
 
 template <class T>
@@ -162,23 +155,24 @@ void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, const Reg
       }
       break;
     case CudaStepMode::Grid: {
-      const int blocks = std::clamp(grid_for(std::max(r.n_elems, r.n_nodes), kPersistentBlock<T>), 1, limits_.grid_blocks);
+      const index_t items = std::max(r.n_elems, kNodeLanes * r.n_nodes);
+      const int blocks = std::clamp(grid_for(items, kGridBlock), 1, limits_.grid_blocks);
       ModelView<T> ma = m;
       StateView<T> sa = s;
       RegionView ra = r;
       StepBuffers<T> b = ring.current();
       void* args[] = {&ma, &sa, &ra, &b, &steps};
       CUDA_CHECK(cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(persistent_grid_kernel<T>), dim3(blocks),
-                                             dim3(kPersistentBlock<T>), args, 0, stream));
+                                             dim3(kGridBlock), args, 0, stream));
       ring.advance(steps);
       break;
     }
     case CudaStepMode::Cluster: {
-      const int blocks =
-          std::clamp(grid_for(std::max(r.n_elems, r.n_nodes), kPersistentBlock<T>), 1, limits_.cluster_size);
+      const index_t items = std::max(r.n_elems, kNodeLanes * r.n_nodes);
+      const int blocks = std::clamp(grid_for(items, kClusterBlock<T>), 1, limits_.cluster_size);
       cudaLaunchConfig_t cfg = {};
       cfg.gridDim = dim3(blocks);
-      cfg.blockDim = dim3(kPersistentBlock<T>);
+      cfg.blockDim = dim3(kClusterBlock<T>);
       cfg.stream = stream;
       cudaLaunchAttribute attr;
       attr.id = cudaLaunchAttributeClusterDimension;

@@ -10,7 +10,11 @@
 //   Cluster  one persistent kernel on a single thread-block cluster (up to
 //            16 blocks on Hopper), cluster.sync() between passes: the
 //            cheapest barrier, for regions a cluster can cover.
-// Auto picks by region size (see choose()).
+// Auto picks by precision and region size from measurements on an H200
+// (docs/cuda.md): Graph, except double regions of >= kGridMinElems elements,
+// where the cooperative kernel wins (its grid-wide barrier costs less than
+// the double pass 3's tail at that size). The cluster kernel is kept as an
+// option: one cluster has at most 16 SMs, too few for pass 3.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -48,7 +52,7 @@ class GraphExec {
 struct PersistentLimits {
   int grid_blocks = 0;   ///< co-resident blocks of the grid kernel (0: no cooperative launch)
   int cluster_size = 0;  ///< blocks of the largest schedulable cluster (0: no clusters)
-  int block = 0;         ///< threads per block of both persistent kernels
+  int block = 0;         ///< threads per block of the cluster kernel
 };
 
 template <class T>
@@ -56,6 +60,8 @@ class Stepper {
  public:
   /// Most steps captured in one graph (a multiple of 3 keeps the phase).
   static constexpr int kMaxGraphSteps = 30;
+  /// Auto: smallest double-precision region (elements) run by the Grid mode.
+  static constexpr long kGridMinElems = 50000;
 
   /// Queries the device's limits for the persistent kernels.
   void init();

@@ -1,12 +1,15 @@
 // The four IANP passes of DESIGN.md section 2 as per-item device functions
-// (one element or one node each), built on the shared __host__ __device__
-// math of core/tet.hpp, and the kernels that run them: one kernel per pass
-// (plain launches and CUDA graphs, chained with programmatic dependent
-// launch) and persistent kernels that run whole steps with a barrier
-// between passes. nvcc only.
+// (one element, or one lane of a node's group), built on the shared
+// __host__ __device__ math of core/tet.hpp, and the kernels that run them:
+// one kernel per pass (plain launches and CUDA graphs, chained with
+// programmatic dependent launch) and persistent kernels that run whole steps
+// with a barrier between passes. nvcc only.
 //
-// Model arrays never change while kernels run, so they are read through the
-// read-only path (__ldg); state arrays are read with plain loads (the
+// Each item is split in two: what it reads from the model (which never
+// changes while kernels run: read through the read-only path, __ldg) and
+// what it does with the state. A chained pass kernel loads its model part
+// before waiting for the previous pass, so that round trip overlaps the
+// previous kernel's tail. State arrays are read with plain loads (the
 // persistent kernels read what other blocks wrote before the barrier).
 #pragma once
 
@@ -24,80 +27,133 @@ __device__ __forceinline__ unsigned long long bad_key(index_t e, float J) {
   return (static_cast<unsigned long long>(static_cast<unsigned>(e)) << 32) | __float_as_uint(J);
 }
 
-/// Corner nodes, corner displacements and shape gradients of element e.
+/// The model data of one element that passes 1 and 3 use.
 template <class T>
-__device__ __forceinline__ void load_element(const ModelView<T>& m, const Packed3<T>* u, index_t e, index_t c[4],
-                                             Vec3<T> ue[4], T dN[12]) {
+struct ElementData {
+  index_t e;
+  index_t c[4];     ///< corner nodes
+  index_t slot[4];  ///< node_elem slots of its corners
+  T dN[12];         ///< shape gradients (1/m)
+  T V, mu, K;       ///< m^3, Pa, Pa
+};
+
+template <class T>
+__device__ __forceinline__ ElementData<T> load_element(const ModelView<T>& m, index_t e) {
+  ElementData<T> d;
   const index_t ne = m.n_elems;
+  d.e = e;
 #pragma unroll
-  for (int a = 0; a < 4; ++a) c[a] = __ldg(m.elem_nodes + a * ne + e);
+  for (int a = 0; a < 4; ++a) {
+    d.c[a] = __ldg(m.elem_nodes + a * ne + e);
+    d.slot[a] = __ldg(m.slot_of + a * ne + e);
+  }
 #pragma unroll
-  for (int k = 0; k < 12; ++k) dN[k] = __ldg(m.dndx + k * ne + e);
-#pragma unroll
-  for (int a = 0; a < 4; ++a) ue[a] = u[c[a]].vec();
+  for (int k = 0; k < 12; ++k) d.dN[k] = __ldg(m.dndx + k * ne + e);
+  d.V = __ldg(m.volume + e);
+  d.mu = __ldg(m.mu + e);
+  d.K = __ldg(m.K + e);
+  return d;
 }
 
-/// Pass 1 for element e: J_e = det F, and p_e V_e (p_e = K (J_e - 1)) into
+template <class T>
+__device__ __forceinline__ void corner_displacements(const ElementData<T>& d, const Packed3<T>* u, Vec3<T> ue[4]) {
+#pragma unroll
+  for (int a = 0; a < 4; ++a) ue[a] = u[d.c[a]].vec();
+}
+
+/// Pass 1 for an element: J_e = det F, and p_e V_e (p_e = K (J_e - 1)) into
 /// the node_elem slots of its four corners.
 template <class T>
-__device__ void element_pressure_at(const ModelView<T>& m, const StateView<T>& s, const Packed3<T>* u, index_t e) {
-  index_t c[4];
+__device__ void element_pressure_at(const StateView<T>& s, const ElementData<T>& d, const Packed3<T>* u) {
   Vec3<T> ue[4];
-  T dN[12];
-  load_element(m, u, e, c, ue, dN);
-  const T J = det(deformation_gradient(ue, dN));
-  const T pv = volumetric_pressure(J, __ldg(m.K + e)) * __ldg(m.volume + e);
-  s.elem_J[e] = J;
-  const index_t ne = m.n_elems;
+  corner_displacements(d, u, ue);
+  const T J = det(deformation_gradient(ue, d.dN));
+  const T pv = volumetric_pressure(J, d.K) * d.V;
+  s.elem_J[d.e] = J;
 #pragma unroll
-  for (int a = 0; a < 4; ++a) s.pv_slot[__ldg(m.slot_of + a * ne + e)] = pv;
+  for (int a = 0; a < 4; ++a) s.pv_slot[d.slot[a]] = pv;
 }
 
-/// Pass 2 for node a: p_a = sum_e p_e V_e / sum_e V_e over its elements, in
-/// the stored order of node_elem (deterministic; the cpu backend's order).
-template <class T>
-__device__ void nodal_pressure_at(const ModelView<T>& m, const StateView<T>& s, index_t a) {
-  T pv = T(0);
-  const index_t end = __ldg(m.node_elem_start + a + 1);
-#pragma unroll 8
-  for (index_t k = __ldg(m.node_elem_start + a); k < end; ++k) pv += s.pv_slot[k];
-  s.node_p[a] = pv / __ldg(m.node_volume + a);
-}
-
-/// Pass 3 for element e: pbar = (1/4) sum_a p_a, then IANP forces (or plain
+/// Pass 3 for an element: pbar = (1/4) sum_a p_a, then IANP forces (or plain
 /// tet forces when the model has ianp off) into the node_elem slots of its
 /// corners. An element with J <= 0, Jbar <= 0 or a non-finite J is recorded
 /// in s.bad (lowest wins; its forces are zero, as core's functions return).
 template <class T>
-__device__ void element_forces_at(const ModelView<T>& m, const StateView<T>& s, const Packed3<T>* u, index_t e) {
-  index_t c[4];
+__device__ void element_forces_at(const StateView<T>& s, const ElementData<T>& d, const Packed3<T>* u, bool ianp) {
   Vec3<T> ue[4];
-  T dN[12];
-  load_element(m, u, e, c, ue, dN);
+  corner_displacements(d, u, ue);
   Vec3<T> f[4];
   T J;
-  const T V = __ldg(m.volume + e), mu = __ldg(m.mu + e), K = __ldg(m.K + e);
-  if (m.ianp) {
-    const T pbar = (s.node_p[c[0]] + s.node_p[c[1]] + s.node_p[c[2]] + s.node_p[c[3]]) / T(4);
-    J = ianp_element_forces(ue, dN, V, mu, K, pbar, f);
+  if (ianp) {
+    const T pbar = (s.node_p[d.c[0]] + s.node_p[d.c[1]] + s.node_p[d.c[2]] + s.node_p[d.c[3]]) / T(4);
+    J = ianp_element_forces(ue, d.dN, d.V, d.mu, d.K, pbar, f);
   } else {
-    J = plain_element_forces(ue, dN, V, mu, K, f);
+    J = plain_element_forces(ue, d.dN, d.V, d.mu, d.K, f);
   }
-  if (!(J > T(0)) || !isfinite(J)) atomicMin(s.bad, bad_key(e, static_cast<float>(J)));
-  const index_t ne = m.n_elems;
+  if (!(J > T(0)) || !isfinite(J)) atomicMin(s.bad, bad_key(d.e, static_cast<float>(J)));
 #pragma unroll
-  for (int a = 0; a < 4; ++a) s.f_slot[__ldg(m.slot_of + a * ne + e)] = Packed3<T>::of(f[a]);
+  for (int a = 0; a < 4; ++a) s.f_slot[d.slot[a]] = Packed3<T>::of(f[a]);
 }
 
-/// Pass 4 for node a: f_a = sum of its corners' element forces in the stored
-/// order of node_elem (a gather: no atomics), then u_next = u_held for held
-/// nodes, else the damped central difference with R = 0.
+/// Lanes that share one node in passes 2 and 4: lane j of a node's group
+/// sums the node's slots begin + j, begin + j + kNodeLanes, ... (adjacent
+/// lanes read adjacent slots), then the group adds its partial sums
+/// pairwise. A node of the kidney touches up to ~60 elements: one thread per
+/// node would wait on ~60 / 8 rounds of dependent loads, eight lanes on one.
+inline constexpr int kNodeLanes = 8;
+
+/// Mask of the calling lane's node group within its warp.
+__device__ __forceinline__ unsigned node_group_mask() {
+  return ((1u << kNodeLanes) - 1) << ((threadIdx.x & 31) & ~(kNodeLanes - 1));
+}
+
+/// Total of the group's partial sums x, in a fixed pairwise order (lanes
+/// j, j^1, then pairs j, j^2, ...): every lane gets the same, deterministic
+/// value (a + b == b + a exactly). Differs from a sequential sum by rounding.
 template <class T>
-__device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, const StepBuffers<T>& b, index_t a) {
+__device__ __forceinline__ T node_group_sum(T x, unsigned mask) {
+#pragma unroll
+  for (int o = 1; o < kNodeLanes; o <<= 1) x += __shfl_xor_sync(mask, x, o);
+  return x;
+}
+
+/// The model data of one node that passes 2 and 4 use (one lane's view).
+template <class T>
+struct NodeData {
+  index_t a;
+  index_t first, end;  ///< this lane's first slot, the node's end slot
+  int lane;
+  unsigned mask;
+};
+
+template <class T>
+__device__ __forceinline__ NodeData<T> load_node(const ModelView<T>& m, index_t a, int lane, unsigned mask) {
+  return {a, __ldg(m.node_elem_start + a) + lane, __ldg(m.node_elem_start + a + 1), lane, mask};
+}
+
+/// Pass 2 for a node (one lane of its group): p_a = sum_e p_e V_e / sum_e V_e
+/// over its elements; lane 0 writes it.
+template <class T>
+__device__ void nodal_pressure_at(const ModelView<T>& m, const StateView<T>& s, const NodeData<T>& d) {
+  T pv = T(0);
+#pragma unroll 4
+  for (index_t k = d.first; k < d.end; k += kNodeLanes) pv += s.pv_slot[k];
+  pv = node_group_sum(pv, d.mask);
+  if (d.lane == 0) s.node_p[d.a] = pv / __ldg(m.node_volume + d.a);
+}
+
+/// Pass 4 for a node (one lane of its group): f_a = sum of its corners'
+/// element forces (a gather: no atomics), then lane 0 sets u_next = u_held
+/// for a held node, else the damped central difference with R = 0.
+template <class T>
+__device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, const StepBuffers<T>& b,
+                               const NodeData<T>& d) {
   Vec3<T> f = {T(0), T(0), T(0)};
-  const index_t end = __ldg(m.node_elem_start + a + 1);
-#pragma unroll 8
-  for (index_t k = __ldg(m.node_elem_start + a); k < end; ++k) f = f + s.f_slot[k].vec();
+#pragma unroll 4
+  for (index_t k = d.first; k < d.end; k += kNodeLanes) f = f + s.f_slot[k].vec();
+  f = {node_group_sum(f.x, d.mask), node_group_sum(f.y, d.mask), node_group_sum(f.z, d.mask)};
+  if (d.lane != 0) return;
+  const index_t a = d.a;
   s.f[a] = Packed3<T>::of(f);
   if (s.held[a]) {
     b.u_next[a] = s.u_held[a];
@@ -110,42 +166,58 @@ __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, con
 }
 
 // ---- one kernel per pass ------------------------------------------------------
-// Each lets the next pass's grid launch at once and then waits for the
-// previous grid (programmatic dependent launch: the launch latency overlaps
-// the previous pass; both calls are no-ops for a plain launch). Nothing is
-// read before the wait, so a predecessor that is not a pass is safe too.
+// Each lets the next pass's grid launch at once, loads its model data (and
+// the region's lists, written before any pass ran), then waits for the
+// previous grid (programmatic dependent launch; both calls are no-ops for a
+// plain launch) before it touches the state.
 
-__device__ __forceinline__ void chain_to_previous_pass() {
-  cudaTriggerProgrammaticLaunchCompletion();
-  cudaGridDependencySynchronize();
-}
+__device__ __forceinline__ void let_next_pass_launch() { cudaTriggerProgrammaticLaunchCompletion(); }
+__device__ __forceinline__ void wait_for_previous_pass() { cudaGridDependencySynchronize(); }
 
 template <class T>
 __global__ void element_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
-  chain_to_previous_pass();
+  let_next_pass_launch();
   const index_t i = thread_index();
-  if (i < r.n_elems) element_pressure_at(m, s, u, r.elem(i));
+  const bool active = i < r.n_elems;
+  ElementData<T> d;
+  if (active) d = load_element(m, r.elem(i));
+  wait_for_previous_pass();
+  if (active) element_pressure_at(s, d, u);
 }
 
+/// Node kernels run kNodeLanes threads per node (launch kNodeLanes * n);
+/// whole groups are active or not.
 template <class T>
 __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView r) {
-  chain_to_previous_pass();
-  const index_t i = thread_index();
-  if (i < r.n_nodes) nodal_pressure_at(m, s, r.node(i));
+  let_next_pass_launch();
+  const index_t g = thread_index(), i = g / kNodeLanes;
+  const bool active = i < r.n_nodes;
+  NodeData<T> d;
+  if (active) d = load_node(m, r.node(i), g % kNodeLanes, node_group_mask());
+  wait_for_previous_pass();
+  if (active) nodal_pressure_at(m, s, d);
 }
 
 template <class T>
 __global__ void element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
-  chain_to_previous_pass();
+  let_next_pass_launch();
   const index_t i = thread_index();
-  if (i < r.n_elems) element_forces_at(m, s, u, r.elem(i));
+  const bool active = i < r.n_elems;
+  ElementData<T> d;
+  if (active) d = load_element(m, r.elem(i));
+  wait_for_previous_pass();
+  if (active) element_forces_at(s, d, u, m.ianp);
 }
 
 template <class T>
 __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
-  chain_to_previous_pass();
-  const index_t i = thread_index();
-  if (i < r.n_nodes) node_update_at(m, s, b, r.node(i));
+  let_next_pass_launch();
+  const index_t g = thread_index(), i = g / kNodeLanes;
+  const bool active = i < r.n_nodes;
+  NodeData<T> d;
+  if (active) d = load_node(m, r.node(i), g % kNodeLanes, node_group_mask());
+  wait_for_previous_pass();
+  if (active) node_update_at(m, s, b, d);
 }
 
 // ---- persistent kernels: whole steps, a barrier between passes ----------------
@@ -160,39 +232,50 @@ struct ClusterBarrier {
   __device__ void operator()() const { cooperative_groups::this_cluster().sync(); }
 };
 
-/// `steps` TLED steps; every pass is a grid-stride loop over the region and
-/// the barrier separates passes (and steps). The buffers rotate per step.
+/// `steps` TLED steps; every pass is a grid-stride loop over the region
+/// (node passes over kNodeLanes lanes per node: the stride is a multiple of
+/// kNodeLanes, so a group's lanes always iterate together) and the barrier
+/// separates passes (and steps). The buffers rotate per step.
 template <class T, class Barrier>
 __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
                           int steps, Barrier barrier) {
   const index_t first = thread_index(), stride = thread_stride();
+  const index_t node_items = kNodeLanes * r.n_nodes;
+  const int lane = first % kNodeLanes;
+  const unsigned mask = node_group_mask();
   for (int k = 0; k < steps; ++k) {
-    for (index_t i = first; i < r.n_elems; i += stride) element_pressure_at(m, s, b.u, r.elem(i));
+    for (index_t i = first; i < r.n_elems; i += stride) element_pressure_at(s, load_element(m, r.elem(i)), b.u);
     barrier();
-    for (index_t i = first; i < r.n_nodes; i += stride) nodal_pressure_at(m, s, r.node(i));
+    for (index_t g = first; g < node_items; g += stride)
+      nodal_pressure_at(m, s, load_node(m, r.node(g / kNodeLanes), lane, mask));
     barrier();
-    for (index_t i = first; i < r.n_elems; i += stride) element_forces_at(m, s, b.u, r.elem(i));
+    for (index_t i = first; i < r.n_elems; i += stride) element_forces_at(s, load_element(m, r.elem(i)), b.u, m.ianp);
     barrier();
-    for (index_t i = first; i < r.n_nodes; i += stride) node_update_at(m, s, b, r.node(i));
+    for (index_t g = first; g < node_items; g += stride)
+      node_update_at(m, s, b, load_node(m, r.node(g / kNodeLanes), lane, mask));
     b = b.rotated();
     if (k + 1 < steps) barrier();
   }
 }
 
-/// Threads per block of the persistent kernels: 1024 in float (a 16-block
-/// cluster then covers 16k items, one per thread, for the ~8k-element
-/// kidney), 512 in double (its pass 3 needs ~128 registers per thread).
+/// Threads per block of the cooperative grid kernel: small blocks spread a
+/// small region over many SMs (pass 3 is compute-heavy).
+inline constexpr int kGridBlock = 256;
+
+/// Threads per block of the cluster kernel: 1024 in float (a 16-block
+/// cluster then covers 16k items, one per thread), 512 in double (its pass 3
+/// needs ~128 registers per thread).
 template <class T>
-inline constexpr int kPersistentBlock = sizeof(T) == 4 ? 1024 : 512;
+inline constexpr int kClusterBlock = sizeof(T) == 4 ? 1024 : 512;
 
 template <class T>
-__global__ void __launch_bounds__(kPersistentBlock<T>)
+__global__ void __launch_bounds__(kGridBlock)
     persistent_grid_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b, int steps) {
   run_steps(m, s, r, b, steps, GridBarrier{});
 }
 
 template <class T>
-__global__ void __launch_bounds__(kPersistentBlock<T>)
+__global__ void __launch_bounds__(kClusterBlock<T>)
     persistent_cluster_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b, int steps) {
   run_steps(m, s, r, b, steps, ClusterBarrier{});
 }
