@@ -14,6 +14,7 @@ void add_mesh_command(CLI::App& app, int& rc);
 void add_run_command(CLI::App& app, int& rc);
 void add_bench_command(CLI::App& app, int& rc);
 void add_info_command(CLI::App& app, int& rc);
+void add_view_command(CLI::App& app, int& rc);  ///< apps/viewer/view_command.cpp
 
 /// Loads a scene file, or the built-in kidney for the name "@kidney".
 scene::Scene load_scene_arg(const std::string& arg);

@@ -1,0 +1,132 @@
+#include "apps/viewer/overlay.hpp"
+
+#include <GLFW/glfw3.h>
+#include <imgui.h>
+#include <imgui_impl_glfw.h>
+#include <imgui_impl_opengl3.h>
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+namespace tissue::viewer {
+namespace {
+
+void row(const char* label, const std::string& value) {
+  ImGui::TextUnformatted(label);
+  ImGui::SameLine(84);
+  ImGui::TextUnformatted(value.c_str());
+}
+
+std::string mm(Vec3<double> p) { return fmt::format("({:.1f}, {:.1f}, {:.1f}) mm", 1e3 * p.x, 1e3 * p.y, 1e3 * p.z); }
+
+}  // namespace
+
+Overlay::Overlay(GLFWwindow* window) : glfw_(window != nullptr) {
+  IMGUI_CHECKVERSION();
+  ImGui::CreateContext();
+  ImGui::GetIO().IniFilename = nullptr;  // no imgui.ini beside the user's files
+  ImGui::StyleColorsDark();
+  ImGui::GetStyle().WindowRounding = 4;
+  ImGui::GetStyle().Alpha = 0.92f;
+  if (glfw_) ImGui_ImplGlfw_InitForOpenGL(window, true);  // chains the viewer's own callbacks
+  ImGui_ImplOpenGL3_Init("#version 330 core");
+}
+
+Overlay::~Overlay() {
+  ImGui_ImplOpenGL3_Shutdown();
+  if (glfw_) ImGui_ImplGlfw_Shutdown();
+  ImGui::DestroyContext();
+}
+
+bool Overlay::wants_mouse() const { return ImGui::GetIO().WantCaptureMouse; }
+
+void Overlay::panel_rect(float r[4]) const { std::copy_n(rect_, 4, r); }
+
+OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, const std::string& status, int w, int h) {
+  OverlayActions act;
+  if (!editing_) edit_ = s.params;
+  ImGui_ImplOpenGL3_NewFrame();
+  if (glfw_) {
+    ImGui_ImplGlfw_NewFrame();
+  } else {
+    ImGuiIO& io = ImGui::GetIO();
+    io.DisplaySize = ImVec2(float(w), float(h));
+    io.DeltaTime = 1.0f / 60;
+  }
+  ImGui::NewFrame();
+  ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_Always);
+  ImGui::SetNextWindowSize(ImVec2(500, 0), ImGuiCond_Always);
+  ImGui::Begin("tissue", nullptr, ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse);
+  const HapticStats& st = s.stats;
+  row("backend", fmt::format("{} ({})", f.backend, to_string(s.params.precision)));
+  row("device", f.device_name);
+  row("GL", f.gl);
+  row("positions", f.positions);
+  row("mesh", fmt::format("{} nodes, {} tets, {} triangles", f.n_nodes, f.n_elems, f.n_tris));
+  row("TLED", fmt::format("{} steps/tick, {:.0f} steps/s", s.steps_per_tick, st.steps_per_s));
+  row("haptic", fmt::format("{:.1f} Hz, tick p50 {:.3f} p99 {:.3f} max {:.3f} ms", st.rate_hz, 1e3 * st.work_p50,
+                            1e3 * st.work_p99, 1e3 * st.work_max));
+  row("jitter", fmt::format("p99 {:.3f} ms; late {} of {} (session {} of {})", 1e3 * st.wake_p99, st.window_late,
+                            st.window_ticks, st.late, st.ticks));
+  if (!st.keeping_up)
+    ImGui::TextColored(ImVec4(1, 0.35f, 0.3f, 1), "SOLVER CANNOT KEEP UP: %ld of the last %ld ticks late",
+                       st.window_late, st.window_ticks);
+  row("tool", fmt::format("{}  {}", mm(s.tool),
+                          s.contact_tri >= 0 ? fmt::format("contact, triangle {}", s.contact_tri) : "no contact"));
+  row("force", fmt::format("{:.4f} N to the device (tissue {:.4f} N){}", norm(s.rendered_force), norm(s.tissue_force),
+                           s.clamped ? "  CLAMPED" : ""));
+  row("region", s.region.whole() ? fmt::format("whole mesh, {} nodes, {} elements", s.region.nodes(), s.region.n_elems)
+                                 : fmt::format("{} inner + {} halo nodes, {} elements (depth {})", s.region.n_inner,
+                                               s.region.n_halo, s.region.n_elems, s.region.depth));
+  row("time", fmt::format("{:.3f} s simulated, max |u| {:.2f} mm", s.time, 1e3 * s.max_disp));
+  ImGui::Separator();
+  bool changed = false;
+  const double nu_min = 0.0, nu_max = 0.499;
+  if (!f.uniform_material && edit_.E <= 0) ImGui::TextDisabled("E, nu: the scene's %s", "materials (several sets)");
+  if (ImGui::InputDouble(f.uniform_material ? "E [Pa]" : "E [Pa] (all sets)", &edit_.E, 100, 1000, "%.0f")) {
+    edit_.E = std::clamp(edit_.E, 10.0, 1e7);
+    changed = true;
+  }
+  changed |= ImGui::SliderScalar("nu", ImGuiDataType_Double, &edit_.nu, &nu_min, &nu_max, "%.3f");
+  bool whole = edit_.depth == kDepthAll;
+  int depth = whole ? 5 : edit_.depth;
+  if (ImGui::Checkbox("whole mesh", &whole)) changed = true;
+  ImGui::SameLine();
+  ImGui::BeginDisabled(whole);
+  changed |= ImGui::SliderInt("region depth", &depth, 0, 20);
+  ImGui::EndDisabled();
+  edit_.depth = whole ? kDepthAll : depth;
+  int precision = edit_.precision == Precision::Float ? 0 : 1;
+  changed |= ImGui::Combo("precision", &precision, "float\0double\0");
+  edit_.precision = precision == 0 ? Precision::Float : Precision::Double;
+  editing_ = editing_ || changed;
+  if (ImGui::Button("Apply (rebuild)")) {
+    act.apply = edit_;
+    editing_ = false;
+  }
+  ImGui::SameLine();
+  if (ImGui::Button("Reset tissue")) act.reset = true;
+  if (!status.empty()) {
+    ImGui::PushTextWrapPos(0);
+    ImGui::TextColored(ImVec4(1, 0.45f, 0.35f, 1), "%s", status.c_str());
+    ImGui::PopTextWrapPos();
+  }
+  if (glfw_) {
+    ImGui::Separator();
+    ImGui::TextDisabled("left drag: tool in the view plane; wheel: push along the view");
+    ImGui::TextDisabled("right drag: orbit; middle drag: pan; shift+wheel: zoom");
+  }
+  const ImVec2 pos = ImGui::GetWindowPos(), size = ImGui::GetWindowSize();
+  rect_[0] = pos.x;
+  rect_[1] = pos.y;
+  rect_[2] = pos.x + size.x;
+  rect_[3] = pos.y + size.y;
+  ImGui::End();
+  ImGui::Render();
+  ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+  return act;
+}
+
+}  // namespace tissue::viewer

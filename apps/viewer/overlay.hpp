@@ -1,0 +1,54 @@
+// The Dear ImGui overlay: what runs (backend, precision, GL, how positions
+// reach the vertex buffer), how fast (TLED steps/s, haptic rate, tick
+// percentiles and jitter, late ticks), what the tool feels (force, contact,
+// region size), and controls for E, nu, region depth and precision that the
+// haptic loop applies between ticks. Uses Debian's libimgui (core) with the
+// GLFW and OpenGL 3 backends compiled from libimgui-dev's example sources;
+// without a GLFW window (EGL) it feeds ImGui the display size itself.
+#pragma once
+
+#include <optional>
+#include <string>
+
+#include "core/haptic_loop.hpp"
+
+struct GLFWwindow;
+
+namespace tissue::viewer {
+
+/// Facts that do not change every frame.
+struct OverlayFacts {
+  std::string backend, device_name, gl, positions;
+  index_t n_nodes = 0, n_elems = 0, n_tris = 0;
+  bool uniform_material = true;  ///< false: several materials; E/nu apply to all
+};
+
+/// What the user asked for in this frame.
+struct OverlayActions {
+  std::optional<LiveParams> apply;  ///< rebuild with these parameters
+  bool reset = false;               ///< rebuild with the running parameters (tissue at rest)
+};
+
+class Overlay {
+ public:
+  /// `window` null: no GLFW input (headless pictures). GL context current.
+  explicit Overlay(GLFWwindow* window);
+  ~Overlay();
+  Overlay(const Overlay&) = delete;
+  Overlay& operator=(const Overlay&) = delete;
+
+  /// Builds and renders the panel into the bound framebuffer (w x h pixels).
+  OverlayActions draw(const OverlayFacts& facts, const HapticSnapshot& snap, const std::string& status, int w, int h);
+  /// True while ImGui uses the mouse (the tool and camera must not).
+  bool wants_mouse() const;
+  /// The panel's last rectangle (pixels: x0, y0, x1, y1).
+  void panel_rect(float r[4]) const;
+
+ private:
+  bool glfw_ = false;
+  bool editing_ = false;  ///< the controls hold the user's values, not the running ones
+  LiveParams edit_;
+  float rect_[4] = {0, 0, 0, 0};
+};
+
+}  // namespace tissue::viewer

@@ -1,0 +1,92 @@
+// Draws the tissue surface and the glyphs (tool, contact point, force arrow)
+// with OpenGL 3.3 core. The tissue is one vertex buffer of the deformed
+// positions X + u of all nodes (n_nodes x 3 floats, what
+// Backend::write_positions writes) drawn through an index buffer of the
+// surface triangles; flat normals come from screen-space derivatives of the
+// position in the fragment shader, so no normal buffer has to follow the
+// deformation. A second per-node buffer holds the region role (outside,
+// inner, halo) that tints the active region; it changes only when the
+// region does.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "apps/viewer/camera.hpp"
+#include "core/model.hpp"
+#include "core/region.hpp"
+
+namespace tissue::viewer {
+
+/// What to draw besides the tissue (positions in m, forces in N).
+struct Glyphs {
+  bool show_tool = true;
+  Vec3<double> tool = {};          ///< proxy: the tool tip the tissue feels
+  Vec3<double> device = {};        ///< the hand (device) position
+  double tool_radius = 1e-3;       ///< m
+  Vec3<double> shaft_dir = {0, 0, 1};  ///< unit, from the tip back along the tool's shaft
+  bool contact = false;
+  Vec3<double> force = {};         ///< force on the tool (N), drawn from the tip
+  double metres_per_newton = 0.05; ///< arrow length per newton
+};
+
+class Renderer {
+ public:
+  /// Creates the buffers for the model's surface (GL context current).
+  explicit Renderer(const TissueModel<double>& model);
+  ~Renderer();
+  Renderer(const Renderer&) = delete;
+  Renderer& operator=(const Renderer&) = delete;
+
+  /// The tissue's position buffer (GL name), for CUDA registration.
+  unsigned position_buffer() const { return vbo_pos_; }
+  index_t n_nodes() const { return n_nodes_; }
+  /// Replaces the positions from host memory (n_nodes x 3 floats).
+  void upload_positions(const float* xyz);
+  /// Replaces the node roles (NodeRole, n_nodes); empty: no highlight.
+  void upload_roles(std::span<const std::uint8_t> role);
+
+  /// Clears to the background and draws tissue and glyphs into the bound
+  /// framebuffer (viewport = camera size).
+  void draw(const Camera& camera, const Glyphs& glyphs);
+
+  /// Background colour (linear RGB in 0..1), also what screenshots test for.
+  static constexpr float kBackground[3] = {0.11f, 0.12f, 0.15f};
+
+ private:
+  struct Mesh {
+    unsigned vao = 0, vbo = 0, ibo = 0;
+    int count = 0;
+  };
+  Mesh make_mesh(const std::vector<float>& xyz, const std::vector<unsigned>& idx);
+  void draw_glyph(const Mesh& mesh, const Mat4& view_proj, const Mat4& view, const Mat4& model, const float rgb[3]);
+
+  index_t n_nodes_ = 0;
+  int n_indices_ = 0;
+  unsigned program_ = 0;
+  unsigned vao_ = 0, vbo_pos_ = 0, vbo_role_ = 0, ibo_ = 0;
+  Mesh sphere_, cylinder_, cone_;
+  int u_mvp_ = -1, u_mv_ = -1, u_color_ = -1, u_tint_ = -1;
+};
+
+/// An offscreen render target of the given size (4x multisampled colour and
+/// depth, resolved for reading). Binds itself for drawing on construction.
+class OffscreenTarget {
+ public:
+  OffscreenTarget(int width, int height);
+  ~OffscreenTarget();
+  OffscreenTarget(const OffscreenTarget&) = delete;
+  OffscreenTarget& operator=(const OffscreenTarget&) = delete;
+  void bind();
+  /// Resolves and reads the picture as RGB rows, top row first (w x h x 3).
+  std::vector<std::uint8_t> read_rgb();
+  int width() const { return w_; }
+  int height() const { return h_; }
+
+ private:
+  int w_, h_;
+  unsigned fbo_ms_ = 0, color_ms_ = 0, depth_ms_ = 0, fbo_ = 0, color_ = 0;
+};
+
+}  // namespace tissue::viewer

@@ -1,0 +1,87 @@
+#include "apps/viewer/session.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <limits>
+#include <memory>
+
+#include "apps/commands.hpp"
+#include "backends/registry.hpp"
+#include "scene/validate.hpp"
+
+namespace tissue::viewer {
+
+void young_poisson(const MaterialParams& m, double* E, double* nu) {
+  *E = 9 * m.K * m.mu / (3 * m.K + m.mu);
+  *nu = (3 * m.K - 2 * m.mu) / (2 * (3 * m.K + m.mu));
+}
+
+scene::Scene with_params(scene::Scene s, const LiveParams& p) {
+  if (p.E > 0)
+    for (scene::Material& m : s.materials) {
+      m.form = scene::Material::Form::YoungPoisson;
+      m.a = p.E;
+      m.b = p.nu;
+    }
+  s.solver.depth = p.depth;
+  s.solver.precision = p.precision;
+  return s;
+}
+
+Simulation build_simulation(const scene::Scene& base, const LiveParams& p) {
+  const scene::Scene s = with_params(base, p);
+  Simulation sim;
+  sim.model = std::make_unique<TissueModel<double>>(scene::load_model(s));
+  sim.backend = create_backend(s.solver.backend, s.solver.precision);
+  sim.backend->upload(*sim.model);
+  sim.scheduler = std::make_unique<Scheduler>(*sim.backend, *sim.model, scene::scheduler_settings(s));
+  return sim;
+}
+
+SimulationFactory Session::factory() const {
+  auto shared = std::make_shared<const scene::Scene>(scene);
+  return [shared](const LiveParams& p) { return build_simulation(*shared, p); };
+}
+
+Session make_session(scene::Scene scene, const std::string& backend, const std::string& precision,
+                     const std::string& depth) {
+  if (!backend.empty()) scene.solver.backend = backend;
+  if (!precision.empty()) scene.solver.precision = app::parse_precision(precision);
+  if (!depth.empty()) scene.solver.depth = app::parse_depth(depth);
+  scene::validate(scene);
+  Session s;
+  s.params.depth = scene.solver.depth;
+  s.params.precision = scene.solver.precision;
+  // one material: its (E, nu), which rebuild the same model; several: E = 0
+  // keeps them all until the user sets one E and nu for every set
+  if (!scene.materials.empty()) young_poisson(scene.materials.front().params(), &s.params.E, &s.params.nu);
+  if (scene.materials.size() != 1) s.params.E = 0;
+  const double inf = std::numeric_limits<double>::infinity();
+  s.bounds = {{inf, inf, inf}, {-inf, -inf, -inf}};
+  for (size_t i = 0; i + 2 < scene.nodes.size(); i += 3)
+    for (int c = 0; c < 3; ++c) {
+      s.bounds.lo[c] = std::min(s.bounds.lo[c], scene.nodes[i + c]);
+      s.bounds.hi[c] = std::max(s.bounds.hi[c], scene.nodes[i + c]);
+    }
+  s.press_dir = {0, 0, -1};
+  s.approach = 0.1 * s.bounds.diagonal();
+  s.tool_start = s.bounds.center() + Vec3<double>{0, 0, 0.5 * (s.bounds.hi.z - s.bounds.lo.z) + 0.1 * s.bounds.diagonal()};
+  if (!scene.tools.empty()) {
+    const scene::Tool& tool = scene.tools.front();
+    s.tool_radius = tool.radius;
+    if (!tool.path.empty()) {
+      s.tool_start = tool.path.front().p;
+      for (const Waypoint& w : tool.path)
+        if (norm(w.p - s.tool_start) > 1e-9) {
+          s.approach = norm(w.p - s.tool_start);
+          s.press_dir = (1.0 / s.approach) * (w.p - s.tool_start);
+          break;
+        }
+    }
+  }
+  s.scene = std::move(scene);
+  return s;
+}
+
+}  // namespace tissue::viewer

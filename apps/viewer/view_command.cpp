@@ -1,0 +1,38 @@
+// `tissue view <scene>`: registration of the viewer's command-line options.
+#include <CLI/CLI.hpp>
+
+#include <memory>
+
+#include "apps/commands.hpp"
+#include "apps/viewer/viewer.hpp"
+
+namespace tissue::app {
+
+void add_view_command(CLI::App& app, int& rc) {
+  auto* cmd = app.add_subcommand(
+      "view", "Interactive viewer: the mouse (or a scripted or Phantom tool) presses the tissue at 1 kHz; "
+              "--screenshot renders a picture offscreen instead");
+  auto o = std::make_shared<viewer::ViewOptions>();
+  cmd->add_option("scene", o->scene, "Scene XML file, or @kidney for the built-in kidney")->required();
+  cmd->add_option("--backend", o->backend, "cpu | cuda (default: the scene's)");
+  cmd->add_option("--precision", o->precision, "float | double (default: the scene's)");
+  cmd->add_option("--depth", o->depth, "Region depth N (rings from the contact triangle) or 'all'");
+  cmd->add_option("--device", o->device,
+                  "mouse | scripted | phantom (default: mouse; for --screenshot the scene tool's device)");
+  cmd->add_option("--screenshot", o->screenshot, "Render offscreen to this PNG (and a .json sidecar), then quit");
+  cmd->add_option("--ticks", o->ticks, "With --screenshot: haptic ticks to run first (default: the tool path)");
+  cmd->add_option("--width", o->width, "Window or picture width (pixels)")->default_val(960);
+  cmd->add_option("--height", o->height, "Window or picture height (pixels)")->default_val(720);
+  cmd->add_option("--gl", o->gl,
+                  "window | hidden | egl (default: window; pictures: hidden under X, else egl without any X server)");
+  cmd->add_option("--hide", o->hide, "Leave out of the picture: comma list of tool, region, overlay");
+  cmd->add_option("--mouse-events", o->mouse_events,
+                  "With --screenshot and --device mouse: '<tick> wheel <n>; <tick> drag <x0>,<y0> <x1>,<y1>; "
+                  "<tick> orbit <dx>,<dy>'");
+  cmd->add_option("--seconds", o->seconds, "Close the window after this many seconds (0: when closed)");
+  cmd->add_option("--mouse-speed", o->mouse_speed, "Fastest the mouse moves the tool (m/s)")->default_val(0.25);
+  cmd->add_option("--arrow-scale", o->arrow_scale, "Force arrow length in m per N (default: 1.5 organ diagonals)");
+  cmd->callback([o, &rc] { rc = viewer::run_view(*o, load_scene_arg(o->scene)); });
+}
+
+}  // namespace tissue::app

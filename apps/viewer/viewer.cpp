@@ -1,0 +1,358 @@
+#include "apps/viewer/viewer.hpp"
+
+// clang-format off
+#include <GL/glew.h>
+#include <GLFW/glfw3.h>
+// clang-format on
+
+#include <fmt/format.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+
+#include "apps/viewer/camera.hpp"
+#include "apps/viewer/gl_context.hpp"
+#include "apps/viewer/mouse_controller.hpp"
+#include "apps/viewer/mouse_device.hpp"
+#include "apps/viewer/overlay.hpp"
+#include "apps/viewer/phantom_device.hpp"
+#include "apps/viewer/picture.hpp"
+#include "apps/viewer/position_source.hpp"
+#include "apps/viewer/renderer.hpp"
+#include "apps/viewer/session.hpp"
+
+namespace tissue::viewer {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+/// What to leave out of the picture (--hide).
+struct Hidden {
+  bool tool = false, region = false, overlay = false;
+};
+
+Hidden parse_hide(const std::string& list) {
+  Hidden h;
+  std::stringstream in(list);
+  for (std::string item; std::getline(in, item, ',');) {
+    if (item == "tool") h.tool = true;
+    else if (item == "region") h.region = true;
+    else if (item == "overlay") h.overlay = true;
+    else if (!item.empty())
+      throw std::invalid_argument(fmt::format("--hide '{}': '{}' is none of tool, region, overlay", list, item));
+  }
+  return h;
+}
+
+/// The device the tool follows, and the coupling's force limit for it.
+struct DeviceChoice {
+  std::unique_ptr<Device> device;
+  MouseDevice* mouse = nullptr;  ///< set when the device is the mouse
+  double max_force = CouplingParams{}.max_force;
+};
+
+DeviceChoice make_device(const std::string& kind, const Session& s, double mouse_speed) {
+  DeviceChoice d;
+  if (kind == "mouse") {
+    auto m = std::make_unique<MouseDevice>(s.tool_start, mouse_speed);
+    d.mouse = m.get();
+    d.device = std::move(m);
+  } else if (kind == "scripted") {
+    if (s.scene.tools.empty() || s.scene.tools.front().path.empty())
+      throw std::runtime_error(fmt::format("{}: --device scripted needs a tool with a path in the scene", s.scene.source));
+    d.device = std::make_unique<ScriptedDevice>(s.scene.tools.front().path);
+  } else if (kind == "phantom") {
+    d.device = make_phantom_device(WorkspaceMap{s.tool_start, 1.0}, &d.max_force);
+  } else {
+    throw std::invalid_argument(fmt::format("--device '{}' is none of scripted, mouse, phantom", kind));
+  }
+  return d;
+}
+
+/// The parts of the model the renderer needs (mesh only; it never changes on rebuilds).
+TissueModel<double> mesh_of(HapticLoop& loop) {
+  TissueModel<double> m;
+  loop.post([&m](Simulation& sim) {
+        m.n_nodes = sim.model->n_nodes;
+        m.n_elems = sim.model->n_elems;
+        m.n_tris = sim.model->n_tris;
+        m.X = sim.model->X;
+        m.tris = sim.model->tris;
+      }).get();
+  return m;
+}
+
+OverlayFacts facts_of(HapticLoop& loop, const TissueModel<double>& mesh, const Session& s, const GlContext& ctx,
+                      const PositionSource& positions) {
+  OverlayFacts f;
+  loop.post([&f](Simulation& sim) {
+        f.backend = sim.backend->name();
+        f.device_name = sim.backend->device_name();
+      }).get();
+  f.gl = ctx.renderer();
+  f.positions = positions.path();
+  f.n_nodes = mesh.n_nodes;
+  f.n_elems = mesh.n_elems;
+  f.n_tris = mesh.n_tris;
+  f.uniform_material = s.scene.materials.size() == 1;
+  return f;
+}
+
+/// Refreshes the region tint when the region changed (downloads the roles only then).
+void update_roles(HapticLoop& loop, Renderer& r, const HapticSnapshot& snap, bool show, long* shown_version) {
+  if (snap.region_version == *shown_version) return;
+  *shown_version = snap.region_version;
+  if (!show || snap.region.whole() || snap.region.nodes() == 0) {
+    r.upload_roles({});
+    return;
+  }
+  std::vector<std::uint8_t> role;
+  loop.post([&role](Simulation& sim) { role = sim.backend->region().role; }).get();
+  r.upload_roles(role);
+}
+
+Glyphs glyphs_of(const HapticSnapshot& snap, const Session& s, double arrow_scale, bool show_tool) {
+  Glyphs g;
+  g.show_tool = show_tool;
+  g.tool = snap.tool;
+  g.device = snap.device;
+  g.tool_radius = s.tool_radius;
+  g.shaft_dir = -1.0 * s.press_dir;
+  g.contact = snap.contact_tri >= 0;
+  g.force = snap.rendered_force;
+  g.metres_per_newton = arrow_scale;
+  return g;
+}
+
+ContextKind context_kind(const ViewOptions& o) {
+  if (!o.gl.empty()) return parse_context_kind(o.gl);
+  if (o.screenshot.empty()) return ContextKind::Window;
+  const char* display = std::getenv("DISPLAY");
+  return display && *display ? ContextKind::HiddenWindow : ContextKind::Egl;
+}
+
+/// Everything both modes set up: session, device, loop, GL, renderer, positions.
+struct Viewer {
+  Session session;
+  DeviceChoice device;
+  std::unique_ptr<HapticLoop> loop;
+  std::unique_ptr<GlContext> ctx;
+  TissueModel<double> mesh;
+  std::unique_ptr<Renderer> renderer;
+  std::unique_ptr<PositionSource> positions;
+  Camera camera;
+  double arrow_scale = 0;
+  double wheel_step = 0;
+};
+
+std::unique_ptr<Viewer> make_viewer(const ViewOptions& o, scene::Scene scene) {
+  auto v = std::make_unique<Viewer>();
+  v->session = make_session(std::move(scene), o.backend, o.precision, o.depth);
+  const std::string kind = !o.device.empty()                ? o.device
+                           : o.screenshot.empty()           ? "mouse"
+                           : v->session.scene.tools.empty() ? "mouse"
+                                                            : v->session.scene.tools.front().device;
+  v->device = make_device(kind, v->session, o.mouse_speed);
+  HapticLoop::Options opt;
+  opt.coupling.max_force = v->device.max_force;
+  v->loop = std::make_unique<HapticLoop>(*v->device.device, v->session.factory(), v->session.params, opt);
+  if (o.width < 16 || o.height < 16 || o.width > 8192 || o.height > 8192)
+    throw std::invalid_argument(fmt::format("--size {}x{}: each side must lie in 16..8192 pixels", o.width, o.height));
+  v->ctx = std::make_unique<GlContext>(context_kind(o), o.width, o.height, "tissue view: " + o.scene);
+  v->mesh = mesh_of(*v->loop);
+  v->renderer = std::make_unique<Renderer>(v->mesh);
+  v->positions = make_position_source(*v->renderer, v->session.scene.solver.backend);
+  const Bounds& b = v->session.bounds;
+  // From the tool's side, a little to its left and above, so that the dent
+  // shows beside the tool; for the mouse, nearly along the tool's approach,
+  // so that the wheel pushes the tool where the scene's probe presses.
+  const bool mouse = v->device.mouse != nullptr;
+  v->camera = frame_camera(b.center(), b.diagonal(), v->session.press_dir, mouse ? 0.0 : 0.35, mouse ? 0.3 : 0.75,
+                           o.width, o.height);
+  v->arrow_scale = o.arrow_scale > 0 ? o.arrow_scale : 1.5 * b.diagonal();
+  v->wheel_step = b.diagonal() / 150;
+  return v;
+}
+
+void print_stats(const HapticSnapshot& s, const PositionSource& positions) {
+  fmt::print("{}\n", describe(s.stats));
+  fmt::print("TLED {} steps/tick, {:.0f} steps/s; positions: {}\n", s.steps_per_tick, s.stats.steps_per_s,
+             positions.path());
+}
+
+// ------------------------------------------------------------------ pictures
+
+int run_picture(const ViewOptions& o, Viewer& v) {
+  const Hidden hide = parse_hide(o.hide);
+  HapticLoop& loop = *v.loop;
+  long ticks = o.ticks;
+  if (ticks < 0) {
+    const auto* scripted = dynamic_cast<const ScriptedDevice*>(v.device.device.get());
+    ticks = scripted ? std::lround(scripted->duration() / loop.period()) : 0;
+  }
+  // the scripted mouse, if any, between chunks of ticks
+  long done = 0;
+  if (!o.mouse_events.empty()) {
+    if (!v.device.mouse) throw std::invalid_argument("--mouse-events needs --device mouse");
+    MouseController mouse(v.camera, *v.device.mouse, v.wheel_step);
+    for (const MouseEvent& e : parse_mouse_events(o.mouse_events)) {
+      if (e.tick > ticks) break;
+      loop.run_ticks(e.tick - done);
+      done = e.tick;
+      apply(mouse, e);
+    }
+  }
+  loop.run_ticks(ticks - done);
+  const HapticSnapshot snap = loop.snapshot();
+
+  OffscreenTarget target(o.width, o.height);
+  v.positions->update(loop);
+  long shown = -1;
+  update_roles(loop, *v.renderer, snap, !hide.region, &shown);
+  std::unique_ptr<Overlay> overlay = hide.overlay ? nullptr : std::make_unique<Overlay>(nullptr);
+  const OverlayFacts facts = facts_of(loop, v.mesh, v.session, *v.ctx, *v.positions);
+  for (int frame = 0; frame < (overlay ? 2 : 1); ++frame) {  // ImGui lays windows out on the first frame
+    v.renderer->draw(v.camera, glyphs_of(snap, v.session, v.arrow_scale, !hide.tool));
+    if (overlay) overlay->draw(facts, snap, loop.status(), o.width, o.height);
+  }
+  write_png(o.screenshot, o.width, o.height, target.read_rgb());
+
+  PictureFacts pf;
+  pf.width = o.width;
+  pf.height = o.height;
+  pf.backend = facts.backend;
+  pf.precision = to_string(snap.params.precision);
+  pf.positions = facts.positions;
+  pf.snap = snap;
+  v.camera.project(snap.tool, &pf.tool_px[0], &pf.tool_px[1], nullptr);
+  v.camera.project(snap.device, &pf.device_px[0], &pf.device_px[1], nullptr);
+  project_box(v.camera, v.session.bounds.lo, v.session.bounds.hi, pf.organ_px);
+  pf.overlay = overlay != nullptr;
+  if (overlay) overlay->panel_rect(pf.overlay_px);
+  pf.tool_shown = !hide.tool;
+  pf.region_shown = !hide.region;
+  const std::string json_path = o.screenshot + ".json";
+  std::FILE* f = std::fopen(json_path.c_str(), "w");
+  if (!f) throw std::runtime_error(fmt::format("tissue view: cannot write {}", json_path));
+  std::fputs(picture_json(pf).c_str(), f);
+  std::fclose(f);
+  fmt::print("wrote {} ({}x{}, {} ticks, {}, |F| = {:.4f} N, {}) and {}\n", o.screenshot, o.width, o.height,
+             snap.tick < 0 ? 0 : snap.tick, snap.contact_tri >= 0 ? "in contact" : "no contact",
+             norm(snap.rendered_force), v.ctx->renderer(), json_path);
+  return 0;
+}
+
+// ------------------------------------------------------------------ interactive
+
+/// The window's input, reached from GLFW's C callbacks through the user pointer.
+struct Input {
+  MouseController* mouse = nullptr;
+  Overlay* overlay = nullptr;
+  bool reset = false;
+};
+
+/// Cursor position in framebuffer pixels (the camera's units).
+void cursor(GLFWwindow* w, double* x, double* y) {
+  int ww, wh, fw, fh;
+  glfwGetWindowSize(w, &ww, &wh);
+  glfwGetFramebufferSize(w, &fw, &fh);
+  glfwGetCursorPos(w, x, y);
+  *x *= double(fw) / std::max(1, ww);
+  *y *= double(fh) / std::max(1, wh);
+}
+
+void install_input(GLFWwindow* w, Input* in) {
+  glfwSetWindowUserPointer(w, in);
+  glfwSetMouseButtonCallback(w, [](GLFWwindow* win, int button, int action, int mods) {
+    auto* in = static_cast<Input*>(glfwGetWindowUserPointer(win));
+    const MouseButton b = button == GLFW_MOUSE_BUTTON_LEFT    ? MouseButton::Left
+                          : button == GLFW_MOUSE_BUTTON_RIGHT ? MouseButton::Right
+                                                              : MouseButton::Middle;
+    if (!in->mouse) return;
+    if (action == GLFW_RELEASE) {
+      in->mouse->release(b);
+      return;
+    }
+    if (in->overlay && in->overlay->wants_mouse()) return;
+    double x, y;
+    cursor(win, &x, &y);
+    // shift + left drag orbits too, for touchpads without a right button
+    in->mouse->press((mods & GLFW_MOD_SHIFT) && b == MouseButton::Left ? MouseButton::Right : b, x, y);
+  });
+  glfwSetCursorPosCallback(w, [](GLFWwindow* win, double, double) {
+    auto* in = static_cast<Input*>(glfwGetWindowUserPointer(win));
+    if (!in->mouse) return;
+    double x, y;
+    cursor(win, &x, &y);
+    in->mouse->move(x, y);
+  });
+  glfwSetScrollCallback(w, [](GLFWwindow* win, double, double dy) {
+    auto* in = static_cast<Input*>(glfwGetWindowUserPointer(win));
+    if (!in->mouse || (in->overlay && in->overlay->wants_mouse())) return;
+    const bool shift = glfwGetKey(win, GLFW_KEY_LEFT_SHIFT) == GLFW_PRESS || glfwGetKey(win, GLFW_KEY_RIGHT_SHIFT) == GLFW_PRESS;
+    in->mouse->wheel(dy, shift);
+  });
+  glfwSetKeyCallback(w, [](GLFWwindow* win, int key, int, int action, int) {
+    auto* in = static_cast<Input*>(glfwGetWindowUserPointer(win));
+    if (action != GLFW_PRESS) return;
+    if (key == GLFW_KEY_ESCAPE) glfwSetWindowShouldClose(win, GLFW_TRUE);
+    if (key == GLFW_KEY_R) in->reset = true;
+  });
+}
+
+int run_interactive(const ViewOptions& o, Viewer& v) {
+  if (!o.mouse_events.empty()) throw std::invalid_argument("--mouse-events applies to --screenshot runs");
+  const Hidden hide = parse_hide(o.hide);
+  HapticLoop& loop = *v.loop;
+  GLFWwindow* win = v.ctx->window();
+  // a scripted or hardware tool leaves the mouse the camera only
+  MouseDevice camera_only(v.session.tool_start, o.mouse_speed);
+  MouseController mouse(v.camera, v.device.mouse ? *v.device.mouse : camera_only, v.wheel_step);
+  Input input{&mouse, nullptr, false};
+  install_input(win, &input);  // before ImGui, which chains these callbacks
+  std::unique_ptr<Overlay> overlay = hide.overlay ? nullptr : std::make_unique<Overlay>(win);
+  input.overlay = overlay.get();
+  const OverlayFacts facts = facts_of(loop, v.mesh, v.session, *v.ctx, *v.positions);
+  fmt::print("tissue view: {} on {} ({}); GL {}; positions: {}\n", v.session.scene.source, facts.backend,
+             to_string(v.session.params.precision), facts.gl, facts.positions);
+  loop.start();
+  const auto t0 = Clock::now();
+  long shown_region = -1;
+  while (!v.ctx->should_close()) {
+    if (o.seconds > 0 && std::chrono::duration<double>(Clock::now() - t0).count() > o.seconds) break;
+    glfwPollEvents();
+    const HapticSnapshot snap = loop.snapshot();
+    if (input.reset) {
+      loop.request_params(snap.params);
+      input.reset = false;
+    }
+    update_roles(loop, *v.renderer, snap, !hide.region, &shown_region);
+    v.positions->update(loop);
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    v.ctx->framebuffer_size(&v.camera.width, &v.camera.height);
+    v.renderer->draw(v.camera, glyphs_of(snap, v.session, v.arrow_scale, !hide.tool));
+    if (overlay) {
+      const OverlayActions act = overlay->draw(facts, snap, loop.status(), v.camera.width, v.camera.height);
+      if (act.apply) loop.request_params(*act.apply);
+      if (act.reset) loop.request_params(snap.params);
+    }
+    v.ctx->swap_buffers();
+  }
+  loop.stop();
+  print_stats(loop.snapshot(), *v.positions);
+  if (!loop.status().empty()) fmt::print("status: {}\n", loop.status());
+  return 0;
+}
+
+}  // namespace
+
+int run_view(const ViewOptions& o, scene::Scene scene) {
+  std::unique_ptr<Viewer> v = make_viewer(o, std::move(scene));
+  return o.screenshot.empty() ? run_interactive(o, *v) : run_picture(o, *v);
+}
+
+}  // namespace tissue::viewer

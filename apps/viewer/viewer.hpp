@@ -1,0 +1,30 @@
+// `tissue view <scene>`: the interactive viewer (display loop on the main
+// thread, haptic loop on its own) and its headless picture mode.
+#pragma once
+
+#include <string>
+
+#include "scene/scene.hpp"
+
+namespace tissue::viewer {
+
+struct ViewOptions {
+  std::string scene;                     ///< scene file or @kidney (for messages)
+  std::string backend, precision, depth; ///< overrides of the scene's solver ("" keeps it)
+  std::string device;                    ///< scripted | mouse | phantom; "": mouse, or the scene's tool for pictures
+  std::string screenshot;                ///< PNG path: render offscreen after `ticks` ticks, then quit
+  long ticks = -1;                       ///< ticks before the picture (< 0: the scripted path's length)
+  int width = 960, height = 720;         ///< window or picture (pixels)
+  std::string gl;                        ///< window | hidden | egl; "": window, or hidden / egl for pictures
+  std::string hide;                      ///< comma-separated: tool, region, overlay
+  std::string mouse_events;              ///< scripted mouse input for pictures (mouse_controller.hpp)
+  double seconds = 0;                    ///< interactive: close after this long (0: when the window closes)
+  double mouse_speed = 0.25;             ///< fastest the mouse moves the tool (m/s)
+  double arrow_scale = 0;                ///< force arrow length (m per N); 0: 1.5 x the organ's diagonal
+};
+
+/// Runs the viewer on a loaded scene; returns the exit code. Throws for bad
+/// options, scene, GL or device errors (messages name what failed).
+int run_view(const ViewOptions& o, scene::Scene scene);
+
+}  // namespace tissue::viewer
