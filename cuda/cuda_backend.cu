@@ -1,9 +1,10 @@
 // The cuda backend: the Backend interface over the device store, as a list
 // of stages, each one kernel module (stepper, region_fill, collide, reduce).
 // Semantics are the cpu backend's (cpu/constraints.hpp states the rule):
-//   held = fixed | driven | halo; a fixed node is always held at 0 (also
-//   when driven); a halo node is held (and stopped) at its displacement when
-//   the region was built; a node leaving the region is frozen
+//   held (an axis mask per node) = fixed axes | driven axes, every axis
+//   for a halo node; a fixed component is always held at 0 (also when
+//   driven); a halo node is held (and stopped) at its displacement when the
+//   region was built; a node leaving the region is frozen
 //   (u_prev = u_next = u, f = 0), elements leaving it get zero forces; after
 //   a region build or set_displacements pass 1 is recomputed over all
 //   elements, so pass 2 averages valid p_e V_e on halo nodes too.
@@ -28,23 +29,24 @@ namespace tissue {
 namespace gpu {
 namespace {
 
-/// Releases driven nodes (cpu/constraints.hpp's rule): a released node stays
-/// held only if fixed (at 0) or halo (at its current u).
+/// Releases driven nodes (cpu/constraints.hpp's rule): a released halo node
+/// is held (every component) at its current u, any other keeps only its
+/// fixed components (whose targets are 0).
 template <class T>
 __global__ void undrive_kernel(index_t n, const index_t* list, const std::uint8_t* flags, StateView<T> s,
                                const Packed3<T>* u) {
   const index_t i = thread_index();
   if (i >= n) return;
   const index_t a = list[i];
+  const std::uint8_t fixed = fixed_axes(flags[a]);
   s.driven[a] = 0;
-  s.held[a] = 0;
   if (s.role[a] == kHalo) {
-    s.u_held[a] = u[a];
-    s.held[a] = 1;
-  }
-  if (flags[a] & kFixed) {
-    s.u_held[a] = {T(0), T(0), T(0), T(0)};
-    s.held[a] = 1;
+    Packed3<T> held_at = s.u_held[a];
+    hold_halo(fixed, std::uint8_t(0), u[a], held_at);
+    s.u_held[a] = held_at;
+    s.held[a] = kAllAxes;
+  } else {
+    s.held[a] = fixed;
   }
 }
 
@@ -54,21 +56,29 @@ __global__ void probe_roles_kernel(index_t n, const index_t* nodes, const std::u
   if (i < n) out[i] = role[nodes[i]];
 }
 
+/// Drives node ids[i] in the components of masks[i] to values[3 i + c]
+/// (ids unique); a fixed component stays at 0 even under the tool.
 template <class T>
-__global__ void drive_kernel(index_t n, const T* values, const index_t* nodes, const std::uint8_t* flags,
-                             index_t* list, std::uint8_t* held, std::uint8_t* driven, Packed3<T>* u_held) {
+__global__ void drive_kernel(index_t n, const T* values, const index_t* ids, const std::uint8_t* masks,
+                             const std::uint8_t* flags, index_t* list, StateView<T> s) {
   const index_t i = thread_index();
   if (i >= n) return;
-  const index_t a = nodes[i];
+  const index_t a = ids[i];
+  const std::uint8_t mask = masks[i], fixed = fixed_axes(flags[a]);
   list[i] = a;
-  driven[a] = 1;
-  held[a] = 1;
-  u_held[a] = (flags[a] & kFixed) ? Packed3<T>{T(0), T(0), T(0), T(0)}
-                                   : Packed3<T>{values[3 * i], values[3 * i + 1], values[3 * i + 2], T(0)};
+  s.driven[a] |= mask;
+  s.held[a] |= mask;
+  Packed3<T> held_at = s.u_held[a];
+  const std::uint8_t set = mask & ~fixed;
+  if (set & 1) held_at.x = values[3 * i];
+  if (set & 2) held_at.y = values[3 * i + 1];
+  if (set & 4) held_at.z = values[3 * i + 2];
+  s.u_held[a] = held_at;
 }
 
 /// u^n = u^{n-1} = u^{n+1} = src (src: 3 x n component-major, double);
-/// halo nodes that are neither driven nor fixed are held at the new u.
+/// halo nodes are held at the new u in their components that are neither
+/// driven nor fixed.
 template <class T>
 __global__ void set_displacements_kernel(index_t n, const double* src, const std::uint8_t* flags, StateView<T> s,
                                          StepBuffers<T> b) {
@@ -78,7 +88,14 @@ __global__ void set_displacements_kernel(index_t n, const double* src, const std
   b.u_prev[a] = u;
   b.u[a] = u;
   b.u_next[a] = u;
-  if (s.role[a] == kHalo && !s.driven[a] && !(flags[a] & kFixed)) s.u_held[a] = u;
+  if (s.role[a] == kHalo) {  // held at the new u, except driven and fixed components
+    const std::uint8_t keep = s.driven[a] | fixed_axes(flags[a]);
+    Packed3<T> held_at = s.u_held[a];
+    if (!(keep & 1)) held_at.x = u.x;
+    if (!(keep & 2)) held_at.y = u.y;
+    if (!(keep & 4)) held_at.z = u.z;
+    s.u_held[a] = held_at;
+  }
 }
 
 /// Fields in double into dst: u (3 x n), node_p (n), f (3 x n), elem_J (ne).
@@ -138,16 +155,18 @@ class CudaBackend final : public Backend {
     const index_t n = m.n_nodes;
     region_.allocate(n, m.n_elems, stream());
     collider_.allocate(m.n_tris);
-    reducer_.allocate();
+    reducer_.allocate(n, m.n_elems);
     driven_list_.allocate(n);
-    drive_dev_.allocate(n * (3 * sizeof(T) + sizeof(index_t)));
+    drive_dev_.allocate(n * (3 * sizeof(T) + sizeof(index_t) + 1));
     if (drive_pending_) drive_copied_.sync();  // before its staging is freed
     drive_pending_ = false;
     drive_host_.allocate(drive_dev_.size());
     scratch_.allocate(7 * size_t(n) + m.n_elems);
     probe_dev_.allocate(n);
     probe_host_.allocate(n);
-    drive_keep_.reserve(64);
+    drive_ids_.reserve(64);
+    drive_masks_.reserve(64);
+    drive_values_.reserve(192);
     n_driven_ = 0;
     uploaded_ = true;
     build_region({}, kDepthAll);
@@ -196,36 +215,23 @@ class CudaBackend final : public Backend {
     return region_.download(topology(store_.model()), store_.state().role, seeds_, log_, stream());
   }
 
-  /// One upload per call (targets and ids in one pinned block). The nodes
-  /// must lie in the region: checked on the host when they are seeds (the
-  /// Scheduler's case), else by one small download of their roles.
-  /// Duplicates: the last target of a node wins (as on the cpu).
+  /// One upload per call (targets, ids and axis masks in one pinned block).
+  /// The nodes must lie in the region: checked on the host when they are
+  /// seeds (the Scheduler's case), else by one small download of their
+  /// roles. A node given twice is driven in the union of its masks, each
+  /// component at its last target (as on the cpu).
   void set_driven(std::span<const index_t> nodes, std::span<const double> u) override {
     require_model("set_driven");
-    check_driven(nodes, u);
-    if (drive_pending_) drive_copied_.sync();  // the staging buffer is free again
-    std::vector<index_t>& keep = drive_keep_;  // the last occurrence of each node
-    keep.clear();
-    for (size_t i = nodes.size(); i-- > 0;)
-      if (std::find(keep.begin(), keep.end(), nodes[i]) == keep.end()) keep.push_back(index_t(i));
-    const auto n = static_cast<index_t>(keep.size());
-    T* values = reinterpret_cast<T*>(drive_host_.data());
-    index_t* ids = reinterpret_cast<index_t*>(values + 3 * size_t(n));
-    for (index_t k = 0; k < n; ++k) {
-      ids[k] = nodes[keep[k]];
-      for (int c = 0; c < 3; ++c) values[3 * k + c] = static_cast<T>(u[3 * keep[k] + c]);
-    }
-    const T* dvalues = reinterpret_cast<const T*>(drive_dev_.data());
-    const index_t* dids = reinterpret_cast<const index_t*>(dvalues + 3 * size_t(n));
-    log_.to_device(drive_dev_.data(), drive_host_.data(), n * (3 * sizeof(T) + sizeof(index_t)), stream());
-    drive_copied_.record(stream());
-    drive_pending_ = true;
-    check_in_region(n, ids, dids);
-    clear_driven();
-    StateView<T> s = store_.state();
-    launch(n, stream(), drive_kernel<T>, n, dvalues, dids, store_.model().node_flags, driven_list_.data(), s.held,
-           s.driven, s.u_held);
-    n_driven_ = n;
+    drive(nodes, u, {}, "set_driven");
+  }
+
+  void set_driven_axes(std::span<const index_t> nodes, std::span<const double> u,
+                       std::span<const std::uint8_t> axes) override {
+    require_model("set_driven_axes");
+    if (axes.size() != nodes.size())
+      throw std::invalid_argument(
+          str("set_driven_axes: ", axes.size(), " axis masks for ", nodes.size(), " nodes (need one per node)"));
+    drive(nodes, u, axes, "set_driven_axes");
   }
 
   void clear_driven() override {
@@ -266,7 +272,8 @@ class CudaBackend final : public Backend {
 
   Reductions reduce() override {
     require_model("reduce");
-    return reducer_.run(store_.model(), store_.state(), region_.view(), store_.u.current(), log_, stream());
+    return reducer_.run(store_.model(), store_.state(), region_.view(), region_.front(), store_.u.current(), log_,
+                        stream());
   }
 
   Fields download() override {
@@ -310,6 +317,51 @@ class CudaBackend final : public Backend {
     if (!uploaded_) throw std::logic_error(str("cuda backend: ", what, "() called before upload()"));
   }
 
+  /// set_driven(_axes): validate, merge duplicates on the host, one upload,
+  /// release the old set, drive the new one. axes empty = every component.
+  void drive(std::span<const index_t> nodes, std::span<const double> u, std::span<const std::uint8_t> axes,
+             const char* what) {
+    check_driven(nodes, u, axes, what);
+    if (drive_pending_) drive_copied_.sync();  // the staging buffer is free again
+    // merge into unique (id, mask, targets) entries, in first-seen order
+    drive_ids_.clear();
+    drive_masks_.clear();
+    drive_values_.clear();
+    for (size_t k = 0; k < nodes.size(); ++k) {
+      const std::uint8_t mask = axes.empty() ? kAllAxes : axes[k];
+      auto it = std::find(drive_ids_.begin(), drive_ids_.end(), nodes[k]);
+      size_t j = size_t(it - drive_ids_.begin());
+      if (it == drive_ids_.end()) {
+        drive_ids_.push_back(nodes[k]);
+        drive_masks_.push_back(0);
+        drive_values_.insert(drive_values_.end(), 3, 0.0);
+      }
+      drive_masks_[j] |= mask;
+      for (int c = 0; c < 3; ++c)
+        if (mask >> c & 1) drive_values_[3 * j + c] = u[3 * k + c];
+    }
+    const auto n = static_cast<index_t>(drive_ids_.size());
+    T* values = reinterpret_cast<T*>(drive_host_.data());
+    index_t* ids = reinterpret_cast<index_t*>(values + 3 * size_t(n));
+    std::uint8_t* masks = reinterpret_cast<std::uint8_t*>(ids + n);
+    for (index_t k = 0; k < n; ++k) {
+      ids[k] = drive_ids_[k];
+      masks[k] = drive_masks_[k];
+      for (int c = 0; c < 3; ++c) values[3 * k + c] = static_cast<T>(drive_values_[3 * k + c]);
+    }
+    const T* dvalues = reinterpret_cast<const T*>(drive_dev_.data());
+    const index_t* dids = reinterpret_cast<const index_t*>(dvalues + 3 * size_t(n));
+    const std::uint8_t* dmasks = reinterpret_cast<const std::uint8_t*>(dids + n);
+    log_.to_device(drive_dev_.data(), drive_host_.data(), n * (3 * sizeof(T) + sizeof(index_t) + 1), stream());
+    drive_copied_.record(stream());
+    drive_pending_ = true;
+    check_in_region(n, ids, dids, what);
+    clear_driven();
+    launch(n, stream(), drive_kernel<T>, n, dvalues, dids, dmasks, store_.model().node_flags, driven_list_.data(),
+           store_.state());
+    n_driven_ = n;
+  }
+
   /// Pass 1 over every element (after a region build or new displacements).
   void pass1_all() {
     const RegionView all = {nullptr, nullptr, store_.n_nodes(), store_.n_elems()};
@@ -317,7 +369,7 @@ class CudaBackend final : public Backend {
   }
 
   /// Throws std::invalid_argument if a node to drive lies outside the region.
-  void check_in_region(index_t n, const index_t* ids, const index_t* dids) {
+  void check_in_region(index_t n, const index_t* ids, const index_t* dids, const char* what) {
     if (region_.sizes().whole()) return;
     bool all_seeds = true;
     for (index_t k = 0; k < n; ++k)
@@ -328,20 +380,24 @@ class CudaBackend final : public Backend {
     for (index_t k = 0; k < n; ++k)
       if (probe_host_[k] == kOutside)
         throw std::invalid_argument(
-            str("set_driven: node ", ids[k], " is outside the deformation region (build_region from it first)"));
+            str(what, ": node ", ids[k], " is outside the deformation region (build_region from it first)"));
   }
 
-  void check_driven(std::span<const index_t> nodes, std::span<const double> u) const {
+  void check_driven(std::span<const index_t> nodes, std::span<const double> u, std::span<const std::uint8_t> axes,
+                    const char* what) const {
     if (u.size() != 3 * nodes.size())
       throw std::invalid_argument(
-          str("set_driven: ", u.size(), " values for ", nodes.size(), " nodes (need 3 per node)"));
+          str(what, ": ", u.size(), " displacement values for ", nodes.size(), " nodes (need 3 per node)"));
     const index_t n = store_.n_nodes();
     for (size_t i = 0; i < nodes.size(); ++i) {
       if (nodes[i] < 0 || nodes[i] >= n)
-        throw std::invalid_argument(str("set_driven: node ", nodes[i], " out of range (0..", n - 1, ")"));
+        throw std::invalid_argument(str(what, ": node ", nodes[i], " out of range (0..", n - 1, ")"));
+      if (!axes.empty() && (axes[i] == 0 || axes[i] > kAllAxes))
+        throw std::invalid_argument(str(what, ": node ", nodes[i], ": axis mask ", int(axes[i]),
+                                        " must be 1..7 (bit 0 = x, 1 = y, 2 = z)"));
       for (int c = 0; c < 3; ++c)
         if (!std::isfinite(u[3 * i + c]))
-          throw std::invalid_argument(str("set_driven: node ", nodes[i], ": displacement ", "xyz"[c], " = ",
+          throw std::invalid_argument(str(what, ": node ", nodes[i], ": displacement ", "xyz"[c], " = ",
                                           u[3 * i + c], " is not finite"));
     }
   }
@@ -355,12 +411,14 @@ class CudaBackend final : public Backend {
   Stepper<T> stepper_;
   std::vector<index_t> seeds_;
   DeviceArray<index_t> driven_list_;      ///< current driven nodes (n_driven_)
-  DeviceArray<unsigned char> drive_dev_;  ///< set_driven upload: values (3n T), then ids (n)
+  DeviceArray<unsigned char> drive_dev_;  ///< set_driven upload: values (3n T), ids (n), axis masks (n bytes)
   PinnedArray<unsigned char> drive_host_; ///< its pinned staging
   Event drive_copied_;                    ///< the staging's last upload has been read
   bool drive_pending_ = false;
   index_t n_driven_ = 0;
-  std::vector<index_t> drive_keep_;       ///< set_driven's dedup scratch (host)
+  std::vector<index_t> drive_ids_;        ///< set_driven's merge scratch (host)
+  std::vector<std::uint8_t> drive_masks_;
+  std::vector<double> drive_values_;
   DeviceArray<std::uint8_t> probe_dev_;   ///< roles of nodes to drive (n_nodes)
   PinnedArray<std::uint8_t> probe_host_;
   DeviceArray<double> scratch_;           ///< set_displacements / download staging (7 n + ne)

@@ -20,7 +20,7 @@ __global__ void reset_nodes_kernel(index_t n, const std::uint8_t* flags, std::ui
                                    std::uint8_t* role) {
   const index_t a = thread_index();
   if (a >= n) return;
-  held[a] = (flags[a] & kFixed) ? 1 : 0;
+  held[a] = fixed_axes(flags[a]);
   driven[a] = 0;
   role[a] = kInner;
 }

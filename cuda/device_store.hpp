@@ -37,7 +37,7 @@ class DeviceStore {
   void upload(const TissueModel<T>& m, Transfers& log, cudaStream_t stream);
 
   /// u = u_prev = u_next = 0, u_held = 0, f = f_slot = pv_slot = node_p = 0,
-  /// elem_J = 1, held = fixed flags, driven = 0, every node inner, no bad element.
+  /// elem_J = 1, held = the fixed axes, driven = 0, every node inner, no bad element.
   void reset_state(cudaStream_t stream);
 
   ModelView<T> model() const { return model_; }

@@ -7,6 +7,8 @@
 
 #include <cuda_runtime.h>
 
+#include <cstdlib>
+
 #include "core/hd.hpp"
 #include "cuda/check.hpp"
 
@@ -35,6 +37,14 @@ void launch(index_t n, cudaStream_t stream, Kernel kernel, Args... args) {
   launch_blocks(n > 0 ? grid_for(n) : 0, kBlock, stream, kernel, args...);
 }
 
+/// Programmatic dependent launch is on unless the environment sets
+/// TISSUE_CUDA_NO_PDL (a debugging switch: chained kernels then launch
+/// plainly; results are identical either way).
+inline bool pdl_enabled() {
+  static const bool on = std::getenv("TISSUE_CUDA_NO_PDL") == nullptr;
+  return on;
+}
+
 /// Like launch(), with programmatic dependent launch: the grid may be
 /// scheduled while the previous kernel in the stream still runs; the kernel
 /// must wait (cudaGridDependencySynchronize) before touching anything that
@@ -51,7 +61,7 @@ void launch_chained(index_t n, cudaStream_t stream, void (*kernel)(Params...), A
   attr.id = cudaLaunchAttributeProgrammaticStreamSerialization;
   attr.val.programmaticStreamSerializationAllowed = 1;
   cfg.attrs = &attr;
-  cfg.numAttrs = 1;
+  cfg.numAttrs = pdl_enabled() ? 1 : 0;
   CUDA_CHECK(cudaLaunchKernelEx(&cfg, kernel, args...));
 #ifdef TISSUE_CUDA_SYNC_CHECK
   CUDA_CHECK(cudaStreamSynchronize(stream));

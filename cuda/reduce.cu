@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/energy.hpp"
 #include "cuda/launch.cuh"
+#include "cuda/tled.cuh"
 
 namespace tissue::gpu {
 namespace {
@@ -14,7 +16,7 @@ constexpr int kMaxReduceBlocks = 1024;
 __device__ ReducePartial zero_partial() {
   ReducePartial p;
   for (int c = 0; c < 3; ++c) p.reaction[c] = p.internal[c] = 0;
-  p.free2 = p.held2 = p.kinetic = p.max_disp = 0;
+  p.free2 = p.held2 = p.kinetic = p.max_disp = p.front_disp = p.energy = 0;
   p.nonfinite = 0;
   return p;
 }
@@ -28,6 +30,8 @@ __device__ void combine(ReducePartial& a, const ReducePartial& b) {
   a.held2 += b.held2;
   a.kinetic += b.kinetic;
   a.max_disp = fmax(a.max_disp, b.max_disp);
+  a.front_disp = fmax(a.front_disp, b.front_disp);
+  a.energy += b.energy;
   a.nonfinite += b.nonfinite;
 }
 
@@ -43,9 +47,11 @@ __device__ ReducePartial block_reduce(ReducePartial mine) {
   return sh[0];
 }
 
+/// Node a's share: reaction over its driven components, internal force and
+/// squared components (held / free) if inner, kinetic energy, |u|, front.
 template <class T>
-__device__ void accumulate(const ModelView<T>& m, const StateView<T>& s, const StepBuffers<T>& b, index_t a,
-                           ReducePartial& p) {
+__device__ void accumulate_node(const ModelView<T>& m, const StateView<T>& s, const StepBuffers<T>& b,
+                                const FrontView& front, index_t a, ReducePartial& p) {
   const Packed3<T> fp = s.f[a], up = b.u[a], pp = b.u_prev[a];
   const double f[3] = {fp.x, fp.y, fp.z};
   const double u[3] = {up.x, up.y, up.z};
@@ -54,23 +60,48 @@ __device__ void accumulate(const ModelView<T>& m, const StateView<T>& s, const S
                        (u[2] - double(pp.z)) * inv_dt};
   const double f2 = f[0] * f[0] + f[1] * f[1] + f[2] * f[2];
   const double v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
-  if (s.driven[a])
-    for (int c = 0; c < 3; ++c) p.reaction[c] += f[c];
+  if (const std::uint8_t d = s.driven[a])
+    for (int c = 0; c < 3; ++c)
+      if (d >> c & 1) p.reaction[c] += f[c];
   if (s.role[a] == kInner) {
-    for (int c = 0; c < 3; ++c) p.internal[c] += f[c];
-    (s.held[a] ? p.held2 : p.free2) += f2;
+    const std::uint8_t h = s.held[a];
+    for (int c = 0; c < 3; ++c) {
+      p.internal[c] += f[c];
+      ((h >> c & 1) ? p.held2 : p.free2) += f[c] * f[c];
+    }
   }
   p.kinetic += 0.5 * double(m.mass[a]) * v2;
   const double d = sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
   p.max_disp = fmax(p.max_disp, d);
+  if (front.ring && front.ring[a] == front.depth) p.front_disp = fmax(p.front_disp, d);
   if (!isfinite(d) || !isfinite(f2) || !isfinite(v2)) ++p.nonfinite;
+}
+
+/// Element e's strain energy V W(Fbar) (core/energy.hpp) at the current u;
+/// node_p: nodal pressures at the current u (IANP only).
+template <class T>
+__device__ double element_energy(const ModelView<T>& m, const T* node_p, const Packed3<T>* u, index_t e) {
+  const ElementData<T> d = load_element(m, e);
+  Vec3<T> ue[4];
+  corner_displacements(d, u, ue);
+  const Mat3<T> F = deformation_gradient(ue, d.dN);
+  const T J = det(F);
+  T Jbar = J;
+  if (m.ianp) {
+    const T pbar = (node_p[d.c[0]] + node_p[d.c[1]] + node_p[d.c[2]] + node_p[d.c[3]]) / T(4);
+    Jbar = T(1) + pbar / d.K;
+  }
+  return double(element_strain_energy(F, J, Jbar, d.V, d.mu, d.K));
 }
 
 template <class T>
 __global__ void __launch_bounds__(kReduceBlock)
-    reduce_partial_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b, ReducePartial* out) {
+    reduce_partial_kernel(ModelView<T> m, StateView<T> s, RegionView r, FrontView front, StepBuffers<T> b,
+                          const T* energy_node_p, ReducePartial* out) {
   ReducePartial p = zero_partial();
-  for (index_t i = thread_index(); i < r.n_nodes; i += thread_stride()) accumulate(m, s, b, r.node(i), p);
+  for (index_t i = thread_index(); i < r.n_nodes; i += thread_stride()) accumulate_node(m, s, b, front, r.node(i), p);
+  for (index_t i = thread_index(); i < r.n_elems; i += thread_stride())
+    p.energy += element_energy(m, energy_node_p, b.u, r.elem(i));
   const ReducePartial sum = block_reduce(p);
   if (threadIdx.x == 0) out[blockIdx.x] = sum;
 }
@@ -88,6 +119,8 @@ __global__ void __launch_bounds__(kReduceBlock)
   r.held_force2 = sum.held2;
   r.kinetic = sum.kinetic;
   r.max_disp = sum.max_disp;
+  r.front_disp = sum.front_disp;
+  r.strain_energy = sum.energy;
   const unsigned long long key = *bad;
   if (key != ~0ull) {
     r.bad_elem = static_cast<index_t>(key >> 32);
@@ -103,17 +136,30 @@ __global__ void __launch_bounds__(kReduceBlock)
 }  // namespace
 
 template <class T>
-void Reducer<T>::allocate() {
+void Reducer<T>::allocate(index_t n_nodes, index_t n_elems) {
   partial_.allocate(kMaxReduceBlocks);
   result_.allocate(1);
   result_host_.allocate(1);
+  pv_slot_.allocate(4 * size_t(n_elems));
+  elem_J_.allocate(n_elems);
+  node_p_.allocate(n_nodes);
 }
 
 template <class T>
-Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
-                           Transfers& log, cudaStream_t stream) {
-  const int blocks = std::min(grid_for(r.n_nodes, kReduceBlock), kMaxReduceBlocks);
-  launch_blocks(blocks, kReduceBlock, stream, reduce_partial_kernel<T>, m, s, r, b, partial_.data());
+Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
+                           StepBuffers<T> b, Transfers& log, cudaStream_t stream) {
+  if (m.ianp && r.n_elems > 0) {  // nodal pressures at the current u, into scratch
+    CUDA_CHECK(cudaMemcpyAsync(pv_slot_.data(), s.pv_slot, pv_slot_.bytes(), cudaMemcpyDeviceToDevice, stream));
+    StateView<T> e = s;
+    e.pv_slot = pv_slot_.data();
+    e.elem_J = elem_J_.data();
+    e.node_p = node_p_.data();
+    launch(r.n_elems, stream, element_pressure_kernel<T>, m, e, r, static_cast<const Packed3<T>*>(b.u));
+    launch(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, e, r);
+  }
+  const int blocks = std::min(grid_for(std::max(r.n_nodes, r.n_elems), kReduceBlock), kMaxReduceBlocks);
+  launch_blocks(blocks, kReduceBlock, stream, reduce_partial_kernel<T>, m, s, r, front, b,
+                static_cast<const T*>(node_p_.data()), partial_.data());
   launch_blocks(1, kReduceBlock, stream, reduce_final_kernel, blocks, partial_.data(), s.bad, result_.data());
   log.to_host(result_host_.data(), result_.data(), sizeof(Reductions), stream);
   return result_host_[0];

@@ -1,8 +1,10 @@
 // The per-tick reductions over the region (core Reductions): reaction on the
-// tool-driven nodes, internal force and residual parts over inner nodes,
-// kinetic energy and max displacement over region nodes, the bad-element
-// flag (read and cleared). Accumulated in double in two deterministic
-// stages (fixed-order block partials, then one block), one struct back.
+// tool-driven components, internal force and residual parts over inner
+// nodes (per held / free component), kinetic energy and max displacement
+// over region nodes, the front ring's displacement, the strain energy of the
+// computed elements at the current u, and the bad-element flag (read and
+// cleared). Accumulated in double in two deterministic stages (fixed-order
+// block partials, then one block); one struct comes back.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -17,22 +19,36 @@ namespace tissue::gpu {
 struct ReducePartial {
   double reaction[3];
   double internal[3];
-  double free2, held2, kinetic, max_disp;
-  int nonfinite;  ///< region nodes with a non-finite u or f
+  double free2, held2, kinetic, max_disp, front_disp, energy;
+  int nonfinite;  ///< region nodes with a non-finite u, f or velocity
+};
+
+/// The front ring of the region: nodes whose flood-fill ring equals depth
+/// (ring == nullptr: no front, the whole mesh).
+struct FrontView {
+  const int* ring = nullptr;  ///< (n_nodes)
+  int depth = 0;
 };
 
 template <class T>
 class Reducer {
  public:
-  void allocate();
+  /// Partials, result and the strain energy's scratch (passes 1-2 at the
+  /// current u: 4 n_elems + n_elems + n_nodes scalars).
+  void allocate(index_t n_nodes, index_t n_elems);
+
   /// Reduces over region r with the current buffers b; clears the bad flag.
-  Reductions run(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
-                 Transfers& log, cudaStream_t stream);
+  /// For IANP the energy needs the nodal pressures at the current u: passes
+  /// 1 and 2 run again into scratch (the state's pass arrays stay as the last
+  /// step wrote them).
+  Reductions run(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
+                 StepBuffers<T> b, Transfers& log, cudaStream_t stream);
 
  private:
   DeviceArray<ReducePartial> partial_;  ///< one per stage-1 block
   DeviceArray<Reductions> result_;      ///< (1)
   PinnedArray<Reductions> result_host_;
+  DeviceArray<T> pv_slot_, elem_J_, node_p_;  ///< energy scratch
 };
 
 }  // namespace tissue::gpu

@@ -61,17 +61,27 @@ template <class T>
 __global__ void apply_region_kernel(index_t n, const std::uint8_t* flags, StateView<T> s, StepBuffers<T> b) {
   const index_t a = thread_index();
   if (a >= n) return;
-  const std::uint8_t role = s.role[a];
-  const bool fixed = flags[a] & kFixed, driven = s.driven[a];
+  const std::uint8_t role = s.role[a], fixed = fixed_axes(flags[a]), driven = s.driven[a];
   if (role == kOutside || role == kHalo) {  // frozen, or held in place: stopped
     const Packed3<T> u = b.u[a];
     b.u_prev[a] = u;
     b.u_next[a] = u;
     if (role == kOutside) s.f[a] = {T(0), T(0), T(0), T(0)};
-    if (role == kHalo && !driven) s.u_held[a] = u;
+    if (role == kHalo) {
+      Packed3<T> held_at = s.u_held[a];
+      hold_halo(fixed, driven, u, held_at);
+      s.u_held[a] = held_at;
+      s.held[a] = kAllAxes;
+      return;
+    }
   }
-  if (fixed) s.u_held[a] = {T(0), T(0), T(0), T(0)};
-  s.held[a] = fixed || driven || role == kHalo;
+  // driven components keep their targets in u_held; fixed ones are at 0
+  Packed3<T> held_at = s.u_held[a];
+  if (fixed & 1) held_at.x = T(0);
+  if (fixed & 2) held_at.y = T(0);
+  if (fixed & 4) held_at.z = T(0);
+  s.u_held[a] = held_at;
+  s.held[a] = driven | fixed;
 }
 
 /// Elements outside the region get zero forces, so a halo node's f sums
@@ -156,6 +166,10 @@ Region RegionFill::download(const Topology& t, const std::uint8_t* role, std::sp
   if (view_.nodes) {
     log.to_host(r.nodes.data(), view_.nodes, r.nodes.size() * sizeof(index_t), stream);
     log.to_host(r.elems.data(), view_.elems, r.elems.size() * sizeof(index_t), stream);
+    std::vector<int> ring(t.n_nodes);
+    log.to_host(ring.data(), ring_.data(), ring.size() * sizeof(int), stream);
+    for (index_t a = 0; a < t.n_nodes; ++a)
+      if (ring[a] == sizes_.depth) r.front.push_back(a);  // ascending; empty if the fill ran out
   } else {
     std::iota(r.nodes.begin(), r.nodes.end(), 0);
     std::iota(r.elems.begin(), r.elems.end(), 0);

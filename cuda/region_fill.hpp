@@ -13,6 +13,7 @@
 
 #include "core/region.hpp"
 #include "cuda/device_array.hpp"
+#include "cuda/reduce.hpp"
 #include "cuda/views.hpp"
 
 namespace tissue::gpu {
@@ -28,6 +29,19 @@ struct Topology {
 template <class T>
 Topology topology(const ModelView<T>& m) {
   return {m.n_nodes, m.n_elems, m.elem_nodes, m.node_elem_start, m.node_elem};
+}
+
+/// Holds every component of a halo node: at 0 where the model fixes it
+/// (axis mask `fixed`), at the tool's target (already in held_at) where it
+/// is driven, else at its current displacement u.
+template <class T>
+TISSUE_HD void hold_halo(std::uint8_t fixed, std::uint8_t driven, const Packed3<T>& u, Packed3<T>& held_at) {
+  if (fixed & 1) held_at.x = T(0);
+  else if (!(driven & 1)) held_at.x = u.x;
+  if (fixed & 2) held_at.y = T(0);
+  else if (!(driven & 2)) held_at.y = u.y;
+  if (fixed & 4) held_at.z = T(0);
+  else if (!(driven & 4)) held_at.z = u.z;
 }
 
 class RegionFill {
@@ -46,17 +60,22 @@ class RegionFill {
 
   /// The active lists for kernels (null lists for the whole mesh).
   RegionView view() const { return view_; }
+  /// The front ring: nodes reached by the last ring (none for the whole mesh).
+  FrontView front() const { return view_.nodes ? FrontView{ring_.data(), sizes_.depth} : FrontView{}; }
   const RegionSizes& sizes() const { return sizes_; }
 
   /// Installs the region built last into the state (the cpu backend's
-  /// holding rule, cpu/constraints.hpp): held = fixed | driven | halo; fixed
-  /// targets 0; halo nodes are stopped (u_prev = u_next = u) and, unless
-  /// driven, held at u; nodes outside are frozen (u_prev = u_next = u, f = 0)
-  /// so buffer rotation keeps them; elements outside get zero forces.
+  /// holding rule, cpu/constraints.hpp, per component): halo nodes are
+  /// stopped (u_prev = u_next = u) and hold every component (0 where fixed,
+  /// the tool's target where driven, else the current u); other nodes hold
+  /// their driven and fixed components (fixed at 0); nodes outside are
+  /// frozen (u_prev = u_next = u, f = 0) so buffer rotation keeps them;
+  /// elements outside get zero forces.
   template <class T>
   void apply(const ModelView<T>& m, const StateView<T>& s, StepBuffers<T> b, cudaStream_t stream) const;
 
-  /// Downloads role and lists into a host Region (tests and output).
+  /// Downloads role, lists and the front ring into a host Region (tests
+  /// and output).
   Region download(const Topology& t, const std::uint8_t* role, std::span<const index_t> seeds, Transfers& log,
                   cudaStream_t stream) const;
 

@@ -143,8 +143,9 @@ __device__ void nodal_pressure_at(const ModelView<T>& m, const StateView<T>& s, 
 }
 
 /// Pass 4 for a node (one lane of its group): f_a = sum of its corners'
-/// element forces (a gather: no atomics), then lane 0 sets u_next = u_held
-/// for a held node, else the damped central difference with R = 0.
+/// element forces (a gather: no atomics), then lane 0 sets u_next: u_held
+/// for the held components (axis mask), the damped central difference with
+/// R = 0 for the others.
 template <class T>
 __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, const StepBuffers<T>& b,
                                const NodeData<T>& d) {
@@ -155,14 +156,22 @@ __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, con
   if (d.lane != 0) return;
   const index_t a = d.a;
   s.f[a] = Packed3<T>::of(f);
-  if (s.held[a]) {
+  const std::uint8_t h = s.held[a];
+  if (h == kAllAxes) {
     b.u_next[a] = s.u_held[a];
     return;
   }
   const CentralDifference<T> k = {__ldg(m.cd_A + a), __ldg(m.cd_B + a), __ldg(m.cd_C + a)};
   const Packed3<T> u = b.u[a], up = b.u_prev[a];
-  b.u_next[a] = {central_difference_update(k, -f.x, u.x, up.x), central_difference_update(k, -f.y, u.y, up.y),
-                 central_difference_update(k, -f.z, u.z, up.z), T(0)};
+  Packed3<T> next = {central_difference_update(k, -f.x, u.x, up.x), central_difference_update(k, -f.y, u.y, up.y),
+                     central_difference_update(k, -f.z, u.z, up.z), T(0)};
+  if (h) {  // per-component constraints (rollers, symmetry planes, axis-driven nodes)
+    const Packed3<T> target = s.u_held[a];
+    if (h & 1) next.x = target.x;
+    if (h & 2) next.y = target.y;
+    if (h & 4) next.z = target.z;
+  }
+  b.u_next[a] = next;
 }
 
 // ---- one kernel per pass ------------------------------------------------------

@@ -80,8 +80,8 @@ struct RegionView {
 template <class T>
 struct StateView {
   Packed3<T>* u_held = nullptr;        ///< target of held nodes (n_nodes) m
-  std::uint8_t* held = nullptr;        ///< 1 = displacement set, not integrated (n_nodes)
-  std::uint8_t* driven = nullptr;      ///< 1 = tool-driven (n_nodes)
+  std::uint8_t* held = nullptr;        ///< axis mask: bit c = component c set from u_held, not integrated (n_nodes)
+  std::uint8_t* driven = nullptr;      ///< axis mask of the tool-driven components; 0 = not driven (n_nodes)
   std::uint8_t* role = nullptr;        ///< NodeRole (n_nodes)
   T* pv_slot = nullptr;                ///< pass 1: p_e V_e per node_elem slot (4 n_elems) N m
   T* elem_J = nullptr;                 ///< pass 1: J_e (n_elems)

@@ -128,6 +128,7 @@ TEST_P(Stages, FloodFillMatchesCoreForEveryDepth) {
       EXPECT_EQ(r.nodes, ref.nodes);
       EXPECT_EQ(r.elems, ref.elems);
       EXPECT_EQ(r.seeds, ref.seeds);
+      EXPECT_EQ(r.front, ref.front);
       EXPECT_EQ(r.n_inner, ref.n_inner);
       EXPECT_EQ(r.n_halo, ref.n_halo);
       if (depth == 1) {
@@ -251,6 +252,13 @@ TEST_P(Stages, ReductionsMatchCpuUnderDrivenNodes) {
     EXPECT_TRUE(rg.finite);
     EXPECT_EQ(rg.bad_elem, -1);
     EXPECT_GT(rg.kinetic, 0.0);
+    ASSERT_GT(rc.strain_energy, 0.0);
+    EXPECT_NEAR(rg.strain_energy, rc.strain_energy, 10 * tol * rc.strain_energy);
+    report("strain energy", p, std::fabs(rg.strain_energy - rc.strain_energy) / rc.strain_energy);
+    EXPECT_NEAR(rg.front_disp, rc.front_disp, tol * rc.max_disp);
+    if (depth != kDepthAll) {
+      EXPECT_GT(rc.front_disp, 0.0);
+    }
     // release: the reaction sums no node any more
     cpu->clear_driven();
     gpu->clear_driven();
@@ -258,6 +266,67 @@ TEST_P(Stages, ReductionsMatchCpuUnderDrivenNodes) {
     gpu->advance(2);
     EXPECT_EQ(norm(gpu->reduce().reaction), 0.0);
     EXPECT_NEAR(rel_diff(gpu->download().u, cpu->download().u), 0.0, pass_tol(p) * 10);
+  }
+}
+
+/// A box on rollers (bottom nodes held in z only, one corner fully fixed),
+/// three top nodes driven in different components (z; x and z; all, and one
+/// of them given twice): u, f and the reductions match the cpu backend, and
+/// held components stay exactly at their targets.
+TEST_P(Stages, PerComponentConstraintsMatchCpu) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  ModelInput in;
+  box_mesh(in, 4, 4, 3, 0.04, 0.04, 0.03);
+  const double E = 3000, nu = 0.45;
+  in.materials = {{E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu)), 1000}};
+  in.fixed_axes.assign(in.nodes.size() / 3, 0);
+  for (size_t i = 0; i < in.fixed_axes.size(); ++i)
+    if (in.nodes[3 * i + 2] == 0.0) in.fixed_axes[i] = kFixedZ >> 2;  // roller: z only
+  in.fixed_axes[0] = kAllAxes;                                          // one corner pinned
+  in.source = "roller box";
+  const auto m = build_model(in);
+  const index_t top[3] = {box_node(4, 4, 1, 1, 3), box_node(4, 4, 2, 1, 3), box_node(4, 4, 2, 2, 3)};
+  const index_t nodes[4] = {top[0], top[1], top[2], top[1]};
+  const double u[12] = {0, 0, -1e-3, 5e-4, 0, -8e-4, 2e-4, 2e-4, -6e-4, 1e-3, 0, -9e-4};
+  const std::uint8_t axes[4] = {4, 4, 7, 1};  // top[1]: z, then x given again (union: x and z)
+  for (int depth : {kDepthAll, 1}) {
+    SCOPED_TRACE(depth);
+    auto cpu = make_cpu_backend(p), gpu = make_cuda_backend(p);
+    for (Backend* b : {cpu.get(), gpu.get()}) {
+      b->upload(m);
+      b->set_displacements(random_field(m.n_nodes, 2e-5, 41));
+      b->build_region(top, depth);
+      b->set_driven_axes(nodes, u, axes);
+      b->advance(12);
+    }
+    const Fields fc = cpu->download(), fg = gpu->download();
+    const double du = rel_diff(fg.u, fc.u), df = rel_diff(fg.f, fc.f);
+    report("per-component u", p, du);
+    EXPECT_LT(du, 10 * pass_tol(p));
+    EXPECT_LT(df, 10 * pass_tol(p));
+    const index_t n = m.n_nodes;
+    EXPECT_EQ(fg.u[2 * n + top[0]], double(p == Precision::Float ? double(float(-1e-3)) : -1e-3));
+    if (depth == kDepthAll) {
+      EXPECT_EQ(fg.u[n + 0], 0.0);  // the pinned corner (outside a depth-1 region: frozen there)
+    }
+    for (index_t a = 0; a < n; ++a)
+      if (m.X[2 * n + a] == 0.0 && gpu->region().role[a] != kOutside) {
+        ASSERT_EQ(fg.u[2 * n + a], 0.0) << "roller node " << a << " left its plane";
+      }
+    const Reductions rc = cpu->reduce(), rg = gpu->reduce();
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(rg.reaction[c], rc.reaction[c], 10 * pass_tol(p) * norm(rc.reaction));
+    EXPECT_NEAR(rg.held_force2, rc.held_force2, 20 * pass_tol(p) * rc.held_force2);
+    EXPECT_NEAR(rg.free_force2, rc.free_force2, 20 * pass_tol(p) * rc.free_force2);
+    // release: back to the fixed axes only
+    cpu->clear_driven();
+    gpu->clear_driven();
+    cpu->advance(4);
+    gpu->advance(4);
+    EXPECT_LT(rel_diff(gpu->download().u, cpu->download().u), 10 * pass_tol(p));
+    const std::uint8_t bad_axes[1] = {0};
+    EXPECT_THROW(gpu->set_driven_axes(std::span<const index_t>(top, 1), std::span<const double>(u, 3), bad_axes),
+                 std::invalid_argument);
   }
 }
 
@@ -372,7 +441,7 @@ TEST_P(Stages, PerTickTrafficIsFixedAndIndependentOfMeshSize) {
       if (was_in_contact && sched.in_contact()) {  // a tick of a running contact: targets up, reductions down
         ++steady;
         EXPECT_EQ(h2d, 1u);
-        EXPECT_EQ(h2d_bytes, 3 * (3 * scalar + sizeof(index_t)));
+        EXPECT_EQ(h2d_bytes, 3 * (3 * scalar + sizeof(index_t) + 1));  // targets, ids, axis masks
         EXPECT_EQ(d2h, 1u);
         EXPECT_EQ(d2h_bytes, sizeof(Reductions));
       } else {  // hit query, region build on contact start, release
