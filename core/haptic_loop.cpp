@@ -8,6 +8,11 @@
 #include <stdexcept>
 #include <type_traits>
 
+#if defined(__linux__)
+#include <pthread.h>
+#include <sched.h>
+#endif
+
 namespace tissue {
 namespace {
 
@@ -41,6 +46,18 @@ double histogram_quantile(const std::vector<std::uint32_t>& h, long total, doubl
   return max;
 }
 
+/// SCHED_FIFO at `priority` for the calling thread; false when refused.
+bool make_realtime(int priority) {
+#if defined(__linux__)
+  sched_param sp{};
+  sp.sched_priority = priority;
+  return pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp) == 0;
+#else
+  (void)priority;
+  return false;
+#endif
+}
+
 CouplingParams with_period(CouplingParams p, double period) {
   p.period = period;
   return p;
@@ -63,11 +80,18 @@ std::string describe(const HapticStats& s) {
       s.rate_hz, 1.0 / s.period, ms * s.work_p50, ms * s.work_p99, ms * s.work_max, ms * s.wake_p99, s.window_late,
       s.window_ticks, s.late, s.overruns, s.skipped, s.ticks, ms * s.session_p99);
   if (s.keeping_up) return line;
+  if (s.work_p99 > s.period)
+    return fmt::format(
+        "SOLVER CANNOT KEEP UP: {} of the last {} ticks ended after the next deadline and the loop runs at {:.1f} Hz "
+        "instead of {:.0f} Hz: tick work p99 {:.3f} ms exceeds the {:.3f} ms period. Reduce the region depth, use "
+        "float, or a faster backend. {}",
+        s.window_late, s.window_ticks, s.rate_hz, 1.0 / s.period, ms * s.work_p99, ms * s.period, line);
   return fmt::format(
-      "SOLVER CANNOT KEEP UP: {} of the last {} ticks ended after the next deadline and the loop runs at {:.1f} Hz "
-      "instead of {:.0f} Hz (tick work p99 {:.3f} ms for a {:.3f} ms period): reduce the region depth, use float, "
-      "or a faster backend. {}",
-      s.window_late, s.window_ticks, s.rate_hz, 1.0 / s.period, ms * s.work_p99, ms * s.period, line);
+      "HAPTIC DEADLINES MISSED: {} of the last {} ticks ended after the next deadline although the tick work (p99 "
+      "{:.3f} ms) fits the {:.3f} ms period: the haptic thread was not scheduled in time (wake-up jitter p99 {:.3f} "
+      "ms). The machine is busy (other processes, a software renderer) or short of a core for this thread; "
+      "real-time scheduling (HapticLoop::Options::realtime) helps. {}",
+      s.window_late, s.window_ticks, ms * s.work_p99, ms * s.period, ms * s.wake_p99, line);
 }
 
 HapticLoop::HapticLoop(Device& device, SimulationFactory factory, LiveParams params, Options options)
@@ -320,6 +344,7 @@ void HapticLoop::publish(bool haptic_thread) {
 }
 
 void HapticLoop::thread_main() {
+  local_.realtime = options_.realtime && make_realtime(options_.realtime_priority);
   const auto T = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(period_));
   const Clock::time_point t0 = Clock::now();
   long k = 0;  // index of the next deadline t0 + k T

@@ -93,8 +93,10 @@ struct HapticStats {
   bool keeping_up = true;      ///< window: <= 1% late and rate within 2% of 1/T
 };
 
-/// One line: rate, work percentiles, jitter and late ticks; starts with
-/// "SOLVER CANNOT KEEP UP" when keeping_up is false.
+/// One line: rate, work percentiles, jitter and late ticks. When keeping_up
+/// is false it starts with the cause: "SOLVER CANNOT KEEP UP" (the tick work
+/// p99 exceeds the period) or "HAPTIC DEADLINES MISSED" (the work fits, the
+/// thread was not scheduled in time).
 std::string describe(const HapticStats& s);
 
 /// What the display reads after each tick.
@@ -115,6 +117,7 @@ struct HapticSnapshot {
   double residual = 0;                 ///< relative free-node residual
   bool equilibrium = false;
   bool failed = false;                 ///< the solver stopped (see HapticLoop::status())
+  bool realtime = false;               ///< the haptic thread runs with SCHED_FIFO priority
   LiveParams params;                   ///< parameters of the running simulation
   HapticStats stats;
 };
@@ -126,6 +129,14 @@ class HapticLoop {
     int window = 1000;        ///< ticks in the statistics window
     int stats_every = 100;    ///< ticks between statistics updates
     int max_lag = 10;         ///< periods behind before deadlines are dropped
+    /// Ask for SCHED_FIFO priority `realtime_priority` for the haptic thread
+    /// (Linux; needs CAP_SYS_NICE or an rtprio limit). Refused: the thread
+    /// runs at normal priority and HapticSnapshot::realtime stays false.
+    /// Beware that a real-time thread whose solver cannot keep up never
+    /// sleeps; the kernel's RT throttling (95% by default) still lets the
+    /// rest of the machine run.
+    bool realtime = false;
+    int realtime_priority = 80;
   };
 
   /// Builds the first simulation synchronously (factory exceptions reach the

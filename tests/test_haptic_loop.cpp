@@ -280,7 +280,9 @@ TEST(HapticLoop, DescribeNamesRateAndPercentiles) {
   EXPECT_EQ(line.rfind("haptic 999.7 Hz (target 1000 Hz), tick work p50 0.210 ms, p99 0.350 ms", 0), 0u) << line;
   s.keeping_up = false;
   s.window_late = 37;
-  EXPECT_NE(describe(s).find("37 of the last 1000 ticks"), std::string::npos);
+  EXPECT_EQ(describe(s).rfind("HAPTIC DEADLINES MISSED: 37 of the last 1000 ticks", 0), 0u) << describe(s);
+  s.work_p99 = 1.7e-3;  // the work itself exceeds the period
+  EXPECT_EQ(describe(s).rfind("SOLVER CANNOT KEEP UP: 37 of the last 1000 ticks", 0), 0u) << describe(s);
 }
 
 TEST(HapticLoop, FactoryErrorsReachTheConstructor) {

@@ -45,6 +45,7 @@ struct Options {
   double seconds = 5;
   int tbb_threads = 0;
   bool no_rebuild = false;
+  bool realtime = false;
 };
 
 /// The display's side, every frame: snapshot, positions, region roles, mouse.
@@ -92,7 +93,9 @@ int run(const Options& o) {
   } else {
     throw std::invalid_argument(fmt::format("--device '{}' is neither scripted nor mouse", o.device));
   }
-  HapticLoop loop(*device, session.factory(), session.params);
+  HapticLoop::Options opt;
+  opt.realtime = o.realtime;
+  HapticLoop loop(*device, session.factory(), session.params, opt);
   Display display{loop, mouse, session, std::vector<float>(session.scene.nodes.size()), {}};
   fmt::print("haptic session: {} on {} ({}), {} device, {:.1f} s\n", session.scene.source, session.scene.solver.backend,
              to_string(session.params.precision), o.device, o.seconds);
@@ -114,6 +117,7 @@ int run(const Options& o) {
   loop.stop();
   const HapticSnapshot s = loop.snapshot();
   fmt::print("{}\n", describe(s.stats));
+  fmt::print("haptic thread: {}\n", s.realtime ? "SCHED_FIFO (real-time)" : "normal priority");
   fmt::print("session: {} ticks in {:.2f} s ({:.1f} Hz), TLED {} steps/tick, {} display frames, {} region downloads, "
              "{} rebuilds, final |F| = {:.4f} N\n",
              s.stats.ticks, o.seconds, s.stats.session_rate_hz, s.steps_per_tick, display.frames,
@@ -138,6 +142,7 @@ int main(int argc, char** argv) {
   app.add_option("--seconds", o.seconds, "Wall seconds to run")->default_val(5);
   app.add_option("--tbb-threads", o.tbb_threads, "Cap TBB's threads (0: all cores)");
   app.add_flag("--no-rebuild", o.no_rebuild, "Skip the half-way parameter change");
+  app.add_flag("--realtime", o.realtime, "SCHED_FIFO priority for the haptic thread (needs CAP_SYS_NICE)");
   try {
     app.parse(argc, argv);
     return run(o);

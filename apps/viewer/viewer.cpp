@@ -13,6 +13,7 @@
 #include <memory>
 #include <sstream>
 #include <stdexcept>
+#include <thread>
 
 #include "apps/viewer/camera.hpp"
 #include "apps/viewer/gl_context.hpp"
@@ -159,6 +160,7 @@ std::unique_ptr<Viewer> make_viewer(const ViewOptions& o, scene::Scene scene) {
   v->device = make_device(kind, v->session, o.mouse_speed);
   HapticLoop::Options opt;
   opt.coupling.max_force = v->device.max_force;
+  opt.realtime = o.realtime;
   v->loop = std::make_unique<HapticLoop>(*v->device.device, v->session.factory(), v->session.params, opt);
   if (o.width < 16 || o.height < 16 || o.width > 8192 || o.height > 8192)
     throw std::invalid_argument(fmt::format("--size {}x{}: each side must lie in 16..8192 pixels", o.width, o.height));
@@ -180,6 +182,7 @@ std::unique_ptr<Viewer> make_viewer(const ViewOptions& o, scene::Scene scene) {
 
 void print_stats(const HapticSnapshot& s, const PositionSource& positions) {
   fmt::print("{}\n", describe(s.stats));
+  fmt::print("haptic thread: {}\n", s.realtime ? "SCHED_FIFO (real-time)" : "normal priority");
   fmt::print("TLED {} steps/tick, {:.0f} steps/s; positions: {}\n", s.steps_per_tick, s.stats.steps_per_s,
              positions.path());
 }
@@ -321,11 +324,22 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
              to_string(v.session.params.precision), facts.gl, facts.positions);
   loop.start();
   const auto t0 = Clock::now();
+  const auto frame = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / std::max(1.0, o.fps)));
+  auto next_frame = t0;
   long shown_region = -1;
+  bool warned_realtime = false;
   while (!v.ctx->should_close()) {
     if (o.seconds > 0 && std::chrono::duration<double>(Clock::now() - t0).count() > o.seconds) break;
+    // pace the display (Xvfb and some drivers do not block on swap): the
+    // haptic thread needs the core more than a software renderer does
+    next_frame = std::max(next_frame + frame, Clock::now() - frame);
+    std::this_thread::sleep_until(next_frame);
     glfwPollEvents();
     const HapticSnapshot snap = loop.snapshot();
+    if (o.realtime && !warned_realtime && snap.tick > 0 && !snap.realtime) {
+      fmt::print(stderr, "tissue view: warning: real-time scheduling refused; the haptic thread runs at normal priority\n");
+      warned_realtime = true;
+    }
     if (input.reset) {
       loop.request_params(snap.params);
       input.reset = false;

@@ -21,6 +21,8 @@ struct ViewOptions {
   double seconds = 0;                    ///< interactive: close after this long (0: when the window closes)
   double mouse_speed = 0.25;             ///< fastest the mouse moves the tool (m/s)
   double arrow_scale = 0;                ///< force arrow length (m per N); 0: 1.5 x the organ's diagonal
+  double fps = 60;                       ///< interactive: most frames per second (the display yields the rest)
+  bool realtime = false;                 ///< SCHED_FIFO for the haptic thread (HapticLoop::Options::realtime)
 };
 
 /// Runs the viewer on a loaded scene; returns the exit code. Throws for bad
