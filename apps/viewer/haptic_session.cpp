@@ -21,6 +21,7 @@
 
 #include "apps/commands.hpp"
 #include "apps/viewer/mouse_device.hpp"
+#include "apps/viewer/repeating_device.hpp"
 #include "apps/viewer/session.hpp"
 #include "core/haptic_loop.hpp"
 
@@ -28,17 +29,6 @@ namespace {
 
 using namespace tissue;
 using Clock = std::chrono::steady_clock;
-
-/// A scripted path played over and over (press, release, press, ...).
-class RepeatingDevice : public Device {
- public:
-  explicit RepeatingDevice(std::vector<Waypoint> path) : inner_(std::move(path)) {}
-  Vec3<double> read_position(double t) override { return inner_.read_position(std::fmod(t, inner_.duration())); }
-  void send_force(const Vec3<double>&) override {}  // a script renders nothing (and must not grow)
-
- private:
-  ScriptedDevice inner_;
-};
 
 struct Options {
   std::string scene = "@kidney", backend, precision, depth, device = "scripted";
@@ -54,14 +44,17 @@ struct Display {
   viewer::MouseDevice* mouse;
   viewer::Session& session;
   std::vector<float> staging;
+  bool host_positions = true;
   std::vector<std::uint8_t> roles;
   long region_version = -1;
   long frames = 0, region_downloads = 0;
 
   void frame(double t) {
     const HapticSnapshot s = loop.snapshot();
-    float* dst = staging.data();
-    loop.post([dst](Simulation& sim) { sim.backend->write_positions(dst); }).get();
+    if (host_positions) {  // a device backend writes device memory only: the viewer maps a GL buffer for it
+      float* dst = staging.data();
+      loop.post([dst](Simulation& sim) { sim.backend->write_positions(dst); }).get();
+    }
     if (s.region_version != region_version) {
       region_version = s.region_version;
       loop.post([this](Simulation& sim) { roles = sim.backend->region().role; }).get();
@@ -89,14 +82,15 @@ int run(const Options& o) {
   } else if (o.device == "scripted") {
     if (session.scene.tools.empty() || session.scene.tools.front().path.empty())
       throw std::runtime_error(session.scene.source + ": no scripted tool path to play");
-    device = std::make_unique<RepeatingDevice>(session.scene.tools.front().path);
+    device = std::make_unique<viewer::RepeatingDevice>(session.scene.tools.front().path);
   } else {
     throw std::invalid_argument(fmt::format("--device '{}' is neither scripted nor mouse", o.device));
   }
   HapticLoop::Options opt;
   opt.realtime = o.realtime;
   HapticLoop loop(*device, session.factory(), session.params, opt);
-  Display display{loop, mouse, session, std::vector<float>(session.scene.nodes.size()), {}};
+  Display display{loop, mouse, session, std::vector<float>(session.scene.nodes.size()),
+                  session.scene.solver.backend == "cpu", {}};
   fmt::print("haptic session: {} on {} ({}), {} device, {:.1f} s\n", session.scene.source, session.scene.solver.backend,
              to_string(session.params.precision), o.device, o.seconds);
   loop.start();

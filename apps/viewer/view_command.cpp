@@ -29,7 +29,9 @@ void add_view_command(CLI::App& app, int& rc) {
   cmd->add_option("--mouse-events", o->mouse_events,
                   "With --screenshot and --device mouse: '<tick> wheel <n>; <tick> drag <x0>,<y0> <x1>,<y1>; "
                   "<tick> orbit <dx>,<dy>'");
-  cmd->add_option("--seconds", o->seconds, "Close the window after this many seconds (0: when closed)");
+  cmd->add_option("--seconds", o->seconds,
+                  "Stop after this many seconds (0: when the window closes; needed with --gl egl without a picture)");
+  cmd->add_flag("--repeat", o->repeat, "With --device scripted: play the tool path over and over");
   cmd->add_option("--mouse-speed", o->mouse_speed, "Fastest the mouse moves the tool (m/s)")->default_val(0.25);
   cmd->add_option("--arrow-scale", o->arrow_scale, "Force arrow length in m per N (default: 1.5 organ diagonals)");
   cmd->add_option("--fps", o->fps, "Most display frames per second")->default_val(60);

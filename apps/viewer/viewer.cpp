@@ -24,6 +24,7 @@
 #include "apps/viewer/picture.hpp"
 #include "apps/viewer/position_source.hpp"
 #include "apps/viewer/renderer.hpp"
+#include "apps/viewer/repeating_device.hpp"
 #include "apps/viewer/session.hpp"
 
 namespace tissue::viewer {
@@ -56,7 +57,7 @@ struct DeviceChoice {
   double max_force = CouplingParams{}.max_force;
 };
 
-DeviceChoice make_device(const std::string& kind, const Session& s, double mouse_speed) {
+DeviceChoice make_device(const std::string& kind, const Session& s, double mouse_speed, bool repeat) {
   DeviceChoice d;
   if (kind == "mouse") {
     auto m = std::make_unique<MouseDevice>(s.tool_start, mouse_speed);
@@ -65,7 +66,8 @@ DeviceChoice make_device(const std::string& kind, const Session& s, double mouse
   } else if (kind == "scripted") {
     if (s.scene.tools.empty() || s.scene.tools.front().path.empty())
       throw std::runtime_error(fmt::format("{}: --device scripted needs a tool with a path in the scene", s.scene.source));
-    d.device = std::make_unique<ScriptedDevice>(s.scene.tools.front().path);
+    if (repeat) d.device = std::make_unique<RepeatingDevice>(s.scene.tools.front().path);
+    else d.device = std::make_unique<ScriptedDevice>(s.scene.tools.front().path);
   } else if (kind == "phantom") {
     d.device = make_phantom_device(WorkspaceMap{s.tool_start, 1.0}, &d.max_force);
   } else {
@@ -153,11 +155,13 @@ struct Viewer {
 std::unique_ptr<Viewer> make_viewer(const ViewOptions& o, scene::Scene scene) {
   auto v = std::make_unique<Viewer>();
   v->session = make_session(std::move(scene), o.backend, o.precision, o.depth);
+  // the mouse needs a window; pictures and windowless runs take the scene tool's device
+  const bool windowless = !o.screenshot.empty() || o.gl == "egl";
   const std::string kind = !o.device.empty()                ? o.device
-                           : o.screenshot.empty()           ? "mouse"
+                           : !windowless                    ? "mouse"
                            : v->session.scene.tools.empty() ? "mouse"
                                                             : v->session.scene.tools.front().device;
-  v->device = make_device(kind, v->session, o.mouse_speed);
+  v->device = make_device(kind, v->session, o.mouse_speed, o.repeat);
   HapticLoop::Options opt;
   opt.coupling.max_force = v->device.max_force;
   opt.realtime = o.realtime;
@@ -312,11 +316,16 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
   const Hidden hide = parse_hide(o.hide);
   HapticLoop& loop = *v.loop;
   GLFWwindow* win = v.ctx->window();
+  if (!win && !(o.seconds > 0))
+    throw std::invalid_argument("without a window (--gl egl) the display loop needs --seconds (or --screenshot)");
+  if (!win && v.device.mouse) throw std::invalid_argument("--device mouse needs a window (--gl window)");
   // a scripted or hardware tool leaves the mouse the camera only
   MouseDevice camera_only(v.session.tool_start, o.mouse_speed);
   MouseController mouse(v.camera, v.device.mouse ? *v.device.mouse : camera_only, v.wheel_step);
   Input input{&mouse, nullptr, false};
-  install_input(win, &input);  // before ImGui, which chains these callbacks
+  if (win) install_input(win, &input);  // before ImGui, which chains these callbacks
+  // without a window the frames go to an offscreen target, as pictures do
+  std::unique_ptr<OffscreenTarget> offscreen = win ? nullptr : std::make_unique<OffscreenTarget>(o.width, o.height);
   std::unique_ptr<Overlay> overlay = hide.overlay ? nullptr : std::make_unique<Overlay>(win);
   input.overlay = overlay.get();
   const OverlayFacts facts = facts_of(loop, v.mesh, v.session, *v.ctx, *v.positions);
@@ -326,7 +335,7 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
   const auto t0 = Clock::now();
   const auto frame = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / std::max(1.0, o.fps)));
   auto next_frame = t0;
-  long shown_region = -1;
+  long shown_region = -1, frames = 0;
   bool warned_realtime = false;
   while (!v.ctx->should_close()) {
     if (o.seconds > 0 && std::chrono::duration<double>(Clock::now() - t0).count() > o.seconds) break;
@@ -334,7 +343,7 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
     // haptic thread needs the core more than a software renderer does
     next_frame = std::max(next_frame + frame, Clock::now() - frame);
     std::this_thread::sleep_until(next_frame);
-    glfwPollEvents();
+    if (win) glfwPollEvents();
     const HapticSnapshot snap = loop.snapshot();
     if (o.realtime && !warned_realtime && snap.tick > 0 && !snap.realtime) {
       fmt::print(stderr, "tissue view: warning: real-time scheduling refused; the haptic thread runs at normal priority\n");
@@ -346,7 +355,8 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
     }
     update_roles(loop, *v.renderer, snap, !hide.region, &shown_region);
     v.positions->update(loop);
-    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    if (offscreen) offscreen->bind();
+    else glBindFramebuffer(GL_FRAMEBUFFER, 0);
     v.ctx->framebuffer_size(&v.camera.width, &v.camera.height);
     v.renderer->draw(v.camera, glyphs_of(snap, v.session, v.arrow_scale, !hide.tool));
     if (overlay) {
@@ -354,9 +364,14 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
       if (act.apply) loop.request_params(*act.apply);
       if (act.reset) loop.request_params(snap.params);
     }
-    v.ctx->swap_buffers();
+    if (win) v.ctx->swap_buffers();
+    else glFinish();  // the frame's work is done, as a swap would have it
+    ++frames;
   }
+  const double wall = std::chrono::duration<double>(Clock::now() - t0).count();
   loop.stop();
+  fmt::print("display: {} frames in {:.2f} s ({:.1f} frames/s){}\n", frames, wall, frames / std::max(wall, 1e-9),
+             win ? "" : ", offscreen (EGL)");
   print_stats(loop.snapshot(), *v.positions);
   if (!loop.status().empty()) fmt::print("status: {}\n", loop.status());
   return 0;

@@ -1,5 +1,8 @@
 // `tissue view <scene>`: the interactive viewer (display loop on the main
-// thread, haptic loop on its own) and its headless picture mode.
+// thread, haptic loop on its own) and its headless modes: one picture
+// (--screenshot), or the display loop rendering offscreen through EGL for a
+// given time (--gl egl --seconds S), which measures the haptic loop beside a
+// running display on a machine without X (the GPU machine).
 #pragma once
 
 #include <string>
@@ -18,7 +21,8 @@ struct ViewOptions {
   std::string gl;                        ///< window | hidden | egl; "": window, or hidden / egl for pictures
   std::string hide;                      ///< comma-separated: tool, region, overlay
   std::string mouse_events;              ///< scripted mouse input for pictures (mouse_controller.hpp)
-  double seconds = 0;                    ///< interactive: close after this long (0: when the window closes)
+  double seconds = 0;                    ///< close after this long (0: when the window closes; required without one)
+  bool repeat = false;                   ///< scripted device: play the path over and over
   double mouse_speed = 0.25;             ///< fastest the mouse moves the tool (m/s)
   double arrow_scale = 0;                ///< force arrow length (m per N); 0: 1.5 x the organ's diagonal
   double fps = 60;                       ///< interactive: most frames per second (the display yields the rest)
