@@ -91,6 +91,8 @@ struct HapticStats {
   double session_rate_hz = 0;  ///< ticks per wall second since start (1/s)
   double steps_per_s = 0;      ///< TLED steps per wall second over the window
   bool keeping_up = true;      ///< window: <= 1% late and rate within 2% of 1/T
+  bool paced = false;          ///< ticks ran on the haptic thread against deadlines (false: run_ticks,
+                               ///< as fast as possible, no deadlines: rate and lateness mean nothing)
 };
 
 /// One line: rate, work percentiles, jitter and late ticks. When keeping_up

@@ -134,6 +134,8 @@ TEST(HapticLoop, RunTicksPressesTheTissueAndPublishes) {
   EXPECT_LT(s1.tool.z, 0.01);       // the proxy is below the original surface
   EXPECT_EQ(s1.stats.ticks, 150);
   EXPECT_EQ(s1.stats.late, 0);      // no deadlines without the thread
+  EXPECT_FALSE(s1.stats.paced);
+  EXPECT_EQ(describe(s1.stats).rfind("haptic ticks run offline (no deadlines): 150 ticks", 0), 0u);
   EXPECT_LE(s1.stats.work_p50, s1.stats.work_p99);
   EXPECT_LE(s1.stats.work_p99, s1.stats.work_max);
   EXPECT_EQ(s1.steps_per_tick, loop.snapshot().steps_per_tick);
@@ -154,6 +156,7 @@ TEST(HapticLoop, ThreadStartsTicksAndStopsCleanly) {
   EXPECT_EQ(a.tick, b.tick);  // nothing ticks after stop()
   EXPECT_GE(a.tick, 300);
   EXPECT_EQ(a.stats.ticks, a.tick);
+  EXPECT_TRUE(a.stats.paced);
   EXPECT_GT(a.stats.rate_hz, 0);
   EXPECT_LE(a.stats.work_p50, a.stats.work_max);
   EXPECT_GT(a.stats.session_p99, 0);
@@ -282,6 +285,7 @@ TEST(HapticLoop, ASolverFailureStopsTicksUntilNewParameters) {
 
 TEST(HapticLoop, DescribeNamesRateAndPercentiles) {
   HapticStats s;
+  s.paced = true;
   s.period = 1e-3;
   s.rate_hz = 999.7;
   s.work_p50 = 2.1e-4;

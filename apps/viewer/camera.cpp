@@ -128,7 +128,7 @@ Camera frame_camera(Vec3<double> center, double size, Vec3<double> look, double 
   c.forward = f;
   Vec3<double> up = world_up - dot(world_up, f) * f;
   c.up = norm(up) > 1e-6 ? unit(up) : orthogonal(f);
-  c.distance = 0.5 * size / std::tan(0.5 * c.fov_y) * 1.15;
+  c.distance = 0.5 * size / std::tan(0.5 * c.fov_y);
   return c;
 }
 

@@ -66,13 +66,19 @@ OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, con
   row("positions", f.positions);
   row("mesh", fmt::format("{} nodes, {} tets, {} triangles", f.n_nodes, f.n_elems, f.n_tris));
   row("TLED", fmt::format("{} steps/tick, {:.0f} steps/s", s.steps_per_tick, st.steps_per_s));
-  row("haptic", fmt::format("{:.1f} Hz, tick p50 {:.3f} p99 {:.3f} max {:.3f} ms", st.rate_hz, 1e3 * st.work_p50,
-                            1e3 * st.work_p99, 1e3 * st.work_max));
-  row("jitter", fmt::format("p99 {:.3f} ms; late {} of {} (session {} of {})", 1e3 * st.wake_p99, st.window_late,
-                            st.window_ticks, st.late, st.ticks));
-  if (!st.keeping_up)
-    ImGui::TextColored(ImVec4(1, 0.35f, 0.3f, 1), "SOLVER CANNOT KEEP UP: %ld of the last %ld ticks late",
-                       st.window_late, st.window_ticks);
+  if (st.paced) {
+    row("haptic", fmt::format("{:.1f} Hz, tick p50 {:.3f} p99 {:.3f} max {:.3f} ms{}", st.rate_hz, 1e3 * st.work_p50,
+                              1e3 * st.work_p99, 1e3 * st.work_max, s.realtime ? ", SCHED_FIFO" : ""));
+    row("jitter", fmt::format("p99 {:.3f} ms; late {} of {} (session {} of {})", 1e3 * st.wake_p99, st.window_late,
+                              st.window_ticks, st.late, st.ticks));
+  } else {
+    row("haptic", fmt::format("offline: {} ticks, work p50 {:.3f} p99 {:.3f} ms", st.ticks, 1e3 * st.work_p50,
+                              1e3 * st.work_p99));
+  }
+  if (st.paced && !st.keeping_up)
+    ImGui::TextColored(ImVec4(1, 0.35f, 0.3f, 1), "%s: %ld of the last %ld ticks late",
+                       st.work_p99 > st.period ? "SOLVER CANNOT KEEP UP" : "HAPTIC DEADLINES MISSED", st.window_late,
+                       st.window_ticks);
   row("tool", fmt::format("{}  {}", mm(s.tool),
                           s.contact_tri >= 0 ? fmt::format("contact, triangle {}", s.contact_tri) : "no contact"));
   row("force", fmt::format("{:.4f} N to the device (tissue {:.4f} N){}", norm(s.rendered_force), norm(s.tissue_force),

@@ -257,7 +257,7 @@ void Renderer::draw(const Camera& camera, const Glyphs& g) {
   const double r = g.tool_radius;
   const Vec3<double> s = g.shaft_dir;
   draw_glyph(sphere_, view_proj, view, glyph_matrix(g.tool + r * s, s, r, r), kTool);
-  draw_glyph(cylinder_, view_proj, view, glyph_matrix(g.tool + (1.5 * r) * s, s, 0.45 * r, 30 * r), kTool);
+  draw_glyph(cylinder_, view_proj, view, glyph_matrix(g.tool + (1.5 * r) * s, s, 0.45 * r, 16 * r), kTool);
   if (norm(g.device - g.tool) > 0.25 * r)  // the hand, where the coupling pulls the tool
     draw_glyph(sphere_, view_proj, view, glyph_matrix(g.device + r * s, s, 0.6 * r, 0.6 * r), kDevice);
   if (g.contact) draw_glyph(sphere_, view_proj, view, glyph_matrix(g.tool, s, 0.55 * r, 0.55 * r), kContact);

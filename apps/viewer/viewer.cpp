@@ -179,6 +179,8 @@ std::unique_ptr<Viewer> make_viewer(const ViewOptions& o, scene::Scene scene) {
   const bool mouse = v->device.mouse != nullptr;
   v->camera = frame_camera(b.center(), b.diagonal(), v->session.press_dir, mouse ? 0.0 : 0.35, mouse ? 0.3 : 0.75,
                            o.width, o.height);
+  // the overlay panel (500 px) takes the left: centre the organ in what is left
+  if (!parse_hide(o.hide).overlay && o.width >= 800) v->camera.pan(200, 0);
   v->arrow_scale = o.arrow_scale > 0 ? o.arrow_scale : 1.5 * b.diagonal();
   v->wheel_step = b.diagonal() / 150;
   return v;
