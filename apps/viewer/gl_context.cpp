@@ -9,8 +9,10 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <stdexcept>
+#include <string>
 
 namespace tissue::viewer {
 namespace {
@@ -53,8 +55,20 @@ GlContext::GlContext(ContextKind kind, int width, int height, const std::string&
     EGLDeviceEXT devices[16];
     EGLint n = 0;
     if (!query_devices(16, devices, &n) || n == 0) throw std::runtime_error(egl_error("eglQueryDevicesEXT (no device)"));
+    // GPUs first (a CUDA-capable one first of all, for interop), software
+    // rasterisers (Mesa's llvmpipe device) last; the first that initialises
+    auto query_string =
+        reinterpret_cast<PFNEGLQUERYDEVICESTRINGEXTPROC>(eglGetProcAddress("eglQueryDeviceStringEXT"));
+    auto rank = [&](EGLDeviceEXT dev) {
+      const char* ext = query_string ? query_string(dev, EGL_EXTENSIONS) : nullptr;
+      const std::string e = ext ? ext : "";
+      if (e.find("EGL_NV_device_cuda") != std::string::npos) return 0;
+      if (e.find("EGL_MESA_device_software") != std::string::npos) return 2;
+      return 1;
+    };
+    std::stable_sort(devices, devices + n, [&](EGLDeviceEXT a, EGLDeviceEXT b) { return rank(a) < rank(b); });
     EGLDisplay display = EGL_NO_DISPLAY;
-    for (EGLint i = 0; i < n && display == EGL_NO_DISPLAY; ++i) {  // the first device that initialises
+    for (EGLint i = 0; i < n && display == EGL_NO_DISPLAY; ++i) {
       EGLDisplay d = platform_display(EGL_PLATFORM_DEVICE_EXT, devices[i], nullptr);
       EGLint major = 0, minor = 0;
       if (d != EGL_NO_DISPLAY && eglInitialize(d, &major, &minor)) display = d;
