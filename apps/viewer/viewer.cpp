@@ -166,8 +166,6 @@ std::unique_ptr<Viewer> make_viewer(const ViewOptions& o, scene::Scene scene) {
   opt.coupling.max_force = v->device.max_force;
   opt.realtime = o.realtime;
   v->loop = std::make_unique<HapticLoop>(*v->device.device, v->session.factory(), v->session.params, opt);
-  if (o.width < 16 || o.height < 16 || o.width > 8192 || o.height > 8192)
-    throw std::invalid_argument(fmt::format("--size {}x{}: each side must lie in 16..8192 pixels", o.width, o.height));
   v->ctx = std::make_unique<GlContext>(context_kind(o), o.width, o.height, "tissue view: " + o.scene);
   v->mesh = mesh_of(*v->loop);
   v->renderer = std::make_unique<Renderer>(v->mesh);
@@ -374,7 +372,12 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
   loop.stop();
   fmt::print("display: {} frames in {:.2f} s ({:.1f} frames/s){}\n", frames, wall, frames / std::max(wall, 1e-9),
              win ? "" : ", offscreen (EGL)");
-  print_stats(loop.snapshot(), *v.positions);
+  const HapticSnapshot last = loop.snapshot();
+  print_stats(last, *v.positions);
+  fmt::print("final: tool ({:.1f}, {:.1f}, {:.1f}) mm, {}, |F| = {:.4f} N to the device, region {} nodes\n",
+             1e3 * last.tool.x, 1e3 * last.tool.y, 1e3 * last.tool.z,
+             last.contact_tri >= 0 ? fmt::format("contact on triangle {}", last.contact_tri) : "no contact",
+             norm(last.rendered_force), last.region.nodes());
   if (!loop.status().empty()) fmt::print("status: {}\n", loop.status());
   return 0;
 }
@@ -382,6 +385,12 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
 }  // namespace
 
 int run_view(const ViewOptions& o, scene::Scene scene) {
+  if (o.width < 16 || o.height < 16 || o.width > 8192 || o.height > 8192)
+    throw std::invalid_argument(
+        fmt::format("--width {} --height {}: each must lie in 16..8192 pixels", o.width, o.height));
+  parse_hide(o.hide);  // option errors before the scene is built
+  if (!o.gl.empty()) parse_context_kind(o.gl);
+  if (!o.mouse_events.empty()) parse_mouse_events(o.mouse_events);
   std::unique_ptr<Viewer> v = make_viewer(o, std::move(scene));
   return o.screenshot.empty() ? run_interactive(o, *v) : run_picture(o, *v);
 }
