@@ -21,7 +21,7 @@
 
 #include "apps/commands.hpp"
 #include "apps/viewer/mouse_device.hpp"
-#include "apps/viewer/repeating_device.hpp"
+#include "apps/viewer/path_device.hpp"
 #include "apps/viewer/session.hpp"
 #include "core/haptic_loop.hpp"
 
@@ -82,7 +82,7 @@ int run(const Options& o) {
   } else if (o.device == "scripted") {
     if (session.scene.tools.empty() || session.scene.tools.front().path.empty())
       throw std::runtime_error(session.scene.source + ": no scripted tool path to play");
-    device = std::make_unique<viewer::RepeatingDevice>(session.scene.tools.front().path);
+    device = std::make_unique<viewer::PathDevice>(session.scene.tools.front().path, true);
   } else {
     throw std::invalid_argument(fmt::format("--device '{}' is neither scripted nor mouse", o.device));
   }

@@ -24,7 +24,7 @@
 #include "apps/viewer/picture.hpp"
 #include "apps/viewer/position_source.hpp"
 #include "apps/viewer/renderer.hpp"
-#include "apps/viewer/repeating_device.hpp"
+#include "apps/viewer/path_device.hpp"
 #include "apps/viewer/session.hpp"
 
 namespace tissue::viewer {
@@ -66,8 +66,7 @@ DeviceChoice make_device(const std::string& kind, const Session& s, double mouse
   } else if (kind == "scripted") {
     if (s.scene.tools.empty() || s.scene.tools.front().path.empty())
       throw std::runtime_error(fmt::format("{}: --device scripted needs a tool with a path in the scene", s.scene.source));
-    if (repeat) d.device = std::make_unique<RepeatingDevice>(s.scene.tools.front().path);
-    else d.device = std::make_unique<ScriptedDevice>(s.scene.tools.front().path);
+    d.device = std::make_unique<PathDevice>(s.scene.tools.front().path, repeat);
   } else if (kind == "phantom") {
     d.device = make_phantom_device(WorkspaceMap{s.tool_start, 1.0}, &d.max_force);
   } else {
@@ -198,7 +197,7 @@ int run_picture(const ViewOptions& o, Viewer& v) {
   HapticLoop& loop = *v.loop;
   long ticks = o.ticks;
   if (ticks < 0) {
-    const auto* scripted = dynamic_cast<const ScriptedDevice*>(v.device.device.get());
+    const auto* scripted = dynamic_cast<const PathDevice*>(v.device.device.get());
     ticks = scripted ? std::lround(scripted->duration() / loop.period()) : 0;
   }
   // the scripted mouse, if any, between chunks of ticks
