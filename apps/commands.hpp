@@ -15,6 +15,8 @@ void add_run_command(CLI::App& app, int& rc);
 void add_bench_command(CLI::App& app, int& rc);
 void add_info_command(CLI::App& app, int& rc);
 void add_view_command(CLI::App& app, int& rc);  ///< apps/viewer/view_command.cpp
+void add_reference_command(CLI::App& app, int& rc);  ///< apps/cmd_reference.cpp
+void add_tradeoff_command(CLI::App& app, int& rc);   ///< apps/cmd_tradeoff.cpp
 
 /// Loads a scene file, or the built-in kidney for the name "@kidney".
 scene::Scene load_scene_arg(const std::string& arg);
@@ -22,7 +24,7 @@ scene::Scene load_scene_arg(const std::string& arg);
 /// Parses "float" | "double".
 Precision parse_precision(const std::string& s);
 
-/// Parses a region depth: a number >= 0 or "all".
+/// Parses a region depth: a number >= 0, "all" (kDepthAll) or "auto" (kDepthAuto).
 int parse_depth(const std::string& s);
 
 }  // namespace tissue::app

@@ -22,10 +22,11 @@ Precision parse_precision(const std::string& s) {
 
 int parse_depth(const std::string& s) {
   if (s == "all") return kDepthAll;
+  if (s == "auto") return kDepthAuto;
   int d = -1;
   const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), d);
   if (ec != std::errc() || end != s.data() + s.size() || d < 0)
-    throw std::invalid_argument(fmt::format("region depth '{}' is neither a whole number >= 0 nor 'all'", s));
+    throw std::invalid_argument(fmt::format("region depth '{}' is neither a whole number >= 0 nor 'all' nor 'auto'", s));
   return d;
 }
 

@@ -11,8 +11,29 @@ Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, Schedul
     : backend_(backend), model_(model), settings_(settings) {
   if (!(settings_.tick > 0)) throw std::invalid_argument("haptic tick must be > 0 s");
   steps_per_tick_ = std::max(1, static_cast<int>(std::lround(settings_.tick / model.dt)));
+  depth_ = settings_.depth;
+  if (settings_.depth == kDepthAuto) {
+    if (settings_.auto_start < 0)
+      throw std::invalid_argument(fmt::format("depth auto: start depth {} must be >= 0", settings_.auto_start));
+    if (!(settings_.auto_tol > 0) || !std::isfinite(settings_.auto_tol))
+      throw std::invalid_argument(fmt::format("depth auto: tolerance {} must be > 0", settings_.auto_tol));
+    auto_depth_ = true;
+    depth_ = settings_.auto_start;
+  }
   // depth N: an empty region (nothing moves) until the first contact seeds it
-  region_ = backend_.build_region({}, settings_.depth);
+  region_ = backend_.build_region({}, depth_);
+}
+
+bool Scheduler::grow_region(const Reductions& r) {
+  if (!auto_depth_ || seeds_.empty() || region_.whole()) return false;
+  if (r.front_disp < 0)
+    throw SimulationError(fmt::format("depth auto: the {} backend does not report the front ring's displacement "
+                                      "(Reductions::front_disp); use a fixed depth",
+                                      backend_.name()));
+  if (!(r.front_disp > settings_.auto_tol * r.max_disp)) return false;
+  ++depth_;
+  region_ = backend_.build_region(seeds_, depth_);
+  return true;
 }
 
 void Scheduler::start_contact(const Hit& hit, const Vec3<double>& tip) {
@@ -27,7 +48,7 @@ void Scheduler::start_contact(const Hit& hit, const Vec3<double>& tip) {
     std::vector<index_t> seeds(nodes_, nodes_ + 3);
     std::sort(seeds.begin(), seeds.end());
     if (seeds != seeds_) {
-      region_ = backend_.build_region(seeds, settings_.depth);
+      region_ = backend_.build_region(seeds, depth_);
       seeds_ = std::move(seeds);
     }
   }
@@ -86,9 +107,18 @@ TickReport Scheduler::tick(Device& device) {
   const double held = std::sqrt(r.held_force2);
   rep.residual = std::sqrt(r.free_force2) / std::max(held, settings_.force_floor);
   rep.kinetic = r.kinetic;
+  rep.strain_energy = r.strain_energy;
   rep.max_disp = r.max_disp;
+  rep.front_disp = r.front_disp;
   const double energy_scale = std::max(0.5 * held * r.max_disp, 1e-18);
-  rep.equilibrium = rep.residual < settings_.residual_tol && r.kinetic < settings_.kinetic_tol * energy_scale;
+  rep.kinetic_rel = r.kinetic / energy_scale;
+  rep.equilibrium = rep.residual < settings_.residual_tol && rep.kinetic_rel < settings_.kinetic_tol;
+  if (grow_region(r)) {  // the next tick runs on the larger region
+    rep.equilibrium = false;
+    rep.region_nodes = region_.nodes();
+    rep.region_elems = region_.n_elems;
+  }
+  rep.depth = depth_;
   rep.steps = steps_per_tick_;
   device.send_force(rep.force);
   prev_ = tip;

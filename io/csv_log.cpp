@@ -8,7 +8,8 @@ namespace tissue::io {
 
 const char* TickLog::header() {
   return "tick,time,tool_x,tool_y,tool_z,contact_tri,force_x,force_y,force_z,internal_x,internal_y,internal_z,"
-         "region_nodes,region_elems,residual,kinetic,max_disp,equilibrium,steps";
+         "region_nodes,region_elems,residual,kinetic,max_disp,equilibrium,steps,strain_energy,kinetic_rel,front_disp,"
+         "depth";
 }
 
 TickLog::TickLog(const std::string& path) : path_(path), out_(path) {
@@ -19,10 +20,11 @@ TickLog::TickLog(const std::string& path) : path_(path), out_(path) {
 
 void TickLog::write(const TickReport& r) {
   out_ << fmt::format(
-      "{},{:.9g},{:.9g},{:.9g},{:.9g},{},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{},{},{:.6g},{:.6g},{:.9g},{},{}\n",
+      "{},{:.9g},{:.9g},{:.9g},{:.9g},{},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{},{},{:.6g},{:.6g},{:.9g},{},{},"
+      "{:.9g},{:.6g},{:.9g},{}\n",
       r.tick, r.time, r.tool.x, r.tool.y, r.tool.z, r.contact_tri, r.force.x, r.force.y, r.force.z, r.internal.x,
       r.internal.y, r.internal.z, r.region_nodes, r.region_elems, r.residual, r.kinetic, r.max_disp,
-      r.equilibrium ? 1 : 0, r.steps);
+      r.equilibrium ? 1 : 0, r.steps, r.strain_energy, r.kinetic_rel, r.front_disp, r.depth);
   if (!out_) throw std::runtime_error(fmt::format("{}: write failed at tick {}", path_, r.tick));
   ++rows_;
 }

@@ -12,8 +12,11 @@ namespace tissue::io {
 /// Writes a header row, then one row per tick with the columns
 /// tick,time,tool_x,tool_y,tool_z,contact_tri,force_x,force_y,force_z,
 /// internal_x,internal_y,internal_z,region_nodes,region_elems,residual,
-/// kinetic,max_disp,equilibrium,steps
-/// in SI units (s, m, N, J; equilibrium 0/1; contact_tri -1 = none).
+/// kinetic,max_disp,equilibrium,steps,strain_energy,kinetic_rel,front_disp,depth
+/// in SI units (s, m, N, J; equilibrium 0/1; contact_tri -1 = none;
+/// strain_energy and front_disp -1 where the backend does not compute them;
+/// kinetic_rel the equilibrium test's relative kinetic energy; depth the
+/// region's rings, -1 = the whole mesh).
 class TickLog {
  public:
   /// Creates (truncates) the file and writes the header; throws

@@ -360,10 +360,12 @@ scene::Solver Reader::read_solver(pugi::xml_node n) const {
     const auto k = scene::parse_integer(d);
     if (d == "all")
       v.depth = kDepthAll;
+    else if (d == "auto")
+      v.depth = kDepthAuto;
     else if (k && *k >= std::numeric_limits<int>::min() && *k <= std::numeric_limits<int>::max())
       v.depth = int(*k);
     else
-      fail(n, fmt::format("depth = '{}' is neither a whole number nor \"all\"", a.value()));
+      fail(n, fmt::format("depth = '{}' is neither a whole number nor \"all\" nor \"auto\"", a.value()));
   }
   v.tick = real_or(n, "tick", v.tick);
   v.residual_tol = real_or(n, "residual-tol", v.residual_tol);
@@ -497,7 +499,7 @@ void write_solver(pugi::xml_node root, const scene::Solver& v) {
   set(n, "dt", v.dt == 0 ? "auto" : num(v.dt));
   set(n, "dt-safety", num(v.dt_safety));
   set(n, "damping", v.damping == -1 ? "auto" : num(v.damping));
-  set(n, "depth", v.depth == kDepthAll ? "all" : std::to_string(v.depth));
+  set(n, "depth", v.depth == kDepthAll ? "all" : v.depth == kDepthAuto ? "auto" : std::to_string(v.depth));
   set(n, "tick", num(v.tick));
   set(n, "residual-tol", num(v.residual_tol));
   set(n, "kinetic-tol", num(v.kinetic_tol));

@@ -276,7 +276,8 @@ void check_solver(const Scene& s) {
     fail(s, ln, fmt::format("solver: dt-safety = {} must be in (0, 1) (a fraction of the critical step)", v.dt_safety));
   if (v.damping < 0 && v.damping != -1)
     fail(s, ln, fmt::format("solver: damping = {} 1/s must be >= 0 (or \"auto\")", v.damping));
-  if (v.depth < kDepthAll) fail(s, ln, fmt::format("solver: depth = {} must be >= 0 (or \"all\")", v.depth));
+  if (v.depth < kDepthAuto)
+    fail(s, ln, fmt::format("solver: depth = {} must be >= 0 (or \"all\" or \"auto\")", v.depth));
   if (!(v.tick > 0)) fail(s, ln, fmt::format("solver: tick = {} s must be > 0", v.tick));
   if (!(v.residual_tol > 0)) fail(s, ln, fmt::format("solver: residual-tol = {} must be > 0", v.residual_tol));
   if (!(v.kinetic_tol > 0)) fail(s, ln, fmt::format("solver: kinetic-tol = {} must be > 0", v.kinetic_tol));

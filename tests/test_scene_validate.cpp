@@ -348,8 +348,8 @@ TEST(SceneValidate, NegativeDampingOtherThanAuto) {
 
 TEST(SceneValidate, DepthBelowMinusOne) {
   Scene s = valid_scene();
-  s.solver.depth = -2;
-  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "depth = -2", "must be >= 0 (or \"all\")"}));
+  s.solver.depth = -3;  // -1 = all, -2 = auto
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "depth = -3", "must be >= 0 (or \"all\" or \"auto\")"}));
   s.solver.depth = kDepthAll;
   EXPECT_NO_THROW(validate(s));
 }

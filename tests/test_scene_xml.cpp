@@ -312,6 +312,22 @@ TEST(SceneXml, SolverDefaultsAndKeywords) {
   EXPECT_EQ(plain.solver.damping, 0);
 }
 
+// depth="auto" (the adaptive region, core/scheduler.hpp) reads as kDepthAuto,
+// validates, reaches the Scheduler's settings and is written back as "auto".
+TEST(SceneXml, AdaptiveDepth) {
+  const std::string xml = fmt::format(R"(<tissue-scene>{}
+  <material name="m" E="3000" nu="0.45" rho="1000"/>
+  <element-set material="m" elements="0"/>
+  <solver depth="auto"/>
+</tissue-scene>)",
+                                      kTet);
+  const Scene s = parse_scene(xml, "s.xml", "");
+  EXPECT_EQ(s.solver.depth, kDepthAuto);
+  EXPECT_EQ(scene::scheduler_settings(s).depth, kDepthAuto);
+  const Scene back = parse_scene(io::format_scene(s, ""), "back.xml", "");
+  EXPECT_EQ(back.solver.depth, kDepthAuto);
+}
+
 // ---- constraints resolved on a box mesh ------------------------------------
 
 TEST(SceneXml, ConstraintsSelectTheRightNodes) {

@@ -1,0 +1,198 @@
+#include "accuracy/plot.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <stdexcept>
+
+// Private copies of the stb functions (static), so that another library's
+// stb_image_write implementation in the same program cannot clash.
+#define STB_IMAGE_WRITE_STATIC
+#define STB_IMAGE_WRITE_IMPLEMENTATION
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
+#pragma GCC diagnostic ignored "-Wunused-function"
+#include <stb/stb_easy_font.h>
+#include <stb/stb_image_write.h>
+#pragma GCC diagnostic pop
+
+namespace tissue::accuracy {
+
+Canvas::Canvas(int w, int h, Colour bg) : w_(w), h_(h) {
+  if (w < 1 || h < 1) throw std::invalid_argument(fmt::format("canvas size {}x{} must be positive", w, h));
+  rgb_.resize(3 * std::size_t(w) * h);
+  fill_rect(0, 0, w, h, bg);
+}
+
+Canvas::Colour Canvas::at(int x, int y) const {
+  const std::size_t k = 3 * (std::size_t(y) * w_ + x);
+  return {rgb_[k], rgb_[k + 1], rgb_[k + 2]};
+}
+
+void Canvas::set(int x, int y, Colour c) {
+  if (x < 0 || y < 0 || x >= w_ || y >= h_) return;
+  const std::size_t k = 3 * (std::size_t(y) * w_ + x);
+  rgb_[k] = c.r;
+  rgb_[k + 1] = c.g;
+  rgb_[k + 2] = c.b;
+}
+
+void Canvas::fill_rect(int x0, int y0, int x1, int y1, Colour c) {
+  for (int y = std::max(0, y0); y < std::min(h_, y1); ++y)
+    for (int x = std::max(0, x0); x < std::min(w_, x1); ++x) set(x, y, c);
+}
+
+void Canvas::line(double x0, double y0, double x1, double y1, Colour c, double width) {
+  // distance-to-segment test over the segment's bounding box
+  const double r = 0.5 * width;
+  const int xa = int(std::floor(std::min(x0, x1) - r)), xb = int(std::ceil(std::max(x0, x1) + r));
+  const int ya = int(std::floor(std::min(y0, y1) - r)), yb = int(std::ceil(std::max(y0, y1) + r));
+  const double dx = x1 - x0, dy = y1 - y0, len2 = dx * dx + dy * dy;
+  for (int y = std::max(0, ya); y <= std::min(h_ - 1, yb); ++y)
+    for (int x = std::max(0, xa); x <= std::min(w_ - 1, xb); ++x) {
+      const double t = len2 > 0 ? std::clamp(((x - x0) * dx + (y - y0) * dy) / len2, 0.0, 1.0) : 0.0;
+      const double ex = x - (x0 + t * dx), ey = y - (y0 + t * dy);
+      if (ex * ex + ey * ey <= r * r + 0.25) set(x, y, c);
+    }
+}
+
+void Canvas::disc(double cx, double cy, double radius, Colour c) {
+  for (int y = int(cy - radius - 1); y <= int(cy + radius + 1); ++y)
+    for (int x = int(cx - radius - 1); x <= int(cx + radius + 1); ++x)
+      if ((x - cx) * (x - cx) + (y - cy) * (y - cy) <= radius * radius) set(x, y, c);
+}
+
+void Canvas::ring(double cx, double cy, double radius, Colour c, double width) {
+  const double lo = radius - 0.5 * width, hi = radius + 0.5 * width;
+  for (int y = int(cy - hi - 1); y <= int(cy + hi + 1); ++y)
+    for (int x = int(cx - hi - 1); x <= int(cx + hi + 1); ++x) {
+      const double d = std::hypot(x - cx, y - cy);
+      if (d >= lo && d <= hi) set(x, y, c);
+    }
+}
+
+int Canvas::text(int x, int y, const std::string& s, Colour c, int scale) {
+  std::vector<char> buf(s.begin(), s.end());
+  buf.push_back('\0');
+  std::vector<float> vb(std::max<std::size_t>(1024, 80 * s.size() + 64));
+  const int quads = stb_easy_font_print(0, 0, buf.data(), nullptr, vb.data(), int(vb.size() * sizeof(float)));
+  for (int q = 0; q < quads; ++q) {
+    const float* v = vb.data() + 16 * q;  // 4 vertices of (x, y, z, rgba) = 4 floats each
+    const float x0 = v[0], y0 = v[1], x1 = v[8], y1 = v[9];
+    fill_rect(x + int(std::lround(scale * x0)), y + int(std::lround(scale * y0)), x + int(std::lround(scale * x1)),
+              y + int(std::lround(scale * y1)), c);
+  }
+  return text_width(s, scale);
+}
+
+int Canvas::text_width(const std::string& s, int scale) {
+  std::vector<char> buf(s.begin(), s.end());
+  buf.push_back('\0');
+  return scale * stb_easy_font_width(buf.data());
+}
+
+void Canvas::write_png(const std::string& path) const {
+  if (!stbi_write_png(path.c_str(), w_, h_, 3, rgb_.data(), 3 * w_))
+    throw std::runtime_error(fmt::format("{}: cannot write the PNG", path));
+}
+
+namespace {
+
+using Colour = Canvas::Colour;
+
+const std::map<std::string, Colour>& group_colours() {
+  static const std::map<std::string, Colour> c{
+      {"baseline", {0, 0, 0}},       {"depth", {31, 119, 180}},   {"auto", {214, 39, 40}},
+      {"precision", {148, 103, 189}}, {"safety", {44, 160, 44}},   {"mesh", {255, 127, 14}},
+      {"tolerance", {140, 86, 75}}};
+  return c;
+}
+
+/// Log10 axis range covering [lo, hi] with whole decades.
+std::pair<double, double> decades(double lo, double hi) {
+  double a = std::floor(std::log10(lo)), b = std::ceil(std::log10(hi));
+  if (b <= a) b = a + 1;
+  return {a, b};
+}
+
+}  // namespace
+
+void write_tradeoff_plot(const TradeoffResult& res, const std::string& path, int width, int height) {
+  if (res.rows.empty()) throw std::invalid_argument("tradeoff plot: no rows to draw");
+  Canvas cv(width, height);
+  const int left = 90, right = 300, top = 50, bottom = 70;
+  const int pw = width - left - right, ph = height - top - bottom;
+  constexpr double kFloor = 1e-9;  // errors below are drawn at the floor
+  double xlo = 1e300, xhi = 0, ylo = 1e300, yhi = 0;
+  for (const TradeoffRow& r : res.rows) {
+    const double x = std::max(1e3 * r.wall_per_tick, 1e-6), y = std::max(r.disp_err, kFloor);
+    xlo = std::min(xlo, x);
+    xhi = std::max(xhi, x);
+    ylo = std::min(ylo, y);
+    yhi = std::max(yhi, y);
+  }
+  const auto [xa, xb] = decades(xlo, xhi);
+  const auto [ya, yb] = decades(ylo, yhi);
+  auto px = [&](double x) { return left + pw * (std::log10(std::max(x, 1e-6)) - xa) / (xb - xa); };
+  auto py = [&](double y) { return top + ph * (1 - (std::log10(std::max(y, kFloor)) - ya) / (yb - ya)); };
+  const Colour grid{225, 225, 225}, axis{0, 0, 0}, grey{90, 90, 90};
+  // decade grid with 2..9 minor lines, labels
+  for (int d = int(xa); d <= int(xb); ++d) {
+    for (int k = 1; k <= 9 && (d < xb || k == 1); ++k) cv.line(px(k * std::pow(10, d)), top, px(k * std::pow(10, d)), top + ph, grid);
+    const std::string s = fmt::format("{:g}", std::pow(10.0, d));
+    cv.text(int(px(std::pow(10, d))) - Canvas::text_width(s, 2) / 2, top + ph + 8, s, grey, 2);
+  }
+  for (int d = int(ya); d <= int(yb); ++d) {
+    for (int k = 1; k <= 9 && (d < yb || k == 1); ++k) cv.line(left, py(k * std::pow(10, d)), left + pw, py(k * std::pow(10, d)), grid);
+    const std::string s = fmt::format("1e{}", d);
+    cv.text(left - 10 - Canvas::text_width(s, 2), int(py(std::pow(10, d))) - 7, s, grey, 2);
+  }
+  cv.line(left, top, left, top + ph, axis, 2);
+  cv.line(left, top + ph, left + pw, top + ph, axis, 2);
+  cv.text(left, 12, fmt::format("speed-accuracy tradeoff: {} ({})", res.scene, res.device.substr(0, 60)), axis, 2);
+  const std::string xl = "wall time per 1 ms haptic tick (ms)";
+  cv.text(left + pw / 2 - Canvas::text_width(xl, 2) / 2, top + ph + 36, xl, axis, 2);
+  cv.text(8, top - 22, "max nodal displacement error / max displacement (vs same-mesh reference)", axis, 2);
+  // Pareto front, by cost
+  std::vector<const TradeoffRow*> front;
+  for (const TradeoffRow& r : res.rows)
+    if (r.pareto) front.push_back(&r);
+  std::sort(front.begin(), front.end(),
+            [](const TradeoffRow* a, const TradeoffRow* b) { return a->wall_per_tick < b->wall_per_tick; });
+  for (std::size_t k = 1; k < front.size(); ++k)
+    cv.line(px(1e3 * front[k - 1]->wall_per_tick), py(front[k - 1]->disp_err), px(1e3 * front[k]->wall_per_tick),
+            py(front[k]->disp_err), {120, 120, 120}, 2);
+  // points and labels
+  for (const TradeoffRow& r : res.rows) {
+    const auto it = group_colours().find(r.setting.group);
+    const Colour c = it != group_colours().end() ? it->second : grey;
+    const double x = px(1e3 * r.wall_per_tick), y = py(r.disp_err);
+    cv.disc(x, y, 5, c);
+    if (r.pareto) cv.ring(x, y, 9, {0, 0, 0}, 2);
+    std::string label = r.setting.group == "baseline" ? "baseline" : r.setting.label;
+    cv.text(int(x) + 11, int(y) - 6, label, c, 1);
+  }
+  // legend
+  int ly = top + 10;
+  const int lx = left + pw + 25;
+  for (const auto& [group, colour] : group_colours()) {
+    bool used = false;
+    for (const TradeoffRow& r : res.rows) used = used || r.setting.group == group;
+    if (!used) continue;
+    cv.disc(lx + 6, ly + 7, 5, colour);
+    cv.text(lx + 18, ly, group, colour, 2);
+    ly += 24;
+  }
+  cv.ring(lx + 6, ly + 7, 9, {0, 0, 0}, 2);
+  cv.text(lx + 22, ly, "Pareto front", axis, 2);
+  ly += 30;
+  for (const std::string& line : {std::string("errors below 1e-9"), std::string("are drawn at 1e-9")}) {
+    cv.text(lx, ly, line, grey, 1);
+    ly += 12;
+  }
+  cv.write_png(path);
+}
+
+}  // namespace tissue::accuracy

@@ -1,0 +1,194 @@
+#include "accuracy/relaxation.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+namespace tissue::accuracy {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+void check_drive(const TissueModel<double>& m, const Drive& d) {
+  if (d.u.size() != 3 * d.nodes.size())
+    throw std::invalid_argument(
+        fmt::format("relax: {} target values for {} driven nodes (need 3 per node)", d.u.size(), d.nodes.size()));
+  if (!d.axes.empty() && d.axes.size() != d.nodes.size())
+    throw std::invalid_argument(
+        fmt::format("relax: {} axis masks for {} driven nodes (need one per node)", d.axes.size(), d.nodes.size()));
+  for (index_t a : d.nodes)
+    if (a < 0 || a >= m.n_nodes)
+      throw std::invalid_argument(fmt::format("relax: driven node {} out of range (0..{})", a, m.n_nodes - 1));
+}
+
+/// Components each node integrates (bit c = free): not fixed by the model, not driven.
+std::vector<std::uint8_t> free_components(const TissueModel<double>& m, const Drive& d) {
+  std::vector<std::uint8_t> held(m.n_nodes);
+  for (index_t a = 0; a < m.n_nodes; ++a) held[a] = fixed_axes(m.node_flags[a]);
+  for (std::size_t k = 0; k < d.nodes.size(); ++k) held[d.nodes[k]] |= d.axes.empty() ? kAllAxes : d.axes[k];
+  for (auto& h : held) h = std::uint8_t(~h & kAllAxes);
+  return held;
+}
+
+/// Drives the nodes at start + frac (target - start).
+void drive_at(Backend& b, const Drive& d, const std::vector<double>& start, double frac) {
+  std::vector<double> u(d.u.size());
+  for (std::size_t k = 0; k < u.size(); ++k) u[k] = start[k] + frac * (d.u[k] - start[k]);
+  if (d.axes.empty())
+    b.set_driven(d.nodes, u);
+  else
+    b.set_driven_axes(d.nodes, u, d.axes);
+}
+
+/// The driven nodes' start values (3 per node) from u0 (3 x n_nodes, or empty = 0).
+std::vector<double> drive_start(const TissueModel<double>& m, const Drive& d, std::span<const double> u0) {
+  std::vector<double> s(d.u.size(), 0.0);
+  if (u0.empty()) return s;
+  for (std::size_t k = 0; k < d.nodes.size(); ++k)
+    for (int c = 0; c < 3; ++c) s[3 * k + c] = u0[c * m.n_nodes + d.nodes[k]];
+  return s;
+}
+
+/// Throws RelaxError when the reduction saw NaN/Inf or an inverted element.
+void check_health(const Reductions& r, long first, long last) {
+  if (r.bad_elem >= 0)
+    throw RelaxError(fmt::format("relaxation steps {}..{}: element {} has J = {:.4g} (inverted or degenerate)", first,
+                                 last, r.bad_elem, r.bad_J));
+  if (!r.finite)
+    throw RelaxError(fmt::format("relaxation steps {}..{}: non-finite displacement or force", first, last));
+}
+
+}  // namespace
+
+std::vector<double> relaxation_masses(const TissueModel<double>& m, double dt, double safety) {
+  if (!(dt > 0) || !(safety > 0 && safety <= 1))
+    throw std::invalid_argument(fmt::format("relaxation_masses: dt {} must be > 0 and safety {} in (0, 1]", dt, safety));
+  const index_t ne = m.n_elems;
+  std::vector<double> g(m.n_nodes, 0.0);
+  for (index_t e = 0; e < ne; ++e) {
+    double len[4], sum = 0;
+    for (int a = 0; a < 4; ++a) {
+      const double gx = m.dndx[(3 * a) * ne + e], gy = m.dndx[(3 * a + 1) * ne + e], gz = m.dndx[(3 * a + 2) * ne + e];
+      len[a] = std::sqrt(gx * gx + gy * gy + gz * gz);
+      sum += len[a];
+    }
+    const double stiff = (m.K[e] + 4.0 * m.mu[e] / 3.0) * m.volume[e];
+    for (int a = 0; a < 4; ++a) g[m.elem_nodes[a * ne + e]] += stiff * len[a] * sum;
+  }
+  for (double& x : g) x *= dt * dt / (4 * safety);
+  return g;
+}
+
+double rayleigh_omega2(std::span<const double> u0, std::span<const double> u1, std::span<const double> f0,
+                       std::span<const double> f1, std::span<const double> mass,
+                       std::span<const std::uint8_t> free_mask) {
+  const std::size_t n = mass.size();
+  double num = 0, den = 0;
+  for (int c = 0; c < 3; ++c)
+    for (std::size_t a = 0; a < n; ++a) {
+      if (!(free_mask[a] >> c & 1)) continue;
+      const std::size_t k = c * n + a;
+      const double du = u1[k] - u0[k];
+      num += du * (f1[k] - f0[k]);
+      den += mass[a] * du * du;
+    }
+  return den > 0 ? std::max(num, 0.0) / den : 0.0;
+}
+
+RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& drive, const RelaxOptions& o,
+                  std::span<const double> u0) {
+  check_drive(model, drive);
+  if (!u0.empty() && u0.size() != 3 * std::size_t(model.n_nodes))
+    throw std::invalid_argument(
+        fmt::format("relax: start state has {} values for {} nodes (need 3 x n_nodes)", u0.size(), model.n_nodes));
+  if (!(o.residual_tol > 0) || !(o.kinetic_tol > 0) || o.check_every < 1 || o.adapt_every < 1)
+    throw std::invalid_argument("relax: tolerances must be > 0 and check/adapt intervals >= 1");
+  const auto t0 = Clock::now();
+  TissueModel<double> m = model;
+  if (o.mass_scaling) {
+    m.mass = relaxation_masses(m, m.dt, o.mass_safety);
+    m.total_mass = 0;
+    for (double x : m.mass) m.total_mass += x;
+  }
+  const double omega0 = lowest_mode_estimate(m);
+  double alpha = o.damping >= 0 ? o.damping : 2.0 * omega0;
+  set_time_step(m, m.dt, alpha);
+  b.upload(m);
+  if (!u0.empty()) b.set_displacements(u0);
+  const std::vector<double> start = drive_start(m, drive, u0);
+  const std::vector<std::uint8_t> free_mask = free_components(m, drive);
+
+  RelaxResult out;
+  const double ramp_time = o.ramp_time >= 0 ? o.ramp_time : 2 * M_PI / omega0;
+  const long ramp_steps = std::max(1L, std::lround(ramp_time / m.dt));
+  const int ramp_chunk = static_cast<int>(std::clamp(ramp_steps / 200, 1L, long(o.check_every)));
+  long steps = 0, last_check = 0;
+  while (steps < ramp_steps) {
+    const int k = static_cast<int>(std::min<long>(ramp_chunk, ramp_steps - steps));
+    drive_at(b, drive, start, double(steps + k) / double(ramp_steps));
+    b.advance(k);
+    steps += k;
+    if (steps - last_check >= o.check_every || steps == ramp_steps) {
+      check_health(b.reduce(), last_check, steps - 1);
+      last_check = steps;
+    }
+  }
+
+  long last_adapt = steps;
+  double best = INFINITY;  // best residual seen, and the step at which it last halved
+  long best_step = steps;
+  while (true) {
+    b.advance(o.check_every);
+    steps += o.check_every;
+    const Reductions r = b.reduce();
+    check_health(r, steps - o.check_every, steps - 1);
+    const double held = std::max(std::sqrt(r.held_force2), o.force_floor);
+    out.residual = std::sqrt(r.free_force2) / held;
+    out.kinetic = r.kinetic / std::max(0.5 * held * r.max_disp, 1e-300);
+    out.last = r;
+    out.history.push_back(out.residual);
+    if (out.residual <= o.residual_tol && out.kinetic <= o.kinetic_tol) {
+      out.converged = true;
+      break;
+    }
+    if (out.residual < 0.5 * best) {
+      best = out.residual;
+      best_step = steps;
+    }
+    const double period = 2 * M_PI / (0.5 * alpha);  // alpha = 2 omega_1 once adapted
+    const long stall = std::max(10L * o.check_every, std::lround(o.stall_periods * period / m.dt));
+    if (steps - best_step > stall) {
+      out.stalled = true;
+      break;
+    }
+    if (steps >= o.max_steps || seconds_since(t0) > o.max_wall) break;
+    if (o.adapt_damping && steps - last_adapt >= o.adapt_every) {
+      last_adapt = steps;
+      const Fields d0 = b.download();
+      b.advance(1);
+      const Fields d1 = b.download();
+      b.advance(1);
+      const Fields d2 = b.download();
+      steps += 2;
+      const double omega = std::sqrt(rayleigh_omega2(d0.u, d1.u, d1.f, d2.f, m.mass, free_mask));
+      if (omega > 0 && std::fabs(2 * omega - alpha) > 0.1 * alpha) {
+        alpha = 2 * omega;
+        set_time_step(m, m.dt, alpha);
+        b.upload(m);
+        b.set_displacements(d2.u);
+        drive_at(b, drive, start, 1.0);
+        ++out.restarts;
+      }
+    }
+  }
+  out.steps = steps;
+  out.damping = alpha;
+  out.wall = seconds_since(t0);
+  return out;
+}
+
+}  // namespace tissue::accuracy

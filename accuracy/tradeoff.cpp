@@ -1,0 +1,396 @@
+#include "accuracy/tradeoff.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <optional>
+
+#include "accuracy/point_locator.hpp"
+#include "accuracy/reference.hpp"
+#include "accuracy/remesh.hpp"
+#include "backends/registry.hpp"
+#include "core/scheduler.hpp"
+#include "scene/validate.hpp"
+
+namespace tissue::accuracy {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+std::string depth_name(int d) {
+  if (d == kDepthAll) return "all";
+  if (d == kDepthAuto) return "auto";
+  return std::to_string(d);
+}
+
+/// A reference for one contact.
+struct RefEntry {
+  HeldContact contact;
+  ReferenceSolution ref;
+};
+
+/// One mesh of the sweep with its references (one per contact triangle the
+/// runs made; the first is the scene precision's).
+struct MeshCase {
+  std::string name;
+  scene::Scene scene;
+  TissueModel<double> model;     ///< at the scene's settings (reference input)
+  std::vector<RefEntry> refs;
+  std::vector<double> fine_u;    ///< the finest mesh's reference at this mesh's nodes (3 x n_nodes)
+  Vec3<double> fine_force = {};  ///< the finest mesh's force on the tool (N)
+};
+
+const std::vector<Waypoint>& tool_path(const scene::Scene& s) {
+  if (s.tools.empty() || s.tools.front().path.empty())
+    throw std::runtime_error(s.source + ": tradeoff needs a scripted tool path (the scene's first tool)");
+  return s.tools.front().path;
+}
+
+/// The path up to the start of its hold (the device then holds that point).
+std::vector<Waypoint> path_to_hold(const std::vector<Waypoint>& path) {
+  const double t_hold = hold_start(path);
+  std::vector<Waypoint> out;
+  for (const Waypoint& w : path)
+    if (w.t <= t_hold + 1e-12) out.push_back(w);
+  return out;
+}
+
+double relative_disp_error(std::span<const double> u, std::span<const double> ref) {
+  const std::size_t n = u.size() / 3;
+  double err2 = 0, ref2 = 0;
+  for (std::size_t a = 0; a < n; ++a) {
+    double e = 0, r = 0;
+    for (int c = 0; c < 3; ++c) {
+      e += (u[c * n + a] - ref[c * n + a]) * (u[c * n + a] - ref[c * n + a]);
+      r += ref[c * n + a] * ref[c * n + a];
+    }
+    err2 = std::max(err2, e);
+    ref2 = std::max(ref2, r);
+  }
+  return std::sqrt(err2 / std::max(ref2, 1e-300));
+}
+
+double relative_force_error(Vec3<double> f, Vec3<double> ref) { return norm(f - ref) / std::max(norm(ref), 1e-300); }
+
+TradeoffReference reference_row(const MeshCase& mc, const RefEntry& r) {
+  TradeoffReference t;
+  t.mesh = mc.name;
+  t.nodes = mc.model.n_nodes;
+  t.elems = mc.model.n_elems;
+  t.steps = r.ref.relax.steps;
+  t.wall = r.ref.relax.wall;
+  t.residual = r.ref.relax.residual;
+  t.force = -1.0 * r.ref.reaction;
+  t.max_disp = r.ref.max_disp;
+  t.contact_tri = r.contact.tri;
+  return t;
+}
+
+/// The reference for the contact a run of precision p makes on this mesh
+/// (computed on first use and kept).
+const RefEntry& reference_for(MeshCase& mc, Precision p, const TradeoffOptions& o,
+                              std::vector<TradeoffReference>& report) {
+  const std::vector<Waypoint>& path = tool_path(mc.scene);
+  const std::string backend = o.backend.empty() ? mc.scene.solver.backend : o.backend;
+  HeldContact c = held_contact(mc.model, path, mc.scene.solver.tick, hold_start(path), backend, p);
+  for (const RefEntry& r : mc.refs)
+    if (r.contact.tri == c.tri && r.contact.drive.u == c.drive.u) return r;
+  if (o.verbose)
+    fmt::print(stderr, "  reference: {} mesh, contact triangle {} ({} collision)\n", mc.name, c.tri, to_string(p));
+  ReferenceOptions ro;
+  ro.backend = backend;
+  ro.relax.residual_tol = o.reference_tol;
+  RefEntry e{c, reference_solution(mc.model, c.drive, ro)};
+  mc.refs.push_back(std::move(e));
+  report.push_back(reference_row(mc, mc.refs.back()));
+  const TradeoffReference& r = report.back();
+  if (o.verbose)
+    fmt::print(stderr, "  {} nodes, {} tets: reference residual {:.2g} after {} steps ({:.1f} s), |F| = {:.5g} N\n",
+               r.nodes, r.elems, r.residual, r.steps, r.wall, norm(r.force));
+  return mc.refs.back();
+}
+
+MeshCase make_mesh_case(const scene::Scene& base, int target, const std::string& name) {
+  MeshCase mc;
+  mc.name = name;
+  mc.scene = target > 0 ? remesh_scene(base, target) : base;
+  mc.model = scene::load_model(mc.scene);
+  return mc;
+}
+
+/// Runs one setting; returns one row per tolerance in `tols` (ascending order of capture).
+std::vector<TradeoffRow> run_setting(const MeshCase& mc, const RefEntry& ref, const TradeoffSetting& st,
+                                     const std::vector<double>& tols, const TradeoffOptions& o) {
+  scene::Scene s = mc.scene;
+  s.solver.dt = 0;
+  s.solver.dt_safety = st.dt_safety;
+  s.solver.precision = st.precision;
+  if (!o.backend.empty()) s.solver.backend = o.backend;
+  const TissueModel<double> model = scene::load_model(s);
+  SchedulerSettings settings = scene::scheduler_settings(s);
+  settings.depth = st.depth;
+  settings.auto_tol = st.auto_tol;
+  settings.residual_tol = st.residual_tol;
+  auto backend = create_backend(s.solver.backend, st.precision);
+  backend->upload(model);
+  Scheduler sched(*backend, model, settings);
+  const std::vector<Waypoint> path = path_to_hold(tool_path(s));
+  const double t_hold = path.back().t;
+  ScriptedDevice device(path);
+
+  std::vector<std::optional<TradeoffRow>> rows(tols.size());
+  double contact_wall = 0, hold_wall = 0;
+  long contact_steps = 0, hold_ticks = 0;
+  long contact_ticks = 0;
+  auto capture = [&](std::size_t k, const TickReport& rep, bool eq) {
+    TradeoffRow r;
+    r.setting = st;
+    r.setting.residual_tol = tols[k];
+    r.mesh_nodes = model.n_nodes;
+    r.mesh_elems = model.n_elems;
+    r.dt = model.dt;
+    r.steps_per_tick = sched.steps_per_tick();
+    r.region_nodes = rep.region_nodes;
+    r.region_elems = rep.region_elems;
+    r.depth_reached = rep.depth;
+    r.equilibrium = eq;
+    r.hold_ticks = hold_ticks;
+    r.hold_wall = hold_wall;
+    r.residual = rep.residual;
+    r.force = rep.force;
+    r.max_disp = rep.max_disp;
+    const Fields f = backend->download();
+    r.disp_err = relative_disp_error(f.u, ref.ref.fields.u);
+    r.force_err = relative_force_error(rep.force, -1.0 * ref.ref.reaction);
+    r.disp_err_fine = relative_disp_error(f.u, mc.fine_u);
+    r.force_err_fine = relative_force_error(rep.force, mc.fine_force);
+    if (rep.contact_tri != ref.contact.tri)
+      throw std::logic_error(fmt::format("tradeoff: {} touched triangle {}, its reference triangle {}", st.label,
+                                         rep.contact_tri, ref.contact.tri));
+    rows[k] = r;
+  };
+  TickReport rep;
+  while (true) {
+    const auto t0 = Clock::now();
+    rep = sched.tick(device);
+    const double w = seconds_since(t0);
+    if (rep.contact_tri >= 0) {
+      contact_wall += w;
+      contact_steps += rep.steps;
+      ++contact_ticks;
+    }
+    if (rep.time < t_hold - 1e-9) continue;
+    hold_wall += w;
+    ++hold_ticks;
+    const bool kinetic_ok = rep.kinetic_rel < settings.kinetic_tol;
+    bool pending = false;
+    for (std::size_t k = 0; k < tols.size(); ++k) {
+      if (!rows[k] && rep.residual < tols[k] && kinetic_ok) capture(k, rep, true);
+      pending = pending || !rows[k];
+    }
+    if (!pending || rep.time >= t_hold + o.max_hold - 1e-9) break;
+  }
+  std::vector<TradeoffRow> out;
+  for (std::size_t k = 0; k < tols.size(); ++k) {
+    if (!rows[k]) capture(k, rep, false);
+    rows[k]->wall_per_tick = contact_wall / std::max(contact_ticks, 1L);
+    rows[k]->steps_per_s = contact_steps / std::max(contact_wall, 1e-12);
+    out.push_back(*rows[k]);
+  }
+  return out;
+}
+
+std::string fmt_tol(double x) { return fmt::format("{:g}", x); }
+
+/// A JSON string literal's contents: quotes, backslashes and control characters escaped.
+std::string json_escape(const std::string& s) {
+  std::string out;
+  for (const char ch : s) {
+    if (ch == '"' || ch == '\\')
+      out += {'\\', ch};
+    else if (static_cast<unsigned char>(ch) < 0x20)
+      out += fmt::format("\\u{:04x}", int(ch));
+    else
+      out += ch;
+  }
+  return out;
+}
+
+}  // namespace
+
+std::vector<TradeoffSetting> tradeoff_settings(const scene::Scene& scene, const TradeoffOptions& o) {
+  TradeoffSetting base;
+  base.group = "baseline";
+  base.depth = scene.solver.depth;
+  base.precision = scene.solver.precision;
+  base.dt_safety = scene.solver.dt_safety;
+  base.residual_tol = scene.solver.residual_tol;
+  const auto it = std::find(o.mesh_targets.begin(), o.mesh_targets.end(), 0);
+  base.mesh = it == o.mesh_targets.end() ? 0 : static_cast<int>(it - o.mesh_targets.begin());
+  base.label = fmt::format("baseline: depth {}, {}, safety {}, tol {}", depth_name(base.depth),
+                           to_string(base.precision), base.dt_safety, fmt_tol(base.residual_tol));
+  std::vector<TradeoffSetting> out{base};
+  auto vary = [&](const char* group, std::string label, auto&& set) {
+    TradeoffSetting s = base;
+    s.group = group;
+    s.label = std::move(label);
+    set(s);
+    out.push_back(s);
+  };
+  for (int d : o.depths)
+    if (d != base.depth) vary("depth", "depth " + depth_name(d), [&](TradeoffSetting& s) { s.depth = d; });
+  for (double t : o.auto_tols)
+    vary("auto", fmt::format("depth auto, tol {:g}", t), [&](TradeoffSetting& s) {
+      s.depth = kDepthAuto;
+      s.auto_tol = t;
+    });
+  for (Precision p : o.precisions)
+    if (p != base.precision) vary("precision", to_string(p), [&](TradeoffSetting& s) { s.precision = p; });
+  for (double f : o.safeties)
+    if (f != base.dt_safety) vary("safety", fmt::format("safety {:g}", f), [&](TradeoffSetting& s) { s.dt_safety = f; });
+  for (std::size_t m = 0; m < o.mesh_targets.size(); ++m)
+    if (int(m) != base.mesh)
+      vary("mesh", fmt::format("{} mesh", o.mesh_names.at(m)), [&](TradeoffSetting& s) { s.mesh = int(m); });
+  for (double t : o.residual_tols)
+    if (t != base.residual_tol)
+      vary("tolerance", fmt::format("tol {}", fmt_tol(t)), [&](TradeoffSetting& s) { s.residual_tol = t; });
+  return out;
+}
+
+TradeoffResult run_tradeoff(const scene::Scene& scene, const TradeoffOptions& o) {
+  if (o.mesh_targets.empty() || o.mesh_names.size() != o.mesh_targets.size())
+    throw std::invalid_argument("tradeoff: one mesh name per mesh target, at least one mesh");
+  const auto t0 = Clock::now();
+  TradeoffResult res;
+  res.scene = scene.source;
+  // references, finest last
+  std::vector<MeshCase> meshes;
+  for (std::size_t m = 0; m < o.mesh_targets.size(); ++m) {
+    if (o.verbose) fmt::print(stderr, "tradeoff: {} mesh and its reference ...\n", o.mesh_names[m]);
+    meshes.push_back(make_mesh_case(scene, o.mesh_targets[m], o.mesh_names[m]));
+    reference_for(meshes.back(), scene.solver.precision, o, res.references);
+  }
+  const MeshCase& fine = meshes.back();
+  for (MeshCase& mc : meshes) {
+    std::vector<double> pts(3 * std::size_t(mc.model.n_nodes));
+    for (index_t i = 0; i < mc.model.n_nodes; ++i)
+      for (int c = 0; c < 3; ++c) pts[3 * i + c] = mc.model.X[c * mc.model.n_nodes + i];
+    mc.fine_u = sample_field(fine.model, fine.refs.front().ref.fields.u, pts);
+    mc.fine_force = -1.0 * fine.refs.front().ref.reaction;
+  }
+  {
+    auto b = create_backend(o.backend.empty() ? scene.solver.backend : o.backend, Precision::Float);
+    res.device = b->device_name();
+  }
+  // settings: the tolerance rows come from the baseline run
+  const std::vector<TradeoffSetting> settings = tradeoff_settings(scene, o);
+  std::vector<double> base_tols{settings.front().residual_tol};
+  for (const TradeoffSetting& s : settings)
+    if (s.group == "tolerance") base_tols.push_back(s.residual_tol);
+  for (const TradeoffSetting& s : settings) {
+    if (s.group == "tolerance") continue;
+    const bool base = s.group == "baseline";
+    const auto t1 = Clock::now();
+    MeshCase& mc = meshes.at(s.mesh);
+    const RefEntry& ref = reference_for(mc, s.precision, o, res.references);
+    std::vector<TradeoffRow> rows = run_setting(mc, ref, s, base ? base_tols : std::vector<double>{s.residual_tol}, o);
+    for (std::size_t k = 0; k < rows.size(); ++k) {
+      if (base && k > 0) {
+        rows[k].setting = settings[0];
+        rows[k].setting.group = "tolerance";
+        rows[k].setting.residual_tol = base_tols[k];
+        rows[k].setting.label = fmt::format("tol {}", fmt_tol(base_tols[k]));
+      }
+      if (o.verbose)
+        fmt::print(stderr, "  {:<40} {:8.3f} ms/tick  error {:.3g} (force {:.3g})  [{:.1f} s]\n",
+                   rows[k].setting.label, 1e3 * rows[k].wall_per_tick, rows[k].disp_err, rows[k].force_err,
+                   seconds_since(t1));
+      res.rows.push_back(rows[k]);
+    }
+  }
+  mark_pareto(res.rows);
+  res.wall = seconds_since(t0);
+  return res;
+}
+
+void mark_pareto(std::vector<TradeoffRow>& rows) {
+  for (TradeoffRow& r : rows) {
+    r.pareto = true;
+    for (const TradeoffRow& q : rows) {
+      const bool no_worse = q.wall_per_tick <= r.wall_per_tick && q.disp_err <= r.disp_err;
+      const bool better = q.wall_per_tick < r.wall_per_tick || q.disp_err < r.disp_err;
+      if (&q != &r && no_worse && better) {
+        r.pareto = false;
+        break;
+      }
+    }
+  }
+}
+
+std::string tradeoff_table(const TradeoffResult& res) {
+  std::string out = fmt::format("tradeoff for {} on {}\n", res.scene, res.device);
+  out += "references (whole mesh, double, dynamic relaxation):\n";
+  for (const TradeoffReference& r : res.references)
+    out += fmt::format("  {:<8} {:6} nodes {:6} tets  contact triangle {:5}  residual {:.2g}  {:6} steps {:6.1f} s  "
+                       "|F| {:.5g} N  max|u| {:.4g} mm\n",
+                       r.mesh, r.nodes, r.elems, r.contact_tri, r.residual, r.steps, r.wall, norm(r.force),
+                       1e3 * r.max_disp);
+  out += fmt::format("{:<36} {:>6} {:>6} {:>5} {:>6} {:>5} {:>6} {:>8} {:>8} {:>6} {:>3} {:>9} {:>9} {:>9} {:>9} {}\n",
+                     "setting", "tets", "prec", "safe", "tol", "depth", "elems", "ms/tick", "steps/s", "ticks", "eq",
+                     "u err", "F err", "u err*", "F err*", "P");
+  for (const TradeoffRow& r : res.rows) {
+    const TradeoffSetting& s = r.setting;
+    out += fmt::format(
+        "{:<36} {:>6} {:>6} {:>5g} {:>6g} {:>5} {:>6} {:>8.3f} {:>8.0f} {:>6} {:>3} {:>9.2e} {:>9.2e} {:>9.2e} "
+        "{:>9.2e} {}\n",
+        s.label.substr(0, 36), r.mesh_elems, to_string(s.precision), s.dt_safety, s.residual_tol,
+        depth_name(r.depth_reached), r.region_elems, 1e3 * r.wall_per_tick, r.steps_per_s, r.hold_ticks,
+        r.equilibrium ? "y" : "n", r.disp_err, r.force_err, r.disp_err_fine, r.force_err_fine, r.pareto ? "*" : "");
+  }
+  out += "u err, F err: max nodal displacement error / max displacement and tool-force error, against the\n"
+         "same mesh's reference; u err*, F err*: against the finest mesh's reference. ticks: haptic ticks from\n"
+         "the start of the hold to the measured tick (eq: the tolerance passed). P: on the Pareto front of\n"
+         "(ms/tick, u err).\n";
+  out += fmt::format("sweep wall time {:.1f} s\n", res.wall);
+  return out;
+}
+
+std::string tradeoff_json(const TradeoffResult& res) {
+  std::string out = fmt::format("{{\n  \"scene\": \"{}\",\n  \"device\": \"{}\",\n  \"wall_s\": {},\n",
+                                json_escape(res.scene), json_escape(res.device), res.wall);
+  out += "  \"references\": [\n";
+  for (std::size_t k = 0; k < res.references.size(); ++k) {
+    const TradeoffReference& r = res.references[k];
+    out += fmt::format(
+        "    {{\"mesh\": \"{}\", \"nodes\": {}, \"tets\": {}, \"steps\": {}, \"wall_s\": {}, \"residual\": {}, "
+        "\"force\": [{}, {}, {}], \"max_disp\": {}, \"contact_tri\": {}}}{}\n",
+        r.mesh, r.nodes, r.elems, r.steps, r.wall, r.residual, r.force.x, r.force.y, r.force.z, r.max_disp,
+        r.contact_tri, k + 1 < res.references.size() ? "," : "");
+  }
+  out += "  ],\n  \"rows\": [\n";
+  for (std::size_t k = 0; k < res.rows.size(); ++k) {
+    const TradeoffRow& r = res.rows[k];
+    const TradeoffSetting& s = r.setting;
+    out += fmt::format(
+        "    {{\"group\": \"{}\", \"label\": \"{}\", \"depth\": \"{}\", \"auto_tol\": {}, \"precision\": \"{}\", "
+        "\"dt_safety\": {}, \"mesh\": {}, \"residual_tol\": {}, \"mesh_nodes\": {}, \"mesh_tets\": {}, \"dt\": {}, "
+        "\"steps_per_tick\": {}, \"wall_per_tick_s\": {}, \"steps_per_s\": {}, \"region_nodes\": {}, "
+        "\"region_elems\": {}, \"depth_reached\": \"{}\", \"equilibrium\": {}, \"hold_ticks\": {}, "
+        "\"hold_wall_s\": {}, \"residual\": {}, \"force\": [{}, {}, {}], \"max_disp\": {}, \"disp_err\": {}, "
+        "\"force_err\": {}, \"disp_err_fine\": {}, \"force_err_fine\": {}, \"pareto\": {}}}{}\n",
+        s.group, json_escape(s.label), depth_name(s.depth), s.auto_tol, to_string(s.precision), s.dt_safety, s.mesh,
+        s.residual_tol, r.mesh_nodes, r.mesh_elems, r.dt, r.steps_per_tick, r.wall_per_tick, r.steps_per_s,
+        r.region_nodes, r.region_elems, depth_name(r.depth_reached), r.equilibrium, r.hold_ticks, r.hold_wall,
+        r.residual, r.force.x, r.force.y, r.force.z, r.max_disp, r.disp_err, r.force_err, r.disp_err_fine,
+        r.force_err_fine, r.pareto, k + 1 < res.rows.size() ? "," : "");
+  }
+  out += "  ]\n}\n";
+  return out;
+}
+
+}  // namespace tissue::accuracy

@@ -1,0 +1,123 @@
+// The speed-accuracy sweep behind `tissue tradeoff`: with the scene's tool
+// pressed to its held indentation, each setting (region depth, adaptive
+// depth, precision, dt safety factor, mesh size, equilibrium tolerance) is
+// run through the Scheduler exactly as `tissue run` would, and measured
+// against the reference solution (accuracy/reference.hpp).
+//
+// Protocol of one run: the scripted path up to the start of its hold, then
+// the tool held there, tick after tick, until the Scheduler's equilibrium
+// test passes at the setting's tolerance or max_hold simulated seconds have
+// passed. Measured:
+//   cost   wall time per haptic tick and TLED steps/s, averaged over the
+//          ticks in contact (the press and the hold); ticks and wall time
+//          from the start of the hold until equilibrium;
+//   error  at that tick, max_a |u_a - u_ref_a| / max_a |u_ref_a| and
+//          |F - F_ref| / |F_ref| for the force on the tool, against the
+//          reference of the same mesh (the setting's own error: truncation,
+//          rounding, unfinished relaxation), and against the finest mesh's
+//          reference sampled at this mesh's nodes (adding the discretisation).
+// One run serves every equilibrium tolerance at once: the state is captured
+// at the first tick each tolerance passes (the Scheduler's test is the same
+// at every tolerance: relative residual < tol and relative kinetic energy <
+// the scene's kinetic tolerance), so the tolerance rows share the baseline
+// run's trajectory.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/hd.hpp"
+#include "core/vec.hpp"
+#include "scene/scene.hpp"
+
+namespace tissue::accuracy {
+
+/// One point of the sweep.
+struct TradeoffSetting {
+  std::string group;              ///< "baseline", "depth", "auto", "precision", "safety", "mesh", "tolerance"
+  std::string label;              ///< e.g. "depth 3", "auto 0.02", "double", "safety 0.9"
+  int depth = 5;                  ///< rings; kDepthAll; kDepthAuto
+  double auto_tol = 0.02;         ///< depth auto's front tolerance
+  Precision precision = Precision::Float;
+  double dt_safety = 0.5;         ///< dt = safety x dt_crit (then shortened to whole steps per tick)
+  int mesh = 1;                   ///< index into TradeoffOptions::mesh_targets
+  double residual_tol = 1e-3;     ///< equilibrium tolerance (relative free-node residual)
+};
+
+/// What one setting measured.
+struct TradeoffRow {
+  TradeoffSetting setting;
+  index_t mesh_nodes = 0, mesh_elems = 0;
+  double dt = 0;                  ///< s
+  int steps_per_tick = 0;
+  double wall_per_tick = 0;       ///< s, mean over ticks in contact
+  double steps_per_s = 0;         ///< TLED steps per wall second over ticks in contact
+  index_t region_nodes = 0, region_elems = 0;
+  int depth_reached = 0;          ///< rings at the measured tick (kDepthAll = whole)
+  bool equilibrium = false;       ///< the tolerance passed before max_hold ran out
+  long hold_ticks = 0;            ///< ticks from the start of the hold to the measured tick
+  double hold_wall = 0;           ///< s of wall time for those ticks
+  double residual = 0;            ///< relative residual at the measured tick
+  Vec3<double> force = {};        ///< force on the tool (N)
+  double max_disp = 0;            ///< m
+  double disp_err = 0;            ///< vs the same mesh's reference (relative)
+  double force_err = 0;
+  double disp_err_fine = 0;       ///< vs the finest mesh's reference (relative)
+  double force_err_fine = 0;
+  bool pareto = false;            ///< on the front of (wall_per_tick, disp_err)
+};
+
+/// A mesh's reference, for the report.
+struct TradeoffReference {
+  std::string mesh;               ///< "coarse", "default", "fine"
+  index_t nodes = 0, elems = 0;
+  long steps = 0;
+  double wall = 0;                ///< s
+  double residual = 0;            ///< relative residual reached
+  Vec3<double> force = {};        ///< force on the tool (N)
+  double max_disp = 0;            ///< m
+  index_t contact_tri = -1;
+};
+
+struct TradeoffOptions {
+  std::string backend;                          ///< empty = the scene's
+  std::vector<int> mesh_targets = {3000, 0, 25000};  ///< tet targets (0 = the scene's own mesh); the last
+                                                ///< is the finest (the discretisation reference)
+  std::vector<std::string> mesh_names = {"coarse", "default", "fine"};
+  std::vector<int> depths = {1, 2, 3, 5, 8, -1};  ///< kDepthAll = -1
+  std::vector<double> auto_tols = {0.05, 0.02, 0.005};
+  std::vector<Precision> precisions = {Precision::Float, Precision::Double};
+  std::vector<double> safeties = {0.3, 0.6, 0.9};
+  std::vector<double> residual_tols = {1e-2, 1e-3, 1e-4};
+  double max_hold = 0.6;                        ///< s of hold before giving up on equilibrium
+  double reference_tol = 1e-9;                  ///< the references' relative residual
+  bool verbose = true;                          ///< progress lines on stderr
+};
+
+struct TradeoffResult {
+  std::string scene;
+  std::string device;                           ///< processor / GPU of the backend
+  std::vector<TradeoffReference> references;    ///< per mesh
+  std::vector<TradeoffRow> rows;
+  double wall = 0;                              ///< s for the whole sweep
+};
+
+/// The settings swept: the baseline (the scene's solver settings at the
+/// default mesh: depth, precision, safety, tolerance) and one group per
+/// dimension varying that dimension alone around it.
+std::vector<TradeoffSetting> tradeoff_settings(const scene::Scene& scene, const TradeoffOptions& options);
+
+/// Runs the sweep on the scene (references first, then every setting).
+TradeoffResult run_tradeoff(const scene::Scene& scene, const TradeoffOptions& options);
+
+/// Marks the Pareto front of (wall_per_tick, disp_err): rows no other row
+/// beats in both (one strictly).
+void mark_pareto(std::vector<TradeoffRow>& rows);
+
+/// The result as a fixed-width text table.
+std::string tradeoff_table(const TradeoffResult& result);
+
+/// The result as JSON (one object: scene, device, references, rows).
+std::string tradeoff_json(const TradeoffResult& result);
+
+}  // namespace tissue::accuracy
