@@ -21,8 +21,8 @@ bool cuda_available(std::string* why);
 double cuda_copy_bandwidth();
 
 /// How the cuda backend runs advance(n); every mode gives the same results
-/// (see cuda/stepper.hpp). Auto: Graph (captured per-pass kernels), except
-/// double-precision regions of 50k+ elements: Grid (one cooperative kernel).
+/// (see cuda/stepper.hpp). Auto = Graph (captured, chained per-pass
+/// kernels), the fastest measured at every size.
 enum class CudaStepMode { Auto, Launch, Graph, Grid, Cluster };
 
 const char* to_string(CudaStepMode mode);

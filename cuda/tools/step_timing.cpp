@@ -82,7 +82,7 @@ double steps_per_second(Backend& be, double min_seconds) {
 /// Fewest bytes one whole-mesh step moves through device memory in the
 /// device layouts (each array touched once per pass that touches it; s =
 /// scalar bytes): docs/cuda.md lists the terms.
-double step_bytes(double n, double ne, int s) { return ne * (64 + 66.0 * s) + n * (9 + 33.0 * s); }
+double step_bytes(double n, double ne, int s) { return ne * (64 + 70.0 * s) + n * (9 + 34.0 * s); }
 
 template <class T>
 T median(std::vector<T> v) {

@@ -8,19 +8,31 @@
 // starts and at the end; displacements and the reaction force equal within
 // the tolerance below; equilibrium first reached within +-1 tick.
 //
-// Tolerances (relative to the largest displacement / reaction of the run).
-// Both backends run the same core functions over the same gather orders, so
-// nothing is summed in a different order; the differences are rounding of
-// single operations: nvcc contracts a * b + c into FMAs (g++ for x86-64
-// does not) and the device's pow/cbrt differ from glibc's by an ulp or two.
-// Those differences enter each step at ~1 ulp of the forces and are damped,
-// not amplified, by the (stable, damped) explicit dynamics, but they
-// accumulate over the ~10^3..10^4 steps of a run and are amplified where the
-// response is stiff (the near-incompressible volumetric term, K/mu ~ 10).
-// Measured on an H100 (docs/cuda.md): see the [measured] lines this test
-// prints. Bounds: double 1e-9 (measured ~1e-12: a 1000x margin, far below any
-// physical significance), float 2e-3 (measured ~1e-4; float's epsilon is
-// 6e-8, so 1e-4 is ~10^3 ulp accumulated over the run).
+// Tolerances (relative to the largest displacement / reaction of the run),
+// measured on an NVIDIA H200 (docs/cuda.md has the table). Both backends run
+// the same core functions over the same element orders; what differs is
+// rounding: nvcc contracts a * b + c into FMAs (g++ for x86-64 does not), the
+// device's pow/cbrt differ from glibc's by an ulp or two, and the cuda
+// backend adds a node's element values in 8 pairwise-combined partial sums
+// (the cpu sequentially). Those differences enter each step at ~1 ulp and
+// accumulate over the run's 10^3..2.3 x 10^4 steps.
+//   double: 1e-9. Measured <= 2.7e-13 (displacements) and <= 3.2e-13
+//     (force) on every scene: four orders of margin, still far below any
+//     physical significance.
+//   float: 1e-2. Measured <= 3.7e-3 (displacements) and <= 2.6e-3 (force),
+//     worst on the whole kidney (23 steps per tick, 23,000 steps). Float
+//     central differences at this small a step lose digits (u^{n+1} =
+//     B u^n + C u^{n-1} + ..., B ~ 2, C ~ -1): on the same runs the cpu
+//     backend's own float result deviates from its double result by up to
+//     0.45 (whole kidney) and 0.54 (depth 5) of max |u| (measured here with
+//     the cpu backend alone), so the two float backends agree ~100x more
+//     closely than float agrees with double.
+// Equilibrium (first tick of the held contact with Scheduler's equilibrium
+// flag): within +-1 tick in double (measured: the same tick on every scene)
+// and for the float box (the same tick); for the float kidney, whose
+// residual sits at float's rounding floor near the tolerance, within 50
+// ticks (measured 34; the cpu's own float run reaches it 43 ticks after
+// its double run).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -38,8 +50,8 @@
 namespace tissue::cuda_test {
 namespace {
 
-double disp_tol(Precision p) { return p == Precision::Double ? 1e-9 : 2e-3; }
-double force_tol(Precision p) { return p == Precision::Double ? 1e-9 : 2e-3; }
+double disp_tol(Precision p) { return p == Precision::Double ? 1e-9 : 1e-2; }
+double force_tol(Precision p) { return p == Precision::Double ? 1e-9 : 1e-2; }
 
 /// A scene for the suite: its model, scheduler settings and tool path.
 struct ConsistencyScene {
@@ -49,6 +61,7 @@ struct ConsistencyScene {
   std::vector<Waypoint> path;
   double duration = 0;  ///< s simulated
   bool expect_equilibrium = true;  ///< the held indentation settles within the run (checked on the cpu)
+  int float_equilibrium_ticks = 1; ///< allowed difference of the first equilibrium tick in float
 };
 
 /// 60 x 60 x 30 mm box (10 x 10 x 5 cells, 3000 tets), bottom fixed, pressed
@@ -79,6 +92,7 @@ ConsistencyScene kidney_scene(int depth) {
   s.path = sc.tools.at(0).path;
   s.duration = s.path.back().t;
   s.expect_equilibrium = false;  // whether the kidney settles within its hold is the scene's business
+  s.float_equilibrium_ticks = 50;
   return s;
 }
 
@@ -159,7 +173,8 @@ TEST_P(Consistency, SameRegionContactDisplacementForceAndEquilibrium) {
   }
   EXPECT_EQ(first_eq_gpu < 0, first_eq_cpu < 0) << "one backend reached equilibrium, the other never did";
   if (first_eq_cpu >= 0) {
-    EXPECT_NEAR(double(first_eq_gpu), double(first_eq_cpu), 1.0);
+    const double ticks = p == Precision::Double ? 1.0 : double(sc.float_equilibrium_ticks);
+    EXPECT_NEAR(double(first_eq_gpu), double(first_eq_cpu), ticks);
   }
 }
 
