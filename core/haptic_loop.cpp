@@ -105,7 +105,8 @@ HapticLoop::HapticLoop(Device& device, SimulationFactory factory, LiveParams par
       params_(params),
       sim_(checked(factory_(params))),
       period_(sim_.scheduler->settings().tick),
-      coupled_(device_, with_period(options.coupling, period_)) {
+      clock_(device_),
+      coupled_(clock_, with_period(options.coupling, period_)) {
   if (options_.window < 2 || options_.stats_every < 1 || options_.max_lag < 1)
     throw std::invalid_argument(fmt::format(
         "haptic loop: window = {} must be >= 2, stats_every = {} >= 1 and max_lag = {} >= 1", options_.window,
@@ -239,6 +240,7 @@ void HapticLoop::rebuild(const LiveParams& params) {
                            to_string(params.precision), e.what()));
     return;
   }
+  clock_.offset += sim_.scheduler->time();
   sim_.scheduler.reset();  // it refers to the backend and the model
   sim_.backend.reset();
   sim_.model.reset();
@@ -264,7 +266,7 @@ bool HapticLoop::tick_once() {
     const TickReport rep = sched.tick(coupled_);
     const CouplingState& c = coupled_.state();
     local_.tick = sched.ticks();
-    local_.time = rep.time;
+    local_.time = clock_.offset + rep.time;
     local_.device = c.device;
     local_.tool = rep.tool;
     local_.tissue_force = rep.force;

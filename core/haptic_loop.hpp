@@ -28,8 +28,8 @@
 // - parameter changes (E, nu, region depth, precision) are requested by the
 //   display and applied by the haptic thread between ticks: it builds a new
 //   Simulation through the factory (a new model and backend; the tissue
-//   restarts from rest), and keeps the old one, reporting why, when the
-//   factory throws.
+//   restarts from rest, the device's clock and the coupling go on), and
+//   keeps the old one, reporting why, when the factory throws.
 // The owner thread (the one that constructs the loop) calls start, stop,
 // post, request_params and run_ticks; snapshot() may be called from any
 // thread.
@@ -104,7 +104,7 @@ std::string describe(const HapticStats& s);
 /// What the display reads after each tick.
 struct HapticSnapshot {
   long tick = -1;                      ///< scheduler ticks done (-1: none yet)
-  double time = 0;                     ///< simulated time (s)
+  double time = 0;                     ///< simulated time of the session, across rebuilds (s)
   Vec3<double> device = {};            ///< device (hand) position (m)
   Vec3<double> tool = {};              ///< proxy: the tool the tissue feels (m)
   Vec3<double> tissue_force = {};      ///< raw solver force on the tool (N)
@@ -191,6 +191,21 @@ class HapticLoop {
   void publish(bool haptic_thread = false);  ///< haptic thread: try_lock, may skip
   void set_status(std::string s);
 
+  /// The device on the session's clock: a rebuilt simulation restarts its
+  /// own time at 0, the device's time goes on (a scripted path continues
+  /// instead of jumping back to its start).
+  class SessionClock : public Device {
+   public:
+    explicit SessionClock(Device& d) : device_(d) {}
+    Vec3<double> read_position(double t) override { return device_.read_position(t + offset); }
+    void send_force(const Vec3<double>& f) override { device_.send_force(f); }
+    bool finished(double t) const override { return device_.finished(t + offset); }
+    double offset = 0;  ///< simulated time of the simulations before the running one (s)
+
+   private:
+    Device& device_;
+  };
+
   // owned by the haptic thread while running, by the owner otherwise
   // (declaration order matters: sim_ is built before coupled_ needs its tick)
   Device& device_;
@@ -199,6 +214,7 @@ class HapticLoop {
   LiveParams params_;
   Simulation sim_;
   double period_ = 1e-3;
+  SessionClock clock_;
   CoupledDevice coupled_;
   HapticSnapshot local_;
   std::vector<index_t> last_seeds_;

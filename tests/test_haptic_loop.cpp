@@ -236,6 +236,28 @@ TEST(HapticLoop, ParameterChangesAreAppliedBetweenTicksOrRefused) {
   EXPECT_TRUE(loop.snapshot().region.whole());
 }
 
+/// Records the times it is read at.
+struct ClockProbe : Device {
+  std::vector<double> t;
+  Vec3<double> read_position(double time) override {
+    t.push_back(time);
+    return {0.011, 0.009, 0.03};  // 2 cm above the box: no contact
+  }
+  void send_force(const Vec3<double>&) override {}
+};
+
+TEST(HapticLoop, TheDeviceClockGoesOnAcrossRebuilds) {
+  ClockProbe dev;
+  HapticLoop loop(dev, box_factory(true), LiveParams{});
+  loop.run_ticks(30);
+  loop.request_params(LiveParams{});  // a new scheduler: its own time starts at 0
+  loop.run_ticks(20);
+  ASSERT_EQ(dev.t.size(), 50u);
+  for (size_t k = 0; k < dev.t.size(); ++k) EXPECT_NEAR(dev.t[k], 1e-3 * (k + 1), 1e-12) << "read " << k;
+  EXPECT_NEAR(loop.snapshot().time, 0.05, 1e-12);
+  EXPECT_EQ(loop.snapshot().tick, 20);  // the running scheduler's ticks
+}
+
 TEST(HapticLoop, ASolverSlowerThanThePeriodIsReportedLate) {
   ScriptedDevice dev = press_device();
   HapticLoop::Options opt;
