@@ -106,7 +106,7 @@ const std::map<std::string, Colour>& group_colours() {
   static const std::map<std::string, Colour> c{
       {"baseline", {0, 0, 0}},       {"depth", {31, 119, 180}},   {"auto", {214, 39, 40}},
       {"precision", {148, 103, 189}}, {"safety", {44, 160, 44}},   {"mesh", {255, 127, 14}},
-      {"tolerance", {140, 86, 75}}};
+      {"tolerance", {140, 86, 75}},  {"anchor", {23, 190, 207}},  {"proposed", {227, 119, 194}}};
   return c;
 }
 
@@ -164,15 +164,45 @@ void write_tradeoff_plot(const TradeoffResult& res, const std::string& path, int
   for (std::size_t k = 1; k < front.size(); ++k)
     cv.line(px(1e3 * front[k - 1]->wall_per_tick), py(front[k - 1]->disp_err), px(1e3 * front[k]->wall_per_tick),
             py(front[k]->disp_err), {120, 120, 120}, 2);
-  // points and labels
+  // points, then labels placed beside them without overlapping each other
+  struct Box {
+    int x0, y0, x1, y1;
+  };
+  std::vector<Box> placed;
+  for (const TradeoffRow& r : res.rows) {
+    const double x = px(1e3 * r.wall_per_tick), y = py(r.disp_err);
+    placed.push_back({int(x) - 6, int(y) - 6, int(x) + 6, int(y) + 6});
+  }
+  auto free_at = [&](const Box& b) {
+    if (b.x0 < 0 || b.x1 > width || b.y0 < 0 || b.y1 > height) return false;
+    for (const Box& p : placed)
+      if (b.x0 < p.x1 && p.x0 < b.x1 && b.y0 < p.y1 && p.y0 < b.y1) return false;
+    return true;
+  };
   for (const TradeoffRow& r : res.rows) {
     const auto it = group_colours().find(r.setting.group);
     const Colour c = it != group_colours().end() ? it->second : grey;
     const double x = px(1e3 * r.wall_per_tick), y = py(r.disp_err);
     cv.disc(x, y, 5, c);
     if (r.pareto) cv.ring(x, y, 9, {0, 0, 0}, 2);
-    std::string label = r.setting.group == "baseline" ? "baseline" : r.setting.label;
-    cv.text(int(x) + 11, int(y) - 6, label, c, 1);
+    const std::string label = r.setting.label.substr(0, r.setting.label.find(':'));
+    const int w = Canvas::text_width(label), h = 9;
+    Box best{int(x) + 11, int(y) - 5, int(x) + 11 + w, int(y) - 5 + h};
+    for (int k = 0; k < 24; ++k) {  // right of the point, then left, stepping away vertically
+      const int dy = (k / 2 % 2 ? -1 : 1) * (k / 4) * 10;
+      const Box b = k % 2 ? Box{int(x) - 11 - w, int(y) - 5 + dy, int(x) - 11, int(y) - 5 + dy + h}
+                          : Box{int(x) + 11, int(y) - 5 + dy, int(x) + 11 + w, int(y) - 5 + dy + h};
+      if (free_at(b)) {
+        best = b;
+        break;
+      }
+    }
+    placed.push_back(best);
+    if (std::abs(best.y0 + 5 - int(y)) > 8) {  // a leader line to a displaced label
+      const int lx = best.x0 > x ? best.x0 - 1 : best.x1 + 1;
+      cv.line(x, y, lx, best.y0 + 4, {170, 170, 170}, 1);
+    }
+    cv.text(best.x0, best.y0, label, c, 1);
   }
   // legend
   int ly = top + 10;

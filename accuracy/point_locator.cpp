@@ -124,9 +124,10 @@ std::vector<double> sample_field(const TissueModel<double>& model, std::span<con
   std::vector<double> out(3 * np, 0.0);
   for (std::size_t k = 0; k < np; ++k) {
     const Location l = loc.locate({points[3 * k], points[3 * k + 1], points[3 * k + 2]});
-    if (l.elem < 0)
-      throw std::runtime_error(fmt::format("sample_field: point {} ({:.6g}, {:.6g}, {:.6g}) lies near no element", k,
-                                           points[3 * k], points[3 * k + 1], points[3 * k + 2]));
+    if (l.elem < 0 || l.outside > kMaxOutside)
+      throw std::runtime_error(fmt::format("sample_field: point {} ({:.6g}, {:.6g}, {:.6g}) lies outside the mesh{}", k,
+                                           points[3 * k], points[3 * k + 1], points[3 * k + 2],
+                                           l.elem < 0 ? "" : fmt::format(" (beyond element {})", l.elem)));
     for (int a = 0; a < 4; ++a) {
       const index_t i = model.elem_nodes[a * ne + l.elem];
       for (int c = 0; c < 3; ++c) out[c * np + k] += l.bary[a] * field[c * n + i];

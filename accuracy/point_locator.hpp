@@ -49,10 +49,14 @@ class PointLocator {
   std::vector<index_t> elems_;        ///< tets overlapping each cell
 };
 
+/// Largest Location::outside sample_field accepts: a point at most about
+/// half an element beyond the mesh (another discretisation's boundary).
+inline constexpr double kMaxOutside = 0.5;
+
 /// Samples the P1 field (3 x n_nodes of `model`, component-major) at
 /// `points` (n_points x 3, xyz interleaved, m). Returns (3 x n_points,
-/// component-major). Throws std::runtime_error naming the point when no
-/// element lies near it.
+/// component-major). Throws std::runtime_error naming the point when it
+/// lies outside the mesh by more than kMaxOutside.
 std::vector<double> sample_field(const TissueModel<double>& model, std::span<const double> field,
                                  std::span<const double> points);
 

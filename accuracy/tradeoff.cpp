@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <ctime>
 #include <cmath>
 #include <memory>
 #include <optional>
@@ -75,6 +76,14 @@ double relative_disp_error(std::span<const double> u, std::span<const double> re
   return std::sqrt(err2 / std::max(ref2, 1e-300));
 }
 
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  const std::size_t h = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + h, v.end());
+  if (v.size() % 2) return v[h];
+  return 0.5 * (v[h] + *std::max_element(v.begin(), v.begin() + h));
+}
+
 double relative_force_error(Vec3<double> f, Vec3<double> ref) { return norm(f - ref) / std::max(norm(ref), 1e-300); }
 
 TradeoffReference reference_row(const MeshCase& mc, const RefEntry& r) {
@@ -144,7 +153,9 @@ std::vector<TradeoffRow> run_setting(const MeshCase& mc, const RefEntry& ref, co
   ScriptedDevice device(path);
 
   std::vector<std::optional<TradeoffRow>> rows(tols.size());
-  double contact_wall = 0, hold_wall = 0;
+  std::vector<double> tick_wall;  // per contact tick (s)
+  tick_wall.reserve(4096);
+  double contact_wall = 0, contact_cpu = 0, hold_wall = 0;
   long contact_steps = 0, hold_ticks = 0;
   long contact_ticks = 0;
   auto capture = [&](std::size_t k, const TickReport& rep, bool eq) {
@@ -177,10 +188,13 @@ std::vector<TradeoffRow> run_setting(const MeshCase& mc, const RefEntry& ref, co
   TickReport rep;
   while (true) {
     const auto t0 = Clock::now();
+    const std::clock_t c0 = std::clock();
     rep = sched.tick(device);
-    const double w = seconds_since(t0);
+    const double w = seconds_since(t0), cpu = double(std::clock() - c0) / CLOCKS_PER_SEC;
     if (rep.contact_tri >= 0) {
+      tick_wall.push_back(w);
       contact_wall += w;
+      contact_cpu += cpu;
       contact_steps += rep.steps;
       ++contact_ticks;
     }
@@ -198,7 +212,8 @@ std::vector<TradeoffRow> run_setting(const MeshCase& mc, const RefEntry& ref, co
   std::vector<TradeoffRow> out;
   for (std::size_t k = 0; k < tols.size(); ++k) {
     if (!rows[k]) capture(k, rep, false);
-    rows[k]->wall_per_tick = contact_wall / std::max(contact_ticks, 1L);
+    rows[k]->wall_per_tick = median(tick_wall);
+    rows[k]->cpu_per_tick = contact_cpu / std::max(contact_ticks, 1L);
     rows[k]->steps_per_s = contact_steps / std::max(contact_wall, 1e-12);
     out.push_back(*rows[k]);
   }
@@ -232,33 +247,55 @@ std::vector<TradeoffSetting> tradeoff_settings(const scene::Scene& scene, const 
   base.residual_tol = scene.solver.residual_tol;
   const auto it = std::find(o.mesh_targets.begin(), o.mesh_targets.end(), 0);
   base.mesh = it == o.mesh_targets.end() ? 0 : static_cast<int>(it - o.mesh_targets.begin());
-  base.label = fmt::format("baseline: depth {}, {}, safety {}, tol {}", depth_name(base.depth),
-                           to_string(base.precision), base.dt_safety, fmt_tol(base.residual_tol));
-  std::vector<TradeoffSetting> out{base};
-  auto vary = [&](const char* group, std::string label, auto&& set) {
-    TradeoffSetting s = base;
+  base.label = fmt::format("baseline: depth {}, {}, safety {:g}", depth_name(base.depth), to_string(base.precision),
+                           base.dt_safety);
+  // the anchor of the precision, safety, mesh and tolerance groups: the
+  // baseline without truncation or float rounding, so that their own errors show
+  TradeoffSetting anchor = base;
+  anchor.group = "anchor";
+  anchor.depth = o.anchor_depth;
+  anchor.precision = o.anchor_precision;
+  anchor.label = fmt::format("anchor: depth {}, {}, safety {:g}", depth_name(anchor.depth),
+                             to_string(anchor.precision), anchor.dt_safety);
+  std::vector<TradeoffSetting> out{base, anchor};
+  auto vary = [&](const TradeoffSetting& from, const char* group, std::string label, auto&& set) {
+    TradeoffSetting s = from;
     s.group = group;
     s.label = std::move(label);
     set(s);
     out.push_back(s);
   };
   for (int d : o.depths)
-    if (d != base.depth) vary("depth", "depth " + depth_name(d), [&](TradeoffSetting& s) { s.depth = d; });
+    if (d != base.depth) vary(base, "depth", "depth " + depth_name(d), [&](TradeoffSetting& s) { s.depth = d; });
   for (double t : o.auto_tols)
-    vary("auto", fmt::format("depth auto, tol {:g}", t), [&](TradeoffSetting& s) {
+    vary(base, "auto", fmt::format("depth auto, tol {:g}", t), [&](TradeoffSetting& s) {
       s.depth = kDepthAuto;
       s.auto_tol = t;
     });
   for (Precision p : o.precisions)
-    if (p != base.precision) vary("precision", to_string(p), [&](TradeoffSetting& s) { s.precision = p; });
+    if (p != base.precision)
+      vary(base, "precision", fmt::format("{}, depth {}", to_string(p), depth_name(base.depth)),
+           [&](TradeoffSetting& s) { s.precision = p; });
   for (double f : o.safeties)
-    if (f != base.dt_safety) vary("safety", fmt::format("safety {:g}", f), [&](TradeoffSetting& s) { s.dt_safety = f; });
+    if (f != anchor.dt_safety)
+      vary(anchor, "safety", fmt::format("anchor, safety {:g}", f), [&](TradeoffSetting& s) { s.dt_safety = f; });
   for (std::size_t m = 0; m < o.mesh_targets.size(); ++m)
-    if (int(m) != base.mesh)
-      vary("mesh", fmt::format("{} mesh", o.mesh_names.at(m)), [&](TradeoffSetting& s) { s.mesh = int(m); });
+    if (int(m) != anchor.mesh)
+      vary(anchor, "mesh", fmt::format("anchor, {} mesh", o.mesh_names.at(m)),
+           [&](TradeoffSetting& s) { s.mesh = int(m); });
   for (double t : o.residual_tols)
-    if (t != base.residual_tol)
-      vary("tolerance", fmt::format("tol {}", fmt_tol(t)), [&](TradeoffSetting& s) { s.residual_tol = t; });
+    if (t != anchor.residual_tol)
+      vary(anchor, "tolerance", fmt::format("anchor, tol {}", fmt_tol(t)), [&](TradeoffSetting& s) { s.residual_tol = t; });
+  for (const TradeoffSetting& p : o.proposed) {
+    TradeoffSetting s = p;
+    s.group = "proposed";
+    s.mesh = base.mesh;
+    if (s.label.empty())
+      s.label = fmt::format("proposed: depth {}{}, {}, safety {:g}, tol {}", depth_name(s.depth),
+                            s.depth == kDepthAuto ? fmt::format(" {:g}", s.auto_tol) : "", to_string(s.precision),
+                            s.dt_safety, fmt_tol(s.residual_tol));
+    out.push_back(s);
+  }
   return out;
 }
 
@@ -289,23 +326,23 @@ TradeoffResult run_tradeoff(const scene::Scene& scene, const TradeoffOptions& o)
   }
   // settings: the tolerance rows come from the baseline run
   const std::vector<TradeoffSetting> settings = tradeoff_settings(scene, o);
-  std::vector<double> base_tols{settings.front().residual_tol};
+  const TradeoffSetting& anchor = settings.at(1);
+  std::vector<double> base_tols{anchor.residual_tol};
+  std::vector<const TradeoffSetting*> tol_settings{&anchor};
   for (const TradeoffSetting& s : settings)
-    if (s.group == "tolerance") base_tols.push_back(s.residual_tol);
+    if (s.group == "tolerance") {
+      base_tols.push_back(s.residual_tol);
+      tol_settings.push_back(&s);
+    }
   for (const TradeoffSetting& s : settings) {
     if (s.group == "tolerance") continue;
-    const bool base = s.group == "baseline";
+    const bool base = s.group == "anchor";  // its run serves the tolerance rows too
     const auto t1 = Clock::now();
     MeshCase& mc = meshes.at(s.mesh);
     const RefEntry& ref = reference_for(mc, s.precision, o, res.references);
     std::vector<TradeoffRow> rows = run_setting(mc, ref, s, base ? base_tols : std::vector<double>{s.residual_tol}, o);
     for (std::size_t k = 0; k < rows.size(); ++k) {
-      if (base && k > 0) {
-        rows[k].setting = settings[0];
-        rows[k].setting.group = "tolerance";
-        rows[k].setting.residual_tol = base_tols[k];
-        rows[k].setting.label = fmt::format("tol {}", fmt_tol(base_tols[k]));
-      }
+      if (base) rows[k].setting = *tol_settings[k];
       if (o.verbose)
         fmt::print(stderr, "  {:<40} {:8.3f} ms/tick  error {:.3g} (force {:.3g})  [{:.1f} s]\n",
                    rows[k].setting.label, 1e3 * rows[k].wall_per_tick, rows[k].disp_err, rows[k].force_err,
@@ -340,21 +377,23 @@ std::string tradeoff_table(const TradeoffResult& res) {
                        "|F| {:.5g} N  max|u| {:.4g} mm\n",
                        r.mesh, r.nodes, r.elems, r.contact_tri, r.residual, r.steps, r.wall, norm(r.force),
                        1e3 * r.max_disp);
-  out += fmt::format("{:<36} {:>6} {:>6} {:>5} {:>6} {:>5} {:>6} {:>8} {:>8} {:>6} {:>3} {:>9} {:>9} {:>9} {:>9} {}\n",
-                     "setting", "tets", "prec", "safe", "tol", "depth", "elems", "ms/tick", "steps/s", "ticks", "eq",
-                     "u err", "F err", "u err*", "F err*", "P");
+  out += fmt::format("{:<44} {:>6} {:>6} {:>5} {:>6} {:>5} {:>6} {:>8} {:>8} {:>8} {:>6} {:>3} {:>9} {:>9} {:>9} {:>9} {}\n",
+                     "setting", "tets", "prec", "safe", "tol", "depth", "elems", "ms/tick", "cpu ms", "steps/s",
+                     "ticks", "eq", "u err", "F err", "u err*", "F err*", "P");
   for (const TradeoffRow& r : res.rows) {
     const TradeoffSetting& s = r.setting;
     out += fmt::format(
-        "{:<36} {:>6} {:>6} {:>5g} {:>6g} {:>5} {:>6} {:>8.3f} {:>8.0f} {:>6} {:>3} {:>9.2e} {:>9.2e} {:>9.2e} "
-        "{:>9.2e} {}\n",
-        s.label.substr(0, 36), r.mesh_elems, to_string(s.precision), s.dt_safety, s.residual_tol,
-        depth_name(r.depth_reached), r.region_elems, 1e3 * r.wall_per_tick, r.steps_per_s, r.hold_ticks,
+        "{:<44} {:>6} {:>6} {:>5g} {:>6g} {:>5} {:>6} {:>8.3f} {:>8.3f} {:>8.0f} {:>6} {:>3} {:>9.2e} {:>9.2e} "
+        "{:>9.2e} {:>9.2e} {}\n",
+        s.label.substr(0, 44), r.mesh_elems, to_string(s.precision), s.dt_safety, s.residual_tol,
+        depth_name(r.depth_reached), r.region_elems, 1e3 * r.wall_per_tick, 1e3 * r.cpu_per_tick, r.steps_per_s,
+        r.hold_ticks,
         r.equilibrium ? "y" : "n", r.disp_err, r.force_err, r.disp_err_fine, r.force_err_fine, r.pareto ? "*" : "");
   }
-  out += "u err, F err: max nodal displacement error / max displacement and tool-force error, against the\n"
-         "same mesh's reference; u err*, F err*: against the finest mesh's reference. ticks: haptic ticks from\n"
-         "the start of the hold to the measured tick (eq: the tolerance passed). P: on the Pareto front of\n"
+  out += "ms/tick: median wall time of a haptic tick in contact; cpu ms: mean process CPU time (all threads)\n"
+         "per tick. u err, F err: max nodal displacement error / max displacement and tool-force error, against\n"
+         "the same mesh's reference; u err*, F err*: against the finest mesh's reference. ticks: haptic ticks\n"
+         "from the start of the hold to the measured tick (eq: the tolerance passed). P: on the Pareto front of\n"
          "(ms/tick, u err).\n";
   out += fmt::format("sweep wall time {:.1f} s\n", res.wall);
   return out;
@@ -379,12 +418,13 @@ std::string tradeoff_json(const TradeoffResult& res) {
     out += fmt::format(
         "    {{\"group\": \"{}\", \"label\": \"{}\", \"depth\": \"{}\", \"auto_tol\": {}, \"precision\": \"{}\", "
         "\"dt_safety\": {}, \"mesh\": {}, \"residual_tol\": {}, \"mesh_nodes\": {}, \"mesh_tets\": {}, \"dt\": {}, "
-        "\"steps_per_tick\": {}, \"wall_per_tick_s\": {}, \"steps_per_s\": {}, \"region_nodes\": {}, "
+        "\"steps_per_tick\": {}, \"wall_per_tick_s\": {}, \"cpu_per_tick_s\": {}, \"steps_per_s\": {}, \"region_nodes\": {}, "
         "\"region_elems\": {}, \"depth_reached\": \"{}\", \"equilibrium\": {}, \"hold_ticks\": {}, "
         "\"hold_wall_s\": {}, \"residual\": {}, \"force\": [{}, {}, {}], \"max_disp\": {}, \"disp_err\": {}, "
         "\"force_err\": {}, \"disp_err_fine\": {}, \"force_err_fine\": {}, \"pareto\": {}}}{}\n",
         s.group, json_escape(s.label), depth_name(s.depth), s.auto_tol, to_string(s.precision), s.dt_safety, s.mesh,
-        s.residual_tol, r.mesh_nodes, r.mesh_elems, r.dt, r.steps_per_tick, r.wall_per_tick, r.steps_per_s,
+        s.residual_tol, r.mesh_nodes, r.mesh_elems, r.dt, r.steps_per_tick, r.wall_per_tick, r.cpu_per_tick,
+        r.steps_per_s,
         r.region_nodes, r.region_elems, depth_name(r.depth_reached), r.equilibrium, r.hold_ticks, r.hold_wall,
         r.residual, r.force.x, r.force.y, r.force.z, r.max_disp, r.disp_err, r.force_err, r.disp_err_fine,
         r.force_err_fine, r.pareto, k + 1 < res.rows.size() ? "," : "");

@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "core/hd.hpp"
+#include "core/region.hpp"
 #include "core/vec.hpp"
 #include "scene/scene.hpp"
 
@@ -34,7 +35,8 @@ namespace tissue::accuracy {
 
 /// One point of the sweep.
 struct TradeoffSetting {
-  std::string group;              ///< "baseline", "depth", "auto", "precision", "safety", "mesh", "tolerance"
+  std::string group;              ///< "baseline", "anchor", "depth", "auto", "precision", "safety", "mesh",
+                                  ///< "tolerance", "proposed"
   std::string label;              ///< e.g. "depth 3", "auto 0.02", "double", "safety 0.9"
   int depth = 5;                  ///< rings; kDepthAll; kDepthAuto
   double auto_tol = 0.02;         ///< depth auto's front tolerance
@@ -50,7 +52,8 @@ struct TradeoffRow {
   index_t mesh_nodes = 0, mesh_elems = 0;
   double dt = 0;                  ///< s
   int steps_per_tick = 0;
-  double wall_per_tick = 0;       ///< s, mean over ticks in contact
+  double wall_per_tick = 0;       ///< s, median over ticks in contact (robust to other processes' bursts)
+  double cpu_per_tick = 0;        ///< s of process CPU time (all threads), mean over ticks in contact
   double steps_per_s = 0;         ///< TLED steps per wall second over ticks in contact
   index_t region_nodes = 0, region_elems = 0;
   int depth_reached = 0;          ///< rings at the measured tick (kDepthAll = whole)
@@ -79,16 +82,32 @@ struct TradeoffReference {
   index_t contact_tri = -1;
 };
 
+/// The defaults the kidney's sweep argues for (docs/accuracy.md): adaptive
+/// depth (front tolerance 0.05), double precision, dt = 0.9 dt_crit,
+/// residual tolerance 1e-3.
+inline TradeoffSetting proposed_defaults() {
+  TradeoffSetting s;
+  s.depth = kDepthAuto;
+  s.auto_tol = 0.05;
+  s.precision = Precision::Double;
+  s.dt_safety = 0.9;
+  s.residual_tol = 1e-3;
+  return s;
+}
+
 struct TradeoffOptions {
   std::string backend;                          ///< empty = the scene's
   std::vector<int> mesh_targets = {3000, 0, 25000};  ///< tet targets (0 = the scene's own mesh); the last
                                                 ///< is the finest (the discretisation reference)
   std::vector<std::string> mesh_names = {"coarse", "default", "fine"};
-  std::vector<int> depths = {1, 2, 3, 5, 8, -1};  ///< kDepthAll = -1
+  std::vector<int> depths = {1, 2, 3, 5, 8, kDepthAll};
   std::vector<double> auto_tols = {0.05, 0.02, 0.005};
   std::vector<Precision> precisions = {Precision::Float, Precision::Double};
   std::vector<double> safeties = {0.3, 0.6, 0.9};
   std::vector<double> residual_tols = {1e-2, 1e-3, 1e-4};
+  int anchor_depth = kDepthAll;                 ///< the anchor's depth: see tradeoff_settings
+  Precision anchor_precision = Precision::Double;
+  std::vector<TradeoffSetting> proposed = {proposed_defaults()};  ///< extra rows: settings to propose
   double max_hold = 0.6;                        ///< s of hold before giving up on equilibrium
   double reference_tol = 1e-9;                  ///< the references' relative residual
   bool verbose = true;                          ///< progress lines on stderr
@@ -102,9 +121,15 @@ struct TradeoffResult {
   double wall = 0;                              ///< s for the whole sweep
 };
 
-/// The settings swept: the baseline (the scene's solver settings at the
-/// default mesh: depth, precision, safety, tolerance) and one group per
-/// dimension varying that dimension alone around it.
+/// The settings swept, one dimension at a time:
+///   baseline   the scene's solver settings on the scene's mesh;
+///   anchor     the baseline on the whole mesh in double (anchor_depth,
+///              anchor_precision): no truncation, no float floor;
+///   depth, auto, precision   vary the baseline's depth and precision (the
+///              region is what they trade);
+///   safety, mesh, tolerance  vary the anchor (around the baseline, the
+///              region's truncation error would hide their effect);
+///   proposed   the `proposed` settings, on the scene's mesh.
 std::vector<TradeoffSetting> tradeoff_settings(const scene::Scene& scene, const TradeoffOptions& options);
 
 /// Runs the sweep on the scene (references first, then every setting).

@@ -1,0 +1,356 @@
+// The accuracy library: the reference solution (dynamic relaxation with
+// fictitious masses and adaptive damping), the held tool contact, point
+// location and field transfer between meshes, re-meshing, and the tradeoff
+// sweep with its table, JSON and PNG plot -- on small boxes.
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "accuracy/plot.hpp"
+#include "accuracy/point_locator.hpp"
+#include "accuracy/reference.hpp"
+#include "accuracy/relaxation.hpp"
+#include "accuracy/remesh.hpp"
+#include "accuracy/tradeoff.hpp"
+#include "backends/registry.hpp"
+#include "core/box_mesh.hpp"
+#include "core/scheduler.hpp"
+#include "scene/validate.hpp"
+
+namespace tissue {
+namespace {
+
+using namespace accuracy;
+
+constexpr double kL = 0.03, kH = 0.015;  // box 30 x 30 x 15 mm, bottom fixed
+constexpr int kN = 4, kNz = 2;
+
+ModelInput box_input(double nu = 0.45) {
+  ModelInput in;
+  box_mesh(in, kN, kN, kNz, kL, kL, kH);
+  const double E = 3000;
+  in.materials = {{E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu)), 1000}};
+  in.fixed.assign(in.nodes.size() / 3, 0);
+  for (size_t i = 0; i < in.fixed.size(); ++i) in.fixed[i] = in.nodes[3 * i + 2] == 0.0;
+  in.source = "reference box";
+  return in;
+}
+
+/// Approach, press 2 mm, hold 0.5 s, retract, at an off-centre top point.
+std::vector<Waypoint> press() { return press_path({0.0131, 0.0162, kH}, {0, 0, -1}, 0.002, 0.003, 0.05, 0.1, 0.5, 0.05); }
+
+TEST(HoldStart, LongestStationarySegment) {
+  EXPECT_DOUBLE_EQ(hold_start(press()), 0.15);
+  const std::vector<Waypoint> moving{{0, {0, 0, 0}}, {1, {1, 0, 0}}};
+  EXPECT_DOUBLE_EQ(hold_start(moving), 1.0);
+  EXPECT_THROW(hold_start({}), std::invalid_argument);
+}
+
+TEST(HeldContact, DrivesTheTouchedTriangleByTheToolsOffset) {
+  const TissueModel<double> m = build_model(box_input());
+  const HeldContact c = held_contact(m, press(), 1e-3, 0.15);
+  ASSERT_GE(c.tri, 0);
+  ASSERT_EQ(c.drive.nodes.size(), 3u);
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(c.drive.nodes[k], m.tris[k * m.n_tris + c.tri]);
+  EXPECT_NEAR(c.point.z, kH, 1e-12);  // on the top face
+  EXPECT_NEAR(c.tip.z, kH - 0.002, 1e-12);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NEAR(c.drive.u[3 * k + 2], -0.002, 1e-9);
+    EXPECT_NEAR(c.drive.u[3 * k], 0.0, 1e-9);
+  }
+  EXPECT_GT(c.t_contact, 0.05 - 1e-9);  // during the approach's last tick or right after
+  EXPECT_LT(c.t_contact, 0.06);
+  // a path that never reaches the body is named as such
+  const std::vector<Waypoint> miss{{0, {0.01, 0.01, 0.05}}, {0.2, {0.01, 0.01, 0.03}}};
+  try {
+    held_contact(m, miss, 1e-3, 0.2);
+    FAIL() << "a missing path gave a contact";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("does not touch"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Reference, ConvergesAndMatchesALongPhysicalRun) {
+  const TissueModel<double> m = build_model(box_input());
+  const HeldContact c = held_contact(m, press(), 1e-3, 0.15);
+  const ReferenceSolution ref = reference_solution(m, c.drive);
+  EXPECT_TRUE(ref.relax.converged);
+  EXPECT_LE(ref.relax.residual, 1e-9);
+  EXPECT_GT(ref.relax.steps, 0);
+  EXPECT_NEAR(ref.max_disp, 0.002, 1e-12);  // the driven nodes
+  EXPECT_GT(ref.strain_energy, 0);
+  // the same physics through the Scheduler, held long enough to settle fully
+  auto b = create_backend("cpu", Precision::Double);
+  b->upload(m);
+  SchedulerSettings st;
+  st.depth = kDepthAll;
+  Scheduler sched(*b, m, st);
+  std::vector<Waypoint> path = press();
+  path.resize(3);  // hold the deepest point forever
+  ScriptedDevice tool(path);
+  TickReport rep;
+  while (sched.time() < 1.5) rep = sched.tick(tool);
+  ASSERT_LT(rep.residual, 1e-8);
+  const Fields f = b->download();
+  double err = 0;
+  for (size_t k = 0; k < f.u.size(); ++k) err = std::max(err, std::fabs(f.u[k] - ref.fields.u[k]));
+  EXPECT_LT(err, 1e-7 * ref.max_disp);
+  EXPECT_LT(norm(rep.force + ref.reaction), 1e-7 * norm(ref.reaction));  // force on the tool = -reaction
+}
+
+// On a graded mesh (cells from 0.3 mm to 14 mm across x) the physical
+// masses make the smallest cells set the step for everyone; the fictitious
+// masses put every node at its own stability limit and relax in fewer steps
+// (on a uniform mesh the Gershgorin bound's slack makes them ~2x slower).
+TEST(Reference, FictitiousMassesChangeTheRouteNotTheAnswer) {
+  ModelInput in = box_input(0.49);
+  for (size_t i = 0; i < in.nodes.size(); i += 3) in.nodes[i] = kL * std::pow(in.nodes[i] / kL, 3.0);
+  const TissueModel<double> m = build_model(in);
+  const HeldContact c = held_contact(m, press(), 1e-3, 0.15);
+  ReferenceOptions scaled, physical;
+  physical.relax.mass_scaling = false;
+  const ReferenceSolution a = reference_solution(m, c.drive, scaled);
+  const ReferenceSolution b = reference_solution(m, c.drive, physical);
+  double err = 0;
+  for (size_t k = 0; k < a.fields.u.size(); ++k) err = std::max(err, std::fabs(a.fields.u[k] - b.fields.u[k]));
+  EXPECT_LT(err, 1e-7 * a.max_disp);
+  std::cout << "[ INFO     ] relaxation steps: fictitious masses " << a.relax.steps << ", physical masses "
+            << b.relax.steps << "\n";
+  EXPECT_LT(a.relax.steps, b.relax.steps);
+}
+
+TEST(Reference, UnfinishedRelaxationIsReportedWithItsResidual) {
+  const TissueModel<double> m = build_model(box_input());
+  const HeldContact c = held_contact(m, press(), 1e-3, 0.15);
+  ReferenceOptions o;
+  o.relax.max_steps = 300;
+  try {
+    reference_solution(m, c.drive, o);
+    FAIL() << "300 steps cannot reach 1e-9";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("relative residual"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Relaxation, InvertingDriveStopsWithTheElement) {
+  const TissueModel<double> m = build_model(box_input());
+  Drive d;
+  d.nodes = {box_node(kN, kN, 2, 2, kNz)};
+  d.u = {0, 0, -0.03};  // twice the thickness: crushes its elements
+  auto b = create_backend("cpu", Precision::Double);
+  RelaxOptions o;
+  o.ramp_time = 0.01;
+  try {
+    relax(*b, m, d, o);
+    FAIL() << "an inverting drive relaxed";
+  } catch (const RelaxError& e) {
+    EXPECT_NE(std::string(e.what()).find("element "), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("steps "), std::string::npos) << e.what();
+  }
+  Drive bad = d;
+  bad.u.pop_back();
+  EXPECT_THROW(relax(*b, m, bad, o), std::invalid_argument);
+}
+
+TEST(Relaxation, RayleighQuotientAndMasses) {
+  // f = k u on every free component: omega^2 = k / m exactly
+  const std::vector<double> mass{2.0, 2.0};
+  const std::vector<double> u0{0, 1, 0, 2, 0, 0}, u1{1, 1, 2, 2, 1, 0};
+  std::vector<double> f0(6), f1(6);
+  for (int k = 0; k < 6; ++k) {
+    f0[k] = 8.0 * u0[k];
+    f1[k] = 8.0 * u1[k];
+  }
+  const std::vector<std::uint8_t> all{7, 7}, none{0, 0};
+  EXPECT_DOUBLE_EQ(rayleigh_omega2(u0, u1, f0, f1, mass, all), 4.0);
+  EXPECT_EQ(rayleigh_omega2(u0, u1, f0, f1, mass, none), 0.0);
+  EXPECT_EQ(rayleigh_omega2(u0, u0, f0, f0, mass, all), 0.0);
+  // the fictitious masses of a single tet: dt^2 / (4 s) (K + 4 mu / 3) V |dN_a| sum_b |dN_b|
+  ModelInput in;
+  in.nodes = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1};
+  in.tets = {0, 1, 2, 3};
+  in.materials = {{1.0, 2.0, 1.0}};
+  const TissueModel<double> m = build_model(in);
+  const std::vector<double> ms = relaxation_masses(m, 0.1, 0.5);
+  const double sum = 1 + 1 + 1 + std::sqrt(3.0);  // |dN| of corners 1..3 and 0
+  EXPECT_NEAR(ms[0], 0.01 / 2 * (2 + 4.0 / 3) / 6 * std::sqrt(3.0) * sum, 1e-15);
+  EXPECT_NEAR(ms[1], 0.01 / 2 * (2 + 4.0 / 3) / 6 * 1 * sum, 1e-15);
+  EXPECT_THROW(relaxation_masses(m, 0.1, 0), std::invalid_argument);
+}
+
+TEST(PointLocator, LinearFieldsTransferExactly) {
+  ModelInput a = box_input(), b;
+  box_mesh(b, 3, 5, 3, kL, kL, kH);  // another discretisation of the same box
+  b.materials = a.materials;
+  const TissueModel<double> ma = build_model(a), mb = build_model(b);
+  std::vector<double> field(3 * size_t(ma.n_nodes));
+  for (index_t i = 0; i < ma.n_nodes; ++i) {
+    const double x = ma.X[i], y = ma.X[ma.n_nodes + i], z = ma.X[2 * ma.n_nodes + i];
+    field[i] = 1 + 2 * x - y;
+    field[ma.n_nodes + i] = 3 * z;
+    field[2 * ma.n_nodes + i] = x + y + z;
+  }
+  std::vector<double> pts;
+  for (index_t i = 0; i < mb.n_nodes; ++i)
+    for (int c = 0; c < 3; ++c) pts.push_back(mb.X[c * mb.n_nodes + i]);
+  pts.insert(pts.end(), {kL + 1e-9, 0.5 * kL, 0.5 * kH});  // a hair outside: clamped onto the face
+  const std::vector<double> s = sample_field(ma, field, pts);
+  const size_t np = pts.size() / 3;
+  for (size_t k = 0; k < np; ++k) {
+    const double x = std::min(pts[3 * k], kL), y = pts[3 * k + 1], z = pts[3 * k + 2];
+    const double tol = k + 1 < np ? 1e-12 : 1e-8;  // the outside point: within its distance x the gradient
+    ASSERT_NEAR(s[k], 1 + 2 * x - y, tol) << "point " << k;
+    ASSERT_NEAR(s[np + k], 3 * z, tol) << "point " << k;
+    ASSERT_NEAR(s[2 * np + k], x + y + z, tol) << "point " << k;
+  }
+  const PointLocator loc(ma);
+  const Location in = loc.locate({0.011, 0.012, 0.004});
+  EXPECT_GE(in.elem, 0);
+  EXPECT_EQ(in.outside, 0.0);
+  EXPECT_GT(loc.locate({kL + 0.001, 0.01, 0.01}).outside, 0.0);
+  const std::vector<double> far{1.0, 1.0, 1.0};
+  EXPECT_THROW(sample_field(ma, field, far), std::runtime_error);
+}
+
+/// A scene of the box with a node-list constraint on its bottom and a press.
+scene::Scene box_scene() {
+  const ModelInput in = box_input();
+  scene::Scene s;
+  s.source = "box.xml";
+  s.nodes = in.nodes;
+  s.tets = in.tets;
+  scene::Material mat;
+  mat.name = "tissue";
+  mat.a = 3000;
+  mat.b = 0.45;
+  s.materials = {mat};
+  scene::ElementSet all;
+  all.name = "all";
+  all.material = "tissue";
+  all.all = true;
+  s.sets = {all};
+  scene::Constraint bottom;
+  for (index_t i = 0; i < static_cast<index_t>(in.fixed.size()); ++i)
+    if (in.fixed[i]) bottom.nodes.push_back(i);
+  s.constraints = {bottom};
+  scene::Tool tool;
+  tool.path = press();
+  s.tools = {tool};
+  return s;
+}
+
+TEST(Remesh, MovesNodeConstraintsByGeometry) {
+  const scene::Scene s = box_scene();
+  const scene::Scene r = remesh_scene(s, 600);
+  const TissueModel<double> m = scene::load_model(r);
+  EXPECT_GT(m.n_elems, 400);
+  EXPECT_LT(m.n_elems, 900);
+  const std::vector<index_t>& fixed = r.constraints.front().nodes;
+  std::vector<std::uint8_t> is_fixed(m.n_nodes, 0);
+  for (index_t a : fixed) is_fixed[a] = 1;
+  for (index_t a = 0; a < m.n_nodes; ++a) {
+    const double z = m.X[2 * m.n_nodes + a];
+    if (z == 0.0) {
+      EXPECT_TRUE(is_fixed[a]) << "bottom node " << a << " not fixed";
+    }
+    if (z > 0.5 * kH / kNz) {
+      EXPECT_FALSE(is_fixed[a]) << "node " << a << " at z = " << z << " fixed";
+    }
+  }
+  EXPECT_THROW(remesh_scene(s, 0), std::invalid_argument);
+}
+
+TEST(Pareto, FrontOfCostAndError) {
+  std::vector<TradeoffRow> rows(4);
+  rows[0].wall_per_tick = 1, rows[0].disp_err = 0.5;
+  rows[1].wall_per_tick = 2, rows[1].disp_err = 0.1;
+  rows[2].wall_per_tick = 3, rows[2].disp_err = 0.2;  // dominated by rows[1]
+  rows[3].wall_per_tick = 4, rows[3].disp_err = 0.01;
+  mark_pareto(rows);
+  EXPECT_TRUE(rows[0].pareto);
+  EXPECT_TRUE(rows[1].pareto);
+  EXPECT_FALSE(rows[2].pareto);
+  EXPECT_TRUE(rows[3].pareto);
+}
+
+TEST(Canvas, DrawsLinesDiscsAndText) {
+  Canvas c(60, 40);
+  const Canvas::Colour red{255, 0, 0};
+  c.line(5, 5, 50, 5, red, 1);
+  EXPECT_EQ(c.at(30, 5).r, 255);
+  EXPECT_EQ(c.at(30, 5).g, 0);
+  EXPECT_EQ(c.at(30, 20).g, 255);  // background untouched
+  c.disc(30, 25, 3, red);
+  EXPECT_EQ(c.at(30, 25).g, 0);
+  const int w = c.text(2, 12, "Ab1", {0, 0, 0});
+  EXPECT_GT(w, 10);
+  int dark = 0;
+  for (int y = 12; y < 22; ++y)
+    for (int x = 2; x < 2 + w; ++x) dark += c.at(x, y).r == 0;
+  EXPECT_GT(dark, 10);
+  c.set(-1, 100, red);  // clipped, no crash
+  EXPECT_THROW(Canvas(0, 10), std::invalid_argument);
+}
+
+// The whole sweep on the box, trimmed to a handful of settings: the table,
+// the JSON and the plot come out, the whole-mesh double row is accurate,
+// the depth-1 region is cheaper and worse, float stops at its floor.
+TEST(Tradeoff, SweepOnABox) {
+  const scene::Scene s = box_scene();
+  TradeoffOptions o;
+  o.mesh_targets = {0};
+  o.mesh_names = {"default"};
+  o.depths = {1, kDepthAll};
+  o.auto_tols = {0.05};
+  o.safeties = {0.9};
+  o.residual_tols = {1e-2, 1e-4};
+  o.max_hold = 0.4;
+  o.verbose = false;
+  const std::vector<TradeoffSetting> settings = tradeoff_settings(s, o);
+  ASSERT_EQ(settings.front().group, "baseline");
+  EXPECT_EQ(settings.front().depth, 5);
+  // baseline, anchor, depths 1 and all, auto, double, safety 0.9, two tolerances, proposed
+  EXPECT_EQ(settings.size(), 10u);
+  EXPECT_EQ(settings[1].group, "anchor");
+  EXPECT_EQ(settings[1].depth, kDepthAll);
+  const TradeoffResult res = run_tradeoff(s, o);
+  ASSERT_EQ(res.rows.size(), settings.size());
+  EXPECT_FALSE(res.references.empty());
+  const TradeoffRow* depth1 = nullptr;
+  const TradeoffRow* all = nullptr;
+  const TradeoffRow* dbl = nullptr;
+  for (const TradeoffRow& r : res.rows) {
+    if (r.setting.label == "depth 1") depth1 = &r;
+    if (r.setting.label == "depth all") all = &r;
+    if (r.setting.group == "precision") dbl = &r;
+    EXPECT_GT(r.wall_per_tick, 0) << r.setting.label;
+    EXPECT_GT(r.steps_per_s, 0) << r.setting.label;
+  }
+  ASSERT_TRUE(depth1 && all && dbl);
+  EXPECT_LT(depth1->region_elems, all->region_elems);
+  EXPECT_GT(depth1->disp_err, all->disp_err);
+  EXPECT_LT(all->disp_err, 0.05);
+  EXPECT_TRUE(dbl->equilibrium);
+  const std::string table = tradeoff_table(res), json = tradeoff_json(res);
+  EXPECT_NE(table.find("depth 1"), std::string::npos);
+  EXPECT_EQ(std::count(json.begin(), json.end(), '{'), std::count(json.begin(), json.end(), '}'));
+  EXPECT_NE(json.find("\"disp_err\""), std::string::npos);
+  const std::string png = (std::filesystem::temp_directory_path() / "tissue_tradeoff_test.png").string();
+  write_tradeoff_plot(res, png);
+  std::ifstream in(png, std::ios::binary);
+  char sig[8] = {};
+  in.read(sig, 8);
+  EXPECT_EQ(std::string(sig + 1, 3), "PNG");
+  EXPECT_GT(std::filesystem::file_size(png), 2000u);
+  std::filesystem::remove(png);
+}
+
+}  // namespace
+}  // namespace tissue
