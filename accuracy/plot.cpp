@@ -120,13 +120,15 @@ std::pair<double, double> decades(double lo, double hi) {
 }  // namespace
 
 void write_tradeoff_plot(const TradeoffResult& res, const std::string& path, int width, int height) {
-  if (res.rows.empty()) throw std::invalid_argument("tradeoff plot: no rows to draw");
+  if (std::none_of(res.rows.begin(), res.rows.end(), [](const TradeoffRow& r) { return r.failed.empty(); }))
+    throw std::invalid_argument("tradeoff plot: no successful rows to draw");
   Canvas cv(width, height);
-  const int left = 90, right = 300, top = 50, bottom = 70;
+  const int left = 90, right = 300, top = 64, bottom = 70;
   const int pw = width - left - right, ph = height - top - bottom;
   constexpr double kFloor = 1e-9;  // errors below are drawn at the floor
   double xlo = 1e300, xhi = 0, ylo = 1e300, yhi = 0;
   for (const TradeoffRow& r : res.rows) {
+    if (!r.failed.empty()) continue;
     const double x = std::max(1e3 * r.wall_per_tick, 1e-6), y = std::max(r.disp_err, kFloor);
     xlo = std::min(xlo, x);
     xhi = std::max(xhi, x);
@@ -151,7 +153,7 @@ void write_tradeoff_plot(const TradeoffResult& res, const std::string& path, int
   }
   cv.line(left, top, left, top + ph, axis, 2);
   cv.line(left, top + ph, left + pw, top + ph, axis, 2);
-  cv.text(left, 12, fmt::format("speed-accuracy tradeoff: {} ({})", res.scene, res.device.substr(0, 60)), axis, 2);
+  cv.text(left, 6, fmt::format("speed-accuracy tradeoff: {} ({})", res.scene, res.device.substr(0, 60)), axis, 2);
   const std::string xl = "wall time per 1 ms haptic tick (ms)";
   cv.text(left + pw / 2 - Canvas::text_width(xl, 2) / 2, top + ph + 36, xl, axis, 2);
   cv.text(8, top - 22, "max nodal displacement error / max displacement (vs same-mesh reference)", axis, 2);
@@ -170,6 +172,7 @@ void write_tradeoff_plot(const TradeoffResult& res, const std::string& path, int
   };
   std::vector<Box> placed;
   for (const TradeoffRow& r : res.rows) {
+    if (!r.failed.empty()) continue;
     const double x = px(1e3 * r.wall_per_tick), y = py(r.disp_err);
     placed.push_back({int(x) - 6, int(y) - 6, int(x) + 6, int(y) + 6});
   }
@@ -180,6 +183,7 @@ void write_tradeoff_plot(const TradeoffResult& res, const std::string& path, int
     return true;
   };
   for (const TradeoffRow& r : res.rows) {
+    if (!r.failed.empty()) continue;
     const auto it = group_colours().find(r.setting.group);
     const Colour c = it != group_colours().end() ? it->second : grey;
     const double x = px(1e3 * r.wall_per_tick), y = py(r.disp_err);

@@ -53,13 +53,16 @@ std::vector<double> drive_start(const TissueModel<double>& m, const Drive& d, st
   return s;
 }
 
-/// Throws RelaxError when the reduction saw NaN/Inf or an inverted element.
-void check_health(const Reductions& r, long first, long last) {
+/// Throws RelaxError when the reduction saw NaN/Inf or an inverted element;
+/// `frac` is how far the drive's ramp had got (1 = full targets).
+void check_health(const Reductions& r, long first, long last, double frac) {
+  const std::string when =
+      frac < 1 ? fmt::format(" (ramp at {:.0f}% of the drive's targets)", 100 * frac) : std::string(" (targets held)");
   if (r.bad_elem >= 0)
-    throw RelaxError(fmt::format("relaxation steps {}..{}: element {} has J = {:.4g} (inverted or degenerate)", first,
-                                 last, r.bad_elem, r.bad_J));
+    throw RelaxError(fmt::format("relaxation steps {}..{}{}: element {} has J = {:.4g} (inverted or degenerate)", first,
+                                 last, when, r.bad_elem, r.bad_J));
   if (!r.finite)
-    throw RelaxError(fmt::format("relaxation steps {}..{}: non-finite displacement or force", first, last));
+    throw RelaxError(fmt::format("relaxation steps {}..{}{}: non-finite displacement or force", first, last, when));
 }
 
 }  // namespace
@@ -133,7 +136,7 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
     b.advance(k);
     steps += k;
     if (steps - last_check >= o.check_every || steps == ramp_steps) {
-      check_health(b.reduce(), last_check, steps - 1);
+      check_health(b.reduce(), last_check, steps - 1, double(steps) / double(ramp_steps));
       last_check = steps;
     }
   }
@@ -145,7 +148,7 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
     b.advance(o.check_every);
     steps += o.check_every;
     const Reductions r = b.reduce();
-    check_health(r, steps - o.check_every, steps - 1);
+    check_health(r, steps - o.check_every, steps - 1, 1.0);
     const double held = std::max(std::sqrt(r.held_force2), o.force_floor);
     out.residual = std::sqrt(r.free_force2) / held;
     out.kinetic = r.kinetic / std::max(0.5 * held * r.max_disp, 1e-300);

@@ -42,6 +42,7 @@ struct MeshCase {
   scene::Scene scene;
   TissueModel<double> model;     ///< at the scene's settings (reference input)
   std::vector<RefEntry> refs;
+  std::string failed;            ///< why its first reference failed (the mesh is then skipped)
   std::vector<double> fine_u;    ///< the finest mesh's reference at this mesh's nodes (3 x n_nodes)
   Vec3<double> fine_force = {};  ///< the finest mesh's force on the tool (N)
 };
@@ -61,7 +62,10 @@ std::vector<Waypoint> path_to_hold(const std::vector<Waypoint>& path) {
   return out;
 }
 
-double relative_disp_error(std::span<const double> u, std::span<const double> ref) {
+/// max_a |u_a - ref_a| / max_a |ref_a| (both 3 x n, component-major); the
+/// error's max runs over the nodes `use` marks (empty = all).
+double relative_disp_error(std::span<const double> u, std::span<const double> ref,
+                           const std::vector<std::uint8_t>& use = {}) {
   const std::size_t n = u.size() / 3;
   double err2 = 0, ref2 = 0;
   for (std::size_t a = 0; a < n; ++a) {
@@ -70,10 +74,18 @@ double relative_disp_error(std::span<const double> u, std::span<const double> re
       e += (u[c * n + a] - ref[c * n + a]) * (u[c * n + a] - ref[c * n + a]);
       r += ref[c * n + a] * ref[c * n + a];
     }
-    err2 = std::max(err2, e);
+    if (use.empty() || use[a]) err2 = std::max(err2, e);
     ref2 = std::max(ref2, r);
   }
   return std::sqrt(err2 / std::max(ref2, 1e-300));
+}
+
+/// Nodes of the model farther than `radius` from p (1 = far).
+std::vector<std::uint8_t> far_nodes(const TissueModel<double>& m, Vec3<double> p, double radius) {
+  std::vector<std::uint8_t> far(m.n_nodes);
+  for (index_t a = 0; a < m.n_nodes; ++a)
+    far[a] = norm(Vec3<double>{m.X[a], m.X[m.n_nodes + a], m.X[2 * m.n_nodes + a]} - p) > radius;
+  return far;
 }
 
 double median(std::vector<double> v) {
@@ -107,14 +119,36 @@ const RefEntry& reference_for(MeshCase& mc, Precision p, const TradeoffOptions& 
   const std::vector<Waypoint>& path = tool_path(mc.scene);
   const std::string backend = o.backend.empty() ? mc.scene.solver.backend : o.backend;
   HeldContact c = held_contact(mc.model, path, mc.scene.solver.tick, hold_start(path), backend, p);
-  for (const RefEntry& r : mc.refs)
-    if (r.contact.tri == c.tri && r.contact.drive.u == c.drive.u) return r;
+  // the same triangle driven to the same targets up to float rounding of the
+  // contact point (1e-6 relative, far below every error the sweep measures)
+  for (const RefEntry& r : mc.refs) {
+    if (r.contact.tri != c.tri) continue;
+    double diff = 0, size = 0;
+    for (std::size_t k = 0; k < c.drive.u.size(); ++k) {
+      diff = std::max(diff, std::fabs(r.contact.drive.u[k] - c.drive.u[k]));
+      size = std::max(size, std::fabs(c.drive.u[k]));
+    }
+    if (diff <= 1e-6 * size) return r;
+  }
   if (o.verbose)
     fmt::print(stderr, "  reference: {} mesh, contact triangle {} ({} collision)\n", mc.name, c.tri, to_string(p));
   ReferenceOptions ro;
   ro.backend = backend;
   ro.relax.residual_tol = o.reference_tol;
-  RefEntry e{c, reference_solution(mc.model, c.drive, ro)};
+  RefEntry e{c, {}};
+  try {
+    e.ref = reference_solution(mc.model, c.drive, ro);
+  } catch (const std::exception& err) {
+    TradeoffReference t;
+    t.mesh = mc.name;
+    t.nodes = mc.model.n_nodes;
+    t.elems = mc.model.n_elems;
+    t.contact_tri = c.tri;
+    t.failed = err.what();
+    report.push_back(t);
+    if (o.verbose) fmt::print(stderr, "  reference failed: {}\n", t.failed);
+    throw;
+  }
   mc.refs.push_back(std::move(e));
   report.push_back(reference_row(mc, mc.refs.back()));
   const TradeoffReference& r = report.back();
@@ -178,8 +212,13 @@ std::vector<TradeoffRow> run_setting(const MeshCase& mc, const RefEntry& ref, co
     const Fields f = backend->download();
     r.disp_err = relative_disp_error(f.u, ref.ref.fields.u);
     r.force_err = relative_force_error(rep.force, -1.0 * ref.ref.reaction);
-    r.disp_err_fine = relative_disp_error(f.u, mc.fine_u);
-    r.force_err_fine = relative_force_error(rep.force, mc.fine_force);
+    if (mc.fine_u.empty()) {  // no usable finest mesh
+      r.disp_err_fine = r.disp_err_fine_far = r.force_err_fine = NAN;
+    } else {
+      r.disp_err_fine = relative_disp_error(f.u, mc.fine_u);
+      r.disp_err_fine_far = relative_disp_error(f.u, mc.fine_u, far_nodes(model, ref.contact.point, o.far_radius));
+      r.force_err_fine = relative_force_error(rep.force, mc.fine_force);
+    }
     if (rep.contact_tri != ref.contact.tri)
       throw std::logic_error(fmt::format("tradeoff: {} touched triangle {}, its reference triangle {}", st.label,
                                          rep.contact_tri, ref.contact.tri));
@@ -221,6 +260,9 @@ std::vector<TradeoffRow> run_setting(const MeshCase& mc, const RefEntry& ref, co
 }
 
 std::string fmt_tol(double x) { return fmt::format("{:g}", x); }
+
+/// A JSON number; null for NaN and infinities (JSON has neither).
+std::string json_num(double x) { return std::isfinite(x) ? fmt::format("{}", x) : "null"; }
 
 /// A JSON string literal's contents: quotes, backslashes and control characters escaped.
 std::string json_escape(const std::string& s) {
@@ -310,15 +352,22 @@ TradeoffResult run_tradeoff(const scene::Scene& scene, const TradeoffOptions& o)
   for (std::size_t m = 0; m < o.mesh_targets.size(); ++m) {
     if (o.verbose) fmt::print(stderr, "tradeoff: {} mesh and its reference ...\n", o.mesh_names[m]);
     meshes.push_back(make_mesh_case(scene, o.mesh_targets[m], o.mesh_names[m]));
-    reference_for(meshes.back(), scene.solver.precision, o, res.references);
+    try {
+      reference_for(meshes.back(), scene.solver.precision, o, res.references);
+    } catch (const std::exception& e) {
+      meshes.back().failed = e.what();
+    }
   }
-  const MeshCase& fine = meshes.back();
+  const MeshCase* fine = nullptr;  // the finest usable mesh
+  for (const MeshCase& mc : meshes)
+    if (mc.failed.empty()) fine = &mc;
   for (MeshCase& mc : meshes) {
+    if (!fine) break;
     std::vector<double> pts(3 * std::size_t(mc.model.n_nodes));
     for (index_t i = 0; i < mc.model.n_nodes; ++i)
       for (int c = 0; c < 3; ++c) pts[3 * i + c] = mc.model.X[c * mc.model.n_nodes + i];
-    mc.fine_u = sample_field(fine.model, fine.refs.front().ref.fields.u, pts);
-    mc.fine_force = -1.0 * fine.refs.front().ref.reaction;
+    mc.fine_u = sample_field(fine->model, fine->refs.front().ref.fields.u, pts);
+    mc.fine_force = -1.0 * fine->refs.front().ref.reaction;
   }
   {
     auto b = create_backend(o.backend.empty() ? scene.solver.backend : o.backend, Precision::Float);
@@ -339,10 +388,27 @@ TradeoffResult run_tradeoff(const scene::Scene& scene, const TradeoffOptions& o)
     const bool base = s.group == "anchor";  // its run serves the tolerance rows too
     const auto t1 = Clock::now();
     MeshCase& mc = meshes.at(s.mesh);
-    const RefEntry& ref = reference_for(mc, s.precision, o, res.references);
-    std::vector<TradeoffRow> rows = run_setting(mc, ref, s, base ? base_tols : std::vector<double>{s.residual_tol}, o);
+    std::vector<TradeoffRow> rows;
+    try {
+      if (!mc.failed.empty()) throw std::runtime_error("no reference on this mesh: " + mc.failed);
+      const RefEntry& ref = reference_for(mc, s.precision, o, res.references);
+      rows = run_setting(mc, ref, s, base ? base_tols : std::vector<double>{s.residual_tol}, o);
+    } catch (const std::exception& e) {
+      rows.assign(base ? base_tols.size() : 1, TradeoffRow{});
+      for (TradeoffRow& r : rows) {
+        r.setting = s;
+        r.mesh_nodes = mc.model.n_nodes;
+        r.mesh_elems = mc.model.n_elems;
+        r.failed = e.what();
+      }
+      if (o.verbose) fmt::print(stderr, "  {:<40} failed: {}\n", s.label, e.what());
+    }
     for (std::size_t k = 0; k < rows.size(); ++k) {
       if (base) rows[k].setting = *tol_settings[k];
+      if (!rows[k].failed.empty()) {
+        res.rows.push_back(rows[k]);
+        continue;
+      }
       if (o.verbose)
         fmt::print(stderr, "  {:<40} {:8.3f} ms/tick  error {:.3g} (force {:.3g})  [{:.1f} s]\n",
                    rows[k].setting.label, 1e3 * rows[k].wall_per_tick, rows[k].disp_err, rows[k].force_err,
@@ -357,8 +423,10 @@ TradeoffResult run_tradeoff(const scene::Scene& scene, const TradeoffOptions& o)
 
 void mark_pareto(std::vector<TradeoffRow>& rows) {
   for (TradeoffRow& r : rows) {
-    r.pareto = true;
+    r.pareto = r.failed.empty();
+    if (!r.pareto) continue;
     for (const TradeoffRow& q : rows) {
+      if (!q.failed.empty()) continue;
       const bool no_worse = q.wall_per_tick <= r.wall_per_tick && q.disp_err <= r.disp_err;
       const bool better = q.wall_per_tick < r.wall_per_tick || q.disp_err < r.disp_err;
       if (&q != &r && no_worse && better) {
@@ -373,28 +441,39 @@ std::string tradeoff_table(const TradeoffResult& res) {
   std::string out = fmt::format("tradeoff for {} on {}\n", res.scene, res.device);
   out += "references (whole mesh, double, dynamic relaxation):\n";
   for (const TradeoffReference& r : res.references)
-    out += fmt::format("  {:<8} {:6} nodes {:6} tets  contact triangle {:5}  residual {:.2g}  {:6} steps {:6.1f} s  "
+    if (!r.failed.empty())
+      out += fmt::format("  {:<8} {:6} nodes {:6} tets  contact triangle {:5}  FAILED: {}\n", r.mesh, r.nodes, r.elems,
+                         r.contact_tri, r.failed);
+    else
+      out += fmt::format("  {:<8} {:6} nodes {:6} tets  contact triangle {:5}  residual {:.2g}  {:6} steps {:6.1f} s  "
                        "|F| {:.5g} N  max|u| {:.4g} mm\n",
                        r.mesh, r.nodes, r.elems, r.contact_tri, r.residual, r.steps, r.wall, norm(r.force),
                        1e3 * r.max_disp);
-  out += fmt::format("{:<44} {:>6} {:>6} {:>5} {:>6} {:>5} {:>6} {:>8} {:>8} {:>8} {:>6} {:>3} {:>9} {:>9} {:>9} {:>9} {}\n",
-                     "setting", "tets", "prec", "safe", "tol", "depth", "elems", "ms/tick", "cpu ms", "steps/s",
-                     "ticks", "eq", "u err", "F err", "u err*", "F err*", "P");
+  out += fmt::format(
+      "{:<44} {:>6} {:>6} {:>5} {:>6} {:>5} {:>6} {:>8} {:>8} {:>8} {:>6} {:>3} {:>9} {:>9} {:>9} {:>9} {:>9} {}\n",
+      "setting", "tets", "prec", "safe", "tol", "depth", "elems", "ms/tick", "cpu ms", "steps/s", "ticks", "eq",
+      "u err", "F err", "u err*", "u far*", "F err*", "P");
   for (const TradeoffRow& r : res.rows) {
     const TradeoffSetting& s = r.setting;
+    if (!r.failed.empty()) {
+      out += fmt::format("{:<44} {:>6} {:>6} {:>5g} {:>6g}  failed: {}\n", s.label.substr(0, 44), r.mesh_elems,
+                         to_string(s.precision), s.dt_safety, s.residual_tol, r.failed);
+      continue;
+    }
     out += fmt::format(
         "{:<44} {:>6} {:>6} {:>5g} {:>6g} {:>5} {:>6} {:>8.3f} {:>8.3f} {:>8.0f} {:>6} {:>3} {:>9.2e} {:>9.2e} "
-        "{:>9.2e} {:>9.2e} {}\n",
+        "{:>9.2e} {:>9.2e} {:>9.2e} {}\n",
         s.label.substr(0, 44), r.mesh_elems, to_string(s.precision), s.dt_safety, s.residual_tol,
         depth_name(r.depth_reached), r.region_elems, 1e3 * r.wall_per_tick, 1e3 * r.cpu_per_tick, r.steps_per_s,
         r.hold_ticks,
-        r.equilibrium ? "y" : "n", r.disp_err, r.force_err, r.disp_err_fine, r.force_err_fine, r.pareto ? "*" : "");
+        r.equilibrium ? "y" : "n", r.disp_err, r.force_err, r.disp_err_fine, r.disp_err_fine_far, r.force_err_fine,
+        r.pareto ? "*" : "");
   }
   out += "ms/tick: median wall time of a haptic tick in contact; cpu ms: mean process CPU time (all threads)\n"
          "per tick. u err, F err: max nodal displacement error / max displacement and tool-force error, against\n"
-         "the same mesh's reference; u err*, F err*: against the finest mesh's reference. ticks: haptic ticks\n"
-         "from the start of the hold to the measured tick (eq: the tolerance passed). P: on the Pareto front of\n"
-         "(ms/tick, u err).\n";
+         "the same mesh's reference; u err*, F err*: against the finest mesh's reference (u far*: the error\n"
+         "over nodes farther than far_radius from the contact point). ticks: haptic ticks from the start of the\n"
+         "hold to the measured tick (eq: the tolerance passed). P: on the Pareto front of (ms/tick, u err).\n";
   out += fmt::format("sweep wall time {:.1f} s\n", res.wall);
   return out;
 }
@@ -407,9 +486,9 @@ std::string tradeoff_json(const TradeoffResult& res) {
     const TradeoffReference& r = res.references[k];
     out += fmt::format(
         "    {{\"mesh\": \"{}\", \"nodes\": {}, \"tets\": {}, \"steps\": {}, \"wall_s\": {}, \"residual\": {}, "
-        "\"force\": [{}, {}, {}], \"max_disp\": {}, \"contact_tri\": {}}}{}\n",
+        "\"force\": [{}, {}, {}], \"max_disp\": {}, \"contact_tri\": {}, \"failed\": \"{}\"}}{}\n",
         r.mesh, r.nodes, r.elems, r.steps, r.wall, r.residual, r.force.x, r.force.y, r.force.z, r.max_disp,
-        r.contact_tri, k + 1 < res.references.size() ? "," : "");
+        r.contact_tri, json_escape(r.failed), k + 1 < res.references.size() ? "," : "");
   }
   out += "  ],\n  \"rows\": [\n";
   for (std::size_t k = 0; k < res.rows.size(); ++k) {
@@ -421,13 +500,14 @@ std::string tradeoff_json(const TradeoffResult& res) {
         "\"steps_per_tick\": {}, \"wall_per_tick_s\": {}, \"cpu_per_tick_s\": {}, \"steps_per_s\": {}, \"region_nodes\": {}, "
         "\"region_elems\": {}, \"depth_reached\": \"{}\", \"equilibrium\": {}, \"hold_ticks\": {}, "
         "\"hold_wall_s\": {}, \"residual\": {}, \"force\": [{}, {}, {}], \"max_disp\": {}, \"disp_err\": {}, "
-        "\"force_err\": {}, \"disp_err_fine\": {}, \"force_err_fine\": {}, \"pareto\": {}}}{}\n",
+        "\"force_err\": {}, \"disp_err_fine\": {}, \"disp_err_fine_far\": {}, \"force_err_fine\": {}, "
+        "\"pareto\": {}, \"failed\": \"{}\"}}{}\n",
         s.group, json_escape(s.label), depth_name(s.depth), s.auto_tol, to_string(s.precision), s.dt_safety, s.mesh,
         s.residual_tol, r.mesh_nodes, r.mesh_elems, r.dt, r.steps_per_tick, r.wall_per_tick, r.cpu_per_tick,
         r.steps_per_s,
         r.region_nodes, r.region_elems, depth_name(r.depth_reached), r.equilibrium, r.hold_ticks, r.hold_wall,
-        r.residual, r.force.x, r.force.y, r.force.z, r.max_disp, r.disp_err, r.force_err, r.disp_err_fine,
-        r.force_err_fine, r.pareto, k + 1 < res.rows.size() ? "," : "");
+        r.residual, r.force.x, r.force.y, r.force.z, r.max_disp, r.disp_err, r.force_err, json_num(r.disp_err_fine),
+        json_num(r.disp_err_fine_far), json_num(r.force_err_fine), r.pareto, json_escape(r.failed), k + 1 < res.rows.size() ? "," : "");
   }
   out += "  ]\n}\n";
   return out;

@@ -66,8 +66,11 @@ struct TradeoffRow {
   double disp_err = 0;            ///< vs the same mesh's reference (relative)
   double force_err = 0;
   double disp_err_fine = 0;       ///< vs the finest mesh's reference (relative)
+  double disp_err_fine_far = 0;   ///< the same over nodes farther than far_radius from the contact point:
+                                  ///< the discretisation error away from the one-triangle contact patch
   double force_err_fine = 0;
   bool pareto = false;            ///< on the front of (wall_per_tick, disp_err)
+  std::string failed;             ///< why the run or its reference stopped (the rest is then unset); empty = ran
 };
 
 /// A mesh's reference, for the report.
@@ -80,6 +83,7 @@ struct TradeoffReference {
   Vec3<double> force = {};        ///< force on the tool (N)
   double max_disp = 0;            ///< m
   index_t contact_tri = -1;
+  std::string failed;             ///< why the relaxation stopped (e.g. an element inverted under the contact)
 };
 
 /// The defaults the kidney's sweep argues for (docs/accuracy.md): adaptive
@@ -97,9 +101,9 @@ inline TradeoffSetting proposed_defaults() {
 
 struct TradeoffOptions {
   std::string backend;                          ///< empty = the scene's
-  std::vector<int> mesh_targets = {3000, 0, 25000};  ///< tet targets (0 = the scene's own mesh); the last
-                                                ///< is the finest (the discretisation reference)
-  std::vector<std::string> mesh_names = {"coarse", "default", "fine"};
+  std::vector<int> mesh_targets = {3000, 0, 20000, 25000};  ///< tet targets (0 = the scene's own mesh), ascending:
+                                                ///< the finest usable one is the discretisation reference
+  std::vector<std::string> mesh_names = {"coarse", "default", "fine", "finer"};
   std::vector<int> depths = {1, 2, 3, 5, 8, kDepthAll};
   std::vector<double> auto_tols = {0.05, 0.02, 0.005};
   std::vector<Precision> precisions = {Precision::Float, Precision::Double};
@@ -110,6 +114,7 @@ struct TradeoffOptions {
   std::vector<TradeoffSetting> proposed = {proposed_defaults()};  ///< extra rows: settings to propose
   double max_hold = 0.6;                        ///< s of hold before giving up on equilibrium
   double reference_tol = 1e-9;                  ///< the references' relative residual
+  double far_radius = 0.01;                     ///< m: "far" nodes for disp_err_fine_far
   bool verbose = true;                          ///< progress lines on stderr
 };
 
@@ -132,11 +137,15 @@ struct TradeoffResult {
 ///   proposed   the `proposed` settings, on the scene's mesh.
 std::vector<TradeoffSetting> tradeoff_settings(const scene::Scene& scene, const TradeoffOptions& options);
 
-/// Runs the sweep on the scene (references first, then every setting).
+/// Runs the sweep on the scene (references first, then every setting). A
+/// mesh whose reference cannot be computed (an element inverts under the
+/// tool's contact triangle, ...) and a run that stops (SimulationError) are
+/// reported as failed rows with their message; the sweep goes on. The finest
+/// usable mesh is the discretisation reference.
 TradeoffResult run_tradeoff(const scene::Scene& scene, const TradeoffOptions& options);
 
 /// Marks the Pareto front of (wall_per_tick, disp_err): rows no other row
-/// beats in both (one strictly).
+/// beats in both (one strictly). Failed rows are never on it.
 void mark_pareto(std::vector<TradeoffRow>& rows);
 
 /// The result as a fixed-width text table.

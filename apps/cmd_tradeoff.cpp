@@ -29,8 +29,9 @@ int run_tradeoff_command(TradeoffArgs& a) {
     for (const std::string& d : a.depths) o.depths.push_back(parse_depth(d));
   }
   if (!a.meshes.empty()) {
-    if (a.meshes.size() != 3) throw std::invalid_argument("--meshes takes three tet counts: coarse,default,fine");
     o.mesh_targets = a.meshes;
+    o.mesh_names.clear();
+    for (int t : a.meshes) o.mesh_names.push_back(t == 0 ? "default" : fmt::format("{}k", (t + 500) / 1000));
   }
   if (a.quick) {  // a smoke run: the scene's mesh only, a few settings
     o.mesh_targets = {0};
@@ -69,7 +70,7 @@ void add_tradeoff_command(CLI::App& app, int& rc) {
   cmd->add_option("--plot", a->plot, "Write a PNG plot of error against cost with the Pareto front");
   cmd->add_option("--backend", a->backend, "cpu | cuda (default: the scene's)");
   cmd->add_option("--depths", a->depths, "Fixed depths to sweep (numbers or 'all')")->delimiter(',');
-  cmd->add_option("--meshes", a->meshes, "Target tet counts coarse,default,fine (0 = the scene's own mesh)")
+  cmd->add_option("--meshes", a->meshes, "Target tet counts, ascending (0 = the scene's own mesh); default 3000,0,20000,25000")
       ->delimiter(',');
   cmd->add_option("--max-hold", a->options.max_hold, "Simulated seconds of hold before giving up on equilibrium");
   cmd->add_flag("--quick", a->quick, "Smoke run: the scene's mesh only and a handful of settings");

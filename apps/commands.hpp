@@ -17,6 +17,7 @@ void add_info_command(CLI::App& app, int& rc);
 void add_view_command(CLI::App& app, int& rc);  ///< apps/viewer/view_command.cpp
 void add_reference_command(CLI::App& app, int& rc);  ///< apps/cmd_reference.cpp
 void add_tradeoff_command(CLI::App& app, int& rc);   ///< apps/cmd_tradeoff.cpp
+void add_locking_command(CLI::App& app, int& rc);    ///< apps/cmd_locking.cpp
 
 /// Loads a scene file, or the built-in kidney for the name "@kidney".
 scene::Scene load_scene_arg(const std::string& arg);

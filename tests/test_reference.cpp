@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "accuracy/locking.hpp"
 #include "accuracy/plot.hpp"
 #include "accuracy/point_locator.hpp"
 #include "accuracy/reference.hpp"
@@ -265,6 +266,16 @@ TEST(Remesh, MovesNodeConstraintsByGeometry) {
     }
   }
   EXPECT_THROW(remesh_scene(s, 0), std::invalid_argument);
+}
+
+TEST(Richardson, RecoversTheLimitAndOrder) {
+  double p = 0;
+  EXPECT_NEAR(richardson(17, 5, 2, &p), 1.0, 1e-12);  // f(h) = 1 + h^2 at h = 4, 2, 1
+  EXPECT_NEAR(p, 2.0, 1e-12);
+  EXPECT_NEAR(richardson(1 - 0.4, 1 - 0.2, 1 - 0.1, &p), 1.0, 1e-12);  // f(h) = 1 - h / 10, rising
+  EXPECT_NEAR(p, 1.0, 1e-12);
+  EXPECT_EQ(richardson(1, 2, 1, &p), 0.0);  // not monotone: no estimate
+  EXPECT_EQ(p, 0.0);
 }
 
 TEST(Pareto, FrontOfCostAndError) {
