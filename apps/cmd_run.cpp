@@ -18,7 +18,7 @@ void add_run_command(CLI::App& app, int& rc) {
   cmd->add_option("scene", opt->scene, "Scene XML file, or @kidney for the built-in kidney")->required();
   cmd->add_option("--backend", opt->backend, "cpu | cuda (default: the scene's)");
   cmd->add_option("--precision", opt->precision, "float | double (default: the scene's)");
-  cmd->add_option("--depth", opt->depth, "Region depth N (rings from the contact triangle) or 'all'");
+  cmd->add_option("--depth", opt->depth, "Region depth N (rings from the contact triangle), 'all' or 'auto'");
   auto* ticks = cmd->add_option("--ticks", opt->ticks, "Haptic ticks to run (default: the tool path's length)");
   cmd->add_option("--time", opt->time, "Simulated seconds to run")->excludes(ticks);
   cmd->add_option("--out", opt->out_dir, "Write ticks.csv and VTU frames (series.pvd) here");

@@ -80,7 +80,7 @@ int run_scene(const RunOptions& o) {
   }
   if (model.reoriented > 0) fmt::print("note: {} inverted input tets were reoriented\n", model.reoriented);
   fmt::print("running {} ticks of {} on {} ({}), region depth {}\n", n_ticks, s.source, backend->name(),
-             to_string(backend->precision()), settings.depth == kDepthAll ? "all" : std::to_string(settings.depth));
+             to_string(backend->precision()), settings.depth == kDepthAll ? "all" : settings.depth == kDepthAuto ? "auto" : std::to_string(settings.depth));
 
   std::optional<io::TickLog> log;
   std::optional<io::VtuSeries> frames;
