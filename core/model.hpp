@@ -113,6 +113,17 @@ void align_time_step(TissueModel<double>& m, double tick);
 /// and the mean density.
 double lowest_mode_estimate(const TissueModel<double>& m);
 
+/// sum_e V_e over each node's node_elem list, in stored order and in T (n_nodes)
+/// m^3: the denominator of IANP pass 2, computed once per upload the same way
+/// by every backend so that their nodal pressures agree to the bit.
+template <class T>
+std::vector<T> node_volume_sums(const TissueModel<T>& m) {
+  std::vector<T> v(m.n_nodes, T(0));
+  for (index_t a = 0; a < m.n_nodes; ++a)
+    for (index_t k = m.node_elem_start[a]; k < m.node_elem_start[a + 1]; ++k) v[a] += m.volume[m.node_elem[k] / 4];
+  return v;
+}
+
 /// The same model in another scalar type.
 template <class T>
 TissueModel<T> convert(const TissueModel<double>& m);

@@ -58,7 +58,7 @@ void CpuBackend<T>::upload(const TissueModel<double>& model) {
   surface_.reset();
   model_ = convert<T>(model);
   state_.resize(model_.n_nodes, model_.n_elems);
-  node_volume_ = node_volumes(model_);
+  node_volume_ = node_volume_sums(model_);
   all_elems_.resize(model_.n_elems);
   std::iota(all_elems_.begin(), all_elems_.end(), 0);
   driven_list_.clear();

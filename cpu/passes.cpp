@@ -139,14 +139,6 @@ void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const ind
   std::swap(s.u, s.u_next);  // u <- u^{n+1}; u_next now holds u^{n-1} (scratch)
 }
 
-template <class T>
-std::vector<T> node_volumes(const TissueModel<T>& m) {
-  std::vector<T> v(m.n_nodes, T(0));
-  for (index_t a = 0; a < m.n_nodes; ++a)
-    for (index_t k = m.node_elem_start[a]; k < m.node_elem_start[a + 1]; ++k) v[a] += m.volume[m.node_elem[k] >> 2];
-  return v;
-}
-
 #define TISSUE_CPU_PASSES(T)                                                                                      \
   template void element_pressure(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>,                \
                                  tbb::affinity_partitioner&);                                                     \
@@ -155,8 +147,7 @@ std::vector<T> node_volumes(const TissueModel<T>& m) {
   template void element_forces(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>, BadElementFlag&, \
                                tbb::affinity_partitioner&);                                                       \
   template void node_update(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>,                     \
-                            tbb::affinity_partitioner&);                                                          \
-  template std::vector<T> node_volumes(const TissueModel<T>&);
+                            tbb::affinity_partitioner&);
 TISSUE_CPU_PASSES(float)
 TISSUE_CPU_PASSES(double)
 #undef TISSUE_CPU_PASSES

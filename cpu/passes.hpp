@@ -37,7 +37,7 @@ void element_pressure(const TissueModel<T>& m, TissueState<T>& s, std::span<cons
 
 /// Pass 2 over `nodes`: node_p[a] = sum_e p_e V_e / node_volume[a] over the
 /// node's node_elem list, in stored order. node_volume (n_nodes, m^3) is
-/// sum_e V_e over the same list (see node_volumes()).
+/// sum_e V_e over the same list (core node_volume_sums()).
 template <class T>
 void nodal_pressure(const TissueModel<T>& m, TissueState<T>& s, const std::vector<T>& node_volume,
                     std::span<const index_t> nodes, tbb::affinity_partitioner& part);
@@ -59,10 +59,5 @@ void element_forces(const TissueModel<T>& m, TissueState<T>& s, std::span<const 
 template <class T>
 void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> nodes,
                  tbb::affinity_partitioner& part);
-
-/// sum_e V_e over each node's node_elem list, in stored order (n_nodes, m^3):
-/// the denominator of pass 2, computed once at upload.
-template <class T>
-std::vector<T> node_volumes(const TissueModel<T>& m);
 
 }  // namespace tissue::cpu

@@ -41,16 +41,6 @@ std::vector<index_t> slot_positions(const std::vector<index_t>& node_elem, index
   return slot;
 }
 
-/// sum_e V_e over each node's node_elem list in stored order, in T: the
-/// denominator of pass 2, computed exactly as the cpu backend does.
-template <class T>
-std::vector<T> node_volumes(const TissueModel<T>& m) {
-  std::vector<T> v(m.n_nodes, T(0));
-  for (index_t a = 0; a < m.n_nodes; ++a)
-    for (index_t k = m.node_elem_start[a]; k < m.node_elem_start[a + 1]; ++k) v[a] += m.volume[m.node_elem[k] >> 2];
-  return v;
-}
-
 }  // namespace
 
 template <class T>
@@ -73,7 +63,7 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   upload_array(cd_C_, m.cd_C, log, stream);
   upload_array(node_flags_, m.node_flags, log, stream);
   const std::vector<index_t> slot_of = slot_positions(m.node_elem, ne);
-  const std::vector<T> node_volume = node_volumes(m);
+  const std::vector<T> node_volume = node_volume_sums(m);
   upload_array(slot_of_, slot_of, log, stream);
   upload_array(node_volume_, node_volume, log, stream);
   CUDA_CHECK(cudaStreamSynchronize(stream));  // the host sources above must outlive the copies
