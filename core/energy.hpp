@@ -7,7 +7,9 @@
 #pragma once
 
 #include <cmath>
+#include <limits>
 
+#include "core/cube_root.hpp"
 #include "core/vec.hpp"
 
 namespace tissue {
@@ -16,14 +18,16 @@ namespace tissue {
 /// bulk moduli mu, K (Pa), deformation gradient F with J = det F, and the
 /// modified Jacobian Jbar of its volumetric term (Jbar = J for plain tets).
 /// Returns 0 when J <= 0 or is not finite: an inverted element has no
-/// energy of this law; the bad-element flag reports it.
+/// energy of this law; the bad-element flag reports it. Branch-free (a
+/// select), like the force routines, so that it vectorises.
 template <class T>
 TISSUE_HD T element_strain_energy(const Mat3<T>& F, T J, T Jbar, T volume, T mu, T K) {
-  if (!(J > T(0)) || !std::isfinite(J)) return T(0);
+  const bool ok = (J > T(0)) & (J <= std::numeric_limits<T>::max());  // & not &&: no branch
+  const T cbrt_J = cube_root(ok ? J : T(1));
   const T I1 = trace(transpose(F) * F);
-  const T iso = mu / T(2) * (std::pow(J, T(-2) / T(3)) * I1 - T(3));
+  const T iso = mu / T(2) * (I1 / (cbrt_J * cbrt_J) - T(3));
   const T vol = K / T(2) * (Jbar - T(1)) * (Jbar - T(1));
-  return volume * (iso + vol);
+  return ok ? volume * (iso + vol) : T(0);
 }
 
 }  // namespace tissue

@@ -5,6 +5,11 @@
 #if defined(__CUDACC__)
 #define TISSUE_HD __host__ __device__ __forceinline__
 #define TISSUE_UNROLL _Pragma("unroll")
+#elif defined(__GNUC__)
+// Always inlined on the host too: the cpu backend's element loops vectorise
+// across elements only when the whole per-element math is inlined into them.
+#define TISSUE_HD inline __attribute__((always_inline))
+#define TISSUE_UNROLL _Pragma("GCC unroll 16")
 #else
 #define TISSUE_HD inline
 #define TISSUE_UNROLL

@@ -225,6 +225,9 @@ TissueModel<double> build_model(const ModelInput& in) {
   std::vector<index_t> fill(m.node_elem_start.begin(), m.node_elem_start.end() - 1);
   for (index_t e = 0; e < ne; ++e)
     for (int a = 0; a < 4; ++a) m.node_elem[fill[m.elem_nodes[a * ne + e]]++] = 4 * e + a;
+  m.elem_slot.resize(4 * size_t(ne));
+  for (size_t k = 0; k < m.node_elem.size(); ++k)
+    m.elem_slot[size_t(m.node_elem[k] & 3) * ne + (m.node_elem[k] >> 2)] = static_cast<index_t>(k);
 
   extract_surface(m);
 
@@ -264,6 +267,7 @@ TissueModel<T> convert(const TissueModel<double>& m) {
   r.cd_C = cv(m.cd_C);
   r.node_elem_start = m.node_elem_start;
   r.node_elem = m.node_elem;
+  r.elem_slot = m.elem_slot;
   r.tris = m.tris;
   r.tri_elem = m.tri_elem;
   r.node_flags = m.node_flags;

@@ -79,6 +79,10 @@ struct TissueModel {
   std::vector<T> cd_A, cd_B, cd_C;   ///< central-difference constants (n_nodes each)
   std::vector<index_t> node_elem_start;  ///< CSR offsets into node_elem (n_nodes + 1)
   std::vector<index_t> node_elem;        ///< incident (element * 4 + corner), sorted (nnz)
+  std::vector<index_t> elem_slot;        ///< position in node_elem of each (corner, element):
+                                         ///< node_elem[elem_slot[a * n_elems + e]] == 4 e + a (4 x n_elems).
+                                         ///< Pass 3 writes a corner's force to its node's slot, so that
+                                         ///< pass 4 sums contiguous slots.
   std::vector<index_t> tris;         ///< outward surface triangles (3 x n_tris)
   std::vector<index_t> tri_elem;     ///< tet owning each surface triangle (n_tris)
   std::vector<std::uint8_t> node_flags;  ///< NodeFlag bits (n_nodes)

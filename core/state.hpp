@@ -22,8 +22,11 @@ struct TissueState {
   std::vector<std::uint8_t> driven;///< axis mask of the components the tool drives; 0 = not driven (n_nodes)
   std::vector<T> elem_pv;  ///< pass 1: p_e V_e (n_elems) N m
   std::vector<T> elem_J;   ///< pass 1: J_e = det F (n_elems)
+  std::vector<T> elem_F;   ///< pass 1: deformation gradient F (9 x n_elems, k = 3 i + j); host backends'
+                           ///< pass 3 reads it instead of recomputing F
   std::vector<T> node_p;   ///< pass 2: nodal pressure p_a (n_nodes) Pa
-  std::vector<T> elem_f;   ///< pass 3: element nodal forces (12 x n_elems, k = 3 * corner + axis) N
+  std::vector<T> f_slot;   ///< pass 3: element nodal forces in node order: slot k = model.elem_slot of
+                           ///< (corner, element), xyz interleaved (4 n_elems x 3) N
   std::vector<T> f;        ///< pass 4: internal nodal force (3 x n_nodes) N
   Region region;           ///< active nodes and elements
 
@@ -33,8 +36,9 @@ struct TissueState {
     driven.assign(n_nodes, 0);
     elem_pv.assign(n_elems, T(0));
     elem_J.assign(n_elems, T(1));
+    elem_F.assign(9 * size_t(n_elems), T(0));
     node_p.assign(n_nodes, T(0));
-    elem_f.assign(12 * size_t(n_elems), T(0));
+    f_slot.assign(12 * size_t(n_elems), T(0));
   }
 };
 

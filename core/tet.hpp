@@ -6,6 +6,7 @@
 
 #include <cmath>
 
+#include "core/cube_root.hpp"
 #include "core/vec.hpp"
 
 namespace tissue {
@@ -66,7 +67,8 @@ TISSUE_HD Mat3<T> neo_hookean_pk2(const Mat3<T>& F, T J, T mu, T K) {
   const Mat3<T> C = transpose(F) * F;
   const T I1 = trace(C);
   const Mat3<T> Ci = inverse(C, J * J);  // det C = J^2
-  const T a = mu * std::pow(J, T(-2) / T(3));
+  const T cbrt_J = cube_root(J);
+  const T a = mu / (cbrt_J * cbrt_J);  // mu J^(-2/3)
   const T b = -a * I1 / T(3) + K * J * (J - T(1));
   Mat3<T> S = b * Ci;
   S(0, 0) += a;
@@ -81,7 +83,8 @@ template <class T>
 TISSUE_HD T neo_hookean_energy(const Mat3<T>& F, T mu, T K) {
   const T J = det(F);
   const T I1 = trace(transpose(F) * F);
-  return mu / T(2) * (std::pow(J, T(-2) / T(3)) * I1 - T(3)) + K / T(2) * (J - T(1)) * (J - T(1));
+  const T cbrt_J = cube_root(J);
+  return mu / T(2) * (I1 / (cbrt_J * cbrt_J) - T(3)) + K / T(2) * (J - T(1)) * (J - T(1));
 }
 
 /// Element pressure (Pa) from the volumetric law p = K (J - 1).
@@ -99,36 +102,56 @@ TISSUE_UNROLL
   for (int a = 0; a < 4; ++a) f[a] = P * Vec3<T>{dN[3 * a], dN[3 * a + 1], dN[3 * a + 2]};
 }
 
+/// f[a] = 0 for every corner unless `keep` (a select, not a branch).
+template <class T>
+TISSUE_HD void zero_unless(bool keep, Vec3<T> f[4]) {
+TISSUE_UNROLL
+  for (int a = 0; a < 4; ++a) f[a] = {keep ? f[a].x : T(0), keep ? f[a].y : T(0), keep ? f[a].z : T(0)};
+}
+
 /// IANP pass 3 for one element: from the averaged nodal pressure pbar (Pa),
 /// Jbar = 1 + pbar / K, Fbar = (Jbar / J)^(1/3) F, then f_a = V Fbar S(Fbar) dN_a.
-/// Returns J = det F of the unmodified gradient (<= 0 or NaN flags a bad element).
+/// Returns J = det F of the unmodified gradient; a bad element (J <= 0,
+/// Jbar <= 0 or NaN) gets zero forces and returns the offending value (J,
+/// or Jbar when only Jbar is bad). Branch-free: a bad element's arithmetic
+/// runs on stand-in values (J = Jbar = 1) and its forces are selected away,
+/// so SIMD lanes and GPU warps never diverge. F is the element's
+/// deformation_gradient (pass 1 may have computed it already).
 template <class T>
-TISSUE_HD T ianp_element_forces(const Vec3<T> u[4], const T dN[12], T volume, T mu, T K, T pbar, Vec3<T> f[4]) {
-  Mat3<T> F = deformation_gradient(u, dN);
+TISSUE_HD T ianp_element_forces(const Mat3<T>& F, const T dN[12], T volume, T mu, T K, T pbar, Vec3<T> f[4]) {
   const T J = det(F);
   const T Jbar = T(1) + pbar / K;
-  if (!(J > T(0)) || !(Jbar > T(0))) {
-    for (int a = 0; a < 4; ++a) f[a] = {T(0), T(0), T(0)};
-    return J > T(0) ? Jbar : J;  // report the non-positive one
-  }
-  const Mat3<T> Fbar = std::cbrt(Jbar / J) * F;
-  const Mat3<T> S = neo_hookean_pk2(Fbar, Jbar, mu, K);
-  element_nodal_forces(Fbar, S, volume, dN, f);
-  return J;
+  const bool ok = (J > T(0)) & (Jbar > T(0));  // & not &&: no branch
+  const T Js = ok ? J : T(1), Jbars = ok ? Jbar : T(1);
+  const Mat3<T> Fbar = cube_root(Jbars / Js) * F;
+  element_nodal_forces(Fbar, neo_hookean_pk2(Fbar, Jbars, mu, K), volume, dN, f);
+  zero_unless(ok, f);
+  return ok ? J : (J > T(0) ? Jbar : J);
+}
+
+/// The same from the corner displacements u (m).
+template <class T>
+TISSUE_HD T ianp_element_forces(const Vec3<T> u[4], const T dN[12], T volume, T mu, T K, T pbar, Vec3<T> f[4]) {
+  return ianp_element_forces(deformation_gradient(u, dN), dN, volume, mu, K, pbar, f);
 }
 
 /// Plain (un-averaged) tet forces f_a = V F S(F) dN_a: the locking-prone
 /// formulation, kept as a reference for tests and the locking study.
+/// Returns J; a bad element (J <= 0 or NaN) gets zero forces (branch-free,
+/// as above), from the deformation gradient F.
+template <class T>
+TISSUE_HD T plain_element_forces(const Mat3<T>& F, const T dN[12], T volume, T mu, T K, Vec3<T> f[4]) {
+  const T J = det(F);
+  const bool ok = J > T(0);
+  element_nodal_forces(F, neo_hookean_pk2(F, ok ? J : T(1), mu, K), volume, dN, f);
+  zero_unless(ok, f);
+  return J;
+}
+
+/// The same from the corner displacements u (m).
 template <class T>
 TISSUE_HD T plain_element_forces(const Vec3<T> u[4], const T dN[12], T volume, T mu, T K, Vec3<T> f[4]) {
-  const Mat3<T> F = deformation_gradient(u, dN);
-  const T J = det(F);
-  if (!(J > T(0))) {
-    for (int a = 0; a < 4; ++a) f[a] = {T(0), T(0), T(0)};
-    return J;
-  }
-  element_nodal_forces(F, neo_hookean_pk2(F, J, mu, K), volume, dN, f);
-  return J;
+  return plain_element_forces(deformation_gradient(u, dN), dN, volume, mu, K, f);
 }
 
 /// Per-node integration constants of the damped central difference,

@@ -23,7 +23,7 @@ namespace tissue::cpu {
 /// are frozen (u_prev = u_next = u, f = 0); halo nodes are held at their
 /// current u (and stopped: u_prev = u_next = u); fixed and driven components
 /// stay held; every other component of a region node is released. Elements outside the region
-/// get elem_f = 0, so a halo node's f sums only computed elements. The
+/// get zero forces in f_slot, so a halo node's f sums only computed elements. The
 /// caller recomputes pass 1 over all elements afterwards.
 template <class T>
 void install_region(const TissueModel<T>& m, TissueState<T>& s, Region region);

@@ -3,10 +3,12 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <cmath>
 #include <utility>
 
 #include "core/tet.hpp"
+#include "cpu/element_lanes.hpp"
 
 namespace tissue::cpu {
 namespace {
@@ -23,73 +25,83 @@ void for_each_index(std::span<const index_t> idx, std::size_t grain, tbb::affini
       part);
 }
 
-/// Corner displacements u (m) and shape gradients dN (4 x 3, 1/m) of element e.
-template <class T>
-inline void load_element(const TissueModel<T>& m, const T* u, index_t e, Vec3<T> ue[4], T dN[12]) {
-  const index_t n = m.n_nodes, ne = m.n_elems;
-  for (int a = 0; a < 4; ++a) {
-    const index_t i = m.elem_nodes[a * ne + e];
-    ue[a] = {u[i], u[n + i], u[2 * n + i]};
-  }
-  for (int k = 0; k < 12; ++k) dN[k] = m.dndx[k * ne + e];
+/// Runs body(first, count) over consecutive batches of at most kLanes
+/// entries of idx, in parallel chunks of at least `grain` entries.
+template <class Body>
+void for_each_batch(std::span<const index_t> idx, std::size_t grain, tbb::affinity_partitioner& part,
+                    const Body& body) {
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, idx.size(), grain),
+      [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t k = r.begin(); k < r.end(); k += kLanes)
+          body(idx.data() + k, int(std::min<std::size_t>(kLanes, r.end() - k)));
+      },
+      part);
 }
 
 template <class T, bool kIanp>
 void element_forces_impl(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems,
                          BadElementFlag& bad, tbb::affinity_partitioner& part) {
   const index_t ne = m.n_elems;
-  const T* u = s.u.data();
-  const T* p = s.node_p.data();
-  T* ef = s.elem_f.data();
-  for_each_index(elems, kForceGrain, part, [&](index_t e) {
-    Vec3<T> ue[4], f[4];
-    T dN[12];
-    load_element(m, u, e, ue, dN);
-    T J;
-    if constexpr (kIanp) {
-      const index_t* c = m.elem_nodes.data();
-      const T pbar = T(0.25) * (((p[c[e]] + p[c[ne + e]]) + p[c[2 * ne + e]]) + p[c[3 * ne + e]]);
-      J = ianp_element_forces(ue, dN, m.volume[e], m.mu[e], m.K[e], pbar, f);
-    } else {
-      J = plain_element_forces(ue, dN, m.volume[e], m.mu[e], m.K[e], f);
+  const T* p = kIanp ? s.node_p.data() : nullptr;
+  const index_t* slot = m.elem_slot.data();
+  T* fs = s.f_slot.data();
+  for_each_batch(elems, kForceGrain, part, [&](const index_t* e, int count) {
+    ElementLanes<T> b;
+    gather_force_lanes(m, s.elem_F.data(), p, e, count, b);
+    lanes_forces<T, kIanp>(b);
+    for (int l = 0; l < count; ++l) {
+      const T J = b.J[l];
+      if (!(J > T(0)) || !std::isfinite(J)) bad.record(e[l], double(J));
+      for (int a = 0; a < 4; ++a) {
+        T* f = fs + 3 * size_t(slot[a * ne + e[l]]);
+        f[0] = b.f[3 * a][l];
+        f[1] = b.f[3 * a + 1][l];
+        f[2] = b.f[3 * a + 2][l];
+      }
     }
-    if (!(J > T(0)) || !std::isfinite(J)) bad.record(e, double(J));
-    for (int a = 0; a < 4; ++a)
-      for (int c = 0; c < 3; ++c) ef[(3 * a + c) * ne + e] = f[a][c];
   });
 }
 
 }  // namespace
 
 template <class T>
+void element_pressure(const TissueModel<T>& m, const T* u, std::span<const index_t> elems, T* J_out, T* pv_out,
+                      T* F_out, tbb::affinity_partitioner& part) {
+  const std::size_t ne = m.n_elems;
+  for_each_batch(elems, kElemGrain, part, [&](const index_t* e, int count) {
+    ElementLanes<T> b;
+    gather_lanes(m, u, static_cast<const T*>(nullptr), e, count, b);
+    lanes_pressure(b);
+    scatter_rows(b.out, ne, 1, e, b, pv_out);
+    if (J_out) scatter_rows(b.J, ne, 1, e, b, J_out);
+    if (F_out) scatter_rows(&b.F[0][0], ne, 9, e, b, F_out);
+  });
+}
+
+template <class T>
 void element_pressure(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems,
                       tbb::affinity_partitioner& part) {
-  const T* u = s.u.data();
-  T* J_out = s.elem_J.data();
-  T* pv_out = s.elem_pv.data();
-  for_each_index(elems, kElemGrain, part, [&](index_t e) {
-    Vec3<T> ue[4];
-    T dN[12];
-    load_element(m, u, e, ue, dN);
-    const T J = det(deformation_gradient(ue, dN));
-    J_out[e] = J;
-    pv_out[e] = volumetric_pressure(J, m.K[e]) * m.volume[e];
+  element_pressure(m, s.u.data(), elems, s.elem_J.data(), s.elem_pv.data(), s.elem_F.data(), part);
+}
+
+template <class T>
+void nodal_pressure(const TissueModel<T>& m, const T* pv, const std::vector<T>& node_volume,
+                    std::span<const index_t> nodes, T* p, tbb::affinity_partitioner& part) {
+  const index_t* start = m.node_elem_start.data();
+  const index_t* list = m.node_elem.data();
+  const T* vol = node_volume.data();
+  for_each_index(nodes, kNodeGrain, part, [&](index_t a) {
+    T sum = 0;
+    for (index_t k = start[a]; k < start[a + 1]; ++k) sum += pv[list[k] >> 2];
+    p[a] = sum / vol[a];
   });
 }
 
 template <class T>
 void nodal_pressure(const TissueModel<T>& m, TissueState<T>& s, const std::vector<T>& node_volume,
                     std::span<const index_t> nodes, tbb::affinity_partitioner& part) {
-  const index_t* start = m.node_elem_start.data();
-  const index_t* list = m.node_elem.data();
-  const T* pv = s.elem_pv.data();
-  const T* vol = node_volume.data();
-  T* p = s.node_p.data();
-  for_each_index(nodes, kNodeGrain, part, [&](index_t a) {
-    T sum = 0;
-    for (index_t k = start[a]; k < start[a + 1]; ++k) sum += pv[list[k] >> 2];
-    p[a] = sum / vol[a];
-  });
+  nodal_pressure(m, s.elem_pv.data(), node_volume, nodes, s.node_p.data(), part);
 }
 
 template <class T>
@@ -104,10 +116,9 @@ void element_forces(const TissueModel<T>& m, TissueState<T>& s, std::span<const 
 template <class T>
 void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> nodes,
                  tbb::affinity_partitioner& part) {
-  const index_t n = m.n_nodes, ne = m.n_elems;
+  const index_t n = m.n_nodes;
   const index_t* start = m.node_elem_start.data();
-  const index_t* list = m.node_elem.data();
-  const T* ef = s.elem_f.data();
+  const T* fs = s.f_slot.data();
   const T* u = s.u.data();
   const T* u_prev = s.u_prev.data();
   const T* u_held = s.u_held.data();
@@ -116,10 +127,8 @@ void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const ind
   T* u_next = s.u_next.data();
   for_each_index(nodes, kNodeGrain, part, [&](index_t a) {
     T f[3] = {0, 0, 0};
-    for (index_t k = start[a]; k < start[a + 1]; ++k) {
-      const index_t e = list[k] >> 2, corner = list[k] & 3;
-      for (int c = 0; c < 3; ++c) f[c] += ef[(3 * corner + c) * ne + e];
-    }
+    for (index_t k = start[a]; k < start[a + 1]; ++k)
+      for (int c = 0; c < 3; ++c) f[c] += fs[3 * size_t(k) + c];
     const std::uint8_t h = held[a];
     if (h == kAllAxes) {
       for (int c = 0; c < 3; ++c) {
@@ -142,8 +151,12 @@ void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const ind
 #define TISSUE_CPU_PASSES(T)                                                                                      \
   template void element_pressure(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>,                \
                                  tbb::affinity_partitioner&);                                                     \
+  template void element_pressure(const TissueModel<T>&, const T*, std::span<const index_t>, T*, T*, T*,           \
+                                 tbb::affinity_partitioner&);                                                     \
   template void nodal_pressure(const TissueModel<T>&, TissueState<T>&, const std::vector<T>&,                     \
                                std::span<const index_t>, tbb::affinity_partitioner&);                             \
+  template void nodal_pressure(const TissueModel<T>&, const T*, const std::vector<T>&, std::span<const index_t>,  \
+                               T*, tbb::affinity_partitioner&);                                                   \
   template void element_forces(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>, BadElementFlag&, \
                                tbb::affinity_partitioner&);                                                       \
   template void node_update(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>,                     \

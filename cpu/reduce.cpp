@@ -8,8 +8,8 @@
 #include <cmath>
 #include <functional>
 
-#include "core/energy.hpp"
-#include "core/tet.hpp"
+#include "cpu/element_lanes.hpp"
+#include "cpu/passes.hpp"
 
 namespace tissue::cpu {
 namespace {
@@ -98,61 +98,32 @@ double front_displacement(const TissueModel<T>& m, const TissueState<T>& s) {
 template <class T>
 double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<T>& node_volume,
                      EnergyScratch<T>& scratch) {
-  const index_t n = m.n_nodes, ne = m.n_elems;
   const std::span<const index_t> elems = s.region.elems, nodes = s.region.nodes;
-  const index_t* en = m.elem_nodes.data();
-  const T* u = s.u.data();
-  auto gradient = [&](index_t e, T* J) {
-    Vec3<T> ue[4];
-    T dN[12];
-    for (int a = 0; a < 4; ++a) {
-      const index_t i = en[a * ne + e];
-      ue[a] = {u[i], u[n + i], u[2 * n + i]};
-    }
-    for (int k = 0; k < 12; ++k) dN[k] = m.dndx[k * ne + e];
-    const Mat3<T> F = deformation_gradient(ue, dN);
-    *J = det(F);
-    return F;
-  };
+  const T* node_p = nullptr;
   if (m.ianp) {
     // passes 1 and 2 at the current u, into scratch (elements outside the
     // region keep the state's values: their nodes do not move)
     scratch.elem_pv.assign(s.elem_pv.begin(), s.elem_pv.end());
-    scratch.node_p.resize(n);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, elems.size(), kReduceGrain),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t k = r.begin(); k != r.end(); ++k) {
-                          const index_t e = elems[k];
-                          T J;
-                          gradient(e, &J);
-                          scratch.elem_pv[e] = volumetric_pressure(J, m.K[e]) * m.volume[e];
-                        }
-                      });
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nodes.size(), kReduceGrain),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t k = r.begin(); k != r.end(); ++k) {
-                          const index_t a = nodes[k];
-                          T sum = 0;
-                          for (index_t j = m.node_elem_start[a]; j < m.node_elem_start[a + 1]; ++j)
-                            sum += scratch.elem_pv[m.node_elem[j] >> 2];
-                          scratch.node_p[a] = sum / node_volume[a];
-                        }
-                      });
+    scratch.node_p.resize(m.n_nodes);
+    element_pressure(m, s.u.data(), elems, static_cast<T*>(nullptr), scratch.elem_pv.data(), static_cast<T*>(nullptr),
+                     scratch.pressure_part);
+    nodal_pressure(m, scratch.elem_pv.data(), node_volume, nodes, scratch.node_p.data(), scratch.nodal_part);
+    node_p = scratch.node_p.data();
   }
+  // batches aligned to kLanes inside every fixed-grain chunk: the same
+  // batches and the same summation order at any thread count
   return tbb::parallel_deterministic_reduce(
       tbb::blocked_range<std::size_t>(0, elems.size(), kReduceGrain), 0.0,
       [&](const tbb::blocked_range<std::size_t>& r, double sum) {
-        for (std::size_t k = r.begin(); k != r.end(); ++k) {
-          const index_t e = elems[k];
-          T J;
-          const Mat3<T> F = gradient(e, &J);
-          T Jbar = J;
-          if (m.ianp) {
-            const T* p = scratch.node_p.data();
-            const T pbar = T(0.25) * (((p[en[e]] + p[en[ne + e]]) + p[en[2 * ne + e]]) + p[en[3 * ne + e]]);
-            Jbar = T(1) + pbar / m.K[e];
-          }
-          sum += double(element_strain_energy(F, J, Jbar, m.volume[e], m.mu[e], m.K[e]));
+        for (std::size_t k = r.begin(); k < r.end(); k += kLanes) {
+          ElementLanes<T> b;
+          const int count = int(std::min<std::size_t>(kLanes, r.end() - k));
+          gather_lanes(m, s.u.data(), node_p, elems.data() + k, count, b);
+          if (m.ianp)
+            lanes_energy<T, true>(b);
+          else
+            lanes_energy<T, false>(b);
+          for (int l = 0; l < count; ++l) sum += double(b.out[l]);
         }
         return sum;
       },

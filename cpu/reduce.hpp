@@ -4,6 +4,8 @@
 // results are bit-reproducible). Every sum is accumulated in double.
 #pragma once
 
+#include <tbb/partitioner.h>
+
 #include <span>
 #include <vector>
 
@@ -39,6 +41,7 @@ template <class T>
 struct EnergyScratch {
   std::vector<T> elem_pv;  ///< p_e V_e at the current u (n_elems) N m
   std::vector<T> node_p;   ///< nodal pressure at the current u (n_nodes) Pa
+  tbb::affinity_partitioner pressure_part, nodal_part;  ///< for its passes 1 and 2
 };
 
 /// Strain energy sum_e V_e W(Fbar_e) over the region's elements at the

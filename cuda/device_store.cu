@@ -31,16 +31,6 @@ __global__ void reset_elems_kernel(index_t ne, T* elem_J) {
   if (e < ne) elem_J[e] = T(1);
 }
 
-/// slot_of[a * ne + e] = k where node_elem[k] == 4 e + a (the inverse permutation).
-std::vector<index_t> slot_positions(const std::vector<index_t>& node_elem, index_t ne) {
-  std::vector<index_t> slot(node_elem.size());
-  for (size_t k = 0; k < node_elem.size(); ++k) {
-    const index_t e = node_elem[k] >> 2, a = node_elem[k] & 3;
-    slot[size_t(a) * ne + e] = static_cast<index_t>(k);
-  }
-  return slot;
-}
-
 }  // namespace
 
 template <class T>
@@ -62,9 +52,8 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   upload_array(cd_B_, m.cd_B, log, stream);
   upload_array(cd_C_, m.cd_C, log, stream);
   upload_array(node_flags_, m.node_flags, log, stream);
-  const std::vector<index_t> slot_of = slot_positions(m.node_elem, ne);
   const std::vector<T> node_volume = node_volume_sums(m);
-  upload_array(slot_of_, slot_of, log, stream);
+  upload_array(slot_of_, m.elem_slot, log, stream);
   upload_array(node_volume_, node_volume, log, stream);
   CUDA_CHECK(cudaStreamSynchronize(stream));  // the host sources above must outlive the copies
 

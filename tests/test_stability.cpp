@@ -71,13 +71,17 @@ PressRun press(const TissueModel<double>& m, double depth, double hold, Precisio
   ScriptedDevice tool(press_path({0.0151, 0.0149, kH}, {0, 0, -1}, depth, 0.003, t_approach, t_press, hold, 0.05));
   PressRun r;
   r.steps_per_tick = sched.steps_per_tick();
+  double mu_V = 0;  // J
+  for (index_t e = 0; e < m.n_elems; ++e) mu_V += m.mu[e] * m.volume[e];
+  const double w_floor = 8 * (p == Precision::Float ? 6e-8 : 1.2e-16) * mu_V;
   try {
     while (sched.time() < t_approach + t_press + hold - 1e-9) {
       const TickReport rep = sched.tick(tool);
       ++r.ticks;
       const double e = rep.kinetic + rep.strain_energy;
-      // (W >= 0 exactly; summed rounding of nearly undeformed elements may dip a hair below)
-      r.finite = r.finite && std::isfinite(e) && std::isfinite(norm(rep.force)) && rep.strain_energy > -1e-15;
+      // (W >= 0 exactly; the rounding of nearly undeformed elements' W = mu/2 (I1 J^(-2/3) - 3) V + ...
+      // may dip below, by at most a few ulp of mu V per element)
+      r.finite = r.finite && std::isfinite(e) && std::isfinite(norm(rep.force)) && rep.strain_energy > -w_floor;
       r.peak_force = std::max(r.peak_force, norm(rep.force));
       if (rep.time <= t_approach + t_press + 1e-9) {
         r.e_press = e;

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include "core/tet.hpp"
@@ -443,6 +444,32 @@ TEST(TetMathDouble, BadElementsGiveZeroForceAndReportJ) {
 }
 
 // ---------------------------------------------------------------- central difference
+
+// core/cube_root.hpp: within 4 ulp of std::cbrt over the whole normal range
+// (log-uniform samples, plus every value near 1 where J lives), exact on
+// cubes of powers of two, and inputs below the smallest normal number are
+// treated as that number (never NaN or Inf).
+TYPED_TEST(TetMath, CubeRootMatchesStdCbrt) {
+  using T = TypeParam;
+  const double lo = std::log(double(std::numeric_limits<T>::min())), hi = std::log(double(std::numeric_limits<T>::max()));
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> unit_interval(0, 1);
+  double worst = 0;
+  for (int i = 0; i < 200000; ++i) {
+    const T x = i < 2000 ? T(1) + T(i - 1000) * std::numeric_limits<T>::epsilon()
+                         : T(std::exp(lo + (hi - lo) * unit_interval(rng)));
+    const double want = std::cbrt(double(x));
+    worst = std::max(worst, std::fabs(double(cube_root(x)) - want) / (want * std::numeric_limits<T>::epsilon()));
+  }
+  EXPECT_LE(worst, 4.0) << "worst error in ulp";
+  EXPECT_EQ(cube_root(T(8)), T(2));
+  EXPECT_EQ(cube_root(T(0.125)), T(0.5));
+  EXPECT_EQ(cube_root(T(1)), T(1));
+  const T tiny = std::numeric_limits<T>::min();
+  EXPECT_EQ(cube_root(T(0)), cube_root(tiny));
+  EXPECT_EQ(cube_root(tiny / T(1024)), cube_root(tiny));
+  EXPECT_TRUE(std::isfinite(cube_root(T(0))));
+}
 
 TEST(CentralDifference, UndampedConstants) {
   const double m = 0.003, dt = 2e-4;

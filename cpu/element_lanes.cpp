@@ -1,0 +1,95 @@
+#include "cpu/element_lanes.hpp"
+
+#include "core/energy.hpp"
+#include "core/tet.hpp"
+
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__SANITIZE_THREAD__)
+#define TISSUE_SIMD_CLONES __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
+#else
+#define TISSUE_SIMD_CLONES
+#endif
+
+namespace tissue::cpu {
+namespace {
+
+/// Lane l's corner displacements and shape gradients as core's arguments.
+template <class T>
+inline void lane_element(const ElementLanes<T>& b, int l, Vec3<T> ue[4], T dN[12]) {
+  TISSUE_UNROLL
+  for (int a = 0; a < 4; ++a) ue[a] = {b.u[3 * a][l], b.u[3 * a + 1][l], b.u[3 * a + 2][l]};
+  TISSUE_UNROLL
+  for (int k = 0; k < 12; ++k) dN[k] = b.dN[k][l];
+}
+
+}  // namespace
+
+/// Pass 1 on every lane: J = det F, out = volumetric_pressure(J, K) V.
+template <class T>
+TISSUE_SIMD_CLONES void lanes_pressure(ElementLanes<T>& b) {
+#pragma GCC ivdep
+  for (int l = 0; l < kLanes; ++l) {
+    Vec3<T> ue[4];
+    T dN[12];
+    lane_element(b, l, ue, dN);
+    const Mat3<T> F = deformation_gradient(ue, dN);
+    const T J = det(F);
+    TISSUE_UNROLL
+    for (int k = 0; k < 9; ++k) b.F[k][l] = F.m[k];
+    b.J[l] = J;
+    b.out[l] = volumetric_pressure(J, b.K[l]) * b.V[l];
+  }
+}
+
+/// Pass 3 on every lane: ianp_element_forces (or plain_element_forces) into
+/// f, its returned J into J.
+template <class T, bool kIanp>
+TISSUE_SIMD_CLONES void lanes_forces(ElementLanes<T>& b) {
+#pragma GCC ivdep
+  for (int l = 0; l < kLanes; ++l) {
+    Vec3<T> f[4];
+    T dN[12];
+    Mat3<T> F;
+    TISSUE_UNROLL
+    for (int k = 0; k < 12; ++k) dN[k] = b.dN[k][l];
+    TISSUE_UNROLL
+    for (int k = 0; k < 9; ++k) F.m[k] = b.F[k][l];
+    if constexpr (kIanp)
+      b.J[l] = ianp_element_forces(F, dN, b.V[l], b.mu[l], b.K[l], b.pbar[l], f);
+    else
+      b.J[l] = plain_element_forces(F, dN, b.V[l], b.mu[l], b.K[l], f);
+    TISSUE_UNROLL
+    for (int a = 0; a < 4; ++a) {
+      b.f[3 * a][l] = f[a].x;
+      b.f[3 * a + 1][l] = f[a].y;
+      b.f[3 * a + 2][l] = f[a].z;
+    }
+  }
+}
+
+/// Strain energy on every lane: out = element_strain_energy with Jbar from
+/// pbar (IANP) or Jbar = J (plain).
+template <class T, bool kIanp>
+TISSUE_SIMD_CLONES void lanes_energy(ElementLanes<T>& b) {
+#pragma GCC ivdep
+  for (int l = 0; l < kLanes; ++l) {
+    Vec3<T> ue[4];
+    T dN[12];
+    lane_element(b, l, ue, dN);
+    const Mat3<T> F = deformation_gradient(ue, dN);
+    const T J = det(F);
+    const T Jbar = kIanp ? T(1) + b.pbar[l] / b.K[l] : J;
+    b.out[l] = element_strain_energy(F, J, Jbar, b.V[l], b.mu[l], b.K[l]);
+  }
+}
+
+#define TISSUE_CPU_LANES(T)                         \
+  template void lanes_pressure<T>(ElementLanes<T>&); \
+  template void lanes_forces<T, true>(ElementLanes<T>&); \
+  template void lanes_forces<T, false>(ElementLanes<T>&); \
+  template void lanes_energy<T, true>(ElementLanes<T>&); \
+  template void lanes_energy<T, false>(ElementLanes<T>&);
+TISSUE_CPU_LANES(float)
+TISSUE_CPU_LANES(double)
+#undef TISSUE_CPU_LANES
+
+}  // namespace tissue::cpu
