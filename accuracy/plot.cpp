@@ -106,7 +106,8 @@ const std::map<std::string, Colour>& group_colours() {
   static const std::map<std::string, Colour> c{
       {"baseline", {0, 0, 0}},       {"depth", {31, 119, 180}},   {"auto", {214, 39, 40}},
       {"precision", {148, 103, 189}}, {"safety", {44, 160, 44}},   {"mesh", {255, 127, 14}},
-      {"tolerance", {140, 86, 75}},  {"anchor", {23, 190, 207}},  {"proposed", {227, 119, 194}}};
+      {"tolerance", {140, 86, 75}},  {"anchor", {23, 190, 207}},  {"compare", {227, 119, 194}},
+      {"mass", {188, 189, 34}}};
   return c;
 }
 

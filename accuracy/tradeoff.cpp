@@ -45,6 +45,8 @@ struct MeshCase {
   std::string failed;            ///< why its first reference failed (the mesh is then skipped)
   std::vector<double> fine_u;    ///< the finest mesh's reference at this mesh's nodes (3 x n_nodes)
   Vec3<double> fine_force = {};  ///< the finest mesh's force on the tool (N)
+  std::vector<Vec3<double>> press_force;  ///< the dynamic reference's force per tick up to the hold (N);
+                                          ///< empty until first needed (dynamic_reference)
 };
 
 const std::vector<Waypoint>& tool_path(const scene::Scene& s) {
@@ -166,12 +168,27 @@ MeshCase make_mesh_case(const scene::Scene& base, int target, const std::string&
   return mc;
 }
 
-/// Runs one setting; returns one row per tolerance in `tols` (ascending order of capture).
+/// max_k |f_k - ref_k| / max_k |ref_k| over the ticks both have (N / N).
+double press_force_error(const std::vector<Vec3<double>>& f, const std::vector<Vec3<double>>& ref) {
+  double err = 0, scale = 0;
+  for (std::size_t k = 0; k < std::min(f.size(), ref.size()); ++k) {
+    err = std::max(err, norm(f[k] - ref[k]));
+    scale = std::max(scale, norm(ref[k]));
+  }
+  return scale > 0 ? err / scale : NAN;
+}
+
+/// Runs one setting; returns one row per tolerance in `tols` (ascending
+/// order of capture). The force per tick up to the hold goes to `press`;
+/// the rows' press_force_err compares it with mc.press_force (NaN while
+/// that is empty).
 std::vector<TradeoffRow> run_setting(const MeshCase& mc, const RefEntry& ref, const TradeoffSetting& st,
-                                     const std::vector<double>& tols, const TradeoffOptions& o) {
+                                     const std::vector<double>& tols, const TradeoffOptions& o,
+                                     std::vector<Vec3<double>>& press) {
   scene::Scene s = mc.scene;
   s.solver.dt = 0;
   s.solver.dt_safety = st.dt_safety;
+  s.solver.mass_scaling = st.mass_scaling;
   s.solver.precision = st.precision;
   if (!o.backend.empty()) s.solver.backend = o.backend;
   const TissueModel<double> model = scene::load_model(s);
@@ -185,6 +202,7 @@ std::vector<TradeoffRow> run_setting(const MeshCase& mc, const RefEntry& ref, co
   const std::vector<Waypoint> path = path_to_hold(tool_path(s));
   const double t_hold = path.back().t;
   ScriptedDevice device(path);
+  press.clear();
 
   std::vector<std::optional<TradeoffRow>> rows(tols.size());
   std::vector<double> tick_wall;  // per contact tick (s)
@@ -200,6 +218,7 @@ std::vector<TradeoffRow> run_setting(const MeshCase& mc, const RefEntry& ref, co
     r.mesh_elems = model.n_elems;
     r.dt = model.dt;
     r.steps_per_tick = sched.steps_per_tick();
+    r.added_mass = model.added_mass / model.total_mass;
     r.region_nodes = rep.region_nodes;
     r.region_elems = rep.region_elems;
     r.depth_reached = rep.depth;
@@ -237,7 +256,10 @@ std::vector<TradeoffRow> run_setting(const MeshCase& mc, const RefEntry& ref, co
       contact_steps += rep.steps;
       ++contact_ticks;
     }
-    if (rep.time < t_hold - 1e-9) continue;
+    if (rep.time < t_hold - 1e-9) {
+      press.push_back(rep.force);
+      continue;
+    }
     hold_wall += w;
     ++hold_ticks;
     const bool kinetic_ok = rep.kinetic_rel < settings.kinetic_tol;
@@ -254,9 +276,32 @@ std::vector<TradeoffRow> run_setting(const MeshCase& mc, const RefEntry& ref, co
     rows[k]->wall_per_tick = median(tick_wall);
     rows[k]->cpu_per_tick = contact_cpu / std::max(contact_ticks, 1L);
     rows[k]->steps_per_s = contact_steps / std::max(contact_wall, 1e-12);
+    rows[k]->press_force_err = mc.press_force.empty() ? NAN : press_force_error(press, mc.press_force);
     out.push_back(*rows[k]);
   }
   return out;
+}
+
+/// The setting whose dynamics the press_force_err column measures against:
+/// whole mesh, double, dt = 0.5 dt_crit, no mass scaling.
+TradeoffSetting dynamic_reference_setting() {
+  TradeoffSetting s;
+  s.group = "dynamic reference";
+  s.label = "dynamic reference: all, double, safety 0.5, no mass scaling";
+  s.depth = kDepthAll;
+  s.precision = Precision::Double;
+  s.dt_safety = 0.5;
+  s.mass_scaling = 0;
+  return s;
+}
+
+/// Fills mc.press_force on first use (one extra run of the mesh).
+void dynamic_reference(MeshCase& mc, const TradeoffOptions& o, std::vector<TradeoffReference>& report) {
+  if (!mc.press_force.empty()) return;
+  const TradeoffSetting d = dynamic_reference_setting();
+  std::vector<Vec3<double>> press;
+  run_setting(mc, reference_for(mc, d.precision, o, report), d, {d.residual_tol}, o, press);
+  mc.press_force = std::move(press);
 }
 
 std::string fmt_tol(double x) { return fmt::format("{:g}", x); }
@@ -286,19 +331,20 @@ std::vector<TradeoffSetting> tradeoff_settings(const scene::Scene& scene, const 
   base.depth = scene.solver.depth;
   base.precision = scene.solver.precision;
   base.dt_safety = scene.solver.dt_safety;
+  base.mass_scaling = scene.solver.mass_scaling;
   base.residual_tol = scene.solver.residual_tol;
   const auto it = std::find(o.mesh_targets.begin(), o.mesh_targets.end(), 0);
   base.mesh = it == o.mesh_targets.end() ? 0 : static_cast<int>(it - o.mesh_targets.begin());
-  base.label = fmt::format("baseline: depth {}, {}, safety {:g}", depth_name(base.depth), to_string(base.precision),
-                           base.dt_safety);
+  base.label = fmt::format("baseline: depth {}, {}, safety {:g}, mass {:g}", depth_name(base.depth),
+                           to_string(base.precision), base.dt_safety, base.mass_scaling);
   // the anchor of the precision, safety, mesh and tolerance groups: the
   // baseline without truncation or float rounding, so that their own errors show
   TradeoffSetting anchor = base;
   anchor.group = "anchor";
   anchor.depth = o.anchor_depth;
   anchor.precision = o.anchor_precision;
-  anchor.label = fmt::format("anchor: depth {}, {}, safety {:g}", depth_name(anchor.depth),
-                             to_string(anchor.precision), anchor.dt_safety);
+  anchor.label = fmt::format("anchor: depth {}, {}, safety {:g}, mass {:g}", depth_name(anchor.depth),
+                             to_string(anchor.precision), anchor.dt_safety, anchor.mass_scaling);
   std::vector<TradeoffSetting> out{base, anchor};
   auto vary = [&](const TradeoffSetting& from, const char* group, std::string label, auto&& set) {
     TradeoffSetting s = from;
@@ -321,6 +367,10 @@ std::vector<TradeoffSetting> tradeoff_settings(const scene::Scene& scene, const 
   for (double f : o.safeties)
     if (f != anchor.dt_safety)
       vary(anchor, "safety", fmt::format("anchor, safety {:g}", f), [&](TradeoffSetting& s) { s.dt_safety = f; });
+  for (double f : o.mass_scalings)
+    if (f != anchor.mass_scaling)
+      vary(anchor, "mass", f == 0 ? std::string("anchor, no mass scaling") : fmt::format("anchor, mass scaling {:g}", f),
+           [&](TradeoffSetting& s) { s.mass_scaling = f; });
   for (std::size_t m = 0; m < o.mesh_targets.size(); ++m)
     if (int(m) != anchor.mesh)
       vary(anchor, "mesh", fmt::format("anchor, {} mesh", o.mesh_names.at(m)),
@@ -328,14 +378,14 @@ std::vector<TradeoffSetting> tradeoff_settings(const scene::Scene& scene, const 
   for (double t : o.residual_tols)
     if (t != anchor.residual_tol)
       vary(anchor, "tolerance", fmt::format("anchor, tol {}", fmt_tol(t)), [&](TradeoffSetting& s) { s.residual_tol = t; });
-  for (const TradeoffSetting& p : o.proposed) {
+  for (const TradeoffSetting& p : o.compare) {
     TradeoffSetting s = p;
-    s.group = "proposed";
+    s.group = "compare";
     s.mesh = base.mesh;
     if (s.label.empty())
-      s.label = fmt::format("proposed: depth {}{}, {}, safety {:g}, tol {}", depth_name(s.depth),
+      s.label = fmt::format("compare: depth {}{}, {}, safety {:g}, mass {:g}, tol {}", depth_name(s.depth),
                             s.depth == kDepthAuto ? fmt::format(" {:g}", s.auto_tol) : "", to_string(s.precision),
-                            s.dt_safety, fmt_tol(s.residual_tol));
+                            s.dt_safety, s.mass_scaling, fmt_tol(s.residual_tol));
     out.push_back(s);
   }
   return out;
@@ -391,8 +441,10 @@ TradeoffResult run_tradeoff(const scene::Scene& scene, const TradeoffOptions& o)
     std::vector<TradeoffRow> rows;
     try {
       if (!mc.failed.empty()) throw std::runtime_error("no reference on this mesh: " + mc.failed);
+      dynamic_reference(mc, o, res.references);
       const RefEntry& ref = reference_for(mc, s.precision, o, res.references);
-      rows = run_setting(mc, ref, s, base ? base_tols : std::vector<double>{s.residual_tol}, o);
+      std::vector<Vec3<double>> press;
+      rows = run_setting(mc, ref, s, base ? base_tols : std::vector<double>{s.residual_tol}, o, press);
     } catch (const std::exception& e) {
       rows.assign(base ? base_tols.size() : 1, TradeoffRow{});
       for (TradeoffRow& r : rows) {
@@ -450,28 +502,30 @@ std::string tradeoff_table(const TradeoffResult& res) {
                        r.mesh, r.nodes, r.elems, r.contact_tri, r.residual, r.steps, r.wall, norm(r.force),
                        1e3 * r.max_disp);
   out += fmt::format(
-      "{:<44} {:>6} {:>6} {:>5} {:>6} {:>5} {:>6} {:>8} {:>8} {:>8} {:>6} {:>3} {:>9} {:>9} {:>9} {:>9} {:>9} {}\n",
-      "setting", "tets", "prec", "safe", "tol", "depth", "elems", "ms/tick", "cpu ms", "steps/s", "ticks", "eq",
-      "u err", "F err", "u err*", "u far*", "F err*", "P");
+      "{:<44} {:>6} {:>6} {:>5} {:>6} {:>6} {:>5} {:>5} {:>6} {:>8} {:>8} {:>8} {:>6} {:>3} {:>9} {:>9} {:>9} {:>9} "
+      "{:>9} {:>9} {}\n",
+      "setting", "tets", "prec", "safe", "mass", "tol", "steps", "depth", "elems", "ms/tick", "cpu ms", "steps/s",
+      "ticks", "eq", "u err", "F err", "press F", "u err*", "u far*", "F err*", "P");
   for (const TradeoffRow& r : res.rows) {
     const TradeoffSetting& s = r.setting;
     if (!r.failed.empty()) {
-      out += fmt::format("{:<44} {:>6} {:>6} {:>5g} {:>6g}  failed: {}\n", s.label.substr(0, 44), r.mesh_elems,
-                         to_string(s.precision), s.dt_safety, s.residual_tol, r.failed);
+      out += fmt::format("{:<44} {:>6} {:>6} {:>5g} {:>6g} {:>6g}  failed: {}\n", s.label.substr(0, 44),
+                         r.mesh_elems, to_string(s.precision), s.dt_safety, s.mass_scaling, s.residual_tol, r.failed);
       continue;
     }
     out += fmt::format(
-        "{:<44} {:>6} {:>6} {:>5g} {:>6g} {:>5} {:>6} {:>8.3f} {:>8.3f} {:>8.0f} {:>6} {:>3} {:>9.2e} {:>9.2e} "
-        "{:>9.2e} {:>9.2e} {:>9.2e} {}\n",
-        s.label.substr(0, 44), r.mesh_elems, to_string(s.precision), s.dt_safety, s.residual_tol,
-        depth_name(r.depth_reached), r.region_elems, 1e3 * r.wall_per_tick, 1e3 * r.cpu_per_tick, r.steps_per_s,
-        r.hold_ticks,
-        r.equilibrium ? "y" : "n", r.disp_err, r.force_err, r.disp_err_fine, r.disp_err_fine_far, r.force_err_fine,
-        r.pareto ? "*" : "");
+        "{:<44} {:>6} {:>6} {:>5g} {:>6g} {:>6g} {:>5} {:>5} {:>6} {:>8.3f} {:>8.3f} {:>8.0f} {:>6} {:>3} {:>9.2e} "
+        "{:>9.2e} {:>9.2e} {:>9.2e} {:>9.2e} {:>9.2e} {}\n",
+        s.label.substr(0, 44), r.mesh_elems, to_string(s.precision), s.dt_safety, s.mass_scaling, s.residual_tol,
+        r.steps_per_tick, depth_name(r.depth_reached), r.region_elems, 1e3 * r.wall_per_tick, 1e3 * r.cpu_per_tick,
+        r.steps_per_s, r.hold_ticks, r.equilibrium ? "y" : "n", r.disp_err, r.force_err, r.press_force_err,
+        r.disp_err_fine, r.disp_err_fine_far, r.force_err_fine, r.pareto ? "*" : "");
   }
   out += "ms/tick: median wall time of a haptic tick in contact; cpu ms: mean process CPU time (all threads)\n"
          "per tick. u err, F err: max nodal displacement error / max displacement and tool-force error, against\n"
-         "the same mesh's reference; u err*, F err*: against the finest mesh's reference (u far*: the error\n"
+         "the same mesh's reference; press F: the largest tool-force difference during the press from the same\n"
+         "mesh run whole, double, safety 0.5, no mass scaling (the transient, relative to its peak force);\n"
+         "mass: the mass scaling budget; u err*, F err*: against the finest mesh's reference (u far*: the error\n"
          "over nodes farther than far_radius from the contact point). ticks: haptic ticks from the start of the\n"
          "hold to the measured tick (eq: the tolerance passed). P: on the Pareto front of (ms/tick, u err).\n";
   out += fmt::format("sweep wall time {:.1f} s\n", res.wall);
@@ -496,17 +550,20 @@ std::string tradeoff_json(const TradeoffResult& res) {
     const TradeoffSetting& s = r.setting;
     out += fmt::format(
         "    {{\"group\": \"{}\", \"label\": \"{}\", \"depth\": \"{}\", \"auto_tol\": {}, \"precision\": \"{}\", "
-        "\"dt_safety\": {}, \"mesh\": {}, \"residual_tol\": {}, \"mesh_nodes\": {}, \"mesh_tets\": {}, \"dt\": {}, "
+        "\"dt_safety\": {}, \"mass_scaling\": {}, \"mesh\": {}, \"residual_tol\": {}, \"mesh_nodes\": {}, "
+        "\"mesh_tets\": {}, \"dt\": {}, \"added_mass\": {}, "
         "\"steps_per_tick\": {}, \"wall_per_tick_s\": {}, \"cpu_per_tick_s\": {}, \"steps_per_s\": {}, \"region_nodes\": {}, "
         "\"region_elems\": {}, \"depth_reached\": \"{}\", \"equilibrium\": {}, \"hold_ticks\": {}, "
         "\"hold_wall_s\": {}, \"residual\": {}, \"force\": [{}, {}, {}], \"max_disp\": {}, \"disp_err\": {}, "
-        "\"force_err\": {}, \"disp_err_fine\": {}, \"disp_err_fine_far\": {}, \"force_err_fine\": {}, "
+        "\"force_err\": {}, \"press_force_err\": {}, \"disp_err_fine\": {}, \"disp_err_fine_far\": {}, "
+        "\"force_err_fine\": {}, "
         "\"pareto\": {}, \"failed\": \"{}\"}}{}\n",
-        s.group, json_escape(s.label), depth_name(s.depth), s.auto_tol, to_string(s.precision), s.dt_safety, s.mesh,
-        s.residual_tol, r.mesh_nodes, r.mesh_elems, r.dt, r.steps_per_tick, r.wall_per_tick, r.cpu_per_tick,
+        s.group, json_escape(s.label), depth_name(s.depth), s.auto_tol, to_string(s.precision), s.dt_safety,
+        s.mass_scaling, s.mesh, s.residual_tol, r.mesh_nodes, r.mesh_elems, r.dt, r.added_mass, r.steps_per_tick, r.wall_per_tick, r.cpu_per_tick,
         r.steps_per_s,
         r.region_nodes, r.region_elems, depth_name(r.depth_reached), r.equilibrium, r.hold_ticks, r.hold_wall,
-        r.residual, r.force.x, r.force.y, r.force.z, r.max_disp, r.disp_err, r.force_err, json_num(r.disp_err_fine),
+        r.residual, r.force.x, r.force.y, r.force.z, r.max_disp, r.disp_err, r.force_err,
+        json_num(r.press_force_err), json_num(r.disp_err_fine),
         json_num(r.disp_err_fine_far), json_num(r.force_err_fine), r.pareto, json_escape(r.failed), k + 1 < res.rows.size() ? "," : "");
   }
   out += "  ]\n}\n";

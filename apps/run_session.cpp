@@ -32,12 +32,21 @@ ScriptedDevice scripted_device(const scene::Scene& s) {
   return ScriptedDevice(tool.path);  // read_scene has loaded a path file into `path`
 }
 
+/// "off", or what selective mass scaling added and what it bought.
+std::string mass_scaling_line(const TissueModel<double>& m) {
+  if (m.scaled_elems == 0) return fmt::format("none (dt_crit without it: {:.4g} s)", m.dt_crit_physical);
+  return fmt::format("+{:.3g} % mass on {} elements (density up to x{:.3g}); dt_crit {:.4g} -> {:.4g} s",
+                     100 * m.added_mass / m.total_mass, m.scaled_elems, m.max_density_scale, m.dt_crit_physical,
+                     m.dt_crit);
+}
+
 void print_summary(const RunSummary& r, const Backend& b, const TissueModel<double>& m, int steps_per_tick) {
   fmt::print(
       "summary\n"
       "  backend            {} ({}, {})\n"
       "  mesh               {} nodes, {} tets, {} surface triangles\n"
       "  time step          dt = {:.4g} s (dt_crit = {:.4g} s, element {}), {} TLED steps per {:.3g} ms tick\n"
+      "  mass scaling       {}\n"
       "  TLED steps         {}\n"
       "  haptic ticks       {}\n"
       "  simulated time     {:.4f} s\n"
@@ -49,7 +58,7 @@ void print_summary(const RunSummary& r, const Backend& b, const TissueModel<doub
       "  region             {} nodes, {} elements\n"
       "  equilibrium        {}\n",
       b.name(), to_string(b.precision()), b.device_name(), m.n_nodes, m.n_elems, m.n_tris, m.dt, m.dt_crit,
-      m.dt_crit_elem, steps_per_tick, 1e3 * m.dt * steps_per_tick, r.steps, r.ticks, r.sim_time, r.wall_time,
+      m.dt_crit_elem, steps_per_tick, 1e3 * m.dt * steps_per_tick, mass_scaling_line(m), r.steps, r.ticks, r.sim_time, r.wall_time,
       r.sim_time / std::max(r.wall_time, 1e-12), r.steps / std::max(r.wall_time, 1e-12), 1e3 * r.max_disp,
       r.peak_force, r.final_force.x, r.final_force.y, r.final_force.z, r.region_nodes, r.region_elems,
       r.equilibrium ? "reached" : "not reached");

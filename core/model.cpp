@@ -78,6 +78,41 @@ void align_time_step(TissueModel<double>& m, double tick) {
   set_time_step(m, tick / steps, m.damping);
 }
 
+/// Mass element scaling would add to lift every dt_e to `need` (kg), with
+/// the count and the largest factor.
+MassScaling mass_needed(const std::vector<double>& dt_e, const std::vector<double>& rho_V, double need) {
+  MassScaling r;
+  r.need = need;
+  for (size_t e = 0; e < dt_e.size(); ++e)
+    if (dt_e[e] < need) {
+      const double s = (need / dt_e[e]) * (need / dt_e[e]);
+      r.added_mass += (s - 1) * rho_V[e];
+      ++r.scaled_elems;
+      r.max_scale = std::max(r.max_scale, s);
+    }
+  return r;
+}
+
+MassScaling choose_mass_scaling(const std::vector<double>& dt_e, const std::vector<double>& rho_V, double tick,
+                                double safety, double budget) {
+  double total = 0, dt_min = std::numeric_limits<double>::infinity();
+  for (size_t e = 0; e < dt_e.size(); ++e) {
+    total += rho_V[e];
+    dt_min = std::min(dt_min, dt_e[e]);
+  }
+  const int unscaled = std::max(1, int(std::ceil(tick / (safety * dt_min) * (1 - 1e-12))));
+  for (int n = 1;; ++n) {
+    const double dt = tick / n;
+    MassScaling r = n >= unscaled ? MassScaling{} : mass_needed(dt_e, rho_V, dt / safety);
+    if (n >= unscaled || r.added_mass <= budget * total) {
+      r.steps = n;
+      r.dt = dt;
+      if (r.need == 0) r.need = dt / safety;
+      return r;
+    }
+  }
+}
+
 double lowest_mode_estimate(const TissueModel<double>& m) {
   double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
   for (index_t i = 0; i < m.n_nodes; ++i)
@@ -160,6 +195,7 @@ TissueModel<double> build_model(const ModelInput& in) {
   m.ianp = in.ianp;
   m.dt_crit = std::numeric_limits<double>::infinity();
   std::vector<index_t> uses(n, 0);
+  std::vector<double> dt_elem(ne), rho_V(ne);  // for mass scaling
   for (index_t e = 0; e < ne; ++e) {
     index_t c[4];
     for (int a = 0; a < 4; ++a) {
@@ -205,6 +241,8 @@ TissueModel<double> build_model(const ModelInput& in) {
     // (2 / omega_max of the lumped linearised system) is 0.89..0.94 of
     // L / c for nu in 0.3..0.499, so their L_e carries a 0.85 factor.
     const double dt_e = (in.ianp ? 1.0 : 0.85) * tet_min_altitude(X, V) / wave;
+    dt_elem[e] = dt_e;
+    rho_V[e] = p.rho * V;
     if (dt_e < m.dt_crit) {
       m.dt_crit = dt_e;
       m.dt_crit_elem = e;
@@ -236,9 +274,42 @@ TissueModel<double> build_model(const ModelInput& in) {
   if (std::isnan(in.damping) || std::isinf(in.damping))
     throw ModelError(fmt::format("{}: damping alpha = {} 1/s must be finite (or < 0 for the default)", in.source,
                                  in.damping));
-  if (!(in.dt_safety > 0 && in.dt_safety < 1) && in.dt == 0)
+  if (!(in.dt_safety > 0 && in.dt_safety < 1) && (in.dt == 0 || in.mass_scaling > 0))
     throw ModelError(fmt::format("{}: dt safety factor {} must be in (0, 1)", in.source, in.dt_safety));
-  const double dt = in.dt > 0 ? in.dt : in.dt_safety * m.dt_crit;
+  m.dt_crit_physical = m.dt_crit;
+  double dt = in.dt > 0 ? in.dt : in.dt_safety * m.dt_crit;
+  if (!(in.mass_scaling >= 0 && in.mass_scaling < 1))
+    throw ModelError(fmt::format("{}: mass scaling budget {} must be in [0, 1) (a fraction of the total mass)",
+                                 in.source, in.mass_scaling));
+  if (in.mass_scaling > 0) {
+    MassScaling ms;
+    if (in.dt > 0) {  // lift every element to the requested step
+      ms = mass_needed(dt_elem, rho_V, in.dt / in.dt_safety);
+      if (ms.added_mass > in.mass_scaling * m.total_mass)
+        throw ModelError(fmt::format(
+            "{}: time step dt = {:.6g} s is above the stable limit dt_crit = {:.6g} s set by element {} "
+            "(min_e L_e / c_e), and lifting every element to dt / safety = {:.6g} s by mass scaling needs "
+            "{:.3g} % added mass on {} elements (budget {:.3g} %); use a smaller dt or a larger mass-scaling budget",
+            in.source, in.dt, m.dt_crit, m.dt_crit_elem, ms.need, 100 * ms.added_mass / m.total_mass,
+            ms.scaled_elems, 100 * in.mass_scaling));
+    } else if (in.tick > 0) {
+      ms = choose_mass_scaling(dt_elem, rho_V, in.tick, in.dt_safety, in.mass_scaling);
+      dt = ms.dt;
+    } else {
+      throw ModelError(fmt::format("{}: mass scaling needs a haptic tick or an explicit dt to aim at", in.source));
+    }
+    if (ms.scaled_elems > 0) {
+      for (index_t e = 0; e < ne; ++e)
+        if (dt_elem[e] < ms.need) {
+          const double s_e = (ms.need / dt_elem[e]) * (ms.need / dt_elem[e]);
+          for (int a = 0; a < 4; ++a) m.mass[m.elem_nodes[a * ne + e]] += (s_e - 1) * rho_V[e] / 4;
+        }
+      m.dt_crit = ms.need;  // every scaled element now has dt_e = need; the others had more
+      m.added_mass = ms.added_mass;
+      m.scaled_elems = ms.scaled_elems;
+      m.max_density_scale = ms.max_scale;
+    }
+  }
   const double damping = in.damping >= 0 ? in.damping : 2.0 * lowest_mode_estimate(m);
   try {
     set_time_step(m, dt, damping);
@@ -276,6 +347,10 @@ TissueModel<T> convert(const TissueModel<double>& m) {
   r.dt_crit_elem = m.dt_crit_elem;
   r.damping = m.damping;
   r.total_mass = m.total_mass;
+  r.added_mass = m.added_mass;
+  r.scaled_elems = m.scaled_elems;
+  r.max_density_scale = m.max_density_scale;
+  r.dt_crit_physical = m.dt_crit_physical;
   r.reoriented = m.reoriented;
   r.ianp = m.ianp;
   return r;

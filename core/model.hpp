@@ -38,6 +38,10 @@ struct ModelInput {
   double damping = -1;                   ///< mass-proportional damping alpha (1/s); < 0 = from the lowest-mode estimate
   bool ianp = true;                      ///< improved average nodal pressure; false = plain (locking-prone) tets,
                                          ///< whose dt_crit uses 0.85 x the smallest altitude (their measured limit)
+  double mass_scaling = 0;               ///< selective mass scaling budget: the most mass that may be added to the
+                                         ///< elements that limit the step, as a fraction of the total mass (0 = off;
+                                         ///< see choose_mass_scaling)
+  double tick = 0;                       ///< haptic period (s): with mass scaling and dt = 0, dt = tick / n
   std::string source = "<model>";        ///< names the input in error messages
 };
 
@@ -91,7 +95,11 @@ struct TissueModel {
   double dt_crit = 0;       ///< critical step min_e L_e / c_e (s)
   index_t dt_crit_elem = -1;///< element that sets dt_crit
   double damping = 0;       ///< alpha (1/s)
-  double total_mass = 0;    ///< kg
+  double total_mass = 0;    ///< kg, physical (without mass scaling's added mass)
+  double added_mass = 0;    ///< kg added by mass scaling (included in `mass`)
+  index_t scaled_elems = 0; ///< elements whose density mass scaling raised
+  double max_density_scale = 1;  ///< largest of their density factors
+  double dt_crit_physical = 0;   ///< critical step without mass scaling (s)
   index_t reoriented = 0;   ///< inverted input tets whose corners were swapped
   bool ianp = true;         ///< pass 3 uses IANP (else plain tet forces, passes 1-2 unused)
 };
@@ -101,6 +109,30 @@ struct TissueModel {
 /// message names the limit and the element that sets it). Inverted tets
 /// (V < 0) are reoriented by swapping corners 1 and 2 and counted.
 TissueModel<double> build_model(const ModelInput& in);
+
+/// Selective mass scaling (the explicit-dynamics practice of LS-DYNA's and
+/// Abaqus/Explicit's "mass scaling" for a target step): a few badly shaped
+/// elements (slivers, with one tiny altitude) set dt_crit = min_e L_e / c_e
+/// far below the typical element's. Raising the density of just those
+/// elements by s_e = (need / dt_e)^2 lifts their dt_e = L_e / c_e to `need`
+/// (c_e scales with 1 / sqrt(rho)); their nodes get the added mass. The
+/// stiffness is untouched, so static equilibria do not change; the dynamics
+/// change by the added inertia, which tissue tradeoff measures.
+struct MassScaling {
+  int steps = 0;            ///< TLED steps per tick chosen
+  double dt = 0;            ///< s, = tick / steps
+  double need = 0;          ///< s, the element step every element reaches (dt / safety)
+  double added_mass = 0;    ///< kg
+  index_t scaled_elems = 0;
+  double max_scale = 1;     ///< largest density factor
+};
+
+/// Chooses the fewest steps per tick n whose dt = tick / n needs at most
+/// budget x total_mass of added mass, with every element step lifted to
+/// dt / safety. dt_e: the elements' steps L_e / c_e (s); rho_V: their masses
+/// rho_e V_e (kg). n is at most the count without scaling (no mass added).
+MassScaling choose_mass_scaling(const std::vector<double>& dt_e, const std::vector<double>& rho_V, double tick,
+                                double safety, double budget);
 
 /// Recomputes dt-dependent integration constants for a new step or damping
 /// (checks dt against dt_crit as build_model does).

@@ -48,8 +48,13 @@ struct alignas(64) ElementLanes {
 /// whole mesh; ascending region lists have long runs), else one element at
 /// a time.
 template <class T>
-void gather_rows(const T* src, std::size_t ne, int rows, const index_t* elems, const ElementLanes<T>& b, T* dst) {
-  if (b.run) {
+inline void gather_rows(const T* src, std::size_t ne, int rows, const index_t* elems, const ElementLanes<T>& b,
+                        T* dst) {
+  if (b.run && b.count == kLanes) {  // a fixed trip count: whole-vector copies
+    src += elems[0];
+    for (int k = 0; k < rows; ++k)
+      for (int l = 0; l < kLanes; ++l) dst[k * kLanes + l] = src[k * ne + l];
+  } else if (b.run) {
     for (int k = 0; k < rows; ++k)
       for (int l = 0; l < b.count; ++l) dst[k * kLanes + l] = src[k * ne + std::size_t(elems[0]) + l];
   } else {
@@ -60,8 +65,13 @@ void gather_rows(const T* src, std::size_t ne, int rows, const index_t* elems, c
 
 /// The inverse of gather_rows: src (rows x kLanes) into dst (rows x n_elems).
 template <class T>
-void scatter_rows(const T* src, std::size_t ne, int rows, const index_t* elems, const ElementLanes<T>& b, T* dst) {
-  if (b.run) {
+inline void scatter_rows(const T* src, std::size_t ne, int rows, const index_t* elems, const ElementLanes<T>& b,
+                         T* dst) {
+  if (b.run && b.count == kLanes) {
+    dst += elems[0];
+    for (int k = 0; k < rows; ++k)
+      for (int l = 0; l < kLanes; ++l) dst[k * ne + l] = src[k * kLanes + l];
+  } else if (b.run) {
     for (int k = 0; k < rows; ++k)
       for (int l = 0; l < b.count; ++l) dst[k * ne + std::size_t(elems[0]) + l] = src[k * kLanes + l];
   } else {

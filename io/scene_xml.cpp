@@ -341,8 +341,8 @@ scene::Tool Reader::read_tool(pugi::xml_node n) const {
 }
 
 scene::Solver Reader::read_solver(pugi::xml_node n) const {
-  check_attributes(n, {"backend", "precision", "dt", "dt-safety", "damping", "depth", "tick", "residual-tol",
-                       "kinetic-tol", "ianp"});
+  check_attributes(n, {"backend", "precision", "dt", "dt-safety", "mass-scaling", "damping", "depth", "tick",
+                       "residual-tol", "kinetic-tol", "ianp"});
   check_no_text(n);
   scene::Solver v;
   v.line = line(n);
@@ -354,6 +354,16 @@ scene::Solver Reader::read_solver(pugi::xml_node n) const {
   }
   v.dt = real_or_auto(n, "dt", v.dt, 0.0);
   v.dt_safety = real_or(n, "dt-safety", v.dt_safety);
+  if (const pugi::xml_attribute a = n.attribute("mass-scaling")) {
+    const auto f = scene::parse_real(a.value());
+    if (scene::trim(a.value()) == "off")
+      v.mass_scaling = 0;
+    else if (f)
+      v.mass_scaling = *f;
+    else
+      fail(n, fmt::format("mass-scaling = '{}' is neither a number (a fraction of the total mass) nor \"off\"",
+                          a.value()));
+  }
   v.damping = real_or_auto(n, "damping", v.damping, -1.0);
   if (const pugi::xml_attribute a = n.attribute("depth")) {
     const std::string_view d = scene::trim(a.value());
@@ -498,6 +508,7 @@ void write_solver(pugi::xml_node root, const scene::Solver& v) {
   set(n, "precision", to_string(v.precision));
   set(n, "dt", v.dt == 0 ? "auto" : num(v.dt));
   set(n, "dt-safety", num(v.dt_safety));
+  set(n, "mass-scaling", v.mass_scaling == 0 ? "off" : num(v.mass_scaling));
   set(n, "damping", v.damping == -1 ? "auto" : num(v.damping));
   set(n, "depth", v.depth == kDepthAll ? "all" : v.depth == kDepthAuto ? "auto" : std::to_string(v.depth));
   set(n, "tick", num(v.tick));

@@ -268,12 +268,16 @@ void check_solver(const Scene& s) {
   if (v.backend != "cpu" && v.backend != "cuda")
     fail(s, ln, fmt::format("solver: unknown backend '{}'; expected cpu or cuda", v.backend));
   const std::pair<std::string_view, double> numbers[] = {
-      {"dt", v.dt},     {"dt-safety", v.dt_safety},       {"damping", v.damping},
+      {"dt", v.dt},     {"dt-safety", v.dt_safety},       {"mass-scaling", v.mass_scaling}, {"damping", v.damping},
       {"tick", v.tick}, {"residual-tol", v.residual_tol}, {"kinetic-tol", v.kinetic_tol}};
   for (const auto& [name, value] : numbers) check_finite(s, ln, "solver", name, value);
   if (v.dt < 0) fail(s, ln, fmt::format("solver: dt = {} s must be >= 0 (0 or \"auto\" = dt-safety x dt_crit)", v.dt));
   if (!(v.dt_safety > 0 && v.dt_safety < 1))
     fail(s, ln, fmt::format("solver: dt-safety = {} must be in (0, 1) (a fraction of the critical step)", v.dt_safety));
+  if (!(v.mass_scaling >= 0 && v.mass_scaling < 1))
+    fail(s, ln,
+         fmt::format("solver: mass-scaling = {} must be in [0, 1) (the added mass allowed, a fraction of the total)",
+                     v.mass_scaling));
   if (v.damping < 0 && v.damping != -1)
     fail(s, ln, fmt::format("solver: damping = {} 1/s must be >= 0 (or \"auto\")", v.damping));
   if (v.depth < kDepthAuto)
@@ -306,6 +310,8 @@ ModelInput to_model_input(const Scene& scene) {
   for (const Material& m : scene.materials) in.materials.push_back(m.params());
   in.dt = scene.solver.dt;
   in.dt_safety = scene.solver.dt_safety;
+  in.mass_scaling = scene.solver.mass_scaling;
+  in.tick = scene.solver.tick;
   in.damping = scene.solver.damping;
   in.ianp = scene.solver.ianp;
   in.source = scene.source;

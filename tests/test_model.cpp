@@ -284,6 +284,105 @@ TEST(Model, TimeStepAboveCriticalIsRefused) {
   EXPECT_DOUBLE_EQ(m.cd_C[0], k.C);
 }
 
+// ---------------------------------------------------------------- mass scaling
+
+// choose_mass_scaling on hand-made elements: three of 1 kg each, element
+// steps 10, 40 and 100 us, tick 1 ms, safety 0.5. Without scaling dt = 5 us
+// (200 steps). n steps need every dt_e >= 2 ms / n: n = 50 (40 us) costs
+// (40/10)^2 - 1 = 15 kg on the first element, n = 25 (80 us) costs 63 + 3 kg.
+TEST(MassScaling, ChoosesTheFewestStepsWithinTheBudget) {
+  const std::vector<double> dt_e = {10e-6, 40e-6, 100e-6}, rho_V = {1, 1, 1};
+  MassScaling r = choose_mass_scaling(dt_e, rho_V, 1e-3, 0.5, 0.0);
+  EXPECT_EQ(r.steps, 200);  // no budget: no mass, the unscaled step count
+  EXPECT_EQ(r.added_mass, 0);
+  EXPECT_EQ(r.scaled_elems, 0);
+  r = choose_mass_scaling(dt_e, rho_V, 1e-3, 0.5, 15.0 / 3);  // 15 kg allowed
+  EXPECT_EQ(r.steps, 50);
+  EXPECT_NEAR(r.dt, 20e-6, 1e-18);
+  EXPECT_NEAR(r.need, 40e-6, 1e-18);
+  EXPECT_NEAR(r.added_mass, 15.0, 1e-9);
+  EXPECT_EQ(r.scaled_elems, 1);
+  EXPECT_NEAR(r.max_scale, 16.0, 1e-9);
+  r = choose_mass_scaling(dt_e, rho_V, 1e-3, 0.5, 66.0 / 3 + 1e-9);
+  EXPECT_EQ(r.steps, 25);
+  EXPECT_NEAR(r.added_mass, 66.0, 1e-9);
+  EXPECT_EQ(r.scaled_elems, 2);
+}
+
+/// The 2 x 2 x 2 box with a flat tet (apex 5 % of a cell above the top face)
+/// that sets the critical step 14x below the Kuhn tets'.
+ModelInput box_with_flat_tet() {
+  const int n = 2;
+  const double s = 0.01, h = 0.05 * s;
+  ModelInput in = box_input(n, n, n, n * s, n * s, n * s);
+  const index_t apex = static_cast<index_t>(in.nodes.size() / 3);
+  in.nodes.insert(in.nodes.end(), {2 * s / 3, s / 3, n * s + h});
+  in.tets.insert(in.tets.end(), {box_node(n, n, 0, 0, n), box_node(n, n, 1, 0, n), box_node(n, n, 1, 1, n), apex});
+  return in;
+}
+
+TEST(MassScaling, LiftsTheFlatTetAndAddsMassOnlyToItsCorners) {
+  ModelInput in = box_with_flat_tet();
+  in.dt_safety = 0.9;
+  const TissueModel<double> plain = build_model(in);
+  in.tick = 1e-3;
+  in.mass_scaling = 0.01;
+  const TissueModel<double> m = build_model(in);
+  const index_t flat = m.n_elems - 1;
+  EXPECT_EQ(m.scaled_elems, 1);
+  EXPECT_GT(m.added_mass, 0);
+  EXPECT_LE(m.added_mass, 0.01 * m.total_mass);
+  EXPECT_DOUBLE_EQ(m.total_mass, plain.total_mass);  // the physical mass
+  EXPECT_DOUBLE_EQ(m.dt_crit_physical, plain.dt_crit);
+  EXPECT_GT(m.dt_crit, 2 * plain.dt_crit);  // 1 % buys 3 steps per tick instead of 8
+  // whole steps per tick, and dt = safety x the lifted limit at most
+  const double steps = 1e-3 / m.dt;
+  EXPECT_NEAR(steps, std::round(steps), 1e-9);
+  EXPECT_LE(m.dt, 0.9 * m.dt_crit * (1 + 1e-12));
+  EXPECT_LE(2 * std::round(steps), std::ceil(1e-3 / plain.dt));
+  // the flat tet's four corners carry the added mass, in equal parts
+  double sum = 0;
+  for (index_t a = 0; a < m.n_nodes; ++a) {
+    sum += m.mass[a];
+    bool corner = false;
+    for (int k = 0; k < 4; ++k) corner = corner || m.elem_nodes[k * m.n_elems + flat] == a;
+    if (corner)
+      EXPECT_NEAR(m.mass[a] - plain.mass[a], m.added_mass / 4, 1e-12 * m.added_mass) << "node " << a;
+    else
+      EXPECT_EQ(m.mass[a], plain.mass[a]) << "node " << a;
+  }
+  EXPECT_NEAR(sum, m.total_mass + m.added_mass, 1e-12 * sum);
+  // a budget too small for one step less leaves the model as it was
+  in.mass_scaling = 1e-12;
+  const TissueModel<double> same = build_model(in);
+  EXPECT_EQ(same.scaled_elems, 0);
+  EXPECT_EQ(same.mass, plain.mass);
+}
+
+TEST(MassScaling, BadBudgetsAndUnreachableStepsAreNamed) {
+  ModelInput in = box_with_flat_tet();
+  in.tick = 1e-3;
+  for (double bad : {-0.1, 1.0, 2.0}) {
+    in.mass_scaling = bad;
+    expect_model_error([&] { build_model(in); }, {"box", "mass scaling budget", "[0, 1)"});
+  }
+  in.mass_scaling = 0.01;
+  in.tick = 0;
+  expect_model_error([&] { build_model(in); }, {"box", "mass scaling needs a haptic tick"});
+  // an explicit dt the budget cannot reach: the limit, the element and the mass it would take
+  const TissueModel<double> plain = build_model(box_with_flat_tet());
+  in.dt = 0.5 * 1e-3;
+  expect_model_error([&] { build_model(in); },
+                     {"box", "above the stable limit", fmt::format("element {}", plain.dt_crit_elem), "added mass",
+                      "budget 1 %"});
+  // one it can (0.4 % added): accepted, every element lifted to dt / safety
+  in.dt = 2 * plain.dt_crit;
+  in.dt_safety = 0.9;
+  const TissueModel<double> m = build_model(in);
+  EXPECT_EQ(m.dt, in.dt);
+  EXPECT_NEAR(m.dt_crit, in.dt / 0.9, 1e-12 * m.dt_crit);
+}
+
 TEST(Model, SafetyFactorAndDefaultDamping) {
   ModelInput in = box_input(2, 2, 3, 0.02, 0.02, 0.04);
   in.dt_safety = 0.8;

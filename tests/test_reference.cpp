@@ -320,15 +320,17 @@ TEST(Tradeoff, SweepOnABox) {
   o.mesh_names = {"default"};
   o.depths = {1, kDepthAll};
   o.auto_tols = {0.05};
-  o.safeties = {0.9};
+  o.safeties = {0.5};
+  o.mass_scalings = {0};
   o.residual_tols = {1e-2, 1e-4};
   o.max_hold = 0.4;
   o.verbose = false;
   const std::vector<TradeoffSetting> settings = tradeoff_settings(s, o);
   ASSERT_EQ(settings.front().group, "baseline");
-  EXPECT_EQ(settings.front().depth, 5);
-  // baseline, anchor, depths 1 and all, auto, double, safety 0.9, two tolerances, proposed
-  EXPECT_EQ(settings.size(), 10u);
+  EXPECT_EQ(settings.front().depth, kDepthAuto);  // the scene defaults
+  EXPECT_DOUBLE_EQ(settings.front().mass_scaling, 0.01);
+  // baseline, anchor, depths 1 and all, auto, double, safety 0.5, no mass scaling, two tolerances, compare
+  EXPECT_EQ(settings.size(), 11u);
   EXPECT_EQ(settings[1].group, "anchor");
   EXPECT_EQ(settings[1].depth, kDepthAll);
   const TradeoffResult res = run_tradeoff(s, o);
@@ -337,14 +339,28 @@ TEST(Tradeoff, SweepOnABox) {
   const TradeoffRow* depth1 = nullptr;
   const TradeoffRow* all = nullptr;
   const TradeoffRow* dbl = nullptr;
+  const TradeoffRow* anchor = nullptr;
+  const TradeoffRow* unscaled = nullptr;
   for (const TradeoffRow& r : res.rows) {
     if (r.setting.label == "depth 1") depth1 = &r;
     if (r.setting.label == "depth all") all = &r;
     if (r.setting.group == "precision") dbl = &r;
+    if (r.setting.group == "anchor") anchor = &r;
+    if (r.setting.group == "mass") unscaled = &r;
     EXPECT_GT(r.wall_per_tick, 0) << r.setting.label;
     EXPECT_GT(r.steps_per_s, 0) << r.setting.label;
+    if (r.failed.empty()) {
+      EXPECT_TRUE(std::isfinite(r.press_force_err)) << r.setting.label;
+      EXPECT_GE(r.press_force_err, 0) << r.setting.label;
+    }
   }
-  ASSERT_TRUE(depth1 && all && dbl);
+  ASSERT_TRUE(depth1 && all && dbl && anchor && unscaled);
+  // mass scaling (the scene default, 1 %) within its budget; this regular
+  // box already runs one step per tick, so it has nothing to buy here
+  // (tests/test_model.cpp and test_stability.cpp test what it buys)
+  EXPECT_LE(anchor->added_mass, 0.01);
+  EXPECT_EQ(unscaled->added_mass, 0);
+  EXPECT_LE(anchor->steps_per_tick, unscaled->steps_per_tick);
   EXPECT_LT(depth1->region_elems, all->region_elems);
   EXPECT_GT(depth1->disp_err, all->disp_err);
   EXPECT_LT(all->disp_err, 0.05);
@@ -353,6 +369,8 @@ TEST(Tradeoff, SweepOnABox) {
   EXPECT_NE(table.find("depth 1"), std::string::npos);
   EXPECT_EQ(std::count(json.begin(), json.end(), '{'), std::count(json.begin(), json.end(), '}'));
   EXPECT_NE(json.find("\"disp_err\""), std::string::npos);
+  EXPECT_NE(json.find("\"press_force_err\""), std::string::npos);
+  EXPECT_NE(table.find("press F"), std::string::npos);
   const std::string png = (std::filesystem::temp_directory_path() / "tissue_tradeoff_test.png").string();
   write_tradeoff_plot(res, png);
   std::ifstream in(png, std::ios::binary);
