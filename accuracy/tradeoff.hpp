@@ -114,7 +114,7 @@ struct TradeoffOptions {
   std::vector<double> auto_tols = {0.05, 0.02, 0.005};
   std::vector<Precision> precisions = {Precision::Float, Precision::Double};
   std::vector<double> safeties = {0.3, 0.6, 0.9};
-  std::vector<double> mass_scalings = {0, 0.002, 0.01, 0.03};
+  std::vector<double> mass_scalings = {0, 0.002, 0.01, 0.025, 0.05};
   std::vector<double> residual_tols = {1e-2, 1e-3, 1e-4};
   int anchor_depth = kDepthAll;                 ///< the anchor's depth: see tradeoff_settings
   Precision anchor_precision = Precision::Double;

@@ -55,6 +55,7 @@ void CpuBackend<T>::require_upload(const char* what) const {
 template <class T>
 void CpuBackend<T>::upload(const TissueModel<double>& model) {
   uploaded_ = false;
+  energy_.fresh = false;
   surface_.reset();
   model_ = convert<T>(model);
   state_.resize(model_.n_nodes, model_.n_elems);
@@ -84,6 +85,7 @@ void CpuBackend<T>::set_displacements(std::span<const double> u) {
       throw std::invalid_argument(
           fmt::format("set_displacements: node {}: displacement {} = {} is not finite", k % n, "xyz"[k / n], u[k]));
   for (std::size_t k = 0; k < u.size(); ++k) state_.u[k] = state_.u_prev[k] = state_.u_next[k] = T(u[k]);
+  energy_.fresh = false;
   for (index_t a = 0; a < n; ++a)
     if (state_.region.role[a] == kHalo) {
       const std::uint8_t keep = state_.driven[a] | fixed_axes(model_.node_flags[a]);
@@ -98,6 +100,7 @@ template <class T>
 RegionSizes CpuBackend<T>::build_region(std::span<const index_t> seeds, int depth) {
   require_upload("build_region");
   install_region(model_, state_, flood_fill(model_, seeds, depth));
+  energy_.fresh = false;
   cpu::element_pressure(model_, state_, all_elems_, all_elems_part_);
   return state_.region.sizes();
 }
@@ -126,6 +129,7 @@ void CpuBackend<T>::clear_driven() {
 
 template <class T>
 void CpuBackend<T>::element_pressure() {
+  energy_.fresh = false;  // a caller running the passes one by one
   cpu::element_pressure(model_, state_, state_.region.elems, parts_.element_pressure);
 }
 
@@ -141,14 +145,17 @@ void CpuBackend<T>::element_forces() {
 
 template <class T>
 void CpuBackend<T>::node_update() {
+  energy_.fresh = false;  // u moves
   cpu::node_update(model_, state_, state_.region.nodes, parts_.node_update);
   surface_->mark_dirty();
 }
 
 template <class T>
 void CpuBackend<T>::step() {
-  element_pressure();
-  nodal_pressure();
+  if (!take_passes(energy_, state_)) {  // reduce() may have run passes 1-2 at this u already
+    element_pressure();
+    nodal_pressure();
+  }
   element_forces();
   node_update();
 }

@@ -12,51 +12,53 @@
 namespace tissue::cpu {
 namespace {
 
-/// Lane l's corner displacements and shape gradients as core's arguments.
+/// Lane l's shape gradients and deformation gradient as core's arguments.
 template <class T>
-inline void lane_element(const ElementLanes<T>& b, int l, Vec3<T> ue[4], T dN[12]) {
+inline void lane_dN(const ElementLanes<T>& b, int l, T dN[12]) {
   TISSUE_UNROLL
-  for (int a = 0; a < 4; ++a) ue[a] = {b.u[3 * a][l], b.u[3 * a + 1][l], b.u[3 * a + 2][l]};
+  for (int k = 0; k < 12; ++k) dN[k] = b.dN(k, l);
+}
+
+template <class T>
+inline Mat3<T> lane_F(const ElementLanes<T>& b, int l) {
+  Mat3<T> F;
   TISSUE_UNROLL
-  for (int k = 0; k < 12; ++k) dN[k] = b.dN[k][l];
+  for (int k = 0; k < 9; ++k) F.m[k] = b.F(k, l);
+  return F;
 }
 
 }  // namespace
 
-/// Pass 1 on every lane: J = det F, out = volumetric_pressure(J, K) V.
 template <class T>
 TISSUE_SIMD_CLONES void lanes_pressure(ElementLanes<T>& b) {
 #pragma GCC ivdep
   for (int l = 0; l < kLanes; ++l) {
     Vec3<T> ue[4];
     T dN[12];
-    lane_element(b, l, ue, dN);
+    TISSUE_UNROLL
+    for (int a = 0; a < 4; ++a) ue[a] = {b.u[3 * a][l], b.u[3 * a + 1][l], b.u[3 * a + 2][l]};
+    lane_dN(b, l, dN);
     const Mat3<T> F = deformation_gradient(ue, dN);
     const T J = det(F);
     TISSUE_UNROLL
-    for (int k = 0; k < 9; ++k) b.F[k][l] = F.m[k];
-    b.J[l] = J;
-    b.out[l] = volumetric_pressure(J, b.K[l]) * b.V[l];
+    for (int k = 0; k < 9; ++k) b.F(k, l) = F.m[k];
+    b.J(0, l) = J;
+    b.pv(0, l) = volumetric_pressure(J, b.K(0, l)) * b.V(0, l);
   }
 }
 
-/// Pass 3 on every lane: ianp_element_forces (or plain_element_forces) into
-/// f, its returned J into J.
 template <class T, bool kIanp>
 TISSUE_SIMD_CLONES void lanes_forces(ElementLanes<T>& b) {
 #pragma GCC ivdep
   for (int l = 0; l < kLanes; ++l) {
     Vec3<T> f[4];
     T dN[12];
-    Mat3<T> F;
-    TISSUE_UNROLL
-    for (int k = 0; k < 12; ++k) dN[k] = b.dN[k][l];
-    TISSUE_UNROLL
-    for (int k = 0; k < 9; ++k) F.m[k] = b.F[k][l];
+    lane_dN(b, l, dN);
+    const Mat3<T> F = lane_F(b, l);
     if constexpr (kIanp)
-      b.J[l] = ianp_element_forces(F, dN, b.V[l], b.mu[l], b.K[l], b.pbar[l], f);
+      b.ret[l] = ianp_element_forces(F, dN, b.V(0, l), b.mu(0, l), b.K(0, l), b.pbar[l], f);
     else
-      b.J[l] = plain_element_forces(F, dN, b.V[l], b.mu[l], b.K[l], f);
+      b.ret[l] = plain_element_forces(F, dN, b.V(0, l), b.mu(0, l), b.K(0, l), f);
     TISSUE_UNROLL
     for (int a = 0; a < 4; ++a) {
       b.f[3 * a][l] = f[a].x;
@@ -66,19 +68,14 @@ TISSUE_SIMD_CLONES void lanes_forces(ElementLanes<T>& b) {
   }
 }
 
-/// Strain energy on every lane: out = element_strain_energy with Jbar from
-/// pbar (IANP) or Jbar = J (plain).
 template <class T, bool kIanp>
 TISSUE_SIMD_CLONES void lanes_energy(ElementLanes<T>& b) {
 #pragma GCC ivdep
   for (int l = 0; l < kLanes; ++l) {
-    Vec3<T> ue[4];
-    T dN[12];
-    lane_element(b, l, ue, dN);
-    const Mat3<T> F = deformation_gradient(ue, dN);
+    const Mat3<T> F = lane_F(b, l);
     const T J = det(F);
-    const T Jbar = kIanp ? T(1) + b.pbar[l] / b.K[l] : J;
-    b.out[l] = element_strain_energy(F, J, Jbar, b.V[l], b.mu[l], b.K[l]);
+    const T Jbar = kIanp ? T(1) + b.pbar[l] / b.K(0, l) : J;
+    b.ret[l] = element_strain_energy(F, J, Jbar, b.V(0, l), b.mu(0, l), b.K(0, l));
   }
 }
 

@@ -25,108 +25,136 @@ namespace tissue::cpu {
 /// 8 doubles per AVX-512 register).
 inline constexpr int kLanes = 16;
 
-/// Inputs and outputs of up to kLanes elements, lane-major ([field][lane]).
-/// Lanes past `count` hold an undeformed element of zero volume (u = 0,
-/// F = I, K = mu = 1), so that the math stays finite on them.
+/// A per-element field seen by a batch: row k (component), lane l at
+/// p[k * stride + l]. Either the model's or the state's own array at the
+/// batch's first element (stride n_elems), or a batch buffer (stride kLanes).
+template <class T>
+struct Rows {
+  T* p = nullptr;
+  std::size_t stride = 0;
+  T& operator()(int k, int l) const { return p[k * stride + l]; }
+};
+
+/// One batch of up to kLanes elements. When the batch is a full run of
+/// consecutive elements (always on the whole mesh; ascending region lists
+/// have long runs) the views point straight into the model's and state's
+/// arrays, which are component-major and so already lane-major: nothing is
+/// copied. Otherwise the batch gathers into its buffers and the views point
+/// there; lanes past `count` then hold an undeformed element of zero volume
+/// (u = 0, F = I, K = mu = 1), so that the math stays finite on them.
 template <class T>
 struct alignas(64) ElementLanes {
-  T u[12][kLanes];   ///< corner displacements, k = 3 * corner + axis (m); pass 1 and the energy
-  T F[9][kLanes];    ///< deformation gradient, k = 3 i + j: pass 1's output, pass 3's input
-  T dN[12][kLanes];  ///< shape gradients, k = 3 * corner + axis (1/m)
-  T V[kLanes], mu[kLanes], K[kLanes];  ///< m^3, Pa, Pa
-  T pbar[kLanes];    ///< averaged nodal pressure (Pa); pass 3 and the energy
-  T f[12][kLanes];   ///< out: element nodal forces, k = 3 * corner + axis (N)
-  T J[kLanes];       ///< out: det F (pass 3: ianp_element_forces' return value)
-  T out[kLanes];     ///< out: pass 1 p_e V_e (N m); energy: V W (J)
-  int count = 0;     ///< elements in the batch (<= kLanes)
-  bool run = false;  ///< the batch is consecutive elements elems[0] .. elems[0] + count - 1
+  Rows<const T> dN, V, mu, K;  ///< shape gradients (12 rows, 1/m), volume (m^3), moduli (Pa)
+  Rows<T> F;                   ///< deformation gradient (9 rows, k = 3 i + j): pass 1 writes, pass 3 and energy read
+  Rows<T> J, pv;               ///< pass 1's det F and p_e V_e (N m)
+  T u[12][kLanes];             ///< corner displacements, k = 3 * corner + axis (m): pass 1
+  T pbar[kLanes];              ///< averaged nodal pressure (Pa): pass 3 and the energy
+  T f[12][kLanes];             ///< out: element nodal forces, k = 3 * corner + axis (N): pass 3
+  T ret[kLanes];               ///< out: pass 3's returned J; the energy's V W (J)
+  int count = 0;               ///< elements in the batch (<= kLanes)
+  bool direct = false;         ///< a full run: the views are the arrays themselves
+  // buffers behind the views of a gathered batch
+  T dN_buf[12][kLanes], V_buf[kLanes], mu_buf[kLanes], K_buf[kLanes], F_buf[9][kLanes], J_buf[kLanes], pv_buf[kLanes];
 };
 
 /// Copies `rows` rows of a per-element array src (rows x n_elems,
-/// component-major) at the batch's elements into dst (rows x kLanes):
-/// straight row copies for a run of consecutive elements (always on the
-/// whole mesh; ascending region lists have long runs), else one element at
-/// a time.
+/// component-major) at elems[0..count) into dst (rows x kLanes).
 template <class T>
-inline void gather_rows(const T* src, std::size_t ne, int rows, const index_t* elems, const ElementLanes<T>& b,
-                        T* dst) {
-  if (b.run && b.count == kLanes) {  // a fixed trip count: whole-vector copies
-    src += elems[0];
-    for (int k = 0; k < rows; ++k)
-      for (int l = 0; l < kLanes; ++l) dst[k * kLanes + l] = src[k * ne + l];
-  } else if (b.run) {
-    for (int k = 0; k < rows; ++k)
-      for (int l = 0; l < b.count; ++l) dst[k * kLanes + l] = src[k * ne + std::size_t(elems[0]) + l];
-  } else {
-    for (int l = 0; l < b.count; ++l)
-      for (int k = 0; k < rows; ++k) dst[k * kLanes + l] = src[k * ne + std::size_t(elems[l])];
-  }
+inline void gather_rows(const T* src, std::size_t ne, int rows, const index_t* elems, int count, T* dst) {
+  for (int l = 0; l < count; ++l)
+    for (int k = 0; k < rows; ++k) dst[k * kLanes + l] = src[k * ne + std::size_t(elems[l])];
 }
 
-/// The inverse of gather_rows: src (rows x kLanes) into dst (rows x n_elems).
+/// The inverse: lanes 0..count of src (rows x kLanes) into dst (rows x n_elems).
 template <class T>
-inline void scatter_rows(const T* src, std::size_t ne, int rows, const index_t* elems, const ElementLanes<T>& b,
-                         T* dst) {
-  if (b.run && b.count == kLanes) {
-    dst += elems[0];
-    for (int k = 0; k < rows; ++k)
-      for (int l = 0; l < kLanes; ++l) dst[k * ne + l] = src[k * kLanes + l];
-  } else if (b.run) {
-    for (int k = 0; k < rows; ++k)
-      for (int l = 0; l < b.count; ++l) dst[k * ne + std::size_t(elems[0]) + l] = src[k * kLanes + l];
-  } else {
-    for (int l = 0; l < b.count; ++l)
-      for (int k = 0; k < rows; ++k) dst[k * ne + std::size_t(elems[l])] = src[k * kLanes + l];
-  }
+inline void scatter_rows(const T* src, std::size_t ne, int rows, const index_t* elems, int count, T* dst) {
+  for (int l = 0; l < count; ++l)
+    for (int k = 0; k < rows; ++k) dst[k * ne + std::size_t(elems[l])] = src[k * kLanes + l];
 }
 
-/// Starts a batch of elems[0..count): count, run, the model's dN, V, mu and
-/// K, and the padding lanes.
+/// Starts a batch of elems[0..count): the model's dN, V, mu and K, viewed
+/// in place for a full run, else gathered (with the padding lanes).
 template <class T>
 void begin_lanes(const TissueModel<T>& m, const index_t* elems, int count, ElementLanes<T>& b) {
   const std::size_t ne = m.n_elems;
   b.count = count;
-  b.run = elems[count - 1] - elems[0] == count - 1;
-  gather_rows(m.dndx.data(), ne, 12, elems, b, &b.dN[0][0]);
-  gather_rows(m.volume.data(), ne, 1, elems, b, b.V);
-  gather_rows(m.mu.data(), ne, 1, elems, b, b.mu);
-  gather_rows(m.K.data(), ne, 1, elems, b, b.K);
-  for (int l = count; l < kLanes; ++l) {
-    for (int k = 0; k < 12; ++k) b.u[k][l] = b.dN[k][l] = T(0);
-    for (int k = 0; k < 9; ++k) b.F[k][l] = k % 4 == 0 ? T(1) : T(0);
-    b.V[l] = b.pbar[l] = T(0);
-    b.mu[l] = b.K[l] = T(1);
+  b.direct = count == kLanes && elems[count - 1] - elems[0] == count - 1;
+  if (b.direct) {
+    const std::size_t e0 = elems[0];
+    b.dN = {m.dndx.data() + e0, ne};
+    b.V = {m.volume.data() + e0, ne};
+    b.mu = {m.mu.data() + e0, ne};
+    b.K = {m.K.data() + e0, ne};
+    return;
   }
+  gather_rows(m.dndx.data(), ne, 12, elems, count, &b.dN_buf[0][0]);
+  gather_rows(m.volume.data(), ne, 1, elems, count, b.V_buf);
+  gather_rows(m.mu.data(), ne, 1, elems, count, b.mu_buf);
+  gather_rows(m.K.data(), ne, 1, elems, count, b.K_buf);
+  for (int l = count; l < kLanes; ++l) {
+    for (int k = 0; k < 12; ++k) b.u[k][l] = b.dN_buf[k][l] = T(0);
+    for (int k = 0; k < 9; ++k) b.F_buf[k][l] = k % 4 == 0 ? T(1) : T(0);
+    b.V_buf[l] = b.pbar[l] = T(0);
+    b.mu_buf[l] = b.K_buf[l] = T(1);
+  }
+  b.dN = {&b.dN_buf[0][0], kLanes};
+  b.V = {b.V_buf, kLanes};
+  b.mu = {b.mu_buf, kLanes};
+  b.K = {b.K_buf, kLanes};
 }
 
-/// A batch for pass 1 or the energy: begin_lanes, the corner displacements
-/// from u (3 x n_nodes, component-major) and, with node_p (Pa, n_nodes),
-/// pbar, the mean of the element's four nodal pressures.
+/// A batch for pass 1: begin_lanes, the corner displacements from u (3 x
+/// n_nodes, component-major), and the output views: elem_J, elem_pv
+/// (n_elems) and elem_F (9 x n_elems) themselves for a full run, else the
+/// buffers, which finish_pressure_lanes scatters.
 template <class T>
-void gather_lanes(const TissueModel<T>& m, const T* u, const T* node_p, const index_t* elems, int count,
-                  ElementLanes<T>& b) {
+void gather_pressure_lanes(const TissueModel<T>& m, const T* u, const index_t* elems, int count, T* elem_J,
+                           T* elem_pv, T* elem_F, ElementLanes<T>& b) {
   begin_lanes(m, elems, count, b);
   const index_t n = m.n_nodes, ne = m.n_elems;
   const index_t* en = m.elem_nodes.data();
-  for (int l = 0; l < count; ++l) {
-    T p = 0;
+  for (int l = 0; l < count; ++l)
     for (int a = 0; a < 4; ++a) {
       const index_t i = en[a * ne + elems[l]];
       for (int c = 0; c < 3; ++c) b.u[3 * a + c][l] = u[c * n + i];
-      if (node_p) p += node_p[i];
     }
-    b.pbar[l] = T(0.25) * p;
+  if (b.direct) {
+    b.F = {elem_F + elems[0], std::size_t(ne)};
+    b.J = {elem_J + elems[0], std::size_t(ne)};
+    b.pv = {elem_pv + elems[0], std::size_t(ne)};
+  } else {
+    b.F = {&b.F_buf[0][0], kLanes};
+    b.J = {b.J_buf, kLanes};
+    b.pv = {b.pv_buf, kLanes};
   }
 }
 
-/// A batch for pass 3: begin_lanes, pass 1's deformation gradients from
-/// elem_F (9 x n_elems) and, with node_p (IANP), pbar.
+/// After pass 1's kernel: scatters a gathered batch's outputs (a full run
+/// wrote in place).
 template <class T>
-void gather_force_lanes(const TissueModel<T>& m, const T* elem_F, const T* node_p, const index_t* elems, int count,
+void finish_pressure_lanes(const TissueModel<T>& m, const index_t* elems, T* elem_J, T* elem_pv, T* elem_F,
+                           const ElementLanes<T>& b) {
+  if (b.direct) return;
+  const std::size_t ne = m.n_elems;
+  scatter_rows(&b.F_buf[0][0], ne, 9, elems, b.count, elem_F);
+  scatter_rows(b.J_buf, ne, 1, elems, b.count, elem_J);
+  scatter_rows(b.pv_buf, ne, 1, elems, b.count, elem_pv);
+}
+
+/// A batch for pass 3 or the energy: begin_lanes, pass 1's deformation
+/// gradients elem_F (9 x n_elems) and, with node_p (IANP), pbar, the mean
+/// of the element's four nodal pressures.
+template <class T>
+void gather_force_lanes(const TissueModel<T>& m, T* elem_F, const T* node_p, const index_t* elems, int count,
                         ElementLanes<T>& b) {
   begin_lanes(m, elems, count, b);
   const index_t ne = m.n_elems;
-  gather_rows(elem_F, ne, 9, elems, b, &b.F[0][0]);
+  if (b.direct) {
+    b.F = {elem_F + elems[0], std::size_t(ne)};
+  } else {
+    gather_rows(elem_F, ne, 9, elems, count, &b.F_buf[0][0]);
+    b.F = {&b.F_buf[0][0], kLanes};
+  }
   if (!node_p) return;
   const index_t* en = m.elem_nodes.data();
   for (int l = 0; l < count; ++l) {
@@ -136,17 +164,17 @@ void gather_force_lanes(const TissueModel<T>& m, const T* elem_F, const T* node_
 }
 
 /// Pass 1 on every lane: F = deformation_gradient, J = det F,
-/// out = volumetric_pressure(J, K) V.
+/// pv = volumetric_pressure(J, K) V.
 template <class T>
 void lanes_pressure(ElementLanes<T>& b);
 
 /// Pass 3 on every lane: ianp_element_forces (or plain_element_forces) of F
-/// into f, its returned J into J.
+/// into f, its returned J into ret.
 template <class T, bool kIanp>
 void lanes_forces(ElementLanes<T>& b);
 
-/// Strain energy on every lane: out = element_strain_energy with Jbar from
-/// pbar (IANP) or Jbar = J (plain).
+/// Strain energy on every lane from F: ret = element_strain_energy with
+/// Jbar from pbar (IANP) or Jbar = J (plain).
 template <class T, bool kIanp>
 void lanes_energy(ElementLanes<T>& b);
 

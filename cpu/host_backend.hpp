@@ -67,7 +67,7 @@ class CpuBackend final : public Backend {
   std::vector<index_t> all_elems_;    ///< 0..n_elems-1: pass 1 over every element
   std::vector<index_t> driven_list_;  ///< currently driven nodes
   std::unique_ptr<EmbreeSurface<T>> surface_;
-  EnergyScratch<T> energy_;           ///< strain_energy's pass 1-2 scratch
+  EnergyScratch<T> energy_;           ///< strain_energy's passes 1-2, taken by the next step
   BadElementFlag bad_;
   PassPartitioners parts_;
   tbb::affinity_partitioner all_elems_part_;

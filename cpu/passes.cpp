@@ -51,7 +51,7 @@ void element_forces_impl(const TissueModel<T>& m, TissueState<T>& s, std::span<c
     gather_force_lanes(m, s.elem_F.data(), p, e, count, b);
     lanes_forces<T, kIanp>(b);
     for (int l = 0; l < count; ++l) {
-      const T J = b.J[l];
+      const T J = b.ret[l];
       if (!(J > T(0)) || !std::isfinite(J)) bad.record(e[l], double(J));
       for (int a = 0; a < 4; ++a) {
         T* f = fs + 3 * size_t(slot[a * ne + e[l]]);
@@ -68,14 +68,11 @@ void element_forces_impl(const TissueModel<T>& m, TissueState<T>& s, std::span<c
 template <class T>
 void element_pressure(const TissueModel<T>& m, const T* u, std::span<const index_t> elems, T* J_out, T* pv_out,
                       T* F_out, tbb::affinity_partitioner& part) {
-  const std::size_t ne = m.n_elems;
   for_each_batch(elems, kElemGrain, part, [&](const index_t* e, int count) {
     ElementLanes<T> b;
-    gather_lanes(m, u, static_cast<const T*>(nullptr), e, count, b);
+    gather_pressure_lanes(m, u, e, count, J_out, pv_out, F_out, b);
     lanes_pressure(b);
-    scatter_rows(b.out, ne, 1, e, b, pv_out);
-    if (J_out) scatter_rows(b.J, ne, 1, e, b, J_out);
-    if (F_out) scatter_rows(&b.F[0][0], ne, 9, e, b, F_out);
+    finish_pressure_lanes(m, e, J_out, pv_out, F_out, b);
   });
 }
 

@@ -39,9 +39,9 @@ template <class T>
 void element_pressure(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems,
                       tbb::affinity_partitioner& part);
 
-/// Pass 1 from displacements u (3 x n_nodes, m) into pv_out[e] = p_e V_e
-/// (n_elems, N m) and, unless null, J_out[e] (n_elems) and the deformation
-/// gradient F_out (9 x n_elems), which pass 3 reads.
+/// Pass 1 from displacements u (3 x n_nodes, m) into J_out[e] (n_elems),
+/// pv_out[e] = p_e V_e (n_elems, N m) and the deformation gradient F_out
+/// (9 x n_elems), which pass 3 reads.
 template <class T>
 void element_pressure(const TissueModel<T>& m, const T* u, std::span<const index_t> elems, T* J_out, T* pv_out,
                       T* F_out, tbb::affinity_partitioner& part);

@@ -99,17 +99,15 @@ template <class T>
 double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<T>& node_volume,
                      EnergyScratch<T>& scratch) {
   const std::span<const index_t> elems = s.region.elems, nodes = s.region.nodes;
-  const T* node_p = nullptr;
-  if (m.ianp) {
-    // passes 1 and 2 at the current u, into scratch (elements outside the
-    // region keep the state's values: their nodes do not move)
-    scratch.elem_pv.assign(s.elem_pv.begin(), s.elem_pv.end());
-    scratch.node_p.resize(m.n_nodes);
-    element_pressure(m, s.u.data(), elems, static_cast<T*>(nullptr), scratch.elem_pv.data(), static_cast<T*>(nullptr),
-                     scratch.pressure_part);
-    nodal_pressure(m, scratch.elem_pv.data(), node_volume, nodes, scratch.node_p.data(), scratch.nodal_part);
-    node_p = scratch.node_p.data();
-  }
+  scratch.elem_pv.assign(s.elem_pv.begin(), s.elem_pv.end());
+  scratch.elem_J.assign(s.elem_J.begin(), s.elem_J.end());
+  scratch.elem_F.resize(s.elem_F.size());
+  scratch.node_p.assign(s.node_p.begin(), s.node_p.end());
+  element_pressure(m, s.u.data(), elems, scratch.elem_J.data(), scratch.elem_pv.data(), scratch.elem_F.data(),
+                   scratch.pressure_part);
+  nodal_pressure(m, scratch.elem_pv.data(), node_volume, nodes, scratch.node_p.data(), scratch.nodal_part);
+  scratch.fresh = true;
+  const T* node_p = m.ianp ? scratch.node_p.data() : nullptr;
   // batches aligned to kLanes inside every fixed-grain chunk: the same
   // batches and the same summation order at any thread count
   return tbb::parallel_deterministic_reduce(
@@ -118,23 +116,35 @@ double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std
         for (std::size_t k = r.begin(); k < r.end(); k += kLanes) {
           ElementLanes<T> b;
           const int count = int(std::min<std::size_t>(kLanes, r.end() - k));
-          gather_lanes(m, s.u.data(), node_p, elems.data() + k, count, b);
+          gather_force_lanes(m, scratch.elem_F.data(), node_p, elems.data() + k, count, b);
           if (m.ianp)
             lanes_energy<T, true>(b);
           else
             lanes_energy<T, false>(b);
-          for (int l = 0; l < count; ++l) sum += double(b.out[l]);
+          for (int l = 0; l < count; ++l) sum += double(b.ret[l]);
         }
         return sum;
       },
       std::plus<double>());
 }
 
+template <class T>
+bool take_passes(EnergyScratch<T>& scratch, TissueState<T>& s) {
+  if (!scratch.fresh) return false;
+  scratch.fresh = false;
+  std::swap(scratch.elem_pv, s.elem_pv);
+  std::swap(scratch.elem_J, s.elem_J);
+  std::swap(scratch.elem_F, s.elem_F);
+  std::swap(scratch.node_p, s.node_p);
+  return true;
+}
+
 #define TISSUE_CPU_REDUCE(T)                                                                                 \
   template Reductions reduce_region(const TissueModel<T>&, const TissueState<T>&, std::span<const index_t>); \
   template double front_displacement(const TissueModel<T>&, const TissueState<T>&);                          \
   template double strain_energy(const TissueModel<T>&, const TissueState<T>&, const std::vector<T>&,         \
-                                EnergyScratch<T>&);
+                                EnergyScratch<T>&);                                                          \
+  template bool take_passes(EnergyScratch<T>&, TissueState<T>&);
 TISSUE_CPU_REDUCE(float)
 TISSUE_CPU_REDUCE(double)
 #undef TISSUE_CPU_REDUCE

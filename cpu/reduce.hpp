@@ -35,23 +35,36 @@ Reductions reduce_region(const TissueModel<T>& m, const TissueState<T>& s, std::
 template <class T>
 double front_displacement(const TissueModel<T>& m, const TissueState<T>& s);
 
-/// Scratch for strain_energy (sized on first use, then reused: no
-/// allocation per tick).
+/// Passes 1 and 2 at the current u, as strain_energy computes them (sized
+/// on first use, then reused: no allocation per tick). The next TLED step
+/// would compute exactly these numbers from the same u (a tick's driving
+/// changes targets, not u), so the backend swaps them into its state
+/// instead of recomputing them (take_passes). Every element and node
+/// outside the region keeps the state's value.
 template <class T>
 struct EnergyScratch {
-  std::vector<T> elem_pv;  ///< p_e V_e at the current u (n_elems) N m
-  std::vector<T> node_p;   ///< nodal pressure at the current u (n_nodes) Pa
+  std::vector<T> elem_pv;  ///< p_e V_e (n_elems) N m
+  std::vector<T> elem_J;   ///< det F (n_elems)
+  std::vector<T> elem_F;   ///< F (9 x n_elems; the region's elements only)
+  std::vector<T> node_p;   ///< nodal pressure (n_nodes) Pa
+  bool fresh = false;      ///< holds passes 1-2 of the state's current u and region
   tbb::affinity_partitioner pressure_part, nodal_part;  ///< for its passes 1 and 2
 };
 
 /// Strain energy sum_e V_e W(Fbar_e) over the region's elements at the
 /// current u (J; core/energy.hpp), summed in double by a deterministic
-/// reduction. For IANP the nodal pressures are recomputed from the current
-/// u into `scratch` (passes 1 and 2; the state's own pass arrays are left as
-/// the last step wrote them, so download() is unchanged); node_volume is
-/// pass 2's denominator (n_nodes, m^3).
+/// reduction, from passes 1 and 2 run into `scratch` (the state's own pass
+/// arrays are left as the last step wrote them, so download() is
+/// unchanged); node_volume is pass 2's denominator (n_nodes, m^3). Leaves
+/// scratch.fresh set.
 template <class T>
 double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<T>& node_volume,
                      EnergyScratch<T>& scratch);
+
+/// If scratch is fresh, swaps its passes 1-2 into the state (the values the
+/// next step's passes 1 and 2 would compute) and returns true; the caller
+/// then skips those passes. Clears fresh either way.
+template <class T>
+bool take_passes(EnergyScratch<T>& scratch, TissueState<T>& s);
 
 }  // namespace tissue::cpu

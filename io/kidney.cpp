@@ -254,7 +254,7 @@ scene::Scene default_kidney_scene() {
   s.solver.precision = Precision::Float;
   s.solver.dt = 0;
   s.solver.dt_safety = 0.9;
-  s.solver.mass_scaling = 0.01;
+  s.solver.mass_scaling = 0.025;
   s.solver.damping = -1;
   s.solver.depth = kDepthAuto;
   s.solver.tick = 1e-3;

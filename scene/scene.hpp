@@ -64,7 +64,7 @@ struct Solver {
   Precision precision = Precision::Float;  ///< scalar of the backend's store and arithmetic
   double dt = 0;                    ///< s; 0 = safety * dt_crit
   double dt_safety = 0.9;           ///< fraction of dt_crit used when dt = 0, in (0, 1)
-  double mass_scaling = 0.01;       ///< selective mass scaling budget, a fraction of the total mass in [0, 1)
+  double mass_scaling = 0.025;      ///< selective mass scaling budget, a fraction of the total mass in [0, 1)
                                     ///< (core choose_mass_scaling); 0 = off
   double damping = -1;              ///< alpha (1/s); -1 = auto: 2 x lowest-mode estimate
   int depth = kDepthAuto;           ///< rings; kDepthAll = whole mesh, kDepthAuto = adaptive

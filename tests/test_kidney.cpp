@@ -142,7 +142,7 @@ TEST(KidneyScene, MaterialAndSolverDefaults) {
   EXPECT_EQ(s.solver.precision, tissue::Precision::Float);
   EXPECT_EQ(s.solver.dt, 0);
   EXPECT_DOUBLE_EQ(s.solver.dt_safety, 0.9);
-  EXPECT_DOUBLE_EQ(s.solver.mass_scaling, 0.01);
+  EXPECT_DOUBLE_EQ(s.solver.mass_scaling, 0.025);
   EXPECT_LT(s.solver.damping, 0);
   EXPECT_EQ(s.solver.depth, tissue::kDepthAuto);
   EXPECT_DOUBLE_EQ(s.solver.tick, 1e-3);
