@@ -57,7 +57,7 @@ namespace tissue {
 struct LiveParams {
   double E = 3000;    ///< Young's modulus for every element set (Pa); <= 0: keep the scene's materials
   double nu = 0.45;   ///< Poisson's ratio (with E)
-  int depth = 5;      ///< region depth; kDepthAll = whole mesh
+  int depth = 5;      ///< region depth; kDepthAll = whole mesh, kDepthAuto = adaptive
   Precision precision = Precision::Float;
 };
 

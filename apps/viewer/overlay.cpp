@@ -84,8 +84,9 @@ OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, con
   row("force", fmt::format("{:.4f} N to the device (tissue {:.4f} N){}", norm(s.rendered_force), norm(s.tissue_force),
                            s.clamped ? "  CLAMPED" : ""));
   row("region", s.region.whole() ? fmt::format("whole mesh, {} nodes, {} elements", s.region.nodes(), s.region.n_elems)
-                                 : fmt::format("{} inner + {} halo nodes, {} elements (depth {})", s.region.n_inner,
-                                               s.region.n_halo, s.region.n_elems, s.region.depth));
+                                 : fmt::format("{} inner + {} halo nodes, {} elements ({}depth {})", s.region.n_inner,
+                                               s.region.n_halo, s.region.n_elems,
+                                               s.params.depth == kDepthAuto ? "auto, " : "", s.region.depth));
   row("time", fmt::format("{:.3f} s simulated, max |u| {:.2f} mm", s.time, 1e3 * s.max_disp));
   ImGui::Separator();
   bool changed = false;
@@ -96,14 +97,15 @@ OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, con
     changed = true;
   }
   changed |= ImGui::SliderScalar("nu", ImGuiDataType_Double, &edit_.nu, &nu_min, &nu_max, "%.3f");
-  bool whole = edit_.depth == kDepthAll;
-  int depth = whole ? 5 : edit_.depth;
-  if (ImGui::Checkbox("whole mesh", &whole)) changed = true;
-  ImGui::SameLine();
-  ImGui::BeginDisabled(whole);
-  changed |= ImGui::SliderInt("region depth", &depth, 0, 20);
+  // the region: adaptive (grows until its front barely moves), the whole
+  // mesh, or a fixed number of rings around the contact triangle
+  int mode = edit_.depth == kDepthAuto ? 0 : edit_.depth == kDepthAll ? 1 : 2;
+  int rings = mode == 2 ? edit_.depth : 5;
+  changed |= ImGui::Combo("region", &mode, "auto\0whole mesh\0rings\0");
+  ImGui::BeginDisabled(mode != 2);
+  changed |= ImGui::SliderInt("rings", &rings, 0, 20);
   ImGui::EndDisabled();
-  edit_.depth = whole ? kDepthAll : depth;
+  edit_.depth = mode == 0 ? kDepthAuto : mode == 1 ? kDepthAll : rings;
   int precision = edit_.precision == Precision::Float ? 0 : 1;
   changed |= ImGui::Combo("precision", &precision, "float\0double\0");
   edit_.precision = precision == 0 ? Precision::Float : Precision::Double;
