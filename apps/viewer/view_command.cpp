@@ -35,7 +35,9 @@ void add_view_command(CLI::App& app, int& rc) {
   cmd->add_option("--mouse-speed", o->mouse_speed, "Fastest the mouse moves the tool (m/s)")->default_val(0.25);
   cmd->add_option("--arrow-scale", o->arrow_scale, "Force arrow length in m per N (default: 1.5 organ diagonals)");
   cmd->add_option("--fps", o->fps, "Most display frames per second")->default_val(60);
-  cmd->add_flag("--realtime", o->realtime, "Run the haptic thread with SCHED_FIFO priority (needs CAP_SYS_NICE)");
+  cmd->add_flag("--realtime,!--no-realtime", o->realtime,
+                "Run the haptic thread with SCHED_FIFO priority (the default; needs CAP_SYS_NICE, else it runs at "
+                "normal priority and says so)");
   cmd->callback([o, &rc] { rc = viewer::run_view(*o, load_scene_arg(o->scene)); });
 }
 

@@ -165,6 +165,12 @@ std::unique_ptr<Viewer> make_viewer(const ViewOptions& o, scene::Scene scene) {
   opt.coupling.max_force = v->device.max_force;
   opt.realtime = o.realtime;
   v->loop = std::make_unique<HapticLoop>(*v->device.device, v->session.factory(), v->session.params, opt);
+  // A software renderer (Mesa's llvmpipe, under Xvfb or without a GPU)
+  // starts a render thread per core; with the cpu backend's TBB pool on
+  // every core too, they take turns and haptic ticks come late. Leave it one
+  // thread (before the context exists, when Mesa reads it) unless the user
+  // set LP_NUM_THREADS; hardware GL ignores the variable.
+  if (v->session.scene.solver.backend == "cpu") setenv("LP_NUM_THREADS", "1", 0);
   v->ctx = std::make_unique<GlContext>(context_kind(o), o.width, o.height, "tissue view: " + o.scene);
   v->mesh = mesh_of(*v->loop);
   v->renderer = std::make_unique<Renderer>(v->mesh);

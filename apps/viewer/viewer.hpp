@@ -26,7 +26,8 @@ struct ViewOptions {
   double mouse_speed = 0.25;             ///< fastest the mouse moves the tool (m/s)
   double arrow_scale = 0;                ///< force arrow length (m per N); 0: 1.5 x the organ's diagonal
   double fps = 60;                       ///< interactive: most frames per second (the display yields the rest)
-  bool realtime = false;                 ///< SCHED_FIFO for the haptic thread (HapticLoop::Options::realtime)
+  bool realtime = true;                  ///< SCHED_FIFO for the haptic thread (HapticLoop::Options::realtime), as
+                                        ///< haptic servo loops run (OpenHaptics' scheduler); falls back when refused
 };
 
 /// Runs the viewer on a loaded scene; returns the exit code. Throws for bad
