@@ -338,6 +338,17 @@ TEST(SceneValidate, SafetyFactorOutsideOpenUnitInterval) {
   }
 }
 
+TEST(SceneValidate, MassScalingOutsideItsRange) {
+  for (double bad : {-0.01, 1.0, 3.0}) {
+    Scene s = valid_scene();
+    s.solver.mass_scaling = bad;
+    EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "mass-scaling", "must be in [0, 1)"}));
+  }
+  Scene s = valid_scene();
+  s.solver.mass_scaling = std::nan("");
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "mass-scaling"}));
+}
+
 TEST(SceneValidate, NegativeDampingOtherThanAuto) {
   Scene s = valid_scene();
   s.solver.damping = -0.5;
@@ -388,6 +399,8 @@ TEST(SceneValidate, ValidSceneGivesModelInput) {
   Scene s = valid_scene();
   s.solver.dt = 1e-5;
   s.solver.dt_safety = 0.3;
+  s.solver.mass_scaling = 0.04;
+  s.solver.tick = 2e-3;
   s.solver.damping = 25;
   s.solver.ianp = false;
   const ModelInput in = to_model_input(s);
@@ -409,6 +422,8 @@ TEST(SceneValidate, ValidSceneGivesModelInput) {
   EXPECT_EQ(in.fixed, fixed);
   EXPECT_EQ(in.dt, 1e-5);
   EXPECT_EQ(in.dt_safety, 0.3);
+  EXPECT_EQ(in.mass_scaling, 0.04);
+  EXPECT_EQ(in.tick, 2e-3);
   EXPECT_EQ(in.damping, 25);
   EXPECT_FALSE(in.ianp);
 }

@@ -130,6 +130,7 @@ void expect_same_scene(const Scene& a, const Scene& b) {
   EXPECT_EQ(u.precision, v.precision);
   EXPECT_EQ(u.dt, v.dt);
   EXPECT_EQ(u.dt_safety, v.dt_safety);
+  EXPECT_EQ(u.mass_scaling, v.mass_scaling);
   EXPECT_EQ(u.damping, v.damping);
   EXPECT_EQ(u.depth, v.depth);
   EXPECT_EQ(u.tick, v.tick);
@@ -181,6 +182,7 @@ Scene rich_scene() {
   s.solver.precision = Precision::Double;
   s.solver.dt = 2.5e-5;
   s.solver.dt_safety = 0.4;
+  s.solver.mass_scaling = 0.015;
   s.solver.damping = 12.5;
   s.solver.depth = kDepthAll;
   s.solver.tick = 5e-4;
@@ -415,6 +417,18 @@ TEST(SceneXml, UnknownAttributeIsAnError) {
                               "unknown attribute 'colour'", "allowed: name, E, nu, mu, K, lambda, rho"}));
   const std::string solver = fmt::format("<tissue-scene>{}\n<solver dt_safety=\"0.3\"/></tissue-scene>", kTet);
   EXPECT_TRUE(xml_error(solver, {"scene.xml:5: ", "<solver>", "unknown attribute 'dt_safety'", "dt-safety"}));
+}
+
+// mass-scaling: a fraction, or "off"; anything else names the attribute and the line.
+TEST(SceneXml, MassScalingIsAFractionOrOff) {
+  auto solver = [](const std::string& attr) {
+    return fmt::format("<tissue-scene>{}\n<solver mass-scaling=\"{}\"/></tissue-scene>", kTet, attr);
+  };
+  EXPECT_EQ(parse_scene(solver("0.01"), "scene.xml", "").solver.mass_scaling, 0.01);
+  EXPECT_EQ(parse_scene(solver("off"), "scene.xml", "").solver.mass_scaling, 0.0);
+  EXPECT_EQ(parse_scene(solver(" 2e-2 "), "scene.xml", "").solver.mass_scaling, 0.02);
+  EXPECT_TRUE(xml_error(solver("lots"), {"scene.xml:5: ", "<solver>", "mass-scaling = 'lots'", "\"off\""}));
+  EXPECT_TRUE(xml_error(solver("auto"), {"scene.xml:5: ", "mass-scaling = 'auto'"}));
 }
 
 TEST(SceneXml, UnknownElementIsAnError) {
