@@ -255,13 +255,20 @@ TEST(Model, SquashedTetSetsCriticalStep) {
   EXPECT_NEAR(plain.dt_crit, s / std::sqrt(2.0) / wave, 1e-12 * plain.dt_crit);
 }
 
-TEST(Model, TimeStepAboveCriticalIsRefused) {
+/// The 2 x 2 x 2 box with a flat tet (apex 5 % of a cell above the top face)
+/// that sets the critical step 14x below the Kuhn tets'.
+ModelInput box_with_flat_tet() {
   const int n = 2;
   const double s = 0.01, h = 0.05 * s;
   ModelInput in = box_input(n, n, n, n * s, n * s, n * s);
   const index_t apex = static_cast<index_t>(in.nodes.size() / 3);
   in.nodes.insert(in.nodes.end(), {2 * s / 3, s / 3, n * s + h});
   in.tets.insert(in.tets.end(), {box_node(n, n, 0, 0, n), box_node(n, n, 1, 0, n), box_node(n, n, 1, 1, n), apex});
+  return in;
+}
+
+TEST(Model, TimeStepAboveCriticalIsRefused) {
+  ModelInput in = box_with_flat_tet();
   const auto ok = build_model(in);
   const double dt_crit = ok.dt_crit;
   in.dt = 1.01 * dt_crit;
@@ -307,18 +314,6 @@ TEST(MassScaling, ChoosesTheFewestStepsWithinTheBudget) {
   EXPECT_EQ(r.steps, 25);
   EXPECT_NEAR(r.added_mass, 66.0, 1e-9);
   EXPECT_EQ(r.scaled_elems, 2);
-}
-
-/// The 2 x 2 x 2 box with a flat tet (apex 5 % of a cell above the top face)
-/// that sets the critical step 14x below the Kuhn tets'.
-ModelInput box_with_flat_tet() {
-  const int n = 2;
-  const double s = 0.01, h = 0.05 * s;
-  ModelInput in = box_input(n, n, n, n * s, n * s, n * s);
-  const index_t apex = static_cast<index_t>(in.nodes.size() / 3);
-  in.nodes.insert(in.nodes.end(), {2 * s / 3, s / 3, n * s + h});
-  in.tets.insert(in.tets.end(), {box_node(n, n, 0, 0, n), box_node(n, n, 1, 0, n), box_node(n, n, 1, 1, n), apex});
-  return in;
 }
 
 TEST(MassScaling, LiftsTheFlatTetAndAddsMassOnlyToItsCorners) {
