@@ -100,17 +100,22 @@ MassScaling choose_mass_scaling(const std::vector<double>& dt_e, const std::vect
     total += rho_V[e];
     dt_min = std::min(dt_min, dt_e[e]);
   }
-  const int unscaled = std::max(1, int(std::ceil(tick / (safety * dt_min) * (1 - 1e-12))));
-  for (int n = 1;; ++n) {
-    const double dt = tick / n;
-    MassScaling r = n >= unscaled ? MassScaling{} : mass_needed(dt_e, rho_V, dt / safety);
-    if (n >= unscaled || r.added_mass <= budget * total) {
-      r.steps = n;
-      r.dt = dt;
-      if (r.need == 0) r.need = dt / safety;
-      return r;
-    }
+  // n steps without scaling suffice; the added mass falls as n grows (each
+  // element's need dt / safety does), so bisect for the fewest within budget
+  const long unscaled = std::max(1L, long(std::min(1e9, std::ceil(tick / (safety * dt_min) * (1 - 1e-12)))));
+  long lo = 1, hi = unscaled;
+  while (lo < hi) {
+    const long mid = lo + (hi - lo) / 2;
+    if (mass_needed(dt_e, rho_V, tick / double(mid) / safety).added_mass <= budget * total)
+      hi = mid;
+    else
+      lo = mid + 1;
   }
+  MassScaling r = lo < unscaled ? mass_needed(dt_e, rho_V, tick / double(lo) / safety) : MassScaling{};
+  r.steps = int(lo);
+  r.dt = tick / double(lo);
+  r.need = r.dt / safety;
+  return r;
 }
 
 double lowest_mode_estimate(const TissueModel<double>& m) {
