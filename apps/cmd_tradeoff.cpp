@@ -38,7 +38,8 @@ int run_tradeoff_command(TradeoffArgs& a) {
     o.mesh_names = {"default"};
     o.depths = {1, kDepthAll};
     o.auto_tols = {0.02};
-    o.safeties = {0.9};
+    o.safeties = {0.5};
+    o.mass_scalings = {0};
     o.residual_tols = {1e-2};
     o.max_hold = 0.3;
   }
@@ -62,7 +63,8 @@ int run_tradeoff_command(TradeoffArgs& a) {
 
 void add_tradeoff_command(CLI::App& app, int& rc) {
   auto* cmd = app.add_subcommand("tradeoff",
-                                 "Sweep region depth, precision, dt safety, mesh size and equilibrium tolerance; "
+                                 "Sweep region depth, precision, dt safety, mass scaling, mesh size and equilibrium "
+                                 "tolerance; "
                                  "measure cost and error against the reference solution");
   auto a = std::make_shared<TradeoffArgs>();
   cmd->add_option("scene", a->scene, "Scene XML file, or @kidney for the built-in kidney")->required();
