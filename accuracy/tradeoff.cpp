@@ -299,8 +299,10 @@ TradeoffSetting dynamic_reference_setting() {
 void dynamic_reference(MeshCase& mc, const TradeoffOptions& o, std::vector<TradeoffReference>& report) {
   if (!mc.press_force.empty()) return;
   const TradeoffSetting d = dynamic_reference_setting();
+  TradeoffOptions press_only = o;  // only the press is compared: stop at the hold
+  press_only.max_hold = 0;
   std::vector<Vec3<double>> press;
-  run_setting(mc, reference_for(mc, d.precision, o, report), d, {d.residual_tol}, o, press);
+  run_setting(mc, reference_for(mc, d.precision, o, report), d, {d.residual_tol}, press_only, press);
   mc.press_force = std::move(press);
 }
 

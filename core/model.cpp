@@ -70,27 +70,29 @@ void extract_surface(TissueModel<double>& m) {
   for (index_t t = 0; t < 3 * m.n_tris; ++t) m.node_flags[m.tris[t]] |= kSurface;
 }
 
+/// Density factor that lifts an element's step dt_e to `need` (1 if it has it).
+double density_scale(double dt_e, double need) { return dt_e < need ? (need / dt_e) * (need / dt_e) : 1.0; }
+
+/// Mass that scaling adds to lift every dt_e to `need` (kg), with the count
+/// of scaled elements and the largest factor.
+MassScaling mass_needed(const std::vector<double>& dt_e, const std::vector<double>& rho_V, double need) {
+  MassScaling r;
+  r.need = need;
+  for (size_t e = 0; e < dt_e.size(); ++e)
+    if (const double s = density_scale(dt_e[e], need); s > 1) {
+      r.added_mass += (s - 1) * rho_V[e];
+      ++r.scaled_elems;
+      r.max_scale = std::max(r.max_scale, s);
+    }
+  return r;
+}
+
 }  // namespace
 
 void align_time_step(TissueModel<double>& m, double tick) {
   if (!(tick > 0)) throw ModelError(fmt::format("haptic tick {} s must be > 0", tick));
   const double steps = std::ceil(tick / m.dt * (1 - 1e-12));
   set_time_step(m, tick / steps, m.damping);
-}
-
-/// Mass element scaling would add to lift every dt_e to `need` (kg), with
-/// the count and the largest factor.
-MassScaling mass_needed(const std::vector<double>& dt_e, const std::vector<double>& rho_V, double need) {
-  MassScaling r;
-  r.need = need;
-  for (size_t e = 0; e < dt_e.size(); ++e)
-    if (dt_e[e] < need) {
-      const double s = (need / dt_e[e]) * (need / dt_e[e]);
-      r.added_mass += (s - 1) * rho_V[e];
-      ++r.scaled_elems;
-      r.max_scale = std::max(r.max_scale, s);
-    }
-  return r;
 }
 
 MassScaling choose_mass_scaling(const std::vector<double>& dt_e, const std::vector<double>& rho_V, double tick,
@@ -305,10 +307,8 @@ TissueModel<double> build_model(const ModelInput& in) {
     }
     if (ms.scaled_elems > 0) {
       for (index_t e = 0; e < ne; ++e)
-        if (dt_elem[e] < ms.need) {
-          const double s_e = (ms.need / dt_elem[e]) * (ms.need / dt_elem[e]);
+        if (const double s_e = density_scale(dt_elem[e], ms.need); s_e > 1)
           for (int a = 0; a < 4; ++a) m.mass[m.elem_nodes[a * ne + e]] += (s_e - 1) * rho_V[e] / 4;
-        }
       m.dt_crit = ms.need;  // every scaled element now has dt_e = need; the others had more
       m.added_mass = ms.added_mass;
       m.scaled_elems = ms.scaled_elems;
