@@ -11,7 +11,7 @@
 namespace tissue::accuracy {
 
 ReferenceSolution reference_solution(const TissueModel<double>& model, const Drive& drive,
-                                     const ReferenceOptions& o) {
+                                     const ReferenceOptions& o, const HeldTool* tool) {
   if (!(o.dt_safety > 0 && o.dt_safety <= 1))
     throw std::invalid_argument(fmt::format("reference: dt safety factor {} must be in (0, 1]", o.dt_safety));
   TissueModel<double> m = model;
@@ -19,7 +19,7 @@ ReferenceSolution reference_solution(const TissueModel<double>& model, const Dri
   auto backend = create_backend(o.backend, Precision::Double);
   ReferenceSolution ref;
   ref.dt = m.dt;
-  ref.relax = relax(*backend, m, drive, o.relax);
+  ref.relax = relax(*backend, m, drive, o.relax, {}, tool);
   if (!ref.relax.converged)
     throw std::runtime_error(fmt::format(
         "reference: dynamic relaxation stopped after {} steps ({:.1f} s) at relative residual {:.3g} "
@@ -28,6 +28,8 @@ ReferenceSolution reference_solution(const TissueModel<double>& model, const Dri
         o.relax.kinetic_tol));
   ref.fields = backend->download();
   ref.reaction = ref.relax.last.reaction;
+  ref.tool_force = -1.0 * ref.relax.last.tools[0].reaction;
+  ref.contact_nodes = ref.relax.last.tools[0].contact;
   ref.max_disp = ref.relax.last.max_disp;
   ref.strain_energy = ref.relax.last.strain_energy;
   return ref;
@@ -46,35 +48,48 @@ double hold_start(const std::vector<Waypoint>& path) {
   return start;
 }
 
-HeldContact held_contact(const TissueModel<double>& model, const std::vector<Waypoint>& path, double tick,
-                         double t_hold, const std::string& backend_name, Precision precision) {
-  if (!(tick > 0)) throw std::invalid_argument("held_contact: tick must be > 0 s");
+bool touches_reference_surface(const TissueModel<double>& m, const ToolShape& shape, const ToolPose& pose) {
+  const index_t n = m.n_nodes, nt = m.n_tris;
+  const Capsule<double> cap{pose.tip, pose.tip + shape.shaft * pose.axis, shape.radius};
+  for (index_t t = 0; t < nt; ++t) {
+    Vec3<double> P[3];
+    for (int k = 0; k < 3; ++k) {
+      const index_t a = m.tris[k * nt + t];
+      P[k] = {m.X[a], m.X[n + a], m.X[2 * size_t(n) + a]};
+    }
+    double w[3];
+    Vec3<double> c;
+    if (norm(triangle_deepest_point(cap, P, w, c) - c) < shape.radius) return true;
+  }
+  return false;
+}
+
+HeldTool held_tool(const TissueModel<double>& model, const ToolSetting& tool, const std::vector<Waypoint>& path,
+                   double tick, double t_hold, const ContactOptions& contact) {
+  if (!(tick > 0)) throw std::invalid_argument("held_tool: tick must be > 0 s");
   ScriptedDevice device(path);
-  auto backend = create_backend(backend_name, precision);
-  backend->upload(model);
-  HeldContact c;
-  Vec3<double> prev = device.read_position(tick);  // the Scheduler's first tick reads t = tick
+  const auto pose_at = [&](double t) {
+    const ToolInput in = device.read(t);
+    return ToolPose{in.tip, unit_or(in.axis, unit_or(tool.axis, Vec3<double>{0, 0, 1}))};
+  };
+  HeldTool h;
+  h.shape = tool.shape;
+  h.contact = contact;
+  h.held = pose_at(t_hold);
+  ToolPose prev = pose_at(tick);  // the Scheduler's first tick reads t = tick
   for (long k = 0;; ++k) {
     const double t = (k + 1) * tick;
     if (t > t_hold + 1e-12)
-      throw std::runtime_error(fmt::format("held_contact: the tool path does not touch the surface before t = {} s",
-                                           t_hold));
-    const Vec3<double> tip = device.read_position(t);
-    const Hit hit = backend->collide(prev, tip);
-    if (hit.hit() && dot(tip - prev, hit.normal) < 0) {
-      c.tri = hit.tri;
-      c.point = hit.point;
-      c.t_contact = t;
-      c.drive.nodes.assign(hit.nodes, hit.nodes + 3);
-      break;
+      throw std::runtime_error(
+          fmt::format("held_tool: tool '{}' does not touch the surface before t = {} s", tool.shape.name, t_hold));
+    const ToolPose p = pose_at(t);
+    if (touches_reference_surface(model, tool.shape, p)) {
+      h.start = prev;
+      h.t_touch = t;
+      return h;
     }
-    prev = tip;
+    prev = p;
   }
-  c.tip = device.read_position(t_hold);
-  const Vec3<double> d = c.tip - c.point;
-  for (int k = 0; k < 3; ++k)
-    for (int j = 0; j < 3; ++j) c.drive.u.push_back(d[j]);
-  return c;
 }
 
 }  // namespace tissue::accuracy

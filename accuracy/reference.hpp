@@ -10,6 +10,7 @@
 #include "accuracy/relaxation.hpp"
 #include "core/device.hpp"
 #include "core/model.hpp"
+#include "core/scheduler.hpp"
 
 namespace tissue::accuracy {
 
@@ -24,6 +25,8 @@ struct ReferenceOptions {
 struct ReferenceSolution {
   Fields fields;                ///< relaxed u (3 x n_nodes, m), f (N), nodal pressure, J
   Vec3<double> reaction = {};   ///< sum of internal forces on the driven components (N)
+  Vec3<double> tool_force = {}; ///< force on the held tool, if any: minus its contact reaction (N)
+  index_t contact_nodes = 0;    ///< the tool's contact nodes at the end
   double max_disp = 0;          ///< max |u_a| (m)
   double strain_energy = 0;     ///< J
   double dt = 0;                ///< step used (s)
@@ -31,37 +34,31 @@ struct ReferenceSolution {
 };
 
 /// Relaxes `model` (whole mesh, double, dt = options.dt_safety x dt_crit)
-/// under `drive` from u = 0. Throws RelaxError when the relaxation breaks
-/// down (NaN, inverted element) and std::runtime_error naming the residual
-/// reached when it did not converge within the step or wall limits.
+/// under `drive` (and `tool`, if given) from u = 0. Throws RelaxError when
+/// the relaxation breaks down (NaN, inverted element) and
+/// std::runtime_error naming the residual reached when it did not converge
+/// within the step or wall limits.
 ReferenceSolution reference_solution(const TissueModel<double>& model, const Drive& drive,
-                                     const ReferenceOptions& options = {});
+                                     const ReferenceOptions& options = {}, const HeldTool* tool = nullptr);
 
-/// The tool contact the Scheduler would make on the undeformed tissue along
-/// `path`, held where the tool is at time t_hold (s): sampling the path at
-/// the haptic tick, the first segment from the previous to the current tip
-/// that enters the surface (Backend::collide, nearest hit, an entering
-/// crossing) gives the contact triangle and the point P0; its three corners
-/// are driven by tip(t_hold) - P0 (core/scheduler.hpp's rule with the
-/// undeformed corner displacements u0 = 0). Throws std::runtime_error when
-/// the path never touches the surface before t_hold.
-struct HeldContact {
-  Drive drive;                  ///< the three corners, all components
-  index_t tri = -1;             ///< contact triangle
-  Vec3<double> point = {};      ///< P0 (m)
-  Vec3<double> tip = {};        ///< tip at t_hold (m)
-  double t_contact = 0;         ///< time of the tick that made contact (s)
-};
 /// Time (s) at which a scripted path starts holding the tool still: the
 /// start of its longest stationary segment (two consecutive waypoints at the
 /// same point), or the path's end when it never stops. Throws
 /// std::invalid_argument for an empty path.
 double hold_start(const std::vector<Waypoint>& path);
 
-/// `precision` is the collision's: a float run may pick the other triangle
-/// of an edge the path crosses exactly, and its reference must drive the
-/// triangle it drove.
-HeldContact held_contact(const TissueModel<double>& model, const std::vector<Waypoint>& path, double tick,
-                         double t_hold, const std::string& backend = "cpu", Precision precision = Precision::Double);
+/// The scene's tool held where its path is at t_hold (s), for the
+/// reference: sampling the path at the haptic tick, the ramp starts at the
+/// last pose before the tool first comes within its radius of the
+/// undeformed surface (the first pose when it starts there). The axis is
+/// the path's where it gives one, else the tool's direction. Throws
+/// std::runtime_error when the path never touches the surface before
+/// t_hold.
+HeldTool held_tool(const TissueModel<double>& model, const ToolSetting& tool, const std::vector<Waypoint>& path,
+                   double tick, double t_hold, const ContactOptions& contact = {});
+
+/// True when the capsule of `shape` at `pose` reaches within its radius of
+/// the model's undeformed surface.
+bool touches_reference_surface(const TissueModel<double>& model, const ToolShape& shape, const ToolPose& pose);
 
 }  // namespace tissue::accuracy

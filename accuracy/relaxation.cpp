@@ -34,8 +34,22 @@ std::vector<std::uint8_t> free_components(const TissueModel<double>& m, const Dr
   return held;
 }
 
-/// Drives the nodes at start + frac (target - start).
-void drive_at(Backend& b, const Drive& d, const std::vector<double>& start, double frac) {
+/// The tool's pose a fraction `frac` of the way from its start to its held pose.
+ToolPose tool_pose(const HeldTool& t, double frac) {
+  ToolPose p;
+  interpolate_pose(t.start.tip, t.start.axis, t.held.tip, t.held.axis, frac, p.tip, p.axis);
+  return p;
+}
+
+/// Drives the nodes at start + frac (target - start) and moves the tool
+/// (if any) from where it was to its pose at frac over the next advance.
+void drive_at(Backend& b, const Drive& d, const std::vector<double>& start, double frac, const HeldTool* tool = nullptr,
+              double frac_before = -1) {
+  if (tool) {
+    const ToolMotion m{tool_pose(*tool, frac_before < 0 ? frac : frac_before), tool_pose(*tool, frac)};
+    b.move_tools(std::span<const ToolMotion>(&m, 1));
+  }
+  if (d.nodes.empty()) return;
   std::vector<double> u(d.u.size());
   for (std::size_t k = 0; k < u.size(); ++k) u[k] = start[k] + frac * (d.u[k] - start[k]);
   if (d.axes.empty())
@@ -103,7 +117,7 @@ double rayleigh_omega2(std::span<const double> u0, std::span<const double> u1, s
 }
 
 RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& drive, const RelaxOptions& o,
-                  std::span<const double> u0) {
+                  std::span<const double> u0, const HeldTool* tool) {
   check_drive(model, drive);
   if (!u0.empty() && u0.size() != 3 * std::size_t(model.n_nodes))
     throw std::invalid_argument(
@@ -120,8 +134,12 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
   const double omega0 = lowest_mode_estimate(m);
   double alpha = o.damping >= 0 ? o.damping : 2.0 * omega0;
   set_time_step(m, m.dt, alpha);
-  b.upload(m);
-  if (!u0.empty()) b.set_displacements(u0);
+  const auto load = [&](std::span<const double> u) {
+    b.upload(m);
+    if (tool) b.set_tools(std::span<const ToolShape>(&tool->shape, 1), tool->contact);
+    if (!u.empty()) b.set_displacements(u);
+  };
+  load(u0);
   const std::vector<double> start = drive_start(m, drive, u0);
   const std::vector<std::uint8_t> free_mask = free_components(m, drive);
 
@@ -132,7 +150,7 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
   long steps = 0, last_check = 0;
   while (steps < ramp_steps) {
     const int k = static_cast<int>(std::min<long>(ramp_chunk, ramp_steps - steps));
-    drive_at(b, drive, start, double(steps + k) / double(ramp_steps));
+    drive_at(b, drive, start, double(steps + k) / double(ramp_steps), tool, double(steps) / double(ramp_steps));
     b.advance(k);
     steps += k;
     if (steps - last_check >= o.check_every || steps == ramp_steps) {
@@ -181,9 +199,8 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
       if (omega > 0 && std::fabs(2 * omega - alpha) > 0.1 * alpha) {
         alpha = 2 * omega;
         set_time_step(m, m.dt, alpha);
-        b.upload(m);
-        b.set_displacements(d2.u);
-        drive_at(b, drive, start, 1.0);
+        load(d2.u);
+        drive_at(b, drive, start, 1.0, tool);
         ++out.restarts;
       }
     }

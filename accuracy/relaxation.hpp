@@ -22,6 +22,7 @@
 
 #include "core/backend.hpp"
 #include "core/model.hpp"
+#include "core/tool.hpp"
 
 namespace tissue::accuracy {
 
@@ -30,6 +31,16 @@ struct Drive {
   std::vector<index_t> nodes;      ///< driven nodes (n_driven)
   std::vector<double> u;           ///< their target displacements (n_driven x 3, xyz interleaved) m
   std::vector<std::uint8_t> axes;  ///< component mask per node (n_driven; bit c = axis c); empty = all three
+};
+
+/// A tool pressed and held during a relaxation: it moves from `start` to
+/// `held` while the drive's targets ramp up, then stays at `held`; the
+/// backend's contact stage (core/contact.hpp) acts as in a run.
+struct HeldTool {
+  ToolShape shape;
+  ToolPose start, held;
+  ContactOptions contact;
+  double t_touch = 0;          ///< s: when the scripted path first touched the surface (reports)
 };
 
 /// How to relax.
@@ -77,14 +88,15 @@ struct RelaxError : std::runtime_error {
 
 /// Uploads `model` (with the damping of `options`) to `backend` (whole mesh),
 /// optionally sets the start displacements u0 (3 x n_nodes, m; empty = 0),
-/// ramps `drive`'s targets from u0's values to their own over
-/// options.ramp_time, then steps until the relative residual and kinetic
+/// ramps `drive`'s targets from u0's values to their own (and moves `tool`,
+/// if given, from its start to its held pose) over options.ramp_time, then
+/// steps until the relative residual and kinetic
 /// energy fall below the tolerances or the step/wall limits run out. The
 /// backend is left holding the relaxed state (download() it). Throws
 /// RelaxError on NaN/Inf or an inverted element, std::invalid_argument for a
 /// malformed drive.
 RelaxResult relax(Backend& backend, const TissueModel<double>& model, const Drive& drive, const RelaxOptions& options,
-                  std::span<const double> u0 = {});
+                  std::span<const double> u0 = {}, const HeldTool* tool = nullptr);
 
 /// Fictitious nodal masses (n_nodes, kg) for dynamic relaxation with step
 /// dt (s): m_a = dt^2 / (4 safety) sum_e (K_e + 4 mu_e / 3) V_e |dN_a| sum_b |dN_b|,

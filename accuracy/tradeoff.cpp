@@ -29,20 +29,19 @@ std::string depth_name(int d) {
   return std::to_string(d);
 }
 
-/// A reference for one contact.
+/// The reference of one mesh: the tool held at its indentation.
 struct RefEntry {
-  HeldContact contact;
+  HeldTool tool;
   ReferenceSolution ref;
 };
 
-/// One mesh of the sweep with its references (one per contact triangle the
-/// runs made; the first is the scene precision's).
+/// One mesh of the sweep with its reference.
 struct MeshCase {
   std::string name;
   scene::Scene scene;
   TissueModel<double> model;     ///< at the scene's settings (reference input)
-  std::vector<RefEntry> refs;
-  std::string failed;            ///< why its first reference failed (the mesh is then skipped)
+  std::optional<RefEntry> ref;   ///< computed on first use
+  std::string failed;            ///< why its reference failed (the mesh is then skipped)
   std::vector<double> fine_u;    ///< the finest mesh's reference at this mesh's nodes (3 x n_nodes)
   Vec3<double> fine_force = {};  ///< the finest mesh's force on the tool (N)
   std::vector<Vec3<double>> press_force;  ///< the dynamic reference's force per tick up to the hold (N);
@@ -108,56 +107,45 @@ TradeoffReference reference_row(const MeshCase& mc, const RefEntry& r) {
   t.steps = r.ref.relax.steps;
   t.wall = r.ref.relax.wall;
   t.residual = r.ref.relax.residual;
-  t.force = -1.0 * r.ref.reaction;
+  t.force = r.ref.tool_force;
   t.max_disp = r.ref.max_disp;
-  t.contact_tri = r.contact.tri;
+  t.contact_nodes = r.ref.contact_nodes;
   return t;
 }
 
-/// The reference for the contact a run of precision p makes on this mesh
-/// (computed on first use and kept).
-const RefEntry& reference_for(MeshCase& mc, Precision p, const TradeoffOptions& o,
-                              std::vector<TradeoffReference>& report) {
+/// The mesh's reference (computed on first use and kept): the whole mesh in
+/// double, the scene's first tool held at its indentation, relaxed to the
+/// reference tolerance. Every setting on this mesh is measured against it.
+const RefEntry& reference_for(MeshCase& mc, const TradeoffOptions& o, std::vector<TradeoffReference>& report) {
+  if (mc.ref) return *mc.ref;
   const std::vector<Waypoint>& path = tool_path(mc.scene);
   const std::string backend = o.backend.empty() ? mc.scene.solver.backend : o.backend;
-  HeldContact c = held_contact(mc.model, path, mc.scene.solver.tick, hold_start(path), backend, p);
-  // the same triangle driven to the same targets up to float rounding of the
-  // contact point (1e-6 relative, far below every error the sweep measures)
-  for (const RefEntry& r : mc.refs) {
-    if (r.contact.tri != c.tri) continue;
-    double diff = 0, size = 0;
-    for (std::size_t k = 0; k < c.drive.u.size(); ++k) {
-      diff = std::max(diff, std::fabs(r.contact.drive.u[k] - c.drive.u[k]));
-      size = std::max(size, std::fabs(c.drive.u[k]));
-    }
-    if (diff <= 1e-6 * size) return r;
-  }
-  if (o.verbose)
-    fmt::print(stderr, "  reference: {} mesh, contact triangle {} ({} collision)\n", mc.name, c.tri, to_string(p));
+  const ToolSetting tool = scene::scheduler_settings(mc.scene).tools.front();
+  if (o.verbose) fmt::print(stderr, "  reference: {} mesh, tool held at its indentation\n", mc.name);
   ReferenceOptions ro;
   ro.backend = backend;
   ro.relax.residual_tol = o.reference_tol;
-  RefEntry e{c, {}};
+  RefEntry e;
   try {
-    e.ref = reference_solution(mc.model, c.drive, ro);
+    e.tool = held_tool(mc.model, tool, path, mc.scene.solver.tick, hold_start(path));
+    e.ref = reference_solution(mc.model, {}, ro, &e.tool);
   } catch (const std::exception& err) {
     TradeoffReference t;
     t.mesh = mc.name;
     t.nodes = mc.model.n_nodes;
     t.elems = mc.model.n_elems;
-    t.contact_tri = c.tri;
     t.failed = err.what();
     report.push_back(t);
     if (o.verbose) fmt::print(stderr, "  reference failed: {}\n", t.failed);
     throw;
   }
-  mc.refs.push_back(std::move(e));
-  report.push_back(reference_row(mc, mc.refs.back()));
+  mc.ref = std::move(e);
+  report.push_back(reference_row(mc, *mc.ref));
   const TradeoffReference& r = report.back();
   if (o.verbose)
     fmt::print(stderr, "  {} nodes, {} tets: reference residual {:.2g} after {} steps ({:.1f} s), |F| = {:.5g} N\n",
                r.nodes, r.elems, r.residual, r.steps, r.wall, norm(r.force));
-  return mc.refs.back();
+  return *mc.ref;
 }
 
 MeshCase make_mesh_case(const scene::Scene& base, int target, const std::string& name) {
@@ -196,6 +184,8 @@ std::vector<TradeoffRow> run_setting(const MeshCase& mc, const RefEntry& ref, co
   settings.depth = st.depth;
   settings.auto_tol = st.auto_tol;
   settings.residual_tol = st.residual_tol;
+  settings.contact.face = st.face_contact;
+  settings.contact.max_travel = st.max_travel;
   auto backend = create_backend(s.solver.backend, st.precision);
   backend->upload(model);
   Scheduler sched(*backend, model, settings);
@@ -230,17 +220,14 @@ std::vector<TradeoffRow> run_setting(const MeshCase& mc, const RefEntry& ref, co
     r.max_disp = rep.max_disp;
     const Fields f = backend->download();
     r.disp_err = relative_disp_error(f.u, ref.ref.fields.u);
-    r.force_err = relative_force_error(rep.force, -1.0 * ref.ref.reaction);
+    r.force_err = relative_force_error(rep.force, ref.ref.tool_force);
     if (mc.fine_u.empty()) {  // no usable finest mesh
       r.disp_err_fine = r.disp_err_fine_far = r.force_err_fine = NAN;
     } else {
       r.disp_err_fine = relative_disp_error(f.u, mc.fine_u);
-      r.disp_err_fine_far = relative_disp_error(f.u, mc.fine_u, far_nodes(model, ref.contact.point, o.far_radius));
+      r.disp_err_fine_far = relative_disp_error(f.u, mc.fine_u, far_nodes(model, ref.tool.held.tip, o.far_radius));
       r.force_err_fine = relative_force_error(rep.force, mc.fine_force);
     }
-    if (rep.contact_tri != ref.contact.tri)
-      throw std::logic_error(fmt::format("tradeoff: {} touched triangle {}, its reference triangle {}", st.label,
-                                         rep.contact_tri, ref.contact.tri));
     rows[k] = r;
   };
   TickReport rep;
@@ -249,7 +236,7 @@ std::vector<TradeoffRow> run_setting(const MeshCase& mc, const RefEntry& ref, co
     const std::clock_t c0 = std::clock();
     rep = sched.tick(device);
     const double w = seconds_since(t0), cpu = double(std::clock() - c0) / CLOCKS_PER_SEC;
-    if (rep.contact_tri >= 0) {
+    if (rep.contact_nodes > 0) {
       tick_wall.push_back(w);
       contact_wall += w;
       contact_cpu += cpu;
@@ -302,7 +289,7 @@ void dynamic_reference(MeshCase& mc, const TradeoffOptions& o, std::vector<Trade
   TradeoffOptions press_only = o;  // only the press is compared: stop at the hold
   press_only.max_hold = 0;
   std::vector<Vec3<double>> press;
-  run_setting(mc, reference_for(mc, d.precision, o, report), d, {d.residual_tol}, press_only, press);
+  run_setting(mc, reference_for(mc, o, report), d, {d.residual_tol}, press_only, press);
   mc.press_force = std::move(press);
 }
 
@@ -377,6 +364,11 @@ std::vector<TradeoffSetting> tradeoff_settings(const scene::Scene& scene, const 
     if (int(m) != anchor.mesh)
       vary(anchor, "mesh", fmt::format("anchor, {} mesh", o.mesh_names.at(m)),
            [&](TradeoffSetting& s) { s.mesh = int(m); });
+  for (const TradeoffSetting& c : o.contact)
+    vary(anchor, "contact", c.label, [&](TradeoffSetting& s) {
+      s.face_contact = c.face_contact;
+      s.max_travel = c.max_travel;
+    });
   for (double t : o.residual_tols)
     if (t != anchor.residual_tol)
       vary(anchor, "tolerance", fmt::format("anchor, tol {}", fmt_tol(t)), [&](TradeoffSetting& s) { s.residual_tol = t; });
@@ -405,7 +397,7 @@ TradeoffResult run_tradeoff(const scene::Scene& scene, const TradeoffOptions& o)
     if (o.verbose) fmt::print(stderr, "tradeoff: {} mesh and its reference ...\n", o.mesh_names[m]);
     meshes.push_back(make_mesh_case(scene, o.mesh_targets[m], o.mesh_names[m]));
     try {
-      reference_for(meshes.back(), scene.solver.precision, o, res.references);
+      reference_for(meshes.back(), o, res.references);
     } catch (const std::exception& e) {
       meshes.back().failed = e.what();
     }
@@ -418,8 +410,8 @@ TradeoffResult run_tradeoff(const scene::Scene& scene, const TradeoffOptions& o)
     std::vector<double> pts(3 * std::size_t(mc.model.n_nodes));
     for (index_t i = 0; i < mc.model.n_nodes; ++i)
       for (int c = 0; c < 3; ++c) pts[3 * i + c] = mc.model.X[c * mc.model.n_nodes + i];
-    mc.fine_u = sample_field(fine->model, fine->refs.front().ref.fields.u, pts);
-    mc.fine_force = -1.0 * fine->refs.front().ref.reaction;
+    mc.fine_u = sample_field(fine->model, fine->ref->ref.fields.u, pts);
+    mc.fine_force = fine->ref->ref.tool_force;
   }
   {
     auto b = create_backend(o.backend.empty() ? scene.solver.backend : o.backend, Precision::Float);
@@ -444,7 +436,7 @@ TradeoffResult run_tradeoff(const scene::Scene& scene, const TradeoffOptions& o)
     try {
       if (!mc.failed.empty()) throw std::runtime_error("no reference on this mesh: " + mc.failed);
       dynamic_reference(mc, o, res.references);
-      const RefEntry& ref = reference_for(mc, s.precision, o, res.references);
+      const RefEntry& ref = reference_for(mc, o, res.references);
       std::vector<Vec3<double>> press;
       rows = run_setting(mc, ref, s, base ? base_tols : std::vector<double>{s.residual_tol}, o, press);
     } catch (const std::exception& e) {
@@ -496,12 +488,11 @@ std::string tradeoff_table(const TradeoffResult& res) {
   out += "references (whole mesh, double, dynamic relaxation):\n";
   for (const TradeoffReference& r : res.references)
     if (!r.failed.empty())
-      out += fmt::format("  {:<8} {:6} nodes {:6} tets  contact triangle {:5}  FAILED: {}\n", r.mesh, r.nodes, r.elems,
-                         r.contact_tri, r.failed);
+      out += fmt::format("  {:<8} {:6} nodes {:6} tets  FAILED: {}\n", r.mesh, r.nodes, r.elems, r.failed);
     else
-      out += fmt::format("  {:<8} {:6} nodes {:6} tets  contact triangle {:5}  residual {:.2g}  {:6} steps {:6.1f} s  "
+      out += fmt::format("  {:<8} {:6} nodes {:6} tets  {:4} contact nodes  residual {:.2g}  {:6} steps {:6.1f} s  "
                        "|F| {:.5g} N  max|u| {:.4g} mm\n",
-                       r.mesh, r.nodes, r.elems, r.contact_tri, r.residual, r.steps, r.wall, norm(r.force),
+                       r.mesh, r.nodes, r.elems, r.contact_nodes, r.residual, r.steps, r.wall, norm(r.force),
                        1e3 * r.max_disp);
   out += fmt::format(
       "{:<44} {:>6} {:>6} {:>5} {:>6} {:>6} {:>5} {:>5} {:>6} {:>8} {:>8} {:>8} {:>6} {:>3} {:>9} {:>9} {:>9} {:>9} "
@@ -528,7 +519,7 @@ std::string tradeoff_table(const TradeoffResult& res) {
          "the same mesh's reference; press F: the largest tool-force difference during the press from the same\n"
          "mesh run whole, double, safety 0.5, no mass scaling (the transient, relative to its peak force);\n"
          "mass: the mass scaling budget; u err*, F err*: against the finest mesh's reference (u far*: the error\n"
-         "over nodes farther than far_radius from the contact point). ticks: haptic ticks from the start of the\n"
+         "over nodes farther than far_radius from the held tool tip). ticks: haptic ticks from the start of the\n"
          "hold to the measured tick (eq: the tolerance passed). P: on the Pareto front of (ms/tick, u err).\n";
   out += fmt::format("sweep wall time {:.1f} s\n", res.wall);
   return out;
@@ -542,9 +533,9 @@ std::string tradeoff_json(const TradeoffResult& res) {
     const TradeoffReference& r = res.references[k];
     out += fmt::format(
         "    {{\"mesh\": \"{}\", \"nodes\": {}, \"tets\": {}, \"steps\": {}, \"wall_s\": {}, \"residual\": {}, "
-        "\"force\": [{}, {}, {}], \"max_disp\": {}, \"contact_tri\": {}, \"failed\": \"{}\"}}{}\n",
+        "\"force\": [{}, {}, {}], \"max_disp\": {}, \"contact_nodes\": {}, \"failed\": \"{}\"}}{}\n",
         r.mesh, r.nodes, r.elems, r.steps, r.wall, r.residual, r.force.x, r.force.y, r.force.z, r.max_disp,
-        r.contact_tri, json_escape(r.failed), k + 1 < res.references.size() ? "," : "");
+        r.contact_nodes, json_escape(r.failed), k + 1 < res.references.size() ? "," : "");
   }
   out += "  ],\n  \"rows\": [\n";
   for (std::size_t k = 0; k < res.rows.size(); ++k) {
@@ -552,7 +543,7 @@ std::string tradeoff_json(const TradeoffResult& res) {
     const TradeoffSetting& s = r.setting;
     out += fmt::format(
         "    {{\"group\": \"{}\", \"label\": \"{}\", \"depth\": \"{}\", \"auto_tol\": {}, \"precision\": \"{}\", "
-        "\"dt_safety\": {}, \"mass_scaling\": {}, \"mesh\": {}, \"residual_tol\": {}, \"mesh_nodes\": {}, "
+        "\"dt_safety\": {}, \"mass_scaling\": {}, \"mesh\": {}, \"face_contact\": {}, \"max_travel\": {}, \"residual_tol\": {}, \"mesh_nodes\": {}, "
         "\"mesh_tets\": {}, \"dt\": {}, \"added_mass\": {}, "
         "\"steps_per_tick\": {}, \"wall_per_tick_s\": {}, \"cpu_per_tick_s\": {}, \"steps_per_s\": {}, \"region_nodes\": {}, "
         "\"region_elems\": {}, \"depth_reached\": \"{}\", \"equilibrium\": {}, \"hold_ticks\": {}, "
@@ -561,7 +552,7 @@ std::string tradeoff_json(const TradeoffResult& res) {
         "\"force_err_fine\": {}, "
         "\"pareto\": {}, \"failed\": \"{}\"}}{}\n",
         s.group, json_escape(s.label), depth_name(s.depth), s.auto_tol, to_string(s.precision), s.dt_safety,
-        s.mass_scaling, s.mesh, s.residual_tol, r.mesh_nodes, r.mesh_elems, r.dt, r.added_mass, r.steps_per_tick, r.wall_per_tick, r.cpu_per_tick,
+        s.mass_scaling, s.mesh, s.face_contact, s.max_travel, s.residual_tol, r.mesh_nodes, r.mesh_elems, r.dt, r.added_mass, r.steps_per_tick, r.wall_per_tick, r.cpu_per_tick,
         r.steps_per_s,
         r.region_nodes, r.region_elems, depth_name(r.depth_reached), r.equilibrium, r.hold_ticks, r.hold_wall,
         r.residual, r.force.x, r.force.y, r.force.z, r.max_disp, r.disp_err, r.force_err,

@@ -36,7 +36,7 @@ namespace tissue::accuracy {
 /// One point of the sweep.
 struct TradeoffSetting {
   std::string group;              ///< "baseline", "anchor", "depth", "auto", "precision", "safety", "mass",
-                                  ///< "mesh", "tolerance", "compare"
+                                  ///< "mesh", "contact", "tolerance", "compare"
   std::string label;              ///< e.g. "depth 3", "auto 0.02", "double", "safety 0.9"
   int depth = 5;                  ///< rings; kDepthAll; kDepthAuto
   double auto_tol = 0.02;         ///< depth auto's front tolerance
@@ -45,6 +45,8 @@ struct TradeoffSetting {
   int mesh = 1;                   ///< index into TradeoffOptions::mesh_targets
   double residual_tol = 1e-3;     ///< equilibrium tolerance (relative free-node residual)
   double mass_scaling = 0;        ///< selective mass scaling budget (fraction of the total mass; 0 = off)
+  bool face_contact = true;       ///< contact: face contact on (off: node contact only)
+  double max_travel = 0.5;        ///< contact: most tool travel between two contact checks, in radii
 };
 
 /// What one setting measured.
@@ -67,8 +69,8 @@ struct TradeoffRow {
   double disp_err = 0;            ///< vs the same mesh's reference (relative)
   double force_err = 0;
   double disp_err_fine = 0;       ///< vs the finest mesh's reference (relative)
-  double disp_err_fine_far = 0;   ///< the same over nodes farther than far_radius from the contact point:
-                                  ///< the discretisation error away from the one-triangle contact patch
+  double disp_err_fine_far = 0;   ///< the same over nodes farther than far_radius from the held tool tip:
+                                  ///< the discretisation error away from the contact patch
   double force_err_fine = 0;
   double added_mass = 0;          ///< mass scaling's added mass / total mass
   double press_force_err = 0;     ///< the transient: max over the press's ticks of |F(t) - F_dyn(t)| / max |F_dyn|,
@@ -87,7 +89,7 @@ struct TradeoffReference {
   double residual = 0;            ///< relative residual reached
   Vec3<double> force = {};        ///< force on the tool (N)
   double max_disp = 0;            ///< m
-  index_t contact_tri = -1;
+  index_t contact_nodes = 0;      ///< the tool's contact nodes at equilibrium
   std::string failed;             ///< why the relaxation stopped (e.g. an element inverted under the contact)
 };
 
@@ -105,6 +107,15 @@ inline TradeoffSetting previous_defaults() {
   return s;
 }
 
+/// A contact-dimension setting (label, face contact, check spacing in radii).
+inline TradeoffSetting contact_setting(std::string label, bool face, double max_travel) {
+  TradeoffSetting s;
+  s.label = "anchor, " + std::move(label);
+  s.face_contact = face;
+  s.max_travel = max_travel;
+  return s;
+}
+
 struct TradeoffOptions {
   std::string backend;                          ///< empty = the scene's
   std::vector<int> mesh_targets = {3000, 0, 20000, 25000};  ///< tet targets (0 = the scene's own mesh), ascending:
@@ -116,6 +127,8 @@ struct TradeoffOptions {
   std::vector<double> safeties = {0.3, 0.6, 0.9};
   std::vector<double> mass_scalings = {0, 0.002, 0.01, 0.025, 0.05};
   std::vector<double> residual_tols = {1e-2, 1e-3, 1e-4};
+  std::vector<TradeoffSetting> contact = {contact_setting("node contact only", false, 0.5),
+                                          contact_setting("contact checks every radius of travel", true, 1.0)};
   int anchor_depth = kDepthAll;                 ///< the anchor's depth: see tradeoff_settings
   Precision anchor_precision = Precision::Double;
   std::vector<TradeoffSetting> compare = {previous_defaults()};  ///< extra rows, on the scene's mesh
@@ -139,7 +152,7 @@ struct TradeoffResult {
 ///              anchor_precision): no truncation, no float floor;
 ///   depth, auto, precision   vary the baseline's depth and precision (the
 ///              region is what they trade);
-///   safety, mass, mesh, tolerance  vary the anchor (around the baseline,
+///   safety, mass, mesh, contact, tolerance  vary the anchor (around the baseline,
 ///              the region's truncation error would hide their effect);
 ///   compare    the `compare` settings, on the scene's mesh.
 std::vector<TradeoffSetting> tradeoff_settings(const scene::Scene& scene, const TradeoffOptions& options);

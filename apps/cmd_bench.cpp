@@ -9,7 +9,7 @@
 namespace tissue::app {
 
 void add_bench_command(CLI::App& app, int& rc) {
-  auto* cmd = app.add_subcommand("bench", "Measure TLED steps/s, collision latency and haptic tick time (JSON rows)");
+  auto* cmd = app.add_subcommand("bench", "Measure TLED steps/s, contact-step latency and haptic tick time (JSON rows)");
   auto o = std::make_shared<bench::BenchOptions>();
   auto precision = std::make_shared<std::string>("both");
   cmd->add_option("--backend", o->backend, "cpu | cuda")->default_val("cpu");

@@ -27,33 +27,35 @@ int run_reference(const ReferenceArgs& a) {
   const std::vector<Waypoint>& path = s.tools.front().path;
   const TissueModel<double> model = scene::load_model(s);
   const double t_hold = accuracy::hold_start(path);
-  const accuracy::HeldContact contact = accuracy::held_contact(model, path, s.solver.tick, t_hold, a.backend);
+  const ToolSetting tool = scene::scheduler_settings(s).tools.front();
+  const accuracy::HeldTool held = accuracy::held_tool(model, tool, path, s.solver.tick, t_hold);
   accuracy::ReferenceOptions o;
   o.backend = a.backend;
   o.dt_safety = a.safety;
   o.relax.residual_tol = a.tol;
-  fmt::print("reference for {}: {} nodes, {} tets; tool held from t = {:.3f} s on triangle {} (nodes {} {} {}), "
-             "indentation {:.4g} mm\n",
-             s.source, model.n_nodes, model.n_elems, t_hold, contact.tri, contact.drive.nodes[0],
-             contact.drive.nodes[1], contact.drive.nodes[2], 1e3 * norm(contact.tip - contact.point));
-  const accuracy::ReferenceSolution ref = accuracy::reference_solution(model, contact.drive, o);
-  const Vec3<double> force = -1.0 * ref.reaction;
+  fmt::print("reference for {}: {} nodes, {} tets; tool '{}' (radius {:.4g} mm, shaft {:.4g} mm) touches at t = {:.3f} "
+             "s, held from t = {:.3f} s at ({:.6g}, {:.6g}, {:.6g}) m\n",
+             s.source, model.n_nodes, model.n_elems, tool.shape.name, 1e3 * tool.shape.radius, 1e3 * tool.shape.shaft,
+             held.t_touch, t_hold, held.held.tip.x, held.held.tip.y, held.held.tip.z);
+  const accuracy::ReferenceSolution ref = accuracy::reference_solution(model, {}, o, &held);
+  const Vec3<double> force = ref.tool_force;
   fmt::print(
       "  dynamic relaxation  {} steps of dt = {:.4g} s in {:.2f} s, damping {:.4g} 1/s ({} re-estimates)\n"
       "  residual reached    {:.3g} (relative free-node residual; wanted <= {:.3g}), relative kinetic {:.3g}\n"
-      "  force on the tool   ({:.6g}, {:.6g}, {:.6g}) N, |F| = {:.6g} N\n"
+      "  force on the tool   ({:.6g}, {:.6g}, {:.6g}) N, |F| = {:.6g} N, {} nodes in contact\n"
       "  max displacement    {:.6g} mm\n"
       "  strain energy       {:.6g} J\n",
       ref.relax.steps, ref.dt, ref.relax.wall, ref.relax.damping, ref.relax.restarts, ref.relax.residual, a.tol,
-      ref.relax.kinetic, force.x, force.y, force.z, norm(force), 1e3 * ref.max_disp, ref.strain_energy);
+      ref.relax.kinetic, force.x, force.y, force.z, norm(force), ref.contact_nodes, 1e3 * ref.max_disp,
+      ref.strain_energy);
   if (!a.json.empty()) {
     std::ofstream f(a.json);
     if (!f) throw std::runtime_error("cannot write " + a.json);
     f << fmt::format(
-        "{{\"scene\": \"{}\", \"nodes\": {}, \"tets\": {}, \"contact_tri\": {}, \"t_hold\": {}, \"steps\": {}, "
+        "{{\"scene\": \"{}\", \"nodes\": {}, \"tets\": {}, \"contact_nodes\": {}, \"t_hold\": {}, \"steps\": {}, "
         "\"dt\": {}, \"wall_s\": {}, \"residual\": {}, \"kinetic\": {}, \"damping\": {}, "
         "\"force\": [{}, {}, {}], \"max_disp\": {}, \"strain_energy\": {}}}\n",
-        s.source, model.n_nodes, model.n_elems, contact.tri, t_hold, ref.relax.steps, ref.dt, ref.relax.wall,
+        s.source, model.n_nodes, model.n_elems, ref.contact_nodes, t_hold, ref.relax.steps, ref.dt, ref.relax.wall,
         ref.relax.residual, ref.relax.kinetic, ref.relax.damping, force.x, force.y, force.z, ref.max_disp,
         ref.strain_energy);
     fmt::print("wrote {}\n", a.json);

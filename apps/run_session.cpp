@@ -21,15 +21,18 @@ using Clock = std::chrono::steady_clock;
 
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-/// The scripted device of the scene's first tool.
-ScriptedDevice scripted_device(const scene::Scene& s) {
+/// One scripted device per tool of the scene, in its order.
+std::vector<ScriptedDevice> scripted_devices(const scene::Scene& s) {
   if (s.tools.empty()) throw std::runtime_error(s.source + ": the scene has no tool to drive");
-  const scene::Tool& tool = s.tools.front();
-  if (tool.device != "scripted")
-    throw std::runtime_error(fmt::format("{}: tool '{}' uses the '{}' device; `tissue run` needs a scripted tool "
-                                         "(use `tissue view` for interactive devices)",
-                                         s.source, tool.name, tool.device));
-  return ScriptedDevice(tool.path);  // read_scene has loaded a path file into `path`
+  std::vector<ScriptedDevice> devices;
+  for (const scene::Tool& tool : s.tools) {
+    if (tool.device != "scripted")
+      throw std::runtime_error(fmt::format("{}: tool '{}' uses the '{}' device; `tissue run` needs scripted tools "
+                                           "(use `tissue view` for interactive devices)",
+                                           s.source, tool.name, tool.device));
+    devices.emplace_back(tool.path);  // read_scene has loaded a path file into `path`
+  }
+  return devices;
 }
 
 /// "off", or what selective mass scaling added and what it bought.
@@ -38,6 +41,16 @@ std::string mass_scaling_line(const TissueModel<double>& m) {
   return fmt::format("+{:.3g} % mass on {} elements (density up to x{:.3g}); dt_crit {:.4g} -> {:.4g} s",
                      100 * m.added_mass / m.total_mass, m.scaled_elems, m.max_density_scale, m.dt_crit_physical,
                      m.dt_crit);
+}
+
+std::string tool_lines(const RunSummary& r) {
+  std::string out;
+  for (const RunSummary::Tool& t : r.tools)
+    out += fmt::format(
+        "  tool '{}'{}peak force {:.4g} N, final force ({:.4g}, {:.4g}, {:.4g}) N, {} nodes in contact at the end\n",
+        t.name, std::string(t.name.size() < 10 ? 10 - t.name.size() : 1, ' '), t.peak_force, t.final_force.x,
+        t.final_force.y, t.final_force.z, t.contact_nodes);
+  return out;
 }
 
 void print_summary(const RunSummary& r, const Backend& b, const TissueModel<double>& m, int steps_per_tick) {
@@ -53,14 +66,13 @@ void print_summary(const RunSummary& r, const Backend& b, const TissueModel<doub
       "  wall time          {:.3f} s ({:.2f}x real time)\n"
       "  steps/s            {:.0f}\n"
       "  max displacement   {:.4g} mm\n"
-      "  peak tool force    {:.4g} N\n"
-      "  final tool force   ({:.4g}, {:.4g}, {:.4g}) N\n"
+      "{}"
       "  region             {} nodes, {} elements\n"
       "  equilibrium        {}\n",
       b.name(), to_string(b.precision()), b.device_name(), m.n_nodes, m.n_elems, m.n_tris, m.dt, m.dt_crit,
       m.dt_crit_elem, steps_per_tick, 1e3 * m.dt * steps_per_tick, mass_scaling_line(m), r.steps, r.ticks, r.sim_time, r.wall_time,
       r.sim_time / std::max(r.wall_time, 1e-12), r.steps / std::max(r.wall_time, 1e-12), 1e3 * r.max_disp,
-      r.peak_force, r.final_force.x, r.final_force.y, r.final_force.z, r.region_nodes, r.region_elems,
+      tool_lines(r), r.region_nodes, r.region_elems,
       r.equilibrium ? "reached" : "not reached");
 }
 
@@ -75,7 +87,9 @@ void apply_overrides(scene::Scene& s, const RunOptions& o) {
 int run_scene(const RunOptions& o) {
   scene::Scene s = load_scene_arg(o.scene);
   apply_overrides(s, o);
-  ScriptedDevice device = scripted_device(s);
+  std::vector<ScriptedDevice> devices = scripted_devices(s);
+  std::vector<Device*> device_ptrs;
+  for (ScriptedDevice& d : devices) device_ptrs.push_back(&d);
   const TissueModel<double> model = scene::load_model(s);
   const SchedulerSettings settings = scene::scheduler_settings(s);
   std::unique_ptr<Backend> backend = create_backend(s.solver.backend, s.solver.precision);
@@ -84,7 +98,9 @@ int run_scene(const RunOptions& o) {
 
   long n_ticks = o.ticks;
   if (n_ticks < 0) {
-    const double t = o.time > 0 ? o.time : device.duration();
+    double t = o.time;
+    if (!(t > 0))
+      for (const ScriptedDevice& d : devices) t = std::max(t, d.duration());
     n_ticks = std::max(1L, std::lround(t / settings.tick));
   }
   if (model.reoriented > 0) fmt::print("note: {} inverted input tets were reoriented\n", model.reoriented);
@@ -96,18 +112,21 @@ int run_scene(const RunOptions& o) {
   long frame_every = 0;
   if (!o.out_dir.empty()) {
     std::filesystem::create_directories(o.out_dir);
-    log.emplace(o.out_dir + "/ticks.csv");
+    log.emplace(o.out_dir + "/ticks.csv", sched.n_tools());
     frames.emplace(o.out_dir);
     frame_every = std::max(1L, n_ticks / std::max(1, o.frames));
   }
 
   RunSummary sum;
+  for (const ToolSetting& t : settings.tools) sum.tools.push_back({t.shape.name});
   TickReport rep;
   const auto t0 = Clock::now();
   auto last_progress = t0;
   for (long k = 0; k < n_ticks; ++k) {
-    rep = sched.tick(device);
-    sum.peak_force = std::max(sum.peak_force, norm(rep.force));
+    rep = sched.tick(device_ptrs);
+    for (std::size_t t = 0; t < sum.tools.size(); ++t)
+      sum.tools[t].peak_force = std::max(sum.tools[t].peak_force, norm(rep.tools[t].force));
+    for (const std::string& note : sched.take_notes()) fmt::print(stderr, "note: {}\n", note);
     if (log) log->write(rep);
     if (frames && ((k + 1) % frame_every == 0 || k + 1 == n_ticks)) frames->write(model, backend->download(), rep.time);
     if (!o.quiet && seconds_since(last_progress) > 1.0) {
@@ -122,7 +141,10 @@ int run_scene(const RunOptions& o) {
   sum.steps = sched.total_steps();
   sum.sim_time = sched.time();
   sum.max_disp = rep.max_disp;
-  sum.final_force = rep.force;
+  for (std::size_t t = 0; t < sum.tools.size(); ++t) {
+    sum.tools[t].final_force = rep.tools[t].force;
+    sum.tools[t].contact_nodes = rep.tools[t].contact_nodes;
+  }
   sum.region_nodes = rep.region_nodes;
   sum.region_elems = rep.region_elems;
   sum.equilibrium = rep.equilibrium;

@@ -4,6 +4,7 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "core/backend.hpp"
 #include "core/scheduler.hpp"
@@ -26,8 +27,13 @@ struct RunSummary {
   long ticks = 0, steps = 0;
   double sim_time = 0, wall_time = 0;  ///< s
   double max_disp = 0;                 ///< m, at the end
-  double peak_force = 0;               ///< N, largest |force on tool| seen
-  Vec3<double> final_force = {};       ///< N
+  struct Tool {
+    std::string name;
+    double peak_force = 0;             ///< N, largest |force on the tool| seen
+    Vec3<double> final_force = {};     ///< N
+    index_t contact_nodes = 0;         ///< at the end
+  };
+  std::vector<Tool> tools;             ///< per tool, scene order
   index_t region_nodes = 0, region_elems = 0;
   bool equilibrium = false;
 };

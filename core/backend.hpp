@@ -1,52 +1,61 @@
 // The Backend interface: the fixed, small set of operations the Scheduler
-// runs on whichever backend is active (DESIGN.md section 4). A backend owns
-// its store (host arrays or device buffers) in its own scalar type; values
-// cross this interface in double. Implementations: cpu/ (TBB + Embree) and
-// cuda/ (kernels); backends/registry.hpp creates them by name.
+// runs on whichever backend is active (docs/design.md). A backend owns its
+// store (host arrays or device buffers) in its own scalar type; values cross
+// this interface in double. Implementations: cpu/ (TBB + Embree) and cuda/
+// (kernels); backends/registry.hpp creates them by name.
+//
+// The public functions are not virtual: each checks its arguments and the
+// backend's state once, here, then calls a protected virtual do_*(), so
+// every backend gives the same error for the same mistake (MuJoCo's "check
+// once, before any stage runs").
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <span>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "core/contact.hpp"
 #include "core/model.hpp"
 #include "core/region.hpp"
+#include "core/tool.hpp"
 #include "core/vec.hpp"
 
 namespace tissue {
 
-/// Result of a tool-segment query against the deformed surface.
-struct Hit {
-  index_t tri = -1;            ///< surface triangle hit nearest to A; -1 = no hit
-  double t = 0;                ///< hit at A + t (B - A), t in [0, 1]
-  double bary[2] = {0, 0};     ///< barycentric weights of the triangle's corners 1 and 2
-  index_t nodes[3] = {-1, -1, -1};  ///< the triangle's nodes
-  Vec3<double> u[3] = {};      ///< their displacements at the query (m)
-  Vec3<double> point = {};     ///< hit point (m)
-  Vec3<double> normal = {};    ///< outward unit normal of the deformed triangle
-  bool hit() const { return tri >= 0; }
+/// One tool's share of the per-tick reductions (after the advance's last step).
+struct ToolReduction {
+  Vec3<double> reaction = {};  ///< sum of core contact_reaction over its contact nodes (N); the force
+                               ///< on the tool is minus this
+  index_t contact = 0;         ///< nodes in contact (pushed or grasped)
+  index_t grasped = 0;         ///< of which grasped
+  index_t rigid = 0;           ///< nodes inside the tool that the scene fixes (a rigid support)
+  index_t rigid_first = -1;    ///< the lowest of them, -1 none
+  index_t outside = 0;         ///< nodes inside the tool that are not inner region nodes (cannot move)
 };
 
 /// Reductions over the region after a batch of steps (one call per tick).
 struct Reductions {
-  Vec3<double> reaction = {};  ///< sum of internal forces on tool-driven nodes, driven components only (N)
+  Vec3<double> reaction = {};  ///< sum of internal forces on the set_driven components (N)
   Vec3<double> internal = {};  ///< sum of internal forces on inner nodes (N): zero by construction over the
                                ///< whole mesh, minus the halo's support in a limited region; the
                                ///< equilibrium measure is the free-node residual below
-  double free_force2 = 0;      ///< sum f_ac^2 over free (integrated) components of inner nodes (N^2)
-  double held_force2 = 0;      ///< sum f_ac^2 over held components of inner nodes: fixed or driven (N^2)
+  double free_force2 = 0;      ///< sum f_ac^2 over free (integrated) components of inner nodes (N^2); a
+                               ///< pushed contact node's tangential part counts as free
+  double held_force2 = 0;      ///< sum f_ac^2 over held components of inner nodes: fixed, driven, and
+                               ///< the normal part of pushed contact nodes (N^2)
   double kinetic = 0;          ///< 0.5 sum m_a |(u^n - u^{n-1}) / dt|^2 over region nodes (J)
   double max_disp = 0;         ///< max |u_a| over region nodes (m)
   double strain_energy = -1;   ///< sum_e V_e W(Fbar_e) over computed elements at the current u (J; plain
-                               ///< tets: W(F_e)); W is DESIGN.md section 2's energy. -1 = not computed
-                               ///< by this backend
+                               ///< tets: W(F_e)). -1 = not computed by this backend
   double front_disp = -1;      ///< max |u_a| over the region's front ring (Region::front; 0 when it is
                                ///< empty), the adaptive region's truncation indicator (m); -1 = not computed
   index_t bad_elem = -1;       ///< lowest element with J <= 0 or non-finite since the last reduce; -1 none
   double bad_J = 1;            ///< its J
   bool finite = true;          ///< every reduced value finite
+  ToolReduction tools[kMaxTools];  ///< per tool (set_tools order)
 };
 
 /// Host<->device copies the backend made (0 for host backends).
@@ -63,6 +72,26 @@ struct Fields {
   std::vector<double> f;       ///< internal nodal force (3 x n_nodes) N
 };
 
+/// A tool's motion over the next advance() (m; axes unit or normalised).
+struct ToolMotion {
+  ToolPose from, to;
+  bool grasp = false;          ///< grasp button held: the nodes in contact when it went down follow the tool
+};
+
+/// How contact is computed (the tradeoff's contact dimension; docs/contact.md).
+struct ContactOptions {
+  bool face = true;            ///< face contact (false: node contact only)
+  double max_travel = 0.5;     ///< most travel of a tool between two contact checks, in radii
+};
+
+/// One surface node in contact (Backend::contacts: reports, tests, the viewer).
+struct ContactNode {
+  index_t node = -1;
+  int tool = -1;
+  std::uint8_t kind = kNoContact;  ///< ContactKind
+  Vec3<double> normal = {};        ///< contact normal of a pushed node (unit, out of the tool)
+};
+
 class Backend {
  public:
   virtual ~Backend() = default;
@@ -70,77 +99,136 @@ class Backend {
   virtual std::string name() const = 0;         ///< "cpu", "cuda"
   virtual Precision precision() const = 0;
   virtual std::string device_name() const = 0;  ///< processor or GPU, for reports
+  /// True when write_positions() writes device memory (the viewer maps a
+  /// GL buffer for it); false when it writes host memory.
+  virtual bool positions_on_device() const { return false; }
 
   /// Loads the model (once per scene; allocates everything the loop needs)
-  /// and resets the state to u = 0 with the whole mesh as region.
-  virtual void upload(const TissueModel<double>& model) = 0;
+  /// and resets the state to u = 0 with the whole mesh as region, no
+  /// driven nodes and no tools.
+  void upload(const TissueModel<double>& model);
 
   /// Replaces every displacement (u^n = u^{n-1} = given; 3 x n_nodes, m).
-  virtual void set_displacements(std::span<const double> u) = 0;
+  /// Halo nodes are held at the new u (they are held "at their current
+  /// displacement"); fixed and driven nodes keep their targets.
+  void set_displacements(std::span<const double> u);
 
   /// Flood-fills the region from seeds for depth rings (kDepthAll = whole
   /// mesh), holds the new halo at its current displacement, freezes nodes
   /// leaving the region and recomputes pass 1 over all elements. Returns
   /// the region's sizes only (a device backend keeps the lists on the
   /// device: nothing but these four counts comes back).
-  virtual RegionSizes build_region(std::span<const index_t> seeds, int depth) = 0;
+  RegionSizes build_region(std::span<const index_t> seeds, int depth);
 
   /// The current region's full lists (downloads; for output and tests).
-  virtual Region region() = 0;
+  Region region();
 
-  /// Prescribes the displacement (3 per node, m) of tool-driven nodes; these
-  /// stay held until clear_driven(). Replaces the previous driven set.
-  virtual void set_driven(std::span<const index_t> nodes, std::span<const double> u) = 0;
-  virtual void clear_driven() = 0;
+  /// Prescribes the displacement (3 per node, m) of nodes (a boundary
+  /// drive: references, patch tests); they stay held until clear_driven().
+  /// Replaces the previous driven set. set_driven_axes gives a component
+  /// mask per node (a roller): bit c of axes[k] (1..7) set = component c of
+  /// nodes[k] is prescribed to u[3k + c]; the other components are
+  /// integrated. Reductions::reaction sums the driven components. A node
+  /// given twice is driven in the union of its masks, each component at its
+  /// last target.
+  void set_driven(std::span<const index_t> nodes, std::span<const double> u);
+  void set_driven_axes(std::span<const index_t> nodes, std::span<const double> u, std::span<const std::uint8_t> axes);
+  void clear_driven();
 
-  /// set_driven with a component mask per node (a roller boundary): bit c of
-  /// axes[k] (1..7) set = component c of nodes[k] is prescribed to u[3k + c];
-  /// the other components are integrated. set_driven(nodes, u) is this with
-  /// every mask kAllAxes. The reaction (Reductions::reaction) sums only the
-  /// driven components. The default throws std::logic_error: a backend
-  /// without per-component driving says so rather than driving all three.
-  virtual void set_driven_axes(std::span<const index_t> nodes, std::span<const double> u,
-                               std::span<const std::uint8_t> axes);
+  /// The scene's tools (at most kMaxTools; radius > 0, shaft >= 0) and how
+  /// contact is computed. Releases every grasp; the tools rest at the
+  /// origin until move_tools().
+  void set_tools(std::span<const ToolShape> tools, const ContactOptions& options = {});
+  int n_tools() const { return static_cast<int>(shapes_.size()); }
+  const std::vector<ToolShape>& tools() const { return shapes_; }
 
-  /// The four IANP passes of DESIGN.md section 2 over the region.
-  virtual void element_pressure() = 0;  ///< pass 1: J_e, p_e V_e
-  virtual void nodal_pressure() = 0;    ///< pass 2: p_a
-  virtual void element_forces() = 0;    ///< pass 3: Fbar, S, f_a^e
-  virtual void node_update() = 0;       ///< pass 4: gather f_a, central difference, rotate u
+  /// The tools' motion over the next advance() (one per tool): the pose is
+  /// interpolated linearly across its steps (core interpolate_pose), and
+  /// contact is checked contact_substeps() times per step. A grasp flag
+  /// that turns on grasps the nodes in contact with that tool now; one that
+  /// turns off releases them. After the advance the tools rest at `to`.
+  void move_tools(std::span<const ToolMotion> motion);
 
-  /// n TLED steps, each the four passes in order (backends may fuse or
-  /// replay a captured graph; results are the same).
-  virtual void advance(int steps) {
-    for (int s = 0; s < steps; ++s) {
-      element_pressure();
-      nodal_pressure();
-      element_forces();
-      node_update();
-    }
-  }
+  /// Surface nodes that are not inner region nodes and that the pending
+  /// tool motion comes within a radius of (ascending): the Scheduler seeds
+  /// the region with them before the advance. Empty when there are no tools.
+  std::vector<index_t> contact_candidates();
 
-  /// Segment A->B against every deformed surface triangle; nearest to A wins
-  /// (ties: lowest triangle index).
-  virtual Hit collide(Vec3<double> a, Vec3<double> b) = 0;
+  /// Every surface node in contact after the last step (ascending node id).
+  std::vector<ContactNode> contacts();
+
+  /// The four IANP passes of DESIGN.md section 2 over the region (tests run
+  /// them one by one; node_update has no contact stage).
+  void element_pressure();  ///< pass 1: J_e, p_e V_e
+  void nodal_pressure();    ///< pass 2: p_a
+  void element_forces();    ///< pass 3: Fbar, S, f_a^e
+  void node_update();       ///< pass 4: gather f_a, central difference, rotate u
+
+  /// n TLED steps, each the four passes then the contact stage of the
+  /// tools' motion (core/contact.hpp). Backends may fuse passes or replay a
+  /// captured graph; results are the same.
+  void advance(int steps);
 
   /// Reaction, total internal force, residual parts, kinetic energy, max
-  /// displacement and the bad-element flag (which it clears).
-  virtual Reductions reduce() = 0;
+  /// displacement, per-tool contact results and the bad-element flag
+  /// (which it clears).
+  Reductions reduce();
 
   /// Copies the store's fields to the host (output, tests).
-  virtual Fields download() = 0;
+  Fields download();
 
   /// Writes deformed positions X + u of all nodes as float xyz triples
-  /// (n_nodes x 3) to dst: host memory for host backends, device memory for
-  /// device backends (the viewer's mapped vertex buffer).
-  virtual void write_positions(float* dst) = 0;
+  /// (n_nodes x 3) to dst: host memory when !positions_on_device(), device
+  /// memory otherwise (the viewer's mapped vertex buffer).
+  void write_positions(float* dst);
 
   virtual TransferCounters transfers() const { return {}; }
-};
 
-inline void Backend::set_driven_axes(std::span<const index_t>, std::span<const double>,
-                                     std::span<const std::uint8_t>) {
-  throw std::logic_error(name() + " backend: per-component driving (set_driven_axes) is not implemented");
-}
+  index_t n_nodes() const { return n_nodes_; }
+  bool uploaded() const { return uploaded_; }
+
+ protected:
+  virtual void do_upload(const TissueModel<double>& model) = 0;
+  virtual void do_set_displacements(std::span<const double> u) = 0;
+  virtual RegionSizes do_build_region(std::span<const index_t> seeds, int depth) = 0;
+  virtual Region do_region() = 0;
+  /// Region roles (NodeRole) of the given nodes (the driven-node check).
+  virtual std::vector<std::uint8_t> do_roles(std::span<const index_t> nodes) = 0;
+  /// nodes unique, masks 1..7, targets finite (checked).
+  virtual void do_set_driven(std::span<const index_t> nodes, std::span<const double> u,
+                             std::span<const std::uint8_t> axes) = 0;
+  virtual void do_clear_driven() = 0;
+  /// Tool `tool` at `pose` starts grasping: its pushed contact nodes become grasped.
+  virtual void do_begin_grasp(int tool, const ToolPose& pose) = 0;
+  /// Releases the nodes tool `tool` grasps.
+  virtual void do_end_grasp(int tool) = 0;
+  /// The tools changed (set_tools): forget every contact and grasp.
+  virtual void do_reset_contacts() = 0;
+  virtual void do_element_pressure() = 0;
+  virtual void do_nodal_pressure() = 0;
+  virtual void do_element_forces() = 0;
+  virtual void do_node_update() = 0;
+  virtual void do_advance(int steps, const ContactTools<double>& tools) = 0;
+  /// `sweep` holds the pending motion as one step (steps = 1).
+  virtual std::vector<index_t> do_contact_candidates(const ContactTools<double>& sweep) = 0;
+  virtual std::vector<ContactNode> do_contacts() = 0;
+  virtual Reductions do_reduce() = 0;
+  virtual Fields do_download() = 0;
+  virtual void do_write_positions(float* dst) = 0;
+
+  /// The tools' motion over an advance of `steps` steps (what do_advance gets).
+  ContactTools<double> contact_tools(int steps) const;
+
+ private:
+  void require_upload(const char* what) const;
+
+  bool uploaded_ = false;
+  index_t n_nodes_ = 0, n_elems_ = 0;
+  std::vector<ToolShape> shapes_;
+  ContactOptions contact_options_;
+  std::vector<ToolMotion> motion_;      ///< pending motion per tool
+  std::vector<ToolPose> grasp_pose_;    ///< pose when each tool's grasp started
+  std::vector<std::uint8_t> grasping_;  ///< per tool
+};
 
 }  // namespace tissue

@@ -74,7 +74,11 @@ CoupledDevice::CoupledDevice(Device& inner, CouplingParams params) : inner_(inne
   validate(params_);
 }
 
-Vec3<double> CoupledDevice::read_position(double t) { return coupling_step(params_, state_, inner_.read_position(t)); }
+ToolInput CoupledDevice::read(double t) {
+  ToolInput in = inner_.read(t);
+  in.tip = coupling_step(params_, state_, in.tip);
+  return in;
+}
 
 void CoupledDevice::send_force(const Vec3<double>& force) {
   state_.env_force = force;

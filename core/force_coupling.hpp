@@ -93,8 +93,9 @@ class CoupledDevice : public Device {
   /// Wraps `inner` (which must outlive this); validates `params`.
   CoupledDevice(Device& inner, CouplingParams params);
 
-  /// Reads the wrapped device at t (s) and returns the advanced proxy (m).
-  Vec3<double> read_position(double t) override;
+  /// Reads the wrapped device at t (s) and returns the advanced proxy (m)
+  /// as the tip; the axis and the grasp button pass through unchanged.
+  ToolInput read(double t) override;
   /// Stores the tissue force on the tool (N) and sends the rendered force on.
   void send_force(const Vec3<double>& force) override;
   bool finished(double t) const override { return inner_.finished(t); }

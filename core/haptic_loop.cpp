@@ -58,11 +58,6 @@ bool make_realtime(int priority) {
 #endif
 }
 
-CouplingParams with_period(CouplingParams p, double period) {
-  p.period = period;
-  return p;
-}
-
 Simulation checked(Simulation s) {
   if (!s.model || !s.backend || !s.scheduler)
     throw std::invalid_argument("haptic loop: the simulation factory returned an incomplete simulation");
@@ -98,24 +93,38 @@ std::string describe(const HapticStats& s) {
       s.window_late, s.window_ticks, ms * s.work_p99, ms * s.period, ms * s.wake_p99, line);
 }
 
-HapticLoop::HapticLoop(Device& device, SimulationFactory factory, LiveParams params, Options options)
-    : device_(device),
+HapticLoop::HapticLoop(std::vector<Device*> devices, SimulationFactory factory, LiveParams params, Options options)
+    : devices_(std::move(devices)),
       factory_(std::move(factory)),
       options_(options),
       params_(params),
       sim_(checked(factory_(params))),
-      period_(sim_.scheduler->settings().tick),
-      clock_(device_),
-      coupled_(clock_, with_period(options.coupling, period_)) {
+      period_(sim_.scheduler->settings().tick) {
   if (options_.window < 2 || options_.stats_every < 1 || options_.max_lag < 1)
     throw std::invalid_argument(fmt::format(
         "haptic loop: window = {} must be >= 2, stats_every = {} >= 1 and max_lag = {} >= 1", options_.window,
         options_.stats_every, options_.max_lag));
+  if (devices_.size() != std::size_t(sim_.scheduler->n_tools()))
+    throw std::invalid_argument(fmt::format("haptic loop: {} devices for the scene's {} tools (one device per tool)",
+                                            devices_.size(), sim_.scheduler->n_tools()));
   options_.coupling.period = period_;
+  for (Device* d : devices_) {
+    if (d == nullptr) throw std::invalid_argument("haptic loop: a tool's device is null");
+    clocks_.push_back(std::make_unique<SessionClock>(*d, clock_offset_));
+    coupled_.push_back(std::make_unique<CoupledDevice>(*clocks_.back(), options_.coupling));
+    coupled_ptrs_.push_back(coupled_.back().get());
+  }
   for (auto* v : {&work_ring_, &wake_ring_, &start_ring_, &scratch_}) v->assign(options_.window, 0.0);
   late_ring_.assign(options_.window, 0);
   histogram_.assign(kHistBins, 0);
   local_.params = params_;
+  local_.n_tools = sim_.scheduler->n_tools();
+  for (int t = 0; t < local_.n_tools; ++t) {
+    const ToolSetting& tool = sim_.scheduler->settings().tools[t];
+    local_.tools[t].radius = tool.shape.radius;
+    local_.tools[t].shaft = tool.shape.shaft;
+    local_.tools[t].axis = tool.axis;
+  }
   local_.sim_version = 1;
   local_.region = sim_.scheduler->region();
   local_.steps_per_tick = sim_.scheduler->steps_per_tick();
@@ -234,13 +243,16 @@ void HapticLoop::rebuild(const LiveParams& params) {
     if (std::abs(next.scheduler->settings().tick - period_) > 1e-12)
       throw std::invalid_argument(fmt::format("the haptic tick changed from {} s to {} s", period_,
                                               next.scheduler->settings().tick));
+    if (next.scheduler->n_tools() != int(devices_.size()))
+      throw std::invalid_argument(fmt::format("the scene's tools changed from {} to {}", devices_.size(),
+                                              next.scheduler->n_tools()));
   } catch (const std::exception& e) {
     set_status(fmt::format("parameters refused (E = {} Pa, nu = {}, depth {}, {}); keeping the running simulation: {}",
                            params.E, params.nu, params.depth == kDepthAll ? "all" : std::to_string(params.depth),
                            to_string(params.precision), e.what()));
     return;
   }
-  clock_.offset += sim_.scheduler->time();
+  clock_offset_ += sim_.scheduler->time();
   sim_.scheduler.reset();  // it refers to the backend and the model
   sim_.backend.reset();
   sim_.model.reset();
@@ -251,8 +263,9 @@ void HapticLoop::rebuild(const LiveParams& params) {
   local_.params = params_;
   local_.failed = false;
   local_.tick = -1;
-  local_.contact_tri = -1;
+  local_.contact_nodes = 0;
   local_.tissue_force = {};
+  for (ToolView& t : local_.tools) t.tissue_force = {};
   local_.sim_version += 1;
   local_.region_version += 1;
   local_.region = last_region_ = sim_.scheduler->region();
@@ -263,16 +276,24 @@ void HapticLoop::rebuild(const LiveParams& params) {
 bool HapticLoop::tick_once() {
   Scheduler& sched = *sim_.scheduler;
   try {
-    const TickReport rep = sched.tick(coupled_);
-    const CouplingState& c = coupled_.state();
+    const TickReport rep = sched.tick(coupled_ptrs_);
     local_.tick = sched.ticks();
-    local_.time = clock_.offset + rep.time;
-    local_.device = c.device;
-    local_.tool = rep.tool;
-    local_.tissue_force = rep.force;
-    local_.rendered_force = c.rendered;
-    local_.clamped = c.clamped;
-    local_.contact_tri = rep.contact_tri;
+    local_.time = clock_offset_ + rep.time;
+    local_.n_tools = rep.n_tools;
+    for (int t = 0; t < rep.n_tools; ++t) {
+      const CouplingState& c = coupled_[t]->state();
+      const ToolShape& shape = sched.settings().tools[t].shape;
+      local_.tools[t] = {c.device, rep.tools[t].tip, rep.tools[t].axis, rep.tools[t].force, c.rendered,
+                         shape.radius, shape.shaft, rep.tools[t].contact_nodes, rep.tools[t].grasped,
+                         rep.tools[t].grasp, c.clamped};
+    }
+    const ToolView& first = local_.tools[0];
+    local_.device = first.device;
+    local_.tool = first.tool;
+    local_.tissue_force = first.tissue_force;
+    local_.rendered_force = first.rendered_force;
+    local_.clamped = first.clamped;
+    local_.contact_nodes = rep.contact_nodes;
     local_.max_disp = rep.max_disp;
     local_.residual = rep.residual;
     local_.equilibrium = rep.equilibrium;

@@ -35,6 +35,7 @@
 // thread.
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
@@ -101,16 +102,32 @@ struct HapticStats {
 /// thread was not scheduled in time).
 std::string describe(const HapticStats& s);
 
+/// One tool as the display sees it.
+struct ToolView {
+  Vec3<double> device = {};            ///< device (hand) position (m)
+  Vec3<double> tool = {};              ///< proxy: the tool tip the tissue feels (m)
+  Vec3<double> axis = {0, 0, 1};       ///< shaft axis (unit)
+  Vec3<double> tissue_force = {};      ///< raw solver force on the tool (N)
+  Vec3<double> rendered_force = {};    ///< force sent to the device: coupled and clamped (N)
+  double radius = 0, shaft = 0;        ///< the tool's shape (m)
+  index_t contact_nodes = 0;           ///< surface nodes in contact
+  index_t grasped = 0;                 ///< of which grasped
+  bool grasp = false;                  ///< grasp button held
+  bool clamped = false;                ///< the coupling force exceeded the device maximum
+};
+
 /// What the display reads after each tick.
 struct HapticSnapshot {
   long tick = -1;                      ///< scheduler ticks done (-1: none yet)
   double time = 0;                     ///< simulated time of the session, across rebuilds (s)
-  Vec3<double> device = {};            ///< device (hand) position (m)
-  Vec3<double> tool = {};              ///< proxy: the tool the tissue feels (m)
-  Vec3<double> tissue_force = {};      ///< raw solver force on the tool (N)
-  Vec3<double> rendered_force = {};    ///< force sent to the device: coupled and clamped (N)
-  bool clamped = false;                ///< the coupling force exceeded the device maximum
-  index_t contact_tri = -1;            ///< driving surface triangle, -1 none
+  int n_tools = 0;
+  std::array<ToolView, kMaxTools> tools = {};  ///< per tool (scene order)
+  Vec3<double> device = {};            ///< tools[0].device
+  Vec3<double> tool = {};              ///< tools[0].tool
+  Vec3<double> tissue_force = {};      ///< tools[0].tissue_force
+  Vec3<double> rendered_force = {};    ///< tools[0].rendered_force
+  bool clamped = false;                ///< tools[0].clamped
+  index_t contact_nodes = 0;           ///< surface nodes in contact with any tool
   RegionSizes region;                  ///< current deformation region
   long region_version = 0;             ///< changes whenever the region changes
   long sim_version = 0;                ///< changes on every (re)build of the simulation
@@ -142,10 +159,13 @@ class HapticLoop {
   };
 
   /// Builds the first simulation synchronously (factory exceptions reach the
-  /// caller). `device` must outlive the loop; it is read and sent forces on
-  /// the haptic thread only, so a device shared with the display must
-  /// synchronise itself (viewer's MouseDevice does).
-  HapticLoop(Device& device, SimulationFactory factory, LiveParams params, Options options);
+  /// caller). One device per tool of the scene, in its order, each behind
+  /// its own virtual coupling; the devices must outlive the loop; they are
+  /// read and sent forces on the haptic thread only, so a device shared with
+  /// the display must synchronise itself (viewer's MouseDevice does).
+  HapticLoop(std::vector<Device*> devices, SimulationFactory factory, LiveParams params, Options options);
+  HapticLoop(Device& device, SimulationFactory factory, LiveParams params, Options options)
+      : HapticLoop(std::vector<Device*>{&device}, std::move(factory), params, options) {}
   HapticLoop(Device& device, SimulationFactory factory, LiveParams params)
       : HapticLoop(device, std::move(factory), params, Options{}) {}
   ~HapticLoop();
@@ -177,8 +197,8 @@ class HapticLoop {
   /// change was refused (any thread).
   std::string status() const;
 
-  /// The coupled device the scheduler drives (owner thread, loop stopped).
-  const CoupledDevice& coupled() const { return coupled_; }
+  /// The coupled device of a tool the scheduler drives (owner thread, loop stopped).
+  const CoupledDevice& coupled(int tool = 0) const { return *coupled_.at(tool); }
   double period() const { return period_; }
 
  private:
@@ -196,26 +216,28 @@ class HapticLoop {
   /// instead of jumping back to its start).
   class SessionClock : public Device {
    public:
-    explicit SessionClock(Device& d) : device_(d) {}
-    Vec3<double> read_position(double t) override { return device_.read_position(t + offset); }
+    SessionClock(Device& d, const double& offset) : device_(d), offset_(offset) {}
+    ToolInput read(double t) override { return device_.read(t + offset_); }
     void send_force(const Vec3<double>& f) override { device_.send_force(f); }
-    bool finished(double t) const override { return device_.finished(t + offset); }
-    double offset = 0;  ///< simulated time of the simulations before the running one (s)
+    bool finished(double t) const override { return device_.finished(t + offset_); }
 
    private:
     Device& device_;
+    const double& offset_;
   };
 
   // owned by the haptic thread while running, by the owner otherwise
   // (declaration order matters: sim_ is built before coupled_ needs its tick)
-  Device& device_;
+  std::vector<Device*> devices_;
   SimulationFactory factory_;
   Options options_;
   LiveParams params_;
   Simulation sim_;
   double period_ = 1e-3;
-  SessionClock clock_;
-  CoupledDevice coupled_;
+  double clock_offset_ = 0;  ///< simulated time of the simulations before the running one (s)
+  std::vector<std::unique_ptr<SessionClock>> clocks_;     ///< per tool
+  std::vector<std::unique_ptr<CoupledDevice>> coupled_;   ///< per tool, around clocks_
+  std::vector<Device*> coupled_ptrs_;                     ///< what the scheduler ticks
   HapticSnapshot local_;
   std::vector<index_t> last_seeds_;
   RegionSizes last_region_;

@@ -68,6 +68,22 @@ void extract_surface(TissueModel<double>& m) {
   for (index_t t = 0; t < m.n_tris; ++t)
     for (int v = 0; v < 3; ++v) m.tris[v * m.n_tris + t] = tri[3 * t + v];
   for (index_t t = 0; t < 3 * m.n_tris; ++t) m.node_flags[m.tris[t]] |= kSurface;
+  // surface nodes and, per surface node, its (triangle, corner) slots in ascending order
+  std::vector<index_t> surf_of(m.n_nodes, -1);
+  for (index_t a = 0; a < m.n_nodes; ++a)
+    if (m.node_flags[a] & kSurface) {
+      surf_of[a] = static_cast<index_t>(m.surf_nodes.size());
+      m.surf_nodes.push_back(a);
+    }
+  m.n_surf = static_cast<index_t>(m.surf_nodes.size());
+  m.surf_slot_start.assign(m.n_surf + 1, 0);
+  for (index_t t = 0; t < m.n_tris; ++t)
+    for (int k = 0; k < 3; ++k) ++m.surf_slot_start[surf_of[tri[3 * t + k]] + 1];
+  for (index_t i = 0; i < m.n_surf; ++i) m.surf_slot_start[i + 1] += m.surf_slot_start[i];
+  m.surf_slot.assign(3 * size_t(m.n_tris), 0);
+  std::vector<index_t> fill(m.surf_slot_start.begin(), m.surf_slot_start.end() - 1);
+  for (index_t t = 0; t < m.n_tris; ++t)
+    for (int k = 0; k < 3; ++k) m.surf_slot[fill[surf_of[tri[3 * t + k]]]++] = 3 * t + k;
 }
 
 /// Density factor that lifts an element's step dt_e to `need` (1 if it has it).
@@ -346,6 +362,10 @@ TissueModel<T> convert(const TissueModel<double>& m) {
   r.elem_slot = m.elem_slot;
   r.tris = m.tris;
   r.tri_elem = m.tri_elem;
+  r.n_surf = m.n_surf;
+  r.surf_nodes = m.surf_nodes;
+  r.surf_slot_start = m.surf_slot_start;
+  r.surf_slot = m.surf_slot;
   r.node_flags = m.node_flags;
   r.dt = m.dt;
   r.dt_crit = m.dt_crit;

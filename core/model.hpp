@@ -72,6 +72,7 @@ TISSUE_HD std::uint8_t fixed_axes(std::uint8_t flags) {
 template <class T>
 struct TissueModel {
   index_t n_nodes = 0, n_elems = 0, n_tris = 0;
+  index_t n_surf = 0;                ///< surface nodes (corners of surface triangles)
 
   std::vector<T> X;                  ///< reference positions (3 x n_nodes) m
   std::vector<index_t> elem_nodes;   ///< (4 x n_elems)
@@ -89,6 +90,10 @@ struct TissueModel {
                                          ///< pass 4 sums contiguous slots.
   std::vector<index_t> tris;         ///< outward surface triangles (3 x n_tris)
   std::vector<index_t> tri_elem;     ///< tet owning each surface triangle (n_tris)
+  std::vector<index_t> surf_nodes;   ///< surface nodes, ascending (n_surf)
+  std::vector<index_t> surf_slot_start;  ///< CSR offsets into surf_slot per surface node (n_surf + 1)
+  std::vector<index_t> surf_slot;    ///< each surface node's (triangle, corner) slots 3 t + k, ascending
+                                     ///< (3 n_tris): the contact stage gathers its triangles' proposals
   std::vector<std::uint8_t> node_flags;  ///< NodeFlag bits (n_nodes)
 
   double dt = 0;            ///< time step (s)

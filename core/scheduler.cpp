@@ -5,11 +5,76 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/tet.hpp"
+
 namespace tissue {
+namespace {
+
+Vec3<double> ref_position(const TissueModel<double>& m, index_t a) {
+  return {m.X[a], m.X[m.n_nodes + a], m.X[2 * size_t(m.n_nodes) + a]};
+}
+
+/// Distance from p to the nearest surface node of the reference configuration (m).
+double nearest_surface_node(const TissueModel<double>& m, Vec3<double> p) {
+  double best = INFINITY;
+  for (index_t a : m.surf_nodes) best = std::min(best, norm(ref_position(m, a) - p));
+  return best;
+}
+
+void check_settings(const SchedulerSettings& s, const TissueModel<double>& m) {
+  if (!(s.tick > 0) || !std::isfinite(s.tick))
+    throw std::invalid_argument(fmt::format("haptic tick {} s must be > 0", s.tick));
+  if (s.tools.size() > std::size_t(kMaxTools))
+    throw std::invalid_argument(fmt::format("{} tools: a scene holds at most {}", s.tools.size(), kMaxTools));
+  const double extent = body_extent(m);
+  for (const ToolSetting& t : s.tools) {
+    if (!(t.shape.radius > 0) || !std::isfinite(t.shape.radius))
+      throw std::invalid_argument(
+          fmt::format("tool '{}': radius {} m must be > 0 (the radius is the loaded patch)", t.shape.name,
+                      t.shape.radius));
+    if (2 * t.shape.radius > extent)
+      throw std::invalid_argument(fmt::format(
+          "tool '{}': radius {} m is larger than the body (its largest extent is {:.4g} m): a tool's diameter must "
+          "not exceed the body it touches",
+          t.shape.name, t.shape.radius, extent));
+    if (!(t.shape.shaft >= 0) || !std::isfinite(t.shape.shaft))
+      throw std::invalid_argument(fmt::format("tool '{}': shaft length {} m must be >= 0", t.shape.name, t.shape.shaft));
+    if (!(norm(t.axis) > 0) || !std::isfinite(norm(t.axis)))
+      throw std::invalid_argument(fmt::format("tool '{}': direction ({}, {}, {}) must be a non-zero vector",
+                                              t.shape.name, t.axis.x, t.axis.y, t.axis.z));
+  }
+}
+
+}  // namespace
+
+double body_extent(const TissueModel<double>& m) {
+  double ext = 0;
+  for (int c = 0; c < 3; ++c) {
+    const auto first = m.X.begin() + long(c) * m.n_nodes;
+    const auto [lo, hi] = std::minmax_element(first, first + m.n_nodes);
+    if (m.n_nodes > 0) ext = std::max(ext, *hi - *lo);
+  }
+  return ext;
+}
+
+bool inside_reference_surface(const TissueModel<double>& m, Vec3<double> p) {
+  // a direction no mesh axis or edge is likely to share, long enough to leave the body
+  const Vec3<double> dir = unit_or(Vec3<double>{1.0, 0.0137, 0.0071}, Vec3<double>{1, 0, 0});
+  const Vec3<double> far = p + (4 * body_extent(m) + 1.0) * dir;
+  int crossings = 0;
+  const index_t nt = m.n_tris;
+  for (index_t t = 0; t < nt; ++t) {
+    double bary[2];
+    const Vec3<double> P0 = ref_position(m, m.tris[t]), P1 = ref_position(m, m.tris[nt + t]),
+                       P2 = ref_position(m, m.tris[2 * nt + t]);
+    if (segment_triangle(p, far, P0, P1, P2, bary) > 0) ++crossings;
+  }
+  return crossings % 2 == 1;
+}
 
 Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, SchedulerSettings settings)
-    : backend_(backend), model_(model), settings_(settings) {
-  if (!(settings_.tick > 0)) throw std::invalid_argument("haptic tick must be > 0 s");
+    : backend_(backend), model_(model), settings_(std::move(settings)) {
+  check_settings(settings_, model_);
   steps_per_tick_ = std::max(1, static_cast<int>(std::lround(settings_.tick / model.dt)));
   depth_ = settings_.depth;
   if (settings_.depth == kDepthAuto) {
@@ -20,8 +85,33 @@ Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, Schedul
     auto_depth_ = true;
     depth_ = settings_.auto_start;
   }
+  std::vector<ToolShape> shapes;
+  for (ToolSetting& t : settings_.tools) {
+    t.axis = (1.0 / norm(t.axis)) * t.axis;
+    shapes.push_back(t.shape);
+  }
+  backend_.set_tools(shapes, settings_.contact);
+  prev_.assign(settings_.tools.size(), ToolPose{});
+  motion_.assign(settings_.tools.size(), ToolMotion{});
+  rigid_reported_.assign(settings_.tools.size(), 0);
   // depth N: an empty region (nothing moves) until the first contact seeds it
   region_ = backend_.build_region({}, depth_);
+}
+
+std::vector<std::string> Scheduler::take_notes() {
+  std::vector<std::string> out;
+  out.swap(notes_);
+  return out;
+}
+
+void Scheduler::seed_region() {
+  if (region_.whole()) return;
+  const std::vector<index_t> cand = backend_.contact_candidates();
+  if (cand.empty()) return;
+  std::vector<index_t> seeds;
+  std::set_union(seeds_.begin(), seeds_.end(), cand.begin(), cand.end(), std::back_inserter(seeds));
+  seeds_ = std::move(seeds);
+  region_ = backend_.build_region(seeds_, depth_);
 }
 
 bool Scheduler::grow_region(const Reductions& r) {
@@ -36,57 +126,7 @@ bool Scheduler::grow_region(const Reductions& r) {
   return true;
 }
 
-void Scheduler::start_contact(const Hit& hit, const Vec3<double>& tip) {
-  contact_tri_ = hit.tri;
-  for (int k = 0; k < 3; ++k) {
-    nodes_[k] = hit.nodes[k];
-    u0_[k] = hit.u[k];
-  }
-  p0_ = hit.point;
-  n0_ = hit.normal;
-  if (!region_.whole()) {
-    std::vector<index_t> seeds(nodes_, nodes_ + 3);
-    std::sort(seeds.begin(), seeds.end());
-    if (seeds != seeds_) {
-      region_ = backend_.build_region(seeds, depth_);
-      seeds_ = std::move(seeds);
-    }
-  }
-  drive(tip);
-}
-
-void Scheduler::drive(const Vec3<double>& tip) {
-  const Vec3<double> d = tip - p0_;
-  double u[9];
-  for (int k = 0; k < 3; ++k)
-    for (int c = 0; c < 3; ++c) u[3 * k + c] = u0_[k][c] + d[c];
-  backend_.set_driven(std::span<const index_t>(nodes_, 3), std::span<const double>(u, 9));
-}
-
-TickReport Scheduler::tick(Device& device) {
-  const double t_end = (tick_ + 1) * settings_.tick;
-  const Vec3<double> tip = device.read_position(t_end);
-  if (!has_prev_) {
-    prev_ = tip;
-    has_prev_ = true;
-  }
-  // collide -> contact
-  if (contact_tri_ < 0) {
-    const Hit hit = backend_.collide(prev_, tip);
-    // only an entering crossing starts a contact (a segment leaving the
-    // tissue, e.g. a tool withdrawing through relaxing tissue, does not)
-    if (hit.hit() && dot(tip - prev_, hit.normal) < 0) start_contact(hit, tip);
-  } else if (dot(tip - p0_, n0_) > 0) {
-    backend_.clear_driven();
-    contact_tri_ = -1;
-  } else {
-    drive(tip);
-  }
-  // TLED steps over the region, then one reduction
-  const long first_step = total_steps_;
-  backend_.advance(steps_per_tick_);
-  total_steps_ += steps_per_tick_;
-  const Reductions r = backend_.reduce();
+void Scheduler::check_health(const Reductions& r, long first_step) const {
   if (r.bad_elem >= 0)
     throw SimulationError(fmt::format(
         "tick {} (TLED steps {}..{}): element {} has J = {:.4g} (inverted or degenerate); stopping. "
@@ -95,12 +135,87 @@ TickReport Scheduler::tick(Device& device) {
   if (!r.finite)
     throw SimulationError(fmt::format("tick {} (TLED steps {}..{}): non-finite displacement or force; stopping",
                                       tick_, first_step, total_steps_ - 1));
+}
+
+void Scheduler::note_contacts(const Reductions& r) {
+  for (std::size_t t = 0; t < settings_.tools.size(); ++t) {
+    const ToolReduction& tr = r.tools[t];
+    if (tr.rigid == 0) {
+      rigid_reported_[t] = 0;
+      continue;
+    }
+    if (rigid_reported_[t] > 0) continue;  // once per episode of rigid contact
+    rigid_reported_[t] = tr.rigid;
+    std::vector<index_t> named;
+    for (const ContactNode& c : backend_.contacts())
+      if (c.tool == int(t) && c.kind == kRigidContact && named.size() < 8) named.push_back(c.node);
+    notes_.push_back(fmt::format(
+        "tick {}: tool '{}' presses {} node(s) that the scene fixes (a rigid support): node(s) {}{}; they do not "
+        "move and their support force is not part of the tool's force ({} other node(s) in contact)",
+        tick_, settings_.tools[t].shape.name, tr.rigid, fmt::join(named, ", "), tr.rigid > index_t(named.size()) ? ", ..." : "",
+        tr.contact));
+  }
+}
+
+TickReport Scheduler::tick(Device& device) {
+  Device* one[] = {&device};
+  return tick(one);
+}
+
+TickReport Scheduler::tick(std::span<Device* const> devices) {
+  const std::size_t n_tools = settings_.tools.size();
+  if (devices.size() != n_tools)
+    throw std::invalid_argument(fmt::format("Scheduler::tick: {} devices for {} tools (one device per tool)",
+                                            devices.size(), n_tools));
+  const double t_end = (tick_ + 1) * settings_.tick;
   TickReport rep;
+  rep.n_tools = static_cast<int>(n_tools);
+  for (std::size_t t = 0; t < n_tools; ++t) {
+    const ToolInput in = devices[t]->read(t_end);
+    if (!(std::isfinite(in.tip.x) && std::isfinite(in.tip.y) && std::isfinite(in.tip.z)))
+      throw SimulationError(fmt::format("tick {}: the device of tool '{}' reported a non-finite position", tick_,
+                                        settings_.tools[t].shape.name));
+    const ToolPose pose{in.tip, unit_or(in.axis, settings_.tools[t].axis)};
+    if (!has_prev_) {
+      prev_[t] = pose;
+      const double gap = nearest_surface_node(model_, pose.tip);
+      if (inside_reference_surface(model_, pose.tip) && gap > settings_.tools[t].shape.radius)
+        notes_.push_back(fmt::format(
+            "tool '{}' starts inside the body, {:.3g} mm from its nearest surface node: contact acts on the surface, "
+            "so the tool feels nothing until its surface meets the tissue's",
+            settings_.tools[t].shape.name, 1e3 * (gap - settings_.tools[t].shape.radius)));
+    }
+    motion_[t] = {prev_[t], pose, in.grasp};
+    rep.tools[t].tip = pose.tip;
+    rep.tools[t].axis = pose.axis;
+    rep.tools[t].grasp = in.grasp;
+  }
+  has_prev_ = true;
+  backend_.move_tools(motion_);
+  seed_region();
+  const long first_step = total_steps_;
+  backend_.advance(steps_per_tick_);
+  total_steps_ += steps_per_tick_;
+  const Reductions r = backend_.reduce();
+  check_health(r, first_step);
+  note_contacts(r);
+
   rep.tick = tick_;
   rep.time = t_end;
-  rep.tool = tip;
-  rep.contact_tri = contact_tri_;
-  rep.force = contact_tri_ >= 0 ? -1.0 * r.reaction : Vec3<double>{0, 0, 0};
+  in_contact_ = false;
+  for (std::size_t t = 0; t < n_tools; ++t) {
+    const ToolReduction& tr = r.tools[t];
+    ToolReport& tool = rep.tools[t];
+    tool.force = -1.0 * tr.reaction;
+    tool.contact_nodes = tr.contact;
+    tool.grasped = tr.grasped;
+    tool.rigid_nodes = tr.rigid;
+    rep.contact_nodes += tr.contact;
+    in_contact_ = in_contact_ || tr.contact > 0;
+    prev_[t] = motion_[t].to;
+  }
+  rep.tool = rep.tools[0].tip;
+  rep.force = rep.tools[0].force;
   rep.internal = r.internal;
   rep.region_nodes = region_.nodes();
   rep.region_elems = region_.n_elems;
@@ -120,8 +235,7 @@ TickReport Scheduler::tick(Device& device) {
   }
   rep.depth = depth_;
   rep.steps = steps_per_tick_;
-  device.send_force(rep.force);
-  prev_ = tip;
+  for (std::size_t t = 0; t < n_tools; ++t) devices[t]->send_force(rep.tools[t].force);
   ++tick_;
   return rep;
 }

@@ -1,18 +1,22 @@
 // The Scheduler runs one haptic tick on the active backend, as a list of
-// stages: read device -> collide -> contact -> region -> N TLED steps ->
-// reductions -> force to device. It knows nothing of CUDA, TBB or Embree.
+// stages: read devices -> move tools -> seed the region -> N TLED steps
+// (each with its contact stage) -> reductions -> forces to devices. It knows
+// nothing of CUDA, TBB or Embree.
 //
-// Contact rule (DESIGN.md section 3, made exact here): when the segment from
-// the previous to the current tip position first crosses the deformed
-// surface at point P0 of triangle t (outward normal n0, corner displacements
-// u0_k), the three corners of t become tool-driven, each displaced by
-// u_k = u0_k + (tip - P0): the contact triangle translates rigidly with the
-// tip, so the tip stays at the same barycentric point of it. Contact ends on
-// the first tick at which (tip - P0) . n0 > 0, i.e. the tool has withdrawn
-// beyond the surface point it touched; the nodes are then released and the
-// tissue relaxes. The region is rebuilt when a contact starts on a triangle
-// whose corners differ from the current seeds, and kept after release so
-// that the tissue can relax back.
+// Tools (docs/contact.md): each tool is a capsule driven by its own device.
+// A tick moves every tool linearly from its pose at the previous tick to the
+// pose its device reports for the end of this tick, across the tick's TLED
+// steps; the backend's contact stage pushes the surface out of the tools
+// after every step (core/contact.hpp) and reduces each tool's reaction.
+// The force sent to a device is minus its tool's reaction. A device without
+// an orientation gets the scene's shaft direction. The grasp button grasps
+// the nodes in contact when it goes down and releases them when it comes up.
+//
+// Region (depth N or auto): before each tick's steps, the surface nodes that
+// the tools' motion comes within a radius of and that are not yet inner
+// region nodes (Backend::contact_candidates) join the seeds, and the region
+// is rebuilt from all seeds: it grows to cover everything the tools touch
+// and never shrinks, so touched tissue can relax after release.
 //
 // Adaptive region (depth = kDepthAuto): the first contact builds the region
 // with auto_start rings; after every tick's reduction, while the largest
@@ -20,20 +24,29 @@
 // Reductions::front_disp) exceeds auto_tol times the largest displacement in
 // the region, the region grows by one ring (same seeds), up to the whole
 // connected mesh. The halo beyond the front is held where it is, so the
-// front's displacement bounds how much the truncation holds back; the region
-// never shrinks.
+// front's displacement bounds how much the truncation holds back.
 #pragma once
 
+#include <array>
+#include <span>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "core/backend.hpp"
 #include "core/device.hpp"
+#include "core/tool.hpp"
 
 namespace tissue {
 
+/// A tool of the scene as the Scheduler drives it.
+struct ToolSetting {
+  ToolShape shape;
+  Vec3<double> axis = {0, 0, 1};  ///< shaft direction (unit) when the device has no orientation
+};
+
 struct SchedulerSettings {
-  int depth = 5;               ///< region rings from the contact triangle; kDepthAll = whole mesh;
+  int depth = 5;               ///< region rings from the contact; kDepthAll = whole mesh;
                                ///< kDepthAuto = adaptive (see above)
   double auto_tol = 0.02;      ///< depth auto: grow while front_disp > auto_tol * max_disp (dimensionless)
   int auto_start = 2;          ///< depth auto: rings of the region built at the first contact (>= 0)
@@ -41,15 +54,30 @@ struct SchedulerSettings {
   double residual_tol = 1e-3;  ///< equilibrium: |f_free| / max(|f_held|, force_floor)
   double kinetic_tol = 1e-6;   ///< equilibrium: kinetic / max(energy scale, energy_floor)
   double force_floor = 1e-9;   ///< N
+  std::vector<ToolSetting> tools = {ToolSetting{}};  ///< one per device (at most kMaxTools)
+  ContactOptions contact;      ///< face contact, contact check spacing
+};
+
+/// One tool in one tick.
+struct ToolReport {
+  Vec3<double> tip = {};       ///< m, at the end of the tick
+  Vec3<double> axis = {};      ///< unit shaft axis
+  Vec3<double> force = {};     ///< force on the tool: minus its reaction (N)
+  index_t contact_nodes = 0;   ///< surface nodes in contact (pushed or grasped)
+  index_t grasped = 0;         ///< of which grasped
+  index_t rigid_nodes = 0;     ///< fixed nodes inside the tool (a rigid support)
+  bool grasp = false;          ///< grasp button held
 };
 
 /// What one tick did (one CSV row).
 struct TickReport {
   long tick = 0;
   double time = 0;             ///< simulated time at the end of the tick (s)
-  Vec3<double> tool = {};      ///< tool tip (m)
-  index_t contact_tri = -1;    ///< driving triangle, -1 none
-  Vec3<double> force = {};     ///< force on the tool: -(sum of internal forces on driven nodes) (N)
+  int n_tools = 0;
+  std::array<ToolReport, kMaxTools> tools = {};
+  Vec3<double> tool = {};      ///< tools[0].tip (m)
+  Vec3<double> force = {};     ///< tools[0].force (N)
+  index_t contact_nodes = 0;   ///< nodes in contact with any tool
   Vec3<double> internal = {};  ///< sum of internal forces over inner nodes (N)
   index_t region_nodes = 0, region_elems = 0;
   double residual = 0;         ///< relative free-node residual
@@ -70,28 +98,40 @@ struct SimulationError : std::runtime_error {
 
 class Scheduler {
  public:
-  /// The backend must already hold `model` (Backend::upload).
+  /// The backend must already hold `model` (Backend::upload); the
+  /// constructor gives it the settings' tools. Throws std::invalid_argument
+  /// for bad settings (tick, depth auto, tools: more than kMaxTools, a
+  /// radius <= 0 or larger than the body, a zero axis), naming the rule.
   Scheduler(Backend& backend, const TissueModel<double>& model, SchedulerSettings settings);
 
-  /// One haptic tick; throws SimulationError naming tick, steps and element.
+  /// One haptic tick, one device per tool (in settings order); throws
+  /// SimulationError naming tick, steps and element.
+  TickReport tick(std::span<Device* const> devices);
+  /// The same for a scene with one tool.
   TickReport tick(Device& device);
 
   int steps_per_tick() const { return steps_per_tick_; }
   long ticks() const { return tick_; }
   long total_steps() const { return total_steps_; }
   double time() const { return tick_ * settings_.tick; }
-  bool in_contact() const { return contact_tri_ >= 0; }
+  bool in_contact() const { return in_contact_; }
   const RegionSizes& region() const { return region_; }
   /// Rings of the current region (kDepthAll = whole); under depth auto, the
   /// depth it has grown to.
   int depth() const { return depth_; }
   const std::vector<index_t>& seeds() const { return seeds_; }
   const SchedulerSettings& settings() const { return settings_; }
+  int n_tools() const { return static_cast<int>(settings_.tools.size()); }
+
+  /// Notices since the last call (a tool pressing a rigid support, naming
+  /// its nodes; a tool starting inside the body): one line each.
+  std::vector<std::string> take_notes();
 
  private:
-  void start_contact(const Hit& hit, const Vec3<double>& tip);
-  void drive(const Vec3<double>& tip);
+  void seed_region();
   bool grow_region(const Reductions& r);
+  void check_health(const Reductions& r, long first_step) const;
+  void note_contacts(const Reductions& r);
 
   Backend& backend_;
   const TissueModel<double>& model_;
@@ -102,14 +142,21 @@ class Scheduler {
   long tick_ = 0;
   long total_steps_ = 0;
   bool has_prev_ = false;
-  Vec3<double> prev_ = {};
+  bool in_contact_ = false;
+  std::vector<ToolPose> prev_;  ///< each tool's pose at the end of the last tick
+  std::vector<ToolMotion> motion_;
+  std::vector<index_t> rigid_reported_;  ///< per tool: rigid count last reported (0 = none)
   RegionSizes region_;
   std::vector<index_t> seeds_;  ///< seeds of the current region (sorted)
-  // contact
-  index_t contact_tri_ = -1;
-  index_t nodes_[3] = {-1, -1, -1};
-  Vec3<double> u0_[3] = {};
-  Vec3<double> p0_ = {}, n0_ = {};
+  std::vector<std::string> notes_;
 };
+
+/// True when p lies inside the closed surface of the model's reference
+/// configuration (ray parity along +x; points on the surface count as
+/// outside). For the start-inside notice and tests.
+bool inside_reference_surface(const TissueModel<double>& m, Vec3<double> p);
+
+/// Largest extent of the model's reference bounding box (m).
+double body_extent(const TissueModel<double>& m);
 
 }  // namespace tissue

@@ -6,6 +6,7 @@
 
 #include <vector>
 
+#include "core/contact.hpp"
 #include "core/model.hpp"
 #include "core/region.hpp"
 
@@ -28,10 +29,18 @@ struct TissueState {
   std::vector<T> f_slot;   ///< pass 3: element nodal forces in node order: slot k = model.elem_slot of
                            ///< (corner, element), xyz interleaved (4 n_elems x 3) N
   std::vector<T> f;        ///< pass 4: internal nodal force (3 x n_nodes) N
+  std::vector<std::uint8_t> contact;      ///< ContactKind of each node after the last step (n_nodes)
+  std::vector<signed char> contact_tool;  ///< the tool it touches, -1 none (n_nodes)
+  std::vector<T> contact_normal;  ///< contact normal of pushed nodes, unit, out of the tool (3 x n_nodes)
+  std::vector<T> grasp_offset;    ///< grasped nodes: position minus the tool tip when the grasp started
+                                  ///< (3 x n_nodes) m
   Region region;           ///< active nodes and elements
 
   void resize(index_t n_nodes, index_t n_elems) {
-    for (auto* v : {&u, &u_prev, &u_next, &u_held, &f}) v->assign(3 * size_t(n_nodes), T(0));
+    for (auto* v : {&u, &u_prev, &u_next, &u_held, &f, &contact_normal, &grasp_offset})
+      v->assign(3 * size_t(n_nodes), T(0));
+    contact.assign(n_nodes, kNoContact);
+    contact_tool.assign(n_nodes, -1);
     held.assign(n_nodes, 0);
     driven.assign(n_nodes, 0);
     elem_pv.assign(n_elems, T(0));

@@ -1,6 +1,6 @@
 #include "cpu/constraints.hpp"
 
-#include <fmt/format.h>
+#include "core/node_rules.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -28,18 +28,13 @@ std::uint8_t model_axes(const TissueModel<T>& m, index_t a) {
   return fixed_axes(m.node_flags[a]);
 }
 
-/// Holds every component of halo node a: at 0 where the model fixes it, at
-/// the tool's target where it is driven, else at its current u.
+/// Holds every component of halo node a (core halo_target).
 template <class T>
 void hold_halo(const TissueModel<T>& m, TissueState<T>& s, index_t a) {
   const index_t n = m.n_nodes;
-  const std::uint8_t fixed = model_axes(m, a), driven = s.driven[a];
-  for (int c = 0; c < 3; ++c) {
-    if (fixed >> c & 1)
-      s.u_held[c * n + a] = T(0);
-    else if (!(driven >> c & 1))
-      s.u_held[c * n + a] = s.u[c * n + a];
-  }
+  const Vec3<T> u = {s.u[a], s.u[n + a], s.u[2 * n + a]};
+  const Vec3<T> held = halo_target(model_axes(m, a), s.driven[a], u, Vec3<T>{s.u_held[a], s.u_held[n + a], s.u_held[2 * n + a]});
+  set_all(s.u_held, n, a, held.x, held.y, held.z);
   s.held[a] = kAllAxes;
 }
 
@@ -100,34 +95,14 @@ template <class T>
 void drive_nodes(const TissueModel<T>& m, TissueState<T>& s, std::vector<index_t>& driven_list,
                  std::span<const index_t> nodes, std::span<const double> u, std::span<const std::uint8_t> axes) {
   const index_t n = m.n_nodes;
-  if (u.size() != 3 * nodes.size())
-    throw std::invalid_argument(
-        fmt::format("set_driven: {} displacement values for {} nodes (need 3 per node)", u.size(), nodes.size()));
-  if (!axes.empty() && axes.size() != nodes.size())
-    throw std::invalid_argument(
-        fmt::format("set_driven_axes: {} axis masks for {} nodes (need one per node)", axes.size(), nodes.size()));
-  for (std::size_t k = 0; k < nodes.size(); ++k) {
-    const index_t a = nodes[k];
-    if (a < 0 || a >= n) throw std::invalid_argument(fmt::format("set_driven: node {} out of range (0..{})", a, n - 1));
-    if (s.region.role[a] == kOutside)
-      throw std::invalid_argument(
-          fmt::format("set_driven: node {} is outside the deformation region (build_region from it first)", a));
-    if (!axes.empty() && (axes[k] == 0 || axes[k] > kAllAxes))
-      throw std::invalid_argument(fmt::format(
-          "set_driven_axes: node {}: axis mask {} must be 1..7 (bit 0 = x, 1 = y, 2 = z)", a, int(axes[k])));
-    for (int c = 0; c < 3; ++c)
-      if (!std::isfinite(u[3 * k + c]))
-        throw std::invalid_argument(
-            fmt::format("set_driven: node {}: displacement {} = {} is not finite", a, "xyz"[c], u[3 * k + c]));
-  }
   release_driven(m, s, driven_list);
   for (std::size_t k = 0; k < nodes.size(); ++k) {
     const index_t a = nodes[k];
-    const std::uint8_t mask = axes.empty() ? kAllAxes : axes[k];
+    const std::uint8_t mask = axes[k];
     if (!s.driven[a]) driven_list.push_back(a);
     s.driven[a] |= mask;
     s.held[a] |= mask;
-    const std::uint8_t fixed = model_axes(m, a);  // a fixed component stays at 0 even under the tool
+    const std::uint8_t fixed = model_axes(m, a);  // a fixed component stays at 0 even under the drive
     for (int c = 0; c < 3; ++c)
       if ((mask >> c & 1) && !(fixed >> c & 1)) s.u_held[c * n + a] = T(u[3 * k + c]);
   }

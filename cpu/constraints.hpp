@@ -3,14 +3,9 @@
 // Backend::set_driven / clear_driven. Host functions of (const model&,
 // state&), called once per contact or tick, never inside the step loop.
 //
-// Holding rule, per component (a node's held axis mask and u_held target):
-//   fixed  (kFixed, or kFixedX/Y/Z for one component)  held, u_held = 0 (wins over everything)
-//   driven (state.driven's axis mask)                   held, u_held = the tool's target
-//   halo   (region role kHalo)                          every component held, the others at
-//                                                       u at the time it became halo
-//   anything else in the region                         integrated
-// Nodes outside the region are "frozen": u == u_prev == u_next, so the
-// vector rotation of pass 4 leaves them where they are.
+// The holding rule is core/node_rules.hpp's. Nodes outside the region are
+// "frozen": u == u_prev == u_next, so the vector rotation after pass 4
+// leaves them where they are.
 #pragma once
 
 #include <span>
@@ -28,16 +23,14 @@ namespace tissue::cpu {
 template <class T>
 void install_region(const TissueModel<T>& m, TissueState<T>& s, Region region);
 
-/// Makes `nodes` tool-driven with targets u (3 per node, xyz interleaved, m)
-/// on the components of axes (one mask 1..7 per node; empty = all three),
-/// releasing the previously driven nodes in `driven_list` first (see
-/// release_driven); driven_list then holds `nodes` (once each; masks of a
-/// repeated node are combined). Throws std::invalid_argument for a size
-/// mismatch, a node out of range or outside the region, a mask outside
-/// 1..7, or a non-finite target.
+/// Makes `nodes` driven with targets u (3 per node, xyz interleaved, m) on
+/// the components of axes (one mask 1..7 per node), releasing the
+/// previously driven nodes in `driven_list` first (see release_driven);
+/// driven_list then holds `nodes`. The arguments were checked by Backend
+/// (nodes unique, in range and in the region, masks 1..7, targets finite).
 template <class T>
 void drive_nodes(const TissueModel<T>& m, TissueState<T>& s, std::vector<index_t>& driven_list,
-                 std::span<const index_t> nodes, std::span<const double> u, std::span<const std::uint8_t> axes = {});
+                 std::span<const index_t> nodes, std::span<const double> u, std::span<const std::uint8_t> axes);
 
 /// Releases every node in driven_list (then empties it): a released node
 /// stays held only where it is fixed (at 0) or halo (at its current u).

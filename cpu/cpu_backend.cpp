@@ -12,7 +12,6 @@
 
 #include "cpu/constraints.hpp"
 #include "cpu/host_backend.hpp"
-#include "cpu/reduce.hpp"
 
 namespace tissue {
 
@@ -48,15 +47,9 @@ std::string CpuBackend<T>::device_name() const {
 }
 
 template <class T>
-void CpuBackend<T>::require_upload(const char* what) const {
-  if (!uploaded_) throw std::logic_error(fmt::format("cpu backend: {} called before upload()", what));
-}
-
-template <class T>
-void CpuBackend<T>::upload(const TissueModel<double>& model) {
-  uploaded_ = false;
+void CpuBackend<T>::do_upload(const TissueModel<double>& model) {
   energy_.fresh = false;
-  surface_.reset();
+  contact_.reset();
   model_ = convert<T>(model);
   state_.resize(model_.n_nodes, model_.n_elems);
   node_volume_ = node_volume_sums(model_);
@@ -69,21 +62,12 @@ void CpuBackend<T>::upload(const TissueModel<double>& model) {
   cpu::element_pressure(model_, state_, all_elems_, all_elems_part_);
   double J;
   bad_.take(&J);
-  surface_ = std::make_unique<EmbreeSurface<T>>(model_);
-  uploaded_ = true;
+  contact_ = std::make_unique<ContactStage<T>>(model_);
 }
 
 template <class T>
-void CpuBackend<T>::set_displacements(std::span<const double> u) {
-  require_upload("set_displacements");
+void CpuBackend<T>::do_set_displacements(std::span<const double> u) {
   const index_t n = model_.n_nodes;
-  if (u.size() != 3 * std::size_t(n))
-    throw std::invalid_argument(
-        fmt::format("set_displacements: {} values for {} nodes (need 3 x n_nodes = {})", u.size(), n, 3 * n));
-  for (std::size_t k = 0; k < u.size(); ++k)
-    if (!std::isfinite(u[k]))
-      throw std::invalid_argument(
-          fmt::format("set_displacements: node {}: displacement {} = {} is not finite", k % n, "xyz"[k / n], u[k]));
   for (std::size_t k = 0; k < u.size(); ++k) state_.u[k] = state_.u_prev[k] = state_.u_next[k] = T(u[k]);
   energy_.fresh = false;
   for (index_t a = 0; a < n; ++a)
@@ -93,12 +77,10 @@ void CpuBackend<T>::set_displacements(std::span<const double> u) {
         if (!(keep >> c & 1)) state_.u_held[c * n + a] = state_.u[c * n + a];
     }
   cpu::element_pressure(model_, state_, all_elems_, all_elems_part_);
-  surface_->mark_dirty();
 }
 
 template <class T>
-RegionSizes CpuBackend<T>::build_region(std::span<const index_t> seeds, int depth) {
-  require_upload("build_region");
+RegionSizes CpuBackend<T>::do_build_region(std::span<const index_t> seeds, int depth) {
   install_region(model_, state_, flood_fill(model_, seeds, depth));
   energy_.fresh = false;
   cpu::element_pressure(model_, state_, all_elems_, all_elems_part_);
@@ -106,93 +88,118 @@ RegionSizes CpuBackend<T>::build_region(std::span<const index_t> seeds, int dept
 }
 
 template <class T>
-void CpuBackend<T>::set_driven(std::span<const index_t> nodes, std::span<const double> u) {
-  require_upload("set_driven");
-  drive_nodes(model_, state_, driven_list_, nodes, u);
+std::vector<std::uint8_t> CpuBackend<T>::do_roles(std::span<const index_t> nodes) {
+  std::vector<std::uint8_t> r(nodes.size());
+  for (std::size_t k = 0; k < nodes.size(); ++k) r[k] = state_.region.role[nodes[k]];
+  return r;
 }
 
 template <class T>
-void CpuBackend<T>::set_driven_axes(std::span<const index_t> nodes, std::span<const double> u,
-                                    std::span<const std::uint8_t> axes) {
-  require_upload("set_driven_axes");
-  if (axes.size() != nodes.size())
-    throw std::invalid_argument(
-        fmt::format("set_driven_axes: {} axis masks for {} nodes (need one per node)", axes.size(), nodes.size()));
+void CpuBackend<T>::do_set_driven(std::span<const index_t> nodes, std::span<const double> u,
+                                  std::span<const std::uint8_t> axes) {
   drive_nodes(model_, state_, driven_list_, nodes, u, axes);
 }
 
 template <class T>
-void CpuBackend<T>::clear_driven() {
-  require_upload("clear_driven");
+void CpuBackend<T>::do_clear_driven() {
   release_driven(model_, state_, driven_list_);
 }
 
 template <class T>
-void CpuBackend<T>::element_pressure() {
+void CpuBackend<T>::do_begin_grasp(int tool, const ToolPose& pose) {
+  contact_->begin_grasp(state_, tool, pose.tip);
+}
+
+template <class T>
+void CpuBackend<T>::do_end_grasp(int tool) {
+  contact_->end_grasp(state_, tool);
+}
+
+template <class T>
+void CpuBackend<T>::do_reset_contacts() {
+  contact_->reset(state_);
+}
+
+template <class T>
+void CpuBackend<T>::do_element_pressure() {
   energy_.fresh = false;  // a caller running the passes one by one
   cpu::element_pressure(model_, state_, state_.region.elems, parts_.element_pressure);
 }
 
 template <class T>
-void CpuBackend<T>::nodal_pressure() {
+void CpuBackend<T>::do_nodal_pressure() {
   cpu::nodal_pressure(model_, state_, node_volume_, state_.region.nodes, parts_.nodal_pressure);
 }
 
 template <class T>
-void CpuBackend<T>::element_forces() {
+void CpuBackend<T>::do_element_forces() {
   cpu::element_forces(model_, state_, state_.region.elems, bad_, parts_.element_forces);
 }
 
 template <class T>
-void CpuBackend<T>::node_update() {
+void CpuBackend<T>::do_node_update() {
   energy_.fresh = false;  // u moves
   cpu::node_update(model_, state_, state_.region.nodes, parts_.node_update);
-  surface_->mark_dirty();
+  rotate(state_);
 }
 
 template <class T>
-void CpuBackend<T>::step() {
+void CpuBackend<T>::step(const ContactTools<T>& tools, int k) {
   if (!take_passes(energy_, state_)) {  // reduce() may have run passes 1-2 at this u already
-    element_pressure();
-    nodal_pressure();
+    do_element_pressure();
+    do_nodal_pressure();
   }
-  element_forces();
-  node_update();
+  do_element_forces();
+  energy_.fresh = false;
+  cpu::node_update(model_, state_, state_.region.nodes, parts_.node_update);
+  contact_->step(state_, tools, k);
+  rotate(state_);
 }
 
 template <class T>
-void CpuBackend<T>::advance(int steps) {
-  require_upload("advance");
-  for (int s = 0; s < steps; ++s) step();
+void CpuBackend<T>::do_advance(int steps, const ContactTools<double>& tools) {
+  const ContactTools<T> t = contact_tools_as<T>(tools);
+  for (int k = 0; k < steps; ++k) step(t, k);
 }
 
 template <class T>
-Hit CpuBackend<T>::collide(Vec3<double> a, Vec3<double> b) {
-  require_upload("collide");
-  return surface_->query(state_.u, a, b);
+std::vector<index_t> CpuBackend<T>::do_contact_candidates(const ContactTools<double>& sweep) {
+  return contact_->candidates(state_, contact_tools_as<T>(sweep));
 }
 
 template <class T>
-Reductions CpuBackend<T>::reduce() {
-  require_upload("reduce");
+std::vector<ContactNode> CpuBackend<T>::do_contacts() {
+  const index_t n = model_.n_nodes;
+  std::vector<ContactNode> out;
+  for (index_t a : contact_->touched()) {
+    const Vec3<double> nrm = {double(state_.contact_normal[a]), double(state_.contact_normal[n + a]),
+                              double(state_.contact_normal[2 * size_t(n) + a])};
+    out.push_back({a, state_.contact_tool[a], state_.contact[a], state_.contact[a] == kPushed ? nrm : Vec3<double>{}});
+  }
+  return out;
+}
+
+template <class T>
+Reductions CpuBackend<T>::do_reduce() {
   Reductions r = reduce_region(model_, state_, state_.region.nodes);
   r.strain_energy = strain_energy(model_, state_, node_volume_, energy_);
   r.front_disp = front_displacement(model_, state_);
   r.bad_elem = bad_.take(&r.bad_J);
   if (r.bad_elem < 0) r.bad_J = 1;
+  reduce_contacts(model_, state_, contact_->touched(), r.tools);
+  for (const ToolReduction& t : r.tools)
+    r.finite = r.finite && std::isfinite(t.reaction.x + t.reaction.y + t.reaction.z);
   return r;
 }
 
 template <class T>
-Fields CpuBackend<T>::download() {
-  require_upload("download");
+Fields CpuBackend<T>::do_download() {
   auto cv = [](const std::vector<T>& v) { return std::vector<double>(v.begin(), v.end()); };
   return {cv(state_.u), cv(state_.node_p), cv(state_.elem_J), cv(state_.f)};
 }
 
 template <class T>
-void CpuBackend<T>::write_positions(float* dst) {
-  require_upload("write_positions");
+void CpuBackend<T>::do_write_positions(float* dst) {
   const index_t n = model_.n_nodes;
   const T* X = model_.X.data();
   const T* u = state_.u.data();

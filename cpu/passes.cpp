@@ -7,6 +7,7 @@
 #include <cmath>
 #include <utility>
 
+#include "core/node_rules.hpp"
 #include "core/tet.hpp"
 #include "cpu/element_lanes.hpp"
 
@@ -123,24 +124,20 @@ void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const ind
   T* f_out = s.f.data();
   T* u_next = s.u_next.data();
   for_each_index(nodes, kNodeGrain, part, [&](index_t a) {
-    T f[3] = {0, 0, 0};
-    for (index_t k = start[a]; k < start[a + 1]; ++k)
-      for (int c = 0; c < 3; ++c) f[c] += fs[3 * size_t(k) + c];
-    const std::uint8_t h = held[a];
-    if (h == kAllAxes) {
-      for (int c = 0; c < 3; ++c) {
-        f_out[c * n + a] = f[c];
-        u_next[c * n + a] = u_held[c * n + a];
-      }
-      return;
-    }
-    const CentralDifference<T> cd{m.cd_A[a], m.cd_B[a], m.cd_C[a]};
+    Vec3<T> f = {0, 0, 0};
+    for (index_t k = start[a]; k < start[a + 1]; ++k) f = f + Vec3<T>{fs[3 * size_t(k)], fs[3 * size_t(k) + 1], fs[3 * size_t(k) + 2]};
+    const auto load = [&](const T* v) { return Vec3<T>{v[a], v[n + a], v[2 * size_t(n) + a]}; };
+    const Vec3<T> next = node_next(held[a], load(u_held), CentralDifference<T>{m.cd_A[a], m.cd_B[a], m.cd_C[a]}, f,
+                                   load(u), load(u_prev));
     for (int c = 0; c < 3; ++c) {
       f_out[c * n + a] = f[c];
-      u_next[c * n + a] = (h >> c & 1) ? u_held[c * n + a]
-                                       : central_difference_update(cd, -f[c], u[c * n + a], u_prev[c * n + a]);
+      u_next[c * n + a] = next[c];
     }
   });
+}
+
+template <class T>
+void rotate(TissueState<T>& s) {
   std::swap(s.u_prev, s.u);  // u_prev <- u^n
   std::swap(s.u, s.u_next);  // u <- u^{n+1}; u_next now holds u^{n-1} (scratch)
 }
@@ -157,7 +154,8 @@ void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const ind
   template void element_forces(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>, BadElementFlag&, \
                                tbb::affinity_partitioner&);                                                       \
   template void node_update(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>,                     \
-                            tbb::affinity_partitioner&);
+                            tbb::affinity_partitioner&);                                                          \
+  template void rotate(TissueState<T>&);
 TISSUE_CPU_PASSES(float)
 TISSUE_CPU_PASSES(double)
 #undef TISSUE_CPU_PASSES

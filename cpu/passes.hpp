@@ -68,13 +68,17 @@ void element_forces(const TissueModel<T>& m, TissueState<T>& s, std::span<const 
                     tbb::affinity_partitioner& part);
 
 /// Pass 4 over `nodes`: f_a = sum of the node's contiguous f_slot entries
-/// (its node_elem list, in stored order; no atomics), stored in state.f; held components
-/// (state.held's axis mask) get u_next = u_held, the others the central
-/// difference with R = 0. Then
-/// rotates u_prev <- u <- u_next by swapping the vectors (nodes outside the
-/// region must have u == u_prev == u_next, which build_region guarantees).
+/// (its node_elem list, in stored order; no atomics), stored in state.f,
+/// and u_next by core node_next (held components at u_held, the others the
+/// central difference with R = 0). The contact stage may then correct
+/// u_next before rotate().
 template <class T>
 void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> nodes,
                  tbb::affinity_partitioner& part);
+
+/// Rotates u_prev <- u <- u_next by swapping the vectors (nodes outside the
+/// region must have u == u_prev == u_next, which build_region guarantees).
+template <class T>
+void rotate(TissueState<T>& s);
 
 }  // namespace tissue::cpu

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <functional>
 
+#include "core/node_rules.hpp"
 #include "cpu/element_lanes.hpp"
 #include "cpu/passes.hpp"
 
@@ -40,33 +41,26 @@ Partial combine(Partial a, const Partial& b) {
 template <class T>
 Reductions reduce_region(const TissueModel<T>& m, const TissueState<T>& s, std::span<const index_t> nodes) {
   const index_t n = m.n_nodes;
-  const double inv_dt = 1.0 / m.dt;
   const Partial total = tbb::parallel_deterministic_reduce(
       tbb::blocked_range<std::size_t>(0, nodes.size(), kReduceGrain), Partial{},
       [&](const tbb::blocked_range<std::size_t>& r, Partial p) {
+        const auto load = [&](const std::vector<T>& v, index_t a) {
+          return Vec3<T>{v[a], v[n + a], v[2 * size_t(n) + a]};
+        };
         for (std::size_t k = r.begin(); k != r.end(); ++k) {
           const index_t a = nodes[k];
-          double f[3], u2 = 0, v2 = 0;
+          const NodeTerms t = node_terms(load(s.f, a), load(s.u, a), load(s.u_prev, a), double(m.mass[a]), m.dt,
+                                         s.region.role[a] == kInner, s.held[a], s.driven[a], s.contact[a],
+                                         load(s.contact_normal, a));
           for (int c = 0; c < 3; ++c) {
-            f[c] = double(s.f[c * n + a]);
-            const double u = double(s.u[c * n + a]);
-            const double v = (u - double(s.u_prev[c * n + a])) * inv_dt;
-            u2 += u * u;
-            v2 += v * v;
+            p.reaction[c] += t.reaction[c];
+            p.internal[c] += t.internal[c];
           }
-          const double f2 = f[0] * f[0] + f[1] * f[1] + f[2] * f[2];
-          p.finite = p.finite && std::isfinite(f2) && std::isfinite(u2) && std::isfinite(v2);
-          p.kinetic += 0.5 * double(m.mass[a]) * v2;
-          p.max_disp = std::max(p.max_disp, std::sqrt(u2));
-          if (const std::uint8_t d = s.driven[a])
-            for (int c = 0; c < 3; ++c)
-              if (d >> c & 1) p.reaction[c] += f[c];
-          if (s.region.role[a] != kInner) continue;
-          const std::uint8_t h = s.held[a];
-          for (int c = 0; c < 3; ++c) {
-            p.internal[c] += f[c];
-            ((h >> c & 1) ? p.held2 : p.free2) += f[c] * f[c];
-          }
+          p.free2 += t.free2;
+          p.held2 += t.held2;
+          p.kinetic += t.kinetic;
+          p.max_disp = std::max(p.max_disp, t.disp);
+          p.finite = p.finite && t.finite;
         }
         return p;
       },

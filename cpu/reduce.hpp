@@ -17,17 +17,11 @@ namespace tissue::cpu {
 /// Chunk size of the reduction (nodes).
 inline constexpr std::size_t kReduceGrain = 1024;
 
-/// Reductions over `nodes` (the region's inner and halo nodes) from
-/// state.f, u, u_prev, driven, held and region.role:
-///   reaction     sum f_a over driven nodes, driven components only
-///   internal     sum f_a over inner nodes
-///   free_force2  sum f_ac^2 over the components of inner nodes that are not held
-///   held_force2  sum f_ac^2 over the held components of inner nodes (fixed or driven)
-///   kinetic      0.5 sum m_a |(u_a - u_prev_a) / dt|^2 over all `nodes`
-///   max_disp     max |u_a| over all `nodes`
-///   finite       false if any f_a or u_a visited is not finite
-/// bad_elem / bad_J are left at "none", strain_energy and front_disp at
-/// "not computed"; the caller fills them.
+/// Reductions over `nodes` (the region's inner and halo nodes): the sum of
+/// core node_terms (core/node_rules.hpp) from state.f, u, u_prev, driven,
+/// held, region.role and the contact records. bad_elem / bad_J are left at
+/// "none", strain_energy and front_disp at "not computed", the per-tool
+/// contact results empty; the caller fills them.
 template <class T>
 Reductions reduce_region(const TissueModel<T>& m, const TissueState<T>& s, std::span<const index_t> nodes);
 

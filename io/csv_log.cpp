@@ -6,25 +6,40 @@
 
 namespace tissue::io {
 
-const char* TickLog::header() {
-  return "tick,time,tool_x,tool_y,tool_z,contact_tri,force_x,force_y,force_z,internal_x,internal_y,internal_z,"
-         "region_nodes,region_elems,residual,kinetic,max_disp,equilibrium,steps,strain_energy,kinetic_rel,front_disp,"
-         "depth";
+std::string TickLog::header(int n_tools) {
+  std::string h =
+      "tick,time,tool_x,tool_y,tool_z,contact_nodes,force_x,force_y,force_z,grasp,internal_x,internal_y,internal_z,"
+      "region_nodes,region_elems,residual,kinetic,max_disp,equilibrium,steps,strain_energy,kinetic_rel,front_disp,"
+      "depth";
+  for (int k = 2; k <= n_tools; ++k)
+    h += fmt::format(",tool{0}_x,tool{0}_y,tool{0}_z,tool{0}_contact_nodes,tool{0}_force_x,tool{0}_force_y,"
+                     "tool{0}_force_z,tool{0}_grasp",
+                     k);
+  return h;
 }
 
-TickLog::TickLog(const std::string& path) : path_(path), out_(path) {
+TickLog::TickLog(const std::string& path, int n_tools) : path_(path), n_tools_(n_tools), out_(path) {
+  if (n_tools < 1 || n_tools > kMaxTools)
+    throw std::invalid_argument(fmt::format("{}: {} tools; the tick log takes 1 to {}", path_, n_tools, kMaxTools));
   if (!out_) throw std::runtime_error(fmt::format("{}: cannot open the tick log for writing", path_));
-  out_ << header() << '\n';
+  out_ << header(n_tools) << '\n';
   if (!out_) throw std::runtime_error(fmt::format("{}: cannot write the tick log header", path_));
 }
 
 void TickLog::write(const TickReport& r) {
+  const ToolReport& t0 = r.tools[0];
   out_ << fmt::format(
-      "{},{:.9g},{:.9g},{:.9g},{:.9g},{},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{:.9g},{},{},{:.6g},{:.6g},{:.9g},{},{},"
-      "{:.9g},{:.6g},{:.9g},{}\n",
-      r.tick, r.time, r.tool.x, r.tool.y, r.tool.z, r.contact_tri, r.force.x, r.force.y, r.force.z, r.internal.x,
-      r.internal.y, r.internal.z, r.region_nodes, r.region_elems, r.residual, r.kinetic, r.max_disp,
-      r.equilibrium ? 1 : 0, r.steps, r.strain_energy, r.kinetic_rel, r.front_disp, r.depth);
+      "{},{:.9g},{:.9g},{:.9g},{:.9g},{},{:.9g},{:.9g},{:.9g},{},{:.9g},{:.9g},{:.9g},{},{},{:.6g},{:.6g},{:.9g},{},{},"
+      "{:.9g},{:.6g},{:.9g},{}",
+      r.tick, r.time, t0.tip.x, t0.tip.y, t0.tip.z, t0.contact_nodes, t0.force.x, t0.force.y, t0.force.z,
+      t0.grasp ? 1 : 0, r.internal.x, r.internal.y, r.internal.z, r.region_nodes, r.region_elems, r.residual,
+      r.kinetic, r.max_disp, r.equilibrium ? 1 : 0, r.steps, r.strain_energy, r.kinetic_rel, r.front_disp, r.depth);
+  for (int k = 1; k < n_tools_; ++k) {
+    const ToolReport& t = r.tools[k];
+    out_ << fmt::format(",{:.9g},{:.9g},{:.9g},{},{:.9g},{:.9g},{:.9g},{}", t.tip.x, t.tip.y, t.tip.z,
+                        t.contact_nodes, t.force.x, t.force.y, t.force.z, t.grasp ? 1 : 0);
+  }
+  out_ << '\n';
   if (!out_) throw std::runtime_error(fmt::format("{}: write failed at tick {}", path_, r.tick));
   ++rows_;
 }

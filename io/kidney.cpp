@@ -168,27 +168,6 @@ index_t surface_triangle_along(const SurfaceMesh& s, Vec3<double> dir) {
   return ray_hit(s, dir).first;
 }
 
-namespace {
-
-/// The tet mesh's own boundary (outward triangles, in the model's triangle
-/// order) as a surface: TetGen may split the input facets, so a point chosen
-/// on the input surface can fall on an edge of the mesh's triangles.
-SurfaceMesh mesh_boundary(const std::vector<double>& nodes, const std::vector<index_t>& tets) {
-  ModelInput in;
-  in.nodes = nodes;
-  in.tets = tets;
-  in.materials = {{1, 1, 1}};
-  in.source = "built-in kidney";
-  const TissueModel<double> m = build_model(in);
-  SurfaceMesh s;
-  s.vertices = nodes;
-  for (index_t t = 0; t < m.n_tris; ++t)
-    for (int k = 0; k < 3; ++k) s.triangles.push_back(m.tris[k * m.n_tris + t]);
-  return s;
-}
-
-}  // namespace
-
 Vec3<double> kidney_hilum_centre() {
   return surface_point_along(kidney_surface(KidneyScene::frequency), {0, -1, 0});
 }
@@ -228,26 +207,26 @@ scene::Scene default_kidney_scene() {
   }
   s.constraints.push_back(std::move(fix));
 
-  // The probe: at the centroid of the tet mesh's lateral boundary triangle
-  // (+y), along its inward normal (a triangle's interior point, so the
-  // contact triangle and normal are unambiguous in float and double).
-  // The approach ends touch_overshoot inside the surface, so the tick that
-  // reaches the "touch" point crosses the surface by a margin far above
-  // rounding (in float and double) instead of ending exactly on it; the
-  // deepest point is still press_depth below the surface.
-  const SurfaceMesh boundary = mesh_boundary(s.nodes, s.tets);
-  const index_t lateral = surface_triangle_along(boundary, {0, 1, 0});
-  const Vec3<double> c0 = vertex(boundary, boundary.triangles[3 * lateral]),
-                     c1 = vertex(boundary, boundary.triangles[3 * lateral + 1]),
-                     c2 = vertex(boundary, boundary.triangles[3 * lateral + 2]);
-  const Vec3<double> touch = (1.0 / 3.0) * (c0 + c1 + c2);
-  const Vec3<double> inward = -1.0 * unit(cross(c1 - c0, c2 - c0));
+  // The probe: a rod with a hemispherical tip, aimed at the lateral surface
+  // point along +y along the inward normal of the input surface there. Both
+  // come from the generated surface, not from the tet mesh, so every mesh
+  // of the organ (tissue tradeoff's coarse and fine ones) is pressed at the
+  // same point in the same direction. The path starts with the tool's
+  // surface `approach` outside; the indentation is the tool's deepest point
+  // below the undeformed surface.
+  const Vec3<double> touch = surface_point_along(surface, {0, 1, 0});
+  const index_t lateral = surface_triangle_along(surface, {0, 1, 0});
+  const Vec3<double> c0 = vertex(surface, surface.triangles[3 * lateral]),
+                     c1 = vertex(surface, surface.triangles[3 * lateral + 1]),
+                     c2 = vertex(surface, surface.triangles[3 * lateral + 2]);
+  const Vec3<double> outward = unit(cross(c1 - c0, c2 - c0));
   scene::Tool tool;
   tool.name = "probe";
   tool.radius = K::tool_radius;
+  tool.shaft = K::tool_shaft;
+  tool.direction = outward;
   tool.device = "scripted";
-  tool.path = press_path(touch + K::touch_overshoot * inward, inward, K::press_depth - K::touch_overshoot,
-                         K::approach + K::touch_overshoot);
+  tool.path = press_path(touch + K::tool_radius * outward, -1.0 * outward, K::press_depth, K::approach);
   s.tools.push_back(std::move(tool));
 
   s.solver.backend = "cpu";

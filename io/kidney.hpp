@@ -53,10 +53,10 @@ struct KidneyScene {
   static constexpr double quality = 2.0;           ///< TetGen radius-edge bound (1.414 would force ~9,300 tets)
   static constexpr int target_tets = 8400;         ///< the reference paper's kidney had 8,427
   static constexpr double fix_radius = 0.01;       ///< nodes within this distance of the hilum centre are fixed (m)
-  static constexpr double tool_radius = 0.002;     ///< probe tip radius (m)
-  static constexpr double approach = 0.01;         ///< tool starts this far outside the surface (m)
-  static constexpr double press_depth = 0.005;     ///< indentation below the touched surface point (m)
-  static constexpr double touch_overshoot = 2e-5;  ///< the approach ends this far inside the surface (m); see .cpp
+  static constexpr double tool_radius = 0.002;     ///< probe radius (m): a 4 mm rod with a hemispherical tip
+  static constexpr double tool_shaft = 0.03;       ///< probe shaft length (m)
+  static constexpr double approach = 0.01;         ///< the tool's surface starts this far outside the tissue (m)
+  static constexpr double press_depth = 0.005;     ///< indentation: the tool's deepest point below the surface (m)
   static constexpr double E = 3000, nu = 0.45, rho = 1000;  ///< brain tissue (Pa, -, kg/m^3)
 };
 
@@ -67,12 +67,13 @@ Vec3<double> kidney_hilum_centre();
 /// tetrahedralised by TetGen (KidneyScene::quality) to about
 /// KidneyScene::target_tets tets; one Neo-Hookean material (E = 3000 Pa,
 /// nu = 0.45, rho = 1000 kg/m^3) on every element; a Nodes constraint fixing
-/// the nodes within fix_radius of the hilum centre; one scripted probe
-/// (radius 2 mm) on core press_path: aimed at the centroid of the surface
-/// triangle on the convex lateral side (+y), along that triangle's inward
-/// normal, from 1 cm outside: touch, press 5 mm, hold, retract (1 s);
-/// solver: cpu, float, dt = 0.5 dt_crit, automatic damping, depth 5, 1 ms
-/// tick. Deterministic; the mesh is inline (Scene::nodes, Scene::tets).
+/// the nodes within fix_radius of the hilum centre; one scripted probe (a
+/// capsule of radius 2 mm with a 3 cm shaft) on core press_path: aimed at
+/// the generated surface's point on the convex lateral side (+y), along its
+/// inward normal, from 1 cm outside: touch, press 5 mm, hold, retract (1 s);
+/// solver: cpu, float, dt = 0.9 dt_crit, 2.5 % mass scaling, automatic
+/// damping, depth auto, 1 ms tick. Deterministic; the mesh is inline
+/// (Scene::nodes, Scene::tets).
 scene::Scene default_kidney_scene();
 
 }  // namespace tissue::io

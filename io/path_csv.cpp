@@ -29,17 +29,56 @@ bool skipped(std::string_view line) {
   return t.empty() || t.front() == '#';
 }
 
-Waypoint parse_row(std::string_view text, const std::string& source, int line) {
+/// Column layout from the header: t,x,y,z first, then optionally grasp and
+/// ax,ay,az (together), in any order.
+struct Columns {
+  std::size_t count = 4;
+  int grasp = -1, axis[3] = {-1, -1, -1};
+};
+
+Columns parse_header(std::string_view text, const std::string& source, int line) {
   const auto f = split_commas(text);
-  if (f.size() != 4) fail(source, line, fmt::format("{} fields; expected 4: t,x,y,z", f.size()));
-  double v[4];
-  for (int k = 0; k < 4; ++k) {
-    const auto r = scene::parse_real(f[k]);
-    if (!r) fail(source, line, fmt::format("{} '{}' is not a number", "txyz"[k], f[k]));
-    if (!std::isfinite(*r)) fail(source, line, fmt::format("{} = {} is not a finite number", "txyz"[k], *r));
-    v[k] = *r;
+  const std::string expected = "expected 't,x,y,z' (s, m), optionally followed by 'grasp' and 'ax,ay,az'";
+  if (f.size() < 4 || f[0] != "t" || f[1] != "x" || f[2] != "y" || f[3] != "z")
+    fail(source, line, fmt::format("header is '{}'; {}", scene::trim(text), expected));
+  Columns c;
+  c.count = f.size();
+  for (std::size_t k = 4; k < f.size(); ++k) {
+    int* slot = f[k] == "grasp" ? &c.grasp
+                : f[k] == "ax"  ? &c.axis[0]
+                : f[k] == "ay"  ? &c.axis[1]
+                : f[k] == "az"  ? &c.axis[2]
+                                : nullptr;
+    if (slot == nullptr) fail(source, line, fmt::format("unknown column '{}'; {}", f[k], expected));
+    if (*slot >= 0) fail(source, line, fmt::format("column '{}' appears twice", f[k]));
+    *slot = static_cast<int>(k);
   }
-  return {v[0], {v[1], v[2], v[3]}};
+  const int axes = (c.axis[0] >= 0) + (c.axis[1] >= 0) + (c.axis[2] >= 0);
+  if (axes != 0 && axes != 3) fail(source, line, "give all three axis columns ax,ay,az or none");
+  return c;
+}
+
+Waypoint parse_row(std::string_view text, const Columns& cols, const std::string& source, int line) {
+  const auto f = split_commas(text);
+  if (f.size() != cols.count)
+    fail(source, line, fmt::format("{} fields; the header has {}", f.size(), cols.count));
+  const auto number = [&](std::size_t k, std::string_view name) {
+    const auto r = scene::parse_real(f[k]);
+    if (!r) fail(source, line, fmt::format("{} '{}' is not a number", name, f[k]));
+    if (!std::isfinite(*r)) fail(source, line, fmt::format("{} = {} is not a finite number", name, *r));
+    return *r;
+  };
+  Waypoint w{number(0, "t"), {number(1, "x"), number(2, "y"), number(3, "z")}};
+  if (cols.grasp >= 0) {
+    const std::string_view g = f[cols.grasp];
+    if (g != "0" && g != "1") fail(source, line, fmt::format("grasp '{}' must be 0 or 1 (the grasp button)", g));
+    w.grasp = g == "1";
+  }
+  if (cols.axis[0] >= 0) {
+    w.axis = {number(cols.axis[0], "ax"), number(cols.axis[1], "ay"), number(cols.axis[2], "az")};
+    if (!(norm(w.axis) > 0)) fail(source, line, "axis (0, 0, 0) must be a non-zero direction");
+  }
+  return w;
 }
 
 }  // namespace
@@ -48,18 +87,17 @@ std::vector<Waypoint> parse_path_csv(std::istream& in, const std::string& source
   std::string text;
   int line = 0;
   bool have_header = false;
+  Columns cols;
   std::vector<Waypoint> path;
   while (std::getline(in, text)) {
     ++line;
     if (skipped(text)) continue;
     if (!have_header) {
-      const auto f = split_commas(text);
-      if (f != std::vector<std::string_view>{"t", "x", "y", "z"})
-        fail(source, line, fmt::format("header is '{}'; expected 't,x,y,z' (s, m)", scene::trim(text)));
+      cols = parse_header(text, source, line);
       have_header = true;
       continue;
     }
-    const Waypoint w = parse_row(text, source, line);
+    const Waypoint w = parse_row(text, cols, source, line);
     if (!path.empty() && !(w.t > path.back().t))
       fail(source, line,
            fmt::format("t = {} s is not after the previous waypoint's t = {} s; times must increase", w.t,
@@ -80,8 +118,18 @@ std::vector<Waypoint> read_path_csv(const std::string& path) {
 void write_path_csv(const std::string& path, std::span<const Waypoint> waypoints) {
   std::ofstream out(path);
   if (!out) throw PathCsvError(path + ": cannot open the file for writing");
-  out << "t,x,y,z\n";
-  for (const Waypoint& w : waypoints) out << fmt::format("{},{},{},{}\n", w.t, w.p.x, w.p.y, w.p.z);
+  bool grasp = false, axis = false;
+  for (const Waypoint& w : waypoints) {
+    grasp = grasp || w.grasp;
+    axis = axis || norm(w.axis) > 0;
+  }
+  out << "t,x,y,z" << (grasp ? ",grasp" : "") << (axis ? ",ax,ay,az" : "") << "\n";
+  for (const Waypoint& w : waypoints) {
+    out << fmt::format("{},{},{},{}", w.t, w.p.x, w.p.y, w.p.z);
+    if (grasp) out << (w.grasp ? ",1" : ",0");
+    if (axis) out << fmt::format(",{},{},{}", w.axis.x, w.axis.y, w.axis.z);
+    out << "\n";
+  }
   out.flush();
   if (!out) throw PathCsvError(path + ": write failed");
 }

@@ -316,17 +316,35 @@ Constraint Reader::read_fixed(pugi::xml_node n) const {
 }
 
 scene::Tool Reader::read_tool(pugi::xml_node n) const {
-  check_attributes(n, {"name", "radius", "device", "path"});
+  check_attributes(n, {"name", "radius", "shaft-length", "direction", "device", "path"});
   check_children(n, {"waypoint"});
   scene::Tool t;
   t.line = line(n);
   if (n.attribute("name")) t.name = n.attribute("name").value();
   t.radius = real_or(n, "radius", t.radius);
+  t.shaft = real_or(n, "shaft-length", t.shaft);
+  if (n.attribute("direction")) {
+    double d[3];
+    triple(n, "direction", d);
+    t.direction = {d[0], d[1], d[2]};
+  }
   if (n.attribute("device")) t.device = n.attribute("device").value();
   for (pugi::xml_node w : n.children("waypoint")) {
-    check_attributes(w, {"t", "x", "y", "z"});
+    check_attributes(w, {"t", "x", "y", "z", "grasp", "axis"});
     check_no_text(w);
-    t.path.push_back({real(w, "t"), {real(w, "x"), real(w, "y"), real(w, "z")}});
+    Waypoint wp{real(w, "t"), {real(w, "x"), real(w, "y"), real(w, "z")}};
+    if (const pugi::xml_attribute g = w.attribute("grasp")) {
+      const std::string b = g.value();
+      if (b != "true" && b != "false" && b != "1" && b != "0")
+        fail(w, fmt::format("waypoint grasp = '{}' must be true or false (the grasp button)", g.value()));
+      wp.grasp = b == "true" || b == "1";
+    }
+    if (w.attribute("axis")) {
+      double a[3];
+      triple(w, "axis", a);
+      wp.axis = {a[0], a[1], a[2]};
+    }
+    t.path.push_back(wp);
   }
   if (n.attribute("path")) {
     if (!t.path.empty()) fail(n, "give either path=\"file.csv\" or <waypoint> children, not both");
@@ -434,6 +452,10 @@ std::string triple_text(const double v[3]) {
   return fmt::format("{} {} {}", v[0], v[1], v[2]);
 }
 
+std::string triple_text(const Vec3<double>& v) {
+  return fmt::format("{} {} {}", v.x, v.y, v.z);
+}
+
 std::string id_list(const std::vector<index_t>& ids) {
   return fmt::format("{}", fmt::join(ids, " "));
 }
@@ -488,6 +510,8 @@ void write_tool(pugi::xml_node root, const scene::Tool& t) {
   pugi::xml_node n = root.append_child("tool");
   set(n, "name", t.name);
   set(n, "radius", num(t.radius));
+  if (t.shaft != 0) set(n, "shaft-length", num(t.shaft));
+  set(n, "direction", triple_text(t.direction));
   set(n, "device", t.device);
   if (!t.path_file.empty()) {
     set(n, "path", t.path_file);
@@ -499,6 +523,8 @@ void write_tool(pugi::xml_node root, const scene::Tool& t) {
     set(p, "x", num(w.p.x));
     set(p, "y", num(w.p.y));
     set(p, "z", num(w.p.z));
+    if (w.grasp) set(p, "grasp", "true");
+    if (norm(w.axis) > 0) set(p, "axis", triple_text(w.axis));
   }
 }
 

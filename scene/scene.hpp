@@ -48,12 +48,15 @@ struct Constraint {
   int line = 0;                     ///< source line, for messages (0 = unknown)
 };
 
-/// A rigid probe and the device that drives it.
+/// A rigid tool -- a capsule (core/tool.hpp) -- and the device that drives it.
 struct Tool {
   std::string name = "probe";
-  double radius = 1e-3;             ///< tip radius (m), for display
+  double radius = 2e-3;             ///< tip and shaft radius (m): the loaded patch, physical
+  double shaft = 0;                 ///< shaft length (m) from the tip along the direction; 0 = a sphere
+  Vec3<double> direction = {0, 0, 1};  ///< shaft axis, tip -> handle, used when the device has no orientation
   std::string device = "scripted";  ///< "scripted" | "mouse" | "phantom"
-  std::string path_file;            ///< CSV t,x,y,z (io/path_csv) relative to the scene file; empty = inline
+  std::string path_file;            ///< CSV t,x,y,z[,grasp][,ax,ay,az] (io/path_csv) relative to the scene file;
+                                    ///< empty = inline
   std::vector<Waypoint> path;       ///< scripted path (inline, or loaded from path_file by read_scene)
   int line = 0;                     ///< source line, for messages (0 = unknown)
 };

@@ -240,6 +240,7 @@ void check_path(const Scene& s, const Tool& t, const std::string& what) {
     const std::string wp = fmt::format("{}: waypoint {}", what, k);
     check_finite(s, t.line, wp, "t", w.t);
     for (int c = 0; c < 3; ++c) check_finite(s, t.line, wp, std::string(1, "xyz"[c]), w.p[c]);
+    for (int c = 0; c < 3; ++c) check_finite(s, t.line, wp, fmt::format("axis {}", "xyz"[c]), w.axis[c]);
     if (k > 0 && !(w.t > t.path[k - 1].t))
       fail(s, t.line,
            fmt::format("{} has t = {} s, not after waypoint {} (t = {} s); waypoint times must increase", wp, w.t,
@@ -250,7 +251,29 @@ void check_path(const Scene& s, const Tool& t, const std::string& what) {
 void check_tool(const Scene& s, const Tool& t) {
   const std::string what = fmt::format("tool '{}'", t.name);
   check_finite(s, t.line, what, "radius", t.radius);
-  if (!(t.radius > 0)) fail(s, t.line, fmt::format("{}: radius = {} m must be > 0", what, t.radius));
+  if (!(t.radius > 0))
+    fail(s, t.line, fmt::format("{}: radius = {} m must be > 0 (the radius is the loaded patch)", what, t.radius));
+  check_finite(s, t.line, what, "shaft-length", t.shaft);
+  if (t.shaft < 0) fail(s, t.line, fmt::format("{}: shaft-length = {} m must be >= 0 (0 = a sphere)", what, t.shaft));
+  for (int c = 0; c < 3; ++c) check_finite(s, t.line, what, fmt::format("direction {}", "xyz"[c]), t.direction[c]);
+  if (!(norm(t.direction) > 0))
+    fail(s, t.line, fmt::format("{}: direction (0, 0, 0) must be a non-zero vector (the shaft axis, tip to handle)", what));
+  if (s.nodes.size() >= 3) {  // a tool wider than the body cannot touch it as a tool
+    double ext = 0;
+    for (int c = 0; c < 3; ++c) {
+      double lo = INFINITY, hi = -INFINITY;
+      for (std::size_t i = c; i < s.nodes.size(); i += 3) {
+        lo = std::min(lo, s.nodes[i]);
+        hi = std::max(hi, s.nodes[i]);
+      }
+      ext = std::max(ext, hi - lo);
+    }
+    if (2 * t.radius > ext)
+      fail(s, t.line,
+           fmt::format("{}: radius = {} m is larger than the body (its largest extent is {:.4g} m); check the unit "
+                       "of the radius and of the mesh",
+                       what, t.radius, ext));
+  }
   if (t.device != "scripted" && t.device != "mouse" && t.device != "phantom")
     fail(s, t.line, fmt::format("{}: unknown device '{}'; expected scripted, mouse or phantom", what, t.device));
   if (t.device == "scripted" && t.path.empty())
@@ -326,7 +349,10 @@ TissueModel<double> load_model(const Scene& scene) {
 
 SchedulerSettings scheduler_settings(const Scene& scene) {
   check_solver(scene);
+  for (const Tool& t : scene.tools) check_tool(scene, t);
   SchedulerSettings st;
+  st.tools.clear();
+  for (const Tool& t : scene.tools) st.tools.push_back({{t.name, t.radius, t.shaft}, t.direction});
   st.depth = scene.solver.depth;
   st.tick = scene.solver.tick;
   st.residual_tol = scene.solver.residual_tol;

@@ -12,8 +12,10 @@
 //                (within or across sets); every element in a set;
 //   constraints: node ids in range; numbers finite; box min <= max; plane
 //                normal non-zero; every constraint fixes at least one node;
-//   tools:       radius finite and > 0; device scripted | mouse | phantom; a
-//                scripted tool has a path; waypoints finite with increasing t;
+//   tools:       radius finite, > 0 and at most half the body's largest
+//                extent; shaft-length >= 0; direction non-zero; device
+//                scripted | mouse | phantom; a scripted tool has a path;
+//                waypoints (tip and axis) finite with increasing t;
 //   solver:      backend cpu | cuda; numbers finite; dt >= 0 (0 = auto);
 //                0 < dt-safety < 1; damping >= 0 or -1 (auto); depth >= -2
 //                (-1 = all, -2 = auto); tick > 0; residual-tol > 0; kinetic-tol > 0.
@@ -58,7 +60,8 @@ ModelInput to_model_input(const Scene& scene);
 TissueModel<double> load_model(const Scene& scene);
 
 /// The Scheduler's settings from the validated solver section (depth, tick,
-/// tolerances). Throws SceneError for a broken solver rule.
+/// tolerances) and the tools (shape and direction, scene order). Throws
+/// SceneError for a broken solver or tool rule.
 SchedulerSettings scheduler_settings(const Scene& scene);
 
 }  // namespace tissue::scene

@@ -20,9 +20,14 @@ void MouseController::press(MouseButton b, double x, double y) {
     drag_tip_ = device_.target();
     drag_anchor_ = camera_.unproject_on_plane(x, y, drag_tip_);
   }
+  if (b == MouseButton::Right) device_.set_grasp(true);
 }
 
-void MouseController::release(MouseButton b) { dragging_[int(b)] = false; }
+void MouseController::release(MouseButton b) {
+  dragging_[int(b)] = false;
+  if (b == MouseButton::Left) dragging_[int(MouseButton::Orbit)] = false;  // shift may be up by now
+  if (b == MouseButton::Right) device_.set_grasp(false);
+}
 
 void MouseController::move(double x, double y) {
   const double dx = x - last_x_, dy = y - last_y_;
@@ -30,7 +35,7 @@ void MouseController::move(double x, double y) {
   last_y_ = y;
   if (dragging_[int(MouseButton::Left)])
     device_.set_target(drag_tip_ + (camera_.unproject_on_plane(x, y, drag_tip_) - drag_anchor_));
-  if (dragging_[int(MouseButton::Right)]) camera_.orbit(-0.006 * dx, -0.006 * dy);
+  if (dragging_[int(MouseButton::Orbit)]) camera_.orbit(-0.006 * dx, -0.006 * dy);
   if (dragging_[int(MouseButton::Middle)]) camera_.pan(dx, dy);
 }
 
@@ -71,8 +76,11 @@ std::vector<MouseEvent> parse_mouse_events(const std::string& text) {
     } else if (k == "orbit") {
       e.kind = MouseEvent::Kind::Orbit;
       if (std::sscanf(rest, "%lf , %lf %n", &e.a, &e.b, &tail) != 2) throw bad("expected 'orbit <dx>,<dy>' in pixels");
+    } else if (k == "grasp" || k == "release") {
+      e.kind = k == "grasp" ? MouseEvent::Kind::Grasp : MouseEvent::Kind::Release;
+      std::sscanf(rest, " %n", &tail);
     } else {
-      throw bad("the kind is none of wheel, drag, orbit");
+      throw bad("the kind is none of wheel, drag, orbit, grasp, release");
     }
     if (rest[tail] != '\0') throw bad("unexpected text after the event");
     if (e.tick < 0) throw bad("the tick must be >= 0");
@@ -94,8 +102,14 @@ void apply(MouseController& c, const MouseEvent& e) {
       c.release(MouseButton::Left);
       break;
     case MouseEvent::Kind::Orbit:
-      c.press(MouseButton::Right, 0, 0);
+      c.press(MouseButton::Orbit, 0, 0);
       c.move(e.a, e.b);
+      c.release(MouseButton::Orbit);
+      break;
+    case MouseEvent::Kind::Grasp:
+      c.press(MouseButton::Right, 0, 0);
+      break;
+    case MouseEvent::Kind::Release:
       c.release(MouseButton::Right);
       break;
   }

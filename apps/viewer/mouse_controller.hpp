@@ -6,7 +6,9 @@
 //   wheel         pushes the tip along the viewing direction (the eye's ray
 //                 through the tip, so the tool stays under the cursor; away
 //                 from the eye for wheel-up), one `wheel_step` per notch;
-//   right drag    orbits the camera about its target;
+//   right button  the grasp button (held: the nodes in contact when it went
+//                 down stick to the tool; released: they let go);
+//   shift + left drag  orbits the camera about its target (MouseButton::Orbit);
 //   middle drag   pans the camera;
 //   shift + wheel zooms.
 #pragma once
@@ -19,7 +21,7 @@
 
 namespace tissue::viewer {
 
-enum class MouseButton { Left, Right, Middle };
+enum class MouseButton { Left, Right, Middle, Orbit };
 
 class MouseController {
  public:
@@ -35,7 +37,7 @@ class MouseController {
   Camera& camera_;
   MouseDevice& device_;
   double wheel_step_;
-  bool dragging_[3] = {false, false, false};
+  bool dragging_[4] = {false, false, false, false};
   double last_x_ = 0, last_y_ = 0;
   Vec3<double> drag_tip_ = {}, drag_anchor_ = {};
 };
@@ -43,12 +45,13 @@ class MouseController {
 /// One scripted mouse event of a headless run, applied before tick `tick`.
 struct MouseEvent {
   long tick = 0;
-  enum class Kind { Wheel, Drag, Orbit } kind = Kind::Wheel;
+  enum class Kind { Wheel, Drag, Orbit, Grasp, Release } kind = Kind::Wheel;
   double a = 0, b = 0, c = 0, d = 0;  ///< wheel: notches; drag: x0 y0 x1 y1 (pixels); orbit: dx dy (pixels)
 };
 
-/// Parses "<tick> wheel <notches>; <tick> drag <x0>,<y0> <x1>,<y1>; <tick> orbit <dx>,<dy>"
-/// (events in tick order). Throws std::invalid_argument quoting the bad event.
+/// Parses "<tick> wheel <notches>; <tick> drag <x0>,<y0> <x1>,<y1>; <tick> orbit <dx>,<dy>;
+/// <tick> grasp; <tick> release" (events in tick order; grasp and release press and
+/// release the right button). Throws std::invalid_argument quoting the bad event.
 std::vector<MouseEvent> parse_mouse_events(const std::string& text);
 
 /// Plays one event through the controller, as a user would with the mouse.

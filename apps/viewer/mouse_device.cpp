@@ -23,7 +23,17 @@ Vec3<double> MouseDevice::target() const {
   return target_;
 }
 
-Vec3<double> MouseDevice::read_position(double t) {
+void MouseDevice::set_grasp(bool down) {
+  std::lock_guard lk(mutex_);
+  grasp_ = down;
+}
+
+bool MouseDevice::grasp() const {
+  std::lock_guard lk(mutex_);
+  return grasp_;
+}
+
+ToolInput MouseDevice::read(double t) {
   std::lock_guard lk(mutex_);
   const double dt = started_ ? std::max(0.0, t - t_last_) : 0.0;
   started_ = true;
@@ -31,7 +41,7 @@ Vec3<double> MouseDevice::read_position(double t) {
   const Vec3<double> d = target_ - tip_;
   const double dist = norm(d), step = max_speed_ * dt;
   tip_ = dist <= step ? target_ : tip_ + (step / dist) * d;
-  return tip_;
+  return {tip_, {0, 0, 0}, grasp_};
 }
 
 void MouseDevice::send_force(const Vec3<double>& force) {

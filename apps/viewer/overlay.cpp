@@ -79,10 +79,16 @@ OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, con
     ImGui::TextColored(ImVec4(1, 0.35f, 0.3f, 1), "%s: %ld of the last %ld ticks late",
                        st.work_p99 > st.period ? "SOLVER CANNOT KEEP UP" : "HAPTIC DEADLINES MISSED", st.window_late,
                        st.window_ticks);
-  row("tool", fmt::format("{}  {}", mm(s.tool),
-                          s.contact_tri >= 0 ? fmt::format("contact, triangle {}", s.contact_tri) : "no contact"));
-  row("force", fmt::format("{:.4f} N to the device (tissue {:.4f} N){}", norm(s.rendered_force), norm(s.tissue_force),
-                           s.clamped ? "  CLAMPED" : ""));
+  for (int t = 0; t < s.n_tools; ++t) {
+    const ToolView& v = s.tools[t];
+    const std::string name = s.n_tools > 1 ? fmt::format("tool {}", t + 1) : std::string("tool");
+    row(name.c_str(), fmt::format("{}  {}{}", mm(v.tool),
+                                  v.contact_nodes > 0 ? fmt::format("{} nodes in contact", v.contact_nodes) : "no contact",
+                                  v.grasp ? fmt::format(", grasping {}", v.grasped) : ""));
+    row(s.n_tools > 1 ? fmt::format("force {}", t + 1).c_str() : "force",
+        fmt::format("{:.4f} N to the device (tissue {:.4f} N){}", norm(v.rendered_force), norm(v.tissue_force),
+                    v.clamped ? "  CLAMPED" : ""));
+  }
   row("region", s.region.whole() ? fmt::format("whole mesh, {} nodes, {} elements", s.region.nodes(), s.region.n_elems)
                                  : fmt::format("{} inner + {} halo nodes, {} elements ({}depth {})", s.region.n_inner,
                                                s.region.n_halo, s.region.n_elems,

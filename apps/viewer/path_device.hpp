@@ -1,7 +1,6 @@
 // A scripted tool path for long sessions: played once (then held at its
-// last point) or over and over (press, release, press, ...). Unlike core's
-// ScriptedDevice it keeps no record of the forces it is sent, so a session
-// of any length runs in constant memory.
+// last point) or over and over (press, release, press, ...). It drops the
+// forces it is sent, so a session of any length runs in constant memory.
 #pragma once
 
 #include <cmath>
@@ -16,10 +15,8 @@ class PathDevice : public Device {
   /// With `repeat`, the path should end where it starts (press_path does)
   /// for a seamless loop.
   PathDevice(std::vector<Waypoint> path, bool repeat) : inner_(std::move(path)), repeat_(repeat) {}
-  /// The path's position at t (or at t modulo its duration when repeating) (m).
-  Vec3<double> read_position(double t) override {
-    return inner_.read_position(repeat_ ? std::fmod(t, inner_.duration()) : t);
-  }
+  /// The path's pose and grasp button at t (or at t modulo its duration when repeating).
+  ToolInput read(double t) override { return inner_.read(repeat_ ? std::fmod(t, inner_.duration()) : t); }
   /// Forces are dropped: a script renders nothing.
   void send_force(const Vec3<double>&) override {}
   bool finished(double t) const override { return !repeat_ && inner_.finished(t); }

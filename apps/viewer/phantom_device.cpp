@@ -55,10 +55,12 @@ class PhantomDevice : public Device {
 
   double max_force() const { return max_force_; }
 
-  Vec3<double> read_position(double) override {
+  /// The stylus tip, its axis (the gimbal's z axis, tip to handle) and the
+  /// first stylus button as the grasp button.
+  ToolInput read(double) override {
     std::lock_guard lk(mutex_);
     if (!error_.empty()) throw std::runtime_error(error_);
-    return map_.origin + (map_.scale * 1e-3) * position_mm_;
+    return {map_.origin + (map_.scale * 1e-3) * position_mm_, axis_, grasp_};
   }
 
   void send_force(const Vec3<double>& force) override {
@@ -70,12 +72,17 @@ class PhantomDevice : public Device {
   /// The servo thread's callback (1 kHz): read the stylus, write the force.
   static HDCallbackCode HDCALLBACK servo(void* self_ptr) {
     auto* self = static_cast<PhantomDevice*>(self_ptr);
-    HDdouble p[3], f[3];
+    HDdouble p[3], f[3], m[16];
+    HDint buttons = 0;
     hdBeginFrame(self->hhd_);
     hdGetDoublev(HD_CURRENT_POSITION, p);
+    hdGetDoublev(HD_CURRENT_TRANSFORM, m);  // column-major; column 2 is the stylus axis
+    hdGetIntegerv(HD_CURRENT_BUTTONS, &buttons);
     {
       std::lock_guard lk(self->mutex_);
       self->position_mm_ = {p[0], p[1], p[2]};
+      self->axis_ = unit_or(Vec3<double>{m[8], m[9], m[10]}, Vec3<double>{0, 0, 0});
+      self->grasp_ = (buttons & HD_DEVICE_BUTTON_1) != 0;
       f[0] = self->force_.x;
       f[1] = self->force_.y;
       f[2] = self->force_.z;
@@ -97,6 +104,8 @@ class PhantomDevice : public Device {
   HDdouble max_force_ = 0;
   std::mutex mutex_;
   Vec3<double> position_mm_ = {0, 0, 0};
+  Vec3<double> axis_ = {0, 0, 0};
+  bool grasp_ = false;
   Vec3<double> force_ = {0, 0, 0};
   std::string error_;  ///< set by the servo callback when the device fails
 };

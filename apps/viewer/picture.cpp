@@ -32,14 +32,14 @@ std::string escaped(const std::string& s) {
 
 std::string picture_json(const PictureFacts& f) {
   const HapticSnapshot& s = f.snap;
-  const bool contact = s.contact_tri >= 0;
+  const bool contact = s.contact_nodes > 0;
   auto vec = [](Vec3<double> v) { return fmt::format("[{:.9g}, {:.9g}, {:.9g}]", v.x, v.y, v.z); };
   return fmt::format(
       "{{\n"
       "  \"width\": {}, \"height\": {},\n"
       "  \"backend\": \"{}\", \"precision\": \"{}\", \"positions\": \"{}\",\n"
       "  \"ticks\": {}, \"time\": {:.6f},\n"
-      "  \"contact\": {}, \"contact_triangle\": {},\n"
+      "  \"contact\": {}, \"contact_nodes\": {}, \"tool_radius\": {:.9g},\n"
       "  \"tool\": {}, \"device\": {},\n"
       "  \"tool_px\": [{:.2f}, {:.2f}], \"device_px\": [{:.2f}, {:.2f}],\n"
       "  \"contact_px\": {},\n"
@@ -50,7 +50,7 @@ std::string picture_json(const PictureFacts& f) {
       "  \"region_nodes\": {}, \"region_elements\": {}, \"max_displacement\": {:.9g}\n"
       "}}\n",
       f.width, f.height, escaped(f.backend), escaped(f.precision), escaped(f.positions), s.tick, s.time, contact ? "true" : "false",
-      s.contact_tri, vec(s.tool), vec(s.device), f.tool_px[0], f.tool_px[1], f.device_px[0], f.device_px[1],
+      s.contact_nodes, s.tools[0].radius, vec(s.tool), vec(s.device), f.tool_px[0], f.tool_px[1], f.device_px[0], f.device_px[1],
       contact ? fmt::format("[{:.2f}, {:.2f}]", f.tool_px[0], f.tool_px[1]) : "null", f.organ_px[0], f.organ_px[1],
       f.organ_px[2], f.organ_px[3],
       f.overlay ? fmt::format("[{:.1f}, {:.1f}, {:.1f}, {:.1f}]", f.overlay_px[0], f.overlay_px[1], f.overlay_px[2],

@@ -54,6 +54,7 @@ constexpr float kOrgan[3] = {0.66f, 0.25f, 0.21f};
 constexpr float kTool[3] = {0.76f, 0.78f, 0.82f};
 constexpr float kDevice[3] = {0.36f, 0.37f, 0.42f};
 constexpr float kContact[3] = {0.25f, 0.90f, 0.35f};
+constexpr float kGrasp[3] = {0.98f, 0.62f, 0.20f};
 constexpr float kArrow[3] = {0.20f, 0.78f, 0.98f};
 
 unsigned compile(GLenum type, const char* src) {
@@ -253,23 +254,32 @@ void Renderer::draw(const Camera& camera, const Glyphs& g) {
     glBindVertexArray(0);
     return;
   }
-  // the tool: a ball whose lowest point is the tip, on a shaft
-  const double r = g.tool_radius;
-  const Vec3<double> s = g.shaft_dir;
-  draw_glyph(sphere_, view_proj, view, glyph_matrix(g.tool + r * s, s, r, r), kTool);
-  draw_glyph(cylinder_, view_proj, view, glyph_matrix(g.tool + (1.5 * r) * s, s, 0.45 * r, 16 * r), kTool);
-  if (norm(g.device - g.tool) > 0.25 * r)  // the hand, where the coupling pulls the tool
-    draw_glyph(sphere_, view_proj, view, glyph_matrix(g.device + r * s, s, 0.6 * r, 0.6 * r), kDevice);
-  if (g.contact) draw_glyph(sphere_, view_proj, view, glyph_matrix(g.tool, s, 0.55 * r, 0.55 * r), kContact);
-  // the force on the tool, from the tip
-  const double f = norm(g.force), length = f * g.metres_per_newton;
-  if (length > 0.5 * r) {
-    const Vec3<double> d = (1.0 / f) * g.force;
-    const double head = std::min(0.35 * length, 5 * r);
-    draw_glyph(cylinder_, view_proj, view, glyph_matrix(g.tool, d, 0.3 * r, length - head), kArrow);
-    draw_glyph(cone_, view_proj, view, glyph_matrix(g.tool + (length - head) * d, d, 0.9 * r, head), kArrow);
-  }
+  for (const ToolGlyph& t : g.tools) draw_tool(t, g.metres_per_newton, view_proj, view);
   glBindVertexArray(0);
+}
+
+void Renderer::draw_tool(const ToolGlyph& t, double metres_per_newton, const Mat4& view_proj, const Mat4& view) {
+  // the capsule at its real size, coloured by its contact state
+  const double r = t.radius;
+  const Vec3<double> a = t.axis;
+  const float* body = t.grasp && t.contact ? kGrasp : t.contact ? kContact : kTool;
+  draw_glyph(sphere_, view_proj, view, glyph_matrix(t.tool, a, r, r), body);
+  if (t.shaft > 0) {
+    draw_glyph(cylinder_, view_proj, view, glyph_matrix(t.tool, a, r, t.shaft), body);
+    draw_glyph(sphere_, view_proj, view, glyph_matrix(t.tool + t.shaft * a, a, r, r), body);
+  }
+  // a thin handle beyond the capsule shows the axis (it does not touch the tissue)
+  draw_glyph(cylinder_, view_proj, view, glyph_matrix(t.tool + (t.shaft + r) * a, a, 0.35 * r, 12 * r), kTool);
+  if (norm(t.device - t.tool) > 0.25 * r)  // the hand, where the coupling pulls the tool
+    draw_glyph(sphere_, view_proj, view, glyph_matrix(t.device, a, 0.6 * r, 0.6 * r), kDevice);
+  // the force on the tool, from the tip
+  const double f = norm(t.force), length = f * metres_per_newton;
+  if (length > 0.5 * r) {
+    const Vec3<double> d = (1.0 / f) * t.force;
+    const double head = std::min(0.35 * length, 5 * r);
+    draw_glyph(cylinder_, view_proj, view, glyph_matrix(t.tool, d, 0.3 * r, length - head), kArrow);
+    draw_glyph(cone_, view_proj, view, glyph_matrix(t.tool + (length - head) * d, d, 0.9 * r, head), kArrow);
+  }
 }
 
 OffscreenTarget::OffscreenTarget(int width, int height) : w_(width), h_(height) {

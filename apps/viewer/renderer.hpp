@@ -20,14 +20,21 @@
 namespace tissue::viewer {
 
 /// What to draw besides the tissue (positions in m, forces in N).
+/// One tool as drawn: its capsule at its real size (the tip sphere of
+/// radius r and the shaft of length l along the axis), a thin handle beyond
+/// it, the hand where the coupling pulls, and the force arrow.
+struct ToolGlyph {
+  Vec3<double> tool = {};          ///< proxy: the tip centre the tissue feels (m)
+  Vec3<double> device = {};        ///< the hand (device) position (m)
+  Vec3<double> axis = {0, 0, 1};   ///< unit shaft axis, tip -> handle
+  double radius = 1e-3, shaft = 0; ///< m
+  bool contact = false, grasp = false;
+  Vec3<double> force = {};         ///< force on the tool (N), drawn from the tip
+};
+
 struct Glyphs {
   bool show_tool = true;
-  Vec3<double> tool = {};          ///< proxy: the tool tip the tissue feels
-  Vec3<double> device = {};        ///< the hand (device) position
-  double tool_radius = 1e-3;       ///< m
-  Vec3<double> shaft_dir = {0, 0, 1};  ///< unit, from the tip back along the tool's shaft
-  bool contact = false;
-  Vec3<double> force = {};         ///< force on the tool (N), drawn from the tip
+  std::vector<ToolGlyph> tools;
   double metres_per_newton = 0.05; ///< arrow length per newton
 };
 
@@ -61,6 +68,7 @@ class Renderer {
   };
   Mesh make_mesh(const std::vector<float>& xyz, const std::vector<unsigned>& idx);
   void draw_glyph(const Mesh& mesh, const Mat4& view_proj, const Mat4& view, const Mat4& model, const float rgb[3]);
+  void draw_tool(const ToolGlyph& t, double metres_per_newton, const Mat4& view_proj, const Mat4& view);
 
   index_t n_nodes_ = 0;
   int n_indices_ = 0;

@@ -50,11 +50,18 @@ Hidden parse_hide(const std::string& list) {
   return h;
 }
 
-/// The device the tool follows, and the coupling's force limit for it.
+/// The device the first tool follows, the coupling's force limit for it,
+/// and the scripted devices of the scene's further tools.
 struct DeviceChoice {
   std::unique_ptr<Device> device;
   MouseDevice* mouse = nullptr;  ///< set when the device is the mouse
   double max_force = CouplingParams{}.max_force;
+  std::vector<std::unique_ptr<Device>> others;  ///< tools 2, 3, ...: their scene paths
+  std::vector<Device*> all() const {
+    std::vector<Device*> d{device.get()};
+    for (const auto& o : others) d.push_back(o.get());
+    return d;
+  }
 };
 
 DeviceChoice make_device(const std::string& kind, const Session& s, double mouse_speed, bool repeat) {
@@ -71,6 +78,14 @@ DeviceChoice make_device(const std::string& kind, const Session& s, double mouse
     d.device = make_phantom_device(WorkspaceMap{s.tool_start, 1.0}, &d.max_force);
   } else {
     throw std::invalid_argument(fmt::format("--device '{}' is none of scripted, mouse, phantom", kind));
+  }
+  for (std::size_t t = 1; t < s.scene.tools.size(); ++t) {
+    const scene::Tool& tool = s.scene.tools[t];
+    if (tool.path.empty())
+      throw std::runtime_error(fmt::format("{}: tool '{}' has no path; the viewer drives the first tool by the {} "
+                                           "and every further tool by its scripted path",
+                                           s.scene.source, tool.name, kind));
+    d.others.push_back(std::make_unique<PathDevice>(tool.path, repeat));
   }
   return d;
 }
@@ -117,15 +132,13 @@ void update_roles(HapticLoop& loop, Renderer& r, const HapticSnapshot& snap, boo
   r.upload_roles(role);
 }
 
-Glyphs glyphs_of(const HapticSnapshot& snap, const Session& s, double arrow_scale, bool show_tool) {
+Glyphs glyphs_of(const HapticSnapshot& snap, double arrow_scale, bool show_tool) {
   Glyphs g;
   g.show_tool = show_tool;
-  g.tool = snap.tool;
-  g.device = snap.device;
-  g.tool_radius = s.tool_radius;
-  g.shaft_dir = -1.0 * s.press_dir;
-  g.contact = snap.contact_tri >= 0;
-  g.force = snap.rendered_force;
+  for (int t = 0; t < snap.n_tools; ++t) {
+    const ToolView& v = snap.tools[t];
+    g.tools.push_back({v.tool, v.device, v.axis, v.radius, v.shaft, v.contact_nodes > 0, v.grasp, v.rendered_force});
+  }
   g.metres_per_newton = arrow_scale;
   return g;
 }
@@ -164,7 +177,7 @@ std::unique_ptr<Viewer> make_viewer(const ViewOptions& o, scene::Scene scene) {
   HapticLoop::Options opt;
   opt.coupling.max_force = v->device.max_force;
   opt.realtime = o.realtime;
-  v->loop = std::make_unique<HapticLoop>(*v->device.device, v->session.factory(), v->session.params, opt);
+  v->loop = std::make_unique<HapticLoop>(v->device.all(), v->session.factory(), v->session.params, opt);
   // A software renderer (Mesa's llvmpipe, under Xvfb or without a GPU)
   // starts a render thread per core; with the cpu backend's TBB pool on
   // every core too, they take turns and haptic ticks come late. Leave it one
@@ -228,7 +241,7 @@ int run_picture(const ViewOptions& o, Viewer& v) {
   std::unique_ptr<Overlay> overlay = hide.overlay ? nullptr : std::make_unique<Overlay>(nullptr);
   const OverlayFacts facts = facts_of(loop, v.mesh, v.session, *v.ctx, *v.positions);
   for (int frame = 0; frame < (overlay ? 2 : 1); ++frame) {  // ImGui lays windows out on the first frame
-    v.renderer->draw(v.camera, glyphs_of(snap, v.session, v.arrow_scale, !hide.tool));
+    v.renderer->draw(v.camera, glyphs_of(snap, v.arrow_scale, !hide.tool));
     if (overlay) overlay->draw(facts, snap, loop.status(), o.width, o.height);
   }
   write_png(o.screenshot, o.width, o.height, target.read_rgb());
@@ -253,7 +266,7 @@ int run_picture(const ViewOptions& o, Viewer& v) {
   std::fputs(picture_json(pf).c_str(), f);
   std::fclose(f);
   fmt::print("wrote {} ({}x{}, {} ticks, {}, |F| = {:.4f} N, {}) and {}\n", o.screenshot, o.width, o.height,
-             snap.tick < 0 ? 0 : snap.tick, snap.contact_tri >= 0 ? "in contact" : "no contact",
+             snap.tick < 0 ? 0 : snap.tick, snap.contact_nodes > 0 ? fmt::format("{} nodes in contact", snap.contact_nodes) : "no contact",
              norm(snap.rendered_force), v.ctx->renderer(), json_path);
   return 0;
 }
@@ -292,8 +305,8 @@ void install_input(GLFWwindow* w, Input* in) {
     if (in->overlay && in->overlay->wants_mouse()) return;
     double x, y;
     cursor(win, &x, &y);
-    // shift + left drag orbits too, for touchpads without a right button
-    in->mouse->press((mods & GLFW_MOD_SHIFT) && b == MouseButton::Left ? MouseButton::Right : b, x, y);
+    // shift + left drag orbits the camera; the right button is the grasp button
+    in->mouse->press((mods & GLFW_MOD_SHIFT) && b == MouseButton::Left ? MouseButton::Orbit : b, x, y);
   });
   glfwSetCursorPosCallback(w, [](GLFWwindow* win, double, double) {
     auto* in = static_cast<Input*>(glfwGetWindowUserPointer(win));
@@ -363,7 +376,7 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
     if (offscreen) offscreen->bind();
     else glBindFramebuffer(GL_FRAMEBUFFER, 0);
     v.ctx->framebuffer_size(&v.camera.width, &v.camera.height);
-    v.renderer->draw(v.camera, glyphs_of(snap, v.session, v.arrow_scale, !hide.tool));
+    v.renderer->draw(v.camera, glyphs_of(snap, v.arrow_scale, !hide.tool));
     if (overlay) {
       const OverlayActions act = overlay->draw(facts, snap, loop.status(), v.camera.width, v.camera.height);
       if (act.apply) loop.request_params(*act.apply);
@@ -381,7 +394,7 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
   print_stats(last, *v.positions);
   fmt::print("final: tool ({:.1f}, {:.1f}, {:.1f}) mm, {}, |F| = {:.4f} N to the device, region {} nodes\n",
              1e3 * last.tool.x, 1e3 * last.tool.y, 1e3 * last.tool.z,
-             last.contact_tri >= 0 ? fmt::format("contact on triangle {}", last.contact_tri) : "no contact",
+             last.contact_nodes > 0 ? fmt::format("{} nodes in contact", last.contact_nodes) : "no contact",
              norm(last.rendered_force), last.region.nodes());
   if (!loop.status().empty()) fmt::print("status: {}\n", loop.status());
   return 0;

@@ -1,0 +1,259 @@
+#include "core/backend.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+namespace tissue {
+namespace {
+
+bool finite3(const Vec3<double>& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+
+std::string str(const Vec3<double>& v) { return fmt::format("({}, {}, {})", v.x, v.y, v.z); }
+
+/// The pose with a unit axis; throws naming the tool and the rule broken.
+ToolPose checked_pose(const ToolPose& p, const ToolShape& s, const char* which) {
+  if (!finite3(p.tip))
+    throw std::invalid_argument(fmt::format("move_tools: tool '{}': {} tip {} is not finite", s.name, which, str(p.tip)));
+  const double n = norm(p.axis);
+  if (!(n > 0) || !std::isfinite(n))
+    throw std::invalid_argument(fmt::format("move_tools: tool '{}': {} axis {} must be a non-zero finite direction",
+                                            s.name, which, str(p.axis)));
+  return {p.tip, (1.0 / n) * p.axis};
+}
+
+}  // namespace
+
+void Backend::require_upload(const char* what) const {
+  if (!uploaded_) throw std::logic_error(fmt::format("{} backend: {}() called before upload()", name(), what));
+}
+
+void Backend::upload(const TissueModel<double>& m) {
+  if (m.n_nodes <= 0 || m.n_elems <= 0)
+    throw std::invalid_argument(fmt::format("upload: the model has {} nodes and {} elements (needs at least one of each)",
+                                            m.n_nodes, m.n_elems));
+  if (m.X.size() != 3 * size_t(m.n_nodes) || m.elem_nodes.size() != 4 * size_t(m.n_elems) ||
+      m.node_elem_start.size() != size_t(m.n_nodes) + 1 || m.tris.size() != 3 * size_t(m.n_tris) ||
+      m.surf_nodes.size() != size_t(m.n_surf))
+    throw std::invalid_argument("upload: the model's arrays do not match its sizes (build it with build_model)");
+  if (!(m.dt > 0) || !std::isfinite(m.dt))
+    throw std::invalid_argument(fmt::format("upload: the model's time step {} s must be > 0", m.dt));
+  uploaded_ = false;
+  do_upload(m);
+  n_nodes_ = m.n_nodes;
+  n_elems_ = m.n_elems;
+  uploaded_ = true;
+  shapes_.clear();
+  motion_.clear();
+  grasp_pose_.clear();
+  grasping_.clear();
+}
+
+void Backend::set_displacements(std::span<const double> u) {
+  require_upload("set_displacements");
+  const index_t n = n_nodes_;
+  if (u.size() != 3 * std::size_t(n))
+    throw std::invalid_argument(
+        fmt::format("set_displacements: {} values for {} nodes (need 3 x n_nodes = {})", u.size(), n, 3 * size_t(n)));
+  for (std::size_t k = 0; k < u.size(); ++k)
+    if (!std::isfinite(u[k]))
+      throw std::invalid_argument(
+          fmt::format("set_displacements: node {}: displacement {} = {} is not finite", k % n, "xyz"[k / n], u[k]));
+  do_set_displacements(u);
+}
+
+RegionSizes Backend::build_region(std::span<const index_t> seeds, int depth) {
+  require_upload("build_region");
+  if (depth != kDepthAll && depth < 0)
+    throw std::invalid_argument(fmt::format("build_region: depth {} must be >= 0 or 'all'", depth));
+  if (depth != kDepthAll)
+    for (index_t a : seeds)
+      if (a < 0 || a >= n_nodes_)
+        throw std::out_of_range(fmt::format("build_region: seed node {} out of range (0..{})", a, n_nodes_ - 1));
+  return do_build_region(seeds, depth);
+}
+
+Region Backend::region() {
+  require_upload("region");
+  return do_region();
+}
+
+void Backend::set_driven(std::span<const index_t> nodes, std::span<const double> u) {
+  const std::vector<std::uint8_t> all(nodes.size(), kAllAxes);
+  set_driven_axes(nodes, u, all);
+}
+
+void Backend::set_driven_axes(std::span<const index_t> nodes, std::span<const double> u,
+                              std::span<const std::uint8_t> axes) {
+  require_upload("set_driven");
+  if (u.size() != 3 * nodes.size())
+    throw std::invalid_argument(
+        fmt::format("set_driven: {} displacement values for {} nodes (need 3 per node)", u.size(), nodes.size()));
+  if (axes.size() != nodes.size())
+    throw std::invalid_argument(
+        fmt::format("set_driven: {} axis masks for {} nodes (need one per node)", axes.size(), nodes.size()));
+  for (std::size_t k = 0; k < nodes.size(); ++k) {
+    const index_t a = nodes[k];
+    if (a < 0 || a >= n_nodes_)
+      throw std::invalid_argument(fmt::format("set_driven: node {} out of range (0..{})", a, n_nodes_ - 1));
+    if (axes[k] == 0 || axes[k] > kAllAxes)
+      throw std::invalid_argument(
+          fmt::format("set_driven: node {}: axis mask {} must be 1..7 (bit 0 = x, 1 = y, 2 = z)", a, int(axes[k])));
+    for (int c = 0; c < 3; ++c)
+      if (!std::isfinite(u[3 * k + c]))
+        throw std::invalid_argument(
+            fmt::format("set_driven: node {}: displacement {} = {} is not finite", a, "xyz"[c], u[3 * k + c]));
+  }
+  const std::vector<std::uint8_t> roles = do_roles(nodes);
+  for (std::size_t k = 0; k < nodes.size(); ++k)
+    if (roles[k] == kOutside)
+      throw std::invalid_argument(fmt::format(
+          "set_driven: node {} is outside the deformation region (build_region from it first)", nodes[k]));
+  // merge repeated nodes: the union of their masks, each component at its last target
+  std::vector<index_t> ids;
+  std::vector<std::uint8_t> masks;
+  std::vector<double> values;
+  for (std::size_t k = 0; k < nodes.size(); ++k) {
+    const auto it = std::find(ids.begin(), ids.end(), nodes[k]);
+    const std::size_t j = std::size_t(it - ids.begin());
+    if (it == ids.end()) {
+      ids.push_back(nodes[k]);
+      masks.push_back(0);
+      values.insert(values.end(), 3, 0.0);
+    }
+    masks[j] |= axes[k];
+    for (int c = 0; c < 3; ++c)
+      if (axes[k] >> c & 1) values[3 * j + c] = u[3 * k + c];
+  }
+  do_set_driven(ids, values, masks);
+}
+
+void Backend::clear_driven() {
+  require_upload("clear_driven");
+  do_clear_driven();
+}
+
+void Backend::set_tools(std::span<const ToolShape> tools, const ContactOptions& options) {
+  require_upload("set_tools");
+  if (tools.size() > std::size_t(kMaxTools))
+    throw std::invalid_argument(fmt::format("set_tools: {} tools; a scene holds at most {}", tools.size(), kMaxTools));
+  for (const ToolShape& t : tools) {
+    if (!(t.radius > 0) || !std::isfinite(t.radius))
+      throw std::invalid_argument(fmt::format("set_tools: tool '{}': radius {} m must be > 0", t.name, t.radius));
+    if (!(t.shaft >= 0) || !std::isfinite(t.shaft))
+      throw std::invalid_argument(fmt::format("set_tools: tool '{}': shaft length {} m must be >= 0", t.name, t.shaft));
+  }
+  if (!(options.max_travel > 0) || !std::isfinite(options.max_travel))
+    throw std::invalid_argument(
+        fmt::format("set_tools: contact check spacing {} radii must be > 0", options.max_travel));
+  do_reset_contacts();
+  shapes_.assign(tools.begin(), tools.end());
+  contact_options_ = options;
+  motion_.assign(tools.size(), ToolMotion{});
+  grasp_pose_.assign(tools.size(), ToolPose{});
+  grasping_.assign(tools.size(), 0);
+}
+
+void Backend::move_tools(std::span<const ToolMotion> motion) {
+  require_upload("move_tools");
+  if (motion.size() != shapes_.size())
+    throw std::invalid_argument(
+        fmt::format("move_tools: {} motions for {} tools (set_tools first; one motion per tool)", motion.size(),
+                    shapes_.size()));
+  std::vector<ToolMotion> next(motion.size());
+  for (std::size_t t = 0; t < motion.size(); ++t)
+    next[t] = {checked_pose(motion[t].from, shapes_[t], "start"), checked_pose(motion[t].to, shapes_[t], "end"),
+               motion[t].grasp};
+  for (std::size_t t = 0; t < motion.size(); ++t) {
+    if (next[t].grasp && !grasping_[t]) {
+      grasp_pose_[t] = next[t].from;
+      do_begin_grasp(static_cast<int>(t), next[t].from);
+    } else if (!next[t].grasp && grasping_[t]) {
+      do_end_grasp(static_cast<int>(t));
+    }
+    grasping_[t] = next[t].grasp;
+  }
+  motion_ = std::move(next);
+}
+
+ContactTools<double> Backend::contact_tools(int steps) const {
+  ContactTools<double> c{};
+  c.n_tools = static_cast<int>(shapes_.size());
+  c.steps = std::max(steps, 1);
+  c.face = contact_options_.face ? 1 : 0;
+  for (int t = 0; t < c.n_tools; ++t) {
+    const ToolMotion& m = motion_[t];
+    ToolStep<double>& s = c.tool[t];
+    s.tip0 = m.from.tip;
+    s.axis0 = m.from.axis;
+    s.tip1 = m.to.tip;
+    s.axis1 = m.to.axis;
+    s.radius = shapes_[t].radius;
+    s.shaft = shapes_[t].shaft;
+    s.substeps = contact_substeps(m.from, m.to, s.radius, s.shaft, c.steps, contact_options_.max_travel);
+    s.grasping = grasping_[t];
+    s.grasp_tip = grasp_pose_[t].tip;
+    s.grasp_axis = grasp_pose_[t].axis;
+  }
+  return c;
+}
+
+std::vector<index_t> Backend::contact_candidates() {
+  require_upload("contact_candidates");
+  if (shapes_.empty()) return {};
+  return do_contact_candidates(contact_tools(1));
+}
+
+std::vector<ContactNode> Backend::contacts() {
+  require_upload("contacts");
+  return do_contacts();
+}
+
+void Backend::element_pressure() {
+  require_upload("element_pressure");
+  do_element_pressure();
+}
+
+void Backend::nodal_pressure() {
+  require_upload("nodal_pressure");
+  do_nodal_pressure();
+}
+
+void Backend::element_forces() {
+  require_upload("element_forces");
+  do_element_forces();
+}
+
+void Backend::node_update() {
+  require_upload("node_update");
+  do_node_update();
+}
+
+void Backend::advance(int steps) {
+  require_upload("advance");
+  if (steps < 0) throw std::invalid_argument(fmt::format("advance: step count {} must be >= 0", steps));
+  if (steps == 0) return;
+  do_advance(steps, contact_tools(steps));
+  for (ToolMotion& m : motion_) m.from = m.to;
+}
+
+Reductions Backend::reduce() {
+  require_upload("reduce");
+  return do_reduce();
+}
+
+Fields Backend::download() {
+  require_upload("download");
+  return do_download();
+}
+
+void Backend::write_positions(float* dst) {
+  require_upload("write_positions");
+  if (dst == nullptr)
+    throw std::invalid_argument(fmt::format("write_positions: dst is null (need n_nodes x 3 floats of {} memory)",
+                                            positions_on_device() ? "device" : "host"));
+  do_write_positions(dst);
+}
+
+}  // namespace tissue

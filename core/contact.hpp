@@ -1,0 +1,366 @@
+// Tool contact (docs/contact.md), written once for every backend as
+// host/device functions: the cpu backend runs them in TBB loops over the
+// candidates its BVH finds, the cuda backend in kernels over the surface.
+//
+// The rule, per TLED step, after the step's free displacement update:
+//  1. every surface triangle near a tool is swept along the tool's motion
+//     during the step, in contact_substeps() checks per step (the tool moves
+//     at most r / 2 between two checks: no tunnelling); at each check
+//     (a) node contact: each corner inside the capsule moves to the nearest
+//         point of the capsule's surface (radially from the axis);
+//     (b) face contact: if the triangle's deepest point -- its point
+//         closest to the axis -- is still inside (the tool is smaller than
+//         the triangle, or pokes between its corners), the triangle moves so
+//         that this point reaches the capsule's surface: the correction
+//         delta n is spread to the corners with barycentric weights,
+//         dx_k = w_k delta n / sum_j w_j^2 (the smallest corner motion that
+//         moves the point by delta n); corners that cannot move (fixed,
+//         outside the region, grasped) take no share;
+//  2. each surface node combines its triangles' proposals dx_i, in
+//     ascending triangle order, into one correction that satisfies each of
+//     them along its own direction: dx = dx_1, then for every further
+//     proposal the shortfall |dx_i| - dx . dx_i / |dx_i|, if positive, is
+//     added along dx_i (a continuous rule: a node between two triangles does
+//     not flip from one to the other from step to step). It moves by dx in
+//     its free components and is in contact with the tool of its largest
+//     proposal, with the contact normal n = dx / |dx| (out of the tool).
+//     Frictionless: only the normal is constrained.
+// The contact never pulls: a node that the tissue carries out of the tool
+// by itself is not inside after the free update, so it is not moved and
+// leaves the contact set. Grasped nodes follow the tool rigidly instead.
+//
+// Reaction on a tool: each pushing contact node is held in its normal n by
+// the force (f . n) n, f its internal force, clamped at zero (a contact
+// cannot pull); a grasped node by its whole internal force f. The force on
+// the tool is minus their sum (contact_reaction).
+#pragma once
+
+#include <cstdint>
+
+#include "core/tool.hpp"
+#include "core/vec.hpp"
+
+namespace tissue {
+
+/// What a surface node's contact is (one byte per node).
+enum ContactKind : std::uint8_t {
+  kNoContact = 0,
+  kPushed = 1,          ///< moved onto a tool's surface this step (frictionless)
+  kGrasped = 2,         ///< stuck to a grasping tool
+  kRigidContact = 3,    ///< inside a tool but held by the scene (fixed): a rigid support under the tool
+  kOutsideRegion = 4,   ///< inside a tool but not an inner node of the region: it cannot move
+};
+
+/// One tool over one advance() of `steps` TLED steps, in the backend's scalar.
+template <class T>
+struct ToolStep {
+  Vec3<T> tip0, axis0;        ///< pose at the start of the advance (m, unit)
+  Vec3<T> tip1, axis1;        ///< pose at its end
+  T radius, shaft;            ///< m
+  int substeps;               ///< contact checks per TLED step (>= 1)
+  int grasping;               ///< 1 = its grasped nodes follow it
+  Vec3<T> grasp_tip, grasp_axis;  ///< the pose when the grasp started
+};
+
+/// Every tool over one advance(); what the contact stage reads.
+template <class T>
+struct ContactTools {
+  int n_tools = 0;
+  int steps = 1;              ///< TLED steps of the advance (the poses are interpolated across them)
+  int face = 1;               ///< 1 = face contact on (0: node contact only; a tradeoff setting)
+  ToolStep<T> tool[kMaxTools];
+};
+
+/// The same tools in another scalar (a backend's: Backend hands them over in double).
+template <class T>
+ContactTools<T> contact_tools_as(const ContactTools<double>& d) {
+  const auto v = [](Vec3<double> x) { return Vec3<T>{T(x.x), T(x.y), T(x.z)}; };
+  ContactTools<T> c{};
+  c.n_tools = d.n_tools;
+  c.steps = d.steps;
+  c.face = d.face;
+  for (int t = 0; t < d.n_tools; ++t) {
+    const ToolStep<double>& s = d.tool[t];
+    c.tool[t] = {v(s.tip0), v(s.axis0), v(s.tip1), v(s.axis1), T(s.radius), T(s.shaft), s.substeps, s.grasping,
+                 v(s.grasp_tip), v(s.grasp_axis)};
+  }
+  return c;
+}
+
+/// A capsule: segment a -> b (a = tip) and radius r.
+template <class T>
+struct Capsule {
+  Vec3<T> a, b;
+  T r;
+};
+
+/// The capsule of tool t at the sub-check `j` (1..substeps) of step k
+/// (0..steps-1) of the advance: the pose a fraction (k + j / substeps) /
+/// steps of the way from the start pose to the end pose.
+template <class T>
+TISSUE_HD Capsule<T> tool_capsule(const ToolStep<T>& t, int steps, int k, int j) {
+  const T s = (T(k) + T(j) / T(t.substeps)) / T(steps);
+  Vec3<T> tip, axis;
+  interpolate_pose(t.tip0, t.axis0, t.tip1, t.axis1, s, tip, axis);
+  return {tip, tip + t.shaft * axis, t.radius};
+}
+
+/// Parameter in [0, 1] of the point of segment a -> b closest to x (0 for a
+/// zero-length segment).
+template <class T>
+TISSUE_HD T closest_on_segment(Vec3<T> a, Vec3<T> b, Vec3<T> x) {
+  const Vec3<T> d = b - a;
+  const T dd = dot(d, d);
+  if (!(dd > T(0))) return T(0);
+  const T s = dot(x - a, d) / dd;
+  return s < T(0) ? T(0) : (s > T(1) ? T(1) : s);
+}
+
+/// A unit vector perpendicular to d (any; deterministic).
+template <class T>
+TISSUE_HD Vec3<T> any_perpendicular(Vec3<T> d) {
+  const Vec3<T> e = std::fabs(d.x) < T(0.6) ? Vec3<T>{T(1), T(0), T(0)} : Vec3<T>{T(0), T(1), T(0)};
+  return unit_or(cross(d, e), Vec3<T>{T(0), T(0), T(1)});
+}
+
+/// Direction out of the capsule at axis point c for a point on the axis
+/// itself (distance zero): away from the handle at the tip, perpendicular to
+/// the axis along the shaft.
+template <class T>
+TISSUE_HD Vec3<T> axis_escape(const Capsule<T>& cap, T s) {
+  const Vec3<T> d = cap.b - cap.a;
+  const Vec3<T> ahead = unit_or(T(-1) * d, Vec3<T>{T(0), T(0), T(-1)});
+  return s > T(0) ? any_perpendicular(ahead) : ahead;
+}
+
+/// Node contact: if x lies inside the capsule, moves it radially to the
+/// capsule's surface, writes the outward normal n and returns true.
+template <class T>
+TISSUE_HD bool push_out_of_capsule(const Capsule<T>& cap, Vec3<T>& x, Vec3<T>& n) {
+  const T s = closest_on_segment(cap.a, cap.b, x);
+  const Vec3<T> c = cap.a + s * (cap.b - cap.a);
+  const Vec3<T> d = x - c;
+  const T dist = norm(d);
+  if (!(dist < cap.r)) return false;
+  n = dist > T(0) ? (T(1) / dist) * d : axis_escape(cap, s);
+  x = c + cap.r * n;
+  return true;
+}
+
+/// The point of triangle (P0, P1, P2) closest to x; w receives its
+/// barycentric weights (w0 + w1 + w2 = 1). Works on degenerate triangles.
+template <class T>
+TISSUE_HD Vec3<T> closest_on_triangle(Vec3<T> x, Vec3<T> P0, Vec3<T> P1, Vec3<T> P2, T w[3]) {
+  // Voronoi regions of the vertices, edges and face (Ericson, Real-Time
+  // Collision Detection, 5.1.5), in the order vertex, edge, face.
+  const Vec3<T> ab = P1 - P0, ac = P2 - P0, ap = x - P0;
+  const T d1 = dot(ab, ap), d2 = dot(ac, ap);
+  if (d1 <= T(0) && d2 <= T(0)) { w[0] = T(1); w[1] = w[2] = T(0); return P0; }
+  const Vec3<T> bp = x - P1;
+  const T d3 = dot(ab, bp), d4 = dot(ac, bp);
+  if (d3 >= T(0) && d4 <= d3) { w[1] = T(1); w[0] = w[2] = T(0); return P1; }
+  const T vc = d1 * d4 - d3 * d2;
+  if (vc <= T(0) && d1 >= T(0) && d3 <= T(0)) {
+    const T v = d1 / (d1 - d3);
+    w[0] = T(1) - v; w[1] = v; w[2] = T(0);
+    return P0 + v * ab;
+  }
+  const Vec3<T> cp = x - P2;
+  const T d5 = dot(ab, cp), d6 = dot(ac, cp);
+  if (d6 >= T(0) && d5 <= d6) { w[2] = T(1); w[0] = w[1] = T(0); return P2; }
+  const T vb = d5 * d2 - d1 * d6;
+  if (vb <= T(0) && d2 >= T(0) && d6 <= T(0)) {
+    const T v = d2 / (d2 - d6);
+    w[0] = T(1) - v; w[1] = T(0); w[2] = v;
+    return P0 + v * ac;
+  }
+  const T va = d3 * d6 - d5 * d4;
+  if (va <= T(0) && (d4 - d3) >= T(0) && (d5 - d6) >= T(0)) {
+    const T v = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    w[0] = T(0); w[1] = T(1) - v; w[2] = v;
+    return P1 + v * (P2 - P1);
+  }
+  const T den = va + vb + vc;
+  if (!(den > T(0))) {  // degenerate (zero-area) triangle: the nearest of its three edges handled above
+    w[0] = T(1); w[1] = w[2] = T(0);
+    return P0;
+  }
+  const T v = vb / den, u = vc / den;
+  w[0] = T(1) - v - u; w[1] = v; w[2] = u;
+  return P0 + v * ab + u * ac;
+}
+
+/// Closest points of segments p1 -> q1 and p2 -> q2 (Ericson 5.1.9):
+/// returns s, t in [0, 1] with the points p1 + s (q1 - p1), p2 + t (q2 - p2).
+template <class T>
+TISSUE_HD void closest_segment_segment(Vec3<T> p1, Vec3<T> q1, Vec3<T> p2, Vec3<T> q2, T& s, T& t) {
+  const Vec3<T> d1 = q1 - p1, d2 = q2 - p2, r = p1 - p2;
+  const T a = dot(d1, d1), e = dot(d2, d2), f = dot(d2, r);
+  const auto clamp01 = [](T v) { return v < T(0) ? T(0) : (v > T(1) ? T(1) : v); };
+  if (!(a > T(0)) && !(e > T(0))) { s = t = T(0); return; }
+  if (!(a > T(0))) { s = T(0); t = clamp01(f / e); return; }
+  const T c = dot(d1, r);
+  if (!(e > T(0))) { t = T(0); s = clamp01(-c / a); return; }
+  const T b = dot(d1, d2), den = a * e - b * b;
+  s = den > T(0) ? clamp01((b * f - c * e) / den) : T(0);
+  t = (b * s + f) / e;
+  if (t < T(0)) { t = T(0); s = clamp01(-c / a); }
+  else if (t > T(1)) { t = T(1); s = clamp01((b - c) / a); }
+}
+
+/// The triangle's point closest to the capsule's axis: writes its
+/// barycentric weights w, the axis point c closest to it, and returns the
+/// triangle point q. When the axis pierces the triangle the distance is zero
+/// and q = c is the piercing point.
+template <class T>
+TISSUE_HD Vec3<T> triangle_deepest_point(const Capsule<T>& cap, const Vec3<T> P[3], T w[3], Vec3<T>& c) {
+  // the axis end points against the face, then the three edges against the axis
+  T wa[3];
+  Vec3<T> q = closest_on_triangle(cap.a, P[0], P[1], P[2], w);
+  c = cap.a;
+  T best = dot(q - c, q - c);
+  const Vec3<T> qb = closest_on_triangle(cap.b, P[0], P[1], P[2], wa);
+  if (dot(qb - cap.b, qb - cap.b) < best) {
+    best = dot(qb - cap.b, qb - cap.b);
+    q = qb;
+    c = cap.b;
+    w[0] = wa[0]; w[1] = wa[1]; w[2] = wa[2];
+  }
+  for (int e = 0; e < 3; ++e) {
+    const int i = e, j = e == 2 ? 0 : e + 1;
+    T s, t;
+    closest_segment_segment(cap.a, cap.b, P[i], P[j], s, t);
+    const Vec3<T> ce = cap.a + s * (cap.b - cap.a), qe = P[i] + t * (P[j] - P[i]);
+    if (dot(qe - ce, qe - ce) < best) {
+      best = dot(qe - ce, qe - ce);
+      q = qe;
+      c = ce;
+      w[0] = w[1] = w[2] = T(0);
+      w[i] = T(1) - t;
+      w[j] = t;
+    }
+  }
+  // the axis piercing the face
+  const Vec3<T> d = cap.b - cap.a, e1 = P[1] - P[0], e2 = P[2] - P[0], nrm = cross(e1, e2);
+  const T den = dot(nrm, d);
+  if (den != T(0)) {
+    const T s = dot(nrm, P[0] - cap.a) / den;
+    if (s >= T(0) && s <= T(1)) {
+      const Vec3<T> x = cap.a + s * d;
+      T wx[3];
+      const Vec3<T> qx = closest_on_triangle(x, P[0], P[1], P[2], wx);
+      if (dot(qx - x, qx - x) < best) {
+        q = qx;
+        c = x;
+        w[0] = wx[0]; w[1] = wx[1]; w[2] = wx[2];
+      }
+    }
+  }
+  return q;
+}
+
+/// Per-corner result of the contact sweep of one triangle.
+template <class T>
+struct CornerContact {
+  Vec3<T> dx;           ///< correction of the corner's position (m)
+  signed char tool;     ///< the tool that moved it last, -1 none
+  std::uint8_t blocked; ///< ContactKind: kRigidContact / kOutsideRegion when the tool penetrated it but it
+                        ///< could not move (0 otherwise)
+};
+
+/// Whether a corner may be moved by contact, and why not (ContactKind).
+/// movable = inner region node, not held in every component, not grasped.
+TISSUE_HD std::uint8_t corner_block(bool inner, bool held_all, bool grasped) {
+  return !inner ? std::uint8_t(kOutsideRegion) : ((held_all || grasped) ? std::uint8_t(kRigidContact) : std::uint8_t(0));
+}
+
+/// The contact sweep of one surface triangle during TLED step k of the
+/// advance (see the rule at the top): x[3] are its corners' positions after
+/// the free update (m), block[3] their corner_block() values. Fills out[3].
+template <class T>
+TISSUE_HD void sweep_triangle(const ContactTools<T>& tools, int k, const Vec3<T> x_in[3], const std::uint8_t block[3],
+                              CornerContact<T> out[3]) {
+  Vec3<T> x[3] = {x_in[0], x_in[1], x_in[2]};
+  for (int i = 0; i < 3; ++i) out[i] = {{T(0), T(0), T(0)}, -1, 0};
+  for (int t = 0; t < tools.n_tools; ++t) {
+    const ToolStep<T>& tool = tools.tool[t];
+    for (int j = 1; j <= tool.substeps; ++j) {
+      const Capsule<T> cap = tool_capsule(tool, tools.steps, k, j);
+      for (int i = 0; i < 3; ++i) {  // (a) node contact
+        Vec3<T> xi = x[i], n;
+        if (!push_out_of_capsule(cap, xi, n)) continue;
+        if (block[i]) {
+          out[i].blocked = block[i];
+          out[i].tool = out[i].tool < 0 ? static_cast<signed char>(t) : out[i].tool;
+          continue;
+        }
+        x[i] = xi;
+        out[i].tool = static_cast<signed char>(t);
+      }
+      if (!tools.face) continue;
+      T w[3];  // (b) face contact
+      Vec3<T> c;
+      const Vec3<T> q = triangle_deepest_point(cap, x, w, c);
+      const Vec3<T> d = q - c;
+      const T dist = norm(d);
+      if (!(dist < cap.r)) continue;
+      const Vec3<T> e1 = x[1] - x[0], e2 = x[2] - x[0];
+      // out of the capsule radially; a pierced triangle moves along its inward normal
+      const Vec3<T> n = dist > T(0) ? (T(1) / dist) * d : unit_or(cross(e2, e1), axis_escape(cap, T(0)));
+      const T delta = dist > T(0) ? cap.r - dist : cap.r;
+      T wsum = T(0);
+      for (int i = 0; i < 3; ++i) wsum += block[i] ? T(0) : w[i] * w[i];
+      if (!(wsum > T(0))) {
+        for (int i = 0; i < 3; ++i)
+          if (w[i] > T(0) && block[i]) {
+            out[i].blocked = block[i];
+            if (out[i].tool < 0) out[i].tool = static_cast<signed char>(t);
+          }
+        continue;
+      }
+      for (int i = 0; i < 3; ++i) {
+        if (block[i] || !(w[i] > T(0))) continue;
+        x[i] = x[i] + (w[i] * delta / wsum) * n;
+        out[i].tool = static_cast<signed char>(t);
+      }
+    }
+  }
+  for (int i = 0; i < 3; ++i) out[i].dx = x[i] - x_in[i];
+}
+
+/// Rotation taking unit vector a to unit vector b applied to v (Rodrigues,
+/// the smallest rotation; identity when a == b; a half turn about an axis
+/// perpendicular to a when they are opposite).
+template <class T>
+TISSUE_HD Vec3<T> rotate_between(Vec3<T> a, Vec3<T> b, Vec3<T> v) {
+  const T c = dot(a, b);
+  if (c < T(-0.999999)) {  // opposite: half turn about any perpendicular axis p, R v = 2 (p.v) p - v
+    const Vec3<T> p = any_perpendicular(a);
+    return T(2) * dot(p, v) * p - v;
+  }
+  const Vec3<T> k = cross(a, b);
+  return c * v + cross(k, v) + (dot(k, v) / (T(1) + c)) * k;
+}
+
+/// Where a grasped node goes when its tool is at pose (tip, axis): the
+/// node's offset from the tip when the grasp started (offset, with the axis
+/// then `axis0`) carried along by the tool's translation and the smallest
+/// rotation of its axis.
+template <class T>
+TISSUE_HD Vec3<T> grasped_position(Vec3<T> tip, Vec3<T> axis, Vec3<T> axis0, Vec3<T> offset) {
+  return tip + rotate_between(axis0, axis, offset);
+}
+
+/// Force the tool exerts on one contact node with internal force f (N):
+/// pushed: (f . n)+ n; grasped: f; otherwise zero. `held` masks components
+/// that a scene constraint holds (their force is the support's, not the tool's).
+template <class T>
+TISSUE_HD Vec3<T> contact_reaction(std::uint8_t kind, Vec3<T> f, Vec3<T> n, std::uint8_t fixed) {
+  const Vec3<T> fm = {(fixed & 1) ? T(0) : f.x, (fixed & 2) ? T(0) : f.y, (fixed & 4) ? T(0) : f.z};
+  if (kind == kGrasped) return fm;
+  if (kind != kPushed) return {T(0), T(0), T(0)};
+  const T fn = dot(fm, n);
+  return (fn > T(0) ? fn : T(0)) * n;
+}
+
+}  // namespace tissue

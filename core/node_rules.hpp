@@ -1,0 +1,150 @@
+// The per-node rules of a TLED step and of the per-tick reductions, written
+// once for every backend as host/device functions (the per-element rules
+// are core/tet.hpp, the contact rules core/contact.hpp); cpu/ and cuda/ only
+// loop over nodes and call these.
+//
+// Holding rule, per component (an axis mask per node, model.hpp kAllAxes):
+//   fixed  (kFixed, or kFixedX/Y/Z for one component)  held at 0, wins over everything
+//   driven (Backend::set_driven's axis mask)          held at the drive's target
+//   halo   (region role kHalo)                        every component held; the others at
+//                                                     u when the node became halo
+//   anything else in the region                       integrated (central difference)
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+
+#include "core/contact.hpp"
+#include "core/model.hpp"
+#include "core/tet.hpp"
+
+namespace tissue {
+
+/// u^{n+1} of one node: the held components (axis mask h) at their targets
+/// u_held, the others by the damped central difference with R = 0 and
+/// internal force f.
+template <class T>
+TISSUE_HD Vec3<T> node_next(std::uint8_t h, Vec3<T> u_held, const CentralDifference<T>& cd, Vec3<T> f, Vec3<T> u,
+                            Vec3<T> u_prev) {
+  if (h == kAllAxes) return u_held;
+  Vec3<T> next = {central_difference_update(cd, -f.x, u.x, u_prev.x), central_difference_update(cd, -f.y, u.y, u_prev.y),
+                  central_difference_update(cd, -f.z, u.z, u_prev.z)};
+  if (h & 1) next.x = u_held.x;
+  if (h & 2) next.y = u_held.y;
+  if (h & 4) next.z = u_held.z;
+  return next;
+}
+
+/// Target of a halo node: 0 where the model fixes it (axis mask `fixed`),
+/// the drive's target (already in held_at) where it is driven, else its
+/// current displacement u.
+template <class T>
+TISSUE_HD Vec3<T> halo_target(std::uint8_t fixed, std::uint8_t driven, Vec3<T> u, Vec3<T> held_at) {
+  for (int c = 0; c < 3; ++c) {
+    if (fixed >> c & 1)
+      held_at[c] = T(0);
+    else if (!(driven >> c & 1))
+      held_at[c] = u[c];
+  }
+  return held_at;
+}
+
+/// A contact correction dx applied to the components that are free (held
+/// mask h clear).
+template <class T>
+TISSUE_HD Vec3<T> free_part(std::uint8_t h, Vec3<T> dx) {
+  return {(h & 1) ? T(0) : dx.x, (h & 2) ? T(0) : dx.y, (h & 4) ? T(0) : dx.z};
+}
+
+/// What one surface node's contact is after a step, merged over the
+/// proposals of its triangles (core/contact.hpp's step 2).
+template <class T>
+struct NodeContact {
+  Vec3<T> dx = {T(0), T(0), T(0)};  ///< correction (m); the contact normal is dx / |dx|
+  T largest2 = T(0);                ///< |dx_i|^2 of the largest proposal merged
+  signed char tool = -1;            ///< the tool of the largest proposal
+  std::uint8_t kind = kNoContact;   ///< ContactKind
+};
+
+/// Merges one triangle's proposal for this node (call in ascending triangle
+/// order; core/contact.hpp's step 2): the first proposal is taken as it is,
+/// every further one adds its shortfall along its own direction. A blocked
+/// penetration (rigid support, outside the region) is kept only while no
+/// correction was proposed, rigid before outside.
+template <class T>
+TISSUE_HD void merge_corner(NodeContact<T>& acc, const CornerContact<T>& c) {
+  const T s2 = dot(c.dx, c.dx);
+  if (s2 > T(0)) {
+    if (acc.kind != kPushed) {
+      acc.dx = c.dx;
+    } else {
+      const T len = std::sqrt(s2);
+      const T shortfall = len - dot(acc.dx, c.dx) / len;
+      if (shortfall > T(0)) acc.dx = acc.dx + (shortfall / len) * c.dx;
+    }
+    if (s2 > acc.largest2) {
+      acc.largest2 = s2;
+      acc.tool = c.tool;
+    }
+    acc.kind = kPushed;
+    return;
+  }
+  if (acc.kind == kPushed || !c.blocked) return;
+  if (acc.kind == kNoContact || (acc.kind == kOutsideRegion && c.blocked == kRigidContact)) {
+    acc.kind = c.blocked;
+    acc.tool = c.tool;
+  }
+}
+
+/// Per-node terms of the tick's reductions (core Reductions), in double.
+struct NodeTerms {
+  double reaction[3] = {0, 0, 0};  ///< driven components' internal force
+  double internal[3] = {0, 0, 0};  ///< inner nodes' internal force
+  double free2 = 0, held2 = 0;     ///< squared force over free / held components of inner nodes
+  double kinetic = 0;              ///< J
+  double disp = 0;                 ///< |u| (m)
+  bool finite = true;
+};
+
+/// The terms of node a: internal force f (N), displacement u and u_prev (m),
+/// lumped mass (kg), step dt (s), inner or not, its held and driven axis
+/// masks, and its contact: a pushed node's normal component counts as held
+/// (the tool holds it), its tangential part as free.
+template <class T>
+TISSUE_HD NodeTerms node_terms(Vec3<T> f_, Vec3<T> u_, Vec3<T> up_, double mass, double dt, bool inner,
+                               std::uint8_t held, std::uint8_t driven, std::uint8_t contact, Vec3<T> normal) {
+  NodeTerms t;
+  const double f[3] = {double(f_.x), double(f_.y), double(f_.z)};
+  double u2 = 0, v2 = 0;
+  for (int c = 0; c < 3; ++c) {
+    const double u = double(u_[c]), v = (u - double(up_[c])) / dt;
+    u2 += u * u;
+    v2 += v * v;
+    if (driven >> c & 1) t.reaction[c] = f[c];
+  }
+  const double f2 = f[0] * f[0] + f[1] * f[1] + f[2] * f[2];
+  t.kinetic = 0.5 * mass * v2;
+  t.disp = std::sqrt(u2);
+  t.finite = f2 - f2 == 0 && u2 - u2 == 0 && v2 - v2 == 0;  // false for NaN and infinity
+  if (!inner) return t;
+  double free_n = 0;  // normal part of the free components of a pushed node
+  const bool pushed = contact == kPushed;
+  for (int c = 0; c < 3; ++c) {
+    t.internal[c] = f[c];
+    if (held >> c & 1)
+      t.held2 += f[c] * f[c];
+    else
+      t.free2 += f[c] * f[c];
+    if (pushed && !(held >> c & 1)) free_n += f[c] * double(normal[c]);
+  }
+  if (contact == kGrasped) {  // every component held by the tool
+    t.held2 += t.free2;
+    t.free2 = 0;
+  } else if (pushed) {
+    t.held2 += free_n * free_n;
+    t.free2 = t.free2 > free_n * free_n ? t.free2 - free_n * free_n : 0.0;
+  }
+  return t;
+}
+
+}  // namespace tissue

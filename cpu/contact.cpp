@@ -1,0 +1,217 @@
+#include "cpu/contact.hpp"
+
+#include <algorithm>
+
+#include "core/node_rules.hpp"
+
+namespace tissue::cpu {
+namespace {
+
+template <class T>
+Vec3<T> at(const std::vector<T>& v, index_t n, index_t a) {
+  return {v[a], v[n + a], v[2 * size_t(n) + a]};
+}
+
+template <class T>
+void put(std::vector<T>& v, index_t n, index_t a, Vec3<T> x) {
+  v[a] = x.x;
+  v[n + a] = x.y;
+  v[2 * size_t(n) + a] = x.z;
+}
+
+}  // namespace
+
+template <class T>
+ContactStage<T>::ContactStage(const TissueModel<T>& m) : m_(m), bvh_(m, std::max(median_surface_edge(m), 1e-9)) {}
+
+template <class T>
+Box ContactStage<T>::sweep_box(const ContactTools<T>& tools, int k, double pad) const {
+  Box box;
+  for (int t = 0; t < tools.n_tools; ++t) {
+    const ToolStep<T>& tool = tools.tool[t];
+    for (int j = 1; j <= tool.substeps; ++j) {
+      const Capsule<T> cap = tool_capsule(tool, tools.steps, k, j);
+      const double a[3] = {cap.a.x, cap.a.y, cap.a.z}, b[3] = {cap.b.x, cap.b.y, cap.b.z};
+      box.add(a, pad * double(cap.r));
+      box.add(b, pad * double(cap.r));
+    }
+  }
+  return box;
+}
+
+template <class T>
+Vec3<T> ContactStage<T>::corner_position(const TissueState<T>& s, const ContactTools<T>& tools, int k, const T* u,
+                                         index_t a) const {
+  const index_t n = m_.n_nodes;
+  if (s.contact[a] == kGrasped) {
+    const ToolStep<T>& tool = tools.tool[s.contact_tool[a]];
+    Vec3<T> tip, axis;
+    interpolate_pose(tool.tip0, tool.axis0, tool.tip1, tool.axis1, T(k + 1) / T(tools.steps), tip, axis);
+    return grasped_position(tip, axis, tool.grasp_axis, at(s.grasp_offset, n, a));
+  }
+  return Vec3<T>{m_.X[a], m_.X[n + a], m_.X[2 * size_t(n) + a]} + Vec3<T>{u[a], u[n + a], u[2 * size_t(n) + a]};
+}
+
+template <class T>
+void ContactStage<T>::step(TissueState<T>& s, const ContactTools<T>& tools, int k) {
+  const index_t n = m_.n_nodes, nt = m_.n_tris;
+  // forget last step's contacts (grasps stay)
+  for (index_t a : touched_)
+    if (s.contact[a] != kGrasped) {
+      s.contact[a] = kNoContact;
+      s.contact_tool[a] = -1;
+    }
+  touched_.clear();
+  if (tools.n_tools == 0) return;
+  // grasped nodes follow their tool
+  for (int t = 0; t < tools.n_tools; ++t) {
+    if (!tools.tool[t].grasping) continue;
+    for (index_t a : grasped_[t]) {
+      const Vec3<T> X = {m_.X[a], m_.X[n + a], m_.X[2 * size_t(n) + a]};
+      put(s.u_next, n, a, corner_position(s, tools, k, s.u_next.data(), a) - X);
+      touched_.push_back(a);
+    }
+  }
+  // the triangles near the tools, swept
+  bvh_.update(s.u_next.data());
+  bvh_.query(sweep_box(tools, k, 1.0), tris_);
+  entries_.clear();
+  for (index_t t : tris_) {
+    Vec3<T> x[3];
+    std::uint8_t block[3];
+    index_t c[3];
+    for (int i = 0; i < 3; ++i) {
+      const index_t a = c[i] = m_.tris[i * nt + t];
+      x[i] = corner_position(s, tools, k, s.u_next.data(), a);
+      block[i] = corner_block(s.region.role[a] == kInner, s.held[a] == kAllAxes, s.contact[a] == kGrasped);
+    }
+    CornerContact<T> out[3];
+    sweep_triangle(tools, k, x, block, out);
+    for (int i = 0; i < 3; ++i)
+      if (out[i].tool >= 0) entries_.push_back({c[i], 3 * t + i, out[i]});
+  }
+  // each node takes its triangles' largest proposal (ascending triangle order)
+  std::sort(entries_.begin(), entries_.end(),
+            [](const Entry& a, const Entry& b) { return a.node != b.node ? a.node < b.node : a.slot < b.slot; });
+  for (std::size_t i = 0; i < entries_.size();) {
+    const index_t a = entries_[i].node;
+    NodeContact<T> acc;
+    std::size_t j = i;
+    for (; j < entries_.size() && entries_[j].node == a; ++j) merge_corner(acc, entries_[j].c);
+    i = j;
+    if (s.contact[a] == kGrasped || acc.kind == kNoContact) continue;
+    if (acc.kind == kPushed) {
+      put(s.u_next, n, a, at(s.u_next, n, a) + free_part(s.held[a], acc.dx));
+      put(s.contact_normal, n, a, unit_or(acc.dx, Vec3<T>{0, 0, 0}));
+    }
+    s.contact[a] = acc.kind;
+    s.contact_tool[a] = acc.tool;
+    touched_.push_back(a);
+  }
+  std::sort(touched_.begin(), touched_.end());
+}
+
+template <class T>
+void ContactStage<T>::begin_grasp(TissueState<T>& s, int tool, Vec3<double> tip) {
+  const index_t n = m_.n_nodes;
+  std::vector<index_t>& g = grasped_[tool];
+  g.clear();
+  for (index_t a : touched_) {
+    if (s.contact[a] != kPushed || s.contact_tool[a] != tool) continue;
+    s.contact[a] = kGrasped;
+    const Vec3<T> x = Vec3<T>{m_.X[a], m_.X[n + a], m_.X[2 * size_t(n) + a]} + at(s.u, n, a);
+    put(s.grasp_offset, n, a, x - Vec3<T>{T(tip.x), T(tip.y), T(tip.z)});
+    g.push_back(a);
+  }
+}
+
+template <class T>
+void ContactStage<T>::end_grasp(TissueState<T>& s, int tool) {
+  for (index_t a : grasped_[tool]) {
+    s.contact[a] = kNoContact;
+    s.contact_tool[a] = -1;
+  }
+  grasped_[tool].clear();
+}
+
+template <class T>
+void ContactStage<T>::reset(TissueState<T>& s) {
+  for (index_t a : touched_) {
+    s.contact[a] = kNoContact;
+    s.contact_tool[a] = -1;
+  }
+  touched_.clear();
+  for (auto& g : grasped_) {
+    for (index_t a : g) {
+      s.contact[a] = kNoContact;
+      s.contact_tool[a] = -1;
+    }
+    g.clear();
+  }
+}
+
+template <class T>
+std::vector<index_t> ContactStage<T>::candidates(const TissueState<T>& s, const ContactTools<T>& sweep) {
+  const index_t nt = m_.n_tris;
+  std::vector<index_t> out;
+  bvh_.update(s.u.data());
+  bvh_.query(sweep_box(sweep, 0, 1.5), tris_);
+  for (index_t t : tris_) {
+    Vec3<T> x[3];
+    index_t c[3];
+    bool all_inner = true;
+    for (int i = 0; i < 3; ++i) {
+      c[i] = m_.tris[i * nt + t];
+      x[i] = corner_position(s, sweep, 0, s.u.data(), c[i]);
+      all_inner = all_inner && s.region.role[c[i]] == kInner;
+    }
+    if (all_inner) continue;
+    bool near = false;
+    for (int k = 0; k < sweep.n_tools && !near; ++k)
+      for (int j = 1; j <= sweep.tool[k].substeps && !near; ++j) {
+        const Capsule<T> cap = tool_capsule(sweep.tool[k], 1, 0, j);
+        T w[3];
+        Vec3<T> axis_point;
+        const Vec3<T> q = triangle_deepest_point(cap, x, w, axis_point);
+        near = norm(q - axis_point) < T(1.5) * cap.r;
+      }
+    if (!near) continue;
+    for (int i = 0; i < 3; ++i)
+      if (s.region.role[c[i]] != kInner) out.push_back(c[i]);
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+template <class T>
+void reduce_contacts(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<index_t>& touched,
+                     ToolReduction out[kMaxTools]) {
+  const index_t n = m.n_nodes;
+  for (int t = 0; t < kMaxTools; ++t) out[t] = ToolReduction{};
+  for (index_t a : touched) {
+    const int t = s.contact_tool[a];
+    if (t < 0 || t >= kMaxTools) continue;
+    ToolReduction& r = out[t];
+    const std::uint8_t kind = s.contact[a];
+    const Vec3<T> f = at(s.f, n, a);
+    const Vec3<T> react = contact_reaction(kind, f, at(s.contact_normal, n, a), fixed_axes(m.node_flags[a]));
+    r.reaction = r.reaction + Vec3<double>{double(react.x), double(react.y), double(react.z)};
+    r.contact += (kind == kPushed || kind == kGrasped) ? 1 : 0;
+    r.grasped += kind == kGrasped ? 1 : 0;
+    if (kind == kRigidContact) {
+      if (r.rigid == 0 || a < r.rigid_first) r.rigid_first = a;
+      ++r.rigid;
+    }
+    r.outside += kind == kOutsideRegion ? 1 : 0;
+  }
+}
+
+template class ContactStage<float>;
+template class ContactStage<double>;
+template void reduce_contacts(const TissueModel<float>&, const TissueState<float>&, const std::vector<index_t>&,
+                              ToolReduction[kMaxTools]);
+template void reduce_contacts(const TissueModel<double>&, const TissueState<double>&, const std::vector<index_t>&,
+                              ToolReduction[kMaxTools]);
+
+}  // namespace tissue::cpu

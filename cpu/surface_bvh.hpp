@@ -1,0 +1,70 @@
+// The deformed tissue surface as an Embree 3 BVH for the contact stage's
+// box queries (docs/contact.md, cpu backend). Private to cpu/: no Embree
+// type leaves this header's implementation.
+//
+// One Embree user geometry: one primitive per surface triangle, whose
+// bounds are the triangle's box at the last build fattened by `margin` on
+// every side. The BVH stays valid while no surface node has moved more than
+// the margin (in any coordinate) from where it was at the build, because
+// each triangle then still lies in its fattened box; only then is it
+// rebuilt (a check of O(surface nodes) per query, no refit of the whole
+// surface per query). A query is an axis-aligned box: Embree's point query
+// (a sphere enclosing the box) walks the BVH, and each primitive it reports
+// is kept when its fattened box overlaps the query box.
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "core/model.hpp"
+
+namespace tissue::cpu {
+
+/// Axis-aligned box (m).
+struct Box {
+  double lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
+  bool empty = true;
+  void add(const double p[3], double pad);
+};
+
+template <class T>
+class SurfaceBvh {
+ public:
+  /// Over m's surface triangles (m must outlive this object), fattened by
+  /// margin (m) > 0. Throws std::runtime_error when Embree fails.
+  SurfaceBvh(const TissueModel<T>& m, double margin);
+  ~SurfaceBvh();
+  SurfaceBvh(const SurfaceBvh&) = delete;
+  SurfaceBvh& operator=(const SurfaceBvh&) = delete;
+
+  /// Makes the BVH valid for the surface deformed by u (3 x n_nodes, m):
+  /// rebuilds it when a surface node has left its margin.
+  void update(const T* u);
+
+  /// Surface triangles whose fattened box overlaps `box`, ascending, into
+  /// out (cleared first). Call update() for the current u first.
+  void query(const Box& box, std::vector<index_t>& out);
+
+  double margin() const { return margin_; }
+  /// BVH builds so far (tests: rebuilt only when the surface left the margin).
+  long builds() const { return builds_; }
+
+ private:
+  struct Embree;  // RTCDevice, RTCScene, RTCGeometry
+  void build(const T* u);
+
+  const TissueModel<T>& m_;
+  double margin_;
+  std::unique_ptr<Embree> rtc_;
+  std::vector<double> at_build_;  ///< surface node positions at the last build (n_surf x 3)
+  std::vector<float> boxes_;      ///< fattened triangle boxes (n_tris x 6: lo xyz, hi xyz)
+  long builds_ = 0;
+  bool built_ = false;
+};
+
+/// Median length of the surface triangles' edges (m) in the reference
+/// configuration (0 without triangles).
+template <class T>
+double median_surface_edge(const TissueModel<T>& m);
+
+}  // namespace tissue::cpu
