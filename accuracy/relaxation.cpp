@@ -187,7 +187,7 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
       break;
     }
     if (steps >= o.max_steps || seconds_since(t0) > o.max_wall) break;
-    if (o.adapt_damping && steps - last_adapt >= o.adapt_every) {
+    if (o.adapt_damping && out.residual > o.adapt_above && steps - last_adapt >= o.adapt_every) {
       last_adapt = steps;
       const Fields d0 = b.download();
       b.advance(1);
@@ -195,7 +195,10 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
       b.advance(1);
       const Fields d2 = b.download();
       steps += 2;
-      const double omega = std::sqrt(rayleigh_omega2(d0.u, d1.u, d1.f, d2.f, m.mass, free_mask));
+      // nodes on a tool are held by it (their projection is no stiffness of the tissue's)
+      std::vector<std::uint8_t> mask = free_mask;
+      for (const ContactNode& c : b.contacts()) mask[c.node] = 0;
+      const double omega = std::sqrt(rayleigh_omega2(d0.u, d1.u, d1.f, d2.f, m.mass, mask));
       if (omega > 0 && std::fabs(2 * omega - alpha) > 0.1 * alpha) {
         alpha = 2 * omega;
         set_time_step(m, m.dt, alpha);

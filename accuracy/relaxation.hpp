@@ -58,6 +58,9 @@ struct RelaxOptions {
   double mass_safety = 0.5;     ///< fraction of the Gershgorin stability bound the fictitious masses use
   int check_every = 200;        ///< steps between reductions (convergence checks)
   int adapt_every = 2000;       ///< steps between omega_1 estimates (after the ramp)
+  double adapt_above = 1e-6;    ///< ... while the relative residual is above this: near the answer the
+                                ///< step-to-step change is rounding (and, under a tool, contact nodes
+                                ///< settling), not the slowest mode, and a restart would only perturb it
   long max_steps = 2'000'000;   ///< give up after this many steps (converged = false)
   double stall_periods = 3;     ///< give up when the best residual has not halved for this many periods
                                 ///< 2 pi / omega_1 (critical damping divides it by ~500 per period): the

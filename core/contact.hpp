@@ -15,7 +15,13 @@
 //         delta n is spread to the corners with barycentric weights,
 //         dx_k = w_k delta n / sum_j w_j^2 (the smallest corner motion that
 //         moves the point by delta n); corners that cannot move (fixed,
-//         outside the region, grasped) take no share;
+//         outside the region, grasped) take no share.
+//     Sidedness: the tool belongs on the outer side of every face (its
+//     outward normal N). Where the axis has reached the tissue's side of a
+//     face it touches (the face was tilted past it), (a) leaves that face's
+//     corners alone and (b) moves the face along -N to the far side of the
+//     tool, so that neither a corner nor a face is ever pushed out through
+//     the tool: a tool cannot slip through the surface;
 //  2. each surface node combines its triangles' proposals dx_i, in
 //     ascending triangle order, into one correction that satisfies each of
 //     them along its own direction: dx = dx_1, then for every further
@@ -286,9 +292,11 @@ TISSUE_HD void sweep_triangle(const ContactTools<T>& tools, int k, const Vec3<T>
     const ToolStep<T>& tool = tools.tool[t];
     for (int j = 1; j <= tool.substeps; ++j) {
       const Capsule<T> cap = tool_capsule(tool, tools.steps, k, j);
+      const Vec3<T> N = unit_or(cross(x[1] - x[0], x[2] - x[0]), Vec3<T>{T(0), T(0), T(0)});  // outward
       for (int i = 0; i < 3; ++i) {  // (a) node contact
         Vec3<T> xi = x[i], n;
         if (!push_out_of_capsule(cap, xi, n)) continue;
+        if (dot(n, N) > T(0)) continue;  // the tool is past this face here: (b) moves the face, not the corner outward
         if (block[i]) {
           out[i].blocked = block[i];
           out[i].tool = out[i].tool < 0 ? static_cast<signed char>(t) : out[i].tool;
@@ -304,10 +312,14 @@ TISSUE_HD void sweep_triangle(const ContactTools<T>& tools, int k, const Vec3<T>
       const Vec3<T> d = q - c;
       const T dist = norm(d);
       if (!(dist < cap.r)) continue;
-      const Vec3<T> e1 = x[1] - x[0], e2 = x[2] - x[0];
-      // out of the capsule radially; a pierced triangle moves along its inward normal
-      const Vec3<T> n = dist > T(0) ? (T(1) / dist) * d : unit_or(cross(e2, e1), axis_escape(cap, T(0)));
-      const T delta = dist > T(0) ? cap.r - dist : cap.r;
+      const Vec3<T> Nf = unit_or(cross(x[1] - x[0], x[2] - x[0]), axis_escape(cap, T(0)));  // outward
+      // out of the capsule radially; but where the axis has reached the tissue's side of the face (pierced it,
+      // or its point nearest the face projects inside the face from behind), the face moves along its inward
+      // normal to the far side of the tool: a face is never pushed out through the tool
+      const T behind = dot(c - q, Nf);  // < 0: the axis point is on the tissue's side
+      const bool through = !(dist > T(0)) || (behind < T(0) && w[0] > T(0) && w[1] > T(0) && w[2] > T(0));
+      const Vec3<T> n = through ? T(-1) * Nf : (T(1) / dist) * d;
+      const T delta = through ? cap.r - behind : cap.r - dist;
       T wsum = T(0);
       for (int i = 0; i < 3; ++i) wsum += block[i] ? T(0) : w[i] * w[i];
       if (!(wsum > T(0))) {

@@ -1,5 +1,6 @@
 // The cuda backend: the Backend interface over the device store, as a list
-// of stages, each one kernel module (stepper, region_fill, collide, reduce).
+// of stages, each one kernel module (stepper with the contact stage,
+// region_fill, contact, reduce).
 // Semantics are the cpu backend's (cpu/constraints.hpp states the rule):
 //   held (an axis mask per node) = fixed axes | driven axes, every axis
 //   for a halo node; a fixed component is always held at 0 (also when
@@ -8,8 +9,10 @@
 //   (u_prev = u_next = u, f = 0), elements leaving it get zero forces; after
 //   a region build or set_displacements pass 1 is recomputed over all
 //   elements, so pass 2 averages valid p_e V_e on halo nodes too.
-// Per haptic tick the only copies are set_driven's targets (up) and the Hit
-// and Reductions structs (down); see transfers().
+// Per haptic tick the only copies are the tools' motion (up: the head of
+// ContactTools and one ToolStep per tool) and the Reductions struct (down),
+// plus, while the region is not the whole mesh, the contact candidates'
+// count (down); see transfers() and docs/cuda.md.
 #include "cuda/cuda_backend.hpp"
 
 #include <algorithm>
@@ -17,11 +20,12 @@
 #include <stdexcept>
 #include <vector>
 
-#include "cuda/collide.hpp"
+#include "cuda/contact.hpp"
 #include "cuda/device_store.hpp"
 #include "cuda/launch.cuh"
 #include "cuda/reduce.hpp"
 #include "cuda/region_fill.hpp"
+#include "core/node_rules.hpp"
 #include "cuda/stepper.hpp"
 #include "cuda/text.hpp"
 
@@ -41,9 +45,7 @@ __global__ void undrive_kernel(index_t n, const index_t* list, const std::uint8_
   const std::uint8_t fixed = fixed_axes(flags[a]);
   s.driven[a] = 0;
   if (s.role[a] == kHalo) {
-    Packed3<T> held_at = s.u_held[a];
-    hold_halo(fixed, std::uint8_t(0), u[a], held_at);
-    s.u_held[a] = held_at;
+    s.u_held[a] = Packed3<T>::of(halo_target(fixed, std::uint8_t(0), u[a].vec(), s.u_held[a].vec()));
     s.held[a] = kAllAxes;
   } else {
     s.held[a] = fixed;
@@ -147,15 +149,20 @@ class CudaBackend final : public Backend {
   std::string name() const override { return "cuda"; }
   Precision precision() const override { return sizeof(T) == 4 ? Precision::Float : Precision::Double; }
   std::string device_name() const override { return device_name_; }
+  bool positions_on_device() const override { return true; }
+  TransferCounters transfers() const override { return log_.counters(); }
 
-  void upload(const TissueModel<double>& model) override {
+  Stepper<T>& stepper() { return stepper_; }
+  RegionView region_view() const { return region_.view(); }
+
+ protected:
+  void do_upload(const TissueModel<double>& model) override {
     const TissueModel<T> m = convert<T>(model);
-    uploaded_ = false;
     store_.upload(m, log_, stream());
     const index_t n = m.n_nodes;
     region_.allocate(n, m.n_elems, stream());
-    collider_.allocate(m.n_tris);
     reducer_.allocate(n, m.n_elems);
+    contact_.allocate(n, m.n_surf);
     driven_list_.allocate(n);
     drive_dev_.allocate(n * (3 * sizeof(T) + sizeof(index_t) + 1));
     if (drive_pending_) drive_copied_.sync();  // before its staging is freed
@@ -164,45 +171,24 @@ class CudaBackend final : public Backend {
     scratch_.allocate(7 * size_t(n) + m.n_elems);
     probe_dev_.allocate(n);
     probe_host_.allocate(n);
-    drive_ids_.reserve(64);
-    drive_masks_.reserve(64);
-    drive_values_.reserve(192);
     n_driven_ = 0;
-    uploaded_ = true;
-    build_region({}, kDepthAll);
+    do_build_region({}, kDepthAll);
     stream_.sync();
   }
 
-  void set_displacements(std::span<const double> u) override {
-    require_model("set_displacements");
+  void do_set_displacements(std::span<const double> u) override {
     const index_t n = store_.n_nodes();
-    if (u.size() != 3 * size_t(n))
-      throw std::invalid_argument(str("set_displacements: ", u.size(), " values for ", n, " nodes (need 3 x n_nodes = ",
-                                      3 * size_t(n), ")"));
-    for (size_t k = 0; k < u.size(); ++k)
-      if (!std::isfinite(u[k]))
-        throw std::invalid_argument(
-            str("set_displacements: node ", k % n, " axis ", "xyz"[k / n], " is not finite (", u[k], ")"));
     log_.to_device_now(scratch_.data(), u.data(), u.size_bytes(), stream());
     launch(n, stream(), set_displacements_kernel<T>, n, scratch_.data(), store_.model().node_flags, store_.state(),
            store_.u.current());
     pass1_all();
   }
 
-  RegionSizes build_region(std::span<const index_t> seeds, int depth) override {
-    require_model("build_region");
+  RegionSizes do_build_region(std::span<const index_t> seeds, int depth) override {
     const Topology topo = topology(store_.model());
     StateView<T> s = store_.state();
-    RegionSizes sizes;
-    if (depth == kDepthAll) {
-      sizes = region_.whole(topo, s.role, stream());
-    } else {
-      if (depth < 0) throw std::invalid_argument(str("region depth ", depth, " must be >= 0 or 'all'"));
-      for (index_t a : seeds)
-        if (a < 0 || a >= topo.n_nodes)
-          throw std::out_of_range(str("region seed node ", a, " out of range (0..", topo.n_nodes - 1, ")"));
-      sizes = region_.build(topo, seeds, depth, s.role, log_, stream());
-    }
+    const RegionSizes sizes = depth == kDepthAll ? region_.whole(topo, s.role, stream())
+                                                 : region_.build(topo, seeds, depth, s.role, log_, stream());
     seeds_.assign(seeds.begin(), seeds.end());
     region_.apply(store_.model(), s, store_.u.current(), stream());
     pass1_all();
@@ -210,74 +196,104 @@ class CudaBackend final : public Backend {
     return sizes;
   }
 
-  Region region() override {
-    require_model("region");
+  Region do_region() override {
     return region_.download(topology(store_.model()), store_.state().role, seeds_, log_, stream());
   }
 
+  /// One small download of the nodes' roles (none when they are all seeds,
+  /// which are inner nodes: the Scheduler's case).
+  std::vector<std::uint8_t> do_roles(std::span<const index_t> nodes) override {
+    std::vector<std::uint8_t> roles(nodes.size(), kInner);
+    if (region_.sizes().whole() || nodes.empty()) return roles;
+    bool all_seeds = true;
+    for (index_t a : nodes) all_seeds = all_seeds && std::find(seeds_.begin(), seeds_.end(), a) != seeds_.end();
+    if (all_seeds) return roles;
+    const index_t n = static_cast<index_t>(nodes.size());
+    log_.to_device_now(scratch_.data(), nodes.data(), nodes.size_bytes(), stream());
+    launch(n, stream(), probe_roles_kernel, n, reinterpret_cast<const index_t*>(scratch_.data()), store_.state().role,
+           probe_dev_.data());
+    log_.to_host(probe_host_.data(), probe_dev_.data(), n, stream());
+    for (index_t k = 0; k < n; ++k) roles[k] = probe_host_[k];
+    return roles;
+  }
+
   /// One upload per call (targets, ids and axis masks in one pinned block).
-  /// The nodes must lie in the region: checked on the host when they are
-  /// seeds (the Scheduler's case), else by one small download of their
-  /// roles. A node given twice is driven in the union of its masks, each
-  /// component at its last target (as on the cpu).
-  void set_driven(std::span<const index_t> nodes, std::span<const double> u) override {
-    require_model("set_driven");
-    drive(nodes, u, {}, "set_driven");
+  void do_set_driven(std::span<const index_t> nodes, std::span<const double> u,
+                     std::span<const std::uint8_t> axes) override {
+    if (drive_pending_) drive_copied_.sync();  // the staging buffer is free again
+    const auto n = static_cast<index_t>(nodes.size());
+    T* values = reinterpret_cast<T*>(drive_host_.data());
+    index_t* ids = reinterpret_cast<index_t*>(values + 3 * size_t(n));
+    std::uint8_t* masks = reinterpret_cast<std::uint8_t*>(ids + n);
+    for (index_t k = 0; k < n; ++k) {
+      ids[k] = nodes[k];
+      masks[k] = axes[k];
+      for (int c = 0; c < 3; ++c) values[3 * k + c] = static_cast<T>(u[3 * k + c]);
+    }
+    const T* dvalues = reinterpret_cast<const T*>(drive_dev_.data());
+    const index_t* dids = reinterpret_cast<const index_t*>(dvalues + 3 * size_t(n));
+    const std::uint8_t* dmasks = reinterpret_cast<const std::uint8_t*>(dids + n);
+    log_.to_device(drive_dev_.data(), drive_host_.data(), n * (3 * sizeof(T) + sizeof(index_t) + 1), stream());
+    drive_copied_.record(stream());
+    drive_pending_ = true;
+    do_clear_driven();
+    launch(n, stream(), drive_kernel<T>, n, dvalues, dids, dmasks, store_.model().node_flags, driven_list_.data(),
+           store_.state());
+    n_driven_ = n;
   }
 
-  void set_driven_axes(std::span<const index_t> nodes, std::span<const double> u,
-                       std::span<const std::uint8_t> axes) override {
-    require_model("set_driven_axes");
-    if (axes.size() != nodes.size())
-      throw std::invalid_argument(
-          str("set_driven_axes: ", axes.size(), " axis masks for ", nodes.size(), " nodes (need one per node)"));
-    drive(nodes, u, axes, "set_driven_axes");
-  }
-
-  void clear_driven() override {
-    require_model("clear_driven");
+  void do_clear_driven() override {
     launch(n_driven_, stream(), undrive_kernel<T>, n_driven_, driven_list_.data(), store_.model().node_flags,
            store_.state(), store_.u.current().u);
     n_driven_ = 0;
   }
 
-  void element_pressure() override {
-    require_model("element_pressure");
+  void do_begin_grasp(int tool, const ToolPose& pose) override {
+    contact_.begin_grasp(store_.model(), store_.state(), store_.u.current().u, tool, pose.tip, stream());
+  }
+  void do_end_grasp(int tool) override { contact_.end_grasp(store_.model(), store_.state(), tool, stream()); }
+  void do_reset_contacts() override { contact_.reset(store_.model(), store_.state(), stream()); }
+
+  void do_element_pressure() override {
     stepper_.element_pressure(store_.model(), store_.state(), region_.view(), store_.u.current().u, stream());
   }
-  void nodal_pressure() override {
-    require_model("nodal_pressure");
+  void do_nodal_pressure() override {
     stepper_.nodal_pressure(store_.model(), store_.state(), region_.view(), stream());
   }
-  void element_forces() override {
-    require_model("element_forces");
+  void do_element_forces() override {
     stepper_.element_forces(store_.model(), store_.state(), region_.view(), store_.u.current().u, stream());
   }
-  void node_update() override {
-    require_model("node_update");
+  void do_node_update() override {
     stepper_.node_update(store_.model(), store_.state(), region_.view(), store_.u.current(), stream());
     store_.u.advance(1);
   }
 
-  void advance(int steps) override {
-    require_model("advance");
-    if (steps < 0) throw std::invalid_argument(str("advance: step count ", steps, " must be >= 0"));
-    stepper_.advance(store_.model(), store_.state(), region_.view(), store_.u, steps, stream());
+  /// Steps in chunks of at most the stepper's graph length; each chunk's
+  /// slice of the tools' motion is one small upload.
+  void do_advance(int steps, const ContactTools<double>& tools) override {
+    const int chunk = Stepper<T>::kMaxGraphSteps;
+    for (int done = 0; done < steps;) {
+      const int k = std::min(chunk, steps - done);
+      const ContactTools<T>* dtools = nullptr;
+      if (tools.n_tools > 0) dtools = contact_.upload(contact_tools_as<T>(slice(tools, done, k)), log_, stream());
+      stepper_.advance(store_.model(), store_.state(), region_.view(), store_.u, k, dtools, stream());
+      done += k;
+    }
   }
 
-  Hit collide(Vec3<double> a, Vec3<double> b) override {
-    require_model("collide");
-    return collider_.query(store_.model(), store_.u.current().u, a, b, log_, stream());
+  std::vector<index_t> do_contact_candidates(const ContactTools<double>& sweep) override {
+    return contact_.candidates(store_.model(), store_.state(), store_.u.current().u, contact_tools_as<T>(sweep),
+                               log_, stream());
   }
 
-  Reductions reduce() override {
-    require_model("reduce");
-    return reducer_.run(store_.model(), store_.state(), region_.view(), region_.front(), store_.u.current(), log_,
-                        stream());
+  std::vector<ContactNode> do_contacts() override { return contact_.contacts(store_.model(), store_.state(), log_, stream()); }
+
+  Reductions do_reduce() override {
+    return reducer_.run(store_.model(), store_.state(), region_.view(), region_.front(), store_.u.current(), contact_,
+                        log_, stream());
   }
 
-  Fields download() override {
-    require_model("download");
+  Fields do_download() override {
     const index_t n = store_.n_nodes(), ne = store_.n_elems();
     launch(std::max(n, ne), stream(), download_kernel<T>, store_.model(), store_.state(), store_.u.current().u,
            scratch_.data());
@@ -292,74 +308,36 @@ class CudaBackend final : public Backend {
     return f;
   }
 
-  void write_positions(float* dst) override {
-    require_model("write_positions");
+  void do_write_positions(float* dst) override {
     cudaPointerAttributes attr;
-    if (dst == nullptr || cudaPointerGetAttributes(&attr, dst) != cudaSuccess ||
+    if (cudaPointerGetAttributes(&attr, dst) != cudaSuccess ||
         (attr.type != cudaMemoryTypeDevice && attr.type != cudaMemoryTypeManaged)) {
       cudaGetLastError();
-      throw std::invalid_argument("cuda write_positions: dst must be device memory (n_nodes x 3 floats)");
+      throw std::invalid_argument("write_positions: the cuda backend writes device memory: dst must be device "
+                                  "memory (n_nodes x 3 floats), e.g. a mapped GL buffer");
     }
     const index_t n = store_.n_nodes();
     launch(n, stream(), positions_kernel<T>, n, store_.model().X, store_.u.current().u, dst);
     stream_.sync();  // the caller (a GL interop unmap) may use dst right away
   }
 
-  TransferCounters transfers() const override { return log_.counters(); }
-
-  Stepper<T>& stepper() { return stepper_; }
-  RegionView region_view() const { return region_.view(); }
-
  private:
   cudaStream_t stream() const { return stream_.get(); }
 
-  void require_model(const char* what) const {
-    if (!uploaded_) throw std::logic_error(str("cuda backend: ", what, "() called before upload()"));
-  }
-
-  /// set_driven(_axes): validate, merge duplicates on the host, one upload,
-  /// release the old set, drive the new one. axes empty = every component.
-  void drive(std::span<const index_t> nodes, std::span<const double> u, std::span<const std::uint8_t> axes,
-             const char* what) {
-    check_driven(nodes, u, axes, what);
-    if (drive_pending_) drive_copied_.sync();  // the staging buffer is free again
-    // merge into unique (id, mask, targets) entries, in first-seen order
-    drive_ids_.clear();
-    drive_masks_.clear();
-    drive_values_.clear();
-    for (size_t k = 0; k < nodes.size(); ++k) {
-      const std::uint8_t mask = axes.empty() ? kAllAxes : axes[k];
-      auto it = std::find(drive_ids_.begin(), drive_ids_.end(), nodes[k]);
-      size_t j = size_t(it - drive_ids_.begin());
-      if (it == drive_ids_.end()) {
-        drive_ids_.push_back(nodes[k]);
-        drive_masks_.push_back(0);
-        drive_values_.insert(drive_values_.end(), 3, 0.0);
-      }
-      drive_masks_[j] |= mask;
-      for (int c = 0; c < 3; ++c)
-        if (mask >> c & 1) drive_values_[3 * j + c] = u[3 * k + c];
+  /// The part of the tools' motion covering steps [first, first + count) of
+  /// `steps`, as a motion of its own over `count` steps.
+  static ContactTools<double> slice(const ContactTools<double>& all, int first, int count) {
+    if (first == 0 && count == all.steps) return all;
+    ContactTools<double> c = all;
+    c.steps = count;
+    const double s0 = double(first) / all.steps, s1 = double(first + count) / all.steps;
+    for (int t = 0; t < all.n_tools; ++t) {
+      const ToolStep<double>& a = all.tool[t];
+      ToolStep<double>& b = c.tool[t];
+      interpolate_pose(a.tip0, a.axis0, a.tip1, a.axis1, s0, b.tip0, b.axis0);
+      interpolate_pose(a.tip0, a.axis0, a.tip1, a.axis1, s1, b.tip1, b.axis1);
     }
-    const auto n = static_cast<index_t>(drive_ids_.size());
-    T* values = reinterpret_cast<T*>(drive_host_.data());
-    index_t* ids = reinterpret_cast<index_t*>(values + 3 * size_t(n));
-    std::uint8_t* masks = reinterpret_cast<std::uint8_t*>(ids + n);
-    for (index_t k = 0; k < n; ++k) {
-      ids[k] = drive_ids_[k];
-      masks[k] = drive_masks_[k];
-      for (int c = 0; c < 3; ++c) values[3 * k + c] = static_cast<T>(drive_values_[3 * k + c]);
-    }
-    const T* dvalues = reinterpret_cast<const T*>(drive_dev_.data());
-    const index_t* dids = reinterpret_cast<const index_t*>(dvalues + 3 * size_t(n));
-    const std::uint8_t* dmasks = reinterpret_cast<const std::uint8_t*>(dids + n);
-    log_.to_device(drive_dev_.data(), drive_host_.data(), n * (3 * sizeof(T) + sizeof(index_t) + 1), stream());
-    drive_copied_.record(stream());
-    drive_pending_ = true;
-    check_in_region(n, ids, dids, what);
-    clear_driven();
-    launch(n, stream(), drive_kernel<T>, n, dvalues, dids, dmasks, store_.model().node_flags, driven_list_.data(),
-           store_.state());
-    n_driven_ = n;
+    return c;
   }
 
   /// Pass 1 over every element (after a region build or new displacements).
@@ -368,46 +346,12 @@ class CudaBackend final : public Backend {
     stepper_.element_pressure(store_.model(), store_.state(), all, store_.u.current().u, stream());
   }
 
-  /// Throws std::invalid_argument if a node to drive lies outside the region.
-  void check_in_region(index_t n, const index_t* ids, const index_t* dids, const char* what) {
-    if (region_.sizes().whole()) return;
-    bool all_seeds = true;
-    for (index_t k = 0; k < n; ++k)
-      all_seeds = all_seeds && std::find(seeds_.begin(), seeds_.end(), ids[k]) != seeds_.end();
-    if (all_seeds) return;  // seeds are inner nodes
-    launch(n, stream(), probe_roles_kernel, n, dids, store_.state().role, probe_dev_.data());
-    log_.to_host(probe_host_.data(), probe_dev_.data(), n, stream());
-    for (index_t k = 0; k < n; ++k)
-      if (probe_host_[k] == kOutside)
-        throw std::invalid_argument(
-            str(what, ": node ", ids[k], " is outside the deformation region (build_region from it first)"));
-  }
-
-  void check_driven(std::span<const index_t> nodes, std::span<const double> u, std::span<const std::uint8_t> axes,
-                    const char* what) const {
-    if (u.size() != 3 * nodes.size())
-      throw std::invalid_argument(
-          str(what, ": ", u.size(), " displacement values for ", nodes.size(), " nodes (need 3 per node)"));
-    const index_t n = store_.n_nodes();
-    for (size_t i = 0; i < nodes.size(); ++i) {
-      if (nodes[i] < 0 || nodes[i] >= n)
-        throw std::invalid_argument(str(what, ": node ", nodes[i], " out of range (0..", n - 1, ")"));
-      if (!axes.empty() && (axes[i] == 0 || axes[i] > kAllAxes))
-        throw std::invalid_argument(str(what, ": node ", nodes[i], ": axis mask ", int(axes[i]),
-                                        " must be 1..7 (bit 0 = x, 1 = y, 2 = z)"));
-      for (int c = 0; c < 3; ++c)
-        if (!std::isfinite(u[3 * i + c]))
-          throw std::invalid_argument(str(what, ": node ", nodes[i], ": displacement ", "xyz"[c], " = ",
-                                          u[3 * i + c], " is not finite"));
-    }
-  }
-
   Stream stream_;
   Transfers log_;
   DeviceStore<T> store_;
   RegionFill region_;
-  Collider<T> collider_;
   Reducer<T> reducer_;
+  DeviceContact<T> contact_;
   Stepper<T> stepper_;
   std::vector<index_t> seeds_;
   DeviceArray<index_t> driven_list_;      ///< current driven nodes (n_driven_)
@@ -416,13 +360,9 @@ class CudaBackend final : public Backend {
   Event drive_copied_;                    ///< the staging's last upload has been read
   bool drive_pending_ = false;
   index_t n_driven_ = 0;
-  std::vector<index_t> drive_ids_;        ///< set_driven's merge scratch (host)
-  std::vector<std::uint8_t> drive_masks_;
-  std::vector<double> drive_values_;
   DeviceArray<std::uint8_t> probe_dev_;   ///< roles of nodes to drive (n_nodes)
   PinnedArray<std::uint8_t> probe_host_;
-  DeviceArray<double> scratch_;           ///< set_displacements / download staging (7 n + ne)
-  bool uploaded_ = false;
+  DeviceArray<double> scratch_;           ///< set_displacements / download / role-probe staging (7 n + ne)
   std::string device_name_;
 };
 

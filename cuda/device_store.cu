@@ -55,6 +55,9 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   const std::vector<T> node_volume = node_volume_sums(m);
   upload_array(slot_of_, m.elem_slot, log, stream);
   upload_array(node_volume_, node_volume, log, stream);
+  upload_array(surf_nodes_, m.surf_nodes, log, stream);
+  upload_array(surf_slot_start_, m.surf_slot_start, log, stream);
+  upload_array(surf_slot_, m.surf_slot, log, stream);
   CUDA_CHECK(cudaStreamSynchronize(stream));  // the host sources above must outlive the copies
 
   model_ = {};
@@ -77,6 +80,10 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   model_.node_volume = node_volume_.data();
   model_.tris = tris_.data();
   model_.node_flags = node_flags_.data();
+  model_.n_surf = m.n_surf;
+  model_.surf_nodes = surf_nodes_.data();
+  model_.surf_slot_start = surf_slot_start_.data();
+  model_.surf_slot = surf_slot_.data();
   model_.dt = m.dt;
   model_.ianp = m.ianp;
 
@@ -91,6 +98,13 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   elem_J_.allocate(ne);
   node_p_.allocate(n);
   bad_.allocate(1);
+  contact_.allocate(n);
+  contact_tool_.allocate(n);
+  contact_normal_.allocate(n);
+  grasp_offset_.allocate(n);
+  corner_dx_.allocate(3 * size_t(m.n_tris));
+  corner_tool_.allocate(3 * size_t(m.n_tris));
+  corner_blocked_.allocate(3 * size_t(m.n_tris));
   reset_state(stream);
 }
 
@@ -104,6 +118,13 @@ void DeviceStore<T>::reset_state(cudaStream_t stream) {
   pv_slot_.fill_bytes(0, stream);
   node_p_.fill_bytes(0, stream);
   bad_.fill_bytes(0xff, stream);
+  contact_.fill_bytes(kNoContact, stream);
+  contact_tool_.fill_bytes(0xff, stream);  // -1
+  contact_normal_.fill_bytes(0, stream);
+  grasp_offset_.fill_bytes(0, stream);
+  corner_dx_.fill_bytes(0, stream);
+  corner_tool_.fill_bytes(0xff, stream);
+  corner_blocked_.fill_bytes(0, stream);
   launch(model_.n_nodes, stream, reset_nodes_kernel<T>, model_.n_nodes, model_.node_flags, held_.data(),
          driven_.data(), role_.data());
   launch(model_.n_elems, stream, reset_elems_kernel<T>, model_.n_elems, elem_J_.data());
@@ -122,6 +143,13 @@ StateView<T> DeviceStore<T>::state() {
   s.f_slot = f_slot_.data();
   s.f = f_.data();
   s.bad = bad_.data();
+  s.contact = contact_.data();
+  s.contact_tool = contact_tool_.data();
+  s.contact_normal = contact_normal_.data();
+  s.grasp_offset = grasp_offset_.data();
+  s.corner_dx = corner_dx_.data();
+  s.corner_tool = corner_tool_.data();
+  s.corner_blocked = corner_blocked_.data();
   return s;
 }
 

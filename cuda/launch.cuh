@@ -68,6 +68,12 @@ void launch_chained(index_t n, cudaStream_t stream, void (*kernel)(Params...), A
 #endif
 }
 
+/// Programmatic dependent launch, inside a chained kernel: let the next
+/// kernel in the stream be scheduled now; wait until the previous one has
+/// completed (and its writes are visible). Both are no-ops for a plain launch.
+__device__ __forceinline__ void let_next_pass_launch() { cudaTriggerProgrammaticLaunchCompletion(); }
+__device__ __forceinline__ void wait_for_previous_pass() { cudaGridDependencySynchronize(); }
+
 /// Grid-stride index of the calling thread and the stride.
 __device__ __forceinline__ index_t thread_index() { return static_cast<index_t>(blockIdx.x * blockDim.x + threadIdx.x); }
 __device__ __forceinline__ index_t thread_stride() { return static_cast<index_t>(gridDim.x * blockDim.x); }

@@ -47,34 +47,22 @@ __device__ ReducePartial block_reduce(ReducePartial mine) {
   return sh[0];
 }
 
-/// Node a's share: reaction over its driven components, internal force and
-/// squared components (held / free) if inner, kinetic energy, |u|, front.
+/// Node a's share (core node_terms) and its front-ring displacement.
 template <class T>
 __device__ void accumulate_node(const ModelView<T>& m, const StateView<T>& s, const StepBuffers<T>& b,
                                 const FrontView& front, index_t a, ReducePartial& p) {
-  const Packed3<T> fp = s.f[a], up = b.u[a], pp = b.u_prev[a];
-  const double f[3] = {fp.x, fp.y, fp.z};
-  const double u[3] = {up.x, up.y, up.z};
-  const double inv_dt = 1.0 / m.dt;
-  const double v[3] = {(u[0] - double(pp.x)) * inv_dt, (u[1] - double(pp.y)) * inv_dt,
-                       (u[2] - double(pp.z)) * inv_dt};
-  const double f2 = f[0] * f[0] + f[1] * f[1] + f[2] * f[2];
-  const double v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
-  if (const std::uint8_t d = s.driven[a])
-    for (int c = 0; c < 3; ++c)
-      if (d >> c & 1) p.reaction[c] += f[c];
-  if (s.role[a] == kInner) {
-    const std::uint8_t h = s.held[a];
-    for (int c = 0; c < 3; ++c) {
-      p.internal[c] += f[c];
-      ((h >> c & 1) ? p.held2 : p.free2) += f[c] * f[c];
-    }
+  const NodeTerms t = node_terms(s.f[a].vec(), b.u[a].vec(), b.u_prev[a].vec(), double(m.mass[a]), m.dt,
+                                 s.role[a] == kInner, s.held[a], s.driven[a], s.contact[a], s.contact_normal[a].vec());
+  for (int c = 0; c < 3; ++c) {
+    p.reaction[c] += t.reaction[c];
+    p.internal[c] += t.internal[c];
   }
-  p.kinetic += 0.5 * double(m.mass[a]) * v2;
-  const double d = sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
-  p.max_disp = fmax(p.max_disp, d);
-  if (front.ring && front.ring[a] == front.depth) p.front_disp = fmax(p.front_disp, d);
-  if (!isfinite(d) || !isfinite(f2) || !isfinite(v2)) ++p.nonfinite;
+  p.free2 += t.free2;
+  p.held2 += t.held2;
+  p.kinetic += t.kinetic;
+  p.max_disp = fmax(p.max_disp, t.disp);
+  if (front.ring && front.ring[a] == front.depth) p.front_disp = fmax(p.front_disp, t.disp);
+  if (!t.finite) ++p.nonfinite;
 }
 
 /// Element e's strain energy V W(Fbar) (core/energy.hpp) at the current u;
@@ -139,6 +127,9 @@ template <class T>
 void Reducer<T>::allocate(index_t n_nodes, index_t n_elems) {
   partial_.allocate(kMaxReduceBlocks);
   result_.allocate(1);
+  // every byte of the result is defined (its padding too: compute-sanitizer's
+  // initcheck reads the whole struct when it comes back)
+  CUDA_CHECK(cudaMemset(result_.data(), 0, result_.bytes()));
   result_host_.allocate(1);
   pv_slot_.allocate(4 * size_t(n_elems));
   elem_J_.allocate(n_elems);
@@ -147,7 +138,7 @@ void Reducer<T>::allocate(index_t n_nodes, index_t n_elems) {
 
 template <class T>
 Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
-                           StepBuffers<T> b, Transfers& log, cudaStream_t stream) {
+                           StepBuffers<T> b, DeviceContact<T>& contact, Transfers& log, cudaStream_t stream) {
   if (m.ianp && r.n_elems > 0) {  // nodal pressures at the current u, into scratch
     CUDA_CHECK(cudaMemcpyAsync(pv_slot_.data(), s.pv_slot, pv_slot_.bytes(), cudaMemcpyDeviceToDevice, stream));
     StateView<T> e = s;
@@ -161,6 +152,7 @@ Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const R
   launch_blocks(blocks, kReduceBlock, stream, reduce_partial_kernel<T>, m, s, r, front, b,
                 static_cast<const T*>(node_p_.data()), partial_.data());
   launch_blocks(1, kReduceBlock, stream, reduce_final_kernel, blocks, partial_.data(), s.bad, result_.data());
+  contact.reduce(m, s, result_.data(), stream);
   log.to_host(result_host_.data(), result_.data(), sizeof(Reductions), stream);
   return result_host_[0];
 }

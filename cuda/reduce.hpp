@@ -10,6 +10,7 @@
 #include <cuda_runtime.h>
 
 #include "core/backend.hpp"
+#include "cuda/contact.hpp"
 #include "cuda/device_array.hpp"
 #include "cuda/views.hpp"
 
@@ -37,12 +38,13 @@ class Reducer {
   /// current u: 4 n_elems + n_elems + n_nodes scalars).
   void allocate(index_t n_nodes, index_t n_elems);
 
-  /// Reduces over region r with the current buffers b; clears the bad flag.
+  /// Reduces over region r with the current buffers b; clears the bad flag;
+  /// `contact` adds the per-tool contact results before the one download.
   /// For IANP the energy needs the nodal pressures at the current u: passes
   /// 1 and 2 run again into scratch (the state's pass arrays stay as the last
   /// step wrote them).
   Reductions run(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
-                 StepBuffers<T> b, Transfers& log, cudaStream_t stream);
+                 StepBuffers<T> b, DeviceContact<T>& contact, Transfers& log, cudaStream_t stream);
 
  private:
   DeviceArray<ReducePartial> partial_;  ///< one per stage-1 block

@@ -1,5 +1,7 @@
 #include "cuda/region_fill.hpp"
 
+#include "core/node_rules.hpp"
+
 #include <cub/device/device_select.cuh>
 #include <thrust/iterator/counting_iterator.h>
 
@@ -68,9 +70,7 @@ __global__ void apply_region_kernel(index_t n, const std::uint8_t* flags, StateV
     b.u_next[a] = u;
     if (role == kOutside) s.f[a] = {T(0), T(0), T(0), T(0)};
     if (role == kHalo) {
-      Packed3<T> held_at = s.u_held[a];
-      hold_halo(fixed, driven, u, held_at);
-      s.u_held[a] = held_at;
+      s.u_held[a] = Packed3<T>::of(halo_target(fixed, driven, u.vec(), s.u_held[a].vec()));
       s.held[a] = kAllAxes;
       return;
     }

@@ -31,19 +31,6 @@ Topology topology(const ModelView<T>& m) {
   return {m.n_nodes, m.n_elems, m.elem_nodes, m.node_elem_start, m.node_elem};
 }
 
-/// Holds every component of a halo node: at 0 where the model fixes it
-/// (axis mask `fixed`), at the tool's target (already in held_at) where it
-/// is driven, else at its current displacement u.
-template <class T>
-TISSUE_HD void hold_halo(std::uint8_t fixed, std::uint8_t driven, const Packed3<T>& u, Packed3<T>& held_at) {
-  if (fixed & 1) held_at.x = T(0);
-  else if (!(driven & 1)) held_at.x = u.x;
-  if (fixed & 2) held_at.y = T(0);
-  else if (!(driven & 2)) held_at.y = u.y;
-  if (fixed & 4) held_at.z = T(0);
-  else if (!(driven & 4)) held_at.z = u.z;
-}
-
 class RegionFill {
  public:
   /// Allocates the lists, flags and CUB scratch for a mesh of this size.

@@ -99,25 +99,30 @@ void Stepper<T>::node_update(const ModelView<T>& m, const StateView<T>& s, const
 
 template <class T>
 void Stepper<T>::launch_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
-                              int steps, cudaStream_t stream) {
+                              int steps, const ContactTools<T>* tools, cudaStream_t stream) {
   for (int k = 0; k < steps; ++k) {
     element_pressure(m, s, r, b.u, stream);
     nodal_pressure(m, s, r, stream);
     element_forces(m, s, r, b.u, stream);
     node_update(m, s, r, b, stream);
+    if (tools) {  // the contact stage over the surface (cuda/contact.cuh)
+      launch_chained(m.n_tris, stream, sweep_triangles_kernel<T>, m, s, tools, k,
+                     static_cast<const Packed3<T>*>(b.u_next));
+      launch_chained(m.n_surf, stream, gather_contacts_kernel<T>, m, s, tools, k, b.u_next);
+    }
     b = b.rotated();
   }
 }
 
 template <class T>
 cudaGraphExec_t Stepper<T>::graph(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
-                                  BufferRing<T>& ring, int steps, cudaStream_t stream) {
-  const std::pair<int, int> key{ring.phase, steps};
+                                  BufferRing<T>& ring, int steps, const ContactTools<T>* tools, cudaStream_t stream) {
+  const std::tuple<int, int, bool> key{ring.phase, steps, tools != nullptr};
   if (auto it = graphs_.find(key); it != graphs_.end()) return it->second.get();
   cudaGraph_t g = nullptr;
   CUDA_CHECK(cudaStreamBeginCapture(stream, cudaStreamCaptureModeThreadLocal));
   try {
-    launch_steps(m, s, r, ring.current(), steps, stream);
+    launch_steps(m, s, r, ring.current(), steps, tools, stream);
   } catch (...) {
     cudaStreamEndCapture(stream, &g);
     if (g) cudaGraphDestroy(g);
@@ -133,41 +138,42 @@ cudaGraphExec_t Stepper<T>::graph(const ModelView<T>& m, const StateView<T>& s, 
 
 template <class T>
 void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, BufferRing<T>& ring,
-                         int steps, cudaStream_t stream) {
+                         int steps, const ContactTools<T>* tools, cudaStream_t stream) {
   if (steps <= 0) return;
-  if (r.n_elems == 0 && r.n_nodes == 0) {  // nothing moves; every buffer holds the same (frozen) values
+  if (r.n_elems == 0 && r.n_nodes == 0 && !tools) {  // nothing moves; every buffer holds the same (frozen) values
     ring.advance(steps);
     return;
   }
   switch (choose(r)) {
     case CudaStepMode::Auto:  // resolved by choose()
     case CudaStepMode::Launch:
-      launch_steps(m, s, r, ring.current(), steps, stream);
+      launch_steps(m, s, r, ring.current(), steps, tools, stream);
       ring.advance(steps);
       break;
     case CudaStepMode::Graph:
       while (steps > 0) {
         const int k = std::min(steps, kMaxGraphSteps);
-        CUDA_CHECK(cudaGraphLaunch(graph(m, s, r, ring, k, stream), stream));
+        CUDA_CHECK(cudaGraphLaunch(graph(m, s, r, ring, k, tools, stream), stream));
         ring.advance(k);
         steps -= k;
       }
       break;
     case CudaStepMode::Grid: {
-      const index_t items = std::max(r.n_elems, kNodeLanes * r.n_nodes);
+      const index_t items = std::max({r.n_elems, kNodeLanes * r.n_nodes, tools ? m.n_tris : 0});
       const int blocks = std::clamp(grid_for(items, kGridBlock), 1, limits_.grid_blocks);
       ModelView<T> ma = m;
       StateView<T> sa = s;
       RegionView ra = r;
       StepBuffers<T> b = ring.current();
-      void* args[] = {&ma, &sa, &ra, &b, &steps};
+      const ContactTools<T>* ta = tools;
+      void* args[] = {&ma, &sa, &ra, &b, &steps, &ta};
       CUDA_CHECK(cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(persistent_grid_kernel<T>), dim3(blocks),
                                              dim3(kGridBlock), args, 0, stream));
       ring.advance(steps);
       break;
     }
     case CudaStepMode::Cluster: {
-      const index_t items = std::max(r.n_elems, kNodeLanes * r.n_nodes);
+      const index_t items = std::max({r.n_elems, kNodeLanes * r.n_nodes, tools ? m.n_tris : 0});
       const int blocks = std::clamp(grid_for(items, kClusterBlock<T>), 1, limits_.cluster_size);
       cudaLaunchConfig_t cfg = {};
       cfg.gridDim = dim3(blocks);
@@ -180,7 +186,7 @@ void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, const Reg
       attr.val.clusterDim.z = 1;
       cfg.attrs = &attr;
       cfg.numAttrs = 1;
-      CUDA_CHECK(cudaLaunchKernelEx(&cfg, persistent_cluster_kernel<T>, m, s, r, ring.current(), steps));
+      CUDA_CHECK(cudaLaunchKernelEx(&cfg, persistent_cluster_kernel<T>, m, s, r, ring.current(), steps, tools));
       ring.advance(steps);
       break;
     }

@@ -20,9 +20,11 @@
 #include <cuda_runtime.h>
 
 #include <map>
+#include <tuple>
 #include <utility>
 
 #include "cuda/cuda_backend.hpp"
+#include "core/contact.hpp"
 #include "cuda/device_store.hpp"
 
 namespace tissue::gpu {
@@ -82,18 +84,21 @@ class Stepper {
                    cudaStream_t stream);
 
   /// `steps` whole steps from ring's current phase; advances the phase.
+  /// With `tools` (device memory: the tools' motion over these steps), each
+  /// step ends with the contact stage (cuda/contact.cuh); null: none.
   void advance(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, BufferRing<T>& ring, int steps,
-               cudaStream_t stream);
+               const ContactTools<T>* tools, cudaStream_t stream);
 
  private:
   void launch_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b, int steps,
-                    cudaStream_t stream);
+                    const ContactTools<T>* tools, cudaStream_t stream);
   cudaGraphExec_t graph(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, BufferRing<T>& ring,
-                        int steps, cudaStream_t stream);
+                        int steps, const ContactTools<T>* tools, cudaStream_t stream);
 
   CudaStepMode mode_ = CudaStepMode::Auto;
   PersistentLimits limits_;
-  std::map<std::pair<int, int>, GraphExec> graphs_;  ///< (phase, steps) -> graph
+  /// (phase, steps, contact) -> graph; the tools' buffer is the backend's one device array
+  std::map<std::tuple<int, int, bool>, GraphExec> graphs_;
 };
 
 }  // namespace tissue::gpu

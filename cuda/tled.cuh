@@ -15,7 +15,9 @@
 
 #include <cooperative_groups.h>
 
+#include "core/node_rules.hpp"
 #include "core/tet.hpp"
+#include "cuda/contact.cuh"
 #include "cuda/launch.cuh"
 #include "cuda/views.hpp"
 
@@ -156,22 +158,8 @@ __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, con
   if (d.lane != 0) return;
   const index_t a = d.a;
   s.f[a] = Packed3<T>::of(f);
-  const std::uint8_t h = s.held[a];
-  if (h == kAllAxes) {
-    b.u_next[a] = s.u_held[a];
-    return;
-  }
   const CentralDifference<T> k = {__ldg(m.cd_A + a), __ldg(m.cd_B + a), __ldg(m.cd_C + a)};
-  const Packed3<T> u = b.u[a], up = b.u_prev[a];
-  Packed3<T> next = {central_difference_update(k, -f.x, u.x, up.x), central_difference_update(k, -f.y, u.y, up.y),
-                     central_difference_update(k, -f.z, u.z, up.z), T(0)};
-  if (h) {  // per-component constraints (rollers, symmetry planes, axis-driven nodes)
-    const Packed3<T> target = s.u_held[a];
-    if (h & 1) next.x = target.x;
-    if (h & 2) next.y = target.y;
-    if (h & 4) next.z = target.z;
-  }
-  b.u_next[a] = next;
+  b.u_next[a] = Packed3<T>::of(node_next(s.held[a], s.u_held[a].vec(), k, f, b.u[a].vec(), b.u_prev[a].vec()));
 }
 
 // ---- one kernel per pass ------------------------------------------------------
@@ -180,8 +168,6 @@ __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, con
 // previous grid (programmatic dependent launch; both calls are no-ops for a
 // plain launch) before it touches the state.
 
-__device__ __forceinline__ void let_next_pass_launch() { cudaTriggerProgrammaticLaunchCompletion(); }
-__device__ __forceinline__ void wait_for_previous_pass() { cudaGridDependencySynchronize(); }
 
 template <class T>
 __global__ void element_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
@@ -244,10 +230,12 @@ struct ClusterBarrier {
 /// `steps` TLED steps; every pass is a grid-stride loop over the region
 /// (node passes over kNodeLanes lanes per node: the stride is a multiple of
 /// kNodeLanes, so a group's lanes always iterate together) and the barrier
-/// separates passes (and steps). The buffers rotate per step.
+/// separates passes (and steps); with tools, each step ends with the
+/// contact stage (cuda/contact.cuh) over the surface. The buffers rotate per
+/// step.
 template <class T, class Barrier>
 __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
-                          int steps, Barrier barrier) {
+                          int steps, const ContactTools<T>* tools, Barrier barrier) {
   const index_t first = thread_index(), stride = thread_stride();
   const index_t node_items = kNodeLanes * r.n_nodes;
   const int lane = first % kNodeLanes;
@@ -262,6 +250,12 @@ __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const Re
     barrier();
     for (index_t g = first; g < node_items; g += stride)
       node_update_at(m, s, b, load_node(m, r.node(g / kNodeLanes), lane, mask));
+    if (tools) {  // the contact stage
+      barrier();
+      for (index_t t = first; t < m.n_tris; t += stride) sweep_triangle_at(m, s, *tools, k, b.u_next, t);
+      barrier();
+      for (index_t i = first; i < m.n_surf; i += stride) gather_contact_at(m, s, *tools, k, b.u_next, i);
+    }
     b = b.rotated();
     if (k + 1 < steps) barrier();
   }
@@ -279,14 +273,16 @@ inline constexpr int kClusterBlock = sizeof(T) == 4 ? 1024 : 512;
 
 template <class T>
 __global__ void __launch_bounds__(kGridBlock)
-    persistent_grid_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b, int steps) {
-  run_steps(m, s, r, b, steps, GridBarrier{});
+    persistent_grid_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b, int steps,
+                           const ContactTools<T>* tools) {
+  run_steps(m, s, r, b, steps, tools, GridBarrier{});
 }
 
 template <class T>
 __global__ void __launch_bounds__(kClusterBlock<T>)
-    persistent_cluster_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b, int steps) {
-  run_steps(m, s, r, b, steps, ClusterBarrier{});
+    persistent_cluster_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b, int steps,
+                              const ContactTools<T>* tools) {
+  run_steps(m, s, r, b, steps, tools, ClusterBarrier{});
 }
 
 }  // namespace tissue::gpu

@@ -51,6 +51,10 @@ struct ModelView {
   const T* node_volume = nullptr;         ///< sum_e V_e over node_elem in stored order (n_nodes) m^3
   const index_t* tris = nullptr;          ///< (3 x n_tris)
   const std::uint8_t* node_flags = nullptr;  ///< NodeFlag bits (n_nodes)
+  index_t n_surf = 0;                     ///< surface nodes
+  const index_t* surf_nodes = nullptr;    ///< (n_surf) ascending
+  const index_t* surf_slot_start = nullptr;  ///< (n_surf + 1)
+  const index_t* surf_slot = nullptr;     ///< each surface node's (triangle, corner) slots 3 t + k (3 n_tris)
   double dt = 0;                          ///< s
   bool ianp = true;
 };
@@ -89,6 +93,14 @@ struct StateView {
   Packed3<T>* f_slot = nullptr;        ///< pass 3: f_a^e per node_elem slot (4 n_elems) N
   Packed3<T>* f = nullptr;             ///< pass 4: internal force (n_nodes) N
   unsigned long long* bad = nullptr;   ///< lowest bad element key (see bad_key), ~0 = none
+  // contact (core/contact.hpp)
+  std::uint8_t* contact = nullptr;     ///< ContactKind after the last step (n_nodes)
+  signed char* contact_tool = nullptr; ///< the tool touched, -1 none (n_nodes)
+  Packed3<T>* contact_normal = nullptr;///< pushed nodes' contact normal (n_nodes)
+  Packed3<T>* grasp_offset = nullptr;  ///< grasped nodes' offset from the tool tip at the grasp (n_nodes) m
+  Packed3<T>* corner_dx = nullptr;     ///< the sweep's correction per (triangle, corner) slot 3 t + k (3 n_tris) m
+  signed char* corner_tool = nullptr;  ///< its tool, -1 none (3 n_tris)
+  std::uint8_t* corner_blocked = nullptr;  ///< ContactKind of a blocked penetration, 0 none (3 n_tris)
 };
 
 }  // namespace tissue::gpu

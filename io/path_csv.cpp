@@ -75,8 +75,7 @@ Waypoint parse_row(std::string_view text, const Columns& cols, const std::string
     w.grasp = g == "1";
   }
   if (cols.axis[0] >= 0) {
-    w.axis = {number(cols.axis[0], "ax"), number(cols.axis[1], "ay"), number(cols.axis[2], "az")};
-    if (!(norm(w.axis) > 0)) fail(source, line, "axis (0, 0, 0) must be a non-zero direction");
+    w.axis = {number(cols.axis[0], "ax"), number(cols.axis[1], "ay"), number(cols.axis[2], "az")};  // 0,0,0: none
   }
   return w;
 }

@@ -1,6 +1,7 @@
 // Scripted tool paths as CSV: a header line "t,x,y,z", optionally followed
 // by the columns "grasp" (0/1, the grasp button from this waypoint on) and
-// "ax,ay,az" (the shaft axis, tip to handle), then one waypoint per line,
+// "ax,ay,az" (the shaft axis, tip to handle; 0,0,0 = the scene's direction),
+// then one waypoint per line,
 // time in s and tip position in m (SI). Blank lines and lines starting
 // with '#' are skipped; fields may carry surrounding blanks. Times must
 // increase strictly. Every error names file:line.

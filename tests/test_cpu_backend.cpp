@@ -1,8 +1,9 @@
-// The cpu backend (cpu/): the IANP passes against a serial reference built
-// from core/tet.hpp, zero force at rest and under rigid motion, determinism
-// across thread counts, float against double, the region (only region nodes
-// move; halo, frozen, fixed and driven semantics), the inverted-element stop,
-// the reductions, and bad input.
+// The cpu backend's own tests (the interface contract, shared with the cuda
+// backend, is tests/test_backend_contract.cpp): its name and thread count,
+// determinism across thread counts, float against double, the halo rule on
+// its state, the reductions against their definitions on its state, host
+// positions, and the surface BVH that is rebuilt only when the surface has
+// left its margin.
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
@@ -19,103 +20,12 @@
 #include "core/tet.hpp"
 #include "cpu/cpu_backend.hpp"
 #include "cpu/host_backend.hpp"
+#include "tests/backend_test_support.hpp"
 
 namespace tissue {
 namespace {
 
-constexpr double kL = 0.02;  // box edge (m)
-
-/// A kL-sized box of n^3 cells, brain-like tissue (E = 3000 Pa, nu = 0.45,
-/// rho = 1000 kg/m^3); optionally the bottom face z = 0 fixed.
-TissueModel<double> box_model(int n, bool fix_bottom = false, bool ianp = true) {
-  ModelInput in;
-  box_mesh(in, n, n, n, kL, kL, kL);
-  const double E = 3000, nu = 0.45;
-  in.materials = {{E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu)), 1000}};
-  in.ianp = ianp;
-  in.source = "box";
-  if (fix_bottom) {
-    in.fixed.assign(in.nodes.size() / 3, 0);
-    for (size_t i = 0; i < in.fixed.size(); ++i) in.fixed[i] = in.nodes[3 * i + 2] == 0.0;
-  }
-  return build_model(in);
-}
-
-/// u = g(X) for every node (3 x n_nodes).
-template <class G>
-std::vector<double> field(const TissueModel<double>& m, G g) {
-  const index_t n = m.n_nodes;
-  std::vector<double> u(3 * n);
-  for (index_t i = 0; i < n; ++i) {
-    const Vec3<double> d = g(Vec3<double>{m.X[i], m.X[n + i], m.X[2 * n + i]});
-    for (int c = 0; c < 3; ++c) u[c * n + i] = d[c];
-  }
-  return u;
-}
-
-double max_abs(const std::vector<double>& v) {
-  double r = 0;
-  for (double x : v) r = std::max(r, std::fabs(x));
-  return r;
-}
-
-double max_diff(const std::vector<double>& a, const std::vector<double>& b) {
-  double r = 0;
-  for (size_t k = 0; k < a.size(); ++k) r = std::max(r, std::fabs(a[k] - b[k]));
-  return r;
-}
-
-Vec3<double> node_u(const std::vector<double>& u, index_t n, index_t a) {
-  return {u[a], u[n + a], u[2 * n + a]};
-}
-
-/// Serial, scatter-based reference of one TLED step over the whole mesh,
-/// straight from DESIGN.md section 2 and core/tet.hpp (R = 0). Held nodes
-/// (held[a]) are set to u_held. Returns the internal forces f (3 x n).
-std::vector<double> reference_step(const TissueModel<double>& m, std::vector<double>& u, std::vector<double>& u_prev,
-                                   const std::vector<std::uint8_t>& held, const std::vector<double>& u_held) {
-  const index_t n = m.n_nodes, ne = m.n_elems;
-  auto corner_u = [&](index_t e, Vec3<double> ue[4], double dN[12]) {
-    for (int a = 0; a < 4; ++a) ue[a] = node_u(u, n, m.elem_nodes[a * ne + e]);
-    for (int k = 0; k < 12; ++k) dN[k] = m.dndx[k * ne + e];
-  };
-  std::vector<double> num(n, 0.0), den(n, 0.0), f(3 * n, 0.0);
-  for (index_t e = 0; e < ne; ++e) {  // pass 1 and the scatter of pass 2
-    Vec3<double> ue[4];
-    double dN[12];
-    corner_u(e, ue, dN);
-    const double pv = volumetric_pressure(det(deformation_gradient(ue, dN)), m.K[e]) * m.volume[e];
-    for (int a = 0; a < 4; ++a) {
-      num[m.elem_nodes[a * ne + e]] += pv;
-      den[m.elem_nodes[a * ne + e]] += m.volume[e];
-    }
-  }
-  for (index_t e = 0; e < ne; ++e) {  // pass 3 and the scatter of pass 4
-    Vec3<double> ue[4], fe[4];
-    double dN[12];
-    corner_u(e, ue, dN);
-    double p[4];
-    for (int a = 0; a < 4; ++a) p[a] = num[m.elem_nodes[a * ne + e]] / den[m.elem_nodes[a * ne + e]];
-    const double pbar = 0.25 * (((p[0] + p[1]) + p[2]) + p[3]);
-    if (m.ianp)
-      ianp_element_forces(ue, dN, m.volume[e], m.mu[e], m.K[e], pbar, fe);
-    else
-      plain_element_forces(ue, dN, m.volume[e], m.mu[e], m.K[e], fe);
-    for (int a = 0; a < 4; ++a)
-      for (int c = 0; c < 3; ++c) f[c * n + m.elem_nodes[a * ne + e]] += fe[a][c];
-  }
-  std::vector<double> next(3 * n);
-  for (index_t a = 0; a < n; ++a)
-    for (int c = 0; c < 3; ++c) {
-      const size_t k = size_t(c) * n + a;
-      next[k] = held[a] ? u_held[k]
-                        : central_difference_update(CentralDifference<double>{m.cd_A[a], m.cd_B[a], m.cd_C[a]}, -f[k],
-                                                    u[k], u_prev[k]);
-    }
-  u_prev = u;
-  u = next;
-  return f;
-}
+using namespace tissue::test;
 
 class CpuBackendTest : public ::testing::TestWithParam<Precision> {
  protected:
@@ -130,90 +40,10 @@ class CpuBackendTest : public ::testing::TestWithParam<Precision> {
 INSTANTIATE_TEST_SUITE_P(Precisions, CpuBackendTest, ::testing::Values(Precision::Float, Precision::Double),
                          [](const auto& info) { return std::string(to_string(info.param)); });
 
-TEST_P(CpuBackendTest, IdentifiesItself) {
+TEST_P(CpuBackendTest, NamesTheProcessorAndItsThreads) {
   auto b = make_cpu_backend(GetParam());
-  EXPECT_EQ(b->name(), "cpu");
-  EXPECT_EQ(b->precision(), GetParam());
   EXPECT_NE(b->device_name().find("TBB threads"), std::string::npos) << b->device_name();
   EXPECT_EQ(b->device_name(), cpu_device_name());
-}
-
-TEST_P(CpuBackendTest, ZeroForceAtRest) {
-  const auto m = box_model(3, true);
-  auto b = make(m);
-  b->advance(3);
-  const Fields f = b->download();
-  EXPECT_EQ(max_abs(f.u), 0.0);
-  EXPECT_EQ(max_abs(f.f), 0.0);
-  EXPECT_EQ(max_abs(f.node_p), 0.0);
-  for (double J : f.elem_J) EXPECT_EQ(J, 1.0);
-  const Reductions r = b->reduce();
-  EXPECT_EQ(r.free_force2 + r.held_force2 + r.kinetic + r.max_disp, 0.0);
-  EXPECT_EQ(r.bad_elem, -1);
-  EXPECT_TRUE(r.finite);
-}
-
-/// Max |f| after one step from a 5% uniaxial stretch: the force scale the
-/// rigid-motion tolerances are relative to.
-double stretch_force(Backend& b, const TissueModel<double>& m) {
-  b.set_displacements(field(m, [](Vec3<double> X) { return Vec3<double>{0.05 * X.x, 0, 0}; }));
-  b.advance(1);
-  return max_abs(b.download().f);
-}
-
-TEST_P(CpuBackendTest, RigidTranslationGivesNoInternalForce) {
-  const auto m = box_model(4);
-  auto b = make(m);
-  const double scale = stretch_force(*b, m);
-  ASSERT_GT(scale, 1e-6);
-  const auto u = field(m, [](Vec3<double>) { return Vec3<double>{0.003, -0.002, 0.001}; });
-  b->set_displacements(u);
-  b->advance(1);
-  const Fields f = b->download();
-  // tolerance: rounding of F = I + sum u_a dN_a^T, relative to the stretch case
-  EXPECT_LT(max_abs(f.f), (is_float() ? 1e-4 : 1e-11) * scale);
-  EXPECT_LT(max_diff(f.u, u), is_float() ? 1e-9 : 1e-17);  // and nothing moved
-}
-
-TEST_P(CpuBackendTest, RigidRotationGivesNoInternalForce) {
-  const auto m = box_model(4);
-  auto b = make(m);
-  const double scale = stretch_force(*b, m);
-  // 30 degrees about the axis (1, 2, 3) / |.| through the box centre (Rodrigues)
-  const Vec3<double> k = (1.0 / std::sqrt(14.0)) * Vec3<double>{1, 2, 3}, c{kL / 2, kL / 2, kL / 2};
-  const double th = M_PI / 6;
-  const auto u = field(m, [&](Vec3<double> X) {
-    const Vec3<double> r = X - c;
-    const Vec3<double> Rr = std::cos(th) * r + std::sin(th) * cross(k, r) + ((1 - std::cos(th)) * dot(k, r)) * k;
-    return Rr - r;
-  });
-  b->set_displacements(u);
-  b->advance(1);
-  EXPECT_LT(max_abs(b->download().f), (is_float() ? 1e-4 : 1e-11) * scale);
-}
-
-TEST_P(CpuBackendTest, PassesMatchASerialReference) {
-  for (bool ianp : {true, false}) {
-    const auto m = box_model(3, true, ianp);
-    auto b = make(m);
-    std::vector<double> u = field(m, [](Vec3<double> X) {
-      return Vec3<double>{0.04 * X.x * X.z / kL, -0.03 * X.y, 0.02 * X.x - 0.05 * X.z * X.z / kL};
-    });
-    for (index_t a = 0; a < m.n_nodes; ++a)
-      if (m.node_flags[a] & kFixed)
-        for (int c = 0; c < 3; ++c) u[c * m.n_nodes + a] = 0;
-    b->set_displacements(u);
-    std::vector<double> u_prev = u, u_held(u.size(), 0.0), f;
-    std::vector<std::uint8_t> held(m.n_nodes);
-    for (index_t a = 0; a < m.n_nodes; ++a) held[a] = (m.node_flags[a] & kFixed) ? 1 : 0;
-    for (int s = 0; s < 5; ++s) f = reference_step(m, u, u_prev, held, u_held);
-    b->advance(5);
-    const Fields got = b->download();
-    const double f_tol = (is_float() ? 1e-4 : 1e-12) * max_abs(f);  // measured: 2e-6 float, 0 double
-    const double u_tol = (is_float() ? 1e-5 : 1e-14) * max_abs(u);  // measured: 2e-6 float, 0 double
-    EXPECT_LT(max_diff(got.f, f), f_tol) << "ianp " << ianp;
-    EXPECT_LT(max_diff(got.u, u), u_tol) << "ianp " << ianp;
-  }
 }
 
 /// A scripted run: stretch, drive two nodes, step, release, step. Returns the
@@ -282,71 +112,6 @@ TEST(CpuBackendPrecision, FloatAgreesWithDouble) {
   }
   // the driven nodes were pushed down: their internal force f = dW/du points down too
   EXPECT_LT(d.red[3].reaction.z, 0.0);
-}
-
-/// The three nodes of a top-face triangle near the middle of a box of n^3 cells.
-std::vector<index_t> top_triangle(const TissueModel<double>& m) {
-  const index_t n = m.n_nodes, nt = m.n_tris;
-  index_t best = -1;
-  double best_d = 1e300;
-  for (index_t t = 0; t < nt; ++t) {
-    Vec3<double> c{0, 0, 0};
-    bool top = true;
-    for (int k = 0; k < 3; ++k) {
-      const index_t i = m.tris[k * nt + t];
-      top = top && m.X[2 * n + i] == kL;
-      c = c + (1.0 / 3) * Vec3<double>{m.X[i], m.X[n + i], m.X[2 * n + i]};
-    }
-    const double d = std::hypot(c.x - kL / 2, c.y - kL / 2);
-    if (top && d < best_d) {
-      best = t;
-      best_d = d;
-    }
-  }
-  std::vector<index_t> v = {m.tris[best], m.tris[nt + best], m.tris[2 * nt + best]};
-  std::sort(v.begin(), v.end());
-  return v;
-}
-
-TEST_P(CpuBackendTest, RegionRunMovesOnlyRegionNodes) {
-  const auto m = box_model(6, true);
-  auto b = make(m);
-  const auto seeds = top_triangle(m);
-  const RegionSizes sz = b->build_region(seeds, 1);
-  const Region want = flood_fill(m, std::span<const index_t>(seeds), 1);
-  EXPECT_EQ(sz.n_inner, want.n_inner);
-  EXPECT_EQ(sz.n_halo, want.n_halo);
-  EXPECT_EQ(sz.n_elems, index_t(want.elems.size()));
-  const Region got = b->region();
-  EXPECT_EQ(got.nodes, want.nodes);
-  EXPECT_EQ(got.elems, want.elems);
-  EXPECT_EQ(got.role, want.role);
-  ASSERT_LT(got.nodes.size(), size_t(m.n_nodes) / 2);
-
-  const double push[] = {0, 0, -0.001, 0, 0, -0.001, 0, 0, -0.001};
-  b->set_driven(seeds, push);
-  b->advance(30);
-  const Fields f = b->download();
-  const index_t n = m.n_nodes;
-  int moved = 0;
-  for (index_t a = 0; a < n; ++a) {
-    const Vec3<double> u = node_u(f.u, n, a);
-    const bool seed = std::count(seeds.begin(), seeds.end(), a) > 0;
-    if (seed) {
-      EXPECT_NEAR(u.z, -0.001, is_float() ? 1e-10 : 1e-15) << "driven node " << a;  // float(-0.001)
-    } else if (want.role[a] == kInner) {
-      moved += norm(u) > 1e-6;
-    } else {  // outside and halo nodes stay exactly where they were (at 0)
-      EXPECT_EQ(norm(u), 0.0) << "node " << a << " role " << int(want.role[a]);
-    }
-  }
-  EXPECT_GT(moved, 0);
-  // the force on the driven nodes pushes back up; it matches the downloaded f
-  const Reductions r = b->reduce();
-  double fz = 0;
-  for (index_t a : seeds) fz += f.f[2 * n + a];
-  EXPECT_LT(r.reaction.z, 0);
-  EXPECT_NEAR(r.reaction.z, fz, 1e-12 * std::fabs(fz));
 }
 
 /// build_region on a moving mesh, with a driven node that becomes halo (body
@@ -428,66 +193,6 @@ TEST_P(CpuBackendTest, BuildRegionHaloSemantics) {
     check_halo_semantics<double>();
 }
 
-/// Moves node `a` of element `e` along -dN_a so that J_e = 1 - amount.
-std::vector<double> flip(const TissueModel<double>& m, index_t e, int corner, double amount) {
-  const index_t n = m.n_nodes, ne = m.n_elems;
-  const Vec3<double> g{m.dndx[(3 * corner) * ne + e], m.dndx[(3 * corner + 1) * ne + e],
-                       m.dndx[(3 * corner + 2) * ne + e]};
-  std::vector<double> u(3 * n, 0.0);
-  const index_t a = m.elem_nodes[corner * ne + e];
-  for (int c = 0; c < 3; ++c) u[c * n + a] = -amount * g[c] / dot(g, g);  // J = 1 + dN_a . u_a
-  return u;
-}
-
-/// Lowest element with det F <= 0 under u (core math), and its J.
-std::pair<index_t, double> lowest_inverted(const TissueModel<double>& m, const std::vector<double>& u) {
-  const index_t n = m.n_nodes, ne = m.n_elems;
-  for (index_t e = 0; e < ne; ++e) {
-    Vec3<double> ue[4];
-    double dN[12];
-    for (int a = 0; a < 4; ++a) ue[a] = node_u(u, n, m.elem_nodes[a * ne + e]);
-    for (int k = 0; k < 12; ++k) dN[k] = m.dndx[k * ne + e];
-    const double J = det(deformation_gradient(ue, dN));
-    if (J <= 0) return {e, J};
-  }
-  return {-1, 1};
-}
-
-TEST_P(CpuBackendTest, InvertedElementIsReportedOnceThenCleared) {
-  for (bool ianp : {true, false}) {
-    const auto m = box_model(2, false, ianp);
-    auto b = make(m);
-    const auto u = flip(m, 29, 3, 1.3);
-    const auto [e, J] = lowest_inverted(m, u);
-    ASSERT_GE(e, 0);
-    b->set_displacements(u);
-    b->advance(1);
-    const Reductions r = b->reduce();
-    EXPECT_EQ(r.bad_elem, e) << "ianp " << ianp;
-    EXPECT_NEAR(r.bad_J, J, 1e-6 * std::fabs(J) + 1e-6);  // recorded as float
-    EXPECT_EQ(b->reduce().bad_elem, -1);                  // reduce() cleared the flag
-  }
-}
-
-TEST_P(CpuBackendTest, InvertedElementStopsTheScheduler) {
-  const auto m = box_model(2);
-  auto b = make(m);
-  const auto u = flip(m, 29, 3, 1.3);
-  const auto [e, J] = lowest_inverted(m, u);
-  ASSERT_GE(e, 0);
-  b->set_displacements(u);
-  SchedulerSettings settings;
-  settings.depth = kDepthAll;
-  Scheduler sched(*b, m, settings);
-  ScriptedDevice far(std::vector<Waypoint>{{0.0, {1.0, 1.0, 1.0}}});  // never touches the box
-  try {
-    sched.tick(far);
-    FAIL() << "an inverted element did not stop the run";
-  } catch (const SimulationError& err) {
-    EXPECT_NE(std::string(err.what()).find(fmt::format("element {} ", e)), std::string::npos) << err.what();
-  }
-}
-
 TEST_P(CpuBackendTest, ReductionsMatchTheirDefinitions) {
   const auto m = box_model(4, true);
   cpu::CpuBackend<double> b;
@@ -539,40 +244,29 @@ TEST_P(CpuBackendTest, WritePositionsGivesDeformedXyzTriples) {
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(pos[3 * i + c], m.X[c * n + i] + u[c * n + i], 1e-8) << i;
 }
 
-TEST_P(CpuBackendTest, BadInputIsRejectedWithItsRule) {
-  auto fresh = make_cpu_backend(GetParam());
-  EXPECT_THROW(fresh->advance(1), std::logic_error);
-  EXPECT_THROW(fresh->reduce(), std::logic_error);
-  EXPECT_THROW(fresh->collide({0, 0, 0}, {1, 1, 1}), std::logic_error);
-
-  const auto m = box_model(2);
-  auto b = make(m);
-  const index_t n = m.n_nodes;
-  auto message = [](auto&& f) {
-    try {
-      f();
-    } catch (const std::invalid_argument& e) {
-      return std::string(e.what());
-    }
-    return std::string("<no exception>");
-  };
-  std::vector<double> u(3 * n - 1, 0.0);
-  EXPECT_NE(message([&] { b->set_displacements(u); }).find(fmt::format("need 3 x n_nodes = {}", 3 * n)),
-            std::string::npos);
-  u.assign(3 * n, 0.0);
-  u[n + 5] = std::nan("");
-  EXPECT_NE(message([&] { b->set_displacements(u); }).find("node 5: displacement y"), std::string::npos);
-  const index_t nodes[] = {3, n};
-  const double t6[6] = {};
-  EXPECT_NE(message([&] { b->set_driven(nodes, std::span<const double>(t6, 5)); }).find("5 displacement values"),
-            std::string::npos);
-  EXPECT_NE(message([&] { b->set_driven(nodes, t6); }).find(fmt::format("node {} out of range", n)), std::string::npos);
-  const index_t far[] = {0};
-  const index_t seed[] = {n - 1};
-  b->build_region(seed, 0);
-  EXPECT_NE(message([&] { b->set_driven(far, std::span<const double>(t6, 3)); }).find("node 0 is outside"),
-            std::string::npos);
-  EXPECT_THROW(b->build_region(seed, -3), std::invalid_argument);
+/// A slab whose top the tool presses: the BVH is built once, then rebuilt
+/// only when a surface node has moved more than the margin since.
+TEST(SurfaceBvh, RebuiltOnlyWhenTheSurfaceLeavesItsMargin) {
+  const auto m = box_model(6, true);
+  cpu::CpuBackend<double> b;
+  b.upload(m);
+  const ToolShape tool{"probe", 0.003, 0};
+  b.set_tools(std::span<const ToolShape>(&tool, 1));
+  const Vec3<double> top{0.5 * kL + 1e-4, 0.5 * kL + 2e-4, kL + tool.radius};
+  ToolMotion mv{{top, {0, 0, 1}}, {top, {0, 0, 1}}};
+  b.move_tools(std::span<const ToolMotion>(&mv, 1));
+  b.advance(5);
+  EXPECT_EQ(b.surface_builds(), 1);  // the first query builds it; nothing moved since
+  // press 4 mm (more than the margin, the median surface edge of 3.3 mm), then hold
+  for (int k = 0; k < 40; ++k) {
+    mv = {mv.to, {top - Vec3<double>{0, 0, 1e-4 * (k + 1)}, {0, 0, 1}}};
+    b.move_tools(std::span<const ToolMotion>(&mv, 1));
+    b.advance(2);
+  }
+  const long after_press = b.surface_builds();
+  EXPECT_GE(after_press, 2);
+  EXPECT_LE(after_press, 6);  // a few rebuilds for 4 mm of travel, not one per step (80 steps)
+  EXPECT_GT(b.reduce().tools[0].contact, 0);
 }
 
 }  // namespace

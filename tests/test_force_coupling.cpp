@@ -2,9 +2,9 @@
 // parameter checks, the clamp, the coupling's response to a jump of the
 // tissue force (bounded increment per period, then convergence to the tissue
 // force), a closed loop against a wall whose force jumps at contact, and a
-// scripted press on a box of tissue through the real Scheduler and the cpu
-// backend: the raw solver force jumps when contact starts and ends, the force
-// the device receives does not.
+// fast scripted press on a box of tissue through the real Scheduler and the
+// cpu backend: as nodes enter and leave the tool's contact set, the solver's
+// force changes by a few percent of its peak per tick and the device's less.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -32,7 +32,7 @@ double max_increment(const std::vector<Vec3<double>>& f) {
 struct FixedDevice : Device {
   Vec3<double> p = {};
   std::vector<Vec3<double>> forces;
-  Vec3<double> read_position(double) override { return p; }
+  ToolInput read(double) override { return {p}; }
   void send_force(const Vec3<double>& f) override { forces.push_back(f); }
 };
 
@@ -141,13 +141,13 @@ TEST(VirtualCoupling, ContinuousAcrossContactOnAndOffAgainstAJumpingWall) {
   // press the device 5 mm into the wall and back out through CoupledDevice
   const std::vector<Waypoint> path{{0, {0, 0, 0.005}}, {0.4, {0, 0, -0.005}}, {0.7, {0, 0, -0.005}},
                                    {1.1, {0, 0, 0.005}}, {1.5, {0, 0, 0.005}}};
-  ScriptedDevice hand(path);
+  ScriptedDevice hand(path, /*record_forces=*/true);
   CoupledDevice dev(hand, CouplingParams{});
   std::vector<Vec3<double>> raw;
   int contacts_on = 0, contacts_off = 0;
   bool inside = false;
   for (int k = 0; k <= 1500; ++k) {
-    const Vec3<double> x = dev.read_position(k * 1e-3);
+    const Vec3<double> x = dev.read(k * 1e-3).tip;
     const Vec3<double> f = wall_force(x);
     if ((x.z < 0) != inside) (inside ? contacts_off : contacts_on) += 1;
     inside = x.z < 0;
@@ -178,7 +178,7 @@ TEST(VirtualCoupling, ClampsToTheDeviceMaximum) {
   double largest = 0;
   bool clamped = false;
   for (int k = 0; k < 300; ++k) {
-    dev.read_position(k * 1e-3);
+    dev.read(k * 1e-3);
     dev.send_force({0, 50.0, 0});  // far beyond what the device can render
     largest = std::max(largest, norm(hand.forces.back()));
     clamped = clamped || dev.state().clamped;
@@ -230,61 +230,63 @@ std::vector<Waypoint> quick_press(Vec3<double> start, double travel, double spee
   return w;
 }
 
-TEST(VirtualCoupling, ScriptedPressOnTissueRawForceJumpsRenderedDoesNot) {
+TEST(VirtualCoupling, ScriptedPressOnTissueStaysSmoothAsNodesEnterAndLeaveContact) {
   const TissueModel<double> model = tissue_box();
   std::unique_ptr<Backend> backend = create_backend("cpu", Precision::Double);
   backend->upload(model);
   SchedulerSettings settings;
-  settings.depth = kDepthAll;
+  settings.depth = kDepthAll;  // the default tool: a 2 mm sphere on 6.7 mm cells
   Scheduler sched(*backend, model, settings);
-  // from 2 mm above the top face, 6 mm down (4 mm into the tissue) at up to
-  // 30 cm/s, crossing the surface at full speed both ways
-  ScriptedDevice hand(quick_press({0.021, 0.019, 0.022}, 0.006, 0.3, 0.01, 0.15));
+  // from 2 mm above the top face, 6 mm down (4 mm into the tissue) at up to 30 cm/s and back,
+  // crossing the surface at full speed both ways
+  ScriptedDevice hand(quick_press({0.021, 0.019, 0.024}, 0.006, 0.3, 0.01, 0.15), /*record_forces=*/true);
   CoupledDevice dev(hand, CouplingParams{});
   std::vector<Vec3<double>> raw;
-  std::vector<int> contact;
+  std::vector<index_t> contact;
   const long n = std::lround(hand.duration() / settings.tick) + 200;
   for (long k = 0; k < n; ++k) {
     const TickReport r = sched.tick(dev);
     raw.push_back(r.force);
-    contact.push_back(r.contact_tri >= 0);
+    contact.push_back(r.contact_nodes);
   }
   const std::vector<Vec3<double>>& rendered = hand.forces();
   ASSERT_EQ(rendered.size(), raw.size());
-  int on = 0, off = 0;
-  for (size_t k = 1; k < contact.size(); ++k) {
-    on += contact[k] && !contact[k - 1];
-    off += !contact[k] && contact[k - 1];
-  }
-  EXPECT_EQ(on, 1);
-  EXPECT_EQ(off, 1);
   double peak = 0;
   for (const auto& f : raw) peak = std::max(peak, norm(f));
   ASSERT_GT(peak, 1e-3) << "the press should load the tissue";
-  // Around each switch (from the tick before to 15 after): when contact
-  // starts, the raw solver force jumps by more than a tenth of its peak in
-  // one tick, the device's force changes by a third of that at most; when it
-  // ends (the tool is back at the surface point it touched, the tissue has
-  // followed it), the raw force ramps down and the device's force changes no
-  // faster than it. The wall test above has a raw jump at release too.
+  // the largest per-tick change of f over ticks [k - 1, k + 15]
   auto window_increment = [](const std::vector<Vec3<double>>& f, size_t k) {
     double m = 0;
-    for (size_t j = k - 1; j < std::min(f.size(), k + 16); ++j) m = std::max(m, norm(f[j] - f[j - 1]));
+    for (size_t j = std::max<size_t>(k, 1) - 1; j < std::min(f.size(), k + 16); ++j)
+      if (j > 0) m = std::max(m, norm(f[j] - f[j - 1]));
     return m;
   };
-  for (size_t k = 2; k < contact.size(); ++k) {
+  // Every tick at which nodes enter or leave the contact set: the contact
+  // follows the tool's surface, not a mesh triangle, so the raw force has no
+  // jump of its own there; it changes as fast as the press loads the tissue
+  // (at 30 cm/s, 0.3 mm per tick: measured at most 18 % of its peak per
+  // tick), and the coupling smooths that: the device's force changes by at
+  // most 8 % of the peak per tick (measured 5.6 %) and never faster than the
+  // tissue's plus 2 % of the peak (the proxy's own inertia as the hand
+  // accelerates).
+  int events = 0, first = -1, last = -1;
+  for (size_t k = 1; k < contact.size(); ++k) {
     if (contact[k] == contact[k - 1]) continue;
+    ++events;
+    if (first < 0) first = int(k);
+    last = int(k);
     const double raw_step = window_increment(raw, k), rendered_step = window_increment(rendered, k);
-    std::printf("contact %s at tick %zu: raw force step %.4f N, rendered %.4f N (peak %.4f N)\n",
-                contact[k] ? "on" : "off", k, raw_step, rendered_step, peak);
-    if (contact[k]) {
-      EXPECT_GT(raw_step, 0.1 * peak) << "tick " << k;
-      EXPECT_LT(rendered_step, 0.35 * raw_step) << "tick " << k;
-    } else {
-      EXPECT_LE(rendered_step, raw_step) << "tick " << k;
-      EXPECT_LT(rendered_step, 0.1 * peak) << "tick " << k;
-    }
+    EXPECT_LT(raw_step, 0.25 * peak) << "tick " << k;
+    EXPECT_LT(rendered_step, 0.08 * peak) << "tick " << k;
+    EXPECT_LT(rendered_step, raw_step + 0.02 * peak) << "tick " << k;
   }
+  std::printf("%d contact-set changes from tick %d to %d; peak %.4f N; largest per-tick change raw %.4f N, device "
+              "%.4f N\n",
+              events, first, last, peak, max_increment(raw), max_increment(rendered));
+  EXPECT_GE(events, 4) << "the contact set changes as the tool sinks and rises";
+  EXPECT_EQ(contact[size_t(first) - 1], 0);
+  EXPECT_EQ(contact.back(), 0);
+  EXPECT_LT(max_increment(rendered), 0.08 * peak);
 }
 
 }  // namespace

@@ -172,45 +172,34 @@ TEST(KidneyScene, FixedPatchIsExactlyTheHilumBall) {
   EXPECT_EQ(n_fixed, static_cast<index_t>(c.nodes.size()));
 }
 
-TEST(KidneyScene, ToolApproachCrossesTheLateralSurface) {
+TEST(KidneyScene, ProbeIsARodPressedAlongTheLateralNormal) {
   const auto& s = scene();
   ASSERT_EQ(s.tools.size(), 1u);
   const auto& tool = s.tools[0];
-  EXPECT_DOUBLE_EQ(tool.radius, 0.002);
+  EXPECT_DOUBLE_EQ(tool.radius, KidneyScene::tool_radius);
+  EXPECT_DOUBLE_EQ(tool.shaft, KidneyScene::tool_shaft);
   EXPECT_EQ(tool.device, "scripted");
   ASSERT_EQ(tool.path.size(), 5u);  // start, touch, deepest, hold end, back at start
   EXPECT_NEAR(tool.path.back().t, 1.0, 1e-12);
   const Vec3<double> start = tool.path[0].p, touch = tool.path[1].p, deep = tool.path[2].p;
   EXPECT_GT(start.y, 0.03) << "starts outside the convex lateral side";
-
-  index_t tri = -1;
-  const double t = first_crossing(model(), start, touch, &tri);
-  ASSERT_GE(t, 0) << "the approach segment never reaches the kidney";
-  const Vec3<double> hit = start + t * (touch - start);
-  EXPECT_NEAR(norm(hit - start), KidneyScene::approach, 1e-4) << "starts about 1 cm outside";
-  EXPECT_LT(norm(touch - hit), 1e-4) << "the approach ends at the surface (just inside it)";
-  EXPECT_NEAR(norm(deep - hit), KidneyScene::press_depth, 1e-9) << "presses 5 mm below the touched point";
-
-  // the tool moves along the inward normal of the triangle it touches
-  const index_t nt = model().n_tris, n = model().n_nodes;
-  Vec3<double> P[3];
-  for (int k = 0; k < 3; ++k) {
-    const index_t v = model().tris[k * nt + tri];
-    P[k] = {model().X[v], model().X[n + v], model().X[2 * n + v]};
-  }
-  const Vec3<double> normal = cross(P[1] - P[0], P[2] - P[0]);
-  const Vec3<double> dir = touch - start;
-  EXPECT_NEAR(dot(normal, dir) / (norm(normal) * norm(dir)), -1.0, 1e-9);
-  // the same crossing against the generated surface itself
+  // the shaft points back along the press, out of the organ
+  const Vec3<double> dir = (1.0 / norm(touch - start)) * (touch - start);
+  EXPECT_NEAR(dot(tool.direction, dir), -1.0, 1e-12);
+  EXPECT_NEAR(norm(tool.direction), 1.0, 1e-12);
+  // the generated surface: the tip sphere touches it at the touch pose (its
+  // lowest point on the surface point along +y) and its lowest point goes
+  // press_depth below it
   const SurfaceMesh surf = kidney_surface(KidneyScene::frequency);
-  bool crosses = false;
-  for (index_t k = 0; k < surf.n_triangles() && !crosses; ++k) {
-    double bary[2];
-    crosses =
-        tissue::segment_triangle(start, touch, vtx(surf, surf.triangles[3 * k]), vtx(surf, surf.triangles[3 * k + 1]),
-                                 vtx(surf, surf.triangles[3 * k + 2]), bary) >= 0;
-  }
-  EXPECT_TRUE(crosses);
+  const Vec3<double> p = surface_point_along(surf, {0, 1, 0});
+  EXPECT_NEAR(norm(touch + KidneyScene::tool_radius * dir - p), 0.0, 1e-12);
+  EXPECT_NEAR(dot(deep + KidneyScene::tool_radius * dir - p, dir), KidneyScene::press_depth, 1e-12);
+  EXPECT_NEAR(norm(touch - start), KidneyScene::approach, 1e-12);
+  // the mesh's boundary passes through that point: TetGen keeps the input surface
+  index_t tri = -1;
+  const double t = first_crossing(model(), p - 0.001 * dir, p + 0.001 * dir, &tri);
+  ASSERT_GE(t, 0);
+  EXPECT_NEAR(t, 0.5, 1e-6);
 }
 
 TEST(KidneyScene, Deterministic) {

@@ -44,8 +44,13 @@ ModelInput box_input(double nu = 0.45) {
   return in;
 }
 
-/// Approach, press 2 mm, hold 0.5 s, retract, at an off-centre top point.
-std::vector<Waypoint> press() { return press_path({0.0131, 0.0162, kH}, {0, 0, -1}, 0.002, 0.003, 0.05, 0.1, 0.5, 0.05); }
+/// The default tool (a 2 mm sphere): approach, press 2 mm, hold 0.5 s,
+/// retract, at an off-centre top point.
+constexpr double kR = 0.002;
+std::vector<Waypoint> press() {
+  return press_path({0.0131, 0.0162, kH + kR}, {0, 0, -1}, 0.002, 0.003, 0.05, 0.1, 0.5, 0.05);
+}
+const ToolSetting kTool{{"probe", kR, 0}, {0, 0, 1}};
 
 TEST(HoldStart, LongestStationarySegment) {
   EXPECT_DOUBLE_EQ(hold_start(press()), 0.15);
@@ -54,24 +59,22 @@ TEST(HoldStart, LongestStationarySegment) {
   EXPECT_THROW(hold_start({}), std::invalid_argument);
 }
 
-TEST(HeldContact, DrivesTheTouchedTriangleByTheToolsOffset) {
+TEST(HeldTool, RampsFromTheLastPoseBeforeTouchToTheHeldPose) {
   const TissueModel<double> m = build_model(box_input());
-  const HeldContact c = held_contact(m, press(), 1e-3, 0.15);
-  ASSERT_GE(c.tri, 0);
-  ASSERT_EQ(c.drive.nodes.size(), 3u);
-  for (int k = 0; k < 3; ++k) EXPECT_EQ(c.drive.nodes[k], m.tris[k * m.n_tris + c.tri]);
-  EXPECT_NEAR(c.point.z, kH, 1e-12);  // on the top face
-  EXPECT_NEAR(c.tip.z, kH - 0.002, 1e-12);
-  for (int k = 0; k < 3; ++k) {
-    EXPECT_NEAR(c.drive.u[3 * k + 2], -0.002, 1e-9);
-    EXPECT_NEAR(c.drive.u[3 * k], 0.0, 1e-9);
-  }
-  EXPECT_GT(c.t_contact, 0.05 - 1e-9);  // during the approach's last tick or right after
-  EXPECT_LT(c.t_contact, 0.06);
+  const HeldTool h = held_tool(m, kTool, press(), 1e-3, 0.15);
+  EXPECT_EQ(h.shape.radius, kR);
+  EXPECT_NEAR(h.held.tip.z, kH + kR - 0.002, 1e-12);  // the sphere's lowest point 2 mm below the top
+  EXPECT_NEAR(h.held.axis.z, 1.0, 1e-12);
+  // the touch: the sphere reaches the top at t = 0.05 s; the ramp starts a tick before
+  EXPECT_GT(h.t_touch, 0.05 - 1e-9);
+  EXPECT_LT(h.t_touch, 0.052);
+  EXPECT_FALSE(touches_reference_surface(m, h.shape, h.start));
+  EXPECT_GT(h.start.tip.z, kH + kR - 1e-4);
+  EXPECT_TRUE(touches_reference_surface(m, h.shape, h.held));
   // a path that never reaches the body is named as such
   const std::vector<Waypoint> miss{{0, {0.01, 0.01, 0.05}}, {0.2, {0.01, 0.01, 0.03}}};
   try {
-    held_contact(m, miss, 1e-3, 0.2);
+    held_tool(m, kTool, miss, 1e-3, 0.2);
     FAIL() << "a missing path gave a contact";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("does not touch"), std::string::npos) << e.what();
@@ -80,12 +83,15 @@ TEST(HeldContact, DrivesTheTouchedTriangleByTheToolsOffset) {
 
 TEST(Reference, ConvergesAndMatchesALongPhysicalRun) {
   const TissueModel<double> m = build_model(box_input());
-  const HeldContact c = held_contact(m, press(), 1e-3, 0.15);
-  const ReferenceSolution ref = reference_solution(m, c.drive);
+  const HeldTool h = held_tool(m, kTool, press(), 1e-3, 0.15);
+  const ReferenceSolution ref = reference_solution(m, {}, {}, &h);
   EXPECT_TRUE(ref.relax.converged);
   EXPECT_LE(ref.relax.residual, 1e-9);
   EXPECT_GT(ref.relax.steps, 0);
-  EXPECT_NEAR(ref.max_disp, 0.002, 1e-12);  // the driven nodes
+  EXPECT_GT(ref.contact_nodes, 0);
+  EXPECT_GT(ref.max_disp, 0.002);  // the surface under the tool (a face's corner may go deeper than the tip)
+  EXPECT_LT(ref.max_disp, 0.004);
+  EXPECT_GT(ref.tool_force.z, 0);
   EXPECT_GT(ref.strain_energy, 0);
   // the same physics through the Scheduler, held long enough to settle fully
   auto b = create_backend("cpu", Precision::Double);
@@ -102,8 +108,13 @@ TEST(Reference, ConvergesAndMatchesALongPhysicalRun) {
   const Fields f = b->download();
   double err = 0;
   for (size_t k = 0; k < f.u.size(); ++k) err = std::max(err, std::fabs(f.u[k] - ref.fields.u[k]));
-  EXPECT_LT(err, 1e-7 * ref.max_disp);
-  EXPECT_LT(norm(rep.force + ref.reaction), 1e-7 * norm(ref.reaction));  // force on the tool = -reaction
+  // A tool smaller than the 5 mm elements rests on a few faces, and among
+  // the frictionless equilibria of such a faceted surface the one reached
+  // depends a little on the route (the ramp here, the scripted press
+  // there; with finer elements the difference vanishes): measured 1.0 % of
+  // the displacement and 1.1 % of the force.
+  EXPECT_LT(err, 0.02 * ref.max_disp);
+  EXPECT_LT(norm(rep.force - ref.tool_force), 0.02 * norm(ref.tool_force));
 }
 
 // On a graded mesh (cells from 0.3 mm to 14 mm across x) the physical
@@ -114,14 +125,15 @@ TEST(Reference, FictitiousMassesChangeTheRouteNotTheAnswer) {
   ModelInput in = box_input(0.49);
   for (size_t i = 0; i < in.nodes.size(); i += 3) in.nodes[i] = kL * std::pow(in.nodes[i] / kL, 3.0);
   const TissueModel<double> m = build_model(in);
-  const HeldContact c = held_contact(m, press(), 1e-3, 0.15);
+  const HeldTool h = held_tool(m, kTool, press(), 1e-3, 0.15);
   ReferenceOptions scaled, physical;
   physical.relax.mass_scaling = false;
-  const ReferenceSolution a = reference_solution(m, c.drive, scaled);
-  const ReferenceSolution b = reference_solution(m, c.drive, physical);
+  const ReferenceSolution a = reference_solution(m, {}, scaled, &h);
+  const ReferenceSolution b = reference_solution(m, {}, physical, &h);
   double err = 0;
   for (size_t k = 0; k < a.fields.u.size(); ++k) err = std::max(err, std::fabs(a.fields.u[k] - b.fields.u[k]));
-  EXPECT_LT(err, 1e-7 * a.max_disp);
+  EXPECT_LT(err, 0.02 * a.max_disp);  // the route-dependence above
+  EXPECT_LT(norm(a.tool_force - b.tool_force), 0.02 * norm(a.tool_force));
   std::cout << "[ INFO     ] relaxation steps: fictitious masses " << a.relax.steps << ", physical masses "
             << b.relax.steps << "\n";
   EXPECT_LT(a.relax.steps, b.relax.steps);
@@ -129,11 +141,11 @@ TEST(Reference, FictitiousMassesChangeTheRouteNotTheAnswer) {
 
 TEST(Reference, UnfinishedRelaxationIsReportedWithItsResidual) {
   const TissueModel<double> m = build_model(box_input());
-  const HeldContact c = held_contact(m, press(), 1e-3, 0.15);
+  const HeldTool h = held_tool(m, kTool, press(), 1e-3, 0.15);
   ReferenceOptions o;
   o.relax.max_steps = 300;
   try {
-    reference_solution(m, c.drive, o);
+    reference_solution(m, {}, o, &h);
     FAIL() << "300 steps cannot reach 1e-9";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("relative residual"), std::string::npos) << e.what();
@@ -323,14 +335,16 @@ TEST(Tradeoff, SweepOnABox) {
   o.safeties = {0.5};
   o.mass_scalings = {0};
   o.residual_tols = {1e-2, 1e-4};
+  o.contact = {contact_setting("node contact only", false, 0.5)};
   o.max_hold = 0.4;
   o.verbose = false;
   const std::vector<TradeoffSetting> settings = tradeoff_settings(s, o);
   ASSERT_EQ(settings.front().group, "baseline");
   EXPECT_EQ(settings.front().depth, kDepthAuto);  // the scene defaults
   EXPECT_DOUBLE_EQ(settings.front().mass_scaling, 0.025);
-  // baseline, anchor, depths 1 and all, auto, double, safety 0.5, no mass scaling, two tolerances, compare
-  EXPECT_EQ(settings.size(), 11u);
+  // baseline, anchor, depths 1 and all, auto, double, safety 0.5, no mass scaling, node contact only,
+  // two tolerances, compare
+  EXPECT_EQ(settings.size(), 12u);
   EXPECT_EQ(settings[1].group, "anchor");
   EXPECT_EQ(settings[1].depth, kDepthAll);
   const TradeoffResult res = run_tradeoff(s, o);
@@ -341,7 +355,12 @@ TEST(Tradeoff, SweepOnABox) {
   const TradeoffRow* dbl = nullptr;
   const TradeoffRow* anchor = nullptr;
   const TradeoffRow* unscaled = nullptr;
+  const TradeoffRow* nodes_only = nullptr;
   for (const TradeoffRow& r : res.rows) {
+    if (r.setting.group == "contact") {  // checked below: it never touches
+      nodes_only = &r;
+      continue;
+    }
     if (r.setting.label == "depth 1") depth1 = &r;
     if (r.setting.label == "depth all") all = &r;
     if (r.setting.group == "precision") dbl = &r;
@@ -354,7 +373,13 @@ TEST(Tradeoff, SweepOnABox) {
       EXPECT_GE(r.press_force_err, 0) << r.setting.label;
     }
   }
-  ASSERT_TRUE(depth1 && all && dbl && anchor && unscaled);
+  ASSERT_TRUE(depth1 && all && dbl && anchor && unscaled && nodes_only);
+  // node contact alone lets the 2 mm tool slip between the box's 5 mm
+  // nodes: it feels nothing, all of its reference force is missing
+  EXPECT_FALSE(nodes_only->setting.face_contact);
+  EXPECT_TRUE(nodes_only->failed.empty()) << nodes_only->failed;
+  EXPECT_EQ(norm(nodes_only->force), 0.0);
+  EXPECT_NEAR(nodes_only->force_err, 1.0, 1e-12);
   // mass scaling (the scene default, 2.5 %) within its budget; this regular
   // box already runs one step per tick, so it has nothing to buy here
   // (tests/test_model.cpp and test_stability.cpp test what it buys)

@@ -117,12 +117,16 @@ void expect_same_scene(const Scene& a, const Scene& b) {
     const scene::Tool &x = a.tools[k], &y = b.tools[k];
     EXPECT_EQ(x.name, y.name);
     EXPECT_EQ(x.radius, y.radius);
+    EXPECT_EQ(x.shaft, y.shaft);
+    for (int c = 0; c < 3; ++c) EXPECT_EQ(x.direction[c], y.direction[c]);
     EXPECT_EQ(x.device, y.device);
     EXPECT_EQ(x.path_file, y.path_file);
     ASSERT_EQ(x.path.size(), y.path.size()) << x.name;
     for (size_t w = 0; w < x.path.size(); ++w) {
       EXPECT_EQ(x.path[w].t, y.path[w].t);
       for (int c = 0; c < 3; ++c) EXPECT_EQ(x.path[w].p[c], y.path[w].p[c]);
+      for (int c = 0; c < 3; ++c) EXPECT_EQ(x.path[w].axis[c], y.path[w].axis[c]);
+      EXPECT_EQ(x.path[w].grasp, y.path[w].grasp);
     }
   }
   const scene::Solver &u = a.solver, &v = b.solver;
@@ -172,7 +176,11 @@ Scene rich_scene() {
   scene::Tool probe;
   probe.name = "probe";
   probe.radius = 1.5e-3;
+  probe.shaft = 0.025;
+  probe.direction = {0.1, 0, 1};
   probe.path = press_path({0.015, 0.01, 0.017}, {0, 0, -1}, 3e-3, 1e-2);
+  probe.path[2].grasp = true;
+  probe.path[3].axis = {0, 0.6, 0.8};
   scene::Tool mouse;
   mouse.name = "hand";
   mouse.device = "mouse";
@@ -667,13 +675,41 @@ testing::AssertionResult csv_error(const std::string& text, std::initializer_lis
 
 TEST(PathCsv, ErrorsNameFileAndLine) {
   EXPECT_TRUE(csv_error("time,x,y,z\n0,0,0,0\n", {"p.csv:1: ", "header is 'time,x,y,z'", "t,x,y,z"}));
-  EXPECT_TRUE(csv_error("t,x,y,z\n0,0,0,0\n0.1,0,0\n", {"p.csv:3: ", "3 fields; expected 4"}));
+  EXPECT_TRUE(csv_error("t,x,y,z\n0,0,0,0\n0.1,0,0\n", {"p.csv:3: ", "3 fields; the header has 4"}));
   EXPECT_TRUE(csv_error("t,x,y,z\n0,0,0,0\n0.1s,0,0,0\n", {"p.csv:3: ", "t '0.1s' is not a number"}));
   EXPECT_TRUE(csv_error("t,x,y,z\n0,0,0,0\n0.2,0,0,0\n0.2,0,0,1\n",
                         {"p.csv:4: ", "t = 0.2 s is not after", "times must increase"}));
   EXPECT_TRUE(csv_error("t,x,y,z\n0,nan,0,0\n", {"p.csv:2: ", "x = nan is not a finite number"}));
   EXPECT_TRUE(csv_error("t,x,y,z\n", {"p.csv:1: ", "no waypoints"}));
   EXPECT_TRUE(csv_error("", {"p.csv:0: ", "empty"}));
+  // the grasp button and the shaft axis columns
+  EXPECT_TRUE(csv_error("t,x,y,z,force\n", {"p.csv:1: ", "unknown column 'force'"}));
+  EXPECT_TRUE(csv_error("t,x,y,z,ax,ay\n", {"p.csv:1: ", "all three axis columns"}));
+  EXPECT_TRUE(csv_error("t,x,y,z,grasp,grasp\n", {"p.csv:1: ", "'grasp' appears twice"}));
+  EXPECT_TRUE(csv_error("t,x,y,z,grasp\n0,0,0,0,2\n", {"p.csv:2: ", "grasp '2' must be 0 or 1"}));
+  EXPECT_TRUE(csv_error("t,x,y,z,ax,ay,az\n0,0,0,0,0,nan,0\n", {"p.csv:2: ", "ay = nan is not a finite number"}));
+}
+
+TEST(PathCsv, GraspAndAxisColumnsRoundTrip) {
+  std::istringstream in("t,x,y,z,grasp,ax,ay,az\n0,0,0,0.01,0,0,0,1\n0.5,0,0,0.005,1,0,1,0\n");
+  const std::vector<Waypoint> w = io::parse_path_csv(in, "p.csv");
+  ASSERT_EQ(w.size(), 2u);
+  EXPECT_FALSE(w[0].grasp);
+  EXPECT_TRUE(w[1].grasp);
+  EXPECT_EQ(w[1].axis.y, 1.0);
+  const std::string file = (std::filesystem::temp_directory_path() / "tissue_grasp_path.csv").string();
+  io::write_path_csv(file, w);
+  const std::vector<Waypoint> r = io::read_path_csv(file);
+  ASSERT_EQ(r.size(), 2u);
+  EXPECT_EQ(r[1].grasp, true);
+  EXPECT_EQ(r[0].axis.z, 1.0);
+  // the scripted device replays them: the button from its waypoint on, the axis interpolated
+  ScriptedDevice d(r);
+  EXPECT_FALSE(d.read(0.25).grasp);
+  EXPECT_TRUE(d.read(0.5).grasp);
+  const Vec3<double> mid = d.read(0.25).axis;
+  EXPECT_NEAR(norm(mid), 1.0, 1e-12);
+  EXPECT_NEAR(mid.y, mid.z, 1e-12);  // halfway between z and y
 }
 
 }  // namespace

@@ -2,14 +2,17 @@
 // whole haptic interaction: a 40 x 40 x 20 mm box of brain-like tissue with
 // its bottom face fixed, pressed 3 mm into its top face by a ScriptedDevice
 // following press_path (approach 0.1 s, press 0.2 s, hold 0.5 s, retract),
-// then left alone. Checks: the force on the tool opposes the indentation and
-// grows with depth; under the held indentation the free-node residual falls
-// and the equilibrium flag is reached; contact ends after retraction and the
-// tissue relaxes back toward u = 0.
+// then left alone, by the default tool (a 2 mm sphere, smaller than the 10
+// mm cells: face contact carries it). Checks: the force on the tool opposes
+// the indentation and grows with depth; under the held indentation the
+// free-node residual falls and the equilibrium flag is reached; contact
+// ends after retraction and the tissue relaxes back toward u = 0; a limited
+// region is seeded by the contact candidates; bad tool settings are named.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
+#include <string>
 #include <vector>
 
 #include "core/box_mesh.hpp"
@@ -21,7 +24,8 @@ namespace tissue {
 namespace {
 
 constexpr double kLx = 0.04, kLz = 0.02;        // box (m)
-const Vec3<double> kTarget{0.013, 0.016, kLz};  // inside a top-face triangle, off its edges
+constexpr double kRadius = 0.002;                          // the default tool
+const Vec3<double> kTarget{0.013, 0.016, kLz + kRadius};  // the sphere touching the top inside a triangle
 const Vec3<double> kDown{0, 0, -1};
 constexpr double kDepth = 0.003, kApproach = 0.005;                                                   // m
 constexpr double kPressStart = 0.1, kPressEnd = 0.3, kHoldEnd = 0.8, kRetractEnd = 0.82, kEnd = 1.2;  // s
@@ -49,7 +53,8 @@ std::vector<TickReport> run_press(Precision p, int depth, const TissueModel<doub
                                  kHoldEnd - kPressEnd, kRetractEnd - kHoldEnd));
   std::vector<TickReport> out;
   while (sched.time() < kEnd - 1e-9) out.push_back(sched.tick(tool));
-  EXPECT_EQ(tool.forces().size(), out.size());
+  EXPECT_EQ(tool.forces_sent(), long(out.size()));
+  EXPECT_EQ(tool.last_force().z, out.back().force.z);
   return out;
 }
 
@@ -77,16 +82,16 @@ INSTANTIATE_TEST_SUITE_P(Runs, PressedBox,
 TEST_P(PressedBox, ForceOpposesIndentationAndGrowsWithDepth) {
   const auto r = run_press(GetParam().first, GetParam().second, *model_);
   // no contact before the tool reaches the surface, contact from then on
-  EXPECT_LT(at(r, 0.09).contact_tri, 0);
+  EXPECT_EQ(at(r, 0.09).contact_nodes, 0);
   EXPECT_EQ(at(r, 0.09).force.z, 0.0);
-  for (double t = 0.11; t < kHoldEnd; t += 0.01) ASSERT_GE(at(r, t).contact_tri, 0) << "t = " << t;
+  for (double t = 0.11; t < kHoldEnd; t += 0.01) ASSERT_GT(at(r, t).contact_nodes, 0) << "t = " << t;
   // the force on the tool points out of the tissue (+z) and grows with depth
   double prev = 0;
   for (double t : {0.125, 0.15, 0.2, 0.25, 0.3}) {
     const Vec3<double> f = at(r, t).force;
     EXPECT_GT(f.z, prev) << "t = " << t;
-    // mostly along the press (the contact triangle is not symmetric about
-    // the tip, so some lateral force is expected: 9% whole, 20% at depth 1)
+    // mostly along the press (the 10 mm triangles under the 2 mm tool are
+    // not symmetric about it, so some lateral force is expected)
     EXPECT_LT(std::hypot(f.x, f.y), 0.35 * f.z) << "t = " << t;
     prev = f.z;
   }
@@ -123,10 +128,10 @@ TEST_P(PressedBox, HeldIndentationConverges) {
 TEST_P(PressedBox, ContactEndsAndTissueRelaxes) {
   const auto r = run_press(GetParam().first, GetParam().second, *model_);
   const double peak = at(r, kHoldEnd).max_disp;
-  EXPECT_NEAR(peak, kDepth, 0.5 * kDepth);  // the contact triangle went down about 3 mm
+  EXPECT_NEAR(peak, kDepth, 0.5 * kDepth);  // the surface under the tool went down about 3 mm
   double released = -1;
   for (double t = kHoldEnd; t <= kEnd; t += 1e-3)
-    if (at(r, t).contact_tri < 0) {
+    if (at(r, t).contact_nodes == 0) {
       released = t;
       break;
     }
@@ -138,10 +143,10 @@ TEST_P(PressedBox, ContactEndsAndTissueRelaxes) {
   EXPECT_LT(last.max_disp, 1e-2 * peak);
   EXPECT_LT(at(r, released + 0.1).max_disp, at(r, released + 0.01).max_disp);
   EXPECT_LT(last.kinetic, 1e-6 * at(r, kHoldEnd).kinetic + 1e-15);
-  EXPECT_LT(last.contact_tri, 0);
+  EXPECT_EQ(last.contact_nodes, 0);
 }
 
-TEST(SchedulerRegion, LimitedRegionIsSmallerAndSeededByTheContactTriangle) {
+TEST(SchedulerRegion, LimitedRegionIsSmallerAndSeededByTheContactCandidates) {
   const auto m = pressed_box();
   auto backend = make_cpu_backend(Precision::Double);
   backend->upload(m);
@@ -151,16 +156,74 @@ TEST(SchedulerRegion, LimitedRegionIsSmallerAndSeededByTheContactTriangle) {
   ScriptedDevice tool(press_path(kTarget, kDown, kDepth, kApproach));
   TickReport rep;
   while (!sched.in_contact()) rep = sched.tick(tool);
-  ASSERT_GE(rep.contact_tri, 0);
-  std::vector<index_t> tri = {m.tris[rep.contact_tri], m.tris[m.n_tris + rep.contact_tri],
-                              m.tris[2 * m.n_tris + rep.contact_tri]};
-  std::sort(tri.begin(), tri.end());
-  EXPECT_EQ(sched.seeds(), tri);
-  const Region want = flood_fill(m, std::span<const index_t>(tri), 1);
+  ASSERT_GT(rep.contact_nodes, 0);
+  // every node in contact is a seed, and the region is the seeds' 1-ring
+  for (const ContactNode& c : backend->contacts())
+    EXPECT_TRUE(std::binary_search(sched.seeds().begin(), sched.seeds().end(), c.node)) << "node " << c.node;
+  const Region want = flood_fill(m, std::span<const index_t>(sched.seeds()), 1);
   EXPECT_EQ(rep.region_nodes, index_t(want.nodes.size()));
   EXPECT_EQ(rep.region_elems, index_t(want.elems.size()));
   EXPECT_LT(rep.region_elems, m.n_elems);
   EXPECT_EQ(backend->region().nodes, want.nodes);
+  for (index_t a : sched.seeds()) EXPECT_TRUE(m.node_flags[a] & kSurface);
+}
+
+/// The message of the std::invalid_argument f throws ("" when none).
+template <class F>
+std::string refusal(F&& f) {
+  try {
+    f();
+  } catch (const std::invalid_argument& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(SchedulerTools, BadToolSettingsAreRefusedByName) {
+  const auto m = pressed_box();
+  auto backend = make_cpu_backend(Precision::Double);
+  backend->upload(m);
+  auto with = [&](ToolSetting t) {
+    SchedulerSettings s;
+    s.tools = {t};
+    return refusal([&] { Scheduler sched(*backend, m, s); });
+  };
+  EXPECT_NE(with({{"probe", 0.0, 0}, {0, 0, 1}}).find("tool 'probe': radius 0 m must be > 0"), std::string::npos);
+  EXPECT_NE(with({{"probe", -1e-3, 0}, {0, 0, 1}}).find("must be > 0"), std::string::npos);
+  EXPECT_NE(with({{"big", 0.05, 0}, {0, 0, 1}}).find("tool 'big': radius 0.05 m is larger than the body (its largest "
+                                                      "extent is 0.04 m)"),
+            std::string::npos);
+  EXPECT_NE(with({{"probe", 1e-3, -0.01}, {0, 0, 1}}).find("shaft length -0.01 m must be >= 0"), std::string::npos);
+  EXPECT_NE(with({{"probe", 1e-3, 0}, {0, 0, 0}}).find("direction (0, 0, 0) must be a non-zero vector"),
+            std::string::npos);
+  SchedulerSettings five;
+  five.tools.assign(5, ToolSetting{});
+  EXPECT_NE(refusal([&] { Scheduler sched(*backend, m, five); }).find("5 tools: a scene holds at most 4"),
+            std::string::npos);
+  // one device per tool
+  SchedulerSettings two;
+  two.tools = {ToolSetting{}, ToolSetting{}};
+  Scheduler sched(*backend, m, two);
+  ScriptedDevice d(press_path(kTarget, kDown, kDepth, kApproach));
+  EXPECT_NE(refusal([&] { sched.tick(d); }).find("1 devices for 2 tools"), std::string::npos);
+}
+
+TEST(SchedulerTools, AToolStartingInsideTheBodyAwayFromItsSurfaceIsNoted) {
+  const auto m = pressed_box();
+  auto backend = make_cpu_backend(Precision::Double);
+  backend->upload(m);
+  SchedulerSettings settings;
+  settings.depth = kDepthAll;
+  Scheduler sched(*backend, m, settings);
+  ScriptedDevice tool(std::vector<Waypoint>{{0.0, {0.02, 0.02, 0.01}}});  // the middle of the box
+  const TickReport rep = sched.tick(tool);
+  EXPECT_EQ(rep.contact_nodes, 0);
+  const std::vector<std::string> notes = sched.take_notes();
+  ASSERT_EQ(notes.size(), 1u);
+  EXPECT_NE(notes[0].find("tool 'probe' starts inside the body"), std::string::npos) << notes[0];
+  EXPECT_TRUE(inside_reference_surface(m, {0.02, 0.02, 0.01}));
+  EXPECT_FALSE(inside_reference_surface(m, {0.02, 0.02, 0.03}));
+  EXPECT_FALSE(inside_reference_surface(m, {-0.01, 0.02, 0.01}));
 }
 
 }  // namespace

@@ -185,9 +185,11 @@ TEST(TickLog, HeaderAndRows) {
     tissue::TickReport r;
     r.tick = 7;
     r.time = 0.007;
-    r.tool = {0.01, 0.02, -0.03};
-    r.contact_tri = 42;
-    r.force = {0.5, -0.25, 1.5};
+    r.n_tools = 1;
+    r.tools[0].tip = {0.01, 0.02, -0.03};
+    r.tools[0].contact_nodes = 42;
+    r.tools[0].force = {0.5, -0.25, 1.5};
+    r.tools[0].grasp = true;
     r.internal = {1e-6, 0, -2e-6};
     r.region_nodes = 120;
     r.region_elems = 300;
@@ -202,7 +204,8 @@ TEST(TickLog, HeaderAndRows) {
     r.depth = 6;
     log.write(r);
     r.tick = 8;
-    r.contact_tri = -1;
+    r.tools[0].contact_nodes = 0;
+    r.tools[0].grasp = false;
     r.equilibrium = false;
     log.write(r);
     EXPECT_EQ(log.rows(), 2);
@@ -214,19 +217,44 @@ TEST(TickLog, HeaderAndRows) {
   std::getline(in, row2);
   EXPECT_FALSE(std::getline(in, extra));
   EXPECT_EQ(header,
-            "tick,time,tool_x,tool_y,tool_z,contact_tri,force_x,force_y,force_z,internal_x,internal_y,internal_z,"
-            "region_nodes,region_elems,residual,kinetic,max_disp,equilibrium,steps,strain_energy,kinetic_rel,"
-            "front_disp,depth");
+            "tick,time,tool_x,tool_y,tool_z,contact_nodes,force_x,force_y,force_z,grasp,internal_x,internal_y,"
+            "internal_z,region_nodes,region_elems,residual,kinetic,max_disp,equilibrium,steps,strain_energy,"
+            "kinetic_rel,front_disp,depth");
   EXPECT_EQ(row1,
-            "7,0.007,0.01,0.02,-0.03,42,0.5,-0.25,1.5,1e-06,0,-2e-06,120,300,0.0001,2e-09,0.004,1,23,3e-06,0.05,0.001,"
-            "6");
+            "7,0.007,0.01,0.02,-0.03,42,0.5,-0.25,1.5,1,1e-06,0,-2e-06,120,300,0.0001,2e-09,0.004,1,23,3e-06,0.05,"
+            "0.001,6");
   EXPECT_EQ(row2.substr(0, 2), "8,");
-  EXPECT_NE(row2.find(",-1,"), std::string::npos);
+  EXPECT_NE(row2.find(",-0.03,0,0.5,"), std::string::npos);
   EXPECT_NE(row2.find(",0,23,"), std::string::npos);
   // same number of columns everywhere
   auto cols = [](const std::string& s) { return std::count(s.begin(), s.end(), ','); };
   EXPECT_EQ(cols(row1), cols(header));
   EXPECT_EQ(cols(row2), cols(header));
+}
+
+TEST(TickLog, EveryFurtherToolHasItsColumns) {
+  TempDir t;
+  {
+    TickLog log(t.file("ticks.csv"), 2);
+    tissue::TickReport r;
+    r.n_tools = 2;
+    r.tools[1].tip = {1, 2, 3};
+    r.tools[1].contact_nodes = 5;
+    r.tools[1].force = {0, 0, 0.25};
+    r.tools[1].grasp = true;
+    log.write(r);
+  }
+  std::ifstream in(t.file("ticks.csv"));
+  std::string header, row;
+  std::getline(in, header);
+  std::getline(in, row);
+  EXPECT_NE(header.find(",depth,tool2_x,tool2_y,tool2_z,tool2_contact_nodes,tool2_force_x,tool2_force_y,"
+                        "tool2_force_z,tool2_grasp"),
+            std::string::npos)
+      << header;
+  EXPECT_EQ(row.substr(row.size() - 19), ",1,2,3,5,0,0,0.25,1") << row;
+  EXPECT_THROW(TickLog(t.file("bad.csv"), 0), std::invalid_argument);
+  EXPECT_THROW(TickLog(t.file("bad.csv"), tissue::kMaxTools + 1), std::invalid_argument);
 }
 
 TEST(TickLog, UnwritablePathNamed) {

@@ -1,0 +1,100 @@
+// The contact stage of a TLED step on the device (core/contact.hpp's rule,
+// docs/contact.md): one thread per surface triangle sweeps it along the
+// tools' motion in the step (core sweep_triangle) and writes its three
+// corner proposals; then one thread per surface node merges its triangles'
+// proposals in ascending slot order (core merge_corner, the cpu backend's
+// order), moves the node in u_next and records its contact. Grasped nodes
+// follow their tool. Device functions for the per-step kernels and the
+// persistent kernels of cuda/tled.cuh; nvcc only.
+#pragma once
+
+#include "core/contact.hpp"
+#include "core/node_rules.hpp"
+#include "cuda/launch.cuh"
+#include "cuda/views.hpp"
+
+namespace tissue::gpu {
+
+/// Where grasped node a goes at the end of step k (its tool's pose then).
+template <class T>
+__device__ __forceinline__ Vec3<T> grasped_target(const ContactTools<T>& tools, int k, const StateView<T>& s,
+                                                  index_t a) {
+  const ToolStep<T>& tool = tools.tool[s.contact_tool[a]];
+  Vec3<T> tip, axis;
+  interpolate_pose(tool.tip0, tool.axis0, tool.tip1, tool.axis1, T(k + 1) / T(tools.steps), tip, axis);
+  return grasped_position(tip, axis, tool.grasp_axis, s.grasp_offset[a].vec());
+}
+
+/// A corner's position for the sweep of step k: grasped nodes at their
+/// tool, the others at X + u_next.
+template <class T>
+__device__ __forceinline__ Vec3<T> sweep_position(const ModelView<T>& m, const StateView<T>& s,
+                                                  const ContactTools<T>& tools, int k, const Packed3<T>* u_next,
+                                                  index_t a) {
+  if (s.contact[a] == kGrasped) return grasped_target(tools, k, s, a);
+  return m.X[a].vec() + u_next[a].vec();
+}
+
+/// Sweeps surface triangle t in step k; writes its corner slots 3 t + i.
+template <class T>
+__device__ void sweep_triangle_at(const ModelView<T>& m, const StateView<T>& s, const ContactTools<T>& tools, int k,
+                                  const Packed3<T>* u_next, index_t t) {
+  Vec3<T> x[3];
+  std::uint8_t block[3];
+#pragma unroll
+  for (int i = 0; i < 3; ++i) {
+    const index_t a = m.tris[i * m.n_tris + t];
+    x[i] = sweep_position(m, s, tools, k, u_next, a);
+    block[i] = corner_block(s.role[a] == kInner, s.held[a] == kAllAxes, s.contact[a] == kGrasped);
+  }
+  CornerContact<T> out[3];
+  sweep_triangle(tools, k, x, block, out);
+#pragma unroll
+  for (int i = 0; i < 3; ++i) {
+    s.corner_dx[3 * t + i] = Packed3<T>::of(out[i].dx);
+    s.corner_tool[3 * t + i] = out[i].tool;
+    s.corner_blocked[3 * t + i] = out[i].blocked;
+  }
+}
+
+/// Merges surface node i's proposals (ascending slots) and applies them to
+/// u_next; grasped nodes go to their tool.
+template <class T>
+__device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, const ContactTools<T>& tools, int k,
+                                  Packed3<T>* u_next, index_t i) {
+  const index_t a = m.surf_nodes[i];
+  if (s.contact[a] == kGrasped) {
+    u_next[a] = Packed3<T>::of(grasped_target(tools, k, s, a) - m.X[a].vec());
+    return;
+  }
+  NodeContact<T> acc;
+  for (index_t j = m.surf_slot_start[i]; j < m.surf_slot_start[i + 1]; ++j) {
+    const index_t slot = m.surf_slot[j];
+    merge_corner(acc, CornerContact<T>{s.corner_dx[slot].vec(), s.corner_tool[slot], s.corner_blocked[slot]});
+  }
+  s.contact[a] = acc.kind;
+  s.contact_tool[a] = acc.tool;
+  if (acc.kind != kPushed) return;
+  u_next[a] = Packed3<T>::of(u_next[a].vec() + free_part(s.held[a], acc.dx));
+  s.contact_normal[a] = Packed3<T>::of(unit_or(acc.dx, Vec3<T>{T(0), T(0), T(0)}));
+}
+
+template <class T>
+__global__ void sweep_triangles_kernel(ModelView<T> m, StateView<T> s, const ContactTools<T>* tools, int k,
+                                       const Packed3<T>* u_next) {
+  let_next_pass_launch();
+  const index_t t = thread_index();
+  wait_for_previous_pass();
+  if (t < m.n_tris) sweep_triangle_at(m, s, *tools, k, u_next, t);
+}
+
+template <class T>
+__global__ void gather_contacts_kernel(ModelView<T> m, StateView<T> s, const ContactTools<T>* tools, int k,
+                                       Packed3<T>* u_next) {
+  let_next_pass_launch();
+  const index_t i = thread_index();
+  wait_for_previous_pass();
+  if (i < m.n_surf) gather_contact_at(m, s, *tools, k, u_next, i);
+}
+
+}  // namespace tissue::gpu

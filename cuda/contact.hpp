@@ -1,0 +1,73 @@
+// The tool contact of the cuda backend outside the step loop (the per-step
+// kernels are cuda/contact.cuh, run by the stepper): the tools' motion in
+// device memory (one small upload per advance), grasp start and release,
+// the region's contact candidates, the contact list, and the per-tool
+// reductions. The rule is core/contact.hpp's (docs/contact.md).
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <vector>
+
+#include "core/backend.hpp"
+#include "cuda/device_array.hpp"
+#include "cuda/views.hpp"
+
+namespace tissue::gpu {
+
+/// One surface node's contact as DeviceContact::contacts downloads it.
+struct ContactRecord {
+  index_t node;
+  signed char tool;
+  std::uint8_t kind;
+  float normal[3];
+};
+
+template <class T>
+class DeviceContact {
+ public:
+  /// Scratch for a mesh of this size.
+  void allocate(index_t n_nodes, index_t n_surf);
+
+  /// Queues the upload of the tools' motion over the next steps (pinned
+  /// staging, guarded by an event); returns the device copy the kernels read.
+  const ContactTools<T>* upload(const ContactTools<T>& tools, Transfers& log, cudaStream_t stream);
+
+  /// Tool `tool` at tip (m) grasps its pushed nodes (offsets from the tip).
+  void begin_grasp(const ModelView<T>& m, const StateView<T>& s, const Packed3<T>* u, int tool, Vec3<double> tip,
+                   cudaStream_t stream);
+  /// Releases tool `tool`'s grasped nodes.
+  void end_grasp(const ModelView<T>& m, const StateView<T>& s, int tool, cudaStream_t stream);
+  /// Forgets every contact and grasp.
+  void reset(const ModelView<T>& m, const StateView<T>& s, cudaStream_t stream);
+
+  /// Surface nodes, not inner region nodes, within 1.5 radii of the sweep's
+  /// sub-check capsules (current u), ascending: one count comes back, and
+  /// the list when it is not empty.
+  std::vector<index_t> candidates(const ModelView<T>& m, const StateView<T>& s, const Packed3<T>* u,
+                                  const ContactTools<T>& sweep, Transfers& log, cudaStream_t stream);
+
+  /// Every surface node in contact (downloads one record per surface node).
+  std::vector<ContactNode> contacts(const ModelView<T>& m, const StateView<T>& s, Transfers& log,
+                                    cudaStream_t stream);
+
+  /// Per-tool contact reductions (core ToolReduction) over the surface, with
+  /// the internal force s.f, into out->tools (device memory); one block,
+  /// fixed order: deterministic.
+  void reduce(const ModelView<T>& m, const StateView<T>& s, Reductions* out, cudaStream_t stream);
+
+ private:
+  DeviceArray<ContactTools<T>> tools_;       ///< (1)
+  PinnedArray<ContactTools<T>> tools_host_;  ///< its staging
+  Event tools_copied_;                       ///< the staging has been read
+  bool tools_pending_ = false;
+  DeviceArray<std::uint8_t> flag_;           ///< candidates: per node (n_nodes), then per surface node (n_surf)
+  DeviceArray<std::uint8_t> flag_surf_;
+  DeviceArray<index_t> selected_;            ///< (n_surf)
+  DeviceArray<int> n_selected_;              ///< (1)
+  PinnedArray<int> n_selected_host_;
+  DeviceArray<unsigned char> cub_temp_;
+  DeviceArray<ContactRecord> records_;              ///< (n_surf)
+};
+
+}  // namespace tissue::gpu

@@ -1,0 +1,609 @@
+// The Backend contract (core/backend.hpp), one suite over every backend and
+// precision (cpu and cuda, float and double; a backend not built or with no
+// device here skips, naming why): the IANP passes against a serial
+// reference, zero force at rest and under rigid motion, the region, the
+// inverted-element flag, the reductions, identical errors for bad input (the
+// checks live once, in Backend), and the tool contact of core/contact.hpp:
+// no penetration, frictionless reaction that never pulls, the equilibrium
+// balance of tool and supports, grasping, several tools, small tools caught
+// by faces, fast tools sub-stepped, rigid supports reported, the region
+// seeded by contact candidates, a tool that starts inside the surface.
+// The cuda backend's own stage-by-stage comparison with the cpu is
+// tests/cuda/test_cuda_stages.cpp.
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "backends/registry.hpp"
+#include "core/scheduler.hpp"
+#include "tests/backend_test_support.hpp"
+
+namespace tissue {
+namespace {
+
+using namespace tissue::test;
+
+struct Kind {
+  std::string backend;
+  Precision precision;
+};
+
+void PrintTo(const Kind& k, std::ostream* os) { *os << k.backend << " " << to_string(k.precision); }
+
+class Contract : public ::testing::TestWithParam<Kind> {
+ protected:
+  void SetUp() override {
+    for (const BackendInfo& b : list_backends())
+      if (b.name == GetParam().backend && !b.available)
+        GTEST_SKIP() << "backend '" << b.name << "' is not usable here: " << b.detail;
+  }
+  bool is_float() const { return GetParam().precision == Precision::Float; }
+  std::unique_ptr<Backend> make() const { return create_backend(GetParam().backend, GetParam().precision); }
+  std::unique_ptr<Backend> make(const TissueModel<double>& m) const {
+    auto b = make();
+    b->upload(m);
+    return b;
+  }
+  /// Relative rounding scale of the backend's scalar.
+  double eps() const { return is_float() ? 1.2e-7 : 2.2e-16; }
+};
+
+INSTANTIATE_TEST_SUITE_P(Backends, Contract,
+                         ::testing::Values(Kind{"cpu", Precision::Float}, Kind{"cpu", Precision::Double},
+                                           Kind{"cuda", Precision::Float}, Kind{"cuda", Precision::Double}),
+                         [](const auto& info) { return info.param.backend + "_" + to_string(info.param.precision); });
+
+TEST_P(Contract, IdentifiesItself) {
+  auto b = make();
+  EXPECT_EQ(b->name(), GetParam().backend);
+  EXPECT_EQ(b->precision(), GetParam().precision);
+  EXPECT_FALSE(b->device_name().empty());
+  EXPECT_EQ(b->positions_on_device(), GetParam().backend == "cuda");
+}
+
+TEST_P(Contract, ZeroForceAtRest) {
+  const auto m = box_model(3, true);
+  auto b = make(m);
+  b->advance(3);
+  const Fields f = b->download();
+  EXPECT_EQ(max_abs(f.u), 0.0);
+  EXPECT_EQ(max_abs(f.f), 0.0);
+  EXPECT_EQ(max_abs(f.node_p), 0.0);
+  for (double J : f.elem_J) EXPECT_EQ(J, 1.0);
+  const Reductions r = b->reduce();
+  EXPECT_EQ(r.free_force2 + r.held_force2 + r.kinetic + r.max_disp, 0.0);
+  EXPECT_EQ(r.bad_elem, -1);
+  EXPECT_TRUE(r.finite);
+  for (const ToolReduction& t : r.tools) EXPECT_EQ(t.contact, 0);
+}
+
+/// Max |f| after one step from a 5% uniaxial stretch: the force scale the
+/// rigid-motion tolerances are relative to.
+double stretch_force(Backend& b, const TissueModel<double>& m) {
+  b.set_displacements(field(m, [](Vec3<double> X) { return Vec3<double>{0.05 * X.x, 0, 0}; }));
+  b.advance(1);
+  return max_abs(b.download().f);
+}
+
+TEST_P(Contract, RigidMotionGivesNoInternalForce) {
+  const auto m = box_model(4);
+  auto b = make(m);
+  const double scale = stretch_force(*b, m);
+  ASSERT_GT(scale, 1e-6);
+  // tolerance: rounding of F = I + sum u_a dN_a^T, relative to the stretch case
+  const double tol = (is_float() ? 1e-4 : 1e-11) * scale;
+  const auto shift = field(m, [](Vec3<double>) { return Vec3<double>{0.003, -0.002, 0.001}; });
+  b->set_displacements(shift);
+  b->advance(1);
+  EXPECT_LT(max_abs(b->download().f), tol);
+  // 30 degrees about the axis (1, 2, 3) / |.| through the box centre (Rodrigues)
+  const Vec3<double> k = (1.0 / std::sqrt(14.0)) * Vec3<double>{1, 2, 3}, c{kL / 2, kL / 2, kL / 2};
+  const double th = M_PI / 6;
+  b->set_displacements(field(m, [&](Vec3<double> X) {
+    const Vec3<double> r = X - c;
+    return std::cos(th) * r + std::sin(th) * cross(k, r) + ((1 - std::cos(th)) * dot(k, r)) * k - r;
+  }));
+  b->advance(1);
+  EXPECT_LT(max_abs(b->download().f), tol);
+}
+
+TEST_P(Contract, PassesMatchASerialReference) {
+  for (bool ianp : {true, false}) {
+    const auto m = box_model(3, true, ianp);
+    auto b = make(m);
+    std::vector<double> u = field(m, [](Vec3<double> X) {
+      return Vec3<double>{0.04 * X.x * X.z / kL, -0.03 * X.y, 0.02 * X.x - 0.05 * X.z * X.z / kL};
+    });
+    for (index_t a = 0; a < m.n_nodes; ++a)
+      if (m.node_flags[a] & kFixed)
+        for (int c = 0; c < 3; ++c) u[c * m.n_nodes + a] = 0;
+    b->set_displacements(u);
+    std::vector<double> u_prev = u, u_held(u.size(), 0.0), f;
+    std::vector<std::uint8_t> held(m.n_nodes);
+    for (index_t a = 0; a < m.n_nodes; ++a) held[a] = (m.node_flags[a] & kFixed) ? 1 : 0;
+    for (int s = 0; s < 5; ++s) f = reference_step(m, u, u_prev, held, u_held);
+    b->advance(5);
+    const Fields got = b->download();
+    // float: a few ulp per step of the stress's cancellations (measured 2e-6 on the cpu)
+    EXPECT_LT(max_diff(got.f, f), (is_float() ? 1e-4 : 1e-12) * max_abs(f)) << "ianp " << ianp;
+    EXPECT_LT(max_diff(got.u, u), (is_float() ? 1e-5 : 1e-14) * max_abs(u)) << "ianp " << ianp;
+  }
+}
+
+TEST_P(Contract, RegionRunMovesOnlyRegionNodes) {
+  const auto m = box_model(6, true);
+  auto b = make(m);
+  const auto seeds = top_triangle(m);
+  const RegionSizes sz = b->build_region(seeds, 1);
+  const Region want = flood_fill(m, std::span<const index_t>(seeds), 1);
+  EXPECT_EQ(sz.n_inner, want.n_inner);
+  EXPECT_EQ(sz.n_halo, want.n_halo);
+  EXPECT_EQ(sz.n_elems, index_t(want.elems.size()));
+  const Region got = b->region();
+  EXPECT_EQ(got.nodes, want.nodes);
+  EXPECT_EQ(got.elems, want.elems);
+  EXPECT_EQ(got.role, want.role);
+  const double push[] = {0, 0, -0.001, 0, 0, -0.001, 0, 0, -0.001};
+  b->set_driven(seeds, push);
+  b->advance(30);
+  const Fields f = b->download();
+  const index_t n = m.n_nodes;
+  int moved = 0;
+  for (index_t a = 0; a < n; ++a) {
+    const Vec3<double> u = node_u(f.u, n, a);
+    if (std::count(seeds.begin(), seeds.end(), a)) {
+      EXPECT_NEAR(u.z, -0.001, is_float() ? 1e-10 : 1e-15) << "driven node " << a;
+    } else if (want.role[a] == kInner) {
+      moved += norm(u) > 1e-6;
+    } else {  // outside and halo nodes stay exactly where they were (at 0)
+      EXPECT_EQ(norm(u), 0.0) << "node " << a << " role " << int(want.role[a]);
+    }
+  }
+  EXPECT_GT(moved, 0);
+  // the reductions agree with the downloaded fields
+  const Reductions r = b->reduce();
+  double fz = 0, max_u = 0;
+  Vec3<double> internal{0, 0, 0};
+  for (index_t a : seeds) fz += f.f[2 * n + a];
+  for (index_t a : want.nodes) {
+    max_u = std::max(max_u, norm(node_u(f.u, n, a)));
+    if (want.role[a] == kInner) internal = internal + node_u(f.f, n, a);
+  }
+  EXPECT_LT(r.reaction.z, 0);
+  EXPECT_NEAR(r.reaction.z, fz, 1e-12 * std::fabs(fz) + 1e-15);
+  EXPECT_NEAR(r.internal.z, internal.z, 1e-9 * std::fabs(fz));
+  EXPECT_DOUBLE_EQ(r.max_disp, max_u);
+}
+
+TEST_P(Contract, InvertedElementIsReportedOnceThenClearedAndStopsTheScheduler) {
+  for (bool ianp : {true, false}) {
+    const auto m = box_model(2, false, ianp);
+    auto b = make(m);
+    const auto u = flip(m, 29, 3, 1.3);
+    const auto [e, J] = lowest_inverted(m, u);
+    ASSERT_GE(e, 0);
+    b->set_displacements(u);
+    b->advance(1);
+    const Reductions r = b->reduce();
+    EXPECT_EQ(r.bad_elem, e) << "ianp " << ianp;
+    EXPECT_NEAR(r.bad_J, J, 1e-6 * std::fabs(J) + 1e-6);  // recorded as float
+    EXPECT_EQ(b->reduce().bad_elem, -1);                  // reduce() cleared the flag
+    if (!ianp) continue;
+    b->set_displacements(u);
+    SchedulerSettings settings;
+    settings.depth = kDepthAll;
+    settings.tools.front().shape.radius = 0.004;
+    Scheduler sched(*b, m, settings);
+    ScriptedDevice far(std::vector<Waypoint>{{0.0, {1.0, 1.0, 1.0}}});  // never touches the box
+    try {
+      sched.tick(far);
+      ADD_FAILURE() << "an inverted element did not stop the run";
+    } catch (const SimulationError& err) {
+      EXPECT_NE(std::string(err.what()).find(fmt::format("element {} ", e)), std::string::npos) << err.what();
+    }
+  }
+}
+
+/// The message of the std::exception f throws, or "<no exception>".
+template <class F>
+std::string message(F&& f) {
+  try {
+    f();
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "<no exception>";
+}
+
+/// Every bad call's message, in order: the checks live in Backend, so every
+/// backend must give the same words.
+std::vector<std::string> bad_input_messages(Backend& b, const TissueModel<double>& m) {
+  const index_t n = m.n_nodes;
+  std::vector<std::string> out;
+  out.push_back(message([&] { b.set_displacements(std::vector<double>(3 * n - 1, 0.0)); }));
+  std::vector<double> u(3 * size_t(n), 0.0);
+  u[n + 5] = std::nan("");
+  out.push_back(message([&] { b.set_displacements(u); }));
+  const index_t nodes[] = {3, n};
+  const double t6[6] = {};
+  out.push_back(message([&] { b.set_driven(nodes, std::span<const double>(t6, 5)); }));
+  out.push_back(message([&] { b.set_driven(nodes, t6); }));
+  const index_t one[] = {3};
+  const double nan3[3] = {0, std::nan(""), 0};
+  out.push_back(message([&] { b.set_driven(one, nan3); }));
+  const std::uint8_t mask8[] = {8};
+  out.push_back(message([&] { b.set_driven_axes(one, std::span<const double>(t6, 3), mask8); }));
+  out.push_back(message([&] { b.build_region(one, -3); }));
+  const index_t bad_seed[] = {n};
+  out.push_back(message([&] { b.build_region(bad_seed, 1); }));
+  const index_t seed[] = {n - 1};
+  b.build_region(seed, 0);
+  const index_t far[] = {0};
+  out.push_back(message([&] { b.set_driven(far, std::span<const double>(t6, 3)); }));
+  out.push_back(message([&] { b.advance(-1); }));
+  out.push_back(message([&] { b.write_positions(nullptr); }));
+  const ToolShape bad_tools[] = {{"probe", 0.0, 0}};
+  out.push_back(message([&] { b.set_tools(bad_tools); }));
+  const ToolShape neg_shaft[] = {{"probe", 0.001, -1}};
+  out.push_back(message([&] { b.set_tools(neg_shaft); }));
+  const std::vector<ToolShape> five(5);
+  out.push_back(message([&] { b.set_tools(five); }));
+  const ToolShape one_tool[] = {{"probe", 0.001, 0}};
+  b.set_tools(one_tool);
+  out.push_back(message([&] { b.move_tools({}); }));
+  const ToolMotion nan_tip[] = {{{{std::nan(""), 0, 0}, {0, 0, 1}}, {}}};
+  out.push_back(message([&] { b.move_tools(nan_tip); }));
+  const ToolMotion zero_axis[] = {{{{0, 0, 0}, {0, 0, 0}}, {}}};
+  out.push_back(message([&] { b.move_tools(zero_axis); }));
+  return out;
+}
+
+TEST_P(Contract, BadInputGivesTheSameClearErrorOnEveryBackend) {
+  auto fresh = make();
+  EXPECT_NE(message([&] { fresh->advance(1); }).find("before upload()"), std::string::npos);
+  EXPECT_NE(message([&] { fresh->reduce(); }).find("before upload()"), std::string::npos);
+  const auto m = box_model(2);
+  auto b = make(m);
+  const std::vector<std::string> got = bad_input_messages(*b, m);
+  auto reference = create_backend("cpu", Precision::Double);
+  reference->upload(m);
+  const std::vector<std::string> want = bad_input_messages(*reference, m);
+  ASSERT_EQ(got.size(), want.size());
+  for (std::size_t k = 0; k < got.size(); ++k) {
+    EXPECT_EQ(got[k], want[k]) << "call " << k;
+    EXPECT_NE(got[k], "<no exception>") << "call " << k;
+  }
+  const index_t n = m.n_nodes;
+  // and the words name the value and the rule
+  for (const auto& [k, part] : std::vector<std::pair<int, std::string>>{
+           {0, fmt::format("need 3 x n_nodes = {}", 3 * n)},
+           {1, "node 5: displacement y = nan is not finite"},
+           {2, "5 displacement values for 2 nodes"},
+           {3, fmt::format("node {} out of range", n)},
+           {5, "axis mask 8 must be 1..7"},
+           {6, "depth -3 must be >= 0"},
+           {8, "node 0 is outside the deformation region"},
+           {9, "step count -1 must be >= 0"},
+           {11, "radius 0 m must be > 0"},
+           {12, "shaft length -1 m must be >= 0"},
+           {13, "at most 4"},
+           {14, "0 motions for 1 tools"},
+           {15, "tip (nan, 0, 0) is not finite"},
+           {16, "must be a non-zero finite direction"}})
+    EXPECT_NE(got[k].find(part), std::string::npos) << got[k];
+}
+
+// ---- tool contact --------------------------------------------------------------
+
+/// A 40 x 40 x 20 mm box of n x n x n/2 cells (6 tets each) on a fixed base,
+/// brain-like tissue.
+TissueModel<double> slab(int n, bool fix_all = false) {
+  ModelInput in;
+  box_mesh(in, n, n, n / 2, 0.04, 0.04, 0.02);
+  const double E = 3000, nu = 0.45;
+  in.materials = {{E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu)), 1000}};
+  in.fixed.assign(in.nodes.size() / 3, 0);
+  for (size_t i = 0; i < in.fixed.size(); ++i) in.fixed[i] = fix_all || in.nodes[3 * i + 2] == 0.0;
+  in.source = "contact slab";
+  in.dt_safety = 0.9;
+  return build_model(in);
+}
+
+constexpr double kTop = 0.02;
+
+/// A scheduler over the backend with these tools (depth all).
+SchedulerSettings tools_settings(std::vector<ToolSetting> tools) {
+  SchedulerSettings st;
+  st.depth = kDepthAll;
+  st.tools = std::move(tools);
+  return st;
+}
+
+ToolSetting sphere(double r, double shaft = 0, std::string name = "probe") { return {{name, r, shaft}, {0, 0, 1}}; }
+
+/// Approach from 3 mm above, press `depth` (the sphere's lowest point below
+/// the top) over 0.1 s at (x, y), hold `hold` s.
+std::vector<Waypoint> press_at(double x, double y, double r, double depth, double hold = 0.4) {
+  return press_path({x, y, kTop + r}, {0, 0, -1}, depth, 0.003, 0.05, 0.1, hold, 0.05);
+}
+
+/// Largest penetration of a pushed node into a sphere at `c` (m; <= 0 when
+/// none lies inside).
+double penetration(const TissueModel<double>& m, const Fields& f, const std::vector<ContactNode>& contacts,
+                   Vec3<double> c, double r) {
+  const index_t n = m.n_nodes;
+  double worst = -INFINITY;
+  for (const ContactNode& k : contacts) {
+    const Vec3<double> x = Vec3<double>{m.X[k.node], m.X[n + k.node], m.X[2 * n + k.node]} + node_u(f.u, n, k.node);
+    worst = std::max(worst, r - norm(x - c));
+  }
+  return worst;
+}
+
+TEST_P(Contract, PressedSphereHoldsTheSurfaceOutsideAndFeelsItPushBack) {
+  const auto m = slab(8);  // 5 mm cells
+  auto b = make(m);
+  const double r = 0.004;
+  Scheduler sched(*b, m, tools_settings({sphere(r)}));
+  ScriptedDevice dev(press_at(0.0203, 0.0196, r, 0.002));
+  TickReport rep;
+  while (sched.time() < 0.3) rep = sched.tick(dev);
+  ASSERT_GT(rep.contact_nodes, 0);
+  const std::vector<ContactNode> c = b->contacts();
+  ASSERT_FALSE(c.empty());
+  for (const ContactNode& k : c) {
+    EXPECT_EQ(k.tool, 0);
+    EXPECT_EQ(k.kind, kPushed);
+    EXPECT_NEAR(norm(k.normal), 1.0, 1e-5);
+    EXPECT_LT(k.normal.z, 0.0) << "the contact normal points out of the tool, into the tissue below";
+  }
+  // no node inside the tool (float: rounding of positions near 2 cm)
+  EXPECT_LT(penetration(m, b->download(), c, rep.tool, r), is_float() ? 1e-7 : 1e-12);
+  // the tissue pushes the tool up, mostly along the press
+  EXPECT_GT(rep.force.z, 0.0);
+  EXPECT_LT(std::hypot(rep.force.x, rep.force.y), 0.2 * rep.force.z);
+}
+
+TEST_P(Contract, AtEquilibriumTheToolForceBalancesTheSupports) {
+  const auto m = slab(8);
+  auto b = make(m);
+  const double r = 0.004;
+  Scheduler sched(*b, m, tools_settings({sphere(r)}));
+  ScriptedDevice dev(press_at(0.0203, 0.0196, r, 0.002, 3.0));
+  TickReport rep;
+  bool eq = false;
+  while (sched.time() < 3.0 && !eq) {
+    rep = sched.tick(dev);
+    eq = rep.equilibrium && rep.time > 0.2;
+  }
+  ASSERT_TRUE(eq) << "no equilibrium under the held tool";
+  const Fields f = b->download();
+  const index_t n = m.n_nodes;
+  Vec3<double> support{0, 0, 0};  // the internal forces on fixed nodes are the supports' reactions
+  for (index_t a = 0; a < n; ++a)
+    if (m.node_flags[a] & kFixed) support = support + node_u(f.f, n, a);
+  // Newton: the tool's force and the supports' sum to zero on the body, so
+  // F_tool = -sum(contact) f = sum(fixed) f, to the equilibrium tolerance (1e-3)
+  EXPECT_GT(rep.force.z, 0);
+  EXPECT_LT(norm(rep.force - support), 2e-3 * norm(rep.force)) << "tool (" << rep.force.x << ", " << rep.force.y
+                                                                << ", " << rep.force.z << ") support (" << support.x
+                                                                << ", " << support.y << ", " << support.z << ")";
+}
+
+TEST_P(Contract, ContactNeverPullsAndEndsWhenTheToolWithdraws) {
+  const auto m = slab(8);
+  auto b = make(m);
+  const double r = 0.004;
+  Scheduler sched(*b, m, tools_settings({sphere(r)}));
+  ScriptedDevice dev(press_at(0.0203, 0.0196, r, 0.002, 0.1));  // retracts to 3 mm above at t = 0.3 s
+  double min_fz = INFINITY;
+  TickReport rep;
+  while (sched.time() < 0.5) {
+    rep = sched.tick(dev);
+    if (rep.contact_nodes > 0) min_fz = std::min(min_fz, rep.force.z);
+  }
+  EXPECT_GE(min_fz, 0.0) << "a frictionless contact never pulls the tool into the tissue";
+  EXPECT_EQ(rep.contact_nodes, 0);
+  EXPECT_EQ(norm(rep.force), 0.0);
+  EXPECT_TRUE(b->contacts().empty());
+}
+
+TEST_P(Contract, GraspedTissueFollowsTheToolAndPullsBack) {
+  const auto m = slab(8);
+  auto b = make(m);
+  const double r = 0.004;
+  Scheduler sched(*b, m, tools_settings({sphere(r)}));
+  const Vec3<double> touch{0.0203, 0.0196, kTop + r};
+  // press 1 mm, grasp, lift to 3 mm above the undeformed top, hold, release
+  std::vector<Waypoint> path = {{0.0, touch + Vec3<double>{0, 0, 0.002}},
+                                {0.05, touch - Vec3<double>{0, 0, 0.001}},
+                                {0.1, touch - Vec3<double>{0, 0, 0.001}, true},
+                                {0.3, touch + Vec3<double>{0, 0, 0.003}, true},
+                                {0.5, touch + Vec3<double>{0, 0, 0.003}, true},
+                                {0.6, touch + Vec3<double>{0, 0, 0.003}, false}};
+  ScriptedDevice dev(path);
+  TickReport rep;
+  index_t grasped = 0;
+  while (sched.time() < 0.5) {
+    rep = sched.tick(dev);
+    grasped = std::max(grasped, rep.tools[0].grasped);
+  }
+  ASSERT_GT(grasped, 0);
+  EXPECT_TRUE(rep.tools[0].grasp);
+  EXPECT_EQ(rep.tools[0].grasped, grasped) << "the grasped set is fixed while the button is held";
+  // the grasped nodes rose with the tool: the tissue is pulled up by ~4 mm
+  const Fields f = b->download();
+  const index_t n = m.n_nodes;
+  double max_uz = 0;
+  for (const ContactNode& c : b->contacts()) {
+    EXPECT_EQ(c.kind, kGrasped);
+    max_uz = std::max(max_uz, f.u[2 * n + c.node]);
+  }
+  EXPECT_GT(max_uz, 0.003);
+  EXPECT_LT(rep.force.z, 0.0) << "the stretched tissue pulls the tool down: the force includes tension";
+  while (sched.time() < 0.7) rep = sched.tick(dev);  // released 3 mm above the surface
+  EXPECT_EQ(rep.tools[0].grasped, 0);
+  EXPECT_EQ(rep.contact_nodes, 0);
+}
+
+TEST_P(Contract, TwoToolsEachFeelTheirOwnForce) {
+  const auto m = slab(8);
+  auto b = make(m);
+  const double r = 0.004;
+  Scheduler sched(*b, m, tools_settings({sphere(r, 0, "left"), sphere(r, 0.01, "right")}));
+  ScriptedDevice left(press_at(0.011, 0.02, r, 0.001)), right(press_at(0.029, 0.02, r, 0.003));
+  Device* devices[] = {&left, &right};
+  TickReport rep;
+  while (sched.time() < 0.4) rep = sched.tick(devices);
+  ASSERT_EQ(rep.n_tools, 2);
+  EXPECT_GT(rep.tools[0].contact_nodes, 0);
+  EXPECT_GT(rep.tools[1].contact_nodes, 0);
+  EXPECT_GT(rep.tools[0].force.z, 0);
+  EXPECT_GT(rep.tools[1].force.z, 1.5 * rep.tools[0].force.z) << "the deeper press feels more";
+  for (const ContactNode& c : b->contacts()) {
+    const index_t n = m.n_nodes;
+    const double x = m.X[c.node];
+    EXPECT_EQ(c.tool, x < 0.02 ? 0 : 1) << "node " << c.node << " at x = " << x;
+    (void)n;
+  }
+  // the devices got their own tool's force
+  EXPECT_EQ(left.last_force().z, rep.tools[0].force.z);
+  EXPECT_EQ(right.last_force().z, rep.tools[1].force.z);
+}
+
+TEST_P(Contract, ASmallToolBetweenNodesIsCaughtByTheFaces) {
+  const auto m = slab(4);  // 10 mm cells: a 1 mm tool fits between the nodes
+  const double r = 0.001;
+  for (bool face : {true, false}) {
+    auto b = make(m);
+    SchedulerSettings st = tools_settings({sphere(r)});
+    st.contact.face = face;
+    Scheduler sched(*b, m, st);
+    ScriptedDevice dev(press_at(0.0233, 0.0167, r, 0.002));  // inside a top triangle, away from its corners
+    TickReport rep;
+    while (sched.time() < 0.3) rep = sched.tick(dev);
+    if (face) {
+      EXPECT_GT(rep.contact_nodes, 0);
+      EXPECT_GT(rep.force.z, 0);
+      EXPECT_LT(rep.max_disp, 0.0025);
+      EXPECT_GT(rep.max_disp, 0.0015) << "the surface under the tool follows it down";
+    } else {  // node contact alone lets it slip through the face: what face contact is for
+      EXPECT_EQ(rep.contact_nodes, 0);
+      EXPECT_EQ(norm(rep.force), 0.0);
+    }
+  }
+}
+
+TEST_P(Contract, AFastToolIsSubSteppedAndPushesTheTissue) {
+  const auto m = slab(8);
+  const index_t n = m.n_nodes;
+  const double r = 0.002;
+  // from 20 mm above to 3 mm deep within one tick (23 m/s: 11 radii in the
+  // tick). Checked every r / 2 of travel (the default), the tool pushes the
+  // surface ahead of it: the top node nearest its axis ends under the tip.
+  // Checked once per step (max_travel 1000 radii), the tip lands 1 mm under
+  // the surface, past that node, which it then pushes out radially: up, over
+  // the tool.
+  for (double travel : {0.5, 1000.0}) {
+    auto b = make(m);
+    SchedulerSettings st = tools_settings({sphere(r)});
+    st.contact.max_travel = travel;
+    Scheduler sched(*b, m, st);
+    const Vec3<double> top{0.0203, 0.0196, kTop + r};
+    ScriptedDevice dev(std::vector<Waypoint>{{0.0, top + Vec3<double>{0, 0, 0.02}},
+                                             {0.001, top + Vec3<double>{0, 0, 0.02}},
+                                             {0.002, top - Vec3<double>{0, 0, 0.003}},
+                                             {1.0, top - Vec3<double>{0, 0, 0.003}}});
+    sched.tick(dev);
+    const TickReport rep = sched.tick(dev);  // the fast tick
+    const Fields f = b->download();
+    index_t under = -1;  // the top node nearest the tool's axis
+    double best = INFINITY;
+    for (index_t a = 0; a < n; ++a)
+      if (m.X[2 * n + a] == kTop && std::hypot(m.X[a] - top.x, m.X[n + a] - top.y) < best) {
+        best = std::hypot(m.X[a] - top.x, m.X[n + a] - top.y);
+        under = a;
+      }
+    const double z = m.X[2 * n + under] + f.u[2 * n + under] - rep.tool.z;  // relative to the tip centre
+    if (travel < 1) {
+      EXPECT_GT(rep.contact_nodes, 0) << "contact found within the fast tick";
+      EXPECT_LT(z, -0.5 * r) << "the node under the tool is not under the tip: the tool went through the surface";
+    } else {
+      EXPECT_GT(z, 0.0) << "without sub-steps the node should end over the tool (the case above prevents it)";
+    }
+  }
+}
+
+TEST_P(Contract, ARigidSupportUnderTheToolIsReportedByName) {
+  const auto m = slab(4, /*fix_all=*/true);
+  auto b = make(m);
+  const double r = 0.004;
+  Scheduler sched(*b, m, tools_settings({sphere(r)}));
+  ScriptedDevice dev(press_at(0.02, 0.02, r, 0.002));
+  TickReport rep;
+  std::vector<std::string> notes;
+  while (sched.time() < 0.3) {
+    rep = sched.tick(dev);
+    for (std::string& s : sched.take_notes()) notes.push_back(std::move(s));
+  }
+  EXPECT_GT(rep.tools[0].rigid_nodes, 0);
+  EXPECT_EQ(rep.contact_nodes, 0);
+  EXPECT_EQ(norm(rep.force), 0.0);
+  ASSERT_EQ(notes.size(), 1u) << "reported once per episode";
+  EXPECT_NE(notes[0].find("rigid support"), std::string::npos) << notes[0];
+  const std::vector<ContactNode> c = b->contacts();
+  ASSERT_FALSE(c.empty());
+  EXPECT_EQ(c[0].kind, kRigidContact);
+  EXPECT_NE(notes[0].find(std::to_string(c[0].node)), std::string::npos) << notes[0];
+}
+
+TEST_P(Contract, ContactCandidatesSeedALimitedRegion) {
+  const auto m = slab(8);
+  auto b = make(m);
+  const double r = 0.004;
+  SchedulerSettings st = tools_settings({sphere(r)});
+  st.depth = 2;
+  Scheduler sched(*b, m, st);
+  EXPECT_EQ(sched.region().n_elems, 0);  // nothing touched yet
+  ScriptedDevice dev(press_at(0.0203, 0.0196, r, 0.002));
+  TickReport rep;
+  while (sched.time() < 0.3) rep = sched.tick(dev);
+  EXPECT_GT(rep.contact_nodes, 0);
+  EXPECT_GT(rep.region_elems, 0);
+  EXPECT_LT(rep.region_elems, m.n_elems);
+  const Region reg = b->region();
+  for (const ContactNode& c : b->contacts()) EXPECT_EQ(reg.role[c.node], kInner) << "node " << c.node;
+  EXPECT_GT(rep.force.z, 0);
+  // candidates are not-yet-inner surface nodes the pending motion reaches
+  ToolMotion far_away{{{0.005, 0.005, kTop + r}, {0, 0, 1}}, {{0.005, 0.005, kTop + r - 0.001}, {0, 0, 1}}};
+  b->move_tools(std::span<const ToolMotion>(&far_away, 1));
+  const std::vector<index_t> cand = b->contact_candidates();
+  ASSERT_FALSE(cand.empty());
+  EXPECT_TRUE(std::is_sorted(cand.begin(), cand.end()));
+  for (index_t a : cand) {
+    EXPECT_NE(reg.role[a], kInner);
+    EXPECT_TRUE(m.node_flags[a] & kSurface);
+  }
+}
+
+TEST_P(Contract, AToolStartingInsideTheSurfaceIsInContactFromTheFirstTick) {
+  const auto m = slab(8);
+  auto b = make(m);
+  const double r = 0.004;
+  Scheduler sched(*b, m, tools_settings({sphere(r, 0.02)}));
+  ScriptedDevice dev(std::vector<Waypoint>{{0.0, {0.0203, 0.0196, kTop + r - 0.0015}}});  // 1.5 mm deep, held
+  const TickReport first = sched.tick(dev);
+  EXPECT_GT(first.contact_nodes, 0);
+  TickReport rep = first;
+  while (sched.time() < 0.1) rep = sched.tick(dev);
+  EXPECT_GT(rep.force.z, 0);
+  EXPECT_TRUE(sched.take_notes().empty()) << "not embedded: it touches the surface";
+}
+
+}  // namespace
+}  // namespace tissue
