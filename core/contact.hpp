@@ -17,19 +17,23 @@
 //         moves the point by delta n); corners that cannot move (fixed,
 //         outside the region, grasped) take no share.
 //     Sidedness: the tool belongs on the outer side of every face (its
-//     outward normal N). Where the axis has reached the tissue's side of a
-//     face it touches (the face was tilted past it), (a) leaves that face's
-//     corners alone and (b) moves the face along -N to the far side of the
-//     tool, so that neither a corner nor a face is ever pushed out through
-//     the tool: a tool cannot slip through the surface;
+//     outward normal N). Where it has passed through a face -- its axis
+//     pierces the face, or its axis point nearest the face lies more than
+//     kThrough radii on the tissue's side of the face's plane (the face was
+//     tilted past it) -- (a) moves that face's corners and (b) the face
+//     along -N to the far side of the tool (capsule_exit), instead of
+//     radially out through the tool: a tool cannot slip through the surface;
 //  2. each surface node combines its triangles' proposals dx_i, in
 //     ascending triangle order, into one correction that satisfies each of
 //     them along its own direction: dx = dx_1, then for every further
 //     proposal the shortfall |dx_i| - dx . dx_i / |dx_i|, if positive, is
-//     added along dx_i (a continuous rule: a node between two triangles does
-//     not flip from one to the other from step to step). It moves by dx in
-//     its free components and is in contact with the tool of its largest
-//     proposal, with the contact normal n = dx / |dx| (out of the tool).
+//     added along dx_i, in kMergePasses passes over the proposals (one
+//     suffices unless two are more than 90 degrees apart) -- a continuous
+//     rule: a node between two triangles does not flip from one to the
+//     other from step to step. It moves by dx in
+//     its free components (a roller's held component stays) and is in
+//     contact with the tool of its largest proposal, with the contact normal
+//     n = the unit free part of dx (out of the tool).
 //     Frictionless: only the normal is constrained.
 // The contact never pulls: a node that the tissue carries out of the tool
 // by itself is not inside after the free update, so it is not moved and
@@ -42,6 +46,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 
 #include "core/tool.hpp"
 #include "core/vec.hpp"
@@ -186,10 +191,18 @@ TISSUE_HD Vec3<T> closest_on_triangle(Vec3<T> x, Vec3<T> P0, Vec3<T> P1, Vec3<T>
     w[0] = T(0); w[1] = T(1) - v; w[2] = v;
     return P1 + v * (P2 - P1);
   }
+  // den = |ab x ac|^2: for a (nearly) flat triangle the region tests above are rounding noise and the face
+  // solution divides by noise; its nearest point then lies on one of its edges
   const T den = va + vb + vc;
-  if (!(den > T(0))) {  // degenerate (zero-area) triangle: the nearest of its three edges handled above
-    w[0] = T(1); w[1] = w[2] = T(0);
-    return P0;
+  if (!(den > T(64) * std::numeric_limits<T>::epsilon() * dot(ab, ab) * dot(ac, ac))) {
+    const Vec3<T> bc = P2 - P1;
+    const T s0 = closest_on_segment(P0, P1, x), s1 = closest_on_segment(P1, P2, x), s2 = closest_on_segment(P0, P2, x);
+    const Vec3<T> q0 = P0 + s0 * ab, q1 = P1 + s1 * bc, q2 = P0 + s2 * ac;
+    const T d0 = dot(x - q0, x - q0), d1 = dot(x - q1, x - q1), d2 = dot(x - q2, x - q2);
+    if (d0 <= d1 && d0 <= d2) { w[0] = T(1) - s0; w[1] = s0; w[2] = T(0); return q0; }
+    if (d1 <= d2) { w[0] = T(0); w[1] = T(1) - s1; w[2] = s1; return q1; }
+    w[0] = T(1) - s2; w[1] = T(0); w[2] = s2;
+    return q2;
   }
   const T v = vb / den, u = vc / den;
   w[0] = T(1) - v - u; w[1] = v; w[2] = u;
@@ -265,6 +278,35 @@ TISSUE_HD Vec3<T> triangle_deepest_point(const Capsule<T>& cap, const Vec3<T> P[
   return q;
 }
 
+/// How far a point x inside the capsule must move along the unit direction d
+/// to leave it: the larger root of |x + l d - (a + s (b - a))| = r over the
+/// segment, i.e. the exit from the cylinder clamped to the segment's span or
+/// from an end sphere (the capsule is convex: one exit). Used where the tool
+/// has passed a face.
+template <class T>
+TISSUE_HD T capsule_exit(const Capsule<T>& cap, Vec3<T> x, Vec3<T> d) {
+  // exit from the sphere of radius r about p along d (0 when x is outside it)
+  const auto sphere_exit = [&](Vec3<T> p) {
+    const Vec3<T> m = x - p;
+    const T b = dot(m, d), c = dot(m, m) - cap.r * cap.r, disc = b * b - c;
+    return disc > T(0) ? -b + std::sqrt(disc) : T(0);
+  };
+  T exit = sphere_exit(cap.a) > sphere_exit(cap.b) ? sphere_exit(cap.a) : sphere_exit(cap.b);
+  const Vec3<T> ab = cap.b - cap.a;
+  const T len2 = dot(ab, ab);
+  if (len2 > T(0)) {  // the infinite cylinder's exit, if it happens within the segment's span
+    const Vec3<T> e = (T(1) / std::sqrt(len2)) * ab;
+    const Vec3<T> m = x - cap.a, mp = m - dot(m, e) * e, dp = d - dot(d, e) * e;
+    const T A = dot(dp, dp), B = dot(mp, dp), C = dot(mp, mp) - cap.r * cap.r, disc = B * B - A * C;
+    if (A > T(0) && disc > T(0)) {
+      const T l = (-B + std::sqrt(disc)) / A;
+      const T s = dot(m + l * d, e);
+      if (s >= T(0) && s * s <= len2 && l > exit) exit = l;
+    }
+  }
+  return exit;
+}
+
 /// Per-corner result of the contact sweep of one triangle.
 template <class T>
 struct CornerContact {
@@ -280,6 +322,19 @@ TISSUE_HD std::uint8_t corner_block(bool inner, bool held_all, bool grasped) {
   return !inner ? std::uint8_t(kOutsideRegion) : ((held_all || grasped) ? std::uint8_t(kRigidContact) : std::uint8_t(0));
 }
 
+/// A tool has passed through a face when its axis point nearest the face is
+/// this many radii behind the face's plane (on the tissue's side), or the
+/// axis pierces the face. Within this band the tool is at the surface's level
+/// -- beside a shaft through a hole the rim's corners must go sideways --
+/// and pushes stay radial.
+template <class T>
+inline constexpr T kThrough = T(0.1);
+
+/// The axis pierces a face when its distance to it is below this many radii
+/// (the radial direction out of the tool is then rounding, not geometry).
+template <class T>
+inline constexpr T kPierced = T(1e-4);
+
 /// The contact sweep of one surface triangle during TLED step k of the
 /// advance (see the rule at the top): x[3] are its corners' positions after
 /// the free update (m), block[3] their corner_block() values. Fills out[3].
@@ -292,11 +347,19 @@ TISSUE_HD void sweep_triangle(const ContactTools<T>& tools, int k, const Vec3<T>
     const ToolStep<T>& tool = tools.tool[t];
     for (int j = 1; j <= tool.substeps; ++j) {
       const Capsule<T> cap = tool_capsule(tool, tools.steps, k, j);
-      const Vec3<T> N = unit_or(cross(x[1] - x[0], x[2] - x[0]), Vec3<T>{T(0), T(0), T(0)});  // outward
+      // has the tool passed through this face? (sidedness, at the top of this file)
+      T w[3];
+      Vec3<T> c;
+      const Vec3<T> N = unit_or(cross(x[1] - x[0], x[2] - x[0]), axis_escape(cap, T(0)));  // outward
+      Vec3<T> q = triangle_deepest_point(cap, x, w, c);
+      const bool through = !(norm(q - c) > kPierced<T> * cap.r) || dot(c - q, N) < -kThrough<T> * cap.r;
       for (int i = 0; i < 3; ++i) {  // (a) node contact
         Vec3<T> xi = x[i], n;
         if (!push_out_of_capsule(cap, xi, n)) continue;
-        if (dot(n, N) > T(0)) continue;  // the tool is past this face here: (b) moves the face, not the corner outward
+        if (through) {  // to the face's far side, not out through the tool
+          n = T(-1) * N;
+          xi = x[i] + capsule_exit(cap, x[i], n) * n;
+        }
         if (block[i]) {
           out[i].blocked = block[i];
           out[i].tool = out[i].tool < 0 ? static_cast<signed char>(t) : out[i].tool;
@@ -306,20 +369,13 @@ TISSUE_HD void sweep_triangle(const ContactTools<T>& tools, int k, const Vec3<T>
         out[i].tool = static_cast<signed char>(t);
       }
       if (!tools.face) continue;
-      T w[3];  // (b) face contact
-      Vec3<T> c;
-      const Vec3<T> q = triangle_deepest_point(cap, x, w, c);
+      q = triangle_deepest_point(cap, x, w, c);  // (b) face contact, after (a)
       const Vec3<T> d = q - c;
       const T dist = norm(d);
       if (!(dist < cap.r)) continue;
-      const Vec3<T> Nf = unit_or(cross(x[1] - x[0], x[2] - x[0]), axis_escape(cap, T(0)));  // outward
-      // out of the capsule radially; but where the axis has reached the tissue's side of the face (pierced it,
-      // or its point nearest the face projects inside the face from behind), the face moves along its inward
-      // normal to the far side of the tool: a face is never pushed out through the tool
-      const T behind = dot(c - q, Nf);  // < 0: the axis point is on the tissue's side
-      const bool through = !(dist > T(0)) || (behind < T(0) && w[0] > T(0) && w[1] > T(0) && w[2] > T(0));
-      const Vec3<T> n = through ? T(-1) * Nf : (T(1) / dist) * d;
-      const T delta = through ? cap.r - behind : cap.r - dist;
+      const bool pierced = !(dist > kPierced<T> * cap.r);  // the direction out is the face's, not rounding's
+      const Vec3<T> n = through || pierced ? T(-1) * N : (T(1) / dist) * d;
+      const T delta = through || pierced ? capsule_exit(cap, q, n) : cap.r - dist;
       T wsum = T(0);
       for (int i = 0; i < 3; ++i) wsum += block[i] ? T(0) : w[i] * w[i];
       if (!(wsum > T(0))) {
@@ -342,16 +398,19 @@ TISSUE_HD void sweep_triangle(const ContactTools<T>& tools, int k, const Vec3<T>
 
 /// Rotation taking unit vector a to unit vector b applied to v (Rodrigues,
 /// the smallest rotation; identity when a == b; a half turn about an axis
-/// perpendicular to a when they are opposite).
+/// perpendicular to a when they are opposite to rounding). 1 + a.b is taken
+/// as |a + b|^2 / 2, accurate also near opposite vectors.
 template <class T>
 TISSUE_HD Vec3<T> rotate_between(Vec3<T> a, Vec3<T> b, Vec3<T> v) {
-  const T c = dot(a, b);
-  if (c < T(-0.999999)) {  // opposite: half turn about any perpendicular axis p, R v = 2 (p.v) p - v
+  const Vec3<T> sum = a + b;
+  const T one_plus_c = T(0.5) * dot(sum, sum);  // 1 + a.b, without the cancellation near -1
+  if (!(one_plus_c > T(16) * std::numeric_limits<T>::epsilon())) {
+    // opposite: half turn about any perpendicular axis p, R v = 2 (p.v) p - v
     const Vec3<T> p = any_perpendicular(a);
     return T(2) * dot(p, v) * p - v;
   }
   const Vec3<T> k = cross(a, b);
-  return c * v + cross(k, v) + (dot(k, v) / (T(1) + c)) * k;
+  return (one_plus_c - T(1)) * v + cross(k, v) + (dot(k, v) / one_plus_c) * k;
 }
 
 /// Where a grasped node goes when its tool is at pose (tip, axis): the

@@ -13,6 +13,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <limits>
 
 #include "core/contact.hpp"
 #include "core/model.hpp"
@@ -66,9 +67,13 @@ struct NodeContact {
   std::uint8_t kind = kNoContact;   ///< ContactKind
 };
 
+/// Passes of merge_corner over a node's proposals (core/contact.hpp's step 2).
+inline constexpr int kMergePasses = 4;
+
 /// Merges one triangle's proposal for this node (call in ascending triangle
-/// order; core/contact.hpp's step 2): the first proposal is taken as it is,
-/// every further one adds its shortfall along its own direction. A blocked
+/// order, kMergePasses times over the node's proposals; core/contact.hpp's
+/// step 2): the first proposal is taken as it is, every further one adds its
+/// shortfall along its own direction. A blocked
 /// penetration (rigid support, outside the region) is kept only while no
 /// correction was proposed, rigid before outside.
 template <class T>
@@ -80,7 +85,8 @@ TISSUE_HD void merge_corner(NodeContact<T>& acc, const CornerContact<T>& c) {
     } else {
       const T len = std::sqrt(s2);
       const T shortfall = len - dot(acc.dx, c.dx) / len;
-      if (shortfall > T(0)) acc.dx = acc.dx + (shortfall / len) * c.dx;
+      // (a shortfall within rounding of a proposal already met is none)
+      if (shortfall > T(8) * std::numeric_limits<T>::epsilon() * len) acc.dx = acc.dx + (shortfall / len) * c.dx;
     }
     if (s2 > acc.largest2) {
       acc.largest2 = s2;
@@ -94,6 +100,22 @@ TISSUE_HD void merge_corner(NodeContact<T>& acc, const CornerContact<T>& c) {
     acc.kind = c.blocked;
     acc.tool = c.tool;
   }
+}
+
+/// A node's merged contact from its `count` proposals, get(j) giving the
+/// j-th in ascending triangle order: kMergePasses passes of merge_corner
+/// (one when nothing was proposed). Proposals within 90 degrees of each
+/// other are satisfied after the first pass; more obtuse ones (a node
+/// squeezed from two sides) approach theirs by a factor cos(angle - 90 deg)
+/// per pass, and the next step goes on.
+template <class T, class Get>
+TISSUE_HD NodeContact<T> merge_proposals(int count, Get get) {
+  NodeContact<T> acc;
+  for (int pass = 0; pass < kMergePasses; ++pass) {
+    for (int j = 0; j < count; ++j) merge_corner(acc, get(j));
+    if (acc.kind != kPushed) break;
+  }
+  return acc;
 }
 
 /// Per-node terms of the tick's reductions (core Reductions), in double.

@@ -95,14 +95,16 @@ void ContactStage<T>::step(TissueState<T>& s, const ContactTools<T>& tools, int 
             [](const Entry& a, const Entry& b) { return a.node != b.node ? a.node < b.node : a.slot < b.slot; });
   for (std::size_t i = 0; i < entries_.size();) {
     const index_t a = entries_[i].node;
-    NodeContact<T> acc;
     std::size_t j = i;
-    for (; j < entries_.size() && entries_[j].node == a; ++j) merge_corner(acc, entries_[j].c);
+    while (j < entries_.size() && entries_[j].node == a) ++j;
+    const NodeContact<T> acc =
+        merge_proposals<T>(int(j - i), [&](int k) -> const CornerContact<T>& { return entries_[i + k].c; });
     i = j;
     if (s.contact[a] == kGrasped || acc.kind == kNoContact) continue;
     if (acc.kind == kPushed) {
-      put(s.u_next, n, a, at(s.u_next, n, a) + free_part(s.held[a], acc.dx));
-      put(s.contact_normal, n, a, unit_or(acc.dx, Vec3<T>{0, 0, 0}));
+      const Vec3<T> dx = free_part(s.held[a], acc.dx);  // a roller's held component does not move
+      put(s.u_next, n, a, at(s.u_next, n, a) + dx);
+      put(s.contact_normal, n, a, unit_or(dx, Vec3<T>{0, 0, 0}));
     }
     s.contact[a] = acc.kind;
     s.contact_tool[a] = acc.tool;

@@ -67,16 +67,17 @@ __device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, 
     u_next[a] = Packed3<T>::of(grasped_target(tools, k, s, a) - m.X[a].vec());
     return;
   }
-  NodeContact<T> acc;
-  for (index_t j = m.surf_slot_start[i]; j < m.surf_slot_start[i + 1]; ++j) {
-    const index_t slot = m.surf_slot[j];
-    merge_corner(acc, CornerContact<T>{s.corner_dx[slot].vec(), s.corner_tool[slot], s.corner_blocked[slot]});
-  }
+  const index_t first = m.surf_slot_start[i];
+  const NodeContact<T> acc = merge_proposals<T>(int(m.surf_slot_start[i + 1] - first), [&](int j) {
+    const index_t slot = m.surf_slot[first + j];
+    return CornerContact<T>{s.corner_dx[slot].vec(), s.corner_tool[slot], s.corner_blocked[slot]};
+  });
   s.contact[a] = acc.kind;
   s.contact_tool[a] = acc.tool;
   if (acc.kind != kPushed) return;
-  u_next[a] = Packed3<T>::of(u_next[a].vec() + free_part(s.held[a], acc.dx));
-  s.contact_normal[a] = Packed3<T>::of(unit_or(acc.dx, Vec3<T>{T(0), T(0), T(0)}));
+  const Vec3<T> dx = free_part(s.held[a], acc.dx);  // a roller's held component does not move
+  u_next[a] = Packed3<T>::of(u_next[a].vec() + dx);
+  s.contact_normal[a] = Packed3<T>::of(unit_or(dx, Vec3<T>{T(0), T(0), T(0)}));
 }
 
 template <class T>

@@ -499,16 +499,16 @@ TEST_P(Contract, ASmallToolBetweenNodesIsCaughtByTheFaces) {
   }
 }
 
-TEST_P(Contract, AFastToolIsSubSteppedAndPushesTheTissue) {
+TEST_P(Contract, AFastPlungeIsCaughtByOneCheckThroughTheFaceSide) {
   const auto m = slab(8);
   const index_t n = m.n_nodes;
   const double r = 0.002;
   // from 20 mm above to 3 mm deep within one tick (23 m/s: 11 radii in the
-  // tick). Checked every r / 2 of travel (the default), the tool pushes the
-  // surface ahead of it: the top node nearest its axis ends under the tip.
-  // Checked once per step (max_travel 1000 radii), the tip lands 1 mm under
-  // the surface, past that node, which it then pushes out radially: up, over
-  // the tool.
+  // tick). Checked every r / 2 of travel (the default) the tool pushes the
+  // surface ahead of it; checked once per step (max_travel 1000 radii) the
+  // tip lands 1 mm under the surface, behind the faces over it, which the
+  // sidedness rule pushes inward (along -N), not out over the tool. Either
+  // way the top node nearest the axis ends under the tip.
   for (double travel : {0.5, 1000.0}) {
     auto b = make(m);
     SchedulerSettings st = tools_settings({sphere(r)});
@@ -530,12 +530,52 @@ TEST_P(Contract, AFastToolIsSubSteppedAndPushesTheTissue) {
         under = a;
       }
     const double z = m.X[2 * n + under] + f.u[2 * n + under] - rep.tool.z;  // relative to the tip centre
-    if (travel < 1) {
-      EXPECT_GT(rep.contact_nodes, 0) << "contact found within the fast tick";
-      EXPECT_LT(z, -0.5 * r) << "the node under the tool is not under the tip: the tool went through the surface";
-    } else {
-      EXPECT_GT(z, 0.0) << "without sub-steps the node should end over the tool (the case above prevents it)";
-    }
+    EXPECT_GT(rep.contact_nodes, 0) << "max_travel " << travel;
+    EXPECT_LT(z, -0.5 * r) << "max_travel " << travel << ": the node under the tool is not under the tip";
+  }
+}
+
+TEST_P(Contract, AToolCrossingAThinPlateWithinAStepIsSubSteppedNotTunnelled) {
+  // a 40 x 40 x 1 mm plate held at its sides and a 0.5 mm tool moving
+  // 2.5 mm per TLED step (17 m/s). Its centre is 0.25 mm over the tool's
+  // reach of the plate at the end of one step and 0.25 mm under it at the
+  // end of the next. Checked every r / 2 of travel (the default) it meets
+  // the plate and throws it down; checked once per step it never touches
+  // it: it tunnelled.
+  ModelInput in;
+  box_mesh(in, 10, 10, 1, 0.04, 0.04, 0.001);
+  const double E = 3000, nu = 0.45;
+  in.materials = {{E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu)), 1000}};
+  in.fixed.assign(in.nodes.size() / 3, 0);
+  for (size_t i = 0; i < in.fixed.size(); ++i) {
+    const double x = in.nodes[3 * i], y = in.nodes[3 * i + 1];
+    in.fixed[i] = x == 0.0 || y == 0.0 || x == 0.04 || y == 0.04;
+  }
+  in.source = "thin plate";
+  const auto m = build_model(in);
+  const double r = 0.0005, step_travel = 0.0025;
+  int steps = 0;
+  {  // the number of steps in a tick
+    auto b = make(m);
+    Scheduler sched(*b, m, tools_settings({sphere(r)}));
+    ScriptedDevice far(std::vector<Waypoint>{{0.0, {0.02, 0.02, 0.05}}});
+    steps = sched.tick(far).steps;
+  }
+  ASSERT_GT(steps, 1);
+  // centre at the end of the last two steps: z = 1.75 mm, then -0.75 mm
+  const Vec3<double> below{0.0203, 0.0196, -0.00075}, above = below + Vec3<double>{0, 0, steps * step_travel};
+  for (double travel : {0.5, 1000.0}) {
+    auto b = make(m);
+    SchedulerSettings st = tools_settings({sphere(r)});
+    st.contact.max_travel = travel;
+    Scheduler sched(*b, m, st);
+    ScriptedDevice dev(std::vector<Waypoint>{{0.0, above}, {0.001, above}, {0.002, below}, {1.0, below}});
+    EXPECT_EQ(sched.tick(dev).max_disp, 0.0);
+    const TickReport rep = sched.tick(dev);  // the crossing tick
+    if (travel < 1)
+      EXPECT_GT(rep.max_disp, 1e-3) << "the sub-stepped tool met the plate and threw it down";
+    else
+      EXPECT_EQ(rep.max_disp, 0.0) << "one check per step: the tool went through the plate without touching it";
   }
 }
 

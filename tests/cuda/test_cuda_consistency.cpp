@@ -3,10 +3,13 @@
 // region and the whole mesh) driven through core Scheduler by the same
 // ScriptedDevice path on the cpu and the cuda backend, tick by tick, in
 // float and double. Checked:
-// identical contact triangles every tick, identical region sizes every tick
-// and identical region node/element sets (Backend::region()) after contact
-// starts and at the end; displacements and the reaction force equal within
-// the tolerance below; equilibrium first reached within +-1 tick.
+// the same contact sets (Backend::contacts(): nodes, kinds, tools) -- every
+// tick in double; in float a node at the very edge of the tool may be
+// rounded in on one backend and out on the other, so the node counts may
+// differ by one node on at most 2 % of the ticks --, identical region sizes
+// every tick and identical region node/element sets (Backend::region())
+// after contact starts and at the end; displacements and the tool force
+// equal within the tolerance below; equilibrium first reached within +-1 tick.
 //
 // Tolerances (relative to the largest displacement / reaction of the run),
 // measured on an NVIDIA H200 (docs/cuda.md has the table). Both backends run
@@ -60,16 +63,14 @@ struct ConsistencyScene {
 };
 
 /// 60 x 60 x 30 mm box (10 x 10 x 5 cells, 3000 tets), bottom fixed, pressed
-/// 4 mm into its top face at a point inside a triangle, held, released. The
-/// tool reaches the surface half a tick after a tick boundary: a tip that
-/// ends a tick exactly on the surface (t = 1 of the segment) is a rounding
-/// call either backend may make one tick apart.
+/// 4 mm into its top face at a point inside a triangle, held, released.
 ConsistencyScene box_scene(int depth) {
   ConsistencyScene s;
   s.name = depth == kDepthAll ? "box_all" : "box_depth" + std::to_string(depth);
   s.model = [] { return box_model(10, 10, 5, 0.06, 0.06, 0.03); };
   s.settings.depth = depth;
-  s.path = press_path({0.0261, 0.0334, 0.03}, {0, 0, -1}, 0.004, 0.005, 0.1005, 0.2, 0.4, 0.1);
+  // the default tool, a 2 mm sphere, touching the top at 0.1005 s
+  s.path = press_path({0.0261, 0.0334, 0.032}, {0, 0, -1}, 0.004, 0.005, 0.1005, 0.2, 0.4, 0.1);
   s.duration = 1.0;
   return s;
 }
@@ -129,21 +130,36 @@ TEST_P(Consistency, SameRegionContactDisplacementForceAndEquilibrium) {
   ScriptedDevice dev_cpu(sc.path), dev_gpu(sc.path);
 
   double max_u = 0, max_f = 0, worst_u = 0, worst_f = 0;
-  long first_eq_cpu = -1, first_eq_gpu = -1, contact_ticks = 0;
+  long first_eq_cpu = -1, first_eq_gpu = -1, contact_ticks = 0, count_mismatches = 0;
   bool was_in_contact = false;
   while (sc_cpu.time() < sc.duration - 1e-9) {
     const TickReport rc = sc_cpu.tick(dev_cpu), rg = sc_gpu.tick(dev_gpu);
-    ASSERT_EQ(rg.contact_tri, rc.contact_tri) << "tick " << rc.tick;
+    if (p == Precision::Double || rc.tick % 50 == 0) {
+      const std::vector<ContactNode> cc = cpu->contacts(), cg = gpu->contacts();
+      if (p == Precision::Double) {
+        ASSERT_EQ(cg.size(), cc.size()) << "tick " << rc.tick;
+        for (size_t k = 0; k < cc.size(); ++k) {
+          ASSERT_EQ(cg[k].node, cc[k].node) << "tick " << rc.tick;
+          ASSERT_EQ(cg[k].kind, cc[k].kind) << "tick " << rc.tick;
+          ASSERT_EQ(cg[k].tool, cc[k].tool) << "tick " << rc.tick;
+        }
+      }
+    }
+    if (rg.contact_nodes != rc.contact_nodes) {
+      ++count_mismatches;
+      EXPECT_EQ(p, Precision::Float) << "tick " << rc.tick;
+      EXPECT_LE(std::abs(rg.contact_nodes - rc.contact_nodes), 1) << "tick " << rc.tick;
+    }
     ASSERT_EQ(rg.region_nodes, rc.region_nodes) << "tick " << rc.tick;
     ASSERT_EQ(rg.region_elems, rc.region_elems) << "tick " << rc.tick;
-    if (rc.contact_tri >= 0) ++contact_ticks;
-    if (rc.contact_tri >= 0 && !was_in_contact) expect_same_region(*cpu, *gpu, rc.tick);
-    was_in_contact = rc.contact_tri >= 0;
+    if (rc.contact_nodes > 0) ++contact_ticks;
+    if (rc.contact_nodes > 0 && !was_in_contact) expect_same_region(*cpu, *gpu, rc.tick);
+    was_in_contact = rc.contact_nodes > 0;
     // reaction force, relative to the largest seen so far
     max_f = std::max(max_f, norm(rc.force));
     if (max_f > 0) worst_f = std::max(worst_f, norm(rg.force - rc.force) / max_f);
-    if (rc.contact_tri >= 0 && rc.equilibrium && first_eq_cpu < 0) first_eq_cpu = rc.tick;
-    if (rg.contact_tri >= 0 && rg.equilibrium && first_eq_gpu < 0) first_eq_gpu = rg.tick;
+    if (rc.contact_nodes > 0 && rc.equilibrium && first_eq_cpu < 0) first_eq_cpu = rc.tick;
+    if (rg.contact_nodes > 0 && rg.equilibrium && first_eq_gpu < 0) first_eq_gpu = rg.tick;
     if (rc.tick % 20 == 0 || rc.tick + 1 == long(std::lround(sc.duration / sc.settings.tick))) {
       const Fields fc = cpu->download(), fg = gpu->download();
       for (double v : fc.u) max_u = std::max(max_u, std::fabs(v));
@@ -156,10 +172,11 @@ TEST_P(Consistency, SameRegionContactDisplacementForceAndEquilibrium) {
   }
   expect_same_region(*cpu, *gpu, sc_cpu.ticks());
   std::printf("[measured] %s %s: max |u| %.3g m, max |F| %.3g N, worst du/max|u| %.3g, worst dF/max|F| %.3g, "
-              "first equilibrium tick cpu %ld cuda %ld, %ld contact ticks\n",
+              "first equilibrium tick cpu %ld cuda %ld, %ld contact ticks, %ld contact-count mismatches\n",
               sc.name.c_str(), to_string(p), max_u, max_f, worst_u, worst_f, first_eq_cpu, first_eq_gpu,
-              contact_ticks);
+              contact_ticks, count_mismatches);
   EXPECT_GT(contact_ticks, 300);
+  EXPECT_LE(count_mismatches, contact_ticks / 50);
   EXPECT_GT(max_u, 1e-3);  // the tool really pressed
   EXPECT_LT(worst_u, disp_tol(p));
   EXPECT_LT(worst_f, force_tol(p));
