@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <tuple>
 #include <stdexcept>
 
 // Private copies of the stb functions (static), so that another library's
@@ -118,6 +119,44 @@ std::pair<double, double> decades(double lo, double hi) {
   return {a, b};
 }
 
+
+/// A log-log plot area of a canvas: whole decades on both axes, a grid with
+/// minor lines at 2..9, decade labels, the axes lines and their titles.
+struct LogAxes {
+  int left, top, pw, ph;
+  double xa, xb, ya, yb;  // log10 ranges
+  double floor_y = 1e-300;
+
+  LogAxes(int left_, int top_, int pw_, int ph_, double xlo, double xhi, double ylo, double yhi)
+      : left(left_), top(top_), pw(pw_), ph(ph_) {
+    std::tie(xa, xb) = decades(xlo, xhi);
+    std::tie(ya, yb) = decades(ylo, yhi);
+  }
+  double px(double x) const { return left + pw * (std::log10(std::max(x, 1e-300)) - xa) / (xb - xa); }
+  double py(double y) const { return top + ph * (1 - (std::log10(std::max(y, floor_y)) - ya) / (yb - ya)); }
+
+  /// Grid, decade labels ("1e-3" style unless `plain_x`), axes and titles.
+  void draw(Canvas& cv, const std::string& x_title, const std::string& y_title, bool plain_x) const {
+    const Colour grid{225, 225, 225}, axis{0, 0, 0}, grey{90, 90, 90};
+    for (int d = int(xa); d <= int(xb); ++d) {
+      for (int k = 1; k <= 9 && (d < xb || k == 1); ++k)
+        cv.line(px(k * std::pow(10, d)), top, px(k * std::pow(10, d)), top + ph, grid);
+      const std::string s = plain_x ? fmt::format("{:g}", std::pow(10.0, d)) : fmt::format("1e{}", d);
+      cv.text(int(px(std::pow(10, d))) - Canvas::text_width(s, 2) / 2, top + ph + 8, s, grey, 2);
+    }
+    for (int d = int(ya); d <= int(yb); ++d) {
+      for (int k = 1; k <= 9 && (d < yb || k == 1); ++k)
+        cv.line(left, py(k * std::pow(10, d)), left + pw, py(k * std::pow(10, d)), grid);
+      const std::string s = fmt::format("1e{}", d);
+      cv.text(left - 10 - Canvas::text_width(s, 2), int(py(std::pow(10, d))) - 7, s, grey, 2);
+    }
+    cv.line(left, top, left, top + ph, axis, 2);
+    cv.line(left, top + ph, left + pw, top + ph, axis, 2);
+    cv.text(left + pw / 2 - Canvas::text_width(x_title, 2) / 2, top + ph + 36, x_title, axis, 2);
+    cv.text(std::max(8, left - 82), top - 22, y_title, axis, 2);
+  }
+};
+
 }  // namespace
 
 void write_tradeoff_plot(const TradeoffResult& res, const std::string& path, int width, int height) {
@@ -136,28 +175,14 @@ void write_tradeoff_plot(const TradeoffResult& res, const std::string& path, int
     ylo = std::min(ylo, y);
     yhi = std::max(yhi, y);
   }
-  const auto [xa, xb] = decades(xlo, xhi);
-  const auto [ya, yb] = decades(ylo, yhi);
-  auto px = [&](double x) { return left + pw * (std::log10(std::max(x, 1e-6)) - xa) / (xb - xa); };
-  auto py = [&](double y) { return top + ph * (1 - (std::log10(std::max(y, kFloor)) - ya) / (yb - ya)); };
-  const Colour grid{225, 225, 225}, axis{0, 0, 0}, grey{90, 90, 90};
-  // decade grid with 2..9 minor lines, labels
-  for (int d = int(xa); d <= int(xb); ++d) {
-    for (int k = 1; k <= 9 && (d < xb || k == 1); ++k) cv.line(px(k * std::pow(10, d)), top, px(k * std::pow(10, d)), top + ph, grid);
-    const std::string s = fmt::format("{:g}", std::pow(10.0, d));
-    cv.text(int(px(std::pow(10, d))) - Canvas::text_width(s, 2) / 2, top + ph + 8, s, grey, 2);
-  }
-  for (int d = int(ya); d <= int(yb); ++d) {
-    for (int k = 1; k <= 9 && (d < yb || k == 1); ++k) cv.line(left, py(k * std::pow(10, d)), left + pw, py(k * std::pow(10, d)), grid);
-    const std::string s = fmt::format("1e{}", d);
-    cv.text(left - 10 - Canvas::text_width(s, 2), int(py(std::pow(10, d))) - 7, s, grey, 2);
-  }
-  cv.line(left, top, left, top + ph, axis, 2);
-  cv.line(left, top + ph, left + pw, top + ph, axis, 2);
+  LogAxes ax(left, top, pw, ph, xlo, xhi, ylo, yhi);
+  ax.floor_y = kFloor;
+  const auto px = [&](double x) { return ax.px(std::max(x, 1e-6)); };
+  const auto py = [&](double y) { return ax.py(y); };
+  const Colour axis{0, 0, 0}, grey{90, 90, 90};
+  ax.draw(cv, "wall time per 1 ms haptic tick (ms)",
+          "max nodal displacement error / max displacement (vs same-mesh reference)", true);
   cv.text(left, 6, fmt::format("speed-accuracy tradeoff: {} ({})", res.scene, res.device.substr(0, 60)), axis, 2);
-  const std::string xl = "wall time per 1 ms haptic tick (ms)";
-  cv.text(left + pw / 2 - Canvas::text_width(xl, 2) / 2, top + ph + 36, xl, axis, 2);
-  cv.text(8, top - 22, "max nodal displacement error / max displacement (vs same-mesh reference)", axis, 2);
   // Pareto front, by cost
   std::vector<const TradeoffRow*> front;
   for (const TradeoffRow& r : res.rows)
@@ -226,6 +251,94 @@ void write_tradeoff_plot(const TradeoffResult& res, const std::string& path, int
   for (const std::string& line : {std::string("errors below 1e-9"), std::string("are drawn at 1e-9")}) {
     cv.text(lx, ly, line, grey, 1);
     ly += 12;
+  }
+  cv.write_png(path);
+}
+
+void write_hertz_plot(const std::vector<HertzStudy>& studies, const std::string& path) {
+  if (studies.empty() || studies.front().levels.empty()) throw std::invalid_argument("hertz plot: nothing to draw");
+  const int panel_w = 700, panel_h = 520, left = 100, right = 190, top = 70, bottom = 80;
+  const int width = 2 * panel_w, height = panel_h * int(studies.size());
+  Canvas cv(width, height);
+  const Colour black{0, 0, 0}, grey{90, 90, 90};
+  const Colour palette[] = {{31, 119, 180}, {255, 127, 14}, {44, 160, 44}, {214, 39, 40},
+                            {148, 103, 189}, {140, 86, 75}, {227, 119, 194}, {23, 190, 207}};
+  const auto colour = [&](std::size_t k) { return palette[k % std::size(palette)]; };
+  for (std::size_t s = 0; s < studies.size(); ++s) {
+    const HertzStudy& st = studies[s];
+    const HertzOptions& o = st.options;
+    const int y0 = int(s) * panel_h;
+    // left: force against indentation, the closed form as a line
+    double dlo = 1e300, dhi = 0, flo = 1e300, fhi = 0;
+    for (const HertzLevel& l : st.levels)
+      for (const HertzPoint& p : l.points) {
+        dlo = std::min(dlo, 1e3 * p.delta);
+        dhi = std::max(dhi, 1e3 * p.delta);
+        flo = std::min({flo, p.force, p.hertz});
+        fhi = std::max({fhi, p.force, p.hertz});
+      }
+    const int pw = panel_w - left - right, ph = panel_h - top - bottom;
+    LogAxes f(left, y0 + top, pw, ph, dlo, dhi, flo, fhi);
+    f.draw(cv, "indentation delta (mm)", "tool force F (N)", true);
+    cv.text(left, y0 + 8,
+            fmt::format("Hertz: sphere R = {:g} mm, E = {:g} Pa, nu = {:g}", 1e3 * o.R, o.E, o.nu), black, 2);
+    const int samples = 60;
+    for (int k = 0; k < samples; ++k) {
+      const double d0 = dlo * std::pow(dhi / dlo, double(k) / samples), d1 = dlo * std::pow(dhi / dlo, double(k + 1) / samples);
+      cv.line(f.px(d0), f.py(hertz_force(o.E, o.nu, o.R, 1e-3 * d0)), f.px(d1),
+              f.py(hertz_force(o.E, o.nu, o.R, 1e-3 * d1)), black, 2.5);
+    }
+    int ly = y0 + top + 6;
+    const int lx = left + pw + 20;
+    cv.line(lx, ly + 7, lx + 14, ly + 7, black, 2.5);
+    cv.text(lx + 20, ly, "Hertz", black, 2);
+    ly += 24;
+    for (std::size_t k = 0; k < st.levels.size(); ++k) {
+      const HertzLevel& l = st.levels[k];
+      for (std::size_t j = 0; j < l.points.size(); ++j) {
+        const HertzPoint& p = l.points[j];
+        cv.disc(f.px(1e3 * p.delta), f.py(p.force), 4.5, colour(k));
+        if (j > 0)
+          cv.line(f.px(1e3 * l.points[j - 1].delta), f.py(l.points[j - 1].force), f.px(1e3 * p.delta), f.py(p.force),
+                  colour(k), 1.5);
+      }
+      cv.disc(lx + 7, ly + 7, 4.5, colour(k));
+      cv.text(lx + 20, ly, fmt::format("{} cells", l.cells), colour(k), 2);
+      ly += 24;
+    }
+    // right: |error| against the element edge under the tool, one line per
+    // indentation, and the 5 % target
+    double hlo = 1e300, hhi = 0, elo = 1e300, ehi = 0.05;
+    for (const HertzLevel& l : st.levels) {
+      hlo = std::min(hlo, 1e3 * l.h_contact);
+      hhi = std::max(hhi, 1e3 * l.h_contact);
+      for (const HertzPoint& p : l.points) {
+        elo = std::min(elo, std::max(std::fabs(p.error), 1e-4));
+        ehi = std::max(ehi, std::fabs(p.error));
+      }
+    }
+    const int x1 = panel_w;
+    LogAxes e(x1 + left, y0 + top, pw, ph, hlo, hhi, elo, ehi);
+    e.floor_y = 1e-4;
+    e.draw(cv, "element edge under the tool h (mm)", "|F - F_Hertz| / F_Hertz", true);
+    cv.line(e.left, e.py(0.05), e.left + pw, e.py(0.05), {200, 0, 0}, 1.5);
+    cv.text(e.left + 6, int(e.py(0.05)) - 16, "5 %", {200, 0, 0}, 2);
+    const std::size_t n_points = st.levels.front().points.size();
+    ly = y0 + top + 6;
+    for (std::size_t j = 0; j < n_points; ++j) {
+      for (std::size_t k = 0; k < st.levels.size(); ++k) {
+        if (j >= st.levels[k].points.size()) continue;
+        const double x = e.px(1e3 * st.levels[k].h_contact), y = e.py(std::fabs(st.levels[k].points[j].error));
+        cv.disc(x, y, 4.5, colour(j + 4));
+        if (k > 0 && j < st.levels[k - 1].points.size())
+          cv.line(e.px(1e3 * st.levels[k - 1].h_contact), e.py(std::fabs(st.levels[k - 1].points[j].error)), x, y,
+                  colour(j + 4), 1.5);
+      }
+      cv.disc(x1 + lx + 7, ly + 7, 4.5, colour(j + 4));
+      cv.text(x1 + lx + 20, ly, fmt::format("d/R {:g}", o.ratios[j]), colour(j + 4), 2);
+      ly += 24;
+    }
+    cv.text(x1 + lx, ly + 10, st.device.substr(0, 24), grey, 1);
   }
   cv.write_png(path);
 }

@@ -1,5 +1,6 @@
-// A PNG plot of the tradeoff sweep: error against cost on log-log axes, one
-// colour per group, the Pareto front joined by a line and ringed, and labels.
+// PNG plots: the tradeoff sweep (error against cost on log-log axes, one
+// colour per group, the Pareto front joined by a line and ringed, and
+// labels) and the Hertz verification (force against indentation).
 // Drawn by a tiny software rasteriser (Canvas: pixels, lines, discs, text
 // from stb_easy_font) and written with stb_image_write (libstb-dev).
 #pragma once
@@ -8,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "accuracy/hertz.hpp"
 #include "accuracy/tradeoff.hpp"
 
 namespace tissue::accuracy {
@@ -56,5 +58,11 @@ class Canvas {
 /// writes it to `path` (PNG, width x height pixels).
 void write_tradeoff_plot(const TradeoffResult& result, const std::string& path, int width = 1100,
                          int height = 760);
+
+/// Draws the Hertz studies (one row per Poisson's ratio: the tool force
+/// against the indentation on every mesh with the closed form, and the
+/// force error against the element edge under the tool, one line per
+/// indentation, with the 5 % target) and writes them to `path` (PNG).
+void write_hertz_plot(const std::vector<HertzStudy>& studies, const std::string& path);
 
 }  // namespace tissue::accuracy

@@ -127,7 +127,7 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
   const auto t0 = Clock::now();
   TissueModel<double> m = model;
   if (o.mass_scaling) {
-    m.mass = relaxation_masses(m, m.dt, o.mass_safety);
+    m.mass = relaxation_masses(m, m.dt, tool ? std::min(o.mass_safety, o.contact_mass_safety) : o.mass_safety);
     m.total_mass = 0;
     for (double x : m.mass) m.total_mass += x;
   }
@@ -184,6 +184,8 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
     const long stall = std::max(10L * o.check_every, std::lround(o.stall_periods * period / m.dt));
     if (steps - best_step > stall) {
       out.stalled = true;
+      if (tool && out.residual <= o.contact_floor * o.residual_tol && out.kinetic <= o.kinetic_tol)
+        out.converged = out.at_contact_floor = true;
       break;
     }
     if (steps >= o.max_steps || seconds_since(t0) > o.max_wall) break;

@@ -56,6 +56,9 @@ struct RelaxOptions {
                                 ///< static answer does not depend on the masses, and equal local steps
                                 ///< relax a graded mesh in far fewer steps than the smallest element's
   double mass_safety = 0.5;     ///< fraction of the Gershgorin stability bound the fictitious masses use
+  double contact_mass_safety = 0.25;  ///< ... with a held tool: the contact's corrections need the margin
+                                ///< (kidney held 5 mm in: 0.5 keeps a limit cycle at residual 0.04,
+                                ///< 0.25 reaches 1e-7 in 8500 steps; docs/contact.md)
   int check_every = 200;        ///< steps between reductions (convergence checks)
   int adapt_every = 2000;       ///< steps between omega_1 estimates (after the ramp)
   double adapt_above = 1e-6;    ///< ... while the relative residual is above this: near the answer the
@@ -66,6 +69,11 @@ struct RelaxOptions {
                                 ///< 2 pi / omega_1 (critical damping divides it by ~500 per period): the
                                 ///< rounding floor of the precision is reached (stalled = true)
   double max_wall = 600;        ///< ... or this many wall seconds
+  double contact_floor = 30;    ///< under a tool, a relaxation that stalls within this factor of
+                                ///< residual_tol, its kinetic tolerance met, has converged to the
+                                ///< contact's floor: a surface node whose contact force is zero to
+                                ///< rounding goes in and out of the contact set, each time leaving its
+                                ///< rounding-size force in the residual (at_contact_floor = true)
   double force_floor = 1e-12;   ///< N, denominator floor of the relative residual
 };
 
@@ -73,6 +81,7 @@ struct RelaxOptions {
 struct RelaxResult {
   bool converged = false;       ///< both tolerances met
   bool stalled = false;         ///< stopped at the precision's rounding floor (see stall_periods)
+  bool at_contact_floor = false; ///< converged at the contact's floor (see contact_floor)
   double residual = 0;          ///< relative free residual at the end
   double kinetic = 0;           ///< kinetic energy relative to 0.5 |f_held| max|u| at the end
   long steps = 0;               ///< TLED steps taken (ramp included)

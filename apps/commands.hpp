@@ -18,6 +18,7 @@ void add_view_command(CLI::App& app, int& rc);  ///< apps/viewer/view_command.cp
 void add_reference_command(CLI::App& app, int& rc);  ///< apps/cmd_reference.cpp
 void add_tradeoff_command(CLI::App& app, int& rc);   ///< apps/cmd_tradeoff.cpp
 void add_locking_command(CLI::App& app, int& rc);    ///< apps/cmd_locking.cpp
+void add_hertz_command(CLI::App& app, int& rc);      ///< apps/cmd_hertz.cpp
 
 /// Loads a scene file, or the built-in kidney for the name "@kidney".
 scene::Scene load_scene_arg(const std::string& arg);

@@ -103,8 +103,11 @@ void ContactStage<T>::step(TissueState<T>& s, const ContactTools<T>& tools, int 
     if (s.contact[a] == kGrasped || acc.kind == kNoContact) continue;
     if (acc.kind == kPushed) {
       const Vec3<T> dx = free_part(s.held[a], acc.dx);  // a roller's held component does not move
-      put(s.u_next, n, a, at(s.u_next, n, a) + dx);
-      put(s.contact_normal, n, a, unit_or(dx, Vec3<T>{0, 0, 0}));
+      const Vec3<T> u1 = at(s.u_next, n, a) + dx, normal = unit_or(dx, Vec3<T>{0, 0, 0});
+      put(s.u_next, n, a, u1);
+      put(s.contact_normal, n, a, normal);
+      const Vec3<T> x = Vec3<T>{m_.X[a], m_.X[n + a], m_.X[2 * size_t(n) + a]} + u1;
+      put(s.u, n, a, contact_previous(at(s.u, n, a), u1, normal, tool_motion_at(tools.tool[acc.tool], tools.steps, k, x)));
     }
     s.contact[a] = acc.kind;
     s.contact_tool[a] = acc.tool;

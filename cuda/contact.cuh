@@ -3,7 +3,8 @@
 // tools' motion in the step (core sweep_triangle) and writes its three
 // corner proposals; then one thread per surface node merges its triangles'
 // proposals in ascending slot order (core merge_corner, the cpu backend's
-// order), moves the node in u_next and records its contact. Grasped nodes
+// order), moves the node in u_next (and its velocity, in u) and records
+// its contact. Grasped nodes
 // follow their tool. Device functions for the per-step kernels and the
 // persistent kernels of cuda/tled.cuh; nvcc only.
 #pragma once
@@ -58,10 +59,11 @@ __device__ void sweep_triangle_at(const ModelView<T>& m, const StateView<T>& s, 
 }
 
 /// Merges surface node i's proposals (ascending slots) and applies them to
-/// u_next; grasped nodes go to their tool.
+/// u_next, and to u (u^n) the contact's velocity rule (core
+/// contact_previous); grasped nodes go to their tool.
 template <class T>
 __device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, const ContactTools<T>& tools, int k,
-                                  Packed3<T>* u_next, index_t i) {
+                                  Packed3<T>* u, Packed3<T>* u_next, index_t i) {
   const index_t a = m.surf_nodes[i];
   if (s.contact[a] == kGrasped) {
     u_next[a] = Packed3<T>::of(grasped_target(tools, k, s, a) - m.X[a].vec());
@@ -76,8 +78,11 @@ __device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, 
   s.contact_tool[a] = acc.tool;
   if (acc.kind != kPushed) return;
   const Vec3<T> dx = free_part(s.held[a], acc.dx);  // a roller's held component does not move
-  u_next[a] = Packed3<T>::of(u_next[a].vec() + dx);
-  s.contact_normal[a] = Packed3<T>::of(unit_or(dx, Vec3<T>{T(0), T(0), T(0)}));
+  const Vec3<T> u1 = u_next[a].vec() + dx, normal = unit_or(dx, Vec3<T>{T(0), T(0), T(0)});
+  u_next[a] = Packed3<T>::of(u1);
+  s.contact_normal[a] = Packed3<T>::of(normal);
+  const Vec3<T> w = tool_motion_at(tools.tool[acc.tool], tools.steps, k, m.X[a].vec() + u1);
+  u[a] = Packed3<T>::of(contact_previous(u[a].vec(), u1, normal, w));
 }
 
 template <class T>
@@ -91,11 +96,11 @@ __global__ void sweep_triangles_kernel(ModelView<T> m, StateView<T> s, const Con
 
 template <class T>
 __global__ void gather_contacts_kernel(ModelView<T> m, StateView<T> s, const ContactTools<T>* tools, int k,
-                                       Packed3<T>* u_next) {
+                                       Packed3<T>* u, Packed3<T>* u_next) {
   let_next_pass_launch();
   const index_t i = thread_index();
   wait_for_previous_pass();
-  if (i < m.n_surf) gather_contact_at(m, s, *tools, k, u_next, i);
+  if (i < m.n_surf) gather_contact_at(m, s, *tools, k, u, u_next, i);
 }
 
 }  // namespace tissue::gpu

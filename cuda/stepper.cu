@@ -108,7 +108,7 @@ void Stepper<T>::launch_steps(const ModelView<T>& m, const StateView<T>& s, cons
     if (tools) {  // the contact stage over the surface (cuda/contact.cuh)
       launch_chained(m.n_tris, stream, sweep_triangles_kernel<T>, m, s, tools, k,
                      static_cast<const Packed3<T>*>(b.u_next));
-      launch_chained(m.n_surf, stream, gather_contacts_kernel<T>, m, s, tools, k, b.u_next);
+      launch_chained(m.n_surf, stream, gather_contacts_kernel<T>, m, s, tools, k, b.u, b.u_next);
     }
     b = b.rotated();
   }

@@ -254,7 +254,7 @@ __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const Re
       barrier();
       for (index_t t = first; t < m.n_tris; t += stride) sweep_triangle_at(m, s, *tools, k, b.u_next, t);
       barrier();
-      for (index_t i = first; i < m.n_surf; i += stride) gather_contact_at(m, s, *tools, k, b.u_next, i);
+      for (index_t i = first; i < m.n_surf; i += stride) gather_contact_at(m, s, *tools, k, b.u, b.u_next, i);
     }
     b = b.rotated();
     if (k + 1 < steps) barrier();

@@ -265,7 +265,9 @@ TEST(VirtualCoupling, ScriptedPressOnTissueStaysSmoothAsNodesEnterAndLeaveContac
   // follows the tool's surface, not a mesh triangle, so the raw force has no
   // jump of its own there; it changes as fast as the press loads the tissue
   // (at 30 cm/s, 0.3 mm per tick: measured at most 18 % of its peak per
-  // tick), and the coupling smooths that: the device's force changes by at
+  // tick), except at the first touch, an impact: the touched nodes take the
+  // tool's speed within the tick (contact_previous), measured 29 %. The
+  // coupling smooths that: the device's force changes by at
   // most 8 % of the peak per tick (measured 5.6 %) and never faster than the
   // tissue's plus 2 % of the peak (the proxy's own inertia as the hand
   // accelerates).
@@ -276,7 +278,7 @@ TEST(VirtualCoupling, ScriptedPressOnTissueStaysSmoothAsNodesEnterAndLeaveContac
     if (first < 0) first = int(k);
     last = int(k);
     const double raw_step = window_increment(raw, k), rendered_step = window_increment(rendered, k);
-    EXPECT_LT(raw_step, 0.25 * peak) << "tick " << k;
+    EXPECT_LT(raw_step, (first == int(k) ? 0.35 : 0.25) * peak) << "tick " << k;
     EXPECT_LT(rendered_step, 0.08 * peak) << "tick " << k;
     EXPECT_LT(rendered_step, raw_step + 0.02 * peak) << "tick " << k;
   }

@@ -102,9 +102,14 @@ TEST_P(PressedBox, ForceOpposesIndentationAndGrowsWithDepth) {
 
 TEST_P(PressedBox, HeldIndentationConverges) {
   const auto r = run_press(GetParam().first, GetParam().second, *model_);
+  // the residual at the start of the hold: its largest over the first 10
+  // ticks (one tick's value can dip as the tissue rings)
+  double start_residual = 0;
+  for (double t = kPressEnd + 1e-3; t <= kPressEnd + 0.0105; t += 1e-3)
+    start_residual = std::max(start_residual, at(r, t).residual);
   const TickReport& start = at(r, kPressEnd + 0.002);
   const TickReport& end = at(r, kHoldEnd);
-  EXPECT_LT(end.residual, 1e-2 * start.residual);  // the free-node residual falls
+  EXPECT_LT(end.residual, 1e-2 * start_residual);  // the free-node residual falls
   EXPECT_LT(end.kinetic, 1e-3 * start.kinetic);
   EXPECT_TRUE(end.equilibrium);
   double first_eq = -1;
