@@ -101,6 +101,7 @@ HertzStudy run_hertz(const HertzOptions& o) {
     RelaxOptions ro;
     ro.residual_tol = o.residual_tol;
     ro.kinetic_tol = 1e-3 * o.residual_tol;
+    ro.max_wall = 3600;  // the finest meshes are large: give them the hour a verification run may take
     std::vector<double> u;
     for (double ratio : o.ratios) {
       const double delta = ratio * o.R;

@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+#include <cmath>
 #include <map>
 #include <stdexcept>
 
@@ -84,15 +86,39 @@ void transfer_ids(const scene::Scene& old_scene, const TissueModel<double>& old_
 
 }  // namespace
 
+int kidney_frequency(int target_tets) {
+  const double f = io::KidneyScene::frequency * std::cbrt(double(target_tets) / io::KidneyScene::target_tets);
+  return std::clamp(static_cast<int>(std::lround(f)), 2, 64);
+}
+
 scene::Scene remesh_scene(const scene::Scene& scene, int target_tets) {
+  return remesh_scene(scene, target_tets, KidneySurfacing{});
+}
+
+scene::Scene remesh_scene(const scene::Scene& scene, int target_tets, const KidneySurfacing& surfacing) {
   if (target_tets < 1) throw std::invalid_argument(fmt::format("remesh: target tet count {} must be >= 1", target_tets));
+  const bool custom = surfacing.frequency != 0 || surfacing.focus != 1.0;
+  if (custom && scene.source != "@kidney")
+    throw std::invalid_argument(fmt::format("remesh: {}: a surface frequency or focus applies to @kidney only",
+                                            scene.source));
   scene::Scene s = scene;
   io::MeshingOptions opt;
   opt.target_tets = target_tets;
   if (scene.source == "@kidney") {
     opt.quality = io::KidneyScene::quality;
-    io::VolumeMesh mesh =
-        io::tetrahedralize_surface(io::kidney_surface(io::KidneyScene::frequency), opt, "built-in kidney");
+    io::SurfaceFocus focus;
+    focus.scale = surfacing.focus;
+    if (surfacing.focus != 1.0) {
+      if (scene.tools.empty() || scene.tools.front().path.empty())
+        throw std::invalid_argument("remesh: a focused kidney needs a scripted tool to focus on");
+      const auto& path = scene.tools.front().path;
+      const auto deepest = std::min_element(path.begin(), path.end(),
+                                            [](const Waypoint& a, const Waypoint& b) { return norm(a.p) < norm(b.p); });
+      focus.toward = io::kidney_sphere_direction(io::KidneyShape{}, deepest->p);
+    }
+    const int frequency = surfacing.frequency > 0 ? surfacing.frequency : kidney_frequency(target_tets);
+    io::VolumeMesh mesh = io::tetrahedralize_surface(io::kidney_surface(frequency, io::KidneyShape{}, focus), opt,
+                                                     "built-in kidney");
     s.nodes = std::move(mesh.nodes);
     s.tets = std::move(mesh.tets);
     for (scene::Constraint& c : s.constraints)

@@ -19,6 +19,7 @@ void add_reference_command(CLI::App& app, int& rc);  ///< apps/cmd_reference.cpp
 void add_tradeoff_command(CLI::App& app, int& rc);   ///< apps/cmd_tradeoff.cpp
 void add_locking_command(CLI::App& app, int& rc);    ///< apps/cmd_locking.cpp
 void add_hertz_command(CLI::App& app, int& rc);      ///< apps/cmd_hertz.cpp
+void add_converge_command(CLI::App& app, int& rc);   ///< apps/cmd_converge.cpp
 
 /// Loads a scene file, or the built-in kidney for the name "@kidney".
 scene::Scene load_scene_arg(const std::string& arg);

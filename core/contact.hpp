@@ -19,12 +19,17 @@
 //         moves the point by delta n); corners that cannot move (fixed,
 //         outside the region, grasped) take no share.
 //     Sidedness: the tool belongs on the outer side of every face (its
-//     outward normal N). Where it has passed through a face -- its axis
-//     pierces the face, or its axis point nearest the face lies more than
-//     kThrough radii on the tissue's side of the face's plane (the face was
-//     tilted past it) -- (a) moves that face's corners and (b) the face
-//     along -N to the far side of the tool (capsule_exit), instead of
-//     radially out through the tool: a tool cannot slip through the surface;
+//     outward normal N). Where its tip has passed through a face -- the
+//     axis point nearest the face is the tip, and it lies on the face, or
+//     more than kThrough radii on the tissue's side of the face's plane
+//     having crossed that plane since the previous check (a fast tool) or
+//     with its nearest point inside the face (the face cuts the tip sphere
+//     beyond its centre) -- (a) moves that face's corners and
+//     (b) the face along -N to the far side of the tip (tip_exit),
+//     instead of radially out through the tool: a tool cannot slip through
+//     the surface. A face nearest the shaft instead is the rim of the hole
+//     the shaft makes: its corners go out radially from the shaft (moving
+//     it along -N would carry it down the whole shaft);
 //  2. each surface node combines its triangles' proposals dx_i, in
 //     ascending triangle order, into one correction that satisfies each of
 //     them along its own direction: dx = dx_1, then for every further
@@ -36,7 +41,9 @@
 //     its free components (a roller's held component stays) and is in
 //     contact with the tool of its largest proposal, with the contact normal
 //     n = the unit free part of dx (out of the tool).
-//     Frictionless: only the normal is constrained.
+//     Frictionless: only the normal is constrained. It leaves the step
+//     with the tool's normal velocity and half of its own tangential
+//     velocity relative to the tool (core/node_rules.hpp contact_previous).
 // The contact never pulls: a node that the tissue carries out of the tool
 // by itself is not inside after the free update, so it is not moved and
 // leaves the contact set. Grasped nodes follow the tool rigidly instead.
@@ -129,20 +136,6 @@ TISSUE_HD Vec3<T> tool_motion_at(const ToolStep<T>& t, int steps, int k, Vec3<T>
   T s = dot(x - tip1, axis1);
   s = s < T(0) ? T(0) : (s > t.shaft ? t.shaft : s);
   return (tip1 + s * axis1) - (tip0 + s * axis0);
-}
-
-/// The contact's velocity rule (inelastic, no kick): a node that contact
-/// moved leaves the step with the tool's velocity along its contact normal
-/// n, its tangential velocity kept. The central-difference state carries
-/// the velocity as u^{n+1} - u^n, so the contact sets u^n (returned) such
-/// that (u^{n+1} - u^n) . n = w . n, w the tool's motion at the node over
-/// the step (tool_motion_at). Moving only u^{n+1} would turn every
-/// correction into velocity: a corner that face contact lifted off the tool
-/// (the tissue had not pressed it in) would fly on, and a held tool would
-/// pump energy into the tissue step after step.
-template <class T>
-TISSUE_HD Vec3<T> contact_previous(Vec3<T> u_now, Vec3<T> u_next, Vec3<T> n, Vec3<T> w) {
-  return u_now + dot(u_next - u_now - w, n) * n;
 }
 
 /// Parameter in [0, 1] of the point of segment a -> b closest to x (0 for a
@@ -307,33 +300,16 @@ TISSUE_HD Vec3<T> triangle_deepest_point(const Capsule<T>& cap, const Vec3<T> P[
   return q;
 }
 
-/// How far a point x inside the capsule must move along the unit direction d
-/// to leave it: the larger root of |x + l d - (a + s (b - a))| = r over the
-/// segment, i.e. the exit from the cylinder clamped to the segment's span or
-/// from an end sphere (the capsule is convex: one exit). Used where the tool
-/// has passed a face.
+/// How far a point x inside the tool's tip sphere must move along the unit
+/// direction d to leave the sphere (0 when x is outside it). Where the tip
+/// has passed a face, the face goes to the tip's far side; never along the
+/// shaft (a face whose normal lines up with the shaft, on the rim of the
+/// hole the tool makes, would be carried the shaft's whole length).
 template <class T>
-TISSUE_HD T capsule_exit(const Capsule<T>& cap, Vec3<T> x, Vec3<T> d) {
-  // exit from the sphere of radius r about p along d (0 when x is outside it)
-  const auto sphere_exit = [&](Vec3<T> p) {
-    const Vec3<T> m = x - p;
-    const T b = dot(m, d), c = dot(m, m) - cap.r * cap.r, disc = b * b - c;
-    return disc > T(0) ? -b + std::sqrt(disc) : T(0);
-  };
-  T exit = sphere_exit(cap.a) > sphere_exit(cap.b) ? sphere_exit(cap.a) : sphere_exit(cap.b);
-  const Vec3<T> ab = cap.b - cap.a;
-  const T len2 = dot(ab, ab);
-  if (len2 > T(0)) {  // the infinite cylinder's exit, if it happens within the segment's span
-    const Vec3<T> e = (T(1) / std::sqrt(len2)) * ab;
-    const Vec3<T> m = x - cap.a, mp = m - dot(m, e) * e, dp = d - dot(d, e) * e;
-    const T A = dot(dp, dp), B = dot(mp, dp), C = dot(mp, mp) - cap.r * cap.r, disc = B * B - A * C;
-    if (A > T(0) && disc > T(0)) {
-      const T l = (-B + std::sqrt(disc)) / A;
-      const T s = dot(m + l * d, e);
-      if (s >= T(0) && s * s <= len2 && l > exit) exit = l;
-    }
-  }
-  return exit;
+TISSUE_HD T tip_exit(const Capsule<T>& cap, Vec3<T> x, Vec3<T> d) {
+  const Vec3<T> m = x - cap.a;
+  const T b = dot(m, d), c = dot(m, m) - cap.r * cap.r, disc = b * b - c;
+  return c < T(0) && disc > T(0) ? -b + std::sqrt(disc) : T(0);
 }
 
 /// Per-corner result of the contact sweep of one triangle.
@@ -408,13 +384,24 @@ TISSUE_HD void sweep_triangle(const ContactTools<T>& tools, int k, const Vec3<T>
       Vec3<T> c;
       const Vec3<T> N = unit_or(cross(x[1] - x[0], x[2] - x[0]), axis_escape(cap, T(0)));  // outward
       Vec3<T> q = triangle_deepest_point(cap, x, w, c);
-      const bool through = !(norm(q - c) > kPierced<T> * cap.r) || dot(c - q, N) < -kThrough<T> * cap.r;
+      // only the tip passes through a face: the axis meets the face at the tip, or the tip is
+      // behind the face's plane having crossed it since the last check, or behind it and over the
+      // face (its nearest point inside the face: the face cuts the tip sphere beyond its centre).
+      // A face beside the shaft is a hole's rim, and a face whose edge the tissue tilted past the
+      // tip is rounded off: both are pushed radially.
+      const bool at_tip = !(norm(c - cap.a) > kPierced<T> * cap.r);
+      const Vec3<T> tip_before = tool_capsule(tool, tools.steps, k, j - 1).a;
+      const bool behind = dot(c - q, N) < -kThrough<T> * cap.r;
+      const bool crossed = behind && dot(tip_before - q, N) >= T(0);
+      const bool under = behind && w[0] > T(0) && w[1] > T(0) && w[2] > T(0);
+      const bool through = at_tip && (!(norm(q - c) > kPierced<T> * cap.r) || crossed || under);
       for (int i = 0; i < 3; ++i) {  // (a) node contact
         Vec3<T> xi = x[i], n;
         if (!push_out_of_capsule(cap, xi, n)) continue;
-        if (through) {  // to the face's far side, not out through the tool
+        const T exit = through ? tip_exit(cap, x[i], T(-1) * N) : T(0);
+        if (exit > T(0)) {  // to the face's far side, not out through the tool
           n = T(-1) * N;
-          xi = x[i] + capsule_exit(cap, x[i], n) * n;
+          xi = x[i] + exit * n;
         }
         if (block[i]) {
           out[i].blocked = block[i];
@@ -432,8 +419,10 @@ TISSUE_HD void sweep_triangle(const ContactTools<T>& tools, int k, const Vec3<T>
       if (!(dist < reach) && !through) continue;
       if (!(dist < cap.r)) continue;
       const bool pierced = !(dist > kPierced<T> * cap.r);  // the direction out is the face's, not rounding's
+      if (pierced && !through) continue;  // the shaft through a rim face: its corners go out radially, by (a)
       const Vec3<T> n = through || pierced ? T(-1) * N : (T(1) / dist) * d;
-      const T delta = through || pierced ? capsule_exit(cap, q, n) : reach - dist;
+      const T delta = through || pierced ? tip_exit(cap, q, n) : reach - dist;
+      if (!(delta > T(0))) continue;
       T wsum = T(0);
       for (int i = 0; i < 3; ++i) wsum += block[i] ? T(0) : w[i] * w[i];
       if (!(wsum > T(0))) {

@@ -107,7 +107,8 @@ void ContactStage<T>::step(TissueState<T>& s, const ContactTools<T>& tools, int 
       put(s.u_next, n, a, u1);
       put(s.contact_normal, n, a, normal);
       const Vec3<T> x = Vec3<T>{m_.X[a], m_.X[n + a], m_.X[2 * size_t(n) + a]} + u1;
-      put(s.u, n, a, contact_previous(at(s.u, n, a), u1, normal, tool_motion_at(tools.tool[acc.tool], tools.steps, k, x)));
+      const Vec3<T> w = tool_motion_at(tools.tool[acc.tool], tools.steps, k, x);
+      put(s.u, n, a, contact_previous(s.held[a], at(s.u, n, a), u1, normal, w));
     }
     s.contact[a] = acc.kind;
     s.contact_tool[a] = acc.tool;

@@ -82,7 +82,7 @@ __device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, 
   u_next[a] = Packed3<T>::of(u1);
   s.contact_normal[a] = Packed3<T>::of(normal);
   const Vec3<T> w = tool_motion_at(tools.tool[acc.tool], tools.steps, k, m.X[a].vec() + u1);
-  u[a] = Packed3<T>::of(contact_previous(u[a].vec(), u1, normal, w));
+  u[a] = Packed3<T>::of(contact_previous(s.held[a], u[a].vec(), u1, normal, w));
 }
 
 template <class T>

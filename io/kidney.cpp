@@ -136,14 +136,35 @@ double kidney_radial_scale(const KidneyShape& k, Vec3<double> p) {
 }
 
 SurfaceMesh kidney_surface(int frequency, const KidneyShape& k) {
+  return kidney_surface(frequency, k, SurfaceFocus{});
+}
+
+Vec3<double> kidney_sphere_direction(const KidneyShape& k, Vec3<double> x) {
+  const Vec3<double> d{x.x / k.a, x.y / k.b, x.z / k.c};
+  if (!(norm(d) > 0)) throw std::invalid_argument("kidney_sphere_direction: the point is the kidney's centre");
+  return unit(d);
+}
+
+SurfaceMesh kidney_surface(int frequency, const KidneyShape& k, const SurfaceFocus& focus) {
+  if (!(focus.scale > 0 && focus.scale <= 1))
+    throw std::invalid_argument(fmt::format("kidney_surface: focus scale {} must be in (0, 1]", focus.scale));
+  if (!(norm(focus.toward) > 0)) throw std::invalid_argument("kidney_surface: the focus direction is zero");
   if (frequency < 1 || frequency > 64)
     throw std::invalid_argument(fmt::format("kidney_surface: frequency {} must be in 1..64", frequency));
   if (!(k.a > 0 && k.b > 0 && k.c > 0 && k.bean_width > 0 && k.hilum_width > 0 && k.bean >= 0 && k.hilum >= 0 &&
         k.bean + k.hilum < 1))
     throw std::invalid_argument("kidney_surface: semi-axes and widths must be > 0, bean + hilum in [0, 1)");
   SurfaceMesh s = geodesic_sphere(frequency);
+  const Vec3<double> e = unit(focus.toward);
   for (index_t i = 0; i < s.n_vertices(); ++i) {
-    const Vec3<double> x = on_kidney(k, vertex(s, i));
+    Vec3<double> p = vertex(s, i);
+    if (focus.scale < 1 && 1 + dot(p, e) > 1e-12) {
+      // stereographic projection from -e onto the plane through the centre normal to e, scaled, and back
+      const Vec3<double> z = (focus.scale / (1 + dot(p, e))) * (p - dot(p, e) * e);
+      const double z2 = dot(z, z);
+      p = unit((1 / (1 + z2)) * (2.0 * z + (1 - z2) * e));
+    }
+    const Vec3<double> x = on_kidney(k, p);
     s.vertices[3 * i] = x.x;
     s.vertices[3 * i + 1] = x.y;
     s.vertices[3 * i + 2] = x.z;

@@ -39,6 +39,28 @@ double kidney_radial_scale(const KidneyShape& shape, Vec3<double> p);
 /// for a frequency outside 1..64 or a shape with s <= 0.
 SurfaceMesh kidney_surface(int frequency, const KidneyShape& shape = {});
 
+/// Where a kidney surface is refined: its geodesic sphere's vertices are
+/// first moved by the conformal (Moebius) map of the unit sphere that
+/// scales the stereographic coordinates about the pole `toward` by `scale`
+/// (in (0, 1]; 1: uniform). Edges near the pole shrink by `scale`, those
+/// at the antipode grow by 1 / scale, and the map is conformal: triangle
+/// angles are kept, so the focus makes no slivers. Used for the contact's
+/// mesh-convergence study (tissue converge): a 2 mm tool needs faces
+/// finer than itself under it, not everywhere.
+struct SurfaceFocus {
+  Vec3<double> toward{0, 1, 0};  ///< the pole: a direction from the kidney's centre (the shape's own coordinates)
+  double scale = 1.0;
+};
+
+/// The kidney surface with its vertices focused (SurfaceFocus) before the
+/// shape's map; throws std::invalid_argument for a scale outside (0, 1]
+/// or a zero direction, as kidney_surface does for the rest.
+SurfaceMesh kidney_surface(int frequency, const KidneyShape& shape, const SurfaceFocus& focus);
+
+/// The unit-sphere direction whose kidney point lies along x from the
+/// centre (the inverse of the shape's map up to its radial scale).
+Vec3<double> kidney_sphere_direction(const KidneyShape& shape, Vec3<double> x);
+
 /// The point where the ray from the origin along `dir` leaves the closed
 /// star-shaped surface (m). Throws std::runtime_error if the ray misses.
 Vec3<double> surface_point_along(const SurfaceMesh& surface, Vec3<double> dir);

@@ -197,7 +197,8 @@ TEST(Slivers, MeshWithSliverTetsRunsStably) {
     min_ratio = std::min(min_ratio, tet_min_altitude(X, m.volume[e]) / edge);
   }
   EXPECT_LT(min_ratio, 0.03) << "no sliver was made";
-  const PressRun r = press(m, 0.002, 0.4);
+  // (the contact's tangential damping slows the sliding nodes' last settling: 1 s of hold)
+  const PressRun r = press(m, 0.002, 1.0);
   expect_stable(r, "sliver mesh");
   EXPECT_GT(r.steps_per_tick, 10 * std::lround(1e-3 / regular.dt));
 }
@@ -232,29 +233,32 @@ TEST(Slivers, MassScalingLiftsTheStepAndKeepsTheEquilibrium) {
 
 // An indentation of half the body's thickness (7.5 mm into 15 mm) by a rod
 // (a 2 mm sphere on a 2 cm shaft) on 5 mm elements: the elements under the
-// tool are crushed. Measured: at dt = 0.5 dt_crit, in float and double, the
-// IANP elements stay positive and the run reaches equilibrium. At 0.9
-// dt_crit (one step per tick, the tool 0.075 mm per step) an element under
-// the tool inverts about 40 ms into the press and the run stops with the
-// report checked below (tick, steps, element, J) instead of diverging: the
-// clear stop is what the engine promises at this extreme.
+// tool are crushed. At dt = 0.5 dt_crit, in float and double, and at 0.9
+// dt_crit (one step per tick, the tool 0.075 mm per step) the IANP
+// elements stay positive and the run reaches equilibrium. (Before the
+// contact's velocity rule, core/node_rules.hpp contact_previous, an element
+// under the tool inverted about 40 ms into the press at 0.9 and the run
+// stopped with a report.) Measured, and a limit of the 2 mm tool on 5 mm
+// faces at 0.9: the crushed elements push the faces under the tip about
+// 1 mm (r/2) into it per step, and some 6 mm deep the tip slips past the
+// face it rests on (the force falls to the shaft's sideways 0.07 N); at 0.5
+// the push is a quarter of that and the press ends at 0.34 N, the same in
+// float and double.
 TEST(DeepIndentation, HalfTheThickness) {
+  std::vector<double> forces;  // at 0.5: double, float (N)
   for (const auto& [p, safety] : {std::pair{Precision::Double, 0.5}, std::pair{Precision::Float, 0.5},
                                   std::pair{Precision::Double, 0.9}}) {
     ModelInput in = box(3000, 0.45);
     in.dt_safety = safety;
     const TissueModel<double> m = build_model(in);
     const PressRun r = press(m, 0.5 * kH, 1.0, p, 0.02);
-    const std::string what = fmt::format("half-thickness indentation, {}, safety {}", to_string(p), safety);
-    if (safety < 0.6) {
-      expect_stable(r, what);
-      continue;
-    }
-    ASSERT_TRUE(r.stopped) << what << ": ran on (it was measured to stop; if it now runs, say so here)";
-    for (const char* part : {"tick ", "TLED steps ", "element ", "J = ", "inverted"})
-      EXPECT_NE(r.report.find(part), std::string::npos) << r.report;
-    std::cout << "[ INFO     ] " << what << ": " << r.report << "\n";
+    expect_stable(r, fmt::format("half-thickness indentation, {}, safety {}", to_string(p), safety));
+    if (safety > 0.6) continue;
+    forces.push_back(r.final_force);
   }
+  ASSERT_EQ(forces.size(), 2u);
+  EXPECT_GT(forces[0], 0.3);  // the tip still presses the bottom of its pit
+  EXPECT_NEAR(forces[1], forces[0], 1e-3 * forces[0]);
 }
 
 TEST(TimeStep, JustUnderTheLimitRunsStably) {

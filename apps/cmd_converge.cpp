@@ -1,0 +1,109 @@
+// tissue converge: the mesh convergence of the tool force on the built-in
+// kidney (accuracy/convergence.hpp): the probe held at its indentation on
+// meshes refined under it, the force's extrapolated limit, and each mesh's
+// distance from it; optionally uniform re-meshes as comparison rows.
+#include <fmt/format.h>
+
+#include <fstream>
+#include <memory>
+
+#include "accuracy/convergence.hpp"
+#include "apps/commands.hpp"
+
+namespace tissue::app {
+namespace {
+
+struct ConvergeArgs {
+  std::string scene = "@kidney", backend = "cpu", json;
+  double tol = 1e-7;
+  int levels = 5;
+  std::vector<int> uniform;
+};
+
+void print_row(const accuracy::ConvergenceRow& r) {
+  if (!r.failed.empty()) {
+    fmt::print("  {:<10} failed: {}\n", r.name, r.failed);
+    return;
+  }
+  fmt::print("  {:<10} {:>7} nodes {:>7} tets  edge under the tool {:5.2f} mm  |F| = {:.5f} N  residual {:.2g}{}  "
+             "{} steps {:.1f} s\n",
+             r.name, r.nodes, r.tets, 1e3 * r.edge_under_tool, norm(r.force), r.residual,
+             r.at_contact_floor ? " (contact floor)" : "", r.steps, r.wall);
+}
+
+std::string row_json(const accuracy::ConvergenceRow& r, bool in_limit) {
+  return fmt::format(
+      "{{\"mesh\": \"{}\", \"nodes\": {}, \"tets\": {}, \"edge_under_tool\": {}, \"force\": [{}, {}, {}], "
+      "\"force_norm\": {}, \"rel_err\": {}, \"residual\": {}, \"steps\": {}, \"wall_s\": {}, \"in_limit\": {}, "
+      "\"failed\": \"{}\"}}",
+      r.name, r.nodes, r.tets, r.edge_under_tool, r.force.x, r.force.y, r.force.z, norm(r.force), r.rel_err,
+      r.residual, r.steps, r.wall, in_limit, r.failed);
+}
+
+int run_converge(const ConvergeArgs& a) {
+  const scene::Scene s = load_scene_arg(a.scene);
+  if (s.source != "@kidney") throw std::runtime_error(s.source + ": tissue converge refines the built-in @kidney only");
+  std::vector<accuracy::ConvergenceLevel> levels = accuracy::default_convergence_levels();
+  if (a.levels < 3 || a.levels > static_cast<int>(levels.size()))
+    throw std::runtime_error(fmt::format("--levels {} must be in 3..{}", a.levels, levels.size()));
+  levels.resize(a.levels);
+  accuracy::ReferenceOptions o;
+  o.backend = a.backend;
+  o.relax.residual_tol = a.tol;
+  fmt::print("tool force at the held indentation, meshes refined under the tool ({} backend, residual {:.1g}):\n",
+             a.backend, a.tol);
+  const accuracy::ConvergenceResult res = accuracy::kidney_convergence(s, levels, o, print_row);
+  const accuracy::Extrapolation& lim = res.limit;
+  fmt::print("extrapolated |F| = {:.5f} N ({}, order {:.2f} in the edge under the tool)\n", lim.value,
+             lim.monotone ? "Richardson over the last three" : "not monotone: the finest value", lim.order);
+  for (const auto& r : res.rows)
+    if (r.failed.empty()) fmt::print("  {:<10} {:+6.2f} % from the limit\n", r.name, 100 * r.rel_err);
+  std::vector<accuracy::ConvergenceRow> uniform;
+  if (!a.uniform.empty()) {
+    fmt::print("uniform re-meshes (surface and volume refined together), against that limit:\n");
+    std::vector<accuracy::ConvergenceLevel> u;
+    for (int n : a.uniform) u.push_back({fmt::format("uniform {}", n), n, {}});
+    // (one level at a time: the study's extrapolation needs three; these rows only compare)
+    for (const auto& level : u) {
+      accuracy::ConvergenceResult one = accuracy::kidney_convergence(s, {level}, o, nullptr);
+      accuracy::ConvergenceRow r = one.rows.front();
+      if (r.failed.empty()) r.rel_err = norm(r.force) / lim.value - 1;
+      print_row(r);
+      if (r.failed.empty()) fmt::print("  {:<10} {:+6.2f} % from the limit\n", r.name, 100 * r.rel_err);
+      uniform.push_back(r);
+    }
+  }
+  if (!a.json.empty()) {
+    std::string j = fmt::format("{{\"backend\": \"{}\", \"residual_tol\": {}, \"limit\": {}, \"order\": {}, "
+                                "\"monotone\": {}, \"rows\": [",
+                                a.backend, a.tol, lim.value, lim.order, lim.monotone);
+    bool first = true;
+    for (const auto& r : res.rows) j += (first ? (first = false, "\n") : ",\n") + row_json(r, true);
+    for (const auto& r : uniform) j += (first ? (first = false, "\n") : ",\n") + row_json(r, false);
+    j += "]}\n";
+    std::ofstream f(a.json);
+    f << j;
+    if (!f) throw std::runtime_error("cannot write " + a.json);
+    fmt::print("wrote {}\n", a.json);
+  }
+  return 0;
+}
+
+}  // namespace
+
+void add_converge_command(CLI::App& app, int& rc) {
+  auto a = std::make_shared<ConvergeArgs>();
+  auto* cmd = app.add_subcommand(
+      "converge", "Mesh convergence of the tool force on the built-in kidney: meshes refined under the probe, "
+                  "Richardson limit");
+  cmd->add_option("scene", a->scene, "scene (the built-in @kidney)")->capture_default_str();
+  cmd->add_option("--backend", a->backend, "cpu | cuda (relaxes in double)")->capture_default_str();
+  cmd->add_option("--tol", a->tol, "relative residual to reach")->capture_default_str()->check(CLI::PositiveNumber);
+  cmd->add_option("--levels", a->levels, "how many of the family's meshes (3..5; docs/contact.md)")
+      ->capture_default_str();
+  cmd->add_option("--uniform", a->uniform, "also these uniform re-mesh tet counts, as comparison rows");
+  cmd->add_option("--json", a->json, "write the rows as JSON");
+  cmd->callback([a, &rc] { rc = run_converge(*a); });
+}
+
+}  // namespace tissue::app
