@@ -274,8 +274,14 @@ TEST_P(Contract, BadInputGivesTheSameClearErrorOnEveryBackend) {
   reference->upload(m);
   const std::vector<std::string> want = bad_input_messages(*reference, m);
   ASSERT_EQ(got.size(), want.size());
+  // the one backend-specific word: write_positions writes host memory on the cpu, device memory on cuda
+  auto same_rule = [&](std::string msg) {
+    if (const auto at = msg.find("of device memory"); at != std::string::npos && GetParam().backend == "cuda")
+      msg.replace(at, 16, "of host memory");
+    return msg;
+  };
   for (std::size_t k = 0; k < got.size(); ++k) {
-    EXPECT_EQ(got[k], want[k]) << "call " << k;
+    EXPECT_EQ(same_rule(got[k]), want[k]) << "call " << k;
     EXPECT_NE(got[k], "<no exception>") << "call " << k;
   }
   const index_t n = m.n_nodes;

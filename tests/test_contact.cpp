@@ -1127,8 +1127,9 @@ TYPED_TEST(SweepTriangle, BlockedCornersNeverMove) {
 
 TYPED_TEST(SweepTriangle, FastToolDoesNotTunnelThroughTheFace) {
   using T = TypeParam;
-  // a big face at z = 5 cm, outward +z, centroid on the z axis; a 2 mm tool
-  // crossing it from 3 r above to 3 r below within one step
+  // a big face at z = 5 cm, outward +z, centroid on the z axis; a 2 mm tool,
+  // handle up (away from the face), crossing it from 3 r above to 3 r below
+  // within one step
   const double r = 2e-3, z0 = 0.05;
   const Vec3<T> x[3] = {as<T>(VD{-10 * r, -10 * r, z0}), as<T>(VD{20 * r, -10 * r, z0}),
                         as<T>(VD{-10 * r, 20 * r, z0})};
@@ -1138,19 +1139,16 @@ TYPED_TEST(SweepTriangle, FastToolDoesNotTunnelThroughTheFace) {
     ASSERT_EQ(n, 12);  // 6 r of travel, r / 2 per check
     CornerContact<T> out[3];
     Vec3<T> y[3];
-    // one check per step: the tool is checked only 3 r below the face -- it
-    // has passed through it. A sphere jumps over it (nothing moves); a
-    // shaft is seen piercing the face, which moves along -N to the far side
-    // of the tool (see PiercedFaceIsMovedToTheFarSideOfTheTool): r below
-    // the tip
+    // one check per step is too coarse, which is why contact_substeps
+    // exists: the tool is checked only 3 r below the face. The tip sphere is
+    // 3 r from it (no contact); a shaft pierces the face 3 r up from the tip,
+    // so the face's nearest axis point is not the tip: it is the rim of the
+    // shaft's hole, which gets no face correction, and no corner is inside.
+    // Nothing moves either way.
     sweep(one_tool<T>(from.tip, from.axis, to.tip, to.axis, r, shaft, 1), 0, x, kFree, out, y);
-    for (int i = 0; i < 3; ++i) {
-      if (shaft == 0) {
-        EXPECT_TRUE(out[i].dx.x == T(0) && out[i].dx.y == T(0) && out[i].dx.z == T(0) && out[i].tool == -1);
-      } else {
-        EXPECT_NEAR(double(y[i].z), z0 - 4 * r, tol<T>(z0)) << "corner " << i;  // past the tip
-      }
-    }
+    for (int i = 0; i < 3; ++i)
+      EXPECT_TRUE(out[i].dx.x == T(0) && out[i].dx.y == T(0) && out[i].dx.z == T(0) && out[i].tool == -1)
+          << "shaft " << shaft << " corner " << i;
     // contact_substeps checks: the face is pushed ahead of the tip all the
     // way (a translation: the deepest point is the centroid, weights 1/3;
     // the face stays ahead of the tip, so the tool never passes it) and
@@ -1166,47 +1164,130 @@ TYPED_TEST(SweepTriangle, FastToolDoesNotTunnelThroughTheFace) {
     }
     EXPECT_NEAR(deepest_distance(last_capsule(tools), y), 0.95 * r, tol<T>(z0));
   }
+  // A tip sphere that crosses the face's plane between two checks and ends
+  // 0.6 r past it (inside the tissue, within r of the face): at the check
+  // the tip is behind the face and was on its outer side at the previous
+  // check (here the start of the step), so it went through: the face goes
+  // along -N to the tip sphere's far side, not radially out through it (up
+  // to z0 + 0.35 r, leaving the tool inside the tissue). The exit of the
+  // face point q over the tip along -z is 0.6 r + r = 1.6 r: the face ends
+  // r below the tip.
+  {  // q the centroid: w = 1/3 each, a translation by -1.6 r
+    const auto tools = one_tool<T>({0, 0, z0 + 3 * r}, {0, 0, 1}, {0, 0, z0 - 0.6 * r}, {0, 0, 1}, r, 0, 1);
+    CornerContact<T> out[3];
+    Vec3<T> y[3];
+    sweep(tools, 0, x, kFree, out, y);
+    for (int i = 0; i < 3; ++i) {
+      EXPECT_LE(dist(out[i].dx, as<T>(VD{0, 0, -1.6 * r})), tol<T>(z0)) << "corner " << i;
+      EXPECT_NEAR(double(y[i].z), z0 - 1.6 * r, tol<T>(z0)) << "corner " << i;
+      EXPECT_EQ(out[i].tool, 0);
+    }
+    EXPECT_NEAR(deepest_distance(last_capsule(tools), y), r, tol<T>(z0));
+  }
+  {  // a slanted path ending under q = (4 r, -3 r, z0): barycentric w = (9, 14, 7) / 30, sum w^2 = 326 / 900;
+     // the corners move by w_k 1.6 r / sum w^2 along -z and q itself by exactly 1.6 r
+    const auto tools = one_tool<T>({0, 0, z0 + 3 * r}, {0, 0, 1}, {4 * r, -3 * r, z0 - 0.6 * r}, {0, 0, 1}, r, 0, 1);
+    CornerContact<T> out[3];
+    Vec3<T> y[3];
+    sweep(tools, 0, x, kFree, out, y);
+    const double w[3] = {9.0 / 30, 14.0 / 30, 7.0 / 30}, wsum = 326.0 / 900;
+    VD moved{0, 0, 0};
+    for (int i = 0; i < 3; ++i) {
+      EXPECT_LE(dist(out[i].dx, as<T>(VD{0, 0, -w[i] * 1.6 * r / wsum})), tol<T>(z0)) << "corner " << i;
+      moved = moved + w[i] * as<double>(out[i].dx);
+    }
+    EXPECT_NEAR(moved.z, -1.6 * r, tol<T>(z0));
+  }
 }
 
-TYPED_TEST(SweepTriangle, ToolBehindTheFacePushesItInwardNeverOutThroughTheTool) {
+TYPED_TEST(SweepTriangle, ToolBehindTheFacePushesItInwardOnlyWhereTheTipWentThrough) {
   using T = TypeParam;
-  {  // hand-computed: a sphere 0.1 behind a face (outward +z), corner P0 inside it
-    const Vec3<T> x[3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
-    const auto tools = static_tool<T>({0.3, 0.3, -0.1}, {0, 0, -1}, 0.5, 0);
+  // A face (0,-2,0), (2,0,0), (0,2,0), outward N = +z (a right triangle, circumradius 2 >= r: allowance 0.05 r,
+  // reach 0.475), and a tool of radius r = 0.5 with its tip at A = (-0.2, 0, -0.1): 0.2 r behind the face's plane
+  // (past kThrough) and beyond its edge P0 P2 (x = 0), whose midpoint q = (0, 0, 0) is the face's point nearest
+  // to A (w = (1/2, 0, 1/2): on the edge, not inside the face) at |A - q| = sqrt(0.05) = 0.2236 < r. Every shaft
+  // below leaves A away from the face ((shaft direction) . (A - q) > 0), so the tip is the nearest axis point, and
+  // no corner is inside any of the tools.
+  //  * through: the face goes along -N to the tip sphere's far side: the exit of q from the sphere about A along
+  //    -z is 0.1 + sqrt(r^2 - 0.2^2) = 0.1 + sqrt(0.21) = 0.55826; spread by w / sum w^2 (sum 1/2), P0 and P2
+  //    move by that along -z and P1 (w = 0) stays;
+  //  * radial: the face point moves away from A along (q - A) / |q - A| = (2, 0, 1) / sqrt(5) by reach - |q - A|
+  //    = 0.475 - sqrt(0.05) = 0.25139, P0 and P2 by the same.
+  const Vec3<T> x[3] = {{0, -2, 0}, {2, 0, 0}, {0, 2, 0}};
+  const VD A{-0.2, 0, -0.1}, above{-0.2, 0, 0.2};
+  const double r = 0.5;
+  const double through = 0.1 + std::sqrt(0.21), radial = 0.475 - std::sqrt(0.05);
+  const VD down{0, 0, -through}, out_of_tool = (radial / std::sqrt(5.0)) * VD{2, 0, 1};
+  const double c04 = std::sqrt(1 - 0.4 * 0.4);
+  struct Case {
+    const char* what;
+    VD tip0, axis;  // the pose at the start of the step (the end is A with the same axis; one check)
+    double shaft;
+    VD expected;    // the motion of P0 and P2
+  };
+  const Case cases[] = {
+      // (a) the tip crossed the face's plane since the previous check (the tool came down from above in one
+      //     check: the tip was 0.2 on the outer side of the plane through q)
+      {"sphere that crossed the plane", above, {0, 0, 1}, 0, down},
+      {"shaft along the face that crossed the plane", above, {-1, 0, 0}, 1, down},
+      {"shaft up and away that crossed the plane", above, {-0.8, 0, 0.6}, 1, down},
+      // (c) a still tool past whose tip the tissue tilted the face's edge: rounded off radially, continuously
+      //     (no flip at kThrough), whatever the shaft
+      {"still sphere", A, {0, 0, 1}, 0, out_of_tool},
+      {"still shaft along the face", A, {-1, 0, 0}, 1, out_of_tool},
+      {"still shaft up and away, 53 degrees off N", A, {-0.8, 0, 0.6}, 1, out_of_tool},
+      {"still shaft up and away, 66 degrees off N", A, {-c04, 0, 0.4}, 1, out_of_tool},
+  };
+  for (const Case& k : cases) {
+    const auto tools = one_tool<T>(k.tip0, k.axis, A, k.axis, r, k.shaft, 1);
     CornerContact<T> out[3];
     Vec3<T> y[3];
     sweep(tools, 0, x, kFree, out, y);
-    // the centre is 0.2 r behind the face (more than kThrough): (a) moves P0
-    // along -z out of the sphere, to z = -(0.1 + sqrt(0.25 - 0.18)) =
-    // -0.36458, then (b) moves the tilted face along -z until its deepest
-    // point leaves the sphere, spread by w / sum w^2: in all P0 -0.8802 and
-    // P1, P2 -0.4323 (measured; 2e-3 covers a change of the exit's rounding). Every corner moves along -z only, none is left in,
-    // and the tilted face keeps the one-projection residual (at 0.4321 of
-    // r = 0.5; the next check goes on).
-    EXPECT_NEAR(double(out[0].dx.z), -0.88023, 2e-3);
-    EXPECT_NEAR(double(out[1].dx.z), -0.43229, 2e-3);
-    EXPECT_NEAR(double(out[2].dx.z), -0.43229, 2e-3);
-    for (int i = 0; i < 3; ++i) {
-      EXPECT_EQ(double(out[i].dx.x), 0.0);
-      EXPECT_EQ(double(out[i].dx.y), 0.0);
-      EXPECT_GE(dist(y[i], Vec3<T>{T(0.3), T(0.3), T(-0.1)}), 0.5 - tol<T>(1)) << "corner " << i;
+    for (const int i : {0, 2}) {
+      EXPECT_LE(dist(out[i].dx, as<T>(k.expected)), tol<T>(4)) << k.what << ", corner " << i;
+      EXPECT_EQ(out[i].tool, 0) << k.what;
     }
-    EXPECT_GE(deepest_distance(last_capsule(tools), y), 0.43);
+    EXPECT_TRUE(out[1].dx.x == T(0) && out[1].dx.y == T(0) && out[1].dx.z == T(0) && out[1].tool == -1) << k.what;
   }
-  {  // a single check with the tool already 0.7 r past the face: still pushed inward, r below it
-    const double r = 2e-3;
-    const Vec3<T> x[3] = {as<T>(VD{-10 * r, -10 * r, 0}), as<T>(VD{20 * r, -10 * r, 0}), as<T>(VD{-10 * r, 20 * r, 0})};
-    const auto tools = one_tool<T>({0, 0, 3 * r}, {0, 0, 1}, {0, 0, -0.7 * r}, {0, 0, 1}, r, 0, 1);
-    CornerContact<T> out[3];
-    Vec3<T> y[3];
-    sweep(tools, 0, x, kFree, out, y);
-    for (int i = 0; i < 3; ++i) EXPECT_LE(dist(out[i].dx, as<T>(VD{0, 0, -1.7 * r})), tol<T>(r));
+  // (b) the tip behind the middle of a face, over its inside (the face cuts the tip sphere beyond its centre):
+  // through whether the tool came from the outer side within the check or was there still. A big face (-3,-3,0),
+  // (6,-3,0), (-3,6,0) (outward +z, centroid (0,0,0): w = 1/3 each, the face translates), a tool r = 0.5 with its
+  // tip at (0, 0, -0.1): the exit of the centroid along -z is 0.1 + r = 0.6 (the face ends r below the tip; a
+  // radial push would have moved it up by reach - 0.1 = 0.475 - 0.1, out through the tool). Shafts go away from the
+  // face (into the tissue): one up would pierce the face, which is a rim (see ShaftThroughARimFace...).
+  {
+    const Vec3<T> big[3] = {{-3, -3, 0}, {6, -3, 0}, {-3, 6, 0}};
+    const struct {
+      const char* what;
+      double z0;
+      VD axis;
+      double shaft;
+    } under[] = {
+        {"sphere come down", 0.2, {0, 0, 1}, 0},
+        {"still sphere", -0.1, {0, 0, 1}, 0},
+        {"still shaft, into the tissue", -0.1, {0.8, 0, -0.6}, 1},
+        {"shaft into the tissue, come down", 0.2, {0.8, 0, -0.6}, 1},
+    };
+    for (const auto& k : under) {
+      const auto tools = one_tool<T>({0, 0, k.z0}, k.axis, {0, 0, -0.1}, k.axis, r, k.shaft, 1);
+      CornerContact<T> out[3];
+      Vec3<T> y[3];
+      sweep(tools, 0, big, kFree, out, y);
+      for (int i = 0; i < 3; ++i) {
+        EXPECT_LE(dist(out[i].dx, as<T>(VD{0, 0, -0.6})), tol<T>(6)) << k.what << ", corner " << i;
+        EXPECT_EQ(out[i].tool, 0) << k.what;
+      }
+    }
   }
-  // random: a tool (sphere, or a shaft going further in) whose tip is behind
-  // a face and projects into it; every corner moves along -N only
+  // random: a tool (sphere, or a shaft pointing away from the face, into the
+  // tissue) whose tip comes from the face's outer side and ends behind it
+  // over its inside (crossed and under) within one check; every corner moves
+  // along -N only, and where no corner is inside the tool the face point over
+  // the tip goes exactly to the tip sphere's far side: the exit of q0 along -N
+  // is the tip's depth behind the plane + r, spread by w / sum w^2.
   Rng rng(53);
-  int cases = 0;
-  for (int it = 0; cases < 1500 && it < 100000; ++it) {
+  int cases_n = 0, exact = 0;
+  for (int it = 0; cases_n < 1500 && it < 100000; ++it) {
     Vec3<T> P[3];
     random_triangle(rng, Shape::Generic, P);
     const double r = rng.uni(0.05, 0.5);
@@ -1216,69 +1297,215 @@ TYPED_TEST(SweepTriangle, ToolBehindTheFacePushesItInwardNeverOutThroughTheTool)
     const VD q0 = w0[0] * as<double>(P[0]) + w0[1] * as<double>(P[1]) + w0[2] * as<double>(P[2]);
     const VD axis = unit_or(-1.0 * N + 0.6 * rng.unit(), -1.0 * N);
     if (dot(axis, N) > -0.3) continue;
-    const double behind = rng.uni(0.15, 0.9) * r;  // past kThrough: the tool has gone through
-    const auto tools = static_tool<T>(q0 - behind * N, axis, r, it % 2 ? 0.0 : rng.uni(0, 1));
-    ++cases;
+    const double behind = rng.uni(0.15, 0.9) * r;  // past kThrough
+    const double shaft = it % 2 ? 0.0 : rng.uni(0, 1);
+    const VD tip0 = q0 + rng.uni(0.05, 2) * r * N + rng.uni(0, 1) * r * rng.vec();
+    const auto tools = one_tool<T>(tip0, axis, q0 - behind * N, axis, r, shaft, 1);
+    const Capsule<T> cap = last_capsule(tools);
+    const VL a = L(cap.a), b = L(cap.b), n = L(outward(P));
+    if (!(dot(L(tools.tool[0].tip0) - L(P[0]), n) > 0)) continue;  // the start is on the outer side
+    // a corner inside the shaft but not the tip sphere is pushed radially out of the shaft: not this test's
+    bool sphere_corner = false, shaft_corner = false;
+    for (int i = 0; i < 3; ++i) {
+      const LD to_tip = norm(L(P[i]) - a), to_axis = ref_point_segment(a, b, L(P[i]));
+      if (to_axis < LD(1.001) * r && to_tip > LD(0.999) * r) shaft_corner = true;
+      if (to_tip < LD(1.001) * r) sphere_corner = true;
+    }
+    if (shaft_corner) continue;
+    ++cases_n;
     CornerContact<T> out[3];
     Vec3<T> y[3];
     sweep(tools, 0, P, kFree, out, y);
     const std::string where = "triangle " + str(P[0]) + " " + str(P[1]) + " " + str(P[2]) + " tip " +
-                              str(tools.tool[0].tip0) + " axis " + str(tools.tool[0].axis0) + " r " + std::to_string(r);
-    const VL n = L(outward(P));
+                              str(tools.tool[0].tip0) + " -> " + str(cap.a) + " axis " + str(tools.tool[0].axis0) +
+                              " r " + std::to_string(r) + " shaft " + std::to_string(shaft);
     for (int i = 0; i < 3; ++i) {
       const VL dx = L(out[i].dx);
       const LD along = dot(dx, n);
       EXPECT_LE(double(along), tol<T>(2)) << where << " corner " << i;                          // inward
       EXPECT_LE(double(norm(dx - along * n)), tol<T>(2) * (1 + 3 * vmax(out[i].dx))) << where;  // only inward
     }
-    // the old deepest point ends past the tip, on the tissue side; one check leaves the tilted face's one-projection
-    // residual (see the hand case), the next checks of the step clear it. Where the tool is on the face's outer
-    // side again these are radial face contact, which stops at reach = r - the face's allowance (a check that
-    // finds the tool through the face again leaves the face r or more from the axis): after at most four more
-    // the point is at least reach (of the final face) from the tip. Measured: the least margin over the sample
-    // is 2.5e-3 (either precision), while a fifth check still moves some faces (by up to 0.11).
-    const auto point = [&](const Vec3<T>* c) {
-      return as<T>(w0[0] * as<double>(c[0]) + w0[1] * as<double>(c[1]) + w0[2] * as<double>(c[2]));
-    };
-    const Vec3<T> q1 = point(y);
-    EXPECT_LT(double(dot(L(q1) - L(tools.tool[0].tip0), n)), 0.0) << where;
-    Vec3<T> z[3] = {y[0], y[1], y[2]};
-    for (int again = 0; again < 4; ++again) {
-      Vec3<T> next[3];
-      sweep(tools, 0, z, kFree, out, next);
-      for (int i = 0; i < 3; ++i) z[i] = next[i];
+    if (sphere_corner) continue;
+    ++exact;
+    // the tip's depth behind the plane (of the rounded positions) and the exit of its foot q0 along -N
+    const LD depth = -dot(a - L(P[0]), n), delta = depth + LD(r);
+    const double wsum = w0[0] * w0[0] + w0[1] * w0[1] + w0[2] * w0[2];
+    VL moved{0, 0, 0};
+    for (int i = 0; i < 3; ++i) {
+      const VL want = LD(-w0[i] / wsum) * delta * n;
+      EXPECT_LE(double(norm(L(out[i].dx) - want)), 1e3 * tol<T>(2)) << where << " corner " << i;
+      moved = moved + LD(w0[i]) * L(out[i].dx);
     }
-    EXPECT_GE(dist(point(z), tools.tool[0].tip0), ref_reach(z, r) - 1e3 * tol<T>(2)) << where;
+    // q0 ends r below the tip, on its far side
+    EXPECT_LE(double(norm(L(q0) + moved - (a - LD(r) * n))), 1e3 * tol<T>(2)) << where;
+  }
+  EXPECT_EQ(cases_n, 1500);
+  EXPECT_GT(exact, 300);
+}
+
+// A face whose point is the tip's centre (the axis pierces it at the tip,
+// within kPierced r) has been passed through by the tip whatever the motion:
+// it goes along -N to the far side of the tip sphere (tip_exit), r below the
+// tip -- never along the shaft (see ShaftThroughARimFace...).
+TYPED_TEST(SweepTriangle, FacePiercedByTheTipIsMovedToTheFarSideOfTheTip) {
+  using T = TypeParam;
+  // face (-3,-3,0), (3,-3,0), (-3,3,0), outward +z, centroid (-1,-1,0); a still tool of r = 1 with its tip a at
+  // the centroid, on the plane or 0.5e-4 r above or below it (pierced: within kPierced r), handle up (the shaft
+  // rises away from the face), no corner inside (the nearest is 2 sqrt(2) from a). The face point q nearest the
+  // axis is the foot of a, or, for a shaft rising from below the plane, the point where the axis crosses it,
+  // t = -z_a / u_z up the axis (at most 0.83e-4 r from the tip: still the tip). q goes along -z by its exit from
+  // the tip sphere, e = -b + sqrt(b^2 - |m|^2 + r^2) with m = q - a, b = -m_z (r - z_a where q is a's foot), the
+  // corners by w_k e / sum w^2 (w = q's barycentric weights; 1/3 each for the foot: a translation), and q lands on
+  // the tip sphere's far side
+  const Vec3<T> x[3] = {{-3, -3, 0}, {3, -3, 0}, {-3, 3, 0}};
+  for (const double tip_z : {0.0, 0.5e-4, -0.5e-4})
+    for (const VD axis : {VD{0, 0, 1}, VD{0.6, 0, 0.8}, VD{0, -0.8, 0.6}})
+      for (const double shaft : {0.0, 2.0}) {
+        const VD a{-1, -1, tip_z};
+        const double t = shaft > 0 && tip_z < 0 ? -tip_z / axis.z : 0.0;
+        const VD q{a.x + t * axis.x, a.y + t * axis.y, 0}, m = q - a;
+        const double b = -m.z, e = -b + std::sqrt(b * b - dot(m, m) + 1);
+        const double v = (q.x + 3) / 6, u = (q.y + 3) / 6, w[3] = {1 - v - u, v, u};
+        const double wsum = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
+        const auto tools = static_tool<T>(a, axis, 1, shaft);
+        CornerContact<T> out[3];
+        Vec3<T> y[3];
+        sweep(tools, 0, x, kFree, out, y);
+        const std::string where = "tip z " + std::to_string(tip_z) + " axis " + str(axis) + " shaft " +
+                                  std::to_string(shaft);
+        VD moved{0, 0, 0};
+        for (int i = 0; i < 3; ++i) {
+          EXPECT_LE(dist(out[i].dx, as<T>(VD{0, 0, -w[i] * e / wsum})), tol<T>(3)) << where << " corner " << i;
+          EXPECT_EQ(out[i].tool, 0) << where;
+          moved = moved + w[i] * as<double>(out[i].dx);
+        }
+        // q moved by e along -z, onto the tip sphere's far side: r from a, below it
+        EXPECT_LE(dist(moved, VD{0, 0, -e}), tol<T>(3)) << where;
+        EXPECT_NEAR(dist(q + moved, a), 1, tol<T>(3)) << where;
+        EXPECT_LT((q + moved).z, tip_z - 0.99) << where;
+      }
+  // random: a still tool with its tip on a random face's interior point q0 and
+  // its handle on the face's outer side (or a sphere), no corner inside it:
+  // dx_k = -w_k delta N / sum w^2, delta = r - (the tip's height over the
+  // plane, rounding), and q0 ends r below the tip
+  Rng rng(56);
+  int cases = 0;
+  for (int it = 0; cases < 1500 && it < 100000; ++it) {
+    Vec3<T> P[3];
+    random_triangle(rng, Shape::Generic, P);
+    const double r = rng.uni(0.05, 0.3);
+    double w0[3];
+    rng.weights(w0, 0.05);
+    const VD N = as<double>(outward(P));
+    const VD q0 = w0[0] * as<double>(P[0]) + w0[1] * as<double>(P[1]) + w0[2] * as<double>(P[2]);
+    const VD axis = unit_or(N + 0.8 * rng.unit(), N);
+    if (dot(axis, N) < 0.3) continue;
+    const auto tools = static_tool<T>(q0, axis, r, it % 3 ? rng.uni(0, 1) : 0);
+    const Capsule<T> cap = last_capsule(tools);
+    bool corner_inside = false;
+    for (int i = 0; i < 3; ++i) corner_inside |= axis_distance(cap, P[i]) < r * 1.001;
+    if (corner_inside) continue;  // node contact would act first
+    ++cases;
+    CornerContact<T> out[3];
+    Vec3<T> y[3];
+    sweep(tools, 0, P, kFree, out, y);
+    const std::string where = "triangle " + str(P[0]) + " " + str(P[1]) + " " + str(P[2]) + " tip " + str(cap.a) +
+                              " axis end " + str(cap.b) + " r " + std::to_string(r);
+    const VL n = L(outward(P)), a = L(cap.a);
+    const LD delta = LD(r) - dot(a - L(P[0]), n);
+    const double wsum = w0[0] * w0[0] + w0[1] * w0[1] + w0[2] * w0[2];
+    VL moved{0, 0, 0};
+    for (int i = 0; i < 3; ++i) {
+      const VL want = LD(-w0[i] / wsum) * delta * n;
+      EXPECT_LE(double(norm(L(out[i].dx) - want)), 1e3 * tol<T>(2)) << where << " corner " << i;
+      EXPECT_EQ(out[i].tool, 0) << where;
+      moved = moved + LD(w0[i]) * L(out[i].dx);
+    }
+    EXPECT_LE(double(norm(L(q0) + moved - (a - LD(r) * n))), 1e3 * tol<T>(2)) << where;
   }
   EXPECT_EQ(cases, 1500);
 }
 
-// FINDING (sweep_triangle, face contact through a pierced face): the header
-// says the face "moves along -N to the far side of the tool". When the axis
-// pierces the face, c is the piercing point, behind = 0, and the face moves
-// by delta = r only: the tool's part beyond the face is not cleared. Repro
-// (either precision): face {(-3,-3,0), (3,-3,0), (-3,3,0)} (outward +z,
-// centroid (-1,-1,0)), a static tool with tip (-1,-1,-0.5), axis (0,0,1),
-// r = 1, shaft 2, one check: every corner moves by (0,0,-1) and the face
-// is left 0.5 from the tip, inside the tip sphere (expected: at least r =
-// 1 from the axis, i.e. dz <= -1.5). A second identical check does finish
-// the job (then c is the tip, behind = 0.5 > 0: radial), so the error heals
-// one check later; but the last check of a step leaves it. A fix: for a
-// pierced face use delta = r + the depth behind the face of the axis's
-// deepest point over the face (max over a, b of -dot(x - q, N), clamped >= 0).
-TYPED_TEST(SweepTriangle, PiercedFaceIsMovedToTheFarSideOfTheTool) {
+// A shaft through the rim of the hole it makes: the face's nearest axis
+// point is far up the shaft from the tip, so the tip has not passed the face:
+// its corners inside the shaft go radially out of it and nothing moves along
+// the shaft. (The rule before moved such faces along -N out of the whole
+// capsule: for the surface face around a 10 mm shaft 9 mm in, a jump of
+// 9 mm + r down the shaft; for a face the axis lies behind, a jump across
+// the shaft.)
+TYPED_TEST(SweepTriangle, ShaftThroughARimFacePushesItsCornersRadiallyNotAlongTheShaft) {
   using T = TypeParam;
-  const Vec3<T> x[3] = {{-3, -3, 0}, {3, -3, 0}, {-3, 3, 0}};
-  for (const double tip_z : {-0.5, -0.25}) {
-    const auto tools = static_tool<T>({-1, -1, tip_z}, {0, 0, 1}, 1, 2);
+  const double r = 1e-3;
+  const auto tools = static_tool<T>({0, 0, -9 * r}, {0, 0, 1}, r, 10 * r);  // the tip 9 mm in, the shaft up to +1 mm
+  const Capsule<T> cap = last_capsule(tools);
+  {  // the surface face around the hole (outward +z, along the shaft), pierced by the shaft at its centroid 9 r up
+     // from the tip: corners at 0.5 r from the axis go radially to r, in the plane z = 0; the face stays pierced (a
+     // rim) and gets no face correction
+    const double th[3] = {M_PI / 2, M_PI / 2 + 2 * M_PI / 3, M_PI / 2 + 4 * M_PI / 3};
+    Vec3<T> x[3];
+    for (int i = 0; i < 3; ++i) x[i] = as<T>(VD{0.5 * r * std::cos(th[i]), 0.5 * r * std::sin(th[i]), 0});
+    ASSERT_GT(dot(outward(x), Vec3<T>{0, 0, 1}), T(0.99));
     CornerContact<T> out[3];
     Vec3<T> y[3];
     sweep(tools, 0, x, kFree, out, y);
     for (int i = 0; i < 3; ++i) {
-      EXPECT_LE(double(out[i].dx.z), 0.0);  // inward: holds
-      EXPECT_LE(double(out[i].dx.z), tip_z - 1 + tol<T>(3)) << "tip z " << tip_z << " corner " << i;
+      EXPECT_LE(dist(y[i], as<T>(VD{r * std::cos(th[i]), r * std::sin(th[i]), 0})), tol<T>(10 * r)) << "corner " << i;
+      EXPECT_LE(std::fabs(double(out[i].dx.z)), tol<T>(10 * r)) << "corner " << i;  // not along the shaft
+      EXPECT_EQ(out[i].tool, 0);
     }
-    EXPECT_GE(deepest_distance(last_capsule(tools), y), 1 - tol<T>(3)) << "tip z " << tip_z;
+  }
+  {  // a face tilted 40 degrees off the shaft's normal plane, pierced by it at the centroid: each corner goes
+     // radially out at its own height, (x, y) scaled to r / rho
+    const double th[3] = {M_PI / 2, M_PI / 2 + 2 * M_PI / 3, M_PI / 2 + 4 * M_PI / 3}, tilt = 40 * M_PI / 180;
+    VD p[3];
+    Vec3<T> x[3];
+    for (int i = 0; i < 3; ++i) {
+      p[i] = {0.5 * r * std::cos(th[i]), 0.5 * r * std::sin(th[i]) * std::cos(tilt), 0.5 * r * std::sin(th[i]) * std::sin(tilt)};
+      x[i] = as<T>(p[i]);
+    }
+    CornerContact<T> out[3];
+    Vec3<T> y[3];
+    sweep(tools, 0, x, kFree, out, y);
+    // the expected positions keep the face pierced by the axis (so no face contact follows node contact)
+    VD e[3];
+    for (int i = 0; i < 3; ++i) {
+      const double rho = std::hypot(p[i].x, p[i].y);
+      e[i] = {p[i].x * r / rho, p[i].y * r / rho, p[i].z};
+    }
+    ASSERT_LT(double(ref_segment_triangle(L(cap.a), L(cap.b), L(e[0]), L(e[1]), L(e[2]))), 1e-12);
+    for (int i = 0; i < 3; ++i) {
+      EXPECT_LE(dist(y[i], as<T>(e[i])), tol<T>(10 * r)) << "corner " << i;
+      EXPECT_LE(std::fabs(double(out[i].dx.z)), tol<T>(10 * r)) << "corner " << i;
+    }
+  }
+  {  // a face beside the shaft with its normal across it, +x, the axis 0.5 r behind it (as a tilted wall of the
+     // hole): P = (0.5, -0.1, -0.3) r, (0.5, 0.1, -0.3) r, (0.5, -0.1, 0.3) r, each 0.5099 r from the axis, go
+     // radially to (0.5, +-0.1) r / 0.5099 = (0.98058, +-0.19612) r at their heights (not across the shaft to
+     // x < 0). The pushed face is then 0.98058 r >= reach = 0.95 r from the axis (legs 0.3922 r and 0.6 r:
+     // circumradius 0.3584 r, sagitta 0.066 r over the cap 0.05 r): no face contact
+    const VD p[3] = {{0.5 * r, -0.1 * r, -0.3 * r}, {0.5 * r, 0.1 * r, -0.3 * r}, {0.5 * r, -0.1 * r, 0.3 * r}};
+    const Vec3<T> x[3] = {as<T>(p[0]), as<T>(p[1]), as<T>(p[2])};
+    ASSERT_GT(dot(outward(x), Vec3<T>{1, 0, 0}), T(0.99));
+    CornerContact<T> out[3];
+    Vec3<T> y[3];
+    sweep(tools, 0, x, kFree, out, y);
+    const double s = r / std::hypot(0.5 * r, 0.1 * r);
+    for (int i = 0; i < 3; ++i) {
+      EXPECT_LE(dist(y[i], as<T>(VD{s * p[i].x, s * p[i].y, p[i].z})), tol<T>(10 * r)) << "corner " << i;
+      EXPECT_GT(double(y[i].x), 0.0) << "corner " << i;
+      EXPECT_EQ(out[i].tool, 0);
+    }
+  }
+  {  // a big face pierced by the shaft 0.5 r up from a tip 0.5 r behind it (the tip sphere reaches 0.5 r past the
+     // face, the shaft through it): the nearest axis point is the piercing point, not the tip, so this is a rim
+     // too -- no corner is inside, and the face is left as it is
+    const Vec3<T> x[3] = {{-3, -3, 0}, {3, -3, 0}, {-3, 3, 0}};
+    const auto deep = static_tool<T>({-1, -1, -0.5}, {0, 0, 1}, 1, 2);
+    CornerContact<T> out[3];
+    Vec3<T> y[3];
+    sweep(deep, 0, x, kFree, out, y);
+    for (int i = 0; i < 3; ++i)
+      EXPECT_TRUE(out[i].dx.x == T(0) && out[i].dx.y == T(0) && out[i].dx.z == T(0) && out[i].tool == -1);
   }
 }
 
@@ -1302,7 +1529,7 @@ TYPED_TEST(SweepTriangle, AToolAtTheSurfaceLevelPushesCornersRadially) {
   }
 }
 
-// The second repro of the finding above: a capsule that starts clear of the
+// A repro of an earlier finding (a corner left inside): a capsule that starts clear of the
 // face on its outer side (both axis ends at positive height over the plane)
 // and moves down past the face's corner P0 within one step (contact_substeps
 // = 3 checks). At the last check P1 is 0.8306 from the axis, inside (r =
