@@ -25,10 +25,15 @@ using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 /// A generated test mesh: box of c^3 cells x 6 tets, soft tissue material.
-TissueModel<double> box_model(int nx, int ny, int nz, double lx, double ly, double lz) {
+/// (fix_bottom: the nodes at z = 0 are fixed -- a pressed slab must not fly off)
+TissueModel<double> box_model(int nx, int ny, int nz, double lx, double ly, double lz, bool fix_bottom = false) {
   ModelInput in;
   box_mesh(in, nx, ny, nz, lx, ly, lz);
   in.materials = {{3000 / 2.9, 3000 / 0.3, 1000}};  // E = 3000 Pa, nu = 0.45
+  if (fix_bottom) {
+    in.fixed.assign(in.nodes.size() / 3, 0);
+    for (std::size_t i = 0; i < in.fixed.size(); ++i) in.fixed[i] = in.nodes[3 * i + 2] == 0.0;
+  }
   in.source = fmt::format("box {}x{}x{}", nx, ny, nz);
   return build_model(in);
 }
@@ -167,7 +172,7 @@ void bench_contact(Context& c, long want_tris, Precision p) {
   // stage's: the query of the surface and the sweep of the triangles it finds
   int N = static_cast<int>(std::lround(std::sqrt(want_tris / 4.0)));
   if (c.o.quick) N = std::min(N, 10);
-  const TissueModel<double> m = box_model(N, N, 1, 0.1, 0.1, 0.1 / N);
+  const TissueModel<double> m = box_model(N, N, 1, 0.1, 0.1, 0.1 / N, true);
   auto b = create_backend(c.o.backend, p);
   b->upload(m);
   const ToolShape tool{"probe", 0.002, 0};
