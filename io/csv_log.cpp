@@ -4,6 +4,8 @@
 
 #include <stdexcept>
 
+#include "io/atomic_file.hpp"
+
 namespace tissue::io {
 
 const char* TickLog::header() {
@@ -12,10 +14,19 @@ const char* TickLog::header() {
          "depth";
 }
 
-TickLog::TickLog(const std::string& path) : path_(path), out_(path) {
-  if (!out_) throw std::runtime_error(fmt::format("{}: cannot open the tick log for writing", path_));
+TickLog::TickLog(const std::string& path)
+    : path_(path), out_(part_path(path)), last_flush_(std::chrono::steady_clock::now()) {
+  if (!out_) throw std::runtime_error(fmt::format("{}: cannot open the tick log for writing", part_path(path_)));
   out_ << header() << '\n';
-  if (!out_) throw std::runtime_error(fmt::format("{}: cannot write the tick log header", path_));
+  flush();
+}
+
+TickLog::~TickLog() {
+  try {
+    close();
+  } catch (const std::exception&) {
+    // the .part file keeps the rows written
+  }
 }
 
 void TickLog::write(const TickReport& r) {
@@ -27,11 +38,22 @@ void TickLog::write(const TickReport& r) {
       r.equilibrium ? 1 : 0, r.steps, r.strain_energy, r.kinetic_rel, r.front_disp, r.depth);
   if (!out_) throw std::runtime_error(fmt::format("{}: write failed at tick {}", path_, r.tick));
   ++rows_;
+  if (++unflushed_ >= kFlushRows || std::chrono::steady_clock::now() - last_flush_ > std::chrono::seconds(1)) flush();
 }
 
 void TickLog::flush() {
   out_.flush();
-  if (!out_) throw std::runtime_error(fmt::format("{}: flush failed", path_));
+  if (!out_) throw std::runtime_error(fmt::format("{}: flush failed", part_path(path_)));
+  unflushed_ = 0;
+  last_flush_ = std::chrono::steady_clock::now();
+}
+
+void TickLog::close() {
+  if (closed_) return;
+  closed_ = true;
+  out_.close();
+  if (!out_) throw std::runtime_error(fmt::format("{}: write failed when closing", part_path(path_)));
+  rename_into_place(part_path(path_), path_);
 }
 
 }  // namespace tissue::io
