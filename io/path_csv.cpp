@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <istream>
 
@@ -60,7 +61,7 @@ std::vector<Waypoint> parse_path_csv(std::istream& in, const std::string& source
       continue;
     }
     const Waypoint w = parse_row(text, source, line);
-    if (!path.empty() && !(w.t > path.back().t))
+    if (!path.empty() && !(w.t > path.back().t))  // (parse_row has refused NaN)
       fail(source, line,
            fmt::format("t = {} s is not after the previous waypoint's t = {} s; times must increase", w.t,
                        path.back().t));
@@ -72,6 +73,8 @@ std::vector<Waypoint> parse_path_csv(std::istream& in, const std::string& source
 }
 
 std::vector<Waypoint> read_path_csv(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) throw PathCsvError(path + ": is a directory, not a path CSV file");
   std::ifstream in(path);
   if (!in) throw PathCsvError(path + ": cannot open the file");
   return parse_path_csv(in, path);

@@ -268,18 +268,20 @@ void check_solver(const Scene& s) {
   if (v.backend != "cpu" && v.backend != "cuda")
     fail(s, ln, fmt::format("solver: unknown backend '{}'; expected cpu or cuda", v.backend));
   const std::pair<std::string_view, double> numbers[] = {
-      {"dt", v.dt},     {"dt-safety", v.dt_safety},       {"mass-scaling", v.mass_scaling}, {"damping", v.damping},
-      {"tick", v.tick}, {"residual-tol", v.residual_tol}, {"kinetic-tol", v.kinetic_tol}};
+      {"dt", v.dt.value_or(1)}, {"dt-safety", v.dt_safety},       {"mass-scaling", v.mass_scaling},
+      {"damping", v.damping.value_or(0)}, {"tick", v.tick}, {"residual-tol", v.residual_tol},
+      {"kinetic-tol", v.kinetic_tol}};
   for (const auto& [name, value] : numbers) check_finite(s, ln, "solver", name, value);
-  if (v.dt < 0) fail(s, ln, fmt::format("solver: dt = {} s must be >= 0 (0 or \"auto\" = dt-safety x dt_crit)", v.dt));
+  if (v.dt && !(*v.dt > 0))
+    fail(s, ln, fmt::format("solver: dt = {} s must be > 0 (or \"auto\" = dt-safety x dt_crit)", *v.dt));
   if (!(v.dt_safety > 0 && v.dt_safety < 1))
     fail(s, ln, fmt::format("solver: dt-safety = {} must be in (0, 1) (a fraction of the critical step)", v.dt_safety));
   if (!(v.mass_scaling >= 0 && v.mass_scaling < 1))
     fail(s, ln,
          fmt::format("solver: mass-scaling = {} must be in [0, 1) (the added mass allowed, a fraction of the total)",
                      v.mass_scaling));
-  if (v.damping < 0 && v.damping != -1)
-    fail(s, ln, fmt::format("solver: damping = {} 1/s must be >= 0 (or \"auto\")", v.damping));
+  if (v.damping && *v.damping < 0)
+    fail(s, ln, fmt::format("solver: damping = {} 1/s must be >= 0 (or \"auto\")", *v.damping));
   if (v.depth < kDepthAuto)
     fail(s, ln, fmt::format("solver: depth = {} must be >= 0 (or \"all\" or \"auto\")", v.depth));
   if (!(v.tick > 0)) fail(s, ln, fmt::format("solver: tick = {} s must be > 0", v.tick));
@@ -307,8 +309,11 @@ ModelInput to_model_input(const Scene& scene) {
   check_solver(scene);
   in.nodes = scene.nodes;
   in.tets = scene.tets;
-  for (const Material& m : scene.materials) in.materials.push_back(m.params());
-  in.dt = scene.solver.dt;
+  for (const Material& m : scene.materials) {
+    in.materials.push_back(m.params());
+    in.material_names.push_back(m.name);
+  }
+  in.dt = scene.solver.dt.value_or(0);  // ModelInput: 0 = dt_safety x dt_crit
   in.dt_safety = scene.solver.dt_safety;
   in.mass_scaling = scene.solver.mass_scaling;
   in.tick = scene.solver.tick;

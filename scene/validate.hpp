@@ -14,9 +14,9 @@
 //                normal non-zero; every constraint fixes at least one node;
 //   tools:       radius finite and > 0; device scripted | mouse | phantom; a
 //                scripted tool has a path; waypoints finite with increasing t;
-//   solver:      backend cpu | cuda; numbers finite; dt >= 0 (0 = auto);
-//                0 < dt-safety < 1; damping >= 0 or -1 (auto); depth >= -2
-//                (-1 = all, -2 = auto); tick > 0; residual-tol > 0; kinetic-tol > 0.
+//   solver:      backend cpu | cuda; numbers finite; dt > 0 or unset (auto);
+//                0 < dt-safety < 1; damping >= 0 or unset (auto); depth >= 0,
+//                kDepthAll or kDepthAuto; tick > 0; residual-tol > 0; kinetic-tol > 0.
 // The mesh geometry itself (zero-volume tets, unused nodes, dt above the
 // stable limit) is checked by core build_model(), whose ModelError names the
 // scene file (ModelInput::source) and the element or node.

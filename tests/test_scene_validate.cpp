@@ -324,10 +324,14 @@ TEST(SceneValidate, UnknownBackend) {
   EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "unknown backend 'gpu'", "cpu or cuda"}));
 }
 
-TEST(SceneValidate, NegativeTimeStep) {
+TEST(SceneValidate, NonPositiveTimeStep) {
   Scene s = valid_scene();
   s.solver.dt = -1e-4;
-  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "dt = -0.0001 s", "must be >= 0"}));
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "dt = -0.0001 s", "must be > 0 (or \"auto\""}));
+  s.solver.dt = 0;  // not a spelling of "auto"
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "dt = 0 s", "must be > 0"}));
+  s.solver.dt.reset();  // auto
+  EXPECT_NO_THROW(validate(s));
 }
 
 TEST(SceneValidate, SafetyFactorOutsideOpenUnitInterval) {
@@ -353,7 +357,9 @@ TEST(SceneValidate, NegativeDampingOtherThanAuto) {
   Scene s = valid_scene();
   s.solver.damping = -0.5;
   EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "damping = -0.5", "must be >= 0 (or \"auto\")"}));
-  s.solver.damping = -1;  // auto
+  s.solver.damping = -1;  // no longer a spelling of "auto"
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "damping = -1", "must be >= 0 (or \"auto\")"}));
+  s.solver.damping.reset();  // auto
   EXPECT_NO_THROW(validate(s));
 }
 
