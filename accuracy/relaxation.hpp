@@ -15,6 +15,8 @@
 // new alpha and the current displacements (velocity restarts at zero).
 #pragma once
 
+#include <functional>
+
 #include <cstdint>
 #include <span>
 #include <stdexcept>
@@ -53,12 +55,15 @@ struct RelaxOptions {
                                 ///< rounding floor of the precision is reached (stalled = true)
   double max_wall = 600;        ///< ... or this many wall seconds
   double force_floor = 1e-12;   ///< N, denominator floor of the relative residual
+  std::function<bool()> stop;   ///< asked at every convergence check; true ends the relaxation there
+                                ///< (RelaxResult::interrupted: a signal, apps/interrupt.hpp)
 };
 
 /// What a relaxation reached.
 struct RelaxResult {
   bool converged = false;       ///< both tolerances met
   bool stalled = false;         ///< stopped at the precision's rounding floor (see stall_periods)
+  bool interrupted = false;     ///< RelaxOptions::stop ended it
   double residual = 0;          ///< relative free residual at the end
   double kinetic = 0;           ///< kinetic energy relative to 0.5 |f_held| max|u| at the end
   long steps = 0;               ///< TLED steps taken (ramp included)

@@ -19,6 +19,11 @@ void add_reference_command(CLI::App& app, int& rc);  ///< apps/cmd_reference.cpp
 void add_tradeoff_command(CLI::App& app, int& rc);   ///< apps/cmd_tradeoff.cpp
 void add_locking_command(CLI::App& app, int& rc);    ///< apps/cmd_locking.cpp
 
+/// What the command is doing now, in words ("reading the scene x.xml"):
+/// main() names it when memory runs out (std::bad_alloc).
+void set_activity(std::string what);
+const std::string& activity();
+
 /// Loads a scene file, or the built-in kidney for the name "@kidney".
 scene::Scene load_scene_arg(const std::string& arg);
 

@@ -13,6 +13,7 @@
 #include <thread>
 
 #include "backends/registry.hpp"
+#include "io/atomic_file.hpp"
 #include "core/box_mesh.hpp"
 #include "core/scheduler.hpp"
 #include "io/kidney.hpp"
@@ -265,17 +266,21 @@ std::vector<std::string> run_bench(const BenchOptions& o) {
     c.device = probe->device_name();
   }
   c.bandwidth = o.backend == "cpu" ? host_copy_bandwidth() : measure_device_bandwidth(o.backend);
+  const auto stopped = [&] { return o.stop && o.stop(); };
   for (Precision p : o.precisions) {
-    for (const std::string& mesh : o.sizes) bench_tled(c, mesh, p);
-    for (long tris : {10'000L, 100'000L}) bench_collision(c, tris, p);
-    for (int depth : {5, kDepthAll}) bench_tick(c, p, depth);
+    for (const std::string& mesh : o.sizes)
+      if (!stopped()) bench_tled(c, mesh, p);
+    for (long tris : {10'000L, 100'000L})
+      if (!stopped()) bench_collision(c, tris, p);
+    for (int depth : {5, kDepthAll})
+      if (!stopped()) bench_tick(c, p, depth);
   }
   if (!o.json_path.empty()) {
-    std::ofstream f(o.json_path);
-    if (!f) throw std::runtime_error("cannot write " + o.json_path);
-    f << "[\n";
-    for (size_t k = 0; k < c.rows.size(); ++k) f << "  " << c.rows[k] << (k + 1 < c.rows.size() ? ",\n" : "\n");
-    f << "]\n";
+    io::AtomicTextFile f(o.json_path);
+    f.out() << "[\n";
+    for (size_t k = 0; k < c.rows.size(); ++k) f.out() << "  " << c.rows[k] << (k + 1 < c.rows.size() ? ",\n" : "\n");
+    f.out() << "]\n";
+    f.commit();
   }
   return c.rows;
 }
