@@ -1,4 +1,4 @@
-// Output files that no reader ever sees half-written: the contents go to
+// Files in and out. Output files that no reader ever sees half-written: the contents go to
 // "<path>.part" beside the final name, and a rename(2) -- atomic within one
 // file system -- puts the complete file in place. A reader opening <path>
 // sees the previous complete version or the new complete one, never a
@@ -11,6 +11,12 @@
 #include <string_view>
 
 namespace tissue::io {
+
+/// Why `path` cannot be read as an input file: "is a directory" or "is a
+/// device or socket, not a file" (reading /dev/zero would never end); ""
+/// for a regular file, a pipe or a path that does not exist (the caller's
+/// open reports that).
+std::string not_a_file(const std::string& path);
 
 /// The temporary name a file is written under before it is renamed: "<path>.part".
 std::string part_path(const std::string& path);

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <istream>
 
+#include "io/atomic_file.hpp"
 #include "scene/text.hpp"
 
 namespace tissue::io {
@@ -73,8 +74,7 @@ std::vector<Waypoint> parse_path_csv(std::istream& in, const std::string& source
 }
 
 std::vector<Waypoint> read_path_csv(const std::string& path) {
-  std::error_code ec;
-  if (std::filesystem::is_directory(path, ec)) throw PathCsvError(path + ": is a directory, not a path CSV file");
+  if (const std::string why = not_a_file(path); !why.empty()) throw PathCsvError(path + ": " + why + ", not a path CSV file");
   std::ifstream in(path);
   if (!in) throw PathCsvError(path + ": cannot open the file");
   return parse_path_csv(in, path);

@@ -10,6 +10,7 @@
 #include <pugixml.hpp>
 #include <sstream>
 
+#include "io/atomic_file.hpp"
 #include "io/path_csv.hpp"
 #include "io/tetgen_files.hpp"
 #include "scene/text.hpp"
@@ -527,8 +528,7 @@ scene::Scene parse_scene(std::string_view xml, const std::string& source, const 
 }
 
 scene::Scene read_scene(const std::string& path) {
-  std::error_code ec;
-  if (fs::is_directory(path, ec)) throw SceneError(path + ": is a directory, not a scene file");
+  if (const std::string why = io::not_a_file(path); !why.empty()) throw SceneError(path + ": " + why + ", not a scene file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw SceneError(path + ": cannot open the scene file");
   std::ostringstream text;

@@ -7,6 +7,7 @@
 #include <istream>
 #include <limits>
 
+#include "io/atomic_file.hpp"
 #include "scene/text.hpp"
 
 namespace tissue::io {
@@ -206,9 +207,8 @@ std::string ele_path_for(const std::string& node_path) {
 
 TetgenFiles read_tetgen(const std::string& node_path) {
   const std::string ele_path = ele_path_for(node_path);
-  std::error_code ec;
   for (const std::string& p : {node_path, ele_path})
-    if (std::filesystem::is_directory(p, ec)) throw TetgenFileError(p + ": is a directory, not a TetGen file");
+    if (const std::string why = not_a_file(p); !why.empty()) throw TetgenFileError(p + ": " + why + ", not a TetGen file");
   std::ifstream node_in(node_path), ele_in(ele_path);
   if (!node_in) throw TetgenFileError(node_path + ": cannot open the file");
   if (!ele_in) throw TetgenFileError(ele_path + ": cannot open the file (the .ele partner of " + node_path + ")");

@@ -569,6 +569,10 @@ TEST(SceneXml, DirectoriesAreNamed) {
   fs::create_directories(dir.file("p.csv"));
   EXPECT_TRUE(throws_with<io::PathCsvError>([&] { (void)io::read_path_csv(dir.file("p.csv")); },
                                             {dir.file("p.csv"), "is a directory"}));
+  // a device would be read forever
+  EXPECT_TRUE(throws_with<io::PathCsvError>([&] { (void)io::read_path_csv("/dev/zero"); },
+                                            {"/dev/zero: is a device or socket, not a path CSV file"}));
+  EXPECT_TRUE(throws_with<SceneError>([&] { (void)read_scene("/dev/zero"); }, {"/dev/zero: is a device"}));
 }
 
 TEST(SceneXml, MissingFilesAreNamed) {
