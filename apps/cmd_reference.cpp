@@ -100,8 +100,8 @@ void add_reference_command(CLI::App& app, int& rc) {
   cmd->add_option("--safety", a->safety, "dt as a fraction of dt_crit")
       ->default_val(0.9)
       ->check(real_number(0, 1, true, true));
-  cmd->add_option("--json", a->json, "Write the result as JSON");
-  cmd->add_option("--out", a->out, "Write reference.vtu into this folder");
+  cmd->add_option("--json", a->json, "Write the result as JSON")->check(output_file());
+  cmd->add_option("--out", a->out, "Write reference.vtu into this folder")->check(output_folder());
   cmd->add_flag("--overwrite", a->overwrite, "Replace a previous reference.vtu in the --out folder");
   cmd->callback([a, &rc] { rc = run_reference(*a); });
 }

@@ -25,7 +25,8 @@ void add_run_command(CLI::App& app, int& rc) {
   cmd->add_option("--time", opt->time, "Simulated seconds to run")
       ->check(real_number(0, 1e9, true))
       ->excludes(ticks);
-  cmd->add_option("--out", opt->out_dir, "Write ticks.csv and VTU frames (series.pvd) into this folder");
+  cmd->add_option("--out", opt->out_dir, "Write ticks.csv and VTU frames (series.pvd) into this folder")
+      ->check(output_folder());
   cmd->add_option("--frames", opt->frames, "VTU frames to save over the run (with --out; 0 = ticks.csv only)")
       ->default_val(10)
       ->check(whole_number(0, 1'000'000));

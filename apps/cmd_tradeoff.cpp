@@ -74,8 +74,9 @@ void add_tradeoff_command(CLI::App& app, int& rc) {
                                  "measure cost and error against the reference solution");
   auto a = std::make_shared<TradeoffArgs>();
   cmd->add_option("scene", a->scene, "Scene XML file, or @kidney for the built-in kidney")->required();
-  cmd->add_option("--json", a->json, "Write the results as JSON");
-  cmd->add_option("--plot", a->plot, "Write a PNG plot of error against cost with the Pareto front");
+  cmd->add_option("--json", a->json, "Write the results as JSON")->check(output_file());
+  cmd->add_option("--plot", a->plot, "Write a PNG plot of error against cost with the Pareto front")
+      ->check(output_file());
   cmd->add_option("--backend", a->backend, "cpu | cuda (default: the scene's)");
   cmd->add_option("--depths", a->depths, "Fixed depths to sweep (numbers or 'all')")->delimiter(',');
   cmd->add_option("--meshes", a->meshes, "Target tet counts, ascending (0 = the scene's own mesh); default 3000,0,20000,25000")

@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <filesystem>
 
 #include "scene/text.hpp"
 
@@ -35,6 +36,32 @@ std::string real_number_error(std::string_view text, double lo, double hi, bool 
     return fmt::format("{} is out of range: it must be in {}{}, {}{}", text, lo_open ? "(" : "[", lo, hi,
                        hi_open ? ")" : "]");
   return "";
+}
+
+std::string output_file_error(const std::string& path) {
+  namespace fs = std::filesystem;
+  if (path.empty()) return "an empty file name";
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) return fmt::format("{} is a folder; give a file name", path);
+  const fs::path dir = fs::path(path).parent_path();
+  if (!dir.empty() && !fs::is_directory(dir, ec)) return fmt::format("{}: the folder {} does not exist", path, dir.string());
+  return "";
+}
+
+std::string output_folder_error(const std::string& path) {
+  std::error_code ec;
+  if (path.empty()) return "an empty folder name";
+  if (std::filesystem::exists(path, ec) && !std::filesystem::is_directory(path, ec))
+    return fmt::format("{} exists and is not a folder", path);
+  return "";
+}
+
+CLI::Validator output_file() {
+  return CLI::Validator([](std::string& s) { return output_file_error(s); }, "FILE");
+}
+
+CLI::Validator output_folder() {
+  return CLI::Validator([](std::string& s) { return output_folder_error(s); }, "DIR");
 }
 
 CLI::Validator whole_number(long long lo, long long hi) {

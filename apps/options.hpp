@@ -21,8 +21,18 @@ std::string whole_number_error(std::string_view text, long long lo, long long hi
 std::string real_number_error(std::string_view text, double lo, double hi, bool lo_open = false,
                               bool hi_open = false);
 
-/// CLI11 checks wrapping the two functions above (for each value of a list option too).
+/// "" when `path` can be written as an output file: not empty, not a folder,
+/// its folder exists; otherwise why not. Checked before a long command
+/// runs, so that its result is not lost at the end.
+std::string output_file_error(const std::string& path);
+
+/// "" when `path` is a usable output folder name (not empty, not a file).
+std::string output_folder_error(const std::string& path);
+
+/// CLI11 checks wrapping the functions above (for each value of a list option too).
 CLI::Validator whole_number(long long lo, long long hi);
 CLI::Validator real_number(double lo, double hi, bool lo_open = false, bool hi_open = false);
+CLI::Validator output_file();
+CLI::Validator output_folder();
 
 }  // namespace tissue::app

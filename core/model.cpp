@@ -90,6 +90,12 @@ void check_step_count(const ModelInput& in, const TissueModel<double>& m, double
   if (!(in.tick > 0)) return;
   const double steps = in.tick / (safety * m.dt_crit);
   if (!(steps > kMaxStepsPerTick)) return;
+  if (!(in.tick / m.dt_crit > kMaxStepsPerTick))  // the material is fine: the safety factor asks for it
+    throw ModelError(fmt::format("{}: dt safety factor {:.3g} makes dt = {:.3g} x dt_crit ({:.4g} s) = {:.3g} s: one "
+                                 "{:.4g} s haptic tick would need {:.3g} TLED steps (the most is {:.0e}); use a "
+                                 "safety factor of about 0.9",
+                                 in.source, safety, safety, m.dt_crit, safety * m.dt_crit, in.tick, steps,
+                                 kMaxStepsPerTick));
   const index_t e = m.dt_crit_elem;
   const size_t k = in.elem_material.empty() ? 0 : size_t(in.elem_material[e]);
   const MaterialParams& p = in.materials[k];

@@ -247,6 +247,33 @@ void check_path(const Scene& s, const Tool& t, const std::string& what) {
   }
 }
 
+/// Waypoints far beyond the mesh are a unit or typing mistake, and coordinates
+/// that overflow a float break the collision query: every waypoint must lie
+/// within kToolReach mesh sizes (bounding-box diagonal) of the mesh's box.
+void check_path_near_mesh(const Scene& s, const Tool& t, const std::string& what) {
+  constexpr double kToolReach = 1000;
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (size_t k = 0; k < s.nodes.size(); ++k) {
+    lo[k % 3] = std::min(lo[k % 3], s.nodes[k]);
+    hi[k % 3] = std::max(hi[k % 3], s.nodes[k]);
+  }
+  const double size = std::hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]);
+  for (size_t k = 0; k < t.path.size(); ++k) {
+    const Vec3<double>& p = t.path[k].p;
+    double d2 = 0;
+    for (int c = 0; c < 3; ++c) {
+      const double out = std::max({lo[c] - p[c], p[c] - hi[c], 0.0});
+      d2 += out * out;
+    }
+    const double d = std::sqrt(d2);
+    if (d > kToolReach * size)
+      fail(s, t.line,
+           fmt::format("{}: waypoint {} at ({}, {}, {}) m is {:.3g} m from the mesh, more than {:.0f} x its size "
+                       "({:.3g} m); coordinates are metres",
+                       what, k, p.x, p.y, p.z, d, kToolReach, size));
+  }
+}
+
 void check_tool(const Scene& s, const Tool& t) {
   const std::string what = fmt::format("tool '{}'", t.name);
   check_finite(s, t.line, what, "radius", t.radius);
@@ -258,6 +285,7 @@ void check_tool(const Scene& s, const Tool& t) {
          fmt::format("{}: a scripted device needs a path (path=\"file.csv\" or <waypoint> children){}", what,
                      t.path_file.empty() ? "" : fmt::format("; '{}' gave no waypoints", t.path_file)));
   check_path(s, t, what);
+  check_path_near_mesh(s, t, what);
 }
 
 // ---- solver ----------------------------------------------------------------
@@ -325,7 +353,11 @@ ModelInput to_model_input(const Scene& scene) {
 
 TissueModel<double> load_model(const Scene& scene) {
   TissueModel<double> m = build_model(to_model_input(scene));
-  align_time_step(m, scene.solver.tick);  // whole steps per haptic tick
+  try {
+    align_time_step(m, scene.solver.tick);  // whole steps per haptic tick
+  } catch (const ModelError& e) {
+    throw ModelError(location(scene, scene.solver.line) + ": solver: " + e.what());
+  }
   return m;
 }
 

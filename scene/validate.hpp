@@ -13,7 +13,8 @@
 //   constraints: node ids in range; numbers finite; box min <= max; plane
 //                normal non-zero; every constraint fixes at least one node;
 //   tools:       radius finite and > 0; device scripted | mouse | phantom; a
-//                scripted tool has a path; waypoints finite with increasing t;
+//                scripted tool has a path; waypoints finite with increasing t,
+//                within 1000 mesh sizes (bounding-box diagonals) of the mesh;
 //   solver:      backend cpu | cuda; numbers finite; dt > 0 or unset (auto);
 //                0 < dt-safety < 1; damping >= 0 or unset (auto); depth >= 0,
 //                kDepthAll or kDepthAuto; tick > 0; residual-tol > 0; kinetic-tol > 0.

@@ -137,6 +137,11 @@ TEST(Options, CommandsRefuseBadValues) {
             "--meshes: -1 is out of range: it must be in [0, 100000000]");
   EXPECT_EQ(parse_error({"locking", "--nu", "0.5"}), "--nu: 0.5 is out of range: it must be in (-1, 0.5)");
   EXPECT_EQ(parse_error({"locking", "--cells", "4,0"}), "--cells: 0 is out of range: it must be in [1, 64]");
+  // outputs are checked before the work that would write them
+  EXPECT_EQ(parse_error({"run", "x.xml", "--out", ""}), "--out: an empty folder name");
+  EXPECT_EQ(parse_error({"reference", "x.xml", "--json", "/"}), "--json: / is a folder; give a file name");
+  EXPECT_EQ(parse_error({"tradeoff", "x.xml", "--plot", "/no/such/dir/p.png"}),
+            "--plot: /no/such/dir/p.png: the folder /no/such/dir does not exist");
 }
 
 // ---------------------------------------------------- tick count and work

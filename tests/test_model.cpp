@@ -471,6 +471,12 @@ TEST(ModelErrors, ExtremeMaterialNamesTheCauseOfTheStepLimit) {
   }
   in.materials = {material(kE, kNu, 1e-30)};
   expect_model_error([&] { build_model(in); }, {"box", "material 'capsule'", "rho = 1e-30 kg/m^3", "wave speed"});
+  // an absurd safety factor on a sound material is named as the cause
+  in.materials = {material(kE, kNu, kRho)};
+  in.dt_safety = 1e-300;
+  expect_model_error([&] { build_model(in); }, {"box", "dt safety factor 1e-300", "TLED steps", "about 0.9"});
+  in.dt_safety = 0.9;
+  in.materials = {material(kE, kNu, 1e-30)};
   // without a tick (a model built for a relaxation) no such limit applies
   in.tick = 0;
   in.mass_scaling = 0;

@@ -318,6 +318,17 @@ TEST(SceneValidate, NonFiniteWaypoint) {
 
 // ---- solver ----
 
+// A waypoint at 1e300 m once reached the collision query as an invalid ray
+// (an assertion in Embree): waypoints must lie near the mesh.
+TEST(SceneValidate, WaypointFarFromTheMesh) {
+  Scene s = valid_scene();
+  s.tools[0].path[1].p.x = 1e300;
+  EXPECT_TRUE(rejects(s, {"organ.xml:15: ", "tool 'probe': waypoint 1 at (1e+300, 0.005, 0.008) m", "from the mesh",
+                          "1000 x its size", "metres"}));
+  s.tools[0].path[1].p.x = 20.0;  // 20 m from a 2.4 cm mesh: still a plausible approach path
+  EXPECT_NO_THROW(validate(s));
+}
+
 TEST(SceneValidate, UnknownBackend) {
   Scene s = valid_scene();
   s.solver.backend = "gpu";
