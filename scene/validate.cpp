@@ -260,12 +260,9 @@ void check_path_near_mesh(const Scene& s, const Tool& t, const std::string& what
   const double size = std::hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]);
   for (size_t k = 0; k < t.path.size(); ++k) {
     const Vec3<double>& p = t.path[k].p;
-    double d2 = 0;
-    for (int c = 0; c < 3; ++c) {
-      const double out = std::max({lo[c] - p[c], p[c] - hi[c], 0.0});
-      d2 += out * out;
-    }
-    const double d = std::sqrt(d2);
+    double out[3];
+    for (int c = 0; c < 3; ++c) out[c] = std::max({lo[c] - p[c], p[c] - hi[c], 0.0});
+    const double d = std::hypot(out[0], out[1], out[2]);
     if (d > kToolReach * size)
       fail(s, t.line,
            fmt::format("{}: waypoint {} at ({}, {}, {}) m is {:.3g} m from the mesh, more than {:.0f} x its size "
