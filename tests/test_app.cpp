@@ -25,33 +25,16 @@
 #include "apps/run_session.hpp"
 #include "io/scene_xml.hpp"
 #include "scene/validate.hpp"
+#include "tests/temp_dir.hpp"
 
 namespace tissue::app {
 namespace {
 
 namespace fs = std::filesystem;
+using testing_support::TempDir;
+using testing_support::slurp;
 
-class TempDir {
- public:
-  TempDir() {
-    const auto* info = testing::UnitTest::GetInstance()->current_test_info();
-    path_ = fs::temp_directory_path() / fmt::format("tissue-{}-{}-{}", info->test_suite_name(), info->name(), getpid());
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TempDir() { fs::remove_all(path_); }
-  std::string file(const std::string& name) const { return (path_ / name).string(); }
 
- private:
-  fs::path path_;
-};
-
-std::string slurp(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 long lines(const std::string& text) {
   return std::count(text.begin(), text.end(), '\n');

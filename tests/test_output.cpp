@@ -20,35 +20,16 @@
 #include "io/csv_log.hpp"
 #include "io/output_dir.hpp"
 #include "io/vtu_writer.hpp"
+#include "tests/temp_dir.hpp"
 
 namespace tissue {
 namespace {
 
 namespace fs = std::filesystem;
+using testing_support::TempDir;
+using testing_support::slurp;
 
-class TempDir {
- public:
-  TempDir() {
-    const auto* info = testing::UnitTest::GetInstance()->current_test_info();
-    path_ = fs::temp_directory_path() / fmt::format("tissue-{}-{}-{}", info->test_suite_name(), info->name(), getpid());
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TempDir() { fs::remove_all(path_); }
-  std::string file(const std::string& name) const { return (path_ / name).string(); }
-  std::string path() const { return path_.string(); }
-  void write(const std::string& name, const std::string& text) const { std::ofstream(file(name)) << text; }
 
- private:
-  fs::path path_;
-};
-
-std::string slurp(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 /// Success when f throws std::runtime_error with every part in its message.
 template <class F>

@@ -17,11 +17,13 @@
 #include "io/scene_xml.hpp"
 #include "io/tetgen_files.hpp"
 #include "scene/validate.hpp"
+#include "tests/temp_dir.hpp"
 
 namespace tissue {
 namespace {
 
 namespace fs = std::filesystem;
+using testing_support::TempDir;
 using io::format_scene;
 using io::parse_scene;
 using io::read_scene;
@@ -31,22 +33,6 @@ using scene::Material;
 using scene::Scene;
 using scene::SceneError;
 
-/// A fresh folder for one test, removed afterwards.
-class TempDir {
- public:
-  TempDir() {
-    const auto* info = testing::UnitTest::GetInstance()->current_test_info();
-    path_ = fs::temp_directory_path() / fmt::format("tissue-{}-{}-{}", info->test_suite_name(), info->name(), getpid());
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TempDir() { fs::remove_all(path_); }
-  std::string file(const std::string& name) const { return (path_ / name).string(); }
-  void write(const std::string& name, const std::string& text) const { std::ofstream(file(name)) << text; }
-
- private:
-  fs::path path_;
-};
 
 /// 1-based line of the first occurrence of `needle` in `text`.
 int line_of(const std::string& text, const std::string& needle) {
