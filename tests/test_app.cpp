@@ -90,6 +90,7 @@ std::string parse_error(std::vector<std::string> args) {
   add_bench_command(app, rc);
   add_tradeoff_command(app, rc);
   add_locking_command(app, rc);
+  add_view_command(app, rc);
   // parse only: the callbacks would run the command
   for (CLI::App* sub : app.get_subcommands({})) sub->callback(nullptr);
   std::reverse(args.begin(), args.end());
@@ -120,6 +121,9 @@ TEST(Options, CommandsRefuseBadValues) {
             "--meshes: -1 is out of range: it must be in [0, 100000000]");
   EXPECT_EQ(parse_error({"locking", "--nu", "0.5"}), "--nu: 0.5 is out of range: it must be in (-1, 0.5)");
   EXPECT_EQ(parse_error({"locking", "--cells", "4,0"}), "--cells: 0 is out of range: it must be in [1, 64]");
+  EXPECT_EQ(parse_error({"view", "x.xml", "--ticks", "-5"}), "--ticks: -5 is out of range: it must be in [0, 1000000000]");
+  EXPECT_EQ(parse_error({"view", "x.xml", "--width", "0"}), "--width: 0 is out of range: it must be in [16, 16384]");
+  EXPECT_EQ(parse_error({"view", "x.xml", "--fps", "nan"}), "--fps: nan is not a finite number");
   // outputs are checked before the work that would write them
   EXPECT_EQ(parse_error({"run", "x.xml", "--out", ""}), "--out: an empty folder name");
   EXPECT_EQ(parse_error({"reference", "x.xml", "--json", "/"}), "--json: / is a folder; give a file name");
