@@ -81,12 +81,13 @@ std::vector<Waypoint> read_path_csv(const std::string& path) {
 }
 
 void write_path_csv(const std::string& path, std::span<const Waypoint> waypoints) {
-  std::ofstream out(path);
-  if (!out) throw PathCsvError(path + ": cannot open the file for writing");
-  out << "t,x,y,z\n";
-  for (const Waypoint& w : waypoints) out << fmt::format("{},{},{},{}\n", w.t, w.p.x, w.p.y, w.p.z);
-  out.flush();
-  if (!out) throw PathCsvError(path + ": write failed");
+  std::string text = "t,x,y,z\n";
+  for (const Waypoint& w : waypoints) text += fmt::format("{},{},{},{}\n", w.t, w.p.x, w.p.y, w.p.z);
+  try {
+    write_file_atomic(path, text);
+  } catch (const std::runtime_error& e) {
+    throw PathCsvError(e.what());
+  }
 }
 
 }  // namespace tissue::io

@@ -568,11 +568,7 @@ void write_scene(const scene::Scene& s, const std::string& path, bool inline_mes
   }
   for (const scene::Tool& t : s.tools)
     if (!t.path_file.empty() && !t.path.empty()) write_path_csv((dir / t.path_file).string(), t.path);
-  std::ofstream out(path, std::ios::binary);
-  if (!out) throw std::runtime_error(path + ": cannot open the scene file for writing");
-  out << format_scene(s, mesh_file);
-  out.flush();
-  if (!out) throw std::runtime_error(path + ": write failed");
+  write_file_atomic(path, format_scene(s, mesh_file));
 }
 
 }  // namespace tissue::io

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <istream>
+#include <iterator>
 #include <limits>
 
 #include "io/atomic_file.hpp"
@@ -220,20 +221,21 @@ TetgenFiles read_tetgen(const std::string& node_path) {
 
 void write_tetgen(const std::string& node_path, std::span<const double> nodes, std::span<const index_t> tets) {
   const std::string ele_path = ele_path_for(node_path);
-  std::ofstream node_out(node_path), ele_out(ele_path);
-  if (!node_out) throw TetgenFileError(node_path + ": cannot open the file for writing");
-  if (!ele_out) throw TetgenFileError(ele_path + ": cannot open the file for writing");
   const size_t n = nodes.size() / 3, ne = tets.size() / 4;
-  node_out << fmt::format("# {} points (m), written by tissue\n{} 3 0 0\n", n, n);
+  fmt::memory_buffer node_text, ele_text;
+  fmt::format_to(std::back_inserter(node_text), "# {} points (m), written by tissue\n{} 3 0 0\n", n, n);
   for (size_t i = 0; i < n; ++i)
-    node_out << fmt::format("{} {} {} {}\n", i, nodes[3 * i], nodes[3 * i + 1], nodes[3 * i + 2]);
-  ele_out << fmt::format("# {} linear tetrahedra, written by tissue\n{} 4 0\n", ne, ne);
+    fmt::format_to(std::back_inserter(node_text), "{} {} {} {}\n", i, nodes[3 * i], nodes[3 * i + 1], nodes[3 * i + 2]);
+  fmt::format_to(std::back_inserter(ele_text), "# {} linear tetrahedra, written by tissue\n{} 4 0\n", ne, ne);
   for (size_t e = 0; e < ne; ++e)
-    ele_out << fmt::format("{} {} {} {} {}\n", e, tets[4 * e], tets[4 * e + 1], tets[4 * e + 2], tets[4 * e + 3]);
-  node_out.flush();
-  ele_out.flush();
-  if (!node_out) throw TetgenFileError(node_path + ": write failed");
-  if (!ele_out) throw TetgenFileError(ele_path + ": write failed");
+    fmt::format_to(std::back_inserter(ele_text), "{} {} {} {} {}\n", e, tets[4 * e], tets[4 * e + 1], tets[4 * e + 2],
+                   tets[4 * e + 3]);
+  try {  // each file whole or not at all (io/atomic_file.hpp)
+    write_file_atomic(node_path, std::string_view(node_text.data(), node_text.size()));
+    write_file_atomic(ele_path, std::string_view(ele_text.data(), ele_text.size()));
+  } catch (const std::runtime_error& e) {
+    throw TetgenFileError(e.what());
+  }
 }
 
 }  // namespace tissue::io
