@@ -9,6 +9,7 @@
 //   shape gradients    dndx[k * n_elems + e]   (k = 3 * a + j, dN_a/dX_j)
 #pragma once
 
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -35,7 +36,8 @@ struct ModelInput {
                                          ///< plane or roller: fix only the normal component) (n_nodes); empty = none
   double dt = 0;                         ///< requested step (s); 0 = safety * dt_crit
   double dt_safety = 0.5;                ///< fraction of dt_crit used when dt = 0
-  double damping = -1;                   ///< mass-proportional damping alpha (1/s); < 0 = from the lowest-mode estimate
+  std::optional<double> damping;         ///< mass-proportional damping alpha (1/s, >= 0); unset = 2 x the
+                                         ///< lowest-mode estimate
   bool ianp = true;                      ///< improved average nodal pressure; false = plain (locking-prone) tets,
                                          ///< whose dt_crit uses 0.85 x the smallest altitude (their measured limit)
   double mass_scaling = 0;               ///< selective mass scaling budget: the most mass that may be added to the
@@ -43,7 +45,13 @@ struct ModelInput {
                                          ///< see choose_mass_scaling)
   double tick = 0;                       ///< haptic period (s): with mass scaling and dt = 0, dt = tick / n
   std::string source = "<model>";        ///< names the input in error messages
+  std::vector<std::string> material_names;  ///< names of the materials, for messages (empty = by index)
 };
+
+/// The most TLED steps one haptic tick may take (build_model,
+/// align_time_step): beyond it the step count no longer fits the
+/// scheduler's counters, and no run would finish.
+inline constexpr double kMaxStepsPerTick = 1e9;
 
 /// Thrown for invalid model input; the message names the source, the
 /// element or node and the rule broken.
@@ -110,8 +118,12 @@ struct TissueModel {
 };
 
 /// Precomputes the model from the input; throws ModelError for zero-volume
-/// tets, unused nodes, bad materials or a dt above the stable limit (the
-/// message names the limit and the element that sets it). Inverted tets
+/// tets (relative to the tet's size; coordinates whose volumes overflow or
+/// underflow are named as such), two elements with the same four nodes,
+/// unused nodes, bad materials, a stable step so small that one haptic tick
+/// would need more than kMaxStepsPerTick steps (naming the element, its
+/// material and wave speed) or a dt above the stable limit (the message
+/// names the limit and the element that sets it). Inverted tets
 /// (V < 0) are reoriented by swapping corners 1 and 2 and counted.
 TissueModel<double> build_model(const ModelInput& in);
 
