@@ -89,6 +89,18 @@ MassScaling mass_needed(const std::vector<double>& dt_e, const std::vector<doubl
 
 }  // namespace
 
+double wave_speed(const MaterialParams& p) {
+  const double lambda = p.K - 2.0 * p.mu / 3.0;
+  return std::sqrt((lambda + 2 * p.mu) / p.rho);
+}
+
+double element_time_step(const Vec3<double> X[4], double volume, const MaterialParams& p, bool ianp) {
+  // Plain tets are stiffer than IANP ones: their measured stability limit
+  // (2 / omega_max of the lumped linearised system) is 0.89..0.94 of
+  // L / c for nu in 0.3..0.499, so their L_e carries a 0.85 factor.
+  return (ianp ? 1.0 : 0.85) * tet_min_altitude(X, volume) / wave_speed(p);
+}
+
 void align_time_step(TissueModel<double>& m, double tick) {
   if (!(tick > 0)) throw ModelError(fmt::format("haptic tick {} s must be > 0", tick));
   const double steps = std::ceil(tick / m.dt * (1 - 1e-12));
@@ -242,12 +254,7 @@ TissueModel<double> build_model(const ModelInput& in) {
     m.mu[e] = p.mu;
     m.K[e] = p.K;
     m.total_mass += p.rho * V;
-    const double lambda = p.K - 2.0 * p.mu / 3.0;
-    const double wave = std::sqrt((lambda + 2 * p.mu) / p.rho);
-    // Plain tets are stiffer than IANP ones: their measured stability limit
-    // (2 / omega_max of the lumped linearised system) is 0.89..0.94 of
-    // L / c for nu in 0.3..0.499, so their L_e carries a 0.85 factor.
-    const double dt_e = (in.ianp ? 1.0 : 0.85) * tet_min_altitude(X, V) / wave;
+    const double dt_e = element_time_step(X, V, p, in.ianp);
     dt_elem[e] = dt_e;
     rho_V[e] = p.rho * V;
     if (dt_e < m.dt_crit) {

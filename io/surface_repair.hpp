@@ -13,10 +13,6 @@
 
 namespace tissue::io {
 
-/// A progress line for long steps ("remeshing: pass 2 of 5, 31,208
-/// triangles"); empty = silent.
-using Progress = std::function<void(const std::string&)>;
-
 /// What repair_surface() may do.
 struct RepairOptions {
   /// Largest hole filled, as a fraction of the body's bounding-box diagonal
