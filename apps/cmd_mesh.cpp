@@ -16,6 +16,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <map>
 #include <memory>
 
 #include "apps/commands.hpp"
@@ -178,13 +179,17 @@ scene::Scene make_scene(MeshOptions& o) {
   const scene::Solver solver;
   const io::QualityReport q =
       io::mesh_quality(vol, params, tet_material, solver.tick, solver.dt_safety, solver.mass_scaling);
-  fmt::print("meshed: {} nodes, {} tets ({} TetGen runs, switches {})\n", vol.n_nodes(), vol.n_tets(), vol.runs,
-             io::tetgen_switches([&] {
-               io::MeshingOptions m = o.pipeline.meshing;
-               m.max_volume = vol.max_volume;
-               m.regions.resize(inclusions.size());
-               return m;
-             }(), o.surface));
+  if (result.mesher == io::Mesher::Mesh3)
+    fmt::print("meshed: {} nodes, {} tets ({} Mesh_3 runs, sliver perturbation and exudation)\n", vol.n_nodes(),
+               vol.n_tets(), vol.runs);
+  else
+    fmt::print("meshed: {} nodes, {} tets ({} TetGen runs, switches {})\n", vol.n_nodes(), vol.n_tets(), vol.runs,
+               io::tetgen_switches([&] {
+                 io::MeshingOptions m = o.pipeline.meshing;
+                 m.max_volume = vol.max_volume;
+                 m.regions.resize(inclusions.size());
+                 return m;
+               }(), o.surface));
   if (o.pipeline.meshing.target_tets > 0) {
     const double off = double(vol.n_tets()) / o.pipeline.meshing.target_tets - 1;
     std::fflush(stdout);
@@ -229,6 +234,12 @@ void add_mesh_command(CLI::App& app, int& rc) {
   cmd->add_option("--inclusion", o->inclusions,
                   "Closed surface inside the organ meshed as its own element set: FILE[:E=..,nu=..,rho=..] "
                   "(default: 10 x the tissue's E); repeatable");
+  cmd->add_option("--mesher", o->pipeline.mesher,
+                  "Volume mesher: cgal (Mesh_3 with sliver perturbation and exudation), tetgen (quality bounds; "
+                  "inclusions), auto (cgal for a body alone with a size, else tetgen)")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, io::Mesher>{
+          {"auto", io::Mesher::Auto}, {"tetgen", io::Mesher::TetGen}, {"cgal", io::Mesher::Mesh3}}))
+      ->default_str("auto");
   cmd->add_flag("--no-repair", o->no_repair, "Refuse damaged surfaces instead of repairing them");
   cmd->add_option("--remesh-edge", o->pipeline.remesh_edge,
                   "Remesh the surfaces to this edge length (m); 0 = auto (when finer than the target needs), -1 = never")

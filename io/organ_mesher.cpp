@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include "io/cgal_mesher.hpp"
+
 #include <algorithm>
 #include <cmath>
 
@@ -94,8 +96,22 @@ void check_inclusion(const NamedSurface& inc, const NamedSurface& organ, const s
 
 /// One conforming TetGen meshing of the organ with its inclusions as regions.
 VolumeMesh tetrahedralize(const NamedSurface& organ, const std::vector<NamedSurface>& inclusions,
-                          MeshingOptions m) {
+                          MeshingOptions m, Mesher mesher) {
   m.regions.clear();
+  if (mesher == Mesher::Auto)
+    mesher = inclusions.empty() && (m.target_tets > 0 || m.max_volume > 0) ? Mesher::Mesh3 : Mesher::TetGen;
+  if (mesher == Mesher::Mesh3) {
+    if (!inclusions.empty())
+      throw MeshError(organ.source + ": inclusions are meshed by TetGen's regions only (use --mesher tetgen)");
+    Mesh3Options o3;
+    o3.target_tets = m.target_tets;
+    if (m.target_tets == 0) {
+      if (!(m.max_volume > 0)) throw MeshError(organ.source + ": Mesh_3 needs --target-tets or --max-volume");
+      o3.cell_size = std::sqrt(6.0) / 4 * regular_tet_edge(m.max_volume);
+    }
+    o3.progress = m.progress;
+    return mesh3_surface(organ.surface, o3, organ.source);
+  }
   SurfaceMesh combined = organ.surface;
   for (size_t k = 0; k < inclusions.size(); ++k) {
     check_inclusion(inclusions[k], organ, inclusions, k);
@@ -105,7 +121,13 @@ VolumeMesh tetrahedralize(const NamedSurface& organ, const std::vector<NamedSurf
     combined.vertices.insert(combined.vertices.end(), s.vertices.begin(), s.vertices.end());
     for (index_t v : s.triangles) combined.triangles.push_back(base + v);
   }
-  return tetrahedralize_surface(combined, m, organ.source);
+  VolumeMesh v = tetrahedralize_surface(combined, m, organ.source);
+  // TetGen numbers the regions nobody seeded itself (the organ's tissue
+  // around the inclusions): every attribute that is not an inclusion's is
+  // tissue.
+  for (int& r : v.tet_region)
+    if (r < 1 || r > int(inclusions.size())) r = 0;
+  return v;
 }
 
 }  // namespace
@@ -135,8 +157,11 @@ OrganMesh mesh_organ(NamedSurface organ, std::vector<NamedSurface> inclusions, c
   }
   MeshingOptions m = o.meshing;
   m.regions.clear();
+  out.mesher = o.mesher != Mesher::Auto ? o.mesher
+                : inclusions.empty() && (m.target_tets > 0 || m.max_volume > 0) ? Mesher::Mesh3
+                                                                                : Mesher::TetGen;
   for (int attempt = 0;; ++attempt) {
-    out.mesh = tetrahedralize(organ, inclusions, m);
+    out.mesh = tetrahedralize(organ, inclusions, m, out.mesher);
     const double n = out.mesh.n_tets(), target = m.target_tets;
     // The surface alone forces more tets than the target: remesh it coarser
     // (tet count ~ edge^-3) and try again.

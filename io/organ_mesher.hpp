@@ -18,7 +18,14 @@ struct NamedSurface {
   std::string source;
 };
 
+/// Which volume mesher runs (docs/meshing.md compares them).
+/// Auto: Mesh3 for a body alone (it meets the quality goal, TetGen does not:
+/// docs/meshing.md), TetGen when there are inclusions (its region attributes
+/// mesh them conformingly) or no size is given.
+enum class Mesher { Auto, TetGen, Mesh3 };
+
 struct OrganMeshOptions {
+  Mesher mesher = Mesher::Auto;  ///< Mesh3: CGAL Mesh_3 with sliver perturbation and exudation (no inclusions)
   bool repair = true;             ///< false: surfaces must already be closed and clean (check_closed's errors)
   RepairOptions repair_options;
   double remesh_edge = 0;         ///< m; 0 = auto (see organ_edge_length), < 0 = never remesh
@@ -40,6 +47,7 @@ struct OrganMesh {
   VolumeMesh mesh;                ///< tet_region: 0 = organ tissue, k = inclusion k (1-based)
   std::vector<SurfaceSteps> surfaces;  ///< organ first, then the inclusions in order
   double target_edge = 0;         ///< the edge length the size asks for (m); 0 = no size given
+  Mesher mesher = Mesher::TetGen; ///< the mesher that ran
 };
 
 /// Remeshing rule (auto): a surface is remeshed to the target edge a when its

@@ -331,16 +331,6 @@ VolumeMesh mesh_once(const SurfaceMesh& s, const MeshingOptions& o, const std::s
   return m;
 }
 
-/// Refuses a request whose tets cannot fit in memory, before any run.
-void check_memory(double tets, const std::string& what, const std::string& source) {
-  const double need = tets * kBytesPerTet, have = available_memory();
-  if (need > have)
-    throw MeshError(fmt::format(
-        "{}: {} means about {:.3g} million tets, which need about {:.3g} GB of memory for TetGen ({} bytes per "
-        "tet); only {:.3g} GB are available: ask for fewer tets",
-        source, what, tets / 1e6, need / 1e9, kBytesPerTet, have / 1e9));
-}
-
 /// The target-count iteration: a power law n ~ c a^beta fitted through the
 /// last two runs (beta = -1 until there are two, clamped to [-2, -0.3]).
 VolumeMesh mesh_to_target(const SurfaceMesh& s, MeshingOptions o, const std::string& source) {
@@ -406,10 +396,11 @@ VolumeMesh tetrahedralize_surface(const SurfaceMesh& surface, const MeshingOptio
     throw MeshError(fmt::format("{}: target tet count {} must be >= 0 (0 = off)", source, options.target_tets));
   tetgen_switches(options, source);  // validates the options before any work
   if (options.target_tets > 0)
-    check_memory(options.target_tets, fmt::format("a target of {} tets", options.target_tets), source);
+    check_tet_memory(options.target_tets, kBytesPerTet, fmt::format("a target of {} tets", options.target_tets),
+                     source);
   else if (options.max_volume > 0)
-    check_memory(std::fabs(enclosed_volume(surface)) / options.max_volume,
-                 fmt::format("a maximum tet volume of {:.3g} m^3", options.max_volume), source);
+    check_tet_memory(std::fabs(enclosed_volume(surface)) / options.max_volume, kBytesPerTet,
+                     fmt::format("a maximum tet volume of {:.3g} m^3", options.max_volume), source);
   for (const RegionSeed& r : options.regions)
     if (r.attribute <= 0 || !std::isfinite(r.point.x + r.point.y + r.point.z))
       throw MeshError(fmt::format("{}: region attribute {} must be > 0 with a finite seed point", source, r.attribute));
@@ -420,6 +411,15 @@ VolumeMesh tetrahedralize_surface(const SurfaceMesh& surface, const MeshingOptio
   if (options.progress)
     options.progress(fmt::format("tetgen: {} tets, {:.0f} MB", m.n_tets(), m.peak_bytes / 1e6));
   return m;
+}
+
+void check_tet_memory(double tets, double bytes_per_tet, const std::string& what, const std::string& source) {
+  const double need = tets * bytes_per_tet, have = available_memory();
+  if (need > have)
+    throw MeshError(fmt::format(
+        "{}: {} means about {:.3g} million tets, which need about {:.3g} GB of memory ({} bytes per tet); only "
+        "{:.3g} GB are available: ask for fewer tets",
+        source, what, tets / 1e6, need / 1e9, bytes_per_tet, have / 1e9));
 }
 
 double available_memory() {

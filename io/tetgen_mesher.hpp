@@ -70,6 +70,11 @@ inline constexpr int kTargetRounds = 8;
 /// used to refuse a target that cannot fit before any run starts.
 inline constexpr double kBytesPerTet = 600;
 
+/// Throws MeshError naming `source`, `what` was asked ("a target of 50000000
+/// tets") and the memory needed when `tets` tets at `bytes_per_tet` do not
+/// fit in the memory available.
+void check_tet_memory(double tets, double bytes_per_tet, const std::string& what, const std::string& source);
+
 /// Memory the system has available now (bytes; MemAvailable of
 /// /proc/meminfo, or physical memory when it cannot be read).
 double available_memory();
