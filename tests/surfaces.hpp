@@ -3,6 +3,7 @@
 // carry (holes, folds, duplicated vertices, zero-area triangles).
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <map>

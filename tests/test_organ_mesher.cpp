@@ -5,6 +5,7 @@
 // are named, absurd targets are refused before any run.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -94,7 +95,10 @@ TEST(OrganMesher, Mesh3MeetsTheQualityGoalTetGenDoesNot) {
 TEST(OrganMesher, InclusionIsItsOwnConformingRegion) {
   NamedSurface tumour{tt::ellipsoid({0.01, 0, 0.005}, {0.01, 0.008, 0.007}, 3), "tumour.obj"};
   const double tumour_volume = enclosed_volume(tumour.surface);
-  const OrganMesh r = mesh_organ(organ(), {tumour}, target(20000, Mesher::Auto));
+  OrganMeshOptions o = target(0, Mesher::Auto);
+  o.meshing.max_volume = enclosed_volume(organ().surface) / 10000;
+  o.remesh_edge = -1;  // the surfaces as given, so that the region volumes are exact
+  const OrganMesh r = mesh_organ(organ(), {tumour}, o);
   EXPECT_EQ(r.mesher, Mesher::TetGen);
   ASSERT_EQ(r.mesh.tet_region.size(), size_t(r.mesh.n_tets()));
   double v_in = 0, v_all = 0;
