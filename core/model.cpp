@@ -99,7 +99,7 @@ void check_step_count(const ModelInput& in, const TissueModel<double>& m, double
   const index_t e = m.dt_crit_elem;
   const size_t k = in.elem_material.empty() ? 0 : size_t(in.elem_material[e]);
   const MaterialParams& p = in.materials[k];
-  const double c = std::sqrt((p.K + 4 * p.mu / 3) / p.rho);
+  const double c = wave_speed(p);  // sqrt((K + 4 mu / 3) / rho)
   throw ModelError(fmt::format(
       "{}: element {} ({}: mu = {:.4g} Pa, K = {:.4g} Pa, rho = {:.4g} kg/m^3) has a wave speed c = sqrt((K + 4 mu / "
       "3) / rho) = {:.4g} m/s, so its stable step is dt_crit = L / c = {:.4g} s: one {:.4g} s haptic tick would need "
@@ -184,6 +184,18 @@ MassScaling mass_needed(const std::vector<double>& dt_e, const std::vector<doubl
 }
 
 }  // namespace
+
+double wave_speed(const MaterialParams& p) {
+  const double lambda = p.K - 2.0 * p.mu / 3.0;
+  return std::sqrt((lambda + 2 * p.mu) / p.rho);
+}
+
+double element_time_step(const Vec3<double> X[4], double volume, const MaterialParams& p, bool ianp) {
+  // Plain tets are stiffer than IANP ones: their measured stability limit
+  // (2 / omega_max of the lumped linearised system) is 0.89..0.94 of
+  // L / c for nu in 0.3..0.499, so their L_e carries a 0.85 factor.
+  return (ianp ? 1.0 : 0.85) * tet_min_altitude(X, volume) / wave_speed(p);
+}
 
 void align_time_step(TissueModel<double>& m, double tick) {
   if (!(tick > 0)) throw ModelError(fmt::format("haptic tick {} s must be > 0", tick));
@@ -336,12 +348,7 @@ TissueModel<double> build_model(const ModelInput& in) {
     m.mu[e] = p.mu;
     m.K[e] = p.K;
     m.total_mass += p.rho * V;
-    const double lambda = p.K - 2.0 * p.mu / 3.0;
-    const double wave = std::sqrt((lambda + 2 * p.mu) / p.rho);
-    // Plain tets are stiffer than IANP ones: their measured stability limit
-    // (2 / omega_max of the lumped linearised system) is 0.89..0.94 of
-    // L / c for nu in 0.3..0.499, so their L_e carries a 0.85 factor.
-    const double dt_e = (in.ianp ? 1.0 : 0.85) * tet_min_altitude(X, V) / wave;
+    const double dt_e = element_time_step(X, V, p, in.ianp);
     dt_elem[e] = dt_e;
     rho_V[e] = p.rho * V;
     if (dt_e < m.dt_crit) {

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "core/hd.hpp"
+#include "core/vec.hpp"
 
 namespace tissue {
 
@@ -126,6 +127,16 @@ struct TissueModel {
 /// names the limit and the element that sets it). Inverted tets
 /// (V < 0) are reoriented by swapping corners 1 and 2 and counted.
 TissueModel<double> build_model(const ModelInput& in);
+
+/// Dilatational wave speed c = sqrt((lambda + 2 mu) / rho) of a material
+/// (m/s), lambda = K - 2 mu / 3.
+double wave_speed(const MaterialParams& p);
+
+/// An element's stable step L_e / c_e (s): L_e = tet_min_altitude of the tet
+/// X (m) with volume V (m^3), times 0.85 for plain (non-IANP) tets (their
+/// measured limit); c_e = wave_speed(p). build_model's dt_crit is the
+/// smallest of these.
+double element_time_step(const Vec3<double> X[4], double volume, const MaterialParams& p, bool ianp = true);
 
 /// Selective mass scaling (the explicit-dynamics practice of LS-DYNA's and
 /// Abaqus/Explicit's "mass scaling" for a target step): a few badly shaped

@@ -343,6 +343,8 @@ std::string location(const Scene& scene, int line) {
   return line > 0 ? fmt::format("{}:{}", scene.source, line) : scene.source;
 }
 
+void validate_material(const Scene& scene, const Material& material) { check_material(scene, material); }
+
 void validate(const Scene& scene) {
   (void)to_model_input(scene);
 }

@@ -46,6 +46,11 @@ std::string location(const Scene& scene, int line);
 /// Checks every rule listed above; throws SceneError for the first one broken.
 void validate(const Scene& scene);
 
+/// Checks one material by the materials' rules above (for a tool that makes
+/// a scene, such as tissue mesh, before it does any work); throws SceneError
+/// naming scene.source and the material.
+void validate_material(const Scene& scene, const Material& material);
+
 /// Validates the scene and resolves it for build_model(): nodes and tets
 /// copied, element sets turned into one material index per element (the
 /// index of the set's material in scene.materials), materials into
