@@ -56,8 +56,14 @@ LockingStudy locking_study(double nu, const std::vector<int>& cells) {
   if (!(nu > -1 && nu < 0.5)) throw std::invalid_argument(fmt::format("locking study: nu = {} must be in (-1, 0.5)", nu));
   LockingStudy s;
   s.nu = nu;
+  for (size_t k = 0; k < cells.size(); ++k) {  // every mesh checked before any is solved
+    if (cells[k] < 1) throw std::invalid_argument(fmt::format("locking study: {} cells per side must be >= 1", cells[k]));
+    if (k > 0 && cells[k] <= cells[k - 1])
+      throw std::invalid_argument(fmt::format("locking study: cells {} after {}: the meshes must ascend (the last, "
+                                              "finest one is the reference)",
+                                              cells[k], cells[k - 1]));
+  }
   for (int c : cells) {
-    if (c < 1) throw std::invalid_argument(fmt::format("locking study: {} cells per side must be >= 1", c));
     s.cases.push_back(solve(c, false, nu));
     s.cases.push_back(solve(c, true, nu));
   }

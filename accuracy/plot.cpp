@@ -19,6 +19,10 @@
 #include <stb/stb_image_write.h>
 #pragma GCC diagnostic pop
 
+#include <cstdio>
+
+#include "io/atomic_file.hpp"
+
 namespace tissue::accuracy {
 
 Canvas::Canvas(int w, int h, Colour bg) : w_(w), h_(h) {
@@ -95,8 +99,12 @@ int Canvas::text_width(const std::string& s, int scale) {
 }
 
 void Canvas::write_png(const std::string& path) const {
-  if (!stbi_write_png(path.c_str(), w_, h_, 3, rgb_.data(), 3 * w_))
+  const std::string part = io::part_path(path);  // renamed into place when whole
+  if (!stbi_write_png(part.c_str(), w_, h_, 3, rgb_.data(), 3 * w_)) {
+    std::remove(part.c_str());
     throw std::runtime_error(fmt::format("{}: cannot write the PNG", path));
+  }
+  io::rename_into_place(part, path);
 }
 
 namespace {

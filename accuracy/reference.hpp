@@ -18,7 +18,8 @@ namespace tissue::accuracy {
 struct ReferenceOptions {
   std::string backend = "cpu";  ///< backend that relaxes (always in double)
   double dt_safety = 0.9;       ///< dt = dt_safety x dt_crit (IANP is stable up to 1; plain tets need < 0.85)
-  RelaxOptions relax;           ///< residual_tol 1e-9 by default
+  RelaxOptions relax;           ///< residual_tol 1e-9 by default; with relax.stop, an interrupted
+                                ///< relaxation returns its state (relax.interrupted) instead of throwing
 };
 
 /// A relaxed reference state.

@@ -156,13 +156,17 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
     if (steps - last_check >= o.check_every || steps == ramp_steps) {
       check_health(b.reduce(), last_check, steps - 1, double(steps) / double(ramp_steps));
       last_check = steps;
+      if (o.stop && o.stop()) {
+        out.interrupted = true;
+        break;
+      }
     }
   }
 
   long last_adapt = steps;
   double best = INFINITY;  // best residual seen, and the step at which it last halved
   long best_step = steps;
-  while (true) {
+  while (!out.interrupted) {
     b.advance(o.check_every);
     steps += o.check_every;
     const Reductions r = b.reduce();
@@ -189,6 +193,10 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
       break;
     }
     if (steps >= o.max_steps || seconds_since(t0) > o.max_wall) break;
+    if (o.stop && o.stop()) {
+      out.interrupted = true;
+      break;
+    }
     if (o.adapt_damping && out.residual > o.adapt_above && steps - last_adapt >= o.adapt_every) {
       last_adapt = steps;
       const Fields d0 = b.download();

@@ -15,6 +15,8 @@
 // new alpha and the current displacements (velocity restarts at zero).
 #pragma once
 
+#include <functional>
+
 #include <cstdint>
 #include <span>
 #include <stdexcept>
@@ -75,6 +77,8 @@ struct RelaxOptions {
                                 ///< rounding goes in and out of the contact set, each time leaving its
                                 ///< rounding-size force in the residual (at_contact_floor = true)
   double force_floor = 1e-12;   ///< N, denominator floor of the relative residual
+  std::function<bool()> stop;   ///< asked at every convergence check; true ends the relaxation there
+                                ///< (RelaxResult::interrupted: a signal, apps/interrupt.hpp)
 };
 
 /// What a relaxation reached.
@@ -82,6 +86,7 @@ struct RelaxResult {
   bool converged = false;       ///< both tolerances met
   bool stalled = false;         ///< stopped at the precision's rounding floor (see stall_periods)
   bool at_contact_floor = false; ///< converged at the contact's floor (see contact_floor)
+  bool interrupted = false;     ///< RelaxOptions::stop ended it
   double residual = 0;          ///< relative free residual at the end
   double kinetic = 0;           ///< kinetic energy relative to 0.5 |f_held| max|u| at the end
   long steps = 0;               ///< TLED steps taken (ramp included)

@@ -174,7 +174,7 @@ std::vector<TradeoffRow> run_setting(const MeshCase& mc, const RefEntry& ref, co
                                      const std::vector<double>& tols, const TradeoffOptions& o,
                                      std::vector<Vec3<double>>& press) {
   scene::Scene s = mc.scene;
-  s.solver.dt = 0;
+  s.solver.dt.reset();
   s.solver.dt_safety = st.dt_safety;
   s.solver.mass_scaling = st.mass_scaling;
   s.solver.precision = st.precision;
@@ -394,6 +394,11 @@ TradeoffResult run_tradeoff(const scene::Scene& scene, const TradeoffOptions& o)
   // references, finest last
   std::vector<MeshCase> meshes;
   for (std::size_t m = 0; m < o.mesh_targets.size(); ++m) {
+    if (o.stop && o.stop()) {
+      res.interrupted = true;
+      res.wall = seconds_since(t0);
+      return res;
+    }
     if (o.verbose) fmt::print(stderr, "tradeoff: {} mesh and its reference ...\n", o.mesh_names[m]);
     meshes.push_back(make_mesh_case(scene, o.mesh_targets[m], o.mesh_names[m]));
     try {
@@ -429,6 +434,10 @@ TradeoffResult run_tradeoff(const scene::Scene& scene, const TradeoffOptions& o)
     }
   for (const TradeoffSetting& s : settings) {
     if (s.group == "tolerance") continue;
+    if (o.stop && o.stop()) {
+      res.interrupted = true;
+      break;
+    }
     const bool base = s.group == "anchor";  // its run serves the tolerance rows too
     const auto t1 = Clock::now();
     MeshCase& mc = meshes.at(s.mesh);

@@ -23,6 +23,8 @@
 // run's trajectory.
 #pragma once
 
+#include <functional>
+
 #include <string>
 #include <vector>
 
@@ -136,6 +138,8 @@ struct TradeoffOptions {
   double reference_tol = 1e-9;                  ///< the references' relative residual
   double far_radius = 0.01;                     ///< m: "far" nodes for disp_err_fine_far
   bool verbose = true;                          ///< progress lines on stderr
+  std::function<bool()> stop;                   ///< asked before each mesh and each setting: true ends the
+                                                ///< sweep with the rows done (TradeoffResult::interrupted)
 };
 
 struct TradeoffResult {
@@ -144,6 +148,7 @@ struct TradeoffResult {
   std::vector<TradeoffReference> references;    ///< per mesh
   std::vector<TradeoffRow> rows;
   double wall = 0;                              ///< s for the whole sweep
+  bool interrupted = false;                     ///< TradeoffOptions::stop ended the sweep early
 };
 
 /// The settings swept, one dimension at a time:

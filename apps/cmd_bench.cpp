@@ -4,6 +4,8 @@
 #include <memory>
 
 #include "apps/commands.hpp"
+#include "apps/interrupt.hpp"
+#include "apps/options.hpp"
 #include "bench/bench.hpp"
 
 namespace tissue::app {
@@ -14,14 +16,22 @@ void add_bench_command(CLI::App& app, int& rc) {
   auto precision = std::make_shared<std::string>("both");
   cmd->add_option("--backend", o->backend, "cpu | cuda")->default_val("cpu");
   cmd->add_option("--precision", *precision, "float | double | both")->default_val("both");
-  cmd->add_option("--json", o->json_path, "Also write the rows as a JSON array to this file");
+  cmd->add_option("--json", o->json_path, "Also write the rows as a JSON array to this file")->check(output_file());
   cmd->add_option("--sizes", o->sizes, "Whole-mesh TLED meshes: kidney 100k 1m 4m")->delimiter(',');
-  cmd->add_option("--min-seconds", o->min_seconds, "Time each measurement at least this long")->default_val(0.5);
+  cmd->add_option("--min-seconds", o->min_seconds, "Time each measurement at least this long")
+      ->default_val(0.5)
+      ->check(real_number(0, 3600, true));
   cmd->add_flag("--quick", o->quick, "Smoke run on tiny meshes (CI)");
   cmd->callback([o, precision, &rc] {
+    InterruptGuard interrupt;
     if (*precision != "both") o->precisions = {parse_precision(*precision)};
-    bench::run_bench(*o);
-    rc = 0;
+    o->stop = [] { return InterruptGuard::requested(); };
+    set_activity("benchmarking");
+    const std::vector<std::string> rows = bench::run_bench(*o);
+    if (InterruptGuard::requested())
+      fmt::print(stderr, "stopped by {} after {} rows{}\n", InterruptGuard::signal_name(), rows.size(),
+                 o->json_path.empty() ? "" : " (all written to " + o->json_path + ")");
+    rc = InterruptGuard::requested() ? InterruptGuard::exit_code() : 0;
   });
 }
 

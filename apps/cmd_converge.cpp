@@ -4,11 +4,12 @@
 // distance from it; optionally uniform re-meshes as comparison rows.
 #include <fmt/format.h>
 
-#include <fstream>
 #include <memory>
 
 #include "accuracy/convergence.hpp"
 #include "apps/commands.hpp"
+#include "apps/options.hpp"
+#include "io/atomic_file.hpp"
 
 namespace tissue::app {
 namespace {
@@ -81,9 +82,7 @@ int run_converge(const ConvergeArgs& a) {
     for (const auto& r : res.rows) j += (first ? (first = false, "\n") : ",\n") + row_json(r, true);
     for (const auto& r : uniform) j += (first ? (first = false, "\n") : ",\n") + row_json(r, false);
     j += "]}\n";
-    std::ofstream f(a.json);
-    f << j;
-    if (!f) throw std::runtime_error("cannot write " + a.json);
+    io::write_file_atomic(a.json, j);  // whole or not at all
     fmt::print("wrote {}\n", a.json);
   }
   return 0;
@@ -102,7 +101,7 @@ void add_converge_command(CLI::App& app, int& rc) {
   cmd->add_option("--levels", a->levels, "how many of the family's meshes (3..5; docs/contact.md)")
       ->capture_default_str();
   cmd->add_option("--uniform", a->uniform, "also these uniform re-mesh tet counts, as comparison rows");
-  cmd->add_option("--json", a->json, "write the rows as JSON");
+  cmd->add_option("--json", a->json, "write the rows as JSON")->check(output_file());
   cmd->callback([a, &rc] { rc = run_converge(*a); });
 }
 

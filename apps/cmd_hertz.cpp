@@ -2,11 +2,12 @@
 // (accuracy/hertz.hpp): a table on stdout, optional JSON and a PNG plot.
 #include <fmt/format.h>
 
-#include <fstream>
 
 #include "accuracy/hertz.hpp"
 #include "accuracy/plot.hpp"
 #include "apps/commands.hpp"
+#include "apps/options.hpp"
+#include "io/atomic_file.hpp"
 
 namespace tissue::app {
 namespace {
@@ -35,9 +36,7 @@ int run_hertz_command(HertzArgs& a) {
     fmt::print("wrote {}\n", a.plot);
   }
   if (!a.json.empty()) {
-    std::ofstream f(a.json);
-    f << json;
-    if (!f) throw std::runtime_error("cannot write " + a.json);
+    io::write_file_atomic(a.json, json);  // whole or not at all
     fmt::print("wrote {}\n", a.json);
   }
   return 0;
@@ -60,8 +59,9 @@ void add_hertz_command(CLI::App& app, int& rc) {
       ->check(CLI::PositiveNumber);
   cmd->add_option("--block", args->options.block, "block edge L / contact radius at the deepest press")->capture_default_str()->check(CLI::PositiveNumber);
   cmd->add_option("--backend", args->options.backend, "cpu | cuda (relaxes in double)")->capture_default_str();
-  cmd->add_option("--json", args->json, "write the studies as JSON");
-  cmd->add_option("--plot", args->plot, "write a PNG: force against indentation with the closed form, error against h");
+  cmd->add_option("--json", args->json, "write the studies as JSON")->check(output_file());
+  cmd->add_option("--plot", args->plot, "write a PNG: force against indentation with the closed form, error against h")
+      ->check(output_file());
   cmd->add_flag("--quick", args->quick, "two coarse meshes only (a smoke run)");
   cmd->callback([args, &rc] { rc = run_hertz_command(*args); });
 }

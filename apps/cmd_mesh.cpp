@@ -1,30 +1,41 @@
-// tissue mesh: surface file -> TetGen volume mesh -> scene XML with one
-// material, a fixed base and a scripted tool pressing on the top.
+// tissue mesh: surface file(s) -> repair -> remesh -> TetGen -> quality
+// report -> scene XML with one material per element set, a fixed base and a
+// scripted tool pressing on the top. docs/meshing.md explains every step and
+// the measurements behind the defaults.
 //
 // Defaults chosen for a first run of an unknown organ (document in README):
 // - the nodes in the lowest 5% of the height (z) are fixed (the organ rests
 //   on its support);
 // - one scripted probe approaches the topmost surface point under the centre
 //   of the bounding box from 1 cm above, presses min(5 mm, 10% of the
-//   height), holds, and retracts.
+//   height), holds, and retracts;
+// - an inclusion without its own material is ten times stiffer than the
+//   tissue (a tumour), with the tissue's nu and rho.
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
 #include <memory>
 
 #include "apps/commands.hpp"
+#include "apps/options.hpp"
 #include "core/tet.hpp"
 #include "io/kidney.hpp"
+#include "io/mesh_quality.hpp"
+#include "io/organ_mesher.hpp"
 #include "io/scene_xml.hpp"
-#include "io/surface_import.hpp"
-#include "io/tetgen_mesher.hpp"
+#include "scene/validate.hpp"
 
 namespace tissue::app {
 namespace {
 
 struct MeshOptions {
   std::string surface, out, unit = "m";
-  io::MeshingOptions meshing;
+  std::vector<std::string> inclusions;  ///< "file[:E=..,nu=..,rho=..]"
+  bool no_repair = false;
+  io::OrganMeshOptions pipeline;
   double E = 3000, nu = 0.45, rho = 1000;
   double fix_fraction = 0.05;
 };
@@ -48,21 +59,147 @@ Vec3<double> top_point(const io::SurfaceMesh& s, double cx, double cy, double zl
   return a + best * (b - a);
 }
 
-scene::Scene make_scene(const MeshOptions& o) {
-  const double unit = io::parse_unit(o.unit);
-  fmt::print("reading {} (unit: {}, {} m per file unit)\n", o.surface, o.unit, unit);
-  io::SurfaceMesh surf = io::load_surface(o.surface, unit);
-  io::VolumeMesh vol = io::tetrahedralize_surface(surf, o.meshing, o.surface);
+/// "tumour.obj:E=30000,nu=0.45" -> file and material (defaults: ten times
+/// the tissue's E, its nu and rho). Throws std::invalid_argument naming the
+/// spec and the bad key or number.
+std::pair<std::string, scene::Material> parse_inclusion(const std::string& spec, const MeshOptions& o, int k) {
+  scene::Material m{.name = fmt::format("inclusion{}", k), .form = scene::Material::Form::YoungPoisson,
+                    .a = 10 * o.E, .b = o.nu, .rho = o.rho};
+  const size_t colon = spec.rfind(':');
+  if (colon == std::string::npos || spec.find('=', colon) == std::string::npos) return {spec, m};
+  const std::string file = spec.substr(0, colon);
+  std::string rest = spec.substr(colon + 1);
+  size_t start = 0;
+  while (start <= rest.size()) {
+    const size_t end = std::min(rest.find(',', start), rest.size());
+    const std::string item = rest.substr(start, end - start);
+    const size_t eq = item.find('=');
+    if (eq == std::string::npos)
+      throw std::invalid_argument(
+          fmt::format("--inclusion {}: '{}' is not key=value (keys: E, nu, rho)", spec, item));
+    const std::string key = item.substr(0, eq), value = item.substr(eq + 1);
+    double v = 0;
+    try {
+      size_t used = 0;
+      v = std::stod(value, &used);
+      if (used != value.size()) throw std::invalid_argument(value);
+    } catch (const std::exception&) {
+      throw std::invalid_argument(fmt::format("--inclusion {}: {} = '{}' is not a number", spec, key, value));
+    }
+    if (key == "E") m.a = v;
+    else if (key == "nu") m.b = v;
+    else if (key == "rho") m.rho = v;
+    else throw std::invalid_argument(fmt::format("--inclusion {}: unknown key '{}' (keys: E, nu, rho)", spec, key));
+    start = end + 1;
+  }
+  return {file, m};
+}
+
+std::string mm_text(const Vec3<double>& e) { return fmt::format("{:.1f} x {:.1f} x {:.1f} mm", 1e3 * e.x, 1e3 * e.y, 1e3 * e.z); }
+
+scene::Scene make_scene(MeshOptions& o) {
+  const auto start = std::chrono::steady_clock::now();
+  o.pipeline.meshing.progress = [start](const std::string& line) {
+    fmt::print("  [{:6.1f} s] {}\n", std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(),
+               line);
+    std::fflush(stdout);
+  };
+  o.pipeline.repair = !o.no_repair;
+  // materials first: refuse bad numbers before any work
   scene::Scene s;
+  s.source = "tissue mesh";
+  s.materials.push_back({.name = "tissue", .form = scene::Material::Form::YoungPoisson, .a = o.E, .b = o.nu, .rho = o.rho});
+  std::vector<std::string> inclusion_files;
+  for (size_t k = 0; k < o.inclusions.size(); ++k) {
+    auto [file, m] = parse_inclusion(o.inclusions[k], o, int(k + 1));
+    inclusion_files.push_back(file);
+    s.materials.push_back(m);
+  }
+  for (const scene::Material& m : s.materials) scene::validate_material(s, m);
+
+  const double unit = io::parse_unit(o.unit);
+  auto read = [&](const std::string& file) {
+    fmt::print("reading {} (unit: {}, {} m per file unit)\n", file, o.unit, unit);
+    index_t merged = 0;
+    io::NamedSurface n{io::load_surface(file, unit, &merged), file};
+    const Vec3<double> e = io::surface_extents(n.surface);
+    fmt::print("  {} vertices ({} duplicates welded), {} triangles; extent {}\n", n.surface.n_vertices(), merged,
+               n.surface.n_triangles(), mm_text(e));
+    std::fflush(stdout);
+    if (const std::string w = io::unit_warning(std::max({e.x, e.y, e.z}), o.unit); !w.empty())
+      fmt::print(stderr, "tissue mesh: {}: {}\n", file, w);
+    return n;
+  };
+  io::NamedSurface organ = read(o.surface);
+  std::vector<io::NamedSurface> inclusions;
+  for (const std::string& f : inclusion_files) inclusions.push_back(read(f));
+  const io::OrganMesh result = io::mesh_organ(organ, inclusions, o.pipeline);
+  const io::VolumeMesh& vol = result.mesh;
+
   s.source = o.out;
   s.nodes = vol.nodes;
   s.tets = vol.tets;
-  s.materials.push_back({.name = "tissue", .form = scene::Material::Form::YoungPoisson, .a = o.E, .b = o.nu, .rho = o.rho});
-  scene::ElementSet all;
-  all.name = "all";
-  all.material = "tissue";
-  all.all = true;
-  s.sets.push_back(all);
+  std::vector<index_t> tet_material(vol.n_tets(), 0);
+  if (inclusions.empty()) {
+    s.sets.push_back({.name = "all", .material = "tissue", .all = true, .elements = {}, .line = 0});
+  } else {
+    std::vector<scene::ElementSet> sets(inclusions.size() + 1);
+    for (size_t k = 0; k < sets.size(); ++k) {
+      sets[k].name = k == 0 ? "tissue" : s.materials[k].name;
+      sets[k].material = s.materials[k].name;
+    }
+    for (index_t e = 0; e < vol.n_tets(); ++e) {
+      const int r = vol.tet_region.at(e);
+      if (r < 0 || size_t(r) >= sets.size())
+        throw io::MeshError(fmt::format("{}: TetGen gave tet {} the unknown region {}", o.surface, e, r));
+      sets[r].elements.push_back(e);
+      tet_material[e] = r;
+    }
+    for (size_t k = 0; k < sets.size(); ++k) {
+      if (sets[k].elements.empty())
+        throw io::MeshError(fmt::format("{}: no tet landed in {} (is it thinner than the tets?)",
+                                        k == 0 ? o.surface : inclusion_files[k - 1], sets[k].name));
+      double v = 0;
+      for (index_t e : sets[k].elements) {
+        Vec3<double> X[4];
+        for (int a = 0; a < 4; ++a) {
+          const index_t c = vol.tets[4 * e + a];
+          X[a] = {vol.nodes[3 * c], vol.nodes[3 * c + 1], vol.nodes[3 * c + 2]};
+        }
+        double dN[12];
+        v += std::fabs(tet_shape_gradients(X, dN));
+      }
+      fmt::print("  element set '{}': {} tets, {:.4g} cm^3, material E = {:.4g} Pa, nu = {:.4g}, rho = {:.4g}\n",
+                 sets[k].name, sets[k].elements.size(), 1e6 * v, s.materials[k].a, s.materials[k].b,
+                 s.materials[k].rho);
+    }
+    s.sets = std::move(sets);
+  }
+  std::vector<MaterialParams> params;
+  for (const scene::Material& m : s.materials) params.push_back(m.params());
+  const scene::Solver solver;
+  const io::QualityReport q =
+      io::mesh_quality(vol, params, tet_material, solver.tick, solver.dt_safety, solver.mass_scaling);
+  if (result.mesher == io::Mesher::Mesh3)
+    fmt::print("meshed: {} nodes, {} tets ({} Mesh_3 runs, sliver perturbation and exudation)\n", vol.n_nodes(),
+               vol.n_tets(), vol.runs);
+  else
+    fmt::print("meshed: {} nodes, {} tets ({} TetGen runs, switches {})\n", vol.n_nodes(), vol.n_tets(), vol.runs,
+               io::tetgen_switches([&] {
+                 io::MeshingOptions m = o.pipeline.meshing;
+                 m.max_volume = vol.max_volume;
+                 m.regions.resize(inclusions.size());
+                 return m;
+               }(), o.surface));
+  if (o.pipeline.meshing.target_tets > 0) {
+    const double off = double(vol.n_tets()) / o.pipeline.meshing.target_tets - 1;
+    std::fflush(stdout);
+    if (std::fabs(off) > io::kTargetPromise)
+      fmt::print(stderr, "tissue mesh: warning: {} tets is {:+.0f} % off the target {}\n", vol.n_tets(), 100 * off,
+                 o.pipeline.meshing.target_tets);
+  }
+  fmt::print("quality:\n{}", q.summary());
+
   double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
   for (size_t i = 0; i < s.nodes.size(); ++i) {
     lo[i % 3] = std::min(lo[i % 3], s.nodes[i]);
@@ -74,27 +211,46 @@ scene::Scene make_scene(const MeshOptions& o) {
   base.normal[2] = -1;  // fixes (x - point) . normal >= 0: the nodes below the plane
   s.constraints.push_back(base);
   const double height = hi[2] - lo[2];
-  const Vec3<double> target = top_point(surf, 0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), lo[2], hi[2]);
+  const Vec3<double> target = top_point(organ.surface, 0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), lo[2], hi[2]);
   scene::Tool tool;
   tool.radius = 2e-3;
   tool.path = press_path(target, {0, 0, -1}, std::min(5e-3, 0.1 * height), 1e-2);
   s.tools.push_back(tool);
-  fmt::print("meshed: {} nodes, {} tets; fixed base below z = {:.4g} m; tool presses at ({:.4g}, {:.4g}, {:.4g}) m\n",
-             s.nodes.size() / 3, s.tets.size() / 4, base.point[2], target.x, target.y, target.z);
+  fmt::print("body: extent {}; fixed base below z = {:.4g} m; tool presses at ({:.4g}, {:.4g}, {:.4g}) m\n",
+             mm_text({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]}), base.point[2], target.x, target.y, target.z);
   return s;
 }
 
 }  // namespace
 
 void add_mesh_command(CLI::App& app, int& rc) {
-  auto* cmd = app.add_subcommand("mesh", "Tetrahedralise a closed surface (OBJ, STL, PLY, OFF, 3DS, ...) into a scene");
+  auto* cmd = app.add_subcommand("mesh", "Repair, remesh and tetrahedralise a surface (OBJ, STL, PLY, OFF, 3DS, ...) into a scene");
   auto o = std::make_shared<MeshOptions>();
+  io::MeshingOptions& m = o->pipeline.meshing;
+  m.min_dihedral = io::kDefaultMinDihedral;
+  m.optimise = io::kDefaultOptimise;
   cmd->add_option("surface", o->surface, "Surface file, or @kidney to write the built-in kidney scene")->required();
-  cmd->add_option("-o,--output", o->out, "Scene XML to write")->required();
-  cmd->add_option("--unit", o->unit, "Length unit of the surface file: m, cm or mm")->default_val("m");
-  cmd->add_option("--quality", o->meshing.quality, "TetGen radius-edge ratio bound (q)")->default_val(1.414);
-  cmd->add_option("--max-volume", o->meshing.max_volume, "Largest tet volume (m^3; 0 = no bound)")->default_val(0);
-  cmd->add_option("--target-tets", o->meshing.target_tets, "Aim at about this many tets (0 = off)")->default_val(0);
+  cmd->add_option("-o,--output", o->out, "Scene XML to write")->required()->check(output_file());  // before the meshing
+  cmd->add_option("--unit", o->unit, "Length unit of the surface file(s): m, cm or mm")->default_val("m");
+  cmd->add_option("--inclusion", o->inclusions,
+                  "Closed surface inside the organ meshed as its own element set: FILE[:E=..,nu=..,rho=..] "
+                  "(default: 10 x the tissue's E); repeatable");
+  cmd->add_option("--mesher", o->pipeline.mesher,
+                  "Volume mesher: cgal (Mesh_3 with sliver perturbation and exudation), tetgen (quality bounds; "
+                  "inclusions), auto (cgal for a body alone with a size, else tetgen)")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, io::Mesher>{
+          {"auto", io::Mesher::Auto}, {"tetgen", io::Mesher::TetGen}, {"cgal", io::Mesher::Mesh3}}))
+      ->default_str("auto");
+  cmd->add_flag("--no-repair", o->no_repair, "Refuse damaged surfaces instead of repairing them");
+  cmd->add_option("--remesh-edge", o->pipeline.remesh_edge,
+                  "Remesh the surfaces to this edge length (m); 0 = auto (when finer than the target needs), -1 = never")
+      ->default_val(0);
+  cmd->add_option("--quality", m.quality, "TetGen radius-edge ratio bound (q)")->default_val(1.414);
+  cmd->add_option("--min-dihedral", m.min_dihedral, "TetGen minimum dihedral angle bound (degrees, q/..)")
+      ->default_val(io::kDefaultMinDihedral);
+  cmd->add_option("--optimise", m.optimise, "TetGen optimisation level (O, 0..10)")->default_val(io::kDefaultOptimise);
+  cmd->add_option("--max-volume", m.max_volume, "Largest tet volume (m^3; 0 = no bound)")->default_val(0);
+  cmd->add_option("--target-tets", m.target_tets, "Aim at about this many tets, within 15 % (0 = off)")->default_val(0);
   cmd->add_option("--E", o->E, "Young's modulus (Pa)")->default_val(3000);
   cmd->add_option("--nu", o->nu, "Poisson's ratio")->default_val(0.45);
   cmd->add_option("--rho", o->rho, "Density (kg/m^3)")->default_val(1000);

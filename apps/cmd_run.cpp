@@ -8,6 +8,7 @@
 #include <memory>
 
 #include "apps/commands.hpp"
+#include "apps/options.hpp"
 #include "apps/run_session.hpp"
 
 namespace tissue::app {
@@ -19,10 +20,18 @@ void add_run_command(CLI::App& app, int& rc) {
   cmd->add_option("--backend", opt->backend, "cpu | cuda (default: the scene's)");
   cmd->add_option("--precision", opt->precision, "float | double (default: the scene's)");
   cmd->add_option("--depth", opt->depth, "Region depth N (rings from the contact triangle), 'all' or 'auto'");
-  auto* ticks = cmd->add_option("--ticks", opt->ticks, "Haptic ticks to run (default: the tool path's length)");
-  cmd->add_option("--time", opt->time, "Simulated seconds to run")->excludes(ticks);
-  cmd->add_option("--out", opt->out_dir, "Write ticks.csv and VTU frames (series.pvd) here");
-  cmd->add_option("--frames", opt->frames, "VTU frames to save over the run (with --out)")->default_val(10);
+  auto* ticks = cmd->add_option("--ticks", opt->ticks, "Haptic ticks to run (default: the tool path's length)")
+                    ->check(whole_number(1, 1'000'000'000'000));
+  cmd->add_option("--time", opt->time, "Simulated seconds to run")
+      ->check(real_number(0, 1e9, true))
+      ->excludes(ticks);
+  cmd->add_option("--out", opt->out_dir, "Write ticks.csv and VTU frames (series.pvd) into this folder")
+      ->check(output_folder());
+  cmd->add_option("--frames", opt->frames, "VTU frames to save over the run (with --out; 0 = ticks.csv only)")
+      ->default_val(10)
+      ->check(whole_number(0, 1'000'000));
+  cmd->add_flag("--overwrite", opt->overwrite, "Replace another run's outputs in the --out folder");
+  cmd->add_flag("--force", opt->force, "Run even when the work estimate is beyond any usual run (1e12 element updates)");
   cmd->add_flag("--quiet", opt->quiet, "No progress lines");
   cmd->callback([opt, &rc] { rc = run_scene(*opt); });
 }

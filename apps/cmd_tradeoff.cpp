@@ -2,12 +2,15 @@
 // table on stdout, optional JSON and a PNG plot of error against cost.
 #include <fmt/format.h>
 
-#include <fstream>
+#include <algorithm>
 #include <memory>
 
 #include "accuracy/plot.hpp"
 #include "accuracy/tradeoff.hpp"
+#include "io/atomic_file.hpp"
 #include "apps/commands.hpp"
+#include "apps/interrupt.hpp"
+#include "apps/options.hpp"
 
 namespace tissue::app {
 namespace {
@@ -21,6 +24,7 @@ struct TradeoffArgs {
 };
 
 int run_tradeoff_command(TradeoffArgs& a) {
+  InterruptGuard interrupt;
   const scene::Scene s = load_scene_arg(a.scene);
   accuracy::TradeoffOptions& o = a.options;
   o.backend = a.backend;
@@ -43,20 +47,22 @@ int run_tradeoff_command(TradeoffArgs& a) {
     o.residual_tols = {1e-2};
     o.max_hold = 0.3;
   }
+  o.stop = [] { return InterruptGuard::requested(); };
+  set_activity(fmt::format("sweeping the settings of {}", s.source));
   const accuracy::TradeoffResult res = accuracy::run_tradeoff(s, o);
+  if (res.interrupted)
+    fmt::print("stopped by {}: the rows below are the settings done before it\n", InterruptGuard::signal_name());
   fmt::print("{}", accuracy::tradeoff_table(res));
   if (!a.json.empty()) {
-    std::ofstream f(a.json);
-    if (!f) throw std::runtime_error("cannot write " + a.json);
-    f << accuracy::tradeoff_json(res);
-    if (!f) throw std::runtime_error("write failed: " + a.json);
+    io::write_file_atomic(a.json, accuracy::tradeoff_json(res));
     fmt::print("wrote {}\n", a.json);
   }
-  if (!a.plot.empty()) {
+  const bool any_row = std::any_of(res.rows.begin(), res.rows.end(), [](const auto& r) { return r.failed.empty(); });
+  if (!a.plot.empty() && (any_row || !res.interrupted)) {
     accuracy::write_tradeoff_plot(res, a.plot);
     fmt::print("wrote {}\n", a.plot);
   }
-  return 0;
+  return res.interrupted ? InterruptGuard::exit_code() : 0;
 }
 
 }  // namespace
@@ -68,13 +74,16 @@ void add_tradeoff_command(CLI::App& app, int& rc) {
                                  "measure cost and error against the reference solution");
   auto a = std::make_shared<TradeoffArgs>();
   cmd->add_option("scene", a->scene, "Scene XML file, or @kidney for the built-in kidney")->required();
-  cmd->add_option("--json", a->json, "Write the results as JSON");
-  cmd->add_option("--plot", a->plot, "Write a PNG plot of error against cost with the Pareto front");
+  cmd->add_option("--json", a->json, "Write the results as JSON")->check(output_file());
+  cmd->add_option("--plot", a->plot, "Write a PNG plot of error against cost with the Pareto front")
+      ->check(output_file());
   cmd->add_option("--backend", a->backend, "cpu | cuda (default: the scene's)");
   cmd->add_option("--depths", a->depths, "Fixed depths to sweep (numbers or 'all')")->delimiter(',');
   cmd->add_option("--meshes", a->meshes, "Target tet counts, ascending (0 = the scene's own mesh); default 3000,0,20000,25000")
-      ->delimiter(',');
-  cmd->add_option("--max-hold", a->options.max_hold, "Simulated seconds of hold before giving up on equilibrium");
+      ->delimiter(',')
+      ->check(whole_number(0, 100'000'000));
+  cmd->add_option("--max-hold", a->options.max_hold, "Simulated seconds of hold before giving up on equilibrium")
+      ->check(real_number(0, 1e6, true));
   cmd->add_flag("--quick", a->quick, "Smoke run: the scene's mesh only and a handful of settings");
   cmd->callback([a, &rc] { rc = run_tradeoff_command(*a); });
 }

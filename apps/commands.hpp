@@ -21,6 +21,11 @@ void add_locking_command(CLI::App& app, int& rc);    ///< apps/cmd_locking.cpp
 void add_hertz_command(CLI::App& app, int& rc);      ///< apps/cmd_hertz.cpp
 void add_converge_command(CLI::App& app, int& rc);   ///< apps/cmd_converge.cpp
 
+/// What the command is doing now, in words ("reading the scene x.xml"):
+/// main() names it when memory runs out (std::bad_alloc).
+void set_activity(std::string what);
+const std::string& activity();
+
 /// Loads a scene file, or the built-in kidney for the name "@kidney".
 scene::Scene load_scene_arg(const std::string& arg);
 

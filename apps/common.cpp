@@ -9,7 +9,20 @@
 
 namespace tissue::app {
 
+namespace {
+std::string g_activity = "starting";
+}  // namespace
+
+void set_activity(std::string what) {
+  g_activity = std::move(what);
+}
+
+const std::string& activity() {
+  return g_activity;
+}
+
 scene::Scene load_scene_arg(const std::string& arg) {
+  set_activity(fmt::format("reading the scene {}", arg));
   if (arg == "@kidney") return io::default_kidney_scene();
   return io::read_scene(arg);
 }

@@ -4,6 +4,7 @@
 
 #include <cstdio>
 #include <exception>
+#include <new>
 
 #include "apps/commands.hpp"
 
@@ -25,6 +26,9 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "tissue: error: out of memory while %s\n", tissue::app::activity().c_str());
+    return 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "tissue: error: %s\n", e.what());
     return 1;

@@ -5,13 +5,15 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <filesystem>
 #include <optional>
 
 #include "apps/commands.hpp"
+#include "apps/interrupt.hpp"
 #include "backends/registry.hpp"
 #include "io/csv_log.hpp"
+#include "io/output_dir.hpp"
 #include "io/vtu_writer.hpp"
+#include "scene/checks.hpp"
 #include "scene/validate.hpp"
 
 namespace tissue::app {
@@ -61,7 +63,7 @@ void print_summary(const RunSummary& r, const Backend& b, const TissueModel<doub
       "  time step          dt = {:.4g} s (dt_crit = {:.4g} s, element {}), {} TLED steps per {:.3g} ms tick\n"
       "  mass scaling       {}\n"
       "  TLED steps         {}\n"
-      "  haptic ticks       {}\n"
+      "  haptic ticks       {}{}\n"
       "  simulated time     {:.4f} s\n"
       "  wall time          {:.3f} s ({:.2f}x real time)\n"
       "  steps/s            {:.0f}\n"
@@ -70,10 +72,24 @@ void print_summary(const RunSummary& r, const Backend& b, const TissueModel<doub
       "  region             {} nodes, {} elements\n"
       "  equilibrium        {}\n",
       b.name(), to_string(b.precision()), b.device_name(), m.n_nodes, m.n_elems, m.n_tris, m.dt, m.dt_crit,
-      m.dt_crit_elem, steps_per_tick, 1e3 * m.dt * steps_per_tick, mass_scaling_line(m), r.steps, r.ticks, r.sim_time, r.wall_time,
-      r.sim_time / std::max(r.wall_time, 1e-12), r.steps / std::max(r.wall_time, 1e-12), 1e3 * r.max_disp,
-      tool_lines(r), r.region_nodes, r.region_elems,
-      r.equilibrium ? "reached" : "not reached");
+      m.dt_crit_elem, steps_per_tick, 1e3 * m.dt * steps_per_tick, mass_scaling_line(m), r.steps, r.ticks,
+      r.stopped_by.empty() ? std::string()
+                           : fmt::format(" of {} (stopped by {} at a tick boundary)", r.planned_ticks, r.stopped_by),
+      r.sim_time, r.wall_time, r.sim_time / std::max(r.wall_time, 1e-12), r.steps / std::max(r.wall_time, 1e-12),
+      1e3 * r.max_disp, tool_lines(r), r.region_nodes, r.region_elems, r.equilibrium ? "reached" : "not reached");
+}
+
+/// What the scene checks say about a run that stopped on NaN or an inverted
+/// element, as text to append to its message.
+std::string instability_causes(const scene::Scene& s, const TissueModel<double>& m) {
+  std::vector<std::string> causes = scene::incompressibility_findings(s);
+  if (scene::supported_nodes(m) == 0) causes.push_back("no node is fixed (nothing holds the body)");
+  if (causes.empty())
+    return "\n  the scene checks found no material or support problem: a tool has most likely pressed deeper "
+           "than the elements under it can follow (reduce the indentation or refine the mesh there)";
+  std::string out = "\n  likely cause:";
+  for (const std::string& c : causes) out += "\n    " + c;
+  return out;
 }
 
 }  // namespace
@@ -84,58 +100,100 @@ void apply_overrides(scene::Scene& s, const RunOptions& o) {
   if (!o.depth.empty()) s.solver.depth = parse_depth(o.depth);
 }
 
+long tick_count(const RunOptions& o, double path_duration, double tick) {
+  if (o.ticks > 0) return o.ticks;
+  const double t = o.time > 0 ? o.time : path_duration;
+  const double n = std::round(t / tick);
+  if (!(n < 9e18)) throw std::runtime_error(fmt::format("{:.4g} s of {:.4g} s ticks is beyond counting", t, tick));
+  return std::max(1L, static_cast<long>(n));
+}
+
+void check_work(const scene::Scene& s, const TissueModel<double>& model, long ticks, bool force) {
+  const scene::WorkEstimate w = scene::estimate_work(model, s.solver.tick, double(ticks));
+  if (force || !(w.element_steps > scene::kMaxElementSteps)) return;
+  throw std::runtime_error(fmt::format(
+      "{}: this run would take {} ticks x {:.0f} TLED steps x {} elements = {:.3g} element updates, beyond the "
+      "{:.0e} a run may take without --force (hours even on a GPU; a laptop CPU does ~1e8 per second). The step: "
+      "{}. Pass fewer --ticks or --time, fix the scene, or --force to run it anyway",
+      s.source, ticks, w.steps_per_tick, model.n_elems, w.element_steps, scene::kMaxElementSteps,
+      scene::step_cause(s, model)));
+}
+
 int run_scene(const RunOptions& o) {
+  InterruptGuard interrupt;
   scene::Scene s = load_scene_arg(o.scene);
   apply_overrides(s, o);
+  set_activity(fmt::format("building the model of {}", s.source));
+  const TissueModel<double> model = scene::load_model(s);  // validates the whole scene first
   std::vector<ScriptedDevice> devices = scripted_devices(s);
   std::vector<Device*> device_ptrs;
   for (ScriptedDevice& d : devices) device_ptrs.push_back(&d);
-  const TissueModel<double> model = scene::load_model(s);
   const SchedulerSettings settings = scene::scheduler_settings(s);
+  double path_duration = 0;  // the longest tool path
+  for (const ScriptedDevice& d : devices) path_duration = std::max(path_duration, d.duration());
+  const long n_ticks = tick_count(o, path_duration, settings.tick);
+  for (const std::string& w : scene::scene_warnings(s, model)) fmt::print(stderr, "warning: {}\n", w);
+  check_work(s, model, n_ticks, o.force);
+
+  std::optional<io::OutputFolder> folder;
+  if (!o.out_dir.empty()) {
+    folder.emplace(o.out_dir, std::vector<std::string>{"ticks.csv", "series.pvd", "frame_*.vtu"}, o.overwrite);
+    if (folder->removed() > 0)
+      fmt::print("--overwrite: removed {} files of the previous run from {}\n", folder->removed(), o.out_dir);
+  }
+  set_activity(fmt::format("uploading {} to the {} backend", s.source, s.solver.backend));
   std::unique_ptr<Backend> backend = create_backend(s.solver.backend, s.solver.precision);
   backend->upload(model);
   Scheduler sched(*backend, model, settings);
 
-  long n_ticks = o.ticks;
-  if (n_ticks < 0) {
-    double t = o.time;
-    if (!(t > 0))
-      for (const ScriptedDevice& d : devices) t = std::max(t, d.duration());
-    n_ticks = std::max(1L, std::lround(t / settings.tick));
-  }
   if (model.reoriented > 0) fmt::print("note: {} inverted input tets were reoriented\n", model.reoriented);
   fmt::print("running {} ticks of {} on {} ({}), region depth {}\n", n_ticks, s.source, backend->name(),
              to_string(backend->precision()), settings.depth == kDepthAll ? "all" : settings.depth == kDepthAuto ? "auto" : std::to_string(settings.depth));
 
   std::optional<io::TickLog> log;
   std::optional<io::VtuSeries> frames;
-  long frame_every = 0;
-  if (!o.out_dir.empty()) {
-    std::filesystem::create_directories(o.out_dir);
-    log.emplace(o.out_dir + "/ticks.csv", sched.n_tools());
-    frames.emplace(o.out_dir);
-    frame_every = std::max(1L, n_ticks / std::max(1, o.frames));
+  long frame_every = 0, last_frame = 0;
+  if (folder) {
+    log.emplace(folder->file("ticks.csv"), sched.n_tools());
+    if (o.frames > 0) {
+      frames.emplace(folder->path());
+      frame_every = std::max(1L, n_ticks / o.frames);
+    }
   }
 
+  set_activity(fmt::format("running {}", s.source));
   RunSummary sum;
   for (const ToolSetting& t : settings.tools) sum.tools.push_back({t.shape.name});
+  sum.planned_ticks = n_ticks;
   TickReport rep;
   const auto t0 = Clock::now();
   auto last_progress = t0;
-  for (long k = 0; k < n_ticks; ++k) {
-    rep = sched.tick(device_ptrs);
-    for (std::size_t t = 0; t < sum.tools.size(); ++t)
-      sum.tools[t].peak_force = std::max(sum.tools[t].peak_force, norm(rep.tools[t].force));
-    for (const std::string& note : sched.take_notes()) fmt::print(stderr, "note: {}\n", note);
-    if (log) log->write(rep);
-    if (frames && ((k + 1) % frame_every == 0 || k + 1 == n_ticks)) frames->write(model, backend->download(), rep.time);
-    if (!o.quiet && seconds_since(last_progress) > 1.0) {
-      last_progress = Clock::now();
-      const double wall = seconds_since(t0);
-      fmt::print(stderr, "  tick {}/{}  t = {:.3f} s  {:.0f} steps/s  |f| = {:.4g} N  region {} nodes\n", k + 1,
-                 n_ticks, rep.time, sched.total_steps() / wall, norm(rep.force), rep.region_nodes);
+  try {
+    for (long k = 0; k < n_ticks && !InterruptGuard::requested(); ++k) {
+      rep = sched.tick(device_ptrs);
+      for (std::size_t t = 0; t < sum.tools.size(); ++t)
+        sum.tools[t].peak_force = std::max(sum.tools[t].peak_force, norm(rep.tools[t].force));
+      for (const std::string& note : sched.take_notes()) fmt::print(stderr, "note: {}\n", note);
+      if (log) log->write(rep);
+      if (frames && ((k + 1) % frame_every == 0 || k + 1 == n_ticks)) {
+        frames->write(model, backend->download(), rep.time);
+        last_frame = k + 1;
+      }
+      if (!o.quiet && seconds_since(last_progress) > 1.0) {
+        last_progress = Clock::now();
+        const double wall = seconds_since(t0);
+        fmt::print(stderr, "  tick {}/{}  t = {:.3f} s  {:.0f} steps/s  |f| = {:.4g} N  region {} nodes\n", k + 1,
+                   n_ticks, rep.time, sched.total_steps() / wall, norm(rep.force), rep.region_nodes);
+      }
     }
+  } catch (const SimulationError& e) {
+    throw SimulationError(e.what() + instability_causes(s, model));  // the log keeps the ticks that ran
   }
+  if (InterruptGuard::requested()) {
+    sum.stopped_by = InterruptGuard::signal_name();
+    if (frames && sched.ticks() > last_frame) frames->write(model, backend->download(), rep.time);  // the last state
+  }
+  if (log) log->close();
   sum.wall_time = seconds_since(t0);
   sum.ticks = sched.ticks();
   sum.steps = sched.total_steps();
@@ -149,8 +207,10 @@ int run_scene(const RunOptions& o) {
   sum.region_elems = rep.region_elems;
   sum.equilibrium = rep.equilibrium;
   print_summary(sum, *backend, model, sched.steps_per_tick());
-  if (!o.out_dir.empty()) fmt::print("wrote {}/ticks.csv and {}/series.pvd\n", o.out_dir, o.out_dir);
-  return 0;
+  if (folder)
+    fmt::print("wrote {} ({} rows){}\n", log->path(), log->rows(),
+               frames ? fmt::format(" and {} ({} frames)", frames->pvd_path(), frames->frames()) : "");
+  return sum.stopped_by.empty() ? 0 : InterruptGuard::exit_code();
 }
 
 }  // namespace tissue::app

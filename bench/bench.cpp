@@ -13,6 +13,7 @@
 #include <thread>
 
 #include "backends/registry.hpp"
+#include "io/atomic_file.hpp"
 #include "core/box_mesh.hpp"
 #include "core/scheduler.hpp"
 #include "io/kidney.hpp"
@@ -182,13 +183,10 @@ void bench_contact(Context& c, long want_tris, Precision p) {
   auto pose = [&](int k) { return ToolPose{{0.05 + 1e-5 * k, 0.05, top + tool.radius - press}, {0, 0, 1}}; };
   ToolMotion mv{pose(0), pose(0)};
   b->move_tools(std::span<const ToolMotion>(&mv, 1));
-  // the region's seeds: the surface nodes within two radii of the tip (after upload the whole mesh is
-  // the region, so the backend's contact candidates -- nodes outside it -- are none)
-  std::vector<index_t> seeds;
-  for (index_t a : m.surf_nodes) {
-    const Vec3<double> x{m.X[a], m.X[m.n_nodes + a], m.X[2 * size_t(m.n_nodes) + a]};
-    if (norm(x - pose(0).tip) < 2 * tool.radius) seeds.push_back(a);
-  }
+  // an empty region first, as the Scheduler starts: after upload the whole
+  // mesh is the region, and candidates are only nodes outside it
+  b->build_region({}, 1);
+  const std::vector<index_t> seeds = b->contact_candidates();
   if (seeds.empty()) throw std::runtime_error("bench: the contact tool does not reach the slab");
   const RegionSizes reg = b->build_region(seeds, 1);
   std::vector<double> lat;
@@ -290,17 +288,21 @@ std::vector<std::string> run_bench(const BenchOptions& o) {
     c.device = probe->device_name();
   }
   c.bandwidth = o.backend == "cpu" ? host_copy_bandwidth() : measure_device_bandwidth(o.backend);
+  const auto stopped = [&] { return o.stop && o.stop(); };
   for (Precision p : o.precisions) {
-    for (const std::string& mesh : o.sizes) bench_tled(c, mesh, p);
-    for (long tris : {10'000L, 100'000L}) bench_contact(c, tris, p);
-    for (int depth : {5, kDepthAll}) bench_tick(c, p, depth);
+    for (const std::string& mesh : o.sizes)
+      if (!stopped()) bench_tled(c, mesh, p);
+    for (long tris : {10'000L, 100'000L})
+      if (!stopped()) bench_contact(c, tris, p);
+    for (int depth : {5, kDepthAll})
+      if (!stopped()) bench_tick(c, p, depth);
   }
   if (!o.json_path.empty()) {
-    std::ofstream f(o.json_path);
-    if (!f) throw std::runtime_error("cannot write " + o.json_path);
-    f << "[\n";
-    for (size_t k = 0; k < c.rows.size(); ++k) f << "  " << c.rows[k] << (k + 1 < c.rows.size() ? ",\n" : "\n");
-    f << "]\n";
+    io::AtomicTextFile f(o.json_path);
+    f.out() << "[\n";
+    for (size_t k = 0; k < c.rows.size(); ++k) f.out() << "  " << c.rows[k] << (k + 1 < c.rows.size() ? ",\n" : "\n");
+    f.out() << "]\n";
+    f.commit();
   }
   return c.rows;
 }

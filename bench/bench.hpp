@@ -7,6 +7,7 @@
 // bandwidth and the fraction of it a TLED step achieves (bytes_per_step below).
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -21,6 +22,7 @@ struct BenchOptions {
   double min_seconds = 0.5;  ///< time each measurement at least this long
   std::string json_path;     ///< empty: rows only on stdout
   bool quick = false;        ///< CI smoke run: tiny meshes, short timings
+  std::function<bool()> stop;  ///< asked before each measurement: true ends the run with the rows done
 };
 
 /// Fewest bytes one whole-mesh TLED step must move through memory (each

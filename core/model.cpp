@@ -28,6 +28,86 @@ void check_materials(const ModelInput& in) {
   }
 }
 
+/// Why a tet with corners X and signed volume V cannot be used, or "" when
+/// it can. The test is relative to the tet's own size, |V| <= 1e-12 x (its
+/// longest edge)^3 (a flat tet: four corners within 1e-12 of an edge of one
+/// plane), so that it means the same at any scale; coordinates so large or
+/// so large or so small that the volume or the squared face areas (edge^4,
+/// used for the altitudes) leave the range of a double are named as such
+/// rather than as a flat tet.
+std::string degenerate_tet(const Vec3<double> X[4], double V) {
+  double edge = 0;
+  for (int a = 0; a < 4; ++a)
+    for (int b = a + 1; b < 4; ++b) edge = std::max(edge, norm(X[b] - X[a]));
+  const double scale = edge * edge * edge, scale4 = scale * edge;  // squared face areas go as edge^4
+  if (!std::isfinite(V) || !std::isfinite(scale4))
+    return fmt::format("its volume overflows a double (longest edge {:.3g} m); coordinates are read in metres: "
+                       "rescale the mesh",
+                       edge);
+  if (edge == 0) return "all four corners are at the same point (zero volume); tets must have V > 0";
+  if (scale4 < 1e-290)
+    return fmt::format("its volume underflows a double (longest edge {:.3g} m); coordinates are read in metres: "
+                       "rescale the mesh",
+                       edge);
+  if (std::fabs(V) <= 1e-12 * scale)
+    return fmt::format("zero volume: V = {:.3g} m^3 is {:.2g} x its longest edge ({:.3g} m) cubed, a flat tet; tets "
+                       "must have V > 0",
+                       V, std::fabs(V) / scale, edge);
+  return "";
+}
+
+/// Throws naming both elements when two tets have the same four nodes (in
+/// any order): a duplicated tet doubles the mass and stiffness there.
+void check_duplicates(const ModelInput& in, index_t ne) {
+  std::vector<std::pair<std::array<index_t, 4>, index_t>> keys(ne);
+  for (index_t e = 0; e < ne; ++e) {
+    std::array<index_t, 4> k;
+    for (int a = 0; a < 4; ++a) k[a] = in.tets[4 * size_t(e) + a];
+    std::sort(k.begin(), k.end());
+    keys[e] = {k, e};
+  }
+  std::sort(keys.begin(), keys.end());
+  for (size_t i = 1; i < keys.size(); ++i)
+    if (keys[i].first == keys[i - 1].first) {
+      const auto& k = keys[i].first;
+      throw ModelError(fmt::format("{}: elements {} and {} have the same four nodes ({} {} {} {}); a duplicated "
+                                   "tetrahedron doubles the mass and stiffness there: remove one",
+                                   in.source, keys[i - 1].second, keys[i].second, k[0], k[1], k[2], k[3]));
+    }
+}
+
+/// Name of material k for messages: "material 'brain'" or "material 2".
+std::string material_name(const ModelInput& in, size_t k) {
+  return k < in.material_names.size() ? fmt::format("material '{}'", in.material_names[k])
+                                      : fmt::format("material {}", k);
+}
+
+/// Refuses a model whose stable step would need more than kMaxStepsPerTick
+/// steps per haptic tick, naming the element, its material's values and the
+/// wave speed that set it (the cause is a modulus or density far outside
+/// tissue's range, or a unit mistake, not a step the user chose).
+void check_step_count(const ModelInput& in, const TissueModel<double>& m, double safety) {
+  if (!(in.tick > 0)) return;
+  const double steps = in.tick / (safety * m.dt_crit);
+  if (!(steps > kMaxStepsPerTick)) return;
+  if (!(in.tick / m.dt_crit > kMaxStepsPerTick))  // the material is fine: the safety factor asks for it
+    throw ModelError(fmt::format("{}: dt safety factor {:.3g} makes dt = {:.3g} x dt_crit ({:.4g} s) = {:.3g} s: one "
+                                 "{:.4g} s haptic tick would need {:.3g} TLED steps (the most is {:.0e}); use a "
+                                 "safety factor of about 0.9",
+                                 in.source, safety, safety, m.dt_crit, safety * m.dt_crit, in.tick, steps,
+                                 kMaxStepsPerTick));
+  const index_t e = m.dt_crit_elem;
+  const size_t k = in.elem_material.empty() ? 0 : size_t(in.elem_material[e]);
+  const MaterialParams& p = in.materials[k];
+  const double c = wave_speed(p);  // sqrt((K + 4 mu / 3) / rho)
+  throw ModelError(fmt::format(
+      "{}: element {} ({}: mu = {:.4g} Pa, K = {:.4g} Pa, rho = {:.4g} kg/m^3) has a wave speed c = sqrt((K + 4 mu / "
+      "3) / rho) = {:.4g} m/s, so its stable step is dt_crit = L / c = {:.4g} s: one {:.4g} s haptic tick would need "
+      "{:.3g} TLED steps (the most is {:.0e}). The modulus is far too high or the density far too low for tissue "
+      "(soft tissue: E ~ 1e3..1e6 Pa, rho ~ 1000 kg/m^3); check the units (Pa, kg/m^3)",
+      in.source, e, material_name(in, k), p.mu, p.K, p.rho, c, m.dt_crit, in.tick, steps, kMaxStepsPerTick));
+}
+
 /// Boundary faces (faces owned by one tet), oriented outward. Sorts all
 /// 4 n_elems faces by their sorted corner ids; a face seen once is boundary.
 void extract_surface(TissueModel<double>& m) {
@@ -105,9 +185,25 @@ MassScaling mass_needed(const std::vector<double>& dt_e, const std::vector<doubl
 
 }  // namespace
 
+double wave_speed(const MaterialParams& p) {
+  const double lambda = p.K - 2.0 * p.mu / 3.0;
+  return std::sqrt((lambda + 2 * p.mu) / p.rho);
+}
+
+double element_time_step(const Vec3<double> X[4], double volume, const MaterialParams& p, bool ianp) {
+  // Plain tets are stiffer than IANP ones: their measured stability limit
+  // (2 / omega_max of the lumped linearised system) is 0.89..0.94 of
+  // L / c for nu in 0.3..0.499, so their L_e carries a 0.85 factor.
+  return (ianp ? 1.0 : 0.85) * tet_min_altitude(X, volume) / wave_speed(p);
+}
+
 void align_time_step(TissueModel<double>& m, double tick) {
   if (!(tick > 0)) throw ModelError(fmt::format("haptic tick {} s must be > 0", tick));
   const double steps = std::ceil(tick / m.dt * (1 - 1e-12));
+  if (steps > kMaxStepsPerTick)
+    throw ModelError(fmt::format("time step dt = {:.4g} s would need {:.3g} steps per {:.4g} s haptic tick (the most "
+                                 "is {:.0e})",
+                                 m.dt, steps, tick, kMaxStepsPerTick));
   set_time_step(m, tick / steps, m.damping);
 }
 
@@ -201,12 +297,6 @@ TissueModel<double> build_model(const ModelInput& in) {
   m.X.resize(3 * n);
   for (index_t i = 0; i < n; ++i)
     for (int c = 0; c < 3; ++c) m.X[c * n + i] = in.nodes[3 * i + c];
-  double bbox = 0;
-  for (int c = 0; c < 3; ++c) {
-    auto [lo, hi] = std::minmax_element(m.X.begin() + c * n, m.X.begin() + (c + 1) * n);
-    bbox = std::max(bbox, *hi - *lo);
-  }
-  const double vol_eps = 1e-12 * bbox * bbox * bbox;
 
   m.elem_nodes.resize(4 * ne);
   m.dndx.resize(12 * ne);
@@ -234,9 +324,9 @@ TissueModel<double> build_model(const ModelInput& in) {
     for (int a = 0; a < 4; ++a) X[a] = node_pos(in.nodes, c[a]);
     double dN[12] = {};
     double V = tet_shape_gradients(X, dN);
-    if (std::fabs(V) <= vol_eps)
-      throw ModelError(fmt::format("{}: element {} (nodes {} {} {} {}): zero volume {:.3g} m^3; tets must have V > 0",
-                                   in.source, e, c[0], c[1], c[2], c[3], V));
+    if (const std::string why = degenerate_tet(X, V); !why.empty())
+      throw ModelError(
+          fmt::format("{}: element {} (nodes {} {} {} {}): {}", in.source, e, c[0], c[1], c[2], c[3], why));
     if (V < 0) {  // inverted input: swap corners 1 and 2
       std::swap(c[1], c[2]);
       std::swap(X[1], X[2]);
@@ -258,12 +348,7 @@ TissueModel<double> build_model(const ModelInput& in) {
     m.mu[e] = p.mu;
     m.K[e] = p.K;
     m.total_mass += p.rho * V;
-    const double lambda = p.K - 2.0 * p.mu / 3.0;
-    const double wave = std::sqrt((lambda + 2 * p.mu) / p.rho);
-    // Plain tets are stiffer than IANP ones: their measured stability limit
-    // (2 / omega_max of the lumped linearised system) is 0.89..0.94 of
-    // L / c for nu in 0.3..0.499, so their L_e carries a 0.85 factor.
-    const double dt_e = (in.ianp ? 1.0 : 0.85) * tet_min_altitude(X, V) / wave;
+    const double dt_e = element_time_step(X, V, p, in.ianp);
     dt_elem[e] = dt_e;
     rho_V[e] = p.rho * V;
     if (dt_e < m.dt_crit) {
@@ -271,6 +356,7 @@ TissueModel<double> build_model(const ModelInput& in) {
       m.dt_crit_elem = e;
     }
   }
+  check_duplicates(in, ne);
   for (index_t i = 0; i < n; ++i)
     if (uses[i] == 0)
       throw ModelError(fmt::format("{}: node {} belongs to no element (every node needs mass)", in.source, i));
@@ -294,12 +380,13 @@ TissueModel<double> build_model(const ModelInput& in) {
 
   if (in.dt < 0 || std::isnan(in.dt))
     throw ModelError(fmt::format("{}: time step dt = {} s must be > 0 (or 0 for the default)", in.source, in.dt));
-  if (std::isnan(in.damping) || std::isinf(in.damping))
-    throw ModelError(fmt::format("{}: damping alpha = {} 1/s must be finite (or < 0 for the default)", in.source,
-                                 in.damping));
+  if (in.damping && !(*in.damping >= 0 && std::isfinite(*in.damping)))
+    throw ModelError(fmt::format("{}: damping alpha = {} 1/s must be finite and >= 0 (or unset for the default)",
+                                 in.source, *in.damping));
   if (!(in.dt_safety > 0 && in.dt_safety < 1) && (in.dt == 0 || in.mass_scaling > 0))
     throw ModelError(fmt::format("{}: dt safety factor {} must be in (0, 1)", in.source, in.dt_safety));
   m.dt_crit_physical = m.dt_crit;
+  if (in.dt == 0) check_step_count(in, m, in.dt_safety);
   double dt = in.dt > 0 ? in.dt : in.dt_safety * m.dt_crit;
   if (!(in.mass_scaling >= 0 && in.mass_scaling < 1))
     throw ModelError(fmt::format("{}: mass scaling budget {} must be in [0, 1) (a fraction of the total mass)",
@@ -331,7 +418,7 @@ TissueModel<double> build_model(const ModelInput& in) {
       m.max_density_scale = ms.max_scale;
     }
   }
-  const double damping = in.damping >= 0 ? in.damping : 2.0 * lowest_mode_estimate(m);
+  const double damping = in.damping ? *in.damping : 2.0 * lowest_mode_estimate(m);
   try {
     set_time_step(m, dt, damping);
   } catch (const ModelError& err) {

@@ -9,11 +9,13 @@
 //   shape gradients    dndx[k * n_elems + e]   (k = 3 * a + j, dN_a/dX_j)
 #pragma once
 
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "core/hd.hpp"
+#include "core/vec.hpp"
 
 namespace tissue {
 
@@ -35,7 +37,8 @@ struct ModelInput {
                                          ///< plane or roller: fix only the normal component) (n_nodes); empty = none
   double dt = 0;                         ///< requested step (s); 0 = safety * dt_crit
   double dt_safety = 0.5;                ///< fraction of dt_crit used when dt = 0
-  double damping = -1;                   ///< mass-proportional damping alpha (1/s); < 0 = from the lowest-mode estimate
+  std::optional<double> damping;         ///< mass-proportional damping alpha (1/s, >= 0); unset = 2 x the
+                                         ///< lowest-mode estimate
   bool ianp = true;                      ///< improved average nodal pressure; false = plain (locking-prone) tets,
                                          ///< whose dt_crit uses 0.85 x the smallest altitude (their measured limit)
   double mass_scaling = 0;               ///< selective mass scaling budget: the most mass that may be added to the
@@ -43,7 +46,13 @@ struct ModelInput {
                                          ///< see choose_mass_scaling)
   double tick = 0;                       ///< haptic period (s): with mass scaling and dt = 0, dt = tick / n
   std::string source = "<model>";        ///< names the input in error messages
+  std::vector<std::string> material_names;  ///< names of the materials, for messages (empty = by index)
 };
+
+/// The most TLED steps one haptic tick may take (build_model,
+/// align_time_step): beyond it the step count no longer fits the
+/// scheduler's counters, and no run would finish.
+inline constexpr double kMaxStepsPerTick = 1e9;
 
 /// Thrown for invalid model input; the message names the source, the
 /// element or node and the rule broken.
@@ -110,10 +119,24 @@ struct TissueModel {
 };
 
 /// Precomputes the model from the input; throws ModelError for zero-volume
-/// tets, unused nodes, bad materials or a dt above the stable limit (the
-/// message names the limit and the element that sets it). Inverted tets
+/// tets (relative to the tet's size; coordinates whose volumes overflow or
+/// underflow are named as such), two elements with the same four nodes,
+/// unused nodes, bad materials, a stable step so small that one haptic tick
+/// would need more than kMaxStepsPerTick steps (naming the element, its
+/// material and wave speed) or a dt above the stable limit (the message
+/// names the limit and the element that sets it). Inverted tets
 /// (V < 0) are reoriented by swapping corners 1 and 2 and counted.
 TissueModel<double> build_model(const ModelInput& in);
+
+/// Dilatational wave speed c = sqrt((lambda + 2 mu) / rho) of a material
+/// (m/s), lambda = K - 2 mu / 3.
+double wave_speed(const MaterialParams& p);
+
+/// An element's stable step L_e / c_e (s): L_e = tet_min_altitude of the tet
+/// X (m) with volume V (m^3), times 0.85 for plain (non-IANP) tets (their
+/// measured limit); c_e = wave_speed(p). build_model's dt_crit is the
+/// smallest of these.
+double element_time_step(const Vec3<double> X[4], double volume, const MaterialParams& p, bool ianp = true);
 
 /// Selective mass scaling (the explicit-dynamics practice of LS-DYNA's and
 /// Abaqus/Explicit's "mass scaling" for a target step): a few badly shaped

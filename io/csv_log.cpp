@@ -4,6 +4,8 @@
 
 #include <stdexcept>
 
+#include "io/atomic_file.hpp"
+
 namespace tissue::io {
 
 std::string TickLog::header(int n_tools) {
@@ -18,12 +20,23 @@ std::string TickLog::header(int n_tools) {
   return h;
 }
 
-TickLog::TickLog(const std::string& path, int n_tools) : path_(path), n_tools_(n_tools), out_(path) {
+TickLog::TickLog(const std::string& path, int n_tools) : path_(path), n_tools_(n_tools) {
+  // checked before the .part file is created: a refused count leaves nothing behind
   if (n_tools < 1 || n_tools > kMaxTools)
     throw std::invalid_argument(fmt::format("{}: {} tools; the tick log takes 1 to {}", path_, n_tools, kMaxTools));
-  if (!out_) throw std::runtime_error(fmt::format("{}: cannot open the tick log for writing", path_));
+  out_.open(part_path(path_));
+  if (!out_) throw std::runtime_error(fmt::format("{}: cannot open the tick log for writing", part_path(path_)));
+  last_flush_ = std::chrono::steady_clock::now();
   out_ << header(n_tools) << '\n';
-  if (!out_) throw std::runtime_error(fmt::format("{}: cannot write the tick log header", path_));
+  flush();
+}
+
+TickLog::~TickLog() {
+  try {
+    close();
+  } catch (const std::exception&) {
+    // the .part file keeps the rows written
+  }
 }
 
 void TickLog::write(const TickReport& r) {
@@ -42,11 +55,22 @@ void TickLog::write(const TickReport& r) {
   out_ << '\n';
   if (!out_) throw std::runtime_error(fmt::format("{}: write failed at tick {}", path_, r.tick));
   ++rows_;
+  if (++unflushed_ >= kFlushRows || std::chrono::steady_clock::now() - last_flush_ > std::chrono::seconds(1)) flush();
 }
 
 void TickLog::flush() {
   out_.flush();
-  if (!out_) throw std::runtime_error(fmt::format("{}: flush failed", path_));
+  if (!out_) throw std::runtime_error(fmt::format("{}: flush failed", part_path(path_)));
+  unflushed_ = 0;
+  last_flush_ = std::chrono::steady_clock::now();
+}
+
+void TickLog::close() {
+  if (closed_) return;
+  closed_ = true;
+  out_.close();
+  if (!out_) throw std::runtime_error(fmt::format("{}: write failed when closing", part_path(path_)));
+  rename_into_place(part_path(path_), path_);
 }
 
 }  // namespace tissue::io

@@ -1,7 +1,16 @@
 // Per-tick CSV log of the haptic loop: one row per core TickReport, for
 // plotting force and region size against time.
+//
+// Written under "<path>.part" (io/atomic_file.hpp) and renamed to <path> by
+// close(): a file named ticks.csv is always complete. The rows do not lag:
+// each block of rows (kFlushRows, or whatever one second brought) is
+// flushed to the .part file as whole lines, so a reader can follow a long
+// run there (`tail -f ticks.csv.part`). A run ended by an exception or a
+// signal still closes the log (the destructor renames); only a killed or
+// crashed process leaves the .part file, whose last line is then whole.
 #pragma once
 
+#include <chrono>
 #include <fstream>
 #include <string>
 
@@ -22,17 +31,28 @@ namespace tissue::io {
 /// relative kinetic energy; depth the region's rings, -1 = the whole mesh.
 class TickLog {
  public:
-  /// Creates (truncates) the file and writes the header for n_tools tools
-  /// (1..kMaxTools); throws std::runtime_error naming the path when it
-  /// cannot be opened.
-  explicit TickLog(const std::string& path, int n_tools = 1);
+  /// Rows between flushes (at most; a second of wall time flushes too).
+  static constexpr long kFlushRows = 100;
 
-  /// Appends one row; throws std::runtime_error naming the path when the
-  /// write fails.
+  /// Creates (truncates) "<path>.part" and writes the header for n_tools
+  /// tools (1..kMaxTools); throws std::runtime_error naming the path when it
+  /// cannot be opened, std::invalid_argument for a tool count out of range.
+  explicit TickLog(const std::string& path, int n_tools = 1);
+  /// close(), swallowing errors (a destructor must not throw).
+  ~TickLog();
+  TickLog(const TickLog&) = delete;
+  TickLog& operator=(const TickLog&) = delete;
+
+  /// Appends one row (flushing every block); throws std::runtime_error
+  /// naming the path when the write fails.
   void write(const TickReport& r);
 
-  /// Flushes buffered rows to the file.
+  /// Flushes buffered rows to the .part file.
   void flush();
+
+  /// Flushes, closes and renames the .part file to the final path; later
+  /// calls do nothing. Throws std::runtime_error naming the path on failure.
+  void close();
 
   /// Rows written so far (header excluded).
   long rows() const { return rows_; }
@@ -46,6 +66,9 @@ class TickLog {
   int n_tools_;
   std::ofstream out_;
   long rows_ = 0;
+  long unflushed_ = 0;
+  std::chrono::steady_clock::time_point last_flush_;
+  bool closed_ = false;
 };
 
 }  // namespace tissue::io

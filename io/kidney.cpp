@@ -252,10 +252,10 @@ scene::Scene default_kidney_scene() {
 
   s.solver.backend = "cpu";
   s.solver.precision = Precision::Float;
-  s.solver.dt = 0;
+  s.solver.dt.reset();
   s.solver.dt_safety = 0.9;
   s.solver.mass_scaling = 0.025;
-  s.solver.damping = -1;
+  s.solver.damping.reset();
   s.solver.depth = kDepthAuto;
   s.solver.tick = 1e-3;
   return s;

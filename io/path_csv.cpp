@@ -3,9 +3,11 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <istream>
 
+#include "io/atomic_file.hpp"
 #include "scene/text.hpp"
 
 namespace tissue::io {
@@ -97,7 +99,7 @@ std::vector<Waypoint> parse_path_csv(std::istream& in, const std::string& source
       continue;
     }
     const Waypoint w = parse_row(text, cols, source, line);
-    if (!path.empty() && !(w.t > path.back().t))
+    if (!path.empty() && !(w.t > path.back().t))  // (parse_row has refused NaN)
       fail(source, line,
            fmt::format("t = {} s is not after the previous waypoint's t = {} s; times must increase", w.t,
                        path.back().t));
@@ -109,28 +111,30 @@ std::vector<Waypoint> parse_path_csv(std::istream& in, const std::string& source
 }
 
 std::vector<Waypoint> read_path_csv(const std::string& path) {
+  if (const std::string why = not_a_file(path); !why.empty()) throw PathCsvError(path + ": " + why + ", not a path CSV file");
   std::ifstream in(path);
   if (!in) throw PathCsvError(path + ": cannot open the file");
   return parse_path_csv(in, path);
 }
 
 void write_path_csv(const std::string& path, std::span<const Waypoint> waypoints) {
-  std::ofstream out(path);
-  if (!out) throw PathCsvError(path + ": cannot open the file for writing");
   bool grasp = false, axis = false;
   for (const Waypoint& w : waypoints) {
     grasp = grasp || w.grasp;
     axis = axis || norm(w.axis) > 0;
   }
-  out << "t,x,y,z" << (grasp ? ",grasp" : "") << (axis ? ",ax,ay,az" : "") << "\n";
+  std::string text = fmt::format("t,x,y,z{}{}\n", grasp ? ",grasp" : "", axis ? ",ax,ay,az" : "");
   for (const Waypoint& w : waypoints) {
-    out << fmt::format("{},{},{},{}", w.t, w.p.x, w.p.y, w.p.z);
-    if (grasp) out << (w.grasp ? ",1" : ",0");
-    if (axis) out << fmt::format(",{},{},{}", w.axis.x, w.axis.y, w.axis.z);
-    out << "\n";
+    text += fmt::format("{},{},{},{}", w.t, w.p.x, w.p.y, w.p.z);
+    if (grasp) text += w.grasp ? ",1" : ",0";
+    if (axis) text += fmt::format(",{},{},{}", w.axis.x, w.axis.y, w.axis.z);
+    text += '\n';
   }
-  out.flush();
-  if (!out) throw PathCsvError(path + ": write failed");
+  try {
+    write_file_atomic(path, text);
+  } catch (const std::runtime_error& e) {
+    throw PathCsvError(e.what());
+  }
 }
 
 }  // namespace tissue::io

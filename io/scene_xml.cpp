@@ -10,6 +10,7 @@
 #include <pugixml.hpp>
 #include <sstream>
 
+#include "io/atomic_file.hpp"
 #include "io/path_csv.hpp"
 #include "io/tetgen_files.hpp"
 #include "scene/text.hpp"
@@ -75,8 +76,8 @@ class Reader {
   double real(pugi::xml_node n, const char* name) const;
   /// An optional real number (fallback when absent).
   double real_or(pugi::xml_node n, const char* name, double fallback) const;
-  /// An optional real number or the keyword "auto" (-> auto_value).
-  double real_or_auto(pugi::xml_node n, const char* name, double fallback, double auto_value) const;
+  /// An optional real number or the keyword "auto" (-> nullopt); fallback when absent.
+  std::optional<double> real_or_auto(pugi::xml_node n, const char* name, std::optional<double> fallback) const;
   /// A required "x y z" triple.
   void triple(pugi::xml_node n, const char* name, double out[3]) const;
   /// A blank-separated list of ids (node or element) held by attribute `name`.
@@ -143,10 +144,11 @@ double Reader::real_or(pugi::xml_node n, const char* name, double fallback) cons
   return n.attribute(name) ? real(n, name) : fallback;
 }
 
-double Reader::real_or_auto(pugi::xml_node n, const char* name, double fallback, double auto_value) const {
+std::optional<double> Reader::real_or_auto(pugi::xml_node n, const char* name,
+                                           std::optional<double> fallback) const {
   const pugi::xml_attribute a = n.attribute(name);
   if (!a) return fallback;
-  if (scene::trim(a.value()) == "auto") return auto_value;
+  if (scene::trim(a.value()) == "auto") return std::nullopt;
   const auto v = scene::parse_real(a.value());
   if (!v) fail(n, fmt::format("attribute {} = '{}' is neither a number nor \"auto\"", name, a.value()));
   return *v;
@@ -370,7 +372,7 @@ scene::Solver Reader::read_solver(pugi::xml_node n) const {
     if (p != "float" && p != "double") fail(n, fmt::format("precision = '{}' must be float or double", a.value()));
     v.precision = p == "float" ? Precision::Float : Precision::Double;
   }
-  v.dt = real_or_auto(n, "dt", v.dt, 0.0);
+  v.dt = real_or_auto(n, "dt", v.dt);
   v.dt_safety = real_or(n, "dt-safety", v.dt_safety);
   if (const pugi::xml_attribute a = n.attribute("mass-scaling")) {
     const auto f = scene::parse_real(a.value());
@@ -382,7 +384,7 @@ scene::Solver Reader::read_solver(pugi::xml_node n) const {
       fail(n, fmt::format("mass-scaling = '{}' is neither a number (a fraction of the total mass) nor \"off\"",
                           a.value()));
   }
-  v.damping = real_or_auto(n, "damping", v.damping, -1.0);
+  v.damping = real_or_auto(n, "damping", v.damping);
   if (const pugi::xml_attribute a = n.attribute("depth")) {
     const std::string_view d = scene::trim(a.value());
     const auto k = scene::parse_integer(d);
@@ -390,8 +392,10 @@ scene::Solver Reader::read_solver(pugi::xml_node n) const {
       v.depth = kDepthAll;
     else if (d == "auto")
       v.depth = kDepthAuto;
-    else if (k && *k >= std::numeric_limits<int>::min() && *k <= std::numeric_limits<int>::max())
+    else if (k && *k >= 0 && *k <= std::numeric_limits<int>::max())
       v.depth = int(*k);
+    else if (k)
+      fail(n, fmt::format("depth = {} must be >= 0 (rings around the contact), or \"all\" or \"auto\"", *k));
     else
       fail(n, fmt::format("depth = '{}' is neither a whole number nor \"all\" nor \"auto\"", a.value()));
   }
@@ -532,10 +536,10 @@ void write_solver(pugi::xml_node root, const scene::Solver& v) {
   pugi::xml_node n = root.append_child("solver");
   set(n, "backend", v.backend);
   set(n, "precision", to_string(v.precision));
-  set(n, "dt", v.dt == 0 ? "auto" : num(v.dt));
+  set(n, "dt", v.dt ? num(*v.dt) : "auto");
   set(n, "dt-safety", num(v.dt_safety));
   set(n, "mass-scaling", v.mass_scaling == 0 ? "off" : num(v.mass_scaling));
-  set(n, "damping", v.damping == -1 ? "auto" : num(v.damping));
+  set(n, "damping", v.damping ? num(*v.damping) : "auto");
   set(n, "depth", v.depth == kDepthAll ? "all" : v.depth == kDepthAuto ? "auto" : std::to_string(v.depth));
   set(n, "tick", num(v.tick));
   set(n, "residual-tol", num(v.residual_tol));
@@ -550,6 +554,7 @@ scene::Scene parse_scene(std::string_view xml, const std::string& source, const 
 }
 
 scene::Scene read_scene(const std::string& path) {
+  if (const std::string why = io::not_a_file(path); !why.empty()) throw SceneError(path + ": " + why + ", not a scene file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw SceneError(path + ": cannot open the scene file");
   std::ostringstream text;
@@ -589,11 +594,7 @@ void write_scene(const scene::Scene& s, const std::string& path, bool inline_mes
   }
   for (const scene::Tool& t : s.tools)
     if (!t.path_file.empty() && !t.path.empty()) write_path_csv((dir / t.path_file).string(), t.path);
-  std::ofstream out(path, std::ios::binary);
-  if (!out) throw std::runtime_error(path + ": cannot open the scene file for writing");
-  out << format_scene(s, mesh_file);
-  out.flush();
-  if (!out) throw std::runtime_error(path + ": write failed");
+  write_file_atomic(path, format_scene(s, mesh_file));
 }
 
 }  // namespace tissue::io

@@ -35,7 +35,8 @@ scene::Scene parse_scene(std::string_view xml, const std::string& source, const 
 /// inline_mesh the mesh goes into the XML; otherwise into a TetGen .node/.ele
 /// pair beside it, named Scene::mesh_file if set, else "<stem of path>.node".
 /// A tool with a path_file gets its path written to that CSV (relative to
-/// path's folder). Throws std::runtime_error when a file cannot be written.
+/// path's folder). Each file is written whole under "<name>.part" and renamed
+/// (io/atomic_file.hpp). Throws std::runtime_error when a file cannot be written.
 void write_scene(const scene::Scene& scene, const std::string& path, bool inline_mesh);
 
 /// The XML text write_scene writes (no files touched). mesh_file: "" puts the

@@ -144,7 +144,7 @@ index_t weld_vertices(SurfaceMesh& s, double tolerance) {
   return dropped;
 }
 
-SurfaceMesh load_surface(const std::string& path, double metres_per_unit) {
+SurfaceMesh load_surface(const std::string& path, double metres_per_unit, index_t* merged) {
   if (!(metres_per_unit > 0) || !std::isfinite(metres_per_unit))
     throw MeshError(fmt::format("{}: unit scale {} m per unit must be > 0", path, metres_per_unit));
   guard_ply_header(path);
@@ -160,7 +160,9 @@ SurfaceMesh load_surface(const std::string& path, double metres_per_unit) {
   if (out.triangles.empty())
     throw MeshError(
         fmt::format("{}: the file holds no triangles ({} meshes, none with faces)", path, scene->mNumMeshes));
+  const index_t raw = out.n_vertices();
   weld_vertices(out);
+  if (merged) *merged = raw - out.n_vertices();
   if (out.triangles.empty()) throw MeshError(fmt::format("{}: every triangle is degenerate", path));
   return out;
 }
@@ -220,6 +222,52 @@ double enclosed_volume(const SurfaceMesh& s) {
     v += dot(a, cross(b, c));
   }
   return v / 6.0;
+}
+
+double winding_number(const SurfaceMesh& s, Vec3<double> p) {
+  double sum = 0;
+  for (index_t t = 0; t < s.n_triangles(); ++t) {
+    const Vec3<double> a = vertex(s, s.triangles[3 * t]) - p, b = vertex(s, s.triangles[3 * t + 1]) - p,
+                       c = vertex(s, s.triangles[3 * t + 2]) - p;
+    const double la = norm(a), lb = norm(b), lc = norm(c);
+    const double num = dot(a, cross(b, c));
+    const double den = la * lb * lc + dot(a, b) * lc + dot(b, c) * la + dot(c, a) * lb;
+    sum += 2 * std::atan2(num, den);
+  }
+  return sum / (4 * M_PI);
+}
+
+Vec3<double> interior_point(const SurfaceMesh& s, const std::string& source) {
+  index_t best = -1;
+  double best_area = 0;
+  Vec3<double> normal{};
+  for (index_t t = 0; t < s.n_triangles(); ++t) {
+    const Vec3<double> a = vertex(s, s.triangles[3 * t]);
+    const Vec3<double> n = cross(vertex(s, s.triangles[3 * t + 1]) - a, vertex(s, s.triangles[3 * t + 2]) - a);
+    if (0.5 * norm(n) > best_area) {
+      best_area = 0.5 * norm(n);
+      best = t;
+      normal = (1.0 / norm(n)) * n;
+    }
+  }
+  if (best < 0) throw MeshError(source + ": the surface has no triangle of non-zero area");
+  const Vec3<double> c = (1.0 / 3.0) * (vertex(s, s.triangles[3 * best]) + vertex(s, s.triangles[3 * best + 1]) +
+                                        vertex(s, s.triangles[3 * best + 2]));
+  for (double step = 0.1 * std::sqrt(best_area); step > 1e-6 * std::sqrt(best_area); step *= 0.5) {
+    const Vec3<double> p = c - step * normal;
+    if (winding_number(s, p) > 0.5) return p;
+  }
+  throw MeshError(source + ": found no point inside the surface (is it closed and outward?)");
+}
+
+Vec3<double> surface_extents(const SurfaceMesh& s) {
+  if (s.vertices.empty()) return {0, 0, 0};
+  double lo[3] = {s.vertices[0], s.vertices[1], s.vertices[2]}, hi[3] = {lo[0], lo[1], lo[2]};
+  for (size_t k = 0; k < s.vertices.size(); ++k) {
+    lo[k % 3] = std::min(lo[k % 3], s.vertices[k]);
+    hi[k % 3] = std::max(hi[k % 3], s.vertices[k]);
+  }
+  return {hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]};
 }
 
 }  // namespace tissue::io

@@ -8,11 +8,13 @@
 // and must say which unit it assumed (the `tissue mesh` command prints it).
 #pragma once
 
+#include <functional>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "core/hd.hpp"
+#include "core/vec.hpp"
 
 namespace tissue::io {
 
@@ -24,6 +26,10 @@ struct SurfaceMesh {
   index_t n_vertices() const { return static_cast<index_t>(vertices.size() / 3); }
   index_t n_triangles() const { return static_cast<index_t>(triangles.size() / 3); }
 };
+
+/// A progress line for long steps ("remeshing: pass 2 of 5, 31,208
+/// triangles"); empty = silent.
+using Progress = std::function<void(const std::string&)>;
 
 /// Thrown for unreadable, empty or invalid surfaces and failed meshing; the
 /// message names the file (or source) and the rule broken.
@@ -42,7 +48,8 @@ double parse_unit(const std::string& unit);
 /// uses. Point and line primitives are ignored. Throws MeshError naming the
 /// file and Assimp's reason when the file cannot be read or holds no
 /// triangles.
-SurfaceMesh load_surface(const std::string& path, double metres_per_unit);
+/// `merged`, when given, receives the number of vertices welding merged.
+SurfaceMesh load_surface(const std::string& path, double metres_per_unit, index_t* merged = nullptr);
 
 /// Merges vertices closer than `tolerance` (m; < 0 = 1e-9 times the
 /// bounding-box diagonal) into one, keeping the first, and drops triangles
@@ -63,5 +70,20 @@ void check_closed(const SurfaceMesh& mesh, const std::string& source);
 /// Signed volume enclosed by a closed surface (m^3; > 0 when the triangles
 /// are oriented outward), by the divergence theorem.
 double enclosed_volume(const SurfaceMesh& mesh);
+
+/// Generalised winding number of the closed surface around p: the sum of
+/// the triangles' signed solid angles / 4 pi (van Oosterom and Strackee).
+/// About 1 inside an outward surface, 0 outside, whatever the surface's
+/// small defects.
+double winding_number(const SurfaceMesh& mesh, Vec3<double> p);
+
+/// A point strictly inside the closed, outward surface: from the centroid
+/// of its largest triangle, a step inward (a tenth of that triangle's size,
+/// halved until the winding number says inside). Throws MeshError naming
+/// `source` when none is found (a surface of zero thickness).
+Vec3<double> interior_point(const SurfaceMesh& mesh, const std::string& source);
+
+/// Axis-aligned bounding box extents (m) along x, y, z.
+Vec3<double> surface_extents(const SurfaceMesh& mesh);
 
 }  // namespace tissue::io

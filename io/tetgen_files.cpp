@@ -2,9 +2,13 @@
 
 #include <fmt/format.h>
 
+#include <filesystem>
 #include <fstream>
 #include <istream>
+#include <iterator>
+#include <limits>
 
+#include "io/atomic_file.hpp"
 #include "scene/text.hpp"
 
 namespace tissue::io {
@@ -31,6 +35,24 @@ class DataLines {
     return false;
   }
   int line() const { return line_; }
+  /// Characters left in the stream after the current line; -1 when the
+  /// stream cannot tell (not seekable).
+  long long remaining() {
+    const std::istream::pos_type here = in_.tellg();
+    if (here == std::istream::pos_type(-1)) {
+      in_.clear();
+      return -1;
+    }
+    in_.seekg(0, std::ios::end);
+    const std::istream::pos_type end = in_.tellg();
+    in_.seekg(here);
+    if (end == std::istream::pos_type(-1) || !in_) {
+      in_.clear();
+      in_.seekg(here);
+      return -1;
+    }
+    return static_cast<long long>(end - here);
+  }
   const std::string& source() const { return source_; }
 
  private:
@@ -62,8 +84,38 @@ std::vector<long long> header(DataLines& r, size_t n, std::string_view layout) {
   for (size_t k = 0; k < n; ++k) {
     v.push_back(integer_field(r, tok[k], fmt::format("header field {}", k + 1)));
     if (v.back() < 0) fail(r.source(), r.line(), fmt::format("header field {} = {} must be >= 0", k + 1, v.back()));
+    if (v.back() > (1LL << 40))  // keeps the field-count sums below from overflowing
+      fail(r.source(), r.line(), fmt::format("header field {} = {} is beyond any real mesh", k + 1, v.back()));
   }
   return v;
+}
+
+/// Counts up to this are read as they come (the reserve is capped at it).
+constexpr long long kPlainCount = 1 << 20;
+
+/// Refuses a header whose record count or field count cannot be true, before
+/// anything is allocated for it: more records than index_t can number, or
+/// -- for claims beyond kPlainCount, which the readers would reserve room
+/// for -- more than the rest of the file can hold (a record is at least one
+/// line of `fields` numbers, 2 characters each: a digit and a blank).
+/// Smaller shortfalls are reported where the file ends, with that line.
+void check_counts(DataLines& r, long long count, long long fields, std::string_view what, std::string_view whats) {
+  constexpr long long kMaxIds = std::numeric_limits<index_t>::max();
+  if (count > kMaxIds)
+    fail(r.source(), r.line(),
+         fmt::format("the header declares {} {}; at most {} fit tissue's 32-bit ids", count, whats, kMaxIds));
+  const long long left = r.remaining();
+  if (left < 0) return;
+  const long long fit = (left + 1) / 2;  // the last line may lack its newline
+  if (fields > fit && fields > kPlainCount)
+    fail(r.source(), r.line(),
+         fmt::format("the header declares {} fields per {} line, but the rest of the file holds only {} characters",
+                     fields, what, left));
+  if (count > fit / fields && count > kPlainCount)
+    fail(r.source(), r.line(),
+         fmt::format("the header declares {} {}, but the rest of the file holds only {} characters: at most {} "
+                     "lines of {} fields fit (is the file truncated, or the count wrong?)",
+                     count, whats, left, fit / fields, fields));
 }
 
 /// Checks the id of the k-th record (0-based) and returns the numbering base.
@@ -93,9 +145,10 @@ std::vector<double> parse_tetgen_node(std::istream& in, const std::string& sourc
   if (h[0] == 0) fail(source, r.line(), "the header declares 0 points");
   if (h[1] != 3) fail(source, r.line(), fmt::format("dimension is {}; only 3-D meshes are supported", h[1]));
   if (h[3] > 1) fail(source, r.line(), fmt::format("boundary marker flag is {}; expected 0 or 1", h[3]));
+  check_counts(r, h[0], 4 + h[2] + h[3], "point", "points");
   const size_t fields = 4 + h[2] + h[3];
   std::vector<double> xyz;
-  xyz.reserve(3 * h[0]);
+  xyz.reserve(3 * size_t(std::min(h[0], kPlainCount)));  // grows past that with the data actually read
   std::vector<std::string_view> tok;
   first_index = 0;
   for (long long k = 0; k < h[0]; ++k) {
@@ -118,9 +171,10 @@ std::vector<index_t> parse_tetgen_ele(std::istream& in, const std::string& sourc
   if (h[0] == 0) fail(source, r.line(), "the header declares 0 tetrahedra");
   if (h[1] != 4)
     fail(source, r.line(), fmt::format("{} nodes per tetrahedron; only linear 4-node tets are supported", h[1]));
+  check_counts(r, h[0], 5 + h[2], "tetrahedron", "tetrahedra");
   const size_t fields = 5 + h[2];
   std::vector<index_t> tets;
-  tets.reserve(4 * h[0]);
+  tets.reserve(4 * size_t(std::min(h[0], kPlainCount)));
   std::vector<std::string_view> tok;
   int base = first_index;
   for (long long k = 0; k < h[0]; ++k) {
@@ -154,6 +208,8 @@ std::string ele_path_for(const std::string& node_path) {
 
 TetgenFiles read_tetgen(const std::string& node_path) {
   const std::string ele_path = ele_path_for(node_path);
+  for (const std::string& p : {node_path, ele_path})
+    if (const std::string why = not_a_file(p); !why.empty()) throw TetgenFileError(p + ": " + why + ", not a TetGen file");
   std::ifstream node_in(node_path), ele_in(ele_path);
   if (!node_in) throw TetgenFileError(node_path + ": cannot open the file");
   if (!ele_in) throw TetgenFileError(ele_path + ": cannot open the file (the .ele partner of " + node_path + ")");
@@ -165,20 +221,21 @@ TetgenFiles read_tetgen(const std::string& node_path) {
 
 void write_tetgen(const std::string& node_path, std::span<const double> nodes, std::span<const index_t> tets) {
   const std::string ele_path = ele_path_for(node_path);
-  std::ofstream node_out(node_path), ele_out(ele_path);
-  if (!node_out) throw TetgenFileError(node_path + ": cannot open the file for writing");
-  if (!ele_out) throw TetgenFileError(ele_path + ": cannot open the file for writing");
   const size_t n = nodes.size() / 3, ne = tets.size() / 4;
-  node_out << fmt::format("# {} points (m), written by tissue\n{} 3 0 0\n", n, n);
+  fmt::memory_buffer node_text, ele_text;
+  fmt::format_to(std::back_inserter(node_text), "# {} points (m), written by tissue\n{} 3 0 0\n", n, n);
   for (size_t i = 0; i < n; ++i)
-    node_out << fmt::format("{} {} {} {}\n", i, nodes[3 * i], nodes[3 * i + 1], nodes[3 * i + 2]);
-  ele_out << fmt::format("# {} linear tetrahedra, written by tissue\n{} 4 0\n", ne, ne);
+    fmt::format_to(std::back_inserter(node_text), "{} {} {} {}\n", i, nodes[3 * i], nodes[3 * i + 1], nodes[3 * i + 2]);
+  fmt::format_to(std::back_inserter(ele_text), "# {} linear tetrahedra, written by tissue\n{} 4 0\n", ne, ne);
   for (size_t e = 0; e < ne; ++e)
-    ele_out << fmt::format("{} {} {} {} {}\n", e, tets[4 * e], tets[4 * e + 1], tets[4 * e + 2], tets[4 * e + 3]);
-  node_out.flush();
-  ele_out.flush();
-  if (!node_out) throw TetgenFileError(node_path + ": write failed");
-  if (!ele_out) throw TetgenFileError(ele_path + ": write failed");
+    fmt::format_to(std::back_inserter(ele_text), "{} {} {} {} {}\n", e, tets[4 * e], tets[4 * e + 1], tets[4 * e + 2],
+                   tets[4 * e + 3]);
+  try {  // each file whole or not at all (io/atomic_file.hpp)
+    write_file_atomic(node_path, std::string_view(node_text.data(), node_text.size()));
+    write_file_atomic(ele_path, std::string_view(ele_text.data(), ele_text.size()));
+  } catch (const std::runtime_error& e) {
+    throw TetgenFileError(e.what());
+  }
 }
 
 }  // namespace tissue::io

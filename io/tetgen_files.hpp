@@ -7,6 +7,9 @@
 // then be consecutive, and the .ele corners use the same base. Attributes and
 // boundary markers are read past and ignored. Only linear (4-node) tets are
 // accepted. Coordinates are taken as metres. Every error names file:line.
+// Header counts are checked before anything is allocated for them: a count
+// that the rest of the file cannot hold (each record is a line of at least
+// two characters per field) or that 32-bit ids cannot number is refused.
 #pragma once
 
 #include <iosfwd>

@@ -6,17 +6,29 @@
 // any catch can run. Isolating each run turns every TetGen failure, crash or
 // error code, into the child's exit status, which the parent maps to a
 // MeshError. The child sends its output back through a pipe.
+//
+// The child must not outlive the parent: it asks the kernel for SIGKILL when
+// the parent dies (PR_SET_PDEATHSIG), and while a run is in flight the
+// parent's SIGINT/SIGTERM/SIGHUP handler kills the child first and then
+// lets the signal take its usual course.
 #include "io/tetgen_mesher.hpp"
 
 #include <fmt/format.h>
+#include <sys/prctl.h>
+#include <sys/resource.h>
+#include <sys/time.h>
 #include <sys/wait.h>
 #include <tetgen.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
+#include <chrono>
+#include <fstream>
 #include <cmath>
 #include <csignal>
+#include <cstdlib>
 #include <cstring>
 #include <utility>
 
@@ -30,6 +42,8 @@ struct TetgenOutput {
   std::vector<double> points;      ///< (n x 3) m
   std::vector<index_t> tets;       ///< (n_tets x 4)
   std::vector<index_t> face_tags;  ///< facet marker of each output face (d switch: the intersecting input faces)
+  std::vector<double> attributes;  ///< region attribute per tet (A switch), else empty
+  double peak_bytes = 0;           ///< the child's peak resident size
 };
 
 /// Exit codes of the child: 0 success, kTetgenCodeBase + TetGen's code for a
@@ -41,7 +55,16 @@ constexpr int kPipeFailed = 91;
 
 /// Fills TetGen's input: the surface's points and one triangular facet per
 /// triangle, tagged with its triangle id + 1.
-void fill_input(const SurfaceMesh& s, tetgenio& in) {
+void fill_input(const SurfaceMesh& s, const std::vector<RegionSeed>& regions, tetgenio& in) {
+  if (!regions.empty()) {
+    in.numberofregions = int(regions.size());
+    in.regionlist = new REAL[5 * regions.size()];
+    for (size_t k = 0; k < regions.size(); ++k) {
+      const RegionSeed& r = regions[k];
+      const REAL v[5] = {r.point.x, r.point.y, r.point.z, REAL(r.attribute), 0};
+      std::copy(v, v + 5, in.regionlist + 5 * k);
+    }
+  }
   in.firstnumber = 0;
   in.numberofpoints = s.n_vertices();
   in.pointlist = new REAL[s.vertices.size()];
@@ -80,22 +103,37 @@ bool write_array(int fd, const T* data, std::int64_t count) {
   return write_all(fd, &count, sizeof count) && write_all(fd, data, sizeof(T) * size_t(count));
 }
 
-/// The child's work: run TetGen and stream points, tets and face tags.
-[[noreturn]] void child_run(const SurfaceMesh& s, const std::string& switches, int fd) {
+/// The child's work: run TetGen and stream points, tets, face tags and tet
+/// attributes.
+[[noreturn]] void child_run(const SurfaceMesh& s, const MeshingOptions& o, const std::string& switches, int fd,
+                            pid_t parent, double address_cap) {
+  ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+  if (::getppid() != parent) ::_exit(kUnknownException);  // the parent died before prctl
+  for (int sig : {SIGINT, SIGTERM, SIGHUP}) std::signal(sig, SIG_DFL);
+  // TetGen's pools grow without bound on an absurd request: past the memory
+  // available, its allocation fails and it reports "out of memory".
+  const rlimit limit{rlim_t(address_cap), rlim_t(address_cap)};
+  ::setrlimit(RLIMIT_AS, &limit);
   int code = 0;
   try {
     tetgenio in, out;
-    fill_input(s, in);
+    fill_input(s, o.regions, in);
     std::vector<char> sw(switches.begin(), switches.end());
     sw.push_back('\0');
     tetrahedralize(sw.data(), &in, &out);
     const int nf = out.trifacemarkerlist ? out.numberoftrifaces : 0;
     const bool ok = write_array(fd, out.pointlist, std::int64_t(3) * out.numberofpoints) &&
                     write_array(fd, out.tetrahedronlist, std::int64_t(out.numberofcorners) * out.numberoftetrahedra) &&
-                    write_array(fd, out.trifacemarkerlist, std::int64_t(nf));
+                    write_array(fd, out.trifacemarkerlist, std::int64_t(nf)) &&
+                    write_array(fd, out.tetrahedronattributelist,
+                                out.tetrahedronattributelist
+                                    ? std::int64_t(out.numberoftetrahedronattributes) * out.numberoftetrahedra
+                                    : 0);
     code = ok ? 0 : kPipeFailed;
   } catch (int tetgen_code) {
     code = kTetgenCodeBase + tetgen_code;
+  } catch (const std::bad_alloc&) {
+    code = kTetgenCodeBase + 1;  // TetGen's own code for "out of memory"
   } catch (...) {
     code = kUnknownException;
   }
@@ -143,29 +181,84 @@ std::string tetgen_reason(int code) {
   }
 }
 
+/// This process's virtual size (bytes; VmSize of /proc/self/status), 0 if unknown.
+double process_virtual_size() {
+  std::ifstream f("/proc/self/status");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind("VmSize:", 0) == 0) return 1024.0 * std::atof(line.c_str() + 7);
+  return 0;
+}
+
+/// The child of the run in flight (0 = none), for the signal handler.
+std::atomic<pid_t> g_child{0};
+struct sigaction g_previous[3];
+constexpr int kForwarded[3] = {SIGINT, SIGTERM, SIGHUP};
+
+/// Kills the child, puts the previous disposition back and re-raises: the
+/// parent then ends (or handles the signal) as it would have without us.
+extern "C" void kill_child_and_reraise(int sig) {
+  const pid_t child = g_child.load();
+  if (child > 0) ::kill(child, SIGKILL);
+  for (int k = 0; k < 3; ++k)
+    if (kForwarded[k] == sig) ::sigaction(sig, &g_previous[k], nullptr);
+  ::raise(sig);
+}
+
+/// Installs the handler for the lifetime of one run.
+struct ChildGuard {
+  explicit ChildGuard(pid_t child) {
+    g_child = child;
+    struct sigaction sa {};
+    sa.sa_handler = kill_child_and_reraise;
+    sigemptyset(&sa.sa_mask);
+    for (int k = 0; k < 3; ++k) ::sigaction(kForwarded[k], &sa, &g_previous[k]);
+  }
+  ~ChildGuard() {
+    for (int k = 0; k < 3; ++k) ::sigaction(kForwarded[k], &g_previous[k], nullptr);
+    g_child = 0;
+  }
+};
+
 /// One TetGen run in a child process; throws MeshError on any failure.
-TetgenOutput run_tetgen(const SurfaceMesh& s, const std::string& switches, const std::string& source) {
+TetgenOutput run_tetgen(const SurfaceMesh& s, const MeshingOptions& o, const std::string& switches,
+                        const std::string& source) {
   int fds[2];
   if (::pipe(fds) != 0)
     throw MeshError(fmt::format("{}: cannot create a pipe for TetGen: {}", source, std::strerror(errno)));
+  const pid_t parent = ::getpid();
+  // the child's address-space cap: what it inherits plus the memory available
+  const double address_cap = process_virtual_size() + available_memory();
+  // Block the forwarded signals across fork so that none arrives between the
+  // fork and the guard's installation with nobody to kill the child.
+  sigset_t block, old_mask;
+  sigemptyset(&block);
+  for (int sig : kForwarded) sigaddset(&block, sig);
+  ::pthread_sigmask(SIG_BLOCK, &block, &old_mask);
   const pid_t pid = ::fork();
   if (pid < 0) {
+    ::pthread_sigmask(SIG_SETMASK, &old_mask, nullptr);
     ::close(fds[0]);
     ::close(fds[1]);
     throw MeshError(fmt::format("{}: cannot start TetGen (fork): {}", source, std::strerror(errno)));
   }
   if (pid == 0) {
+    ::pthread_sigmask(SIG_SETMASK, &old_mask, nullptr);
     ::close(fds[0]);
-    child_run(s, switches, fds[1]);
+    child_run(s, o, switches, fds[1], parent, address_cap);
   }
+  ChildGuard guard(pid);
+  ::pthread_sigmask(SIG_SETMASK, &old_mask, nullptr);
   ::close(fds[1]);
   TetgenOutput out;
-  const bool read_ok =
-      read_array(fds[0], out.points) && read_array(fds[0], out.tets) && read_array(fds[0], out.face_tags);
+  const bool read_ok = read_array(fds[0], out.points) && read_array(fds[0], out.tets) &&
+                       read_array(fds[0], out.face_tags) && read_array(fds[0], out.attributes);
   ::close(fds[0]);
   int status = 0;
-  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  rusage usage{};
+  while (::wait4(pid, &status, 0, &usage) < 0 && errno == EINTR) {
   }
+  out.peak_bytes = 1024.0 * double(usage.ru_maxrss);
   if (WIFSIGNALED(status))
     throw MeshError(fmt::format("{}: TetGen crashed (signal {}, {}) with switches '{}'", source, WTERMSIG(status),
                                 strsignal(WTERMSIG(status)), switches));
@@ -179,7 +272,7 @@ TetgenOutput run_tetgen(const SurfaceMesh& s, const std::string& switches, const
 /// Runs TetGen's self-intersection detection (d switch); throws naming the
 /// first pair of intersecting input triangles.
 void check_self_intersection(const SurfaceMesh& s, const std::string& source) {
-  const TetgenOutput d = run_tetgen(s, "pzQd", source);
+  const TetgenOutput d = run_tetgen(s, {}, "pzQd", source);
   if (d.face_tags.empty()) return;
   std::vector<index_t> tris;
   for (index_t tag : d.face_tags)
@@ -197,6 +290,12 @@ void check_self_intersection(const SurfaceMesh& s, const std::string& source) {
 /// positive (swapping corners 1 and 2); throws on a zero-volume tet.
 VolumeMesh to_volume_mesh(const TetgenOutput& o, const std::string& source) {
   VolumeMesh m;
+  m.peak_bytes = o.peak_bytes;
+  const size_t n_tets = o.tets.size() / 4;
+  if (!o.attributes.empty()) {
+    const size_t per = o.attributes.size() / std::max<size_t>(1, n_tets);
+    for (size_t e = 0; e < n_tets; ++e) m.tet_region.push_back(int(std::lround(o.attributes[per * e])));
+  }
   const index_t np = static_cast<index_t>(o.points.size() / 3);
   std::vector<index_t> map(np, -1);
   m.tets.reserve(o.tets.size());
@@ -226,7 +325,7 @@ VolumeMesh to_volume_mesh(const TetgenOutput& o, const std::string& source) {
 }
 
 VolumeMesh mesh_once(const SurfaceMesh& s, const MeshingOptions& o, const std::string& source) {
-  VolumeMesh m = to_volume_mesh(run_tetgen(s, tetgen_switches(o, source), source), source);
+  VolumeMesh m = to_volume_mesh(run_tetgen(s, o, tetgen_switches(o, source), source), source);
   m.max_volume = o.max_volume;
   m.runs = 1;
   return m;
@@ -243,11 +342,19 @@ VolumeMesh mesh_to_target(const SurfaceMesh& s, MeshingOptions o, const std::str
   int runs = 0;
   for (int round = 0; round < kTargetRounds; ++round) {
     o.max_volume = a;
+    const auto start = std::chrono::steady_clock::now();
     VolumeMesh m = mesh_once(s, o, source);
     ++runs;
     const double n = m.n_tets();
+    if (o.progress)
+      o.progress(fmt::format("tetgen run {} (at most {}): max volume {:.3g} mm^3 -> {} tets (target {}), {:.1f} s, "
+                             "{:.0f} MB",
+                             runs, kTargetRounds, 1e9 * a, m.n_tets(), o.target_tets,
+                             std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(),
+                             m.peak_bytes / 1e6));
     if (best.tets.empty() || std::fabs(n - target) < std::fabs(best.n_tets() - target)) best = std::move(m);
     if (std::fabs(n - target) <= kTargetTolerance * target) break;
+    if (n > target && prev_n == n) break;  // the surface alone forces this many: larger tets change nothing
     if (prev_a > 0 && prev_n != n && prev_a != a)
       beta = std::clamp(std::log(n / prev_n) / std::log(a / prev_a), -2.0, -0.3);
     prev_a = a;
@@ -269,8 +376,17 @@ std::string tetgen_switches(const MeshingOptions& o, const std::string& source) 
                     source, o.quality));
   if (!(o.max_volume >= 0) || !std::isfinite(o.max_volume))
     throw MeshError(fmt::format("{}: maximum tet volume {} m^3 must be >= 0 (0 = none)", source, o.max_volume));
+  if (!(o.min_dihedral >= 0 && o.min_dihedral <= 30))
+    throw MeshError(fmt::format("{}: minimum dihedral angle {} degrees must be in [0, 30] (TetGen may not terminate "
+                                "above)",
+                                source, o.min_dihedral));
+  if (o.optimise < 0 || o.optimise > 10)
+    throw MeshError(fmt::format("{}: optimisation level {} must be in 0..10", source, o.optimise));
   if (o.quality > 0) sw += fmt::format("q{:.6g}", o.quality);
+  if (o.quality > 0 && o.min_dihedral > 0) sw += fmt::format("/{:.6g}", o.min_dihedral);
+  if (o.optimise != 2) sw += fmt::format("O{}", o.optimise);
   if (o.max_volume > 0) sw += fmt::format("a{:.9g}", o.max_volume);
+  if (!o.regions.empty()) sw += "A";
   return sw;
 }
 
@@ -279,10 +395,41 @@ VolumeMesh tetrahedralize_surface(const SurfaceMesh& surface, const MeshingOptio
   if (options.target_tets < 0)
     throw MeshError(fmt::format("{}: target tet count {} must be >= 0 (0 = off)", source, options.target_tets));
   tetgen_switches(options, source);  // validates the options before any work
+  if (options.target_tets > 0)
+    check_tet_memory(options.target_tets, kBytesPerTet, fmt::format("a target of {} tets", options.target_tets),
+                     source);
+  else if (options.max_volume > 0)
+    check_tet_memory(std::fabs(enclosed_volume(surface)) / options.max_volume, kBytesPerTet,
+                     fmt::format("a maximum tet volume of {:.3g} m^3", options.max_volume), source);
+  for (const RegionSeed& r : options.regions)
+    if (r.attribute <= 0 || !std::isfinite(r.point.x + r.point.y + r.point.z))
+      throw MeshError(fmt::format("{}: region attribute {} must be > 0 with a finite seed point", source, r.attribute));
   check_closed(surface, source);
   check_self_intersection(surface, source);
   if (options.target_tets > 0) return mesh_to_target(surface, options, source);
-  return mesh_once(surface, options, source);
+  VolumeMesh m = mesh_once(surface, options, source);
+  if (options.progress)
+    options.progress(fmt::format("tetgen: {} tets, {:.0f} MB", m.n_tets(), m.peak_bytes / 1e6));
+  return m;
+}
+
+void check_tet_memory(double tets, double bytes_per_tet, const std::string& what, const std::string& source) {
+  const double need = tets * bytes_per_tet, have = available_memory();
+  if (need > have)
+    throw MeshError(fmt::format(
+        "{}: {} means about {:.3g} million tets, which need about {:.3g} GB of memory ({} bytes per tet); only "
+        "{:.3g} GB are available: ask for fewer tets",
+        source, what, tets / 1e6, need / 1e9, bytes_per_tet, have / 1e9));
+}
+
+double available_memory() {
+  std::ifstream f("/proc/meminfo");
+  std::string key;
+  double kb = 0;
+  std::string unit;
+  while (f >> key >> kb >> unit)
+    if (key == "MemAvailable:") return 1024.0 * kb;
+  return double(::sysconf(_SC_PHYS_PAGES)) * double(::sysconf(_SC_PAGESIZE));
 }
 
 double total_volume(const VolumeMesh& m) {

@@ -3,8 +3,10 @@
 #include <fmt/format.h>
 
 #include <filesystem>
-#include <fstream>
+#include <sstream>
 #include <stdexcept>
+
+#include "io/atomic_file.hpp"
 
 namespace tissue::io {
 namespace {
@@ -15,11 +17,11 @@ void check_size(const std::string& path, const char* field, size_t got, size_t w
 }
 
 /// Writes a component-major (3 x n) field as n interleaved xyz triples.
-void write_vec3(std::ofstream& out, const std::vector<double>& v, index_t n) {
+void write_vec3(std::ostream& out, const std::vector<double>& v, index_t n) {
   for (index_t i = 0; i < n; ++i) out << fmt::format("{:.9g} {:.9g} {:.9g}\n", v[i], v[n + i], v[2 * size_t(n) + i]);
 }
 
-void write_scalars(std::ofstream& out, const std::vector<double>& v) {
+void write_scalars(std::ostream& out, const std::vector<double>& v) {
   for (size_t i = 0; i < v.size(); ++i)
     out << fmt::format("{:.9g}{}", v[i], (i % 8 == 7 || i + 1 == v.size()) ? "\n" : " ");
 }
@@ -32,8 +34,7 @@ void write_vtu(const std::string& path, const TissueModel<double>& m, const Fiel
   check_size(path, "nodal_pressure", f.node_p.size(), size_t(n));
   check_size(path, "internal_force", f.f.size(), 3 * size_t(n));
   check_size(path, "J", f.elem_J.size(), size_t(ne));
-  std::ofstream out(path);
-  if (!out) throw std::runtime_error(fmt::format("{}: cannot open for writing", path));
+  std::ostringstream out;
   out << "<?xml version=\"1.0\"?>\n"
          "<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n"
          "<UnstructuredGrid>\n";
@@ -61,8 +62,7 @@ void write_vtu(const std::string& path, const TissueModel<double>& m, const Fiel
          "<DataArray type=\"Float64\" Name=\"J\" format=\"ascii\">\n";
   write_scalars(out, f.elem_J);
   out << "</DataArray>\n</CellData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n";
-  out.close();
-  if (!out) throw std::runtime_error(fmt::format("{}: write failed (disk full or file removed?)", path));
+  write_file_atomic(path, out.str());
 }
 
 VtuSeries::VtuSeries(std::string directory) : directory_(std::move(directory)) {
@@ -91,16 +91,13 @@ std::string VtuSeries::write(const TissueModel<double>& model, const Fields& fie
 }
 
 void VtuSeries::write_pvd() const {
-  const std::string path = pvd_path();
-  std::ofstream out(path);
-  if (!out) throw std::runtime_error(fmt::format("{}: cannot open for writing", path));
+  std::ostringstream out;
   out << "<?xml version=\"1.0\"?>\n"
          "<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n<Collection>\n";
   for (size_t k = 0; k < files_.size(); ++k)
     out << fmt::format("<DataSet timestep=\"{:.9g}\" group=\"\" part=\"0\" file=\"{}\"/>\n", times_[k], files_[k]);
   out << "</Collection>\n</VTKFile>\n";
-  out.close();
-  if (!out) throw std::runtime_error(fmt::format("{}: write failed", path));
+  write_file_atomic(pvd_path(), out.str());
 }
 
 }  // namespace tissue::io

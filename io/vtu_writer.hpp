@@ -2,6 +2,8 @@
 // of the tissue in its reference configuration with the solver's fields, and
 // a frame series with a .pvd collection that carries the simulated times.
 // In ParaView, "Warp By Vector" on "displacement" shows the deformed shape.
+// Every file is written whole under "<name>.part" and renamed into place
+// (io/atomic_file.hpp): a reader never sees a truncated frame or .pvd.
 #pragma once
 
 #include <string>
@@ -23,8 +25,8 @@ void write_vtu(const std::string& path, const TissueModel<double>& model, const 
 
 /// A numbered series of frames, frame_0000.vtu, frame_0001.vtu, ... in one
 /// directory (created if missing), and series.pvd listing them with their
-/// times. The .pvd is rewritten after each frame, so it stays valid if the
-/// run stops early.
+/// times. The .pvd is rewritten (atomically) after each frame, so it lists
+/// exactly the complete frames if the run stops early.
 class VtuSeries {
  public:
   /// Creates `directory` (and parents); throws std::runtime_error naming it

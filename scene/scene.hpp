@@ -65,11 +65,11 @@ struct Tool {
 struct Solver {
   std::string backend = "cpu";      ///< "cpu" | "cuda"
   Precision precision = Precision::Float;  ///< scalar of the backend's store and arithmetic
-  double dt = 0;                    ///< s; 0 = safety * dt_crit
-  double dt_safety = 0.9;           ///< fraction of dt_crit used when dt = 0, in (0, 1)
+  std::optional<double> dt;         ///< s (> 0); unset ("auto") = dt-safety x dt_crit
+  double dt_safety = 0.9;           ///< fraction of dt_crit used when dt is auto, in (0, 1)
   double mass_scaling = 0.025;      ///< selective mass scaling budget, a fraction of the total mass in [0, 1)
                                     ///< (core choose_mass_scaling); 0 = off
-  double damping = -1;              ///< alpha (1/s); -1 = auto: 2 x lowest-mode estimate
+  std::optional<double> damping;    ///< alpha (1/s, >= 0); unset ("auto") = 2 x lowest-mode estimate
   int depth = kDepthAuto;           ///< rings; kDepthAll = whole mesh, kDepthAuto = adaptive
   double tick = 1e-3;               ///< haptic period (s)
   double residual_tol = 1e-3;       ///< equilibrium: relative free-node residual (SchedulerSettings)

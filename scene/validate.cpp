@@ -248,6 +248,30 @@ void check_path(const Scene& s, const Tool& t, const std::string& what) {
   }
 }
 
+/// Waypoints far beyond the mesh are a unit or typing mistake, and coordinates
+/// that overflow a float break the collision query: every waypoint must lie
+/// within kToolReach mesh sizes (bounding-box diagonal) of the mesh's box.
+void check_path_near_mesh(const Scene& s, const Tool& t, const std::string& what) {
+  constexpr double kToolReach = 1000;
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (size_t k = 0; k < s.nodes.size(); ++k) {
+    lo[k % 3] = std::min(lo[k % 3], s.nodes[k]);
+    hi[k % 3] = std::max(hi[k % 3], s.nodes[k]);
+  }
+  const double size = std::hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]);
+  for (size_t k = 0; k < t.path.size(); ++k) {
+    const Vec3<double>& p = t.path[k].p;
+    double out[3];
+    for (int c = 0; c < 3; ++c) out[c] = std::max({lo[c] - p[c], p[c] - hi[c], 0.0});
+    const double d = std::hypot(out[0], out[1], out[2]);
+    if (d > kToolReach * size)
+      fail(s, t.line,
+           fmt::format("{}: waypoint {} at ({}, {}, {}) m is {:.3g} m from the mesh, more than {:.0f} x its size "
+                       "({:.3g} m); coordinates are metres",
+                       what, k, p.x, p.y, p.z, d, kToolReach, size));
+  }
+}
+
 void check_tool(const Scene& s, const Tool& t) {
   const std::string what = fmt::format("tool '{}'", t.name);
   check_finite(s, t.line, what, "radius", t.radius);
@@ -281,6 +305,7 @@ void check_tool(const Scene& s, const Tool& t) {
          fmt::format("{}: a scripted device needs a path (path=\"file.csv\" or <waypoint> children){}", what,
                      t.path_file.empty() ? "" : fmt::format("; '{}' gave no waypoints", t.path_file)));
   check_path(s, t, what);
+  check_path_near_mesh(s, t, what);
 }
 
 // ---- solver ----------------------------------------------------------------
@@ -291,18 +316,20 @@ void check_solver(const Scene& s) {
   if (v.backend != "cpu" && v.backend != "cuda")
     fail(s, ln, fmt::format("solver: unknown backend '{}'; expected cpu or cuda", v.backend));
   const std::pair<std::string_view, double> numbers[] = {
-      {"dt", v.dt},     {"dt-safety", v.dt_safety},       {"mass-scaling", v.mass_scaling}, {"damping", v.damping},
-      {"tick", v.tick}, {"residual-tol", v.residual_tol}, {"kinetic-tol", v.kinetic_tol}};
+      {"dt", v.dt.value_or(1)}, {"dt-safety", v.dt_safety},       {"mass-scaling", v.mass_scaling},
+      {"damping", v.damping.value_or(0)}, {"tick", v.tick}, {"residual-tol", v.residual_tol},
+      {"kinetic-tol", v.kinetic_tol}};
   for (const auto& [name, value] : numbers) check_finite(s, ln, "solver", name, value);
-  if (v.dt < 0) fail(s, ln, fmt::format("solver: dt = {} s must be >= 0 (0 or \"auto\" = dt-safety x dt_crit)", v.dt));
+  if (v.dt && !(*v.dt > 0))
+    fail(s, ln, fmt::format("solver: dt = {} s must be > 0 (or \"auto\" = dt-safety x dt_crit)", *v.dt));
   if (!(v.dt_safety > 0 && v.dt_safety < 1))
     fail(s, ln, fmt::format("solver: dt-safety = {} must be in (0, 1) (a fraction of the critical step)", v.dt_safety));
   if (!(v.mass_scaling >= 0 && v.mass_scaling < 1))
     fail(s, ln,
          fmt::format("solver: mass-scaling = {} must be in [0, 1) (the added mass allowed, a fraction of the total)",
                      v.mass_scaling));
-  if (v.damping < 0 && v.damping != -1)
-    fail(s, ln, fmt::format("solver: damping = {} 1/s must be >= 0 (or \"auto\")", v.damping));
+  if (v.damping && *v.damping < 0)
+    fail(s, ln, fmt::format("solver: damping = {} 1/s must be >= 0 (or \"auto\")", *v.damping));
   if (v.depth < kDepthAuto)
     fail(s, ln, fmt::format("solver: depth = {} must be >= 0 (or \"all\" or \"auto\")", v.depth));
   if (!(v.tick > 0)) fail(s, ln, fmt::format("solver: tick = {} s must be > 0", v.tick));
@@ -315,6 +342,8 @@ void check_solver(const Scene& s) {
 std::string location(const Scene& scene, int line) {
   return line > 0 ? fmt::format("{}:{}", scene.source, line) : scene.source;
 }
+
+void validate_material(const Scene& scene, const Material& material) { check_material(scene, material); }
 
 void validate(const Scene& scene) {
   (void)to_model_input(scene);
@@ -330,8 +359,11 @@ ModelInput to_model_input(const Scene& scene) {
   check_solver(scene);
   in.nodes = scene.nodes;
   in.tets = scene.tets;
-  for (const Material& m : scene.materials) in.materials.push_back(m.params());
-  in.dt = scene.solver.dt;
+  for (const Material& m : scene.materials) {
+    in.materials.push_back(m.params());
+    in.material_names.push_back(m.name);
+  }
+  in.dt = scene.solver.dt.value_or(0);  // ModelInput: 0 = dt_safety x dt_crit
   in.dt_safety = scene.solver.dt_safety;
   in.mass_scaling = scene.solver.mass_scaling;
   in.tick = scene.solver.tick;
@@ -343,7 +375,11 @@ ModelInput to_model_input(const Scene& scene) {
 
 TissueModel<double> load_model(const Scene& scene) {
   TissueModel<double> m = build_model(to_model_input(scene));
-  align_time_step(m, scene.solver.tick);  // whole steps per haptic tick
+  try {
+    align_time_step(m, scene.solver.tick);  // whole steps per haptic tick
+  } catch (const ModelError& e) {
+    throw ModelError(location(scene, scene.solver.line) + ": solver: " + e.what());
+  }
   return m;
 }
 

@@ -15,10 +15,12 @@
 //   tools:       radius finite, > 0 and at most half the body's largest
 //                extent; shaft-length >= 0; direction non-zero; device
 //                scripted | mouse | phantom; a scripted tool has a path;
-//                waypoints (tip and axis) finite with increasing t;
-//   solver:      backend cpu | cuda; numbers finite; dt >= 0 (0 = auto);
-//                0 < dt-safety < 1; damping >= 0 or -1 (auto); depth >= -2
-//                (-1 = all, -2 = auto); tick > 0; residual-tol > 0; kinetic-tol > 0.
+//                waypoints (tip and axis) finite with increasing t, tips within
+//                1000 mesh sizes (bounding-box diagonals) of the mesh;
+//   solver:      backend cpu | cuda; numbers finite; dt > 0 or unset (auto);
+//                0 < dt-safety < 1; 0 <= mass-scaling < 1; damping >= 0 or
+//                unset (auto); depth >= 0, kDepthAll (-1) or kDepthAuto (-2);
+//                tick > 0; residual-tol > 0; kinetic-tol > 0.
 // The mesh geometry itself (zero-volume tets, unused nodes, dt above the
 // stable limit) is checked by core build_model(), whose ModelError names the
 // scene file (ModelInput::source) and the element or node.
@@ -43,6 +45,11 @@ std::string location(const Scene& scene, int line);
 
 /// Checks every rule listed above; throws SceneError for the first one broken.
 void validate(const Scene& scene);
+
+/// Checks one material by the materials' rules above (for a tool that makes
+/// a scene, such as tissue mesh, before it does any work); throws SceneError
+/// naming scene.source and the material.
+void validate_material(const Scene& scene, const Material& material);
 
 /// Validates the scene and resolves it for build_model(): nodes and tets
 /// copied, element sets turned into one material index per element (the

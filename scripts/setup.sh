@@ -5,10 +5,12 @@ set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 BUILD=${TISSUE_BUILD_DIR:-$ROOT/build}
 PACKAGES=(build-essential cmake pkg-config libfmt-dev libeigen3-dev libtbb-dev libembree-dev libtet1.5-dev
-          libassimp-dev libpugixml-dev libcli11-dev libgtest-dev libgmock-dev
+          libassimp-dev libcgal-dev libpugixml-dev libcli11-dev libgtest-dev libgmock-dev
           # the viewer (apps/viewer): windowing, GL through GLEW, EGL, Dear ImGui, PNG; Xvfb + Mesa for pictures
           libglfw3-dev libglew-dev libgl-dev libegl-dev libopengl-dev libimgui-dev libstb-dev
-          xvfb xauth libgl1-mesa-dri)
+          xvfb xauth libgl1-mesa-dri
+          # scripts/fuzz: libFuzzer targets built with clang
+          clang-15 libfuzzer-15-dev)
 
 install_packages() {
   local missing=()

@@ -140,10 +140,10 @@ TEST(KidneyScene, MaterialAndSolverDefaults) {
   EXPECT_TRUE(s.sets[0].all);
   EXPECT_EQ(s.solver.backend, "cpu");
   EXPECT_EQ(s.solver.precision, tissue::Precision::Float);
-  EXPECT_EQ(s.solver.dt, 0);
+  EXPECT_FALSE(s.solver.dt);
   EXPECT_DOUBLE_EQ(s.solver.dt_safety, 0.9);
   EXPECT_DOUBLE_EQ(s.solver.mass_scaling, 0.025);
-  EXPECT_LT(s.solver.damping, 0);
+  EXPECT_FALSE(s.solver.damping);
   EXPECT_EQ(s.solver.depth, tissue::kDepthAuto);
   EXPECT_DOUBLE_EQ(s.solver.tick, 1e-3);
   EXPECT_NO_THROW(tissue::scene::validate(s));

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "accuracy/locking.hpp"
 #include "backends/registry.hpp"
 #include "core/box_mesh.hpp"
 #include "core/model.hpp"
@@ -99,6 +100,15 @@ void expect_equilibrium(const Indentation& r, const char* what) {
 // (ratio 28.5); nu = 0.3 gives 0.1086 N and 0.1072 N (ratio 1.013). Refining
 // to 8 x 8 x 8 cells brings IANP at nu = 0.499 to 0.132 N and plain to 0.319 N.
 // The unconfined linear estimate E A eps is 0.096 N; the clamped faces stiffen.
+TEST(Locking, MeshesMustAscend) {
+  try {
+    (void)accuracy::locking_study(0.45, {8, 4});
+    FAIL() << "expected an error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("cells 4 after 8: the meshes must ascend"), std::string::npos) << e.what();
+  }
+}
+
 TEST(Locking, PlainTetLocksAtNearlyIncompressible) {
   const Indentation plain = indent(false, 0.499), ianp = indent(true, 0.499);
   expect_equilibrium(plain, "plain, nu = 0.499");

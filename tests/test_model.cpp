@@ -411,6 +411,78 @@ TEST(ModelErrors, ZeroVolumeTetNamesElement) {
   expect_model_error([&] { build_model(in); }, {"box", "element 48", "node 1", "twice"});
 }
 
+// A tet listed twice (any corner order, inverted or not) would double the
+// mass and stiffness there: both element ids and the shared nodes are named.
+TEST(ModelErrors, DuplicatedTetNamesBothElements) {
+  ModelInput in = box_input(2, 2, 2, 0.02, 0.02, 0.02);
+  const index_t e = 17, ne = index_t(in.tets.size() / 4);
+  std::vector<index_t> corners(in.tets.begin() + 4 * e, in.tets.begin() + 4 * e + 4);
+  std::sort(corners.begin(), corners.end());
+  in.tets.insert(in.tets.end(), {in.tets[4 * e + 3], in.tets[4 * e + 1], in.tets[4 * e + 0], in.tets[4 * e + 2]});
+  expect_model_error([&] { build_model(in); },
+                     {"box", fmt::format("elements {} and {}", e, ne), "same four nodes",
+                      fmt::format("({} {} {} {})", corners[0], corners[1], corners[2], corners[3]), "remove one"});
+}
+
+// The flat-tet test is relative to each tet's own size: a mesh scaled by
+// 1e-40 or 1e40 builds the same model; coordinates whose volumes leave
+// the range of a double are named as that, never as a contradicting "zero
+// volume 1e+300 m^3".
+TEST(ModelErrors, VolumeTestIsScaleFreeAndNamesOverflow) {
+  const ModelInput ref_in = box_input(2, 2, 2, 0.02, 0.02, 0.02);
+  const TissueModel<double> ref = build_model(ref_in);
+  for (double scale : {1e-40, 1e40}) {
+    ModelInput in = ref_in;
+    for (double& x : in.nodes) x *= scale;
+    const TissueModel<double> m = build_model(in);
+    EXPECT_EQ(m.n_elems, ref.n_elems) << scale;
+    EXPECT_NEAR(m.volume[0] / (scale * scale * scale), ref.volume[0], 1e-12 * ref.volume[0]) << scale;
+  }
+  ModelInput big = ref_in;
+  for (double& x : big.nodes) x *= 1e80;
+  expect_model_error([&] { build_model(big); }, {"box", "element 0", "overflows a double", "metres"});
+  ModelInput tiny = ref_in;
+  for (double& x : tiny.nodes) x *= 1e-80;
+  expect_model_error([&] { build_model(tiny); }, {"box", "element 0", "underflows a double", "metres"});
+  // a flat tet far from the origin is still named as flat, with its ratio
+  ModelInput flat = box_input(2, 2, 2, 0.02, 0.02, 0.02);
+  for (double& x : flat.nodes) x += 1e3;
+  // three corners on the box's x edge: a flat tet
+  flat.tets.insert(flat.tets.end(), {box_node(2, 2, 0, 0, 0), box_node(2, 2, 1, 0, 0), box_node(2, 2, 2, 0, 0),
+                                     box_node(2, 2, 0, 1, 0)});
+  expect_model_error([&] { build_model(flat); }, {"box", "zero volume", "longest edge", "flat tet"});
+}
+
+// A modulus or density far outside tissue's range makes the stable step so
+// small that one tick would need more steps than any run can take: the
+// message names the element, the material and its wave speed, not a dt the
+// user never set.
+TEST(ModelErrors, ExtremeMaterialNamesTheCauseOfTheStepLimit) {
+  ModelInput in = box_input(2, 1, 1, 0.02, 0.01, 0.01);
+  in.materials = {material(1e30, kNu, kRho)};
+  in.material_names = {"capsule"};
+  in.tick = 1e-3;
+  in.dt_safety = 0.9;
+  for (double budget : {0.0, 0.025}) {
+    in.mass_scaling = budget;
+    expect_model_error([&] { build_model(in); },
+                       {"box", "material 'capsule'", "mu = 3.448e+29 Pa", "rho = 1000 kg/m^3", "wave speed",
+                        "TLED steps", "far too high", "Pa, kg/m^3"});
+  }
+  in.materials = {material(kE, kNu, 1e-30)};
+  expect_model_error([&] { build_model(in); }, {"box", "material 'capsule'", "rho = 1e-30 kg/m^3", "wave speed"});
+  // an absurd safety factor on a sound material is named as the cause
+  in.materials = {material(kE, kNu, kRho)};
+  in.dt_safety = 1e-300;
+  expect_model_error([&] { build_model(in); }, {"box", "dt safety factor 1e-300", "TLED steps", "about 0.9"});
+  in.dt_safety = 0.9;
+  in.materials = {material(kE, kNu, 1e-30)};
+  // without a tick (a model built for a relaxation) no such limit applies
+  in.tick = 0;
+  in.mass_scaling = 0;
+  EXPECT_NO_THROW(build_model(in));
+}
+
 TEST(ModelErrors, InvertedTetsAreReorientedAndCounted) {
   const ModelInput good = box_input(2, 2, 2, 0.02, 0.02, 0.02);
   const auto ref = build_model(good);

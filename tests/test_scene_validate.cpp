@@ -318,16 +318,31 @@ TEST(SceneValidate, NonFiniteWaypoint) {
 
 // ---- solver ----
 
+// A waypoint at 1e300 m once reached the collision query as an invalid ray
+// (an assertion in Embree): waypoints must lie near the mesh.
+TEST(SceneValidate, WaypointFarFromTheMesh) {
+  Scene s = valid_scene();
+  s.tools[0].path[1].p.x = 1e300;
+  EXPECT_TRUE(rejects(s, {"organ.xml:15: ", "tool 'probe': waypoint 1 at (1e+300, 0.005, 0.008) m", "from the mesh",
+                          "1000 x its size", "metres"}));
+  s.tools[0].path[1].p.x = 20.0;  // 20 m from a 2.4 cm mesh: still a plausible approach path
+  EXPECT_NO_THROW(validate(s));
+}
+
 TEST(SceneValidate, UnknownBackend) {
   Scene s = valid_scene();
   s.solver.backend = "gpu";
   EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "unknown backend 'gpu'", "cpu or cuda"}));
 }
 
-TEST(SceneValidate, NegativeTimeStep) {
+TEST(SceneValidate, NonPositiveTimeStep) {
   Scene s = valid_scene();
   s.solver.dt = -1e-4;
-  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "dt = -0.0001 s", "must be >= 0"}));
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "dt = -0.0001 s", "must be > 0 (or \"auto\""}));
+  s.solver.dt = 0;  // not a spelling of "auto"
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "dt = 0 s", "must be > 0"}));
+  s.solver.dt.reset();  // auto
+  EXPECT_NO_THROW(validate(s));
 }
 
 TEST(SceneValidate, SafetyFactorOutsideOpenUnitInterval) {
@@ -353,7 +368,9 @@ TEST(SceneValidate, NegativeDampingOtherThanAuto) {
   Scene s = valid_scene();
   s.solver.damping = -0.5;
   EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "damping = -0.5", "must be >= 0 (or \"auto\")"}));
-  s.solver.damping = -1;  // auto
+  s.solver.damping = -1;  // no longer a spelling of "auto"
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "damping = -1", "must be >= 0 (or \"auto\")"}));
+  s.solver.damping.reset();  // auto
   EXPECT_NO_THROW(validate(s));
 }
 

@@ -17,11 +17,13 @@
 #include "io/scene_xml.hpp"
 #include "io/tetgen_files.hpp"
 #include "scene/validate.hpp"
+#include "tests/temp_dir.hpp"
 
 namespace tissue {
 namespace {
 
 namespace fs = std::filesystem;
+using testing_support::TempDir;
 using io::format_scene;
 using io::parse_scene;
 using io::read_scene;
@@ -31,22 +33,6 @@ using scene::Material;
 using scene::Scene;
 using scene::SceneError;
 
-/// A fresh folder for one test, removed afterwards.
-class TempDir {
- public:
-  TempDir() {
-    const auto* info = testing::UnitTest::GetInstance()->current_test_info();
-    path_ = fs::temp_directory_path() / fmt::format("tissue-{}-{}-{}", info->test_suite_name(), info->name(), getpid());
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TempDir() { fs::remove_all(path_); }
-  std::string file(const std::string& name) const { return (path_ / name).string(); }
-  void write(const std::string& name, const std::string& text) const { std::ofstream(file(name)) << text; }
-
- private:
-  fs::path path_;
-};
 
 /// 1-based line of the first occurrence of `needle` in `text`.
 int line_of(const std::string& text, const std::string& needle) {
@@ -305,8 +291,8 @@ TEST(SceneXml, SolverDefaultsAndKeywords) {
                                       kTet);
   const Scene s = parse_scene(xml, "s.xml", "");
   const scene::Solver def;
-  EXPECT_EQ(s.solver.dt, 0);
-  EXPECT_EQ(s.solver.damping, -1);
+  EXPECT_FALSE(s.solver.dt);
+  EXPECT_FALSE(s.solver.damping);
   EXPECT_EQ(s.solver.depth, kDepthAll);
   EXPECT_EQ(s.solver.precision, Precision::Double);
   EXPECT_EQ(s.solver.backend, def.backend);
@@ -320,6 +306,29 @@ TEST(SceneXml, SolverDefaultsAndKeywords) {
   EXPECT_EQ(plain.solver.depth, 7);
   EXPECT_EQ(plain.solver.dt, 1e-5);
   EXPECT_EQ(plain.solver.damping, 0);
+}
+
+// The in-memory "auto" of dt, damping and depth is no number: the numbers
+// that once stood for it (dt 0, damping -1, depth -1 / -2) are refused from
+// a file with the rule, so a typo cannot silently mean "auto".
+TEST(SceneXml, SentinelsAreNotAcceptedAsInput) {
+  const auto scene_with = [&](const std::string& solver) {
+    return fmt::format("<tissue-scene>{}\n<material name=\"m\" E=\"3000\" nu=\"0.45\" rho=\"1000\"/>\n"
+                       "<element-set material=\"m\" elements=\"all\"/>\n<solver {}/></tissue-scene>",
+                       kTet, solver);
+  };
+  const auto rule_error = [&](const std::string& solver, std::initializer_list<std::string> parts) {
+    return throws_with<SceneError>([&] { validate(parse_scene(scene_with(solver), "scene.xml", "")); }, parts);
+  };
+  EXPECT_TRUE(rule_error(R"(damping="-1")", {"scene.xml:7: ", "damping = -1 1/s must be >= 0 (or \"auto\")"}));
+  EXPECT_TRUE(rule_error(R"(dt="0")", {"scene.xml:7: ", "dt = 0 s must be > 0 (or \"auto\""}));
+  EXPECT_TRUE(xml_error(scene_with(R"(depth="-1")"), {"scene.xml:7: ", "depth = -1 must be >= 0", "\"all\""}));
+  EXPECT_TRUE(xml_error(scene_with(R"(depth="-2")"), {"scene.xml:7: ", "depth = -2 must be >= 0", "\"auto\""}));
+  const Scene s = parse_scene(scene_with(R"(damping="auto" dt="auto" depth="auto")"), "scene.xml", "");
+  EXPECT_FALSE(s.solver.damping);
+  EXPECT_FALSE(s.solver.dt);
+  EXPECT_EQ(s.solver.depth, kDepthAuto);
+  EXPECT_NO_THROW(validate(s));
 }
 
 // depth="auto" (the adaptive region, core/scheduler.hpp) reads as kDepthAuto,
@@ -541,6 +550,25 @@ TEST(SceneXml, RuleErrorsFromValidationCiteTheXmlLine) {
       {fmt::format("scene.xml:{}: ", line_of(xml, "<material")), "material 'soft'", "nu = 0.5"}));
 }
 
+// A folder given where a file belongs is named as such, not as malformed XML
+// or an empty file.
+TEST(SceneXml, DirectoriesAreNamed) {
+  TempDir dir;
+  fs::create_directories(dir.file("scene.xml"));
+  EXPECT_TRUE(throws_with<SceneError>([&] { (void)read_scene(dir.file("scene.xml")); },
+                                      {dir.file("scene.xml"), "is a directory, not a scene file"}));
+  fs::create_directories(dir.file("m.node"));
+  EXPECT_TRUE(throws_with<io::TetgenFileError>([&] { (void)io::read_tetgen(dir.file("m.node")); },
+                                               {dir.file("m.node"), "is a directory"}));
+  fs::create_directories(dir.file("p.csv"));
+  EXPECT_TRUE(throws_with<io::PathCsvError>([&] { (void)io::read_path_csv(dir.file("p.csv")); },
+                                            {dir.file("p.csv"), "is a directory"}));
+  // a device would be read forever
+  EXPECT_TRUE(throws_with<io::PathCsvError>([&] { (void)io::read_path_csv("/dev/zero"); },
+                                            {"/dev/zero: is a device or socket, not a path CSV file"}));
+  EXPECT_TRUE(throws_with<SceneError>([&] { (void)read_scene("/dev/zero"); }, {"/dev/zero: is a device"}));
+}
+
 TEST(SceneXml, MissingFilesAreNamed) {
   TempDir dir;
   dir.write("scene.xml", "<tissue-scene>\n  <mesh file=\"nope.node\"/>\n</tissue-scene>\n");
@@ -637,6 +665,19 @@ TEST(TetgenFiles, ErrorsNameFileAndLine) {
   EXPECT_TRUE(ele_error("1 10 0\n", {"m.ele:1: ", "10 nodes per tetrahedron", "linear 4-node"}));
   EXPECT_TRUE(ele_error("1 4 0\n0 0 1 x 3\n", {"m.ele:2: ", "corner 2 'x' is not a whole number"}));
   EXPECT_TRUE(ele_error("2 4 0\n0 0 1 2 3\n", {"m.ele:2: ", "ends after 1 of the 2 tetrahedra"}));
+  // headers that claim more than the file holds are refused before anything is allocated for them
+  EXPECT_TRUE(node_error("3000000000 3 0 0\n0 0 0 0\n", {"m.node:1: ", "3000000000 points", "32-bit ids"}));
+  EXPECT_TRUE(node_error("2000000000 3 0 0\n0 0 0 0\n1 1 0 0\n",
+                         {"m.node:1: ", "2000000000 points", "only 16 characters", "at most 2 lines of 4 fields"}));
+  EXPECT_TRUE(node_error("4 3 99999999999 0\n0 0 0 0\n",
+                         {"m.node:1: ", "100000000003 fields per point line", "only 8 characters"}));
+  EXPECT_TRUE(node_error("4 3 9223372036854775807 1\n0 0 0 0\n", {"m.node:1: ", "header field 3", "beyond any"}));
+  EXPECT_TRUE(ele_error("999999999 4 0\n0 0 1 2 3\n", {"m.ele:1: ", "999999999 tetrahedra", "at most 1 lines"}));
+  EXPECT_TRUE(node_error("1 3 99 0\n0 0 0 0\n", {"m.node:2: ", "4 fields; expected 103"}));  // a plain count
+  // the last line may lack its newline
+  std::istringstream one("1 3 0 0\n0 0 0 0");
+  int first = -1;
+  EXPECT_EQ(io::parse_tetgen_node(one, "m.node", first).size(), 3u);
   EXPECT_TRUE(throws_with<io::TetgenFileError>([] { (void)io::ele_path_for("organ.stl"); }, {"organ.stl", ".node"}));
 }
 
@@ -699,6 +740,8 @@ TEST(PathCsv, GraspAndAxisColumnsRoundTrip) {
   EXPECT_EQ(w[1].axis.y, 1.0);
   const std::string file = (std::filesystem::temp_directory_path() / "tissue_grasp_path.csv").string();
   io::write_path_csv(file, w);
+  EXPECT_FALSE(std::filesystem::exists(file + ".part"));  // written whole, then renamed
+  EXPECT_EQ(testing_support::slurp(file).substr(0, 23), "t,x,y,z,grasp,ax,ay,az\n");
   const std::vector<Waypoint> r = io::read_path_csv(file);
   ASSERT_EQ(r.size(), 2u);
   EXPECT_EQ(r[1].grasp, true);

@@ -4,16 +4,23 @@
 #include <stb/stb_image_write.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <limits>
 #include <stdexcept>
+
+#include "io/atomic_file.hpp"
 
 namespace tissue::viewer {
 
 void write_png(const std::string& path, int w, int h, const std::vector<std::uint8_t>& rgb) {
   if (rgb.size() != 3 * size_t(w) * size_t(h))
     throw std::invalid_argument(fmt::format("write_png: {} bytes for a {}x{} RGB picture", rgb.size(), w, h));
-  if (!stbi_write_png(path.c_str(), w, h, 3, rgb.data(), 3 * w))
+  const std::string part = io::part_path(path);  // renamed into place when whole
+  if (!stbi_write_png(part.c_str(), w, h, 3, rgb.data(), 3 * w)) {
+    std::remove(part.c_str());
     throw std::runtime_error(fmt::format("tissue view: cannot write the picture {}", path));
+  }
+  io::rename_into_place(part, path);
 }
 
 namespace {

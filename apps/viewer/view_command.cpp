@@ -4,6 +4,7 @@
 #include <memory>
 
 #include "apps/commands.hpp"
+#include "apps/options.hpp"
 #include "apps/viewer/viewer.hpp"
 
 namespace tissue::app {
@@ -19,10 +20,16 @@ void add_view_command(CLI::App& app, int& rc) {
   cmd->add_option("--depth", o->depth, "Region depth N (rings from the contact triangle) or 'all'");
   cmd->add_option("--device", o->device,
                   "mouse | scripted | phantom (default: mouse; for --screenshot the scene tool's device)");
-  cmd->add_option("--screenshot", o->screenshot, "Render offscreen to this PNG (and a .json sidecar), then quit");
-  cmd->add_option("--ticks", o->ticks, "With --screenshot: haptic ticks to run first (default: the tool path)");
-  cmd->add_option("--width", o->width, "Window or picture width (pixels)")->default_val(960);
-  cmd->add_option("--height", o->height, "Window or picture height (pixels)")->default_val(720);
+  cmd->add_option("--screenshot", o->screenshot, "Render offscreen to this PNG (and a .json sidecar), then quit")
+      ->check(output_file());
+  cmd->add_option("--ticks", o->ticks, "With --screenshot: haptic ticks to run first (default: the tool path)")
+      ->check(whole_number(0, 1'000'000'000));
+  cmd->add_option("--width", o->width, "Window or picture width (pixels)")
+      ->default_val(960)
+      ->check(whole_number(16, 16384));
+  cmd->add_option("--height", o->height, "Window or picture height (pixels)")
+      ->default_val(720)
+      ->check(whole_number(16, 16384));
   cmd->add_option("--gl", o->gl,
                   "window | hidden | egl (default: window; pictures: hidden under X, else egl without any X server)");
   cmd->add_option("--hide", o->hide, "Leave out of the picture: comma list of tool, region, overlay");
@@ -30,11 +37,15 @@ void add_view_command(CLI::App& app, int& rc) {
                   "With --screenshot and --device mouse: '<tick> wheel <n>; <tick> drag <x0>,<y0> <x1>,<y1>; "
                   "<tick> orbit <dx>,<dy>'");
   cmd->add_option("--seconds", o->seconds,
-                  "Stop after this many seconds (0: when the window closes; needed with --gl egl without a picture)");
+                  "Stop after this many seconds (0: when the window closes; needed with --gl egl without a picture)")
+      ->check(real_number(0, 1e7));
   cmd->add_flag("--repeat", o->repeat, "With --device scripted: play the tool path over and over");
-  cmd->add_option("--mouse-speed", o->mouse_speed, "Fastest the mouse moves the tool (m/s)")->default_val(0.25);
-  cmd->add_option("--arrow-scale", o->arrow_scale, "Force arrow length in m per N (default: 1.5 organ diagonals)");
-  cmd->add_option("--fps", o->fps, "Most display frames per second")->default_val(60);
+  cmd->add_option("--mouse-speed", o->mouse_speed, "Fastest the mouse moves the tool (m/s)")
+      ->default_val(0.25)
+      ->check(real_number(0, 100, true));
+  cmd->add_option("--arrow-scale", o->arrow_scale, "Force arrow length in m per N (default: 1.5 organ diagonals)")
+      ->check(real_number(0, 1e6, true));
+  cmd->add_option("--fps", o->fps, "Most display frames per second")->default_val(60)->check(real_number(1, 10000));
   cmd->add_flag("--realtime,!--no-realtime", o->realtime,
                 "Run the haptic thread with SCHED_FIFO priority (the default; needs CAP_SYS_NICE, else it runs at "
                 "normal priority and says so)");

@@ -26,6 +26,7 @@
 #include "apps/viewer/renderer.hpp"
 #include "apps/viewer/path_device.hpp"
 #include "apps/viewer/session.hpp"
+#include "io/atomic_file.hpp"
 
 namespace tissue::viewer {
 namespace {
@@ -261,10 +262,7 @@ int run_picture(const ViewOptions& o, Viewer& v) {
   pf.tool_shown = !hide.tool;
   pf.region_shown = !hide.region;
   const std::string json_path = o.screenshot + ".json";
-  std::FILE* f = std::fopen(json_path.c_str(), "w");
-  if (!f) throw std::runtime_error(fmt::format("tissue view: cannot write {}", json_path));
-  std::fputs(picture_json(pf).c_str(), f);
-  std::fclose(f);
+  io::write_file_atomic(json_path, picture_json(pf));
   fmt::print("wrote {} ({}x{}, {} ticks, {}, |F| = {:.4f} N, {}) and {}\n", o.screenshot, o.width, o.height,
              snap.tick < 0 ? 0 : snap.tick, snap.contact_nodes > 0 ? fmt::format("{} nodes in contact", snap.contact_nodes) : "no contact",
              norm(snap.rendered_force), v.ctx->renderer(), json_path);

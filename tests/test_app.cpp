@@ -1,0 +1,299 @@
+// The command line: option values checked with messages naming the rule
+// (whole numbers in digits, ranges, finite), the tick count and the work
+// refusal of `tissue run`, and -- through the built program -- interrupted
+// runs (SIGINT / SIGTERM: exit 130 / 143, the summary, a complete ticks.csv
+// and frame series, no .part file) and output folders (another run's
+// outputs refused unless --overwrite, a folder in use refused).
+#include <fcntl.h>
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+#include <pugixml.hpp>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "apps/commands.hpp"
+#include "apps/options.hpp"
+#include "apps/run_session.hpp"
+#include "io/scene_xml.hpp"
+#include "scene/validate.hpp"
+#include "tests/temp_dir.hpp"
+
+namespace tissue::app {
+namespace {
+
+namespace fs = std::filesystem;
+using testing_support::TempDir;
+using testing_support::slurp;
+
+
+
+long lines(const std::string& text) {
+  return std::count(text.begin(), text.end(), '\n');
+}
+
+/// The 2 x 2 x 1 cm block of docs/scene-format.md, its bottom fixed, pressed by the probe.
+const char* kBlock = R"(<tissue-scene version="1">
+  <mesh>
+    <nodes>0 0 0  0.02 0 0  0 0.02 0  0.02 0.02 0  0 0 0.01  0.02 0 0.01  0 0.02 0.01  0.02 0.02 0.01</nodes>
+    <elements>0 1 3 7  0 5 1 7  0 3 2 7  0 2 6 7  0 4 5 7  0 6 4 7</elements>
+  </mesh>
+  <material name="brain" E="3000" nu="0.45" rho="1000"/>
+  <element-set material="brain" elements="all"/>
+  <fixed box-min="-1 -1 -1" box-max="1 1 0"/>
+  <tool name="probe" radius="0.001" device="scripted">
+    <waypoint t="0" x="0.01" y="0.01" z="0.015"/>
+    <waypoint t="0.1" x="0.01" y="0.01" z="0.008"/>
+  </tool>
+</tissue-scene>
+)";
+
+// ----------------------------------------------------------- option values
+
+TEST(Options, WholeNumbers) {
+  EXPECT_EQ(whole_number_error("12", 1, 100), "");
+  EXPECT_EQ(whole_number_error("+12", 1, 100), "");
+  EXPECT_EQ(whole_number_error("-5", 1, 100), "-5 is out of range: it must be in [1, 100]");
+  EXPECT_EQ(whole_number_error("0", 1, 100), "0 is out of range: it must be in [1, 100]");
+  EXPECT_EQ(whole_number_error("nan", 1, 100), "'nan' is not a whole number");
+  EXPECT_EQ(whole_number_error("2.5", 1, 100), "'2.5' is not a whole number");
+  EXPECT_EQ(whole_number_error("1e2", 1, 100), "'1e2' is not a whole number written in digits (write 100)");
+  EXPECT_EQ(whole_number_error("1e12", 1, 1000),
+            "'1e12' is not a whole number written in digits (and 1e+12 is above the most, 1000)");
+  EXPECT_EQ(whole_number_error("99999999999999999999", 1, 100),
+            "99999999999999999999 is out of range: it must be in [1, 100]");
+}
+
+TEST(Options, RealNumbers) {
+  EXPECT_EQ(real_number_error("0.5", 0, 1, true), "");
+  EXPECT_EQ(real_number_error("0", 0, 1, true), "0 is out of range: it must be in (0, 1]");
+  EXPECT_EQ(real_number_error("1", 0, 1, false, true), "1 is out of range: it must be in [0, 1)");
+  EXPECT_EQ(real_number_error("nan", 0, 1), "nan is not a finite number");
+  EXPECT_EQ(real_number_error("-inf", 0, 1), "-inf is not a finite number");
+  EXPECT_EQ(real_number_error("1s", 0, 1), "'1s' is not a number");
+}
+
+/// The error CLI11 raises for `tissue <args>` (empty when the values pass:
+/// the command then runs and fails at once on the scene x.xml, which does
+/// not exist -- its option values were accepted).
+std::string parse_error(std::vector<std::string> args) {
+  CLI::App app;
+  int rc = 0;
+  add_run_command(app, rc);
+  add_reference_command(app, rc);
+  add_bench_command(app, rc);
+  add_tradeoff_command(app, rc);
+  add_locking_command(app, rc);
+  add_view_command(app, rc);
+  std::reverse(args.begin(), args.end());
+  try {
+    app.parse(args);
+  } catch (const CLI::ParseError& e) {
+    return e.what();
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("x.xml: cannot open the scene file"), std::string::npos) << e.what();
+  }
+  return "";
+}
+
+TEST(Options, CommandsRefuseBadValues) {
+  EXPECT_EQ(parse_error({"run", "x.xml", "--ticks", "100"}), "");
+  EXPECT_EQ(parse_error({"run", "x.xml", "--ticks", "-5"}), "--ticks: -5 is out of range: it must be in [1, 1000000000000]");
+  EXPECT_EQ(parse_error({"run", "x.xml", "--ticks", "nan"}), "--ticks: 'nan' is not a whole number");
+  EXPECT_EQ(parse_error({"run", "x.xml", "--ticks", "1e12"}),
+            "--ticks: '1e12' is not a whole number written in digits (write 1000000000000)");
+  EXPECT_EQ(parse_error({"run", "x.xml", "--frames", "-3"}), "--frames: -3 is out of range: it must be in [0, 1000000]");
+  EXPECT_EQ(parse_error({"run", "x.xml", "--time", "nan"}), "--time: nan is not a finite number");
+  EXPECT_EQ(parse_error({"run", "x.xml", "--time", "-1"}), "--time: -1 is out of range: it must be in (0, 1000000000]");
+  EXPECT_EQ(parse_error({"reference", "x.xml", "--tol", "0"}), "--tol: 0 is out of range: it must be in (0, 1)");
+  EXPECT_EQ(parse_error({"reference", "x.xml", "--safety", "1.5"}),
+            "--safety: 1.5 is out of range: it must be in (0, 1)");
+  EXPECT_EQ(parse_error({"bench", "--min-seconds", "nan"}), "--min-seconds: nan is not a finite number");
+  EXPECT_EQ(parse_error({"tradeoff", "x.xml", "--max-hold", "-1"}),
+            "--max-hold: -1 is out of range: it must be in (0, 1000000]");
+  EXPECT_EQ(parse_error({"tradeoff", "x.xml", "--meshes", "3000,-1"}),
+            "--meshes: -1 is out of range: it must be in [0, 100000000]");
+  EXPECT_EQ(parse_error({"locking", "--nu", "0.5"}), "--nu: 0.5 is out of range: it must be in (-1, 0.5)");
+  EXPECT_EQ(parse_error({"locking", "--cells", "4,0"}), "--cells: 0 is out of range: it must be in [1, 64]");
+  EXPECT_EQ(parse_error({"view", "x.xml", "--ticks", "-5"}), "--ticks: -5 is out of range: it must be in [0, 1000000000]");
+  EXPECT_EQ(parse_error({"view", "x.xml", "--width", "0"}), "--width: 0 is out of range: it must be in [16, 16384]");
+  EXPECT_EQ(parse_error({"view", "x.xml", "--fps", "nan"}), "--fps: nan is not a finite number");
+  // outputs are checked before the work that would write them
+  EXPECT_EQ(parse_error({"run", "x.xml", "--out", ""}), "--out: an empty folder name");
+  EXPECT_EQ(parse_error({"reference", "x.xml", "--json", "/"}), "--json: / is a folder; give a file name");
+  EXPECT_EQ(parse_error({"tradeoff", "x.xml", "--plot", "/no/such/dir/p.png"}),
+            "--plot: /no/such/dir/p.png: the folder /no/such/dir does not exist");
+}
+
+// ---------------------------------------------------- tick count and work
+
+TEST(RunPlan, TickCountFromTicksTimeOrPath) {
+  RunOptions o;
+  EXPECT_EQ(tick_count(o, 0.3, 1e-3), 300);  // the path
+  o.time = 0.05;
+  EXPECT_EQ(tick_count(o, 0.3, 1e-3), 50);
+  o.ticks = 7;
+  EXPECT_EQ(tick_count(o, 0.3, 1e-3), 7);
+  EXPECT_EQ(tick_count(RunOptions{}, 0.0, 1e-3), 1);  // a one-waypoint path: one tick
+  EXPECT_THROW(tick_count(RunOptions{}, 1.0, 1e-300), std::runtime_error);
+}
+
+TEST(RunPlan, WorkBeyondTheBoundIsRefusedUnlessForced) {
+  scene::Scene s = io::parse_scene(kBlock, "block.xml", "");
+  s.solver.tick = 1e-12;  // the 0.1 s path then lasts 1e11 ticks of one step each
+  const TissueModel<double> m = scene::load_model(s);
+  try {
+    check_work(s, m, 200'000'000'000L, false);
+    FAIL() << "expected a refusal";
+  } catch (const std::runtime_error& e) {
+    const std::string msg = e.what();
+    for (const char* part : {"block.xml", "200000000000 ticks x 1 TLED steps x 6 elements", "1.2e+12", "--force",
+                             "element", "material 'brain'"})
+      EXPECT_NE(msg.find(part), std::string::npos) << part << " in: " << msg;
+  }
+  EXPECT_NO_THROW(check_work(s, m, 200'000'000'000L, true));
+  EXPECT_NO_THROW(check_work(s, m, 100'000'000'000L, false));  // 6e11 element updates: within the bound
+}
+
+// ------------------------------------------------- the program, end to end
+
+struct Child {
+  pid_t pid = -1;
+  std::string out, err;  ///< files holding its stdout and stderr
+};
+
+/// Starts the built `tissue` with `args`, its output into files in `dir`.
+Child start(const TempDir& dir, const std::string& name, const std::vector<std::string>& args) {
+  Child c;
+  c.out = dir.file(name + ".out");
+  c.err = dir.file(name + ".err");
+  c.pid = fork();
+  if (c.pid == 0) {
+    const int o = open(c.out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    const int e = open(c.err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    dup2(o, 1);
+    dup2(e, 2);
+    std::vector<char*> argv{const_cast<char*>(TISSUE_EXE)};
+    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    execv(TISSUE_EXE, argv.data());
+    _exit(127);
+  }
+  return c;
+}
+
+/// Waits for the child; returns its exit code (128 + signal if a signal ended it).
+int finish(const Child& c) {
+  int status = 0;
+  waitpid(c.pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+int run_tissue(const TempDir& dir, const std::string& name, const std::vector<std::string>& args) {
+  return finish(start(dir, name, args));
+}
+
+/// Blocks until `path` holds at least `n` lines (the run has ticked), or
+/// the child ended; false then.
+bool wait_for_lines(const Child& c, const std::string& path, long n) {
+  while (lines(slurp(path)) < n) {
+    if (waitpid(c.pid, nullptr, WNOHANG) != 0) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return true;
+}
+
+/// Checks a folder left by an interrupted run: no .part file, ticks.csv
+/// with one row per tick the summary reports, a .pvd listing frames that
+/// all exist and parse, the last at the last tick's time.
+void expect_complete_outputs(const std::string& dir, const std::string& summary) {
+  for (const auto& e : fs::directory_iterator(dir))
+    EXPECT_NE(e.path().extension(), ".part") << e.path();
+  const size_t at = summary.find("haptic ticks");
+  ASSERT_NE(at, std::string::npos) << summary;
+  const long ticks = std::stol(summary.substr(summary.find_first_of("0123456789", at)));
+  const std::string csv = slurp(dir + "/ticks.csv");
+  EXPECT_EQ(lines(csv), ticks + 1);  // the header and one row per tick
+  EXPECT_EQ(csv.back(), '\n');
+  const std::string last_row = csv.substr(csv.rfind('\n', csv.size() - 2) + 1);
+  EXPECT_EQ(std::stol(last_row), ticks - 1);  // the tick column counts from 0
+  pugi::xml_document pvd;
+  ASSERT_TRUE(pvd.load_file((dir + "/series.pvd").c_str()));
+  int frames = 0;
+  double last_time = -1;
+  for (const auto& ds : pvd.child("VTKFile").child("Collection").children("DataSet")) {
+    pugi::xml_document vtu;
+    EXPECT_TRUE(vtu.load_file((dir + "/" + ds.attribute("file").value()).c_str())) << ds.attribute("file").value();
+    last_time = ds.attribute("timestep").as_double();
+    ++frames;
+  }
+  EXPECT_GE(frames, 1);  // the state at the stop is saved even before the first planned frame
+  EXPECT_NEAR(last_time, 1e-3 * ticks, 1e-9);
+}
+
+class Interrupted : public testing::TestWithParam<int> {};
+
+TEST_P(Interrupted, RunStopsAtATickWritesEverythingAndExitsWith128PlusSignal) {
+  const int sig = GetParam();
+  TempDir t;
+  std::ofstream(t.file("block.xml")) << kBlock;
+  const std::string out = t.file("out");
+  // a billion ticks: the run only ends by the signal; 1000 frames: none is due before it
+  const Child c = start(t, "run", {"run", t.file("block.xml"), "--ticks", "1000000000", "--frames", "1000", "--out",
+                                   out, "--quiet"});
+  ASSERT_TRUE(wait_for_lines(c, out + "/ticks.csv.part", 3)) << slurp(c.err);
+  // meanwhile the folder is in use
+  EXPECT_EQ(run_tissue(t, "second", {"run", t.file("block.xml"), "--ticks", "5", "--out", out, "--overwrite"}), 1);
+  EXPECT_NE(slurp(t.file("second.err")).find("in use by another running tissue process"), std::string::npos)
+      << slurp(t.file("second.err"));
+  kill(c.pid, sig);
+  EXPECT_EQ(finish(c), 128 + sig);
+  const std::string summary = slurp(c.out);
+  EXPECT_NE(summary.find(fmt::format("of 1000000000 (stopped by {} at a tick boundary)",
+                                     sig == SIGINT ? "SIGINT" : "SIGTERM")),
+            std::string::npos)
+      << summary;
+  expect_complete_outputs(out, summary);
+
+  // the folder now holds this run's outputs: refused, then replaced with --overwrite
+  EXPECT_EQ(run_tissue(t, "again", {"run", t.file("block.xml"), "--ticks", "5", "--out", out}), 1);
+  EXPECT_NE(slurp(t.file("again.err")).find("holds another run's outputs"), std::string::npos)
+      << slurp(t.file("again.err"));
+  EXPECT_EQ(run_tissue(t, "over", {"run", t.file("block.xml"), "--ticks", "5", "--frames", "5", "--out", out,
+                                   "--overwrite", "--quiet"}),
+            0)
+      << slurp(t.file("over.err"));
+  EXPECT_EQ(lines(slurp(out + "/ticks.csv")), 6);
+  int vtus = 0;
+  for (const auto& e : fs::directory_iterator(out)) vtus += e.path().extension() == ".vtu";
+  EXPECT_EQ(vtus, 5);  // no frame of the first run beside the new series
+}
+
+INSTANTIATE_TEST_SUITE_P(Signals, Interrupted, testing::Values(SIGINT, SIGTERM),
+                         [](const testing::TestParamInfo<int>& i) { return i.param == SIGINT ? "SIGINT" : "SIGTERM"; });
+
+TEST(Program, BadInputsGetClearErrors) {
+  TempDir t;
+  std::ofstream(t.file("block.xml")) << kBlock;
+  const auto error_of = [&](const std::vector<std::string>& args) {
+    EXPECT_EQ(run_tissue(t, "bad", args), 1);
+    return slurp(t.file("bad.err"));
+  };
+  EXPECT_NE(error_of({"run", t.file("")}).find("is a directory, not a scene file"), std::string::npos);
+  std::string scene = kBlock;
+  scene.replace(scene.find("t=\"0.1\""), 7, "t=\"nan\"");
+  std::ofstream(t.file("nan.xml")) << scene;
+  EXPECT_NE(error_of({"run", t.file("nan.xml")}).find("waypoint 1: t = nan is not a finite number"),
+            std::string::npos);
+}
+
+}  // namespace
+}  // namespace tissue::app

@@ -1,0 +1,129 @@
+// The checks of a valid scene that may not do what its author meant
+// (scene/checks.hpp): no support, every node fixed, a tick longer than the
+// tool path or far from 1 ms, many steps per tick with their cause, a
+// material more incompressible than the precision resolves, and the work
+// estimate.
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include <string>
+#include <vector>
+
+#include "core/box_mesh.hpp"
+#include "scene/checks.hpp"
+#include "scene/validate.hpp"
+
+namespace tissue::scene {
+namespace {
+
+/// A 2 x 1 x 1 cm box of brain-like tissue, its bottom fixed, pressed by a
+/// probe over 0.1 s.
+Scene box_scene() {
+  Scene s;
+  s.source = "box.xml";
+  ModelInput in;
+  box_mesh(in, 2, 1, 1, 0.02, 0.01, 0.01);
+  s.nodes = in.nodes;
+  s.tets = in.tets;
+  s.materials.push_back({.name = "brain", .form = Material::Form::YoungPoisson, .a = 3000, .b = 0.45, .rho = 1000});
+  s.sets.push_back({.name = "all", .material = "brain", .all = true, .elements = {}, .line = 0});
+  Constraint base;
+  base.kind = Constraint::Kind::Box;
+  base.lo[0] = base.lo[1] = base.lo[2] = -1;
+  base.hi[0] = base.hi[1] = 1;
+  base.hi[2] = 0;
+  s.constraints.push_back(base);
+  Tool t;
+  t.path = {{0, {0.01, 0.005, 0.02}}, {0.1, {0.01, 0.005, 0.008}}};
+  s.tools.push_back(t);
+  return s;
+}
+
+/// The warnings of a scene, with a check that each names the scene file.
+std::vector<std::string> warnings(const Scene& s) {
+  const std::vector<std::string> w = scene_warnings(s, load_model(s));
+  for (const std::string& m : w) EXPECT_EQ(m.rfind(s.source + ": ", 0), 0u) << m;
+  return w;
+}
+
+/// Success when exactly one warning contains every part.
+testing::AssertionResult one_warning(const std::vector<std::string>& w, std::initializer_list<std::string> parts) {
+  int hits = 0;
+  for (const std::string& m : w) {
+    bool all = true;
+    for (const std::string& p : parts) all = all && m.find(p) != std::string::npos;
+    hits += all;
+  }
+  if (hits == 1) return testing::AssertionSuccess();
+  auto f = testing::AssertionFailure() << hits << " warnings match; the warnings are:";
+  for (const std::string& m : w) f << "\n  " << m;
+  return f;
+}
+
+TEST(SceneChecks, AnOrdinaryScenePassesSilently) {
+  EXPECT_TRUE(warnings(box_scene()).empty());
+}
+
+TEST(SceneChecks, NoSupportAndEverythingFixed) {
+  Scene s = box_scene();
+  s.constraints.clear();
+  const auto w = warnings(s);
+  EXPECT_TRUE(one_warning(w, {"no node is fixed", "rigid body", "<fixed>"}));
+  s = box_scene();
+  s.constraints.front().hi[2] = 1;  // the box now holds every node
+  EXPECT_TRUE(one_warning(warnings(s), {"every node (12) is fixed", "nothing can move"}));
+}
+
+TEST(SceneChecks, TickLongerThanThePathOrFarFromOneMillisecond) {
+  Scene s = box_scene();
+  s.solver.tick = 0.5;
+  const auto w = warnings(s);
+  EXPECT_TRUE(one_warning(w, {"tick 0.5 s is longer than the whole tool path (0.1 s)", "in one tick"}));
+  EXPECT_TRUE(one_warning(w, {"tick 0.5 s is far from a haptic device's period"}));
+  s.solver.tick = 1e-7;
+  EXPECT_TRUE(one_warning(warnings(s), {"tick 1e-07 s is far from"}));
+}
+
+// Every scripted tool's path is checked against the tick, not only the first's.
+TEST(SceneChecks, TickLongerThanTheSecondToolsPath) {
+  Scene s = box_scene();
+  s.tools.front().name = "probe";
+  Tool grasper;
+  grasper.name = "grasper";
+  grasper.path = {{0, {0.005, 0.005, 0.02}}, {0.002, {0.005, 0.005, 0.015}}};
+  s.tools.push_back(grasper);
+  s.solver.tick = 0.005;
+  const auto w = warnings(s);
+  EXPECT_TRUE(one_warning(w, {"tick 0.005 s is longer than the whole tool path (0.002 s) of tool 'grasper'"}));
+  EXPECT_TRUE(one_warning(w, {"longer than the whole tool path"}));  // not the probe's 0.1 s path
+}
+
+TEST(SceneChecks, ManyStepsPerTickNameTheirCause) {
+  Scene s = box_scene();
+  s.materials.front().a = 1e12;  // a unit slip: E in Pa x 1e9
+  s.solver.mass_scaling = 0;
+  const TissueModel<double> m = load_model(s);
+  const double steps = std::round(s.solver.tick / m.dt);
+  EXPECT_GT(steps, kManyStepsPerTick);
+  EXPECT_TRUE(one_warning(warnings(s), {fmt::format("{:.0f} TLED steps per 0.001 s tick", steps),
+                                        "material 'brain' (E = 1000000000000 Pa", "wave speed", "dt_crit"}));
+  const WorkEstimate w = estimate_work(m, s.solver.tick, 300);
+  EXPECT_EQ(w.steps_per_tick, steps);
+  EXPECT_EQ(w.steps, 300 * steps);
+  EXPECT_EQ(w.element_steps, 300 * steps * m.n_elems);
+}
+
+TEST(SceneChecks, IncompressibilityBeyondThePrecision) {
+  Scene s = box_scene();
+  s.materials.front().b = 0.4999999;  // K / mu = 5e6
+  const auto w = warnings(s);
+  EXPECT_TRUE(one_warning(w, {"material 'brain'", "nearly incompressible", "float precision", "or precision double"}));
+  s.solver.precision = Precision::Double;  // eps 2.2e-16: resolved
+  EXPECT_TRUE(incompressibility_findings(s).empty());
+  s.materials.front().b = 0.49;
+  s.solver.precision = Precision::Float;
+  EXPECT_TRUE(incompressibility_findings(s).empty());
+}
+
+}  // namespace
+}  // namespace tissue::scene
