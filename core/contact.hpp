@@ -443,6 +443,26 @@ TISSUE_HD void sweep_triangle(const ContactTools<T>& tools, int k, const Vec3<T>
   for (int i = 0; i < 3; ++i) out[i].dx = x[i] - x_in[i];
 }
 
+/// How near a triangle must come to a tool's axis, in radii, for its corners
+/// to be contact candidates (they seed the region before the advance).
+template <class T>
+inline constexpr T kCandidateReach = T(1.5);
+
+/// Whether the triangle x[3] comes within kCandidateReach radii of the axis
+/// of any sub-check capsule of the motion `sweep` (a one-step ContactTools:
+/// the Backend's contact_candidates, on both backends).
+template <class T>
+TISSUE_HD bool triangle_near_tools(const ContactTools<T>& sweep, const Vec3<T> x[3]) {
+  for (int k = 0; k < sweep.n_tools; ++k)
+    for (int j = 1; j <= sweep.tool[k].substeps; ++j) {
+      const Capsule<T> cap = tool_capsule(sweep.tool[k], 1, 0, j);
+      T w[3];
+      Vec3<T> axis_point;
+      if (norm(triangle_deepest_point(cap, x, w, axis_point) - axis_point) < kCandidateReach<T> * cap.r) return true;
+    }
+  return false;
+}
+
 /// Rotation taking unit vector a to unit vector b applied to v (Rodrigues,
 /// the smallest rotation; identity when a == b; a half turn about an axis
 /// perpendicular to a when they are opposite to rounding). 1 + a.b is taken

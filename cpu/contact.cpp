@@ -161,7 +161,7 @@ std::vector<index_t> ContactStage<T>::candidates(const TissueState<T>& s, const 
   const index_t nt = m_.n_tris;
   std::vector<index_t> out;
   bvh_.update(s.u.data());
-  bvh_.query(sweep_box(sweep, 0, 1.5), tris_);
+  bvh_.query(sweep_box(sweep, 0, double(kCandidateReach<T>)), tris_);
   for (index_t t : tris_) {
     Vec3<T> x[3];
     index_t c[3];
@@ -172,16 +172,7 @@ std::vector<index_t> ContactStage<T>::candidates(const TissueState<T>& s, const 
       all_inner = all_inner && s.region.role[c[i]] == kInner;
     }
     if (all_inner) continue;
-    bool near = false;
-    for (int k = 0; k < sweep.n_tools && !near; ++k)
-      for (int j = 1; j <= sweep.tool[k].substeps && !near; ++j) {
-        const Capsule<T> cap = tool_capsule(sweep.tool[k], 1, 0, j);
-        T w[3];
-        Vec3<T> axis_point;
-        const Vec3<T> q = triangle_deepest_point(cap, x, w, axis_point);
-        near = norm(q - axis_point) < T(1.5) * cap.r;
-      }
-    if (!near) continue;
+    if (!triangle_near_tools(sweep, x)) continue;
     for (int i = 0; i < 3; ++i)
       if (s.region.role[c[i]] != kInner) out.push_back(c[i]);
   }

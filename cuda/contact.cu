@@ -54,15 +54,7 @@ __global__ void flag_candidates_kernel(ModelView<T> m, StateView<T> s, const Pac
     all_inner = all_inner && s.role[c[i]] == kInner;
   }
   if (all_inner) return;
-  bool near = false;
-  for (int k = 0; k < sweep.n_tools && !near; ++k)
-    for (int j = 1; j <= sweep.tool[k].substeps && !near; ++j) {
-      const Capsule<T> cap = tool_capsule(sweep.tool[k], 1, 0, j);
-      T w[3];
-      Vec3<T> axis_point;
-      near = norm(triangle_deepest_point(cap, x, w, axis_point) - axis_point) < T(1.5) * cap.r;
-    }
-  if (!near) return;
+  if (!triangle_near_tools(sweep, x)) return;
   for (int i = 0; i < 3; ++i)
     if (s.role[c[i]] != kInner) flag[c[i]] = 1;
 }
@@ -163,6 +155,9 @@ void DeviceContact<T>::allocate(index_t n_nodes, index_t n_surf) {
   n_selected_.allocate(1);
   n_selected_host_.allocate(1);
   records_.allocate(std::max<index_t>(n_surf, 1));
+  // the kernel writes the fields, not the padding between them: zero it once so that the copy to the
+  // host reads no uninitialised byte (compute-sanitizer initcheck)
+  CUDA_CHECK(cudaMemset(records_.data(), 0, records_.bytes()));
   size_t bytes = 0;
   CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, selected_.data(), flag_surf_.data(), selected_.data(),
                                         n_selected_.data(), std::max<index_t>(n_surf, 1)));

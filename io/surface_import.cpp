@@ -8,6 +8,11 @@
 #include <array>
 #include <assimp/Importer.hpp>
 #include <cmath>
+#include <new>
+#include <tuple>
+#include <sstream>
+#include <cstdlib>
+#include <cerrno>
 #include <fstream>
 #include <map>
 #include <unordered_map>
@@ -34,23 +39,38 @@ double bbox_diagonal(const SurfaceMesh& s) {
 }
 
 /// Appends the triangles of every mesh under `node`, transformed by the
-/// accumulated node transform.
-void collect(const aiScene& scene, const aiNode& node, const aiMatrix4x4& parent, double scale, SurfaceMesh& out) {
+/// accumulated node transform; polygons are fanned from their first corner
+/// here (Assimp 5.2's Triangulate step aborts the process on a malformed
+/// PLY face list). Throws MeshError for a non-finite vertex, naming it.
+void collect(const aiScene& scene, const aiNode& node, const aiMatrix4x4& parent, double scale, SurfaceMesh& out,
+             const std::string& path) {
   const aiMatrix4x4 xf = parent * node.mTransformation;
   for (unsigned k = 0; k < node.mNumMeshes; ++k) {
     const aiMesh& mesh = *scene.mMeshes[node.mMeshes[k]];
     const index_t base = out.n_vertices();
     for (unsigned v = 0; v < mesh.mNumVertices; ++v) {
       const aiVector3D p = xf * mesh.mVertices[v];
-      out.vertices.insert(out.vertices.end(), {scale * p.x, scale * p.y, scale * p.z});
+      const double x = scale * p.x, y = scale * p.y, z = scale * p.z;
+      if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z))
+        throw MeshError(fmt::format("{}: vertex {} of mesh {} is not finite ({}, {}, {}) or overflows in metres", path,
+                                    v, node.mMeshes[k], mesh.mVertices[v].x, mesh.mVertices[v].y,
+                                    mesh.mVertices[v].z));
+      out.vertices.insert(out.vertices.end(), {x, y, z});
     }
     for (unsigned f = 0; f < mesh.mNumFaces; ++f) {
       const aiFace& face = mesh.mFaces[f];
-      if (face.mNumIndices != 3) continue;  // points and lines carry no surface
-      for (int c = 0; c < 3; ++c) out.triangles.push_back(base + static_cast<index_t>(face.mIndices[c]));
+      if (face.mNumIndices < 3) continue;  // points and lines carry no surface
+      for (unsigned c = 0; c < face.mNumIndices; ++c)
+        if (face.mIndices[c] >= mesh.mNumVertices)
+          throw MeshError(fmt::format("{}: face {} of mesh {} names vertex {} of {}", path, f, node.mMeshes[k],
+                                      face.mIndices[c], mesh.mNumVertices));
+      for (unsigned c = 1; c + 1 < face.mNumIndices; ++c)
+        out.triangles.insert(out.triangles.end(), {base + static_cast<index_t>(face.mIndices[0]),
+                                                   base + static_cast<index_t>(face.mIndices[c]),
+                                                   base + static_cast<index_t>(face.mIndices[c + 1])});
     }
   }
-  for (unsigned c = 0; c < node.mNumChildren; ++c) collect(scene, *node.mChildren[c], xf, scale, out);
+  for (unsigned c = 0; c < node.mNumChildren; ++c) collect(scene, *node.mChildren[c], xf, scale, out, path);
 }
 
 /// Drops vertices no triangle uses and renumbers the triangles.
@@ -67,23 +87,116 @@ void compact_vertices(SurfaceMesh& s) {
   s.vertices.swap(kept);
 }
 
-/// Assimp 5.2's PLY reader loops forever on a header without an end_header
-/// line (a truncated or hand-edited file). Refuse such files before Assimp
-/// sees them. Headers are a few hundred bytes; the first 1 MiB is searched.
-void guard_ply_header(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
+/// The file's next line that is not blank or a '#' comment, without its
+/// leading blanks and trailing '\r', with its 1-based number, from `text`
+/// starting at `pos` (advanced).
+std::pair<std::string, int> next_line(const std::string& text, std::size_t& pos, int& line) {
+  while (pos < text.size()) {
+    const std::size_t end = std::min(text.find('\n', pos), text.size());
+    std::string l = text.substr(pos, end - pos);
+    pos = end + 1;
+    ++line;
+    const auto first = l.find_first_not_of(" \t\r");
+    if (first == std::string::npos || l[first] == '#') continue;
+    l = l.substr(first);
+    if (!l.empty() && l.back() == '\r') l.pop_back();
+    return {l, line};
+  }
+  return {"", line};
+}
+
+std::string lower(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+/// Checks the element counts a PLY or OFF header claims before Assimp
+/// allocates for them (docs/reliability.md, "Findings in surface import"):
+///  - a PLY file (magic "ply" in any case, after blanks) must have an
+///    end_header line (Assimp 5.2 loops forever without one), and its
+///    elements must fit in the file: at least one byte each;
+///  - an OFF file's vertex and face counts must fit in the file: at least
+///    two bytes per number of each vertex and face line.
+/// Headers are a few hundred bytes; the first 1 MiB is read.
+void guard_header(const std::string& path) {
+  std::ifstream f(path, std::ios::binary | std::ios::ate);
   if (!f) return;  // Assimp reports unreadable files itself
-  std::string head(1 << 20, '\0');
+  const auto size = static_cast<unsigned long long>(std::max<std::streamoff>(f.tellg(), 0));
+  f.seekg(0);
+  std::string head(std::size_t(1) << 20, '\0');
   f.read(head.data(), static_cast<std::streamsize>(head.size()));
   head.resize(static_cast<size_t>(f.gcount()));
-  if (head.rfind("ply", 0) != 0) return;
-  if (head.find("\nend_header") == std::string::npos)
-    throw MeshError(fmt::format("{}: cannot read the surface: PLY header has no end_header line", path));
+  std::size_t pos = 0;
+  int line = 0;
+  const auto [raw_magic, magic_line] = next_line(head, pos, line);
+  const std::string magic = lower(raw_magic);
+  auto count = [&](const std::string& word, int at) -> unsigned long long {
+    errno = 0;
+    char* end = nullptr;
+    const unsigned long long n = std::strtoull(word.c_str(), &end, 10);
+    if (errno == ERANGE)
+      throw MeshError(fmt::format("{}:{}: the header claims {} elements; the file's {} bytes cannot hold them", path,
+                                  at, word.substr(0, 40) + (word.size() > 40 ? "..." : ""), size));
+    if (word.empty() || word[0] == '-' || *end != '\0')
+      throw MeshError(fmt::format("{}:{}: '{}' is not an element count", path, at, word.substr(0, 40)));
+    return n;
+  };
+  if (magic.rfind("ply", 0) == 0) {
+    // Assimp 5.2's PLY reader hangs on headers that bend the format (a magic or keyword in another
+    // case, an end_header line with more on it, no end_header): only the format's exact lines pass
+    if (raw_magic != "ply")
+      throw MeshError(fmt::format("{}:{}: the PLY magic line is '{}', not 'ply'", path, magic_line,
+                                  raw_magic.substr(0, 40)));
+    unsigned long long total = 0;
+    for (;;) {
+      const auto [l, at] = next_line(head, pos, line);
+      if (l.empty())
+        throw MeshError(fmt::format("{}: cannot read the surface: PLY header has no end_header line", path));
+      std::istringstream words(l);
+      std::string first;
+      words >> first;
+      if (first == "end_header") {
+        std::string more;
+        if (words >> more)
+          throw MeshError(fmt::format("{}:{}: PLY header line '{}' is not end_header", path, at, l.substr(0, 40)));
+        break;
+      }
+      if (first != "format" && first != "comment" && first != "obj_info" && first != "element" && first != "property")
+        throw MeshError(fmt::format("{}:{}: PLY header line '{}' starts with no PLY keyword", path, at,
+                                    l.substr(0, 40)));
+      if (first != "element") continue;
+      std::istringstream in(l);
+      std::string kw, name, n;
+      in >> kw >> name >> n;
+      const unsigned long long c = count(n, at);
+      total += c;
+      if (c > size || total > size)
+        throw MeshError(fmt::format("{}:{}: the header claims {} {} elements; the file's {} bytes cannot hold them",
+                                    path, at, c, name, size));
+    }
+  } else if (magic.rfind("off", 0) == 0 || (magic.size() > 3 && magic.find("off") != std::string::npos &&
+                                             magic.find_first_not_of("stcn4off ") == std::string::npos)) {
+    // counts on the magic's line (after "OFF") or on the next one
+    std::string rest = magic.substr(magic.find("off") + 3);
+    int at = magic_line;
+    if (rest.find_first_not_of(" \t\r") == std::string::npos) std::tie(rest, at) = next_line(head, pos, line);
+    std::istringstream in(rest);
+    std::string nv, nf;
+    in >> nv >> nf;
+    if (nv.empty() || nf.empty()) return;  // Assimp reports the malformed header
+    const unsigned long long v = count(nv, at), t = count(nf, at);
+    if (v > size / 6 || t > size / 6 || 6 * v + 8 * t > size)
+      throw MeshError(fmt::format("{}:{}: the header claims {} vertices and {} faces; the file's {} bytes cannot "
+                                  "hold them",
+                                  path, at, v, t, size));
+  }
 }
 
 struct CellHash {
-  size_t operator()(const std::array<long long, 3>& c) const {
-    return std::hash<long long>()(c[0] * 73856093LL ^ c[1] * 19349663LL ^ c[2] * 83492791LL);
+  size_t operator()(const std::array<long long, 3>& c) const {  // unsigned: wraps, never overflows
+    return std::hash<unsigned long long>()(static_cast<unsigned long long>(c[0]) * 73856093ULL ^
+                                           static_cast<unsigned long long>(c[1]) * 19349663ULL ^
+                                           static_cast<unsigned long long>(c[2]) * 83492791ULL);
   }
 };
 
@@ -97,17 +210,27 @@ double parse_unit(const std::string& unit) {
 }
 
 index_t weld_vertices(SurfaceMesh& s, double tolerance) {
+  for (std::size_t k = 0; k < s.vertices.size(); ++k)
+    if (!std::isfinite(s.vertices[k]))
+      throw MeshError(fmt::format("weld: vertex {} is not finite ({})", k / 3, s.vertices[k]));
   if (tolerance < 0) tolerance = 1e-9 * bbox_diagonal(s);
   const index_t n = s.n_vertices();
   std::vector<index_t> rep(n);
+  double lo[3] = {0, 0, 0};
+  for (std::size_t k = 0; k < s.vertices.size(); ++k)
+    lo[k % 3] = k < 3 ? s.vertices[k] : std::min(lo[k % 3], s.vertices[k]);
+  // cells are counted from the box's corner; a tolerance so small against the
+  // box that the counts would leave the integers welds exact duplicates only
+  if (tolerance > 0 && !(bbox_diagonal(s) / tolerance < 1e15)) tolerance = 0;
   if (tolerance > 0) {
     // Uniform grid of cell size `tolerance`: a vertex's partner lies in one of
     // the 27 cells around it.
     std::unordered_map<std::array<long long, 3>, std::vector<index_t>, CellHash> grid;
     for (index_t i = 0; i < n; ++i) {
       const Vec3<double> p = vertex(s, i);
-      const std::array<long long, 3> cell{std::llround(p.x / tolerance), std::llround(p.y / tolerance),
-                                          std::llround(p.z / tolerance)};
+      const std::array<long long, 3> cell{std::llround((p.x - lo[0]) / tolerance),
+                                          std::llround((p.y - lo[1]) / tolerance),
+                                          std::llround((p.z - lo[2]) / tolerance)};
       rep[i] = i;
       for (int dx = -1; dx <= 1 && rep[i] == i; ++dx)
         for (int dy = -1; dy <= 1 && rep[i] == i; ++dy)
@@ -147,16 +270,21 @@ index_t weld_vertices(SurfaceMesh& s, double tolerance) {
 SurfaceMesh load_surface(const std::string& path, double metres_per_unit, index_t* merged) {
   if (!(metres_per_unit > 0) || !std::isfinite(metres_per_unit))
     throw MeshError(fmt::format("{}: unit scale {} m per unit must be > 0", path, metres_per_unit));
-  guard_ply_header(path);
+  guard_header(path);
   Assimp::Importer importer;
-  const aiScene* scene = importer.ReadFile(
-      path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_ValidateDataStructure);
+  const aiScene* scene = nullptr;
+  try {
+    scene = importer.ReadFile(path, aiProcess_JoinIdenticalVertices | aiProcess_ValidateDataStructure);
+  } catch (const std::bad_alloc&) {
+    throw MeshError(fmt::format("{}: cannot read the surface: the element counts in the file do not fit in memory",
+                                path));
+  }
   if (!scene) throw MeshError(fmt::format("{}: cannot read the surface: {}", path, importer.GetErrorString()));
   if ((scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE) || !scene->mRootNode)
     throw MeshError(fmt::format("{}: the file holds no complete mesh (Assimp: {})", path,
                                 *importer.GetErrorString() ? importer.GetErrorString() : "incomplete scene"));
   SurfaceMesh out;
-  collect(*scene, *scene->mRootNode, aiMatrix4x4(), metres_per_unit, out);
+  collect(*scene, *scene->mRootNode, aiMatrix4x4(), metres_per_unit, out, path);
   if (out.triangles.empty())
     throw MeshError(
         fmt::format("{}: the file holds no triangles ({} meshes, none with faces)", path, scene->mNumMeshes));

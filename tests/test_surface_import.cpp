@@ -365,3 +365,87 @@ TEST(CheckClosed, OutOfRangeCorner) {
   s.triangles[5] = 99;
   EXPECT_NE(closed_error(s).find("refers to vertex 99"), std::string::npos);
 }
+
+/// The message of the MeshError that loading `path` throws ("" if none).
+std::string load_error(const std::string& path) {
+  try {
+    load_surface(path, 1.0);
+  } catch (const MeshError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+// Fuzzing's findings (docs/reliability.md, "Findings in surface import"),
+// each on an input written here.
+TEST(LoadSurface, PlyMagicInAnyCaseWithoutEndHeaderIsRefused) {
+  TempDir t;
+  for (const char* magic : {"PLY", "plY"}) {  // Assimp hangs on these: refused at the magic line
+    write_text(t.file("h.ply"), std::string(magic) + "\nformat ascii 1.0\nelement vertex 3\nproperty float x\n");
+    EXPECT_NE(load_error(t.file("h.ply")).find(":1: the PLY magic line is"), std::string::npos) << magic;
+  }
+  write_text(t.file("h.ply"), "  ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n");
+  EXPECT_NE(load_error(t.file("h.ply")).find("no end_header"), std::string::npos);
+  write_text(t.file("h.ply"), "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nEnd_header\n0\n1\n2\n");
+  EXPECT_NE(load_error(t.file("h.ply")).find(":5: PLY header line 'End_header'"), std::string::npos);
+  // found by fuzzing: Assimp 5.2 hangs on an end_header line with more on it
+  write_text(t.file("junk.ply"), "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_headerex 4\n0\n1\n2\n");
+  EXPECT_NE(load_error(t.file("junk.ply")).find(":5: PLY header line 'end_headerex 4'"), std::string::npos)
+      << load_error(t.file("junk.ply"));
+}
+
+TEST(LoadSurface, HeaderCountsBeyondTheFileAreRefusedBeforeAllocating) {
+  TempDir t;
+  write_text(t.file("big.off"), "OFF\n4000000000 4 6\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n");
+  std::string msg = load_error(t.file("big.off"));
+  EXPECT_NE(msg.find(t.file("big.off") + ":2:"), std::string::npos) << msg;  // file and line
+  EXPECT_NE(msg.find("4000000000 vertices"), std::string::npos) << msg;
+  write_text(t.file("huge.off"), "OFF\n" + std::string(80, '4') + " 4 6\n0 0 0\n");
+  msg = load_error(t.file("huge.off"));
+  EXPECT_NE(msg.find("cannot hold them"), std::string::npos) << msg;
+  write_text(t.file("big.ply"), "ply\nformat ascii 1.0\nelement vertex 3000000000\nproperty float x\n"
+                                "property float y\nproperty float z\nend_header\n0 0 0\n");
+  msg = load_error(t.file("big.ply"));
+  EXPECT_NE(msg.find(t.file("big.ply") + ":3:"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("3000000000 vertex elements"), std::string::npos) << msg;
+}
+
+TEST(LoadSurface, PolygonsAreFannedAndBadFaceListsRefusedWithoutAborting) {
+  TempDir t;
+  // a quad and a pentagon: 2 + 3 triangles (Assimp's Triangulate is not used: it aborts on malformed lists)
+  write_text(t.file("poly.off"), "OFF\n6 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n0.5 1.5 0\n-0.5 0.5 0\n"
+                                 "4 0 1 2 3\n5 0 1 2 4 5\n");
+  const SurfaceMesh s = load_surface(t.file("poly.off"), 1.0);
+  EXPECT_EQ(s.n_triangles(), 5);
+  // a face naming a vertex that does not exist: an error, not a crash
+  write_text(t.file("bad.ply"), "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                                "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+                                "end_header\n0 0 0\n1 0 0\n0 1 0\n4 0 1 2 9\n");
+  EXPECT_FALSE(load_error(t.file("bad.ply")).empty());
+}
+
+TEST(LoadSurface, NonFiniteVerticesAreRefusedNamingTheVertex) {
+  TempDir t;
+  write_text(t.file("nan.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 nan 0\nf 1 2 3\nf 1 2 4\n");
+  const std::string msg = load_error(t.file("nan.obj"));
+  EXPECT_NE(msg.find("vertex 3"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("not finite"), std::string::npos) << msg;
+  SurfaceMesh s;
+  s.vertices = {0, 0, 0, 1, 0, 0, 0, std::nan(""), 0};
+  s.triangles = {0, 1, 2};
+  EXPECT_THROW(weld_vertices(s), MeshError);
+}
+
+TEST(WeldVertices, FarFromTheOriginAndTinyTolerancesStayDefined) {
+  // cell indices counted from the box's corner: a mesh 1e12 m from the origin welds like one at it
+  SurfaceMesh s;
+  s.vertices = {1e12, 1e12, 1e12, 1e12 + 1, 1e12, 1e12, 1e12, 1e12 + 1, 1e12, 1e12, 1e12, 1e12};
+  s.triangles = {0, 1, 2, 3, 1, 2};
+  EXPECT_EQ(weld_vertices(s, 1e-3), 0);
+  EXPECT_EQ(s.n_vertices(), 3);  // vertex 3 merged into vertex 0
+  SurfaceMesh u;
+  u.vertices = {0, 0, 0, 1e300, 0, 0, 0, 1, 0, 0, 0, 0};
+  u.triangles = {0, 1, 2, 3, 1, 2};
+  EXPECT_EQ(weld_vertices(u, 1e-300), 0);  // cells beyond the integers: exact duplicates only
+  EXPECT_EQ(u.n_vertices(), 3);
+}
