@@ -166,6 +166,15 @@ OrganMesh mesh_organ(NamedSurface organ, std::vector<NamedSurface> inclusions, c
     // The surface alone forces more tets than the target: remesh it coarser
     // (tet count ~ edge^-3) and try again.
     if (target <= 0 || n <= (1 + kTargetPromise) * target || o.remesh_edge != 0 || attempt == 3) break;
+    // with inclusions, only when the organ's own surface is finer than the size asks: the excess may come
+    // from an inclusion's finer surface instead, and coarsening a coarse organ destroys its shape (a
+    // 24-triangle box became a 4-triangle tetrahedron, leaving its inclusion outside)
+    if (!inclusions.empty() && !(mean_edge_length(organ.surface) < kRemeshBelow * out.target_edge)) {
+      say(o, fmt::format("{} tets, over the target {}: the inclusions' surfaces force them (the organ's is not too "
+                         "fine)",
+                         n, target));
+      break;
+    }
     const double edge = (out.surfaces[0].remeshed_to > 0 ? out.surfaces[0].remeshed_to
                                                           : mean_edge_length(organ.surface)) *
                         std::cbrt(n / target);

@@ -190,3 +190,29 @@ TEST(MeshQuality, RegularTetAndSliver) {
   EXPECT_LT(*std::min_element(ang, ang + 6), 1e-3);
   EXPECT_GT(*std::max_element(ang, ang + 6), kPi - 1e-3);
 }
+
+namespace tissue::io {
+namespace {
+
+// A coarse organ (a 12-triangle box) with a finely meshed inclusion: the
+// inclusion's surface forces more tets than the target, and the organ,
+// whose own surface is not too fine, must not be coarsened for it (it was
+// remeshed into a 4-triangle tetrahedron, leaving the inclusion outside:
+// docs/meshing.md).
+TEST(OrganMesher, AFineInclusionDoesNotCoarsenACoarseOrgan) {
+  io::SurfaceMesh box;
+  tt::add_box(box, 0.0, 0.04);
+  const NamedSurface tumour{tt::ellipsoid({0.02, 0.02, 0.02}, {0.004, 0.004, 0.004}, 3), "tumour.obj"};
+  OrganMeshOptions o;
+  o.mesher = Mesher::TetGen;
+  o.meshing.target_tets = 2000;
+  const OrganMesh r = mesh_organ({box, "box.obj"}, {tumour}, o);
+  EXPECT_GE(r.surfaces[0].triangles_out, 12) << "the organ keeps its shape";
+  EXPECT_GT(r.mesh.n_tets(), (1 + kTargetPromise) * 2000) << "the inclusion's surface forces more tets";
+  long in_tumour = 0;
+  for (int region : r.mesh.tet_region) in_tumour += region == 1;
+  EXPECT_GT(in_tumour, 0);
+}
+
+}  // namespace
+}  // namespace tissue::io
