@@ -73,7 +73,9 @@ SurfaceBvh<T>::SurfaceBvh(const TissueModel<T>& m, double margin)
   at_build_.assign(3 * std::size_t(m.n_surf), 0.0);
   boxes_.assign(6 * std::size_t(m.n_tris), 0.0f);
   if (m.n_tris == 0) return;
-  rtc_->device = rtcNewDevice("threads=1");  // queries run on the haptic thread; builds are small
+  // default configuration: "threads=1" made Embree (built on TBB) cap the whole process at one TBB
+  // thread, serialising every element pass (measured: the kidney step 1.5-2.2x slower on 2 cores)
+  rtc_->device = rtcNewDevice(nullptr);
   if (!rtc_->device) throw std::runtime_error("cpu backend: Embree could not create a device");
   rtc_->scene = rtcNewScene(rtc_->device);
   rtcSetSceneFlags(rtc_->scene, RTC_SCENE_FLAG_DYNAMIC);
