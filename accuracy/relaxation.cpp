@@ -86,6 +86,8 @@ std::vector<double> relaxation_masses(const TissueModel<double>& m, double dt, d
     throw std::invalid_argument(fmt::format("relaxation_masses: dt {} must be > 0 and safety {} in (0, 1]", dt, safety));
   const index_t ne = m.n_elems;
   std::vector<double> g(m.n_nodes, 0.0);
+  // IANP: an element's pressure uses its corners' nodal K_a (core node_bulk_moduli)
+  const std::vector<double> node_K = m.ianp ? node_bulk_moduli(m) : std::vector<double>{};
   for (index_t e = 0; e < ne; ++e) {
     double len[4], sum = 0;
     for (int a = 0; a < 4; ++a) {
@@ -93,7 +95,9 @@ std::vector<double> relaxation_masses(const TissueModel<double>& m, double dt, d
       len[a] = std::sqrt(gx * gx + gy * gy + gz * gz);
       sum += len[a];
     }
-    const double stiff = (m.K[e] + 4.0 * m.mu[e] / 3.0) * m.volume[e];
+    double K = m.K[e];
+    for (int a = 0; a < 4 && m.ianp; ++a) K = std::max(K, node_K[m.elem_nodes[a * ne + e]]);
+    const double stiff = (K + 4.0 * m.mu[e] / 3.0) * m.volume[e];
     for (int a = 0; a < 4; ++a) g[m.elem_nodes[a * ne + e]] += stiff * len[a] * sum;
   }
   for (double& x : g) x *= dt * dt / (4 * safety);

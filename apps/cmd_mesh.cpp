@@ -175,19 +175,6 @@ scene::Scene make_scene(MeshOptions& o) {
                  s.materials[k].rho);
     }
     s.sets = std::move(sets);
-    // IANP across materials of different bulk modulus is unstable (scene/checks.cpp,
-    // docs/meshing.md): such a scene is written for plain tets
-    double kmin = 1e300, kmax = 0;
-    for (const scene::Material& m : s.materials) {
-      kmin = std::min(kmin, m.params().K);
-      kmax = std::max(kmax, m.params().K);
-    }
-    if (kmax > scene::kIanpBulkRatio * kmin) {
-      s.solver.ianp = false;
-      fmt::print("  solver: ianp=\"false\" (plain tets): the inclusions' bulk moduli differ from the tissue's by up to "
-                 "{:.3g} x, and IANP is not stable across such a seam (docs/meshing.md)\n",
-                 kmax / kmin);
-    }
   }
   std::vector<MaterialParams> params;
   for (const scene::Material& m : s.materials) params.push_back(m.params());

@@ -376,6 +376,25 @@ TissueModel<double> build_model(const ModelInput& in) {
   for (size_t k = 0; k < m.node_elem.size(); ++k)
     m.elem_slot[size_t(m.node_elem[k] & 3) * ne + (m.node_elem[k] >> 2)] = static_cast<index_t>(k);
 
+  // IANP where materials of different K meet: an element's pressure comes from its corners' K_a
+  // (node_bulk_moduli), so its stable step is that of the stiffest corner's K
+  if (m.ianp && in.materials.size() > 1) {
+    const std::vector<double> node_K = node_bulk_moduli(m);
+    for (index_t e = 0; e < ne; ++e) {
+      double K = m.K[e];
+      for (int a = 0; a < 4; ++a) K = std::max(K, node_K[m.elem_nodes[a * ne + e]]);
+      if (!(K > m.K[e])) continue;
+      Vec3<double> X[4];
+      for (int a = 0; a < 4; ++a) X[a] = node_pos(in.nodes, m.elem_nodes[a * ne + e]);
+      const index_t mat = in.elem_material.empty() ? 0 : in.elem_material[e];
+      dt_elem[e] = element_time_step(X, m.volume[e], {in.materials[mat].mu, K, in.materials[mat].rho}, true);
+      if (dt_elem[e] < m.dt_crit) {
+        m.dt_crit = dt_elem[e];
+        m.dt_crit_elem = e;
+      }
+    }
+  }
+
   extract_surface(m);
 
   if (in.dt < 0 || std::isnan(in.dt))

@@ -177,14 +177,46 @@ void align_time_step(TissueModel<double>& m, double tick);
 /// and the mean density.
 double lowest_mode_estimate(const TissueModel<double>& m);
 
-/// sum_e V_e over each node's node_elem list, in stored order and in T (n_nodes)
-/// m^3: the denominator of IANP pass 2, computed once per upload the same way
-/// by every backend so that their nodal pressures agree to the bit.
+/// IANP's nodal bulk modulus K_a (n_nodes, Pa): K of the node's elements
+/// where they share one material, else their volume-weighted mean
+/// sum_e K_e V_e / sum_e V_e. Pass 2 averages the elements' volume change
+/// theta_a = sum_e (J_e - 1) V_e / sum_e V_e and gives the node the pressure
+/// p_a = K_a theta_a: for one material this is the average of the element
+/// pressures K (J_e - 1) V_e; where materials meet it is the volumetric term
+/// of the nodal energy sum_a (V_a / 4) K_a theta_a^2 / 2, whose forces are
+/// symmetric (averaging K_e (J_e - 1) instead couples a soft element to its
+/// stiff neighbour ten times harder than the reverse, and the step diverges:
+/// docs/meshing.md, inclusions).
 template <class T>
-std::vector<T> node_volume_sums(const TissueModel<T>& m) {
+std::vector<double> node_bulk_moduli(const TissueModel<T>& m) {
+  std::vector<double> k(m.n_nodes, 0.0);
+  for (index_t a = 0; a < m.n_nodes; ++a) {
+    double kv = 0, v = 0;
+    bool one = true;
+    const index_t first = m.node_elem_start[a], end = m.node_elem_start[a + 1];
+    for (index_t j = first; j < end; ++j) {
+      const index_t e = m.node_elem[j] / 4;
+      kv += double(m.K[e]) * double(m.volume[e]);
+      v += double(m.volume[e]);
+      one = one && m.K[e] == m.K[m.node_elem[first] / 4];
+    }
+    k[a] = end == first ? 0.0 : one ? double(m.K[m.node_elem[first] / 4]) : kv / v;
+  }
+  return k;
+}
+
+/// Pass 2's divisor per node, V_a / K_a (n_nodes, m^3/Pa) with V_a = sum_e
+/// V_e over the node's node_elem list in stored order and in T: p_a =
+/// sum_e (J_e - 1) V_e / divisor_a. Computed once per upload the same way by
+/// every backend so that their nodal pressures agree to the bit.
+template <class T>
+std::vector<T> nodal_pressure_divisors(const TissueModel<T>& m) {
+  const std::vector<double> k = node_bulk_moduli(m);
   std::vector<T> v(m.n_nodes, T(0));
-  for (index_t a = 0; a < m.n_nodes; ++a)
-    for (index_t k = m.node_elem_start[a]; k < m.node_elem_start[a + 1]; ++k) v[a] += m.volume[m.node_elem[k] / 4];
+  for (index_t a = 0; a < m.n_nodes; ++a) {
+    for (index_t j = m.node_elem_start[a]; j < m.node_elem_start[a + 1]; ++j) v[a] += m.volume[m.node_elem[j] / 4];
+    v[a] = v[a] / T(k[a]);
+  }
   return v;
 }
 

@@ -21,7 +21,7 @@ struct TissueState {
   std::vector<std::uint8_t> held;  ///< axis mask (model.hpp kAllAxes): bit c = component c set, not
                                    ///< integrated; kAllAxes for fixed, halo and fully driven nodes (n_nodes)
   std::vector<std::uint8_t> driven;///< axis mask of the components the tool drives; 0 = not driven (n_nodes)
-  std::vector<T> elem_pv;  ///< pass 1: p_e V_e (n_elems) N m
+  std::vector<T> elem_dv;  ///< pass 1: volume change (J_e - 1) V_e (n_elems) m^3
   std::vector<T> elem_J;   ///< pass 1: J_e = det F (n_elems)
   std::vector<T> elem_F;   ///< pass 1: deformation gradient F (9 x n_elems, k = 3 i + j); host backends'
                            ///< pass 3 reads it instead of recomputing F
@@ -43,7 +43,7 @@ struct TissueState {
     contact_tool.assign(n_nodes, -1);
     held.assign(n_nodes, 0);
     driven.assign(n_nodes, 0);
-    elem_pv.assign(n_elems, T(0));
+    elem_dv.assign(n_elems, T(0));
     elem_J.assign(n_elems, T(1));
     elem_F.assign(9 * size_t(n_elems), T(0));
     node_p.assign(n_nodes, T(0));

@@ -52,7 +52,7 @@ void CpuBackend<T>::do_upload(const TissueModel<double>& model) {
   contact_.reset();
   model_ = convert<T>(model);
   state_.resize(model_.n_nodes, model_.n_elems);
-  node_volume_ = node_volume_sums(model_);
+  node_divisor_ = nodal_pressure_divisors(model_);
   all_elems_.resize(model_.n_elems);
   std::iota(all_elems_.begin(), all_elems_.end(), 0);
   driven_list_.clear();
@@ -128,7 +128,7 @@ void CpuBackend<T>::do_element_pressure() {
 
 template <class T>
 void CpuBackend<T>::do_nodal_pressure() {
-  cpu::nodal_pressure(model_, state_, node_volume_, state_.region.nodes, parts_.nodal_pressure);
+  cpu::nodal_pressure(model_, state_, node_divisor_, state_.region.nodes, parts_.nodal_pressure);
 }
 
 template <class T>
@@ -182,7 +182,7 @@ std::vector<ContactNode> CpuBackend<T>::do_contacts() {
 template <class T>
 Reductions CpuBackend<T>::do_reduce() {
   Reductions r = reduce_region(model_, state_, state_.region.nodes);
-  r.strain_energy = strain_energy(model_, state_, node_volume_, energy_);
+  r.strain_energy = strain_energy(model_, state_, node_divisor_, energy_);
   r.front_disp = front_displacement(model_, state_);
   r.bad_elem = bad_.take(&r.bad_J);
   if (r.bad_elem < 0) r.bad_J = 1;

@@ -43,7 +43,7 @@ TISSUE_SIMD_CLONES void lanes_pressure(ElementLanes<T>& b) {
     TISSUE_UNROLL
     for (int k = 0; k < 9; ++k) b.F(k, l) = F.m[k];
     b.J(0, l) = J;
-    b.pv(0, l) = volumetric_pressure(J, b.K(0, l)) * b.V(0, l);
+    b.dv(0, l) = (J - T(1)) * b.V(0, l);
   }
 }
 

@@ -46,7 +46,7 @@ template <class T>
 struct alignas(64) ElementLanes {
   Rows<const T> dN, V, mu, K;  ///< shape gradients (12 rows, 1/m), volume (m^3), moduli (Pa)
   Rows<T> F;                   ///< deformation gradient (9 rows, k = 3 i + j): pass 1 writes, pass 3 and energy read
-  Rows<T> J, pv;               ///< pass 1's det F and p_e V_e (N m)
+  Rows<T> J, dv;               ///< pass 1's det F and volume change (J_e - 1) V_e (m^3)
   T u[12][kLanes];             ///< corner displacements, k = 3 * corner + axis (m): pass 1
   T pbar[kLanes];              ///< averaged nodal pressure (Pa): pass 3 and the energy
   T f[12][kLanes];             ///< out: element nodal forces, k = 3 * corner + axis (N): pass 3
@@ -54,7 +54,7 @@ struct alignas(64) ElementLanes {
   int count = 0;               ///< elements in the batch (<= kLanes)
   bool direct = false;         ///< a full run: the views are the arrays themselves
   // buffers behind the views of a gathered batch
-  T dN_buf[12][kLanes], V_buf[kLanes], mu_buf[kLanes], K_buf[kLanes], F_buf[9][kLanes], J_buf[kLanes], pv_buf[kLanes];
+  T dN_buf[12][kLanes], V_buf[kLanes], mu_buf[kLanes], K_buf[kLanes], F_buf[9][kLanes], J_buf[kLanes], dv_buf[kLanes];
 };
 
 /// Copies `rows` rows of a per-element array src (rows x n_elems,
@@ -104,12 +104,12 @@ void begin_lanes(const TissueModel<T>& m, const index_t* elems, int count, Eleme
 }
 
 /// A batch for pass 1: begin_lanes, the corner displacements from u (3 x
-/// n_nodes, component-major), and the output views: elem_J, elem_pv
+/// n_nodes, component-major), and the output views: elem_J, elem_dv
 /// (n_elems) and elem_F (9 x n_elems) themselves for a full run, else the
 /// buffers, which finish_pressure_lanes scatters.
 template <class T>
 void gather_pressure_lanes(const TissueModel<T>& m, const T* u, const index_t* elems, int count, T* elem_J,
-                           T* elem_pv, T* elem_F, ElementLanes<T>& b) {
+                           T* elem_dv, T* elem_F, ElementLanes<T>& b) {
   begin_lanes(m, elems, count, b);
   const index_t n = m.n_nodes, ne = m.n_elems;
   const index_t* en = m.elem_nodes.data();
@@ -121,24 +121,24 @@ void gather_pressure_lanes(const TissueModel<T>& m, const T* u, const index_t* e
   if (b.direct) {
     b.F = {elem_F + elems[0], std::size_t(ne)};
     b.J = {elem_J + elems[0], std::size_t(ne)};
-    b.pv = {elem_pv + elems[0], std::size_t(ne)};
+    b.dv = {elem_dv + elems[0], std::size_t(ne)};
   } else {
     b.F = {&b.F_buf[0][0], kLanes};
     b.J = {b.J_buf, kLanes};
-    b.pv = {b.pv_buf, kLanes};
+    b.dv = {b.dv_buf, kLanes};
   }
 }
 
 /// After pass 1's kernel: scatters a gathered batch's outputs (a full run
 /// wrote in place).
 template <class T>
-void finish_pressure_lanes(const TissueModel<T>& m, const index_t* elems, T* elem_J, T* elem_pv, T* elem_F,
+void finish_pressure_lanes(const TissueModel<T>& m, const index_t* elems, T* elem_J, T* elem_dv, T* elem_F,
                            const ElementLanes<T>& b) {
   if (b.direct) return;
   const std::size_t ne = m.n_elems;
   scatter_rows(&b.F_buf[0][0], ne, 9, elems, b.count, elem_F);
   scatter_rows(b.J_buf, ne, 1, elems, b.count, elem_J);
-  scatter_rows(b.pv_buf, ne, 1, elems, b.count, elem_pv);
+  scatter_rows(b.dv_buf, ne, 1, elems, b.count, elem_dv);
 }
 
 /// A batch for pass 3 or the energy: begin_lanes, pass 1's deformation
@@ -164,7 +164,7 @@ void gather_force_lanes(const TissueModel<T>& m, T* elem_F, const T* node_p, con
 }
 
 /// Pass 1 on every lane: F = deformation_gradient, J = det F,
-/// pv = volumetric_pressure(J, K) V.
+/// dv = (J - 1) V.
 template <class T>
 void lanes_pressure(ElementLanes<T>& b);
 

@@ -63,7 +63,7 @@ class CpuBackend final : public Backend {
 
   TissueModel<T> model_;
   TissueState<T> state_;
-  std::vector<T> node_volume_;        ///< sum_e V_e per node (n_nodes) m^3, pass 2's denominator
+  std::vector<T> node_divisor_;       ///< V_a / K_a per node (n_nodes) m^3/Pa, pass 2's divisor (core nodal_pressure_divisors)
   std::vector<index_t> all_elems_;    ///< 0..n_elems-1: pass 1 over every element
   std::vector<index_t> driven_list_;  ///< currently driven nodes
   std::unique_ptr<ContactStage<T>> contact_;

@@ -67,39 +67,39 @@ void element_forces_impl(const TissueModel<T>& m, TissueState<T>& s, std::span<c
 }  // namespace
 
 template <class T>
-void element_pressure(const TissueModel<T>& m, const T* u, std::span<const index_t> elems, T* J_out, T* pv_out,
+void element_pressure(const TissueModel<T>& m, const T* u, std::span<const index_t> elems, T* J_out, T* dv_out,
                       T* F_out, tbb::affinity_partitioner& part) {
   for_each_batch(elems, kElemGrain, part, [&](const index_t* e, int count) {
     ElementLanes<T> b;
-    gather_pressure_lanes(m, u, e, count, J_out, pv_out, F_out, b);
+    gather_pressure_lanes(m, u, e, count, J_out, dv_out, F_out, b);
     lanes_pressure(b);
-    finish_pressure_lanes(m, e, J_out, pv_out, F_out, b);
+    finish_pressure_lanes(m, e, J_out, dv_out, F_out, b);
   });
 }
 
 template <class T>
 void element_pressure(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems,
                       tbb::affinity_partitioner& part) {
-  element_pressure(m, s.u.data(), elems, s.elem_J.data(), s.elem_pv.data(), s.elem_F.data(), part);
+  element_pressure(m, s.u.data(), elems, s.elem_J.data(), s.elem_dv.data(), s.elem_F.data(), part);
 }
 
 template <class T>
-void nodal_pressure(const TissueModel<T>& m, const T* pv, const std::vector<T>& node_volume,
+void nodal_pressure(const TissueModel<T>& m, const T* dv, const std::vector<T>& node_divisor,
                     std::span<const index_t> nodes, T* p, tbb::affinity_partitioner& part) {
   const index_t* start = m.node_elem_start.data();
   const index_t* list = m.node_elem.data();
-  const T* vol = node_volume.data();
+  const T* divisor = node_divisor.data();
   for_each_index(nodes, kNodeGrain, part, [&](index_t a) {
     T sum = 0;
-    for (index_t k = start[a]; k < start[a + 1]; ++k) sum += pv[list[k] >> 2];
-    p[a] = sum / vol[a];
+    for (index_t k = start[a]; k < start[a + 1]; ++k) sum += dv[list[k] >> 2];
+    p[a] = sum / divisor[a];
   });
 }
 
 template <class T>
-void nodal_pressure(const TissueModel<T>& m, TissueState<T>& s, const std::vector<T>& node_volume,
+void nodal_pressure(const TissueModel<T>& m, TissueState<T>& s, const std::vector<T>& node_divisor,
                     std::span<const index_t> nodes, tbb::affinity_partitioner& part) {
-  nodal_pressure(m, s.elem_pv.data(), node_volume, nodes, s.node_p.data(), part);
+  nodal_pressure(m, s.elem_dv.data(), node_divisor, nodes, s.node_p.data(), part);
 }
 
 template <class T>

@@ -33,29 +33,29 @@ struct PassPartitioners {
   tbb::affinity_partitioner element_pressure, nodal_pressure, element_forces, node_update;
 };
 
-/// Pass 1 over `elems`: F_e (elem_F), J_e = det F and elem_pv[e] =
-/// volumetric_pressure(J_e, K_e) V_e from the current displacements state.u.
+/// Pass 1 over `elems`: F_e (elem_F), J_e = det F and elem_dv[e] =
+/// (J_e - 1) V_e from the current displacements state.u.
 template <class T>
 void element_pressure(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems,
                       tbb::affinity_partitioner& part);
 
 /// Pass 1 from displacements u (3 x n_nodes, m) into J_out[e] (n_elems),
-/// pv_out[e] = p_e V_e (n_elems, N m) and the deformation gradient F_out
+/// dv_out[e] = p_e V_e (n_elems, N m) and the deformation gradient F_out
 /// (9 x n_elems), which pass 3 reads.
 template <class T>
-void element_pressure(const TissueModel<T>& m, const T* u, std::span<const index_t> elems, T* J_out, T* pv_out,
+void element_pressure(const TissueModel<T>& m, const T* u, std::span<const index_t> elems, T* J_out, T* dv_out,
                       T* F_out, tbb::affinity_partitioner& part);
 
-/// Pass 2 over `nodes`: node_p[a] = sum_e p_e V_e / node_volume[a] over the
-/// node's node_elem list, in stored order. node_volume (n_nodes, m^3) is
-/// sum_e V_e over the same list (core node_volume_sums()).
+/// Pass 2 over `nodes`: node_p[a] = sum_e (J_e - 1) V_e / node_divisor[a]
+/// over the node's node_elem list, in stored order: p_a = K_a theta_a.
+/// node_divisor (n_nodes, m^3/Pa) is V_a / K_a (core nodal_pressure_divisors()).
 template <class T>
-void nodal_pressure(const TissueModel<T>& m, TissueState<T>& s, const std::vector<T>& node_volume,
+void nodal_pressure(const TissueModel<T>& m, TissueState<T>& s, const std::vector<T>& node_divisor,
                     std::span<const index_t> nodes, tbb::affinity_partitioner& part);
 
-/// Pass 2 from pv (n_elems, N m) into p_out (n_nodes, Pa).
+/// Pass 2 from dv (n_elems, m^3) into p_out (n_nodes, Pa).
 template <class T>
-void nodal_pressure(const TissueModel<T>& m, const T* pv, const std::vector<T>& node_volume,
+void nodal_pressure(const TissueModel<T>& m, const T* dv, const std::vector<T>& node_divisor,
                     std::span<const index_t> nodes, T* p_out, tbb::affinity_partitioner& part);
 
 /// Pass 3 over `elems`, from pass 1's elem_F (u has not moved since): pbar =

@@ -90,16 +90,16 @@ double front_displacement(const TissueModel<T>& m, const TissueState<T>& s) {
 }
 
 template <class T>
-double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<T>& node_volume,
+double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<T>& node_divisor,
                      EnergyScratch<T>& scratch) {
   const std::span<const index_t> elems = s.region.elems, nodes = s.region.nodes;
-  scratch.elem_pv.assign(s.elem_pv.begin(), s.elem_pv.end());
+  scratch.elem_dv.assign(s.elem_dv.begin(), s.elem_dv.end());
   scratch.elem_J.assign(s.elem_J.begin(), s.elem_J.end());
   scratch.elem_F.resize(s.elem_F.size());
   scratch.node_p.assign(s.node_p.begin(), s.node_p.end());
-  element_pressure(m, s.u.data(), elems, scratch.elem_J.data(), scratch.elem_pv.data(), scratch.elem_F.data(),
+  element_pressure(m, s.u.data(), elems, scratch.elem_J.data(), scratch.elem_dv.data(), scratch.elem_F.data(),
                    scratch.pressure_part);
-  nodal_pressure(m, scratch.elem_pv.data(), node_volume, nodes, scratch.node_p.data(), scratch.nodal_part);
+  nodal_pressure(m, scratch.elem_dv.data(), node_divisor, nodes, scratch.node_p.data(), scratch.nodal_part);
   scratch.fresh = true;
   const T* node_p = m.ianp ? scratch.node_p.data() : nullptr;
   // batches aligned to kLanes inside every fixed-grain chunk: the same
@@ -126,7 +126,7 @@ template <class T>
 bool take_passes(EnergyScratch<T>& scratch, TissueState<T>& s) {
   if (!scratch.fresh) return false;
   scratch.fresh = false;
-  std::swap(scratch.elem_pv, s.elem_pv);
+  std::swap(scratch.elem_dv, s.elem_dv);
   std::swap(scratch.elem_J, s.elem_J);
   std::swap(scratch.elem_F, s.elem_F);
   std::swap(scratch.node_p, s.node_p);

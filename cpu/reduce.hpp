@@ -37,7 +37,7 @@ double front_displacement(const TissueModel<T>& m, const TissueState<T>& s);
 /// outside the region keeps the state's value.
 template <class T>
 struct EnergyScratch {
-  std::vector<T> elem_pv;  ///< p_e V_e (n_elems) N m
+  std::vector<T> elem_dv;  ///< (J_e - 1) V_e (n_elems) m^3
   std::vector<T> elem_J;   ///< det F (n_elems)
   std::vector<T> elem_F;   ///< F (9 x n_elems; the region's elements only)
   std::vector<T> node_p;   ///< nodal pressure (n_nodes) Pa
@@ -49,10 +49,10 @@ struct EnergyScratch {
 /// current u (J; core/energy.hpp), summed in double by a deterministic
 /// reduction, from passes 1 and 2 run into `scratch` (the state's own pass
 /// arrays are left as the last step wrote them, so download() is
-/// unchanged); node_volume is pass 2's denominator (n_nodes, m^3). Leaves
+/// unchanged); node_divisor is pass 2's divisor (n_nodes, m^3/Pa). Leaves
 /// scratch.fresh set.
 template <class T>
-double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<T>& node_volume,
+double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<T>& node_divisor,
                      EnergyScratch<T>& scratch);
 
 /// If scratch is fresh, swaps its passes 1-2 into the state (the values the

@@ -52,9 +52,9 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   upload_array(cd_B_, m.cd_B, log, stream);
   upload_array(cd_C_, m.cd_C, log, stream);
   upload_array(node_flags_, m.node_flags, log, stream);
-  const std::vector<T> node_volume = node_volume_sums(m);
+  const std::vector<T> node_divisor = nodal_pressure_divisors(m);
   upload_array(slot_of_, m.elem_slot, log, stream);
-  upload_array(node_volume_, node_volume, log, stream);
+  upload_array(node_divisor_, node_divisor, log, stream);
   upload_array(surf_nodes_, m.surf_nodes, log, stream);
   upload_array(surf_slot_start_, m.surf_slot_start, log, stream);
   upload_array(surf_slot_, m.surf_slot, log, stream);
@@ -77,7 +77,7 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   model_.node_elem_start = node_elem_start_.data();
   model_.node_elem = node_elem_.data();
   model_.slot_of = slot_of_.data();
-  model_.node_volume = node_volume_.data();
+  model_.node_divisor = node_divisor_.data();
   model_.tris = tris_.data();
   model_.node_flags = node_flags_.data();
   model_.n_surf = m.n_surf;
@@ -91,7 +91,7 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   u_held_.allocate(n);
   f_.allocate(n);
   f_slot_.allocate(4 * size_t(ne));
-  pv_slot_.allocate(4 * size_t(ne));
+  dv_slot_.allocate(4 * size_t(ne));
   held_.allocate(n);
   driven_.allocate(n);
   role_.allocate(n);
@@ -115,7 +115,7 @@ void DeviceStore<T>::reset_state(cudaStream_t stream) {
   u_held_.fill_bytes(0, stream);
   f_.fill_bytes(0, stream);
   f_slot_.fill_bytes(0, stream);
-  pv_slot_.fill_bytes(0, stream);
+  dv_slot_.fill_bytes(0, stream);
   node_p_.fill_bytes(0, stream);
   bad_.fill_bytes(0xff, stream);
   contact_.fill_bytes(kNoContact, stream);
@@ -137,7 +137,7 @@ StateView<T> DeviceStore<T>::state() {
   s.held = held_.data();
   s.driven = driven_.data();
   s.role = role_.data();
-  s.pv_slot = pv_slot_.data();
+  s.dv_slot = dv_slot_.data();
   s.elem_J = elem_J_.data();
   s.node_p = node_p_.data();
   s.f_slot = f_slot_.data();

@@ -36,7 +36,7 @@ class DeviceStore {
   /// (counted in `log`); the state is then reset (reset_state()).
   void upload(const TissueModel<T>& m, Transfers& log, cudaStream_t stream);
 
-  /// u = u_prev = u_next = 0, u_held = 0, f = f_slot = pv_slot = node_p = 0,
+  /// u = u_prev = u_next = 0, u_held = 0, f = f_slot = dv_slot = node_p = 0,
   /// elem_J = 1, held = the fixed axes, driven = 0, every node inner, no bad
   /// element, no contact.
   void reset_state(cudaStream_t stream);
@@ -56,13 +56,13 @@ class DeviceStore {
   DeviceArray<Packed3<T>> X_;
   DeviceArray<index_t> elem_nodes_, node_elem_start_, node_elem_, slot_of_, tris_;
   DeviceArray<index_t> surf_nodes_, surf_slot_start_, surf_slot_;
-  DeviceArray<T> dndx_, volume_, mu_, K_, mass_, cd_A_, cd_B_, cd_C_, node_volume_;
+  DeviceArray<T> dndx_, volume_, mu_, K_, mass_, cd_A_, cd_B_, cd_C_, node_divisor_;
   DeviceArray<std::uint8_t> node_flags_;
   // state
   DeviceArray<Packed3<T>> u_held_, f_slot_, f_, contact_normal_, grasp_offset_, corner_dx_;
   DeviceArray<std::uint8_t> held_, driven_, role_, contact_, corner_blocked_;
   DeviceArray<signed char> contact_tool_, corner_tool_;
-  DeviceArray<T> pv_slot_, elem_J_, node_p_;
+  DeviceArray<T> dv_slot_, elem_J_, node_p_;
   DeviceArray<unsigned long long> bad_;
 };
 

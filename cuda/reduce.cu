@@ -131,7 +131,7 @@ void Reducer<T>::allocate(index_t n_nodes, index_t n_elems) {
   // initcheck reads the whole struct when it comes back)
   CUDA_CHECK(cudaMemset(result_.data(), 0, result_.bytes()));
   result_host_.allocate(1);
-  pv_slot_.allocate(4 * size_t(n_elems));
+  dv_slot_.allocate(4 * size_t(n_elems));
   elem_J_.allocate(n_elems);
   node_p_.allocate(n_nodes);
 }
@@ -140,9 +140,9 @@ template <class T>
 Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
                            StepBuffers<T> b, DeviceContact<T>& contact, Transfers& log, cudaStream_t stream) {
   if (m.ianp && r.n_elems > 0) {  // nodal pressures at the current u, into scratch
-    CUDA_CHECK(cudaMemcpyAsync(pv_slot_.data(), s.pv_slot, pv_slot_.bytes(), cudaMemcpyDeviceToDevice, stream));
+    CUDA_CHECK(cudaMemcpyAsync(dv_slot_.data(), s.dv_slot, dv_slot_.bytes(), cudaMemcpyDeviceToDevice, stream));
     StateView<T> e = s;
-    e.pv_slot = pv_slot_.data();
+    e.dv_slot = dv_slot_.data();
     e.elem_J = elem_J_.data();
     e.node_p = node_p_.data();
     launch(r.n_elems, stream, element_pressure_kernel<T>, m, e, r, static_cast<const Packed3<T>*>(b.u));

@@ -50,7 +50,7 @@ class Reducer {
   DeviceArray<ReducePartial> partial_;  ///< one per stage-1 block
   DeviceArray<Reductions> result_;      ///< (1)
   PinnedArray<Reductions> result_host_;
-  DeviceArray<T> pv_slot_, elem_J_, node_p_;  ///< energy scratch
+  DeviceArray<T> dv_slot_, elem_J_, node_p_;  ///< energy scratch
 };
 
 }  // namespace tissue::gpu

@@ -63,17 +63,17 @@ __device__ __forceinline__ void corner_displacements(const ElementData<T>& d, co
   for (int a = 0; a < 4; ++a) ue[a] = u[d.c[a]].vec();
 }
 
-/// Pass 1 for an element: J_e = det F, and p_e V_e (p_e = K (J_e - 1)) into
-/// the node_elem slots of its four corners.
+/// Pass 1 for an element: J_e = det F, and its volume change (J_e - 1) V_e
+/// into the node_elem slots of its four corners.
 template <class T>
 __device__ void element_pressure_at(const StateView<T>& s, const ElementData<T>& d, const Packed3<T>* u) {
   Vec3<T> ue[4];
   corner_displacements(d, u, ue);
   const T J = det(deformation_gradient(ue, d.dN));
-  const T pv = volumetric_pressure(J, d.K) * d.V;
+  const T dv = (J - T(1)) * d.V;
   s.elem_J[d.e] = J;
 #pragma unroll
-  for (int a = 0; a < 4; ++a) s.pv_slot[d.slot[a]] = pv;
+  for (int a = 0; a < 4; ++a) s.dv_slot[d.slot[a]] = dv;
 }
 
 /// Pass 3 for an element: pbar = (1/4) sum_a p_a, then IANP forces (or plain
@@ -133,15 +133,15 @@ __device__ __forceinline__ NodeData<T> load_node(const ModelView<T>& m, index_t 
   return {a, __ldg(m.node_elem_start + a) + lane, __ldg(m.node_elem_start + a + 1), lane, mask};
 }
 
-/// Pass 2 for a node (one lane of its group): p_a = sum_e p_e V_e / sum_e V_e
-/// over its elements; lane 0 writes it.
+/// Pass 2 for a node (one lane of its group): p_a = K_a sum_e (J_e - 1) V_e /
+/// sum_e V_e over its elements (node_divisor = V_a / K_a); lane 0 writes it.
 template <class T>
 __device__ void nodal_pressure_at(const ModelView<T>& m, const StateView<T>& s, const NodeData<T>& d) {
-  T pv = T(0);
+  T dv = T(0);
 #pragma unroll 4
-  for (index_t k = d.first; k < d.end; k += kNodeLanes) pv += s.pv_slot[k];
-  pv = node_group_sum(pv, d.mask);
-  if (d.lane == 0) s.node_p[d.a] = pv / __ldg(m.node_volume + d.a);
+  for (index_t k = d.first; k < d.end; k += kNodeLanes) dv += s.dv_slot[k];
+  dv = node_group_sum(dv, d.mask);
+  if (d.lane == 0) s.node_p[d.a] = dv / __ldg(m.node_divisor + d.a);
 }
 
 /// Pass 4 for a node (one lane of its group): f_a = sum of its corners'

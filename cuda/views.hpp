@@ -6,7 +6,7 @@
 //   X, u, u_prev, u_next, u_held, f   one Packed3 per node (x, y, z, pad):
 //                                     one 16-byte (float) or two (double)
 //                                     loads per gathered corner
-//   pv_slot, f_slot                   per (element, corner) values stored in
+//   dv_slot, f_slot                   per (element, corner) values stored in
 //                                     node order: slot k holds the value of
 //                                     node_elem[k], so passes 2 and 4 read a
 //                                     node's values contiguously, in the
@@ -48,7 +48,7 @@ struct ModelView {
   const index_t* node_elem_start = nullptr;  ///< (n_nodes + 1)
   const index_t* node_elem = nullptr;        ///< element * 4 + corner (nnz)
   const index_t* slot_of = nullptr;       ///< position of (e, a) in node_elem (4 x n_elems, [a * n_elems + e])
-  const T* node_volume = nullptr;         ///< sum_e V_e over node_elem in stored order (n_nodes) m^3
+  const T* node_divisor = nullptr;        ///< V_a / K_a (core nodal_pressure_divisors) (n_nodes) m^3/Pa
   const index_t* tris = nullptr;          ///< (3 x n_tris)
   const std::uint8_t* node_flags = nullptr;  ///< NodeFlag bits (n_nodes)
   index_t n_surf = 0;                     ///< surface nodes
@@ -87,7 +87,7 @@ struct StateView {
   std::uint8_t* held = nullptr;        ///< axis mask: bit c = component c set from u_held, not integrated (n_nodes)
   std::uint8_t* driven = nullptr;      ///< axis mask of the tool-driven components; 0 = not driven (n_nodes)
   std::uint8_t* role = nullptr;        ///< NodeRole (n_nodes)
-  T* pv_slot = nullptr;                ///< pass 1: p_e V_e per node_elem slot (4 n_elems) N m
+  T* dv_slot = nullptr;                ///< pass 1: (J_e - 1) V_e per node_elem slot (4 n_elems) m^3
   T* elem_J = nullptr;                 ///< pass 1: J_e (n_elems)
   T* node_p = nullptr;                 ///< pass 2: p_a (n_nodes) Pa
   Packed3<T>* f_slot = nullptr;        ///< pass 3: f_a^e per node_elem slot (4 n_elems) N

@@ -87,26 +87,6 @@ std::vector<std::string> incompressibility_findings(const Scene& s) {
         (3 * (1e-2 / eps) - 2) / (6 * (1e-2 / eps) + 2),
         s.solver.precision == Precision::Float ? " or precision double" : ""));
   }
-  // IANP averages the element pressures K (J - 1) at the nodes and gives each element Jbar = 1 + pbar / K
-  // with its own K: an element of a softer material beside a stiffer one then sees the stiffer one's
-  // pressure divided by its own K, as if it were that much stiffer, and its own stable step no longer holds
-  // (measured: a tumour 10 x stiffer than its tissue, tissue mesh --inclusion, inverts an element within
-  // 0.1 s in float and double, with or without mass scaling; plain tets run to equilibrium)
-  if (s.solver.ianp && s.materials.size() > 1) {
-    const Material *soft = nullptr, *stiff = nullptr;
-    for (const Material& m : s.materials) {
-      if (!soft || m.params().K < soft->params().K) soft = &m;
-      if (!stiff || m.params().K > stiff->params().K) stiff = &m;
-    }
-    const double ratio = stiff->params().K / soft->params().K;
-    if (ratio > kIanpBulkRatio)
-      out.push_back(fmt::format(
-          "{} and {} differ in bulk modulus by {:.3g} x, and IANP averages the pressure across the elements of both: "
-          "where they meet, the softer one's elements see the stiffer one's pressure and are not stable at their own "
-          "time step (expect an inverted element early in the run); set ianp=\"false\" on the solver (plain tets, "
-          "nu <= 0.45) for scenes with inclusions until IANP averages per material (docs/meshing.md)",
-          describe(*stiff), describe(*soft), ratio));
-  }
   return out;
 }
 

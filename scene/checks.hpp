@@ -60,10 +60,6 @@ std::vector<std::string> scene_warnings(const Scene& scene, const TissueModel<do
 /// (the precision rule above), one phrase each; empty when none.
 std::vector<std::string> incompressibility_findings(const Scene& scene);
 
-/// The largest ratio of bulk moduli between a scene's materials that IANP is
-/// trusted with (incompressibility_findings warns beyond it).
-inline constexpr double kIanpBulkRatio = 1.5;
-
 /// Number of nodes the model fixes in any component.
 index_t supported_nodes(const TissueModel<double>& model);
 

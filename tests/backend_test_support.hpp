@@ -70,15 +70,16 @@ inline std::vector<double> reference_step(const TissueModel<double>& m, std::vec
     for (int a = 0; a < 4; ++a) ue[a] = node_u(u, n, m.elem_nodes[a * ne + e]);
     for (int k = 0; k < 12; ++k) dN[k] = m.dndx[k * ne + e];
   };
-  std::vector<double> num(n, 0.0), den(n, 0.0), f(3 * n, 0.0);
+  std::vector<double> num(n, 0.0), den(n, 0.0), kv(n, 0.0), f(3 * n, 0.0);
   for (index_t e = 0; e < ne; ++e) {  // pass 1 and the scatter of pass 2
     Vec3<double> ue[4];
     double dN[12];
     corner_u(e, ue, dN);
-    const double pv = volumetric_pressure(det(deformation_gradient(ue, dN)), m.K[e]) * m.volume[e];
+    const double dv = (det(deformation_gradient(ue, dN)) - 1.0) * m.volume[e];
     for (int a = 0; a < 4; ++a) {
-      num[m.elem_nodes[a * ne + e]] += pv;
+      num[m.elem_nodes[a * ne + e]] += dv;
       den[m.elem_nodes[a * ne + e]] += m.volume[e];
+      kv[m.elem_nodes[a * ne + e]] += m.K[e] * m.volume[e];
     }
   }
   for (index_t e = 0; e < ne; ++e) {  // pass 3 and the scatter of pass 4
@@ -86,7 +87,10 @@ inline std::vector<double> reference_step(const TissueModel<double>& m, std::vec
     double dN[12];
     corner_u(e, ue, dN);
     double p[4];
-    for (int a = 0; a < 4; ++a) p[a] = num[m.elem_nodes[a * ne + e]] / den[m.elem_nodes[a * ne + e]];
+    for (int a = 0; a < 4; ++a) {  // p_a = K_a theta_a, K_a the node's volume-weighted bulk modulus
+      const index_t i = m.elem_nodes[a * ne + e];
+      p[a] = kv[i] / den[i] * (num[i] / den[i]);
+    }
     const double pbar = 0.25 * (((p[0] + p[1]) + p[2]) + p[3]);
     if (m.ianp)
       ianp_element_forces(ue, dN, m.volume[e], m.mu[e], m.K[e], pbar, fe);

@@ -127,27 +127,3 @@ TEST(SceneChecks, IncompressibilityBeyondThePrecision) {
 
 }  // namespace
 }  // namespace tissue::scene
-
-namespace tissue::scene {
-namespace {
-
-// IANP across materials of different bulk modulus (a stiff inclusion) is
-// unstable (measured: docs/meshing.md); the scene checks say so, with both
-// materials, and are silent for plain tets or similar materials.
-TEST(SceneChecks, IanpAcrossMaterialsOfDifferentStiffnessIsWarned) {
-  Scene s = box_scene();
-  s.materials.push_back({.name = "tumour", .form = Material::Form::YoungPoisson, .a = 30000, .b = 0.45, .rho = 1000});
-  s.sets.front().all = false;
-  s.sets.front().elements = {0, 1, 2};
-  s.sets.push_back({.name = "tumour", .material = "tumour", .all = false, .elements = {3, 4, 5}, .line = 0});
-  for (std::size_t e = 6; e < s.tets.size() / 4; ++e) s.sets.front().elements.push_back(static_cast<index_t>(e));
-  EXPECT_TRUE(one_warning(warnings(s), {"tumour", "brain", "10 x", "IANP", "ianp=\"false\""}));
-  s.solver.ianp = false;
-  EXPECT_TRUE(warnings(s).empty());
-  s.solver.ianp = true;
-  s.materials.back().a = 3300;  // 10 % stiffer: within the ratio
-  EXPECT_TRUE(warnings(s).empty());
-}
-
-}  // namespace
-}  // namespace tissue::scene
