@@ -20,6 +20,7 @@ void add_tradeoff_command(CLI::App& app, int& rc);   ///< apps/cmd_tradeoff.cpp
 void add_locking_command(CLI::App& app, int& rc);    ///< apps/cmd_locking.cpp
 void add_hertz_command(CLI::App& app, int& rc);      ///< apps/cmd_hertz.cpp
 void add_converge_command(CLI::App& app, int& rc);   ///< apps/cmd_converge.cpp
+void add_palpate_command(CLI::App& app, int& rc);    ///< apps/cmd_palpate.cpp
 
 /// What the command is doing now, in words ("reading the scene x.xml"):
 /// main() names it when memory runs out (std::bad_alloc).

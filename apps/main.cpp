@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
   tissue::app::add_locking_command(app, rc);
   tissue::app::add_hertz_command(app, rc);
   tissue::app::add_converge_command(app, rc);
+  tissue::app::add_palpate_command(app, rc);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

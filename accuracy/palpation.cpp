@@ -1,0 +1,164 @@
+#include "accuracy/palpation.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <stdexcept>
+
+#include "accuracy/plot.hpp"
+#include "accuracy/reference.hpp"
+#include "core/model.hpp"
+#include "io/kidney.hpp"
+#include "io/organ_mesher.hpp"
+
+namespace tissue::accuracy {
+namespace {
+
+/// The closed surface of the box [0, L]^2 x [0, H], outward triangles.
+io::SurfaceMesh box_surface(double L, double H) {
+  io::SurfaceMesh s;
+  for (int k = 0; k < 8; ++k) s.vertices.insert(s.vertices.end(), {(k & 1) ? L : 0.0, (k & 2) ? L : 0.0, (k & 4) ? H : 0.0});
+  // faces as quads (corners counter-clockwise seen from outside), four triangles each around the face's
+  // centre (no diagonal through the block's symmetry lines)
+  const int q[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+  for (const auto& f : q) {
+    const index_t c = s.n_vertices();
+    for (int a = 0; a < 3; ++a)
+      s.vertices.push_back(0.25 * (s.vertices[3 * f[0] + a] + s.vertices[3 * f[1] + a] + s.vertices[3 * f[2] + a] +
+                                   s.vertices[3 * f[3] + a]));
+    for (int k = 0; k < 4; ++k) s.triangles.insert(s.triangles.end(), {f[k], f[(k + 1) % 4], c});
+  }
+  return s;
+}
+
+MaterialParams material(double E, double nu, double rho) {
+  return {E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu)), rho};
+}
+
+}  // namespace
+
+PalpationScan run_palpation(const PalpationOptions& o) {
+  if (!(o.L > 0 && o.H > 0 && o.tumour_radius > 0 && o.tumour_depth > o.tumour_radius &&
+        o.tumour_depth + o.tumour_radius < o.H && 2 * o.tumour_radius < o.L))
+    throw std::invalid_argument(fmt::format(
+        "palpation: the tumour (radius {:g} m, centre {:g} m deep) must lie inside the {:g} x {:g} x {:g} m block",
+        o.tumour_radius, o.tumour_depth, o.L, o.L, o.H));
+  if (!(o.positions >= 2 && o.scan > 0 && o.scan + 2 * o.tool_radius < o.L && o.tool_radius > 0 && o.press > 0 &&
+        o.press < o.tumour_depth - o.tumour_radius))
+    throw std::invalid_argument(fmt::format(
+        "palpation: the scan ({:g} m) and the tool (radius {:g} m) must stay on the top, and the press ({:g} m) "
+        "above the tumour's top ({:g} m deep)",
+        o.scan, o.tool_radius, o.press, o.tumour_depth - o.tumour_radius));
+  if (!(o.stiffness_ratio > 0 && std::isfinite(o.stiffness_ratio)))
+    throw std::invalid_argument(fmt::format("palpation: stiffness ratio {} must be > 0", o.stiffness_ratio));
+  io::OrganMeshOptions mo;
+  mo.mesher = io::Mesher::TetGen;
+  mo.meshing.target_tets = o.target_tets;
+  mo.remesh_edge = -1;  // the box and the sphere are meshed as built (TetGen refines their faces)
+  io::KidneyShape sphere;
+  sphere.a = sphere.b = sphere.c = o.tumour_radius;
+  sphere.bean = sphere.hilum = 0;
+  io::SurfaceMesh t = io::kidney_surface(6, sphere);
+  for (std::size_t k = 0; k < t.vertices.size(); k += 3) {
+    t.vertices[k] += 0.5 * o.L;
+    t.vertices[k + 1] += 0.5 * o.L;
+    t.vertices[k + 2] += o.H - o.tumour_depth;
+  }
+  std::vector<io::NamedSurface> inclusions;
+  inclusions.push_back({std::move(t), "tumour"});
+  const io::OrganMesh om = io::mesh_organ({box_surface(o.L, o.H), "palpation block"}, std::move(inclusions), mo);
+  ModelInput in;
+  in.nodes = om.mesh.nodes;
+  in.tets = om.mesh.tets;
+  in.material_names = {"tissue", "tumour"};
+  const std::size_t ne = in.tets.size() / 4;
+  in.elem_material.assign(ne, 0);
+  PalpationScan scan;
+  for (std::size_t e = 0; e < ne; ++e)
+    if (!om.mesh.tet_region.empty() && om.mesh.tet_region[e] > 0) {
+      in.elem_material[e] = 1;
+      ++scan.tumour_tets;
+    }
+  if (scan.tumour_tets == 0) throw std::runtime_error("palpation: the mesher gave the tumour no elements");
+  in.fixed.assign(in.nodes.size() / 3, 0);
+  for (std::size_t i = 0; i < in.fixed.size(); ++i) in.fixed[i] = in.nodes[3 * i + 2] == 0.0;
+  in.dt_safety = 0.9;
+  ReferenceOptions ro;
+  ro.backend = o.backend;
+  ro.relax.residual_tol = o.residual;
+  ro.relax.kinetic_tol = 1e-3 * o.residual;
+  for (int pass = 0; pass < 2; ++pass) {  // the tumour, then the baseline on the same mesh
+    const double ratio = pass == 0 ? o.stiffness_ratio : 1.0;
+    in.materials = {material(o.E, o.nu, o.rho), material(ratio * o.E, o.nu, o.rho)};
+    in.source = fmt::format("palpation block, tumour E x {:g}", ratio);
+    const TissueModel<double> m = build_model(in);
+    scan.nodes = m.n_nodes;
+    scan.tets = m.n_elems;
+    std::vector<PalpationPoint>& points = pass == 0 ? scan.with : scan.without;
+    for (int k = 0; k < o.positions; ++k) {
+      const double x = -0.5 * o.scan + o.scan * k / (o.positions - 1);
+      HeldTool tool;
+      tool.shape = {"probe", o.tool_radius, 0.0};
+      const Vec3<double> above{0.5 * o.L + x, 0.5 * o.L, o.H + o.tool_radius};
+      tool.start = {above + Vec3<double>{0, 0, 0.5 * o.tool_radius}, {0, 0, 1}};
+      tool.held = {above - Vec3<double>{0, 0, o.press}, {0, 0, 1}};
+      points.push_back({x, reference_solution(m, {}, ro, &tool).tool_force});
+    }
+  }
+  return scan;
+}
+
+void write_palpation_plot(const PalpationOptions& o, const PalpationScan& scan, const std::string& path) {
+  using Colour = Canvas::Colour;
+  const int width = 1000, height = 620, left = 110, right = 230, top = 70, bottom = 80;
+  const int pw = width - left - right, ph = height - top - bottom;
+  Canvas cv(width, height);
+  const Colour black{0, 0, 0}, grey{200, 200, 200}, red{214, 39, 40}, blue{31, 119, 180}, tan{250, 225, 200};
+  double fhi = 0;
+  for (const auto* s : {&scan.with, &scan.without})
+    for (const PalpationPoint& p : *s) fhi = std::max(fhi, std::fabs(p.force.z));
+  fhi = fhi > 0 ? 1.15 * fhi : 1;
+  const double xlo = -0.5e3 * o.scan, xhi = 0.5e3 * o.scan;
+  auto px = [&](double xmm) { return left + pw * (xmm - xlo) / (xhi - xlo); };
+  auto py = [&](double f) { return top + ph * (1 - f / fhi); };
+  // the tumour's extent under the scan line
+  cv.fill_rect(int(px(-1e3 * o.tumour_radius)), top, int(px(1e3 * o.tumour_radius)), top + ph, tan);
+  for (int k = 0; k <= 4; ++k) {
+    const double xv = xlo + (xhi - xlo) * k / 4, fv = fhi * k / 4;
+    cv.line(px(xv), top, px(xv), top + ph, grey);
+    cv.line(left, py(fv), left + pw, py(fv), grey);
+    const std::string xl = fmt::format("{:g}", xv), fl = fmt::format("{:.3g}", fv);
+    cv.text(int(px(xv)) - Canvas::text_width(xl, 2) / 2, top + ph + 8, xl, black, 2);
+    cv.text(left - 10 - Canvas::text_width(fl, 2), int(py(fv)) - 7, fl, black, 2);
+  }
+  cv.line(left, top + ph, left + pw, top + ph, black, 2);
+  cv.line(left, top, left, top + ph, black, 2);
+  cv.text(left + pw / 2 - 150, top + ph + 40, "tool position along the scan x (mm)", black, 2);
+  cv.text(10, top - 30, "tool force |F_z| (N)", black, 2);
+  cv.text(left, 8,
+          fmt::format("palpation: {:g} mm press, tumour r = {:g} mm at {:g} mm depth, E x {:g}", 1e3 * o.press,
+                      1e3 * o.tumour_radius, 1e3 * o.tumour_depth, o.stiffness_ratio),
+          black, 2);
+  int ly = top + 6;
+  const int lx = left + pw + 20;
+  for (const auto& [s, c, name] :
+       {std::tuple{&scan.with, red, "with tumour"}, std::tuple{&scan.without, blue, "tumour as tissue"}}) {
+    for (std::size_t k = 0; k < s->size(); ++k) {
+      const PalpationPoint& p = (*s)[k];
+      cv.disc(px(1e3 * p.x), py(std::fabs(p.force.z)), 5, c);
+      if (k > 0)
+        cv.line(px(1e3 * (*s)[k - 1].x), py(std::fabs((*s)[k - 1].force.z)), px(1e3 * p.x),
+                py(std::fabs(p.force.z)), c, 2);
+    }
+    cv.disc(lx + 7, ly + 7, 5, c);
+    cv.text(lx + 20, ly, name, c, 2);
+    ly += 26;
+  }
+  cv.fill_rect(lx, ly, lx + 14, ly + 14, tan);
+  cv.text(lx + 20, ly, "tumour's width", black, 2);
+  cv.write_png(path);
+}
+
+}  // namespace tissue::accuracy
