@@ -64,6 +64,13 @@ struct TransferCounters {
   std::uint64_t h2d_bytes = 0, d2h_bytes = 0;
 };
 
+/// Device memory of a backend that has one (bytes; -1 where it has none).
+struct DeviceMemory {
+  std::int64_t held = -1;   ///< held by this process's backend arrays
+  std::int64_t free = -1;   ///< free on the device (all processes)
+  std::int64_t total = -1;  ///< the device's
+};
+
 /// Whole-store snapshot for output and tests (downloads; not for the tick loop).
 struct Fields {
   std::vector<double> u;       ///< displacements (3 x n_nodes) m
@@ -159,7 +166,7 @@ class Backend {
 
   /// The four IANP passes of DESIGN.md section 2 over the region (tests run
   /// them one by one; node_update has no contact stage).
-  void element_pressure();  ///< pass 1: J_e, p_e V_e
+  void element_pressure();  ///< pass 1: J_e, (J_e - 1) V_e
   void nodal_pressure();    ///< pass 2: p_a
   void element_forces();    ///< pass 3: Fbar, S, f_a^e
   void node_update();       ///< pass 4: gather f_a, central difference, rotate u
@@ -183,6 +190,8 @@ class Backend {
   void write_positions(float* dst);
 
   virtual TransferCounters transfers() const { return {}; }
+  /// The device memory now (soak runs, out-of-memory reports); host backends: all -1.
+  virtual DeviceMemory device_memory() const { return {}; }
 
   index_t n_nodes() const { return n_nodes_; }
   bool uploaded() const { return uploaded_; }

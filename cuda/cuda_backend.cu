@@ -18,6 +18,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "cuda/contact.hpp"
@@ -151,12 +152,29 @@ class CudaBackend final : public Backend {
   std::string device_name() const override { return device_name_; }
   bool positions_on_device() const override { return true; }
   TransferCounters transfers() const override { return log_.counters(); }
+  DeviceMemory device_memory() const override {
+    std::size_t free = 0, total = 0;
+    CUDA_CHECK(cudaMemGetInfo(&free, &total));
+    return {static_cast<std::int64_t>(device_bytes_held()), static_cast<std::int64_t>(free),
+            static_cast<std::int64_t>(total)};
+  }
 
   Stepper<T>& stepper() { return stepper_; }
   RegionView region_view() const { return region_.view(); }
 
  protected:
   void do_upload(const TissueModel<double>& model) override {
+    try {
+      upload_arrays(model);
+    } catch (const OutOfDeviceMemory& e) {
+      throw OutOfDeviceMemory("cuda backend: the model (" + std::to_string(model.n_nodes) + " nodes, " +
+                              std::to_string(model.n_elems) + " tets, " + (sizeof(T) == 4 ? "float" : "double") +
+                              ") does not fit in GPU memory: " + e.what() +
+                              "; use a coarser mesh, precision float, or --backend cpu");
+    }
+  }
+
+  void upload_arrays(const TissueModel<double>& model) {
     const TissueModel<T> m = convert<T>(model);
     store_.upload(m, log_, stream());
     const index_t n = m.n_nodes;
@@ -375,6 +393,8 @@ decltype(auto) with_cuda_backend(Backend& b, F&& f) {
 
 }  // namespace
 }  // namespace gpu
+
+void set_cuda_memory_limit(std::size_t bytes) { gpu::set_device_memory_limit(bytes); }
 
 std::unique_ptr<Backend> make_cuda_backend(Precision precision) {
   std::string why;  // checked before any CUDA object is made, for a clear message

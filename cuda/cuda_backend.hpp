@@ -2,6 +2,7 @@
 // apps see only the Backend interface and the few CUDA-free extras below.
 #pragma once
 
+#include <cstddef>
 #include <memory>
 #include <string>
 
@@ -14,6 +15,13 @@ std::unique_ptr<Backend> make_cuda_backend(Precision precision);
 /// True when a CUDA device can be used; otherwise *why says why not.
 /// On success *why holds the device name.
 bool cuda_available(std::string* why);
+
+/// Caps the device memory the cuda backends of this process may hold
+/// together (bytes; 0 = only the GPU's own limit): a host that shares the GPU
+/// with its renderer sets it. Beyond it, and when the GPU itself is full,
+/// upload() throws naming the bytes asked for, held and free (a
+/// std::runtime_error).
+void set_cuda_memory_limit(std::size_t bytes);
 
 /// Device-to-device copy bandwidth of the current GPU (bytes/s, bytes read
 /// plus bytes written), timed with CUDA events over a 2 x 512 MiB copy

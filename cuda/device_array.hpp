@@ -15,6 +15,24 @@
 
 namespace tissue::gpu {
 
+/// The GPU memory the cuda backend could not get. what() names the bytes
+/// asked for, the bytes its arrays already hold, and the GPU's free and
+/// total memory (or the limit set).
+struct OutOfDeviceMemory : CudaError {
+  using CudaError::CudaError;
+};
+
+/// cudaMalloc of `bytes` through the backend's accounting: throws
+/// OutOfDeviceMemory when the GPU (or the limit) cannot hold it.
+void* device_allocate(std::size_t bytes);
+/// cudaFree of device_allocate's memory of `bytes` (noexcept).
+void device_free(void* p, std::size_t bytes) noexcept;
+/// Bytes the cuda backend's arrays hold now (all backends of the process).
+std::size_t device_bytes_held();
+/// Caps the bytes the cuda backend's arrays may hold together (0: no cap
+/// but the GPU's own); a host that shares the GPU with its renderer sets it.
+void set_device_memory_limit(std::size_t bytes);
+
 /// Owns n elements of T in device memory (cudaMalloc); move-only.
 /// Contents are uninitialised after allocate().
 template <class T>
@@ -35,10 +53,12 @@ class DeviceArray {
   }
   ~DeviceArray() { release(); }
 
-  /// Frees the old storage and allocates n elements (n = 0: none).
+  /// Frees the old storage and allocates n elements (n = 0: none). Out of
+  /// memory (the GPU's, or the limit of set_device_memory_limit) throws
+  /// OutOfDeviceMemory naming the bytes asked, held and free.
   void allocate(std::size_t n) {
     release();
-    if (n > 0) CUDA_CHECK(cudaMalloc(reinterpret_cast<void**>(&ptr_), n * sizeof(T)));
+    if (n > 0) ptr_ = static_cast<T*>(device_allocate(n * sizeof(T)));
     n_ = n;
   }
   /// Sets every byte of the array to `byte` (asynchronous on stream).
@@ -53,7 +73,7 @@ class DeviceArray {
 
  private:
   void release() noexcept {
-    if (ptr_) cudaFree(ptr_);  // no throw from a destructor path
+    if (ptr_) device_free(ptr_, n_ * sizeof(T));  // no throw from a destructor path
     ptr_ = nullptr;
     n_ = 0;
   }
