@@ -14,7 +14,7 @@ void add_mesh_command(CLI::App& app, int& rc);
 void add_run_command(CLI::App& app, int& rc);
 void add_bench_command(CLI::App& app, int& rc);
 void add_info_command(CLI::App& app, int& rc);
-void add_view_command(CLI::App& app, int& rc);  ///< apps/viewer/view_command.cpp
+void add_view_command(CLI::App& app, int& rc);  ///< apps/view_forward.cpp: runs tissue-view
 void add_reference_command(CLI::App& app, int& rc);  ///< apps/cmd_reference.cpp
 void add_tradeoff_command(CLI::App& app, int& rc);   ///< apps/cmd_tradeoff.cpp
 void add_locking_command(CLI::App& app, int& rc);    ///< apps/cmd_locking.cpp

@@ -23,6 +23,7 @@
 #include "apps/commands.hpp"
 #include "apps/options.hpp"
 #include "apps/run_session.hpp"
+#include "apps/viewer/view_command.hpp"
 #include "io/scene_xml.hpp"
 #include "scene/validate.hpp"
 #include "tests/temp_dir.hpp"
@@ -92,7 +93,8 @@ std::string parse_error(std::vector<std::string> args) {
   add_bench_command(app, rc);
   add_tradeoff_command(app, rc);
   add_locking_command(app, rc);
-  add_view_command(app, rc);
+  // `tissue view` hands its arguments to tissue-view: its options are the viewer's own
+  viewer::add_view_options(*app.add_subcommand("view"), rc);
   std::reverse(args.begin(), args.end());
   try {
     app.parse(args);
@@ -102,6 +104,31 @@ std::string parse_error(std::vector<std::string> args) {
     EXPECT_NE(std::string(e.what()).find("x.xml: cannot open the scene file"), std::string::npos) << e.what();
   }
   return "";
+}
+
+// `tissue` runs on a headless GPU server: no display library among the
+// libraries its executable needs (the viewer is tissue-view).
+TEST(Program, NeedsNoDisplayLibrary) {
+  FILE* p = popen((std::string("readelf -d '") + TISSUE_EXE + "' 2>&1").c_str(), "r");
+  ASSERT_NE(p, nullptr);
+  std::string out;
+  char buf[512];
+  while (fgets(buf, sizeof buf, p)) out += buf;
+  ASSERT_EQ(pclose(p), 0) << out;
+  std::vector<std::string> needed;
+  std::istringstream lines(out);
+  for (std::string line; std::getline(lines, line);)
+    if (const auto at = line.find("Shared library: ["); at != std::string::npos)
+      needed.push_back(line.substr(at + 17, line.find(']', at) - at - 17));
+  ASSERT_FALSE(needed.empty()) << out;
+  bool has_tbb = false;
+  for (const std::string& lib : needed) {
+    has_tbb = has_tbb || lib.find("libtbb") == 0;
+    for (const char* display : {"libGL", "libEGL", "libOpenGL", "libGLX", "libGLEW", "libglfw", "libX", "libxcb",
+                                "libwayland", "libimgui"})
+      EXPECT_NE(lib.find(display), 0u) << TISSUE_EXE << " needs " << lib;
+  }
+  EXPECT_TRUE(has_tbb) << "the check reads the wrong list: " << out;  // the list is the one we think it is
 }
 
 TEST(Options, CommandsRefuseBadValues) {

@@ -1,18 +1,25 @@
-// `tissue view <scene>`: registration of the viewer's command-line options.
+// The viewer's command line (tissue-view, which `tissue view` runs): its
+// options registered on a CLI11 app.
 #include <CLI/CLI.hpp>
 
 #include <memory>
 
 #include "apps/commands.hpp"
+#include "apps/viewer/view_command.hpp"
 #include "apps/options.hpp"
 #include "apps/viewer/viewer.hpp"
 
-namespace tissue::app {
+namespace tissue::viewer {
 
-void add_view_command(CLI::App& app, int& rc) {
-  auto* cmd = app.add_subcommand(
-      "view", "Interactive viewer: the mouse (or a scripted or Phantom tool) presses the tissue at 1 kHz; "
-              "--screenshot renders a picture offscreen instead");
+void add_view_options(CLI::App& cmd_app, int& rc) {
+  using app::load_scene_arg;
+  using app::output_file;
+  using app::real_number;
+  using app::whole_number;
+  CLI::App* cmd = &cmd_app;
+  cmd->description(
+      "Interactive viewer: the mouse (or a scripted or Phantom tool) presses the tissue at 1 kHz; "
+      "--screenshot renders a picture offscreen instead");
   auto o = std::make_shared<viewer::ViewOptions>();
   cmd->add_option("scene", o->scene, "Scene XML file, or @kidney for the built-in kidney")->required();
   cmd->add_option("--backend", o->backend, "cpu | cuda (default: the scene's)");
@@ -52,4 +59,4 @@ void add_view_command(CLI::App& app, int& rc) {
   cmd->callback([o, &rc] { rc = viewer::run_view(*o, load_scene_arg(o->scene)); });
 }
 
-}  // namespace tissue::app
+}  // namespace tissue::viewer

@@ -1,4 +1,4 @@
-// `tissue view` when the build found no windowing libraries: the command
+// tissue-view when the build found no windowing libraries: the program
 // exists and says what to install (apps/viewer/CMakeLists.txt lists them).
 #include <CLI/CLI.hpp>
 
@@ -6,12 +6,13 @@
 #include <stdexcept>
 #include <string>
 
-#include "apps/commands.hpp"
+#include "apps/viewer/view_command.hpp"
 
-namespace tissue::app {
+namespace tissue::viewer {
 
-void add_view_command(CLI::App& app, int& rc) {
-  auto* cmd = app.add_subcommand("view", "Interactive viewer (not built: see `tissue view --help`)");
+void add_view_options(CLI::App& app, int& rc) {
+  CLI::App* cmd = &app;
+  cmd->description("Interactive viewer (not built here: run it to see what is missing)");
   auto scene = std::make_shared<std::string>();
   cmd->add_option("scene", *scene, "Scene XML file, or @kidney");
   cmd->allow_extras();
@@ -22,4 +23,4 @@ void add_view_command(CLI::App& app, int& rc) {
   });
 }
 
-}  // namespace tissue::app
+}  // namespace tissue::viewer
