@@ -58,6 +58,7 @@ struct Options {
   std::string csv;           ///< the samples as CSV
   std::uint64_t seed = 1;    ///< soak device
   double pull = 0;           ///< soak device: grasp pull in press depths (0: sideways)
+  double soak_start = 0;     ///< soak device: start this many seconds into its series
 };
 
 /// Resident set size of this process (bytes), from /proc/self/statm (0 where unavailable).
@@ -171,8 +172,10 @@ int run(const Options& o) {
       throw std::runtime_error(session.scene.source + ": no scripted tool path to play");
     device = std::make_unique<viewer::PathDevice>(session.scene.tools.front().path, true);
   } else if (o.device == "soak") {
-    device = std::make_unique<viewer::SoakDevice>(session.tool_start, session.press_dir, session.approach,
+    auto d = std::make_unique<viewer::SoakDevice>(session.tool_start, session.press_dir, session.approach,
                                                   session.tool_radius, o.seed, o.pull);
+    d->set_start(o.soak_start);
+    device = std::move(d);
   } else {
     throw std::invalid_argument(fmt::format("--device '{}' is none of scripted, mouse and soak", o.device));
   }
@@ -269,6 +272,8 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);
   app.add_option("--csv", o.csv, "Soak: write the memory samples as CSV");
   app.add_option("--seed", o.seed, "Soak: the random motion's seed")->default_val(1);
+  app.add_option("--soak-start", o.soak_start, "Soak: start this many seconds into the motion's series (a late "
+                                               "cycle at once)")->default_val(0)->check(CLI::NonNegativeNumber);
   app.add_option("--pull", o.pull, "Soak: the grasp pulls back by this many press depths before the release (0: "
                                    "it moves sideways)")->default_val(0)->check(CLI::NonNegativeNumber);
   try {

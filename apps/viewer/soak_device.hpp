@@ -37,7 +37,11 @@ class SoakDevice : public Device {
     up_ = cross(dir_, side_);
   }
 
-  ToolInput read(double t) override {
+  /// The motion from `start` seconds into the series (reproducing a late cycle at once).
+  void set_start(double start) { start_time_ = start; }
+
+  ToolInput read(double t_session) override {
+    const double t = t_session + start_time_;
     const double c = std::floor(t / kCycle);
     const double s = t - c * kCycle;  // seconds into the cycle
     const Keys k = keys(static_cast<std::uint64_t>(c));
@@ -97,6 +101,7 @@ class SoakDevice : public Device {
   double approach_, radius_;
   std::uint64_t seed_;
   double pull_;
+  double start_time_ = 0;
 };
 
 }  // namespace tissue::viewer
