@@ -1,4 +1,4 @@
-// Dynamic relaxation to a tight equilibrium on any backend (DESIGN.md
+// Dynamic relaxation to a tight equilibrium on any backend (docs/design.md
 // section 2: "for quasi-static answers use dynamic relaxation, damping chosen
 // from the lowest mode estimate"). The engine's own damped central
 // difference is the relaxation: mass-proportional damping alpha = 2 omega_1

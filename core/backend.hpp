@@ -164,7 +164,7 @@ class Backend {
   /// Every surface node in contact after the last step (ascending node id).
   std::vector<ContactNode> contacts();
 
-  /// The four IANP passes of DESIGN.md section 2 over the region (tests run
+  /// The four IANP passes of docs/design.md section 2 over the region (tests run
   /// them one by one; node_update has no contact stage).
   void element_pressure();  ///< pass 1: J_e, (J_e - 1) V_e
   void nodal_pressure();    ///< pass 2: p_a

@@ -1,4 +1,4 @@
-// Strain energy of one element (DESIGN.md section 2's Neo-Hookean W), written
+// Strain energy of one element (docs/design.md section 2's Neo-Hookean W), written
 // once for every backend like core/tet.hpp. The energy a TLED step actually
 // uses is W(Fbar): for IANP Fbar = (Jbar / J)^(1/3) F with Jbar = 1 + pbar / K,
 // and since the isochoric part J^(-2/3) I1 is unchanged by scaling F,

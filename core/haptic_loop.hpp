@@ -1,4 +1,4 @@
-// The haptic loop (DESIGN.md section 3, "Loops"): its own thread runs one
+// The haptic loop (docs/design.md section 3, "Loops"): its own thread runs one
 // Scheduler tick per period (1 ms) on a steady clock, with the tool driven
 // through the virtual coupling of core/force_coupling.hpp.
 //

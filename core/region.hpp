@@ -1,4 +1,4 @@
-// The deformation region (DESIGN.md section 3): a flood fill from seed nodes
+// The deformation region (docs/design.md section 3): a flood fill from seed nodes
 // over node -> element -> node adjacency for `depth` rings. Nodes reached
 // (ring <= depth) are inner (their every element is computed); elements
 // touching an inner node are computed; the other corners of those elements

@@ -1,5 +1,5 @@
 // Per-element and per-node TLED math for linear 4-node tetrahedra, written
-// once for every backend (DESIGN.md section 2). All quantities refer to the
+// once for every backend (docs/design.md section 2). All quantities refer to the
 // undeformed configuration. Shapes: a tet's shape-function gradients are
 // dN[3*a + j] = dN_a/dX_j (a = corner 0..3, j = axis 0..2), in 1/m.
 #pragma once
@@ -59,7 +59,7 @@ TISSUE_UNROLL
   return F;
 }
 
-/// Neo-Hookean second Piola-Kirchhoff stress (Pa) of DESIGN.md section 2:
+/// Neo-Hookean second Piola-Kirchhoff stress (Pa) of docs/design.md section 2:
 /// S = mu J^(-2/3) (I - I1/3 C^-1) + K J (J - 1) C^-1, C = F^T F, I1 = tr C.
 /// J = det F must be > 0 (the caller checks).
 template <class T>

@@ -1,4 +1,4 @@
-// The four IANP passes of DESIGN.md section 2 on the host, as TBB loops over
+// The four IANP passes of docs/design.md section 2 on the host, as TBB loops over
 // the region's index lists. Each pass is a function of (const model&,
 // state&): it only loops; the per-element and per-node math is core/tet.hpp.
 // The element passes run in batches of kLanes elements through the

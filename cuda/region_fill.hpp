@@ -1,4 +1,4 @@
-// The deformation region on the device (DESIGN.md section 3; the host
+// The deformation region on the device (docs/design.md section 3; the host
 // reference is core/region.cpp, whose lists these match element for
 // element): rings of node -> element -> node expansion from the seeds, the
 // computed elements and the halo, then ascending compacted node and element

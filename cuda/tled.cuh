@@ -1,4 +1,4 @@
-// The four IANP passes of DESIGN.md section 2 as per-item device functions
+// The four IANP passes of docs/design.md section 2 as per-item device functions
 // (one element, or one lane of a node's group), built on the shared
 // __host__ __device__ math of core/tet.hpp, and the kernels that run them:
 // one kernel per pass (plain launches and CUDA graphs, chained with

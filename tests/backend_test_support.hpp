@@ -61,7 +61,7 @@ inline Vec3<double> node_u(const std::vector<double>& u, index_t n, index_t a) {
 }
 
 /// Serial, scatter-based reference of one TLED step over the whole mesh,
-/// straight from DESIGN.md section 2 and core/tet.hpp (R = 0). Held nodes
+/// straight from docs/design.md section 2 and core/tet.hpp (R = 0). Held nodes
 /// (held[a]) are set to u_held. Returns the internal forces f (3 x n).
 inline std::vector<double> reference_step(const TissueModel<double>& m, std::vector<double>& u, std::vector<double>& u_prev,
                                    const std::vector<std::uint8_t>& held, const std::vector<double>& u_held) {

@@ -1,4 +1,4 @@
-// Volumetric locking (DESIGN.md section 2, IANP) on the cpu backend: a box
+// Volumetric locking (docs/design.md section 2, IANP) on the cpu backend: a box
 // of 4 x 4 x 4 cells, bottom face fixed, top face pushed down by a
 // prescribed displacement (all top nodes tool-driven), relaxed to
 // equilibrium by damped explicit dynamics. At nu = 0.499 the plain linear
@@ -143,7 +143,7 @@ TEST(Locking, FormulationsAgreeAtModerateNu) {
   EXPECT_LT(plain.force / ianp.force, 1.05);
 }
 
-// The critical step of DESIGN.md section 2 (dt_crit = min_e L_e / c_e, L_e the
+// The critical step of docs/design.md section 2 (dt_crit = min_e L_e / c_e, L_e the
 // smallest altitude) is stable for the IANP element, the engine's default:
 // undamped at dt = dt_crit exactly, a random perturbation of a clamped box at
 // nu = 0.499 (the stiffest case) stays bounded over 20000 steps. (The plain

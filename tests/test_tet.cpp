@@ -1,4 +1,4 @@
-// Tests of the per-element TLED math in core/tet.hpp (DESIGN.md section 2):
+// Tests of the per-element TLED math in core/tet.hpp (docs/design.md section 2):
 // shape gradients and volumes, the characteristic length, Neo-Hookean PK2
 // stress against its closed form, element forces against finite differences
 // of the discrete energy, invariance under rigid motion, the IANP element

@@ -1,4 +1,4 @@
-// Verification against closed-form solutions of DESIGN.md section 2's
+// Verification against closed-form solutions of docs/design.md section 2's
 // Neo-Hookean law, W = mu/2 (J^(-2/3) I1 - 3) + K/2 (J - 1)^2, on a cube
 // [0, L]^3 under prescribed boundary displacements, relaxed to a relative
 // residual of 1e-9 by accuracy::relax (the reference-solution relaxation):

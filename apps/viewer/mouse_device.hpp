@@ -1,4 +1,4 @@
-// The mouse as a haptic device (DESIGN.md section 3): the display thread
+// The mouse as a haptic device (docs/design.md section 3): the display thread
 // sets where the tool tip should go; the haptic thread reads the tip, which
 // moves towards that target at a bounded speed, so that the 60 Hz steps of
 // the mouse reach the 1 kHz loop as a smooth path (no jumps into the

@@ -1,4 +1,4 @@
-// Cross-backend consistency (DESIGN.md section 5; issue 3 item 4): the same
+// Cross-backend consistency (docs/design.md section 5; issue 3 item 4): the same
 // scene (a box, and the default kidney of io/kidney.hpp; each with a depth-N
 // region and the whole mesh) driven through core Scheduler by the same
 // ScriptedDevice path on the cpu and the cuda backend, tick by tick, in
