@@ -24,6 +24,12 @@ void add_palpate_command(CLI::App& app, int& rc);    ///< apps/cmd_palpate.cpp
 
 /// What the command is doing now, in words ("reading the scene x.xml"):
 /// main() names it when memory runs out (std::bad_alloc).
+/// Parses argv into `app` (whose callbacks run the command and set rc) and
+/// turns every failure into an exit code: CLI11's own for parse errors, 1
+/// with "<program>: error: ..." on stderr for exceptions (out of memory
+/// names the activity). main() of tissue and tissue-view.
+int run_command_line(CLI::App& app, int argc, char** argv, const int& rc, const char* program);
+
 void set_activity(std::string what);
 const std::string& activity();
 

@@ -1,6 +1,9 @@
 #include <fmt/format.h>
 
 #include <charconv>
+#include <cstdio>
+#include <exception>
+#include <new>
 #include <stdexcept>
 
 #include "apps/commands.hpp"
@@ -12,6 +15,21 @@ namespace tissue::app {
 namespace {
 std::string g_activity = "starting";
 }  // namespace
+
+int run_command_line(CLI::App& app, int argc, char** argv, const int& rc, const char* program) {
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "%s: error: out of memory while %s\n", program, activity().c_str());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: error: %s\n", program, e.what());
+    return 1;
+  }
+  return rc;
+}
 
 void set_activity(std::string what) {
   g_activity = std::move(what);

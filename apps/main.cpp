@@ -2,10 +2,6 @@
 // registers its options on a CLI11 sub-app and returns an exit code.
 #include <CLI/CLI.hpp>
 
-#include <cstdio>
-#include <exception>
-#include <new>
-
 #include "apps/commands.hpp"
 
 int main(int argc, char** argv) {
@@ -23,16 +19,5 @@ int main(int argc, char** argv) {
   tissue::app::add_hertz_command(app, rc);
   tissue::app::add_converge_command(app, rc);
   tissue::app::add_palpate_command(app, rc);
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e);
-  } catch (const std::bad_alloc&) {
-    std::fprintf(stderr, "tissue: error: out of memory while %s\n", tissue::app::activity().c_str());
-    return 1;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "tissue: error: %s\n", e.what());
-    return 1;
-  }
-  return rc;
+  return tissue::app::run_command_line(app, argc, argv, rc, "tissue");
 }

@@ -411,6 +411,28 @@ Vec3<T> random_query(Rng& rng, const Vec3<T> P[3]) {
   return as<T>(p + rng.uni(-0.3, 0.3) * as<double>(outward(P)));
 }
 
+/// The common start of the sweep's random cases: a generic face P, a tool
+/// radius r in [r_lo, r_hi], and the face point q0 at barycentric weights w0
+/// (each >= w_min), with the face's outward normal N.
+template <class T>
+struct FacePoint {
+  Vec3<T> P[3];
+  double r;
+  double w0[3];
+  VD N, q0;
+};
+
+template <class T>
+FacePoint<T> random_face_point(Rng& rng, double r_lo, double r_hi, double w_min) {
+  FacePoint<T> f;
+  random_triangle(rng, Shape::Generic, f.P);
+  f.r = rng.uni(r_lo, r_hi);
+  rng.weights(f.w0, w_min);
+  f.N = as<double>(outward(f.P));
+  f.q0 = f.w0[0] * as<double>(f.P[0]) + f.w0[1] * as<double>(f.P[1]) + f.w0[2] * as<double>(f.P[2]);
+  return f;
+}
+
 template <class T>
 class ClosestOnTriangle : public ::testing::Test {};
 TYPED_TEST_SUITE(ClosestOnTriangle, Scalars);
@@ -1288,13 +1310,8 @@ TYPED_TEST(SweepTriangle, ToolBehindTheFacePushesItInwardOnlyWhereTheTipWentThro
   Rng rng(53);
   int cases_n = 0, exact = 0;
   for (int it = 0; cases_n < 1500 && it < 100000; ++it) {
-    Vec3<T> P[3];
-    random_triangle(rng, Shape::Generic, P);
-    const double r = rng.uni(0.05, 0.5);
-    double w0[3];
-    rng.weights(w0, 0.05);
-    const VD N = as<double>(outward(P));
-    const VD q0 = w0[0] * as<double>(P[0]) + w0[1] * as<double>(P[1]) + w0[2] * as<double>(P[2]);
+    const FacePoint<T> face = random_face_point<T>(rng, 0.05, 0.5, 0.05);
+    const auto& [P, r, w0, N, q0] = face;
     const VD axis = unit_or(-1.0 * N + 0.6 * rng.unit(), -1.0 * N);
     if (dot(axis, N) > -0.3) continue;
     const double behind = rng.uni(0.15, 0.9) * r;  // past kThrough
@@ -1391,13 +1408,8 @@ TYPED_TEST(SweepTriangle, FacePiercedByTheTipIsMovedToTheFarSideOfTheTip) {
   Rng rng(56);
   int cases = 0;
   for (int it = 0; cases < 1500 && it < 100000; ++it) {
-    Vec3<T> P[3];
-    random_triangle(rng, Shape::Generic, P);
-    const double r = rng.uni(0.05, 0.3);
-    double w0[3];
-    rng.weights(w0, 0.05);
-    const VD N = as<double>(outward(P));
-    const VD q0 = w0[0] * as<double>(P[0]) + w0[1] * as<double>(P[1]) + w0[2] * as<double>(P[2]);
+    const FacePoint<T> face = random_face_point<T>(rng, 0.05, 0.3, 0.05);
+    const auto& [P, r, w0, N, q0] = face;
     const VD axis = unit_or(N + 0.8 * rng.unit(), N);
     if (dot(axis, N) < 0.3) continue;
     const auto tools = static_tool<T>(q0, axis, r, it % 3 ? rng.uni(0, 1) : 0);

@@ -4,10 +4,6 @@
 // ARGS` runs `tissue-view ARGS` (apps/view_forward.cpp).
 #include <CLI/CLI.hpp>
 
-#include <cstdio>
-#include <exception>
-#include <new>
-
 #include "apps/commands.hpp"
 #include "apps/viewer/view_command.hpp"
 
@@ -15,16 +11,5 @@ int main(int argc, char** argv) {
   CLI::App app{"tissue-view (tissue view): interactive nonlinear soft-tissue deformation on screen"};
   int rc = 0;
   tissue::viewer::add_view_options(app, rc);
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e);
-  } catch (const std::bad_alloc&) {
-    std::fprintf(stderr, "tissue view: error: out of memory while %s\n", tissue::app::activity().c_str());
-    return 1;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "tissue view: error: %s\n", e.what());
-    return 1;
-  }
-  return rc;
+  return tissue::app::run_command_line(app, argc, argv, rc, "tissue view");
 }
