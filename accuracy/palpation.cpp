@@ -12,6 +12,7 @@
 #include "core/model.hpp"
 #include "io/kidney.hpp"
 #include "io/organ_mesher.hpp"
+#include "scene/scene.hpp"
 
 namespace tissue::accuracy {
 namespace {
@@ -33,8 +34,10 @@ io::SurfaceMesh box_surface(double L, double H) {
   return s;
 }
 
+/// mu and K from E and nu: the scene's own conversion.
 MaterialParams material(double E, double nu, double rho) {
-  return {E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu)), rho};
+  return scene::Material{.name = "", .form = scene::Material::Form::YoungPoisson, .a = E, .b = nu, .rho = rho, .line = 0}
+      .params();
 }
 
 }  // namespace
