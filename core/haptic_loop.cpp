@@ -58,7 +58,7 @@ bool make_realtime(int priority) {
 #endif
 }
 
-Simulation checked(Simulation s) {
+Engine checked(Engine s) {
   if (!s.model || !s.backend || !s.scheduler)
     throw std::invalid_argument("haptic loop: the simulation factory returned an incomplete simulation");
   return s;
@@ -93,7 +93,7 @@ std::string describe(const HapticStats& s) {
       s.window_late, s.window_ticks, ms * s.work_p99, ms * s.period, ms * s.wake_p99, line);
 }
 
-HapticLoop::HapticLoop(std::vector<Device*> devices, SimulationFactory factory, LiveParams params, Options options)
+HapticLoop::HapticLoop(std::vector<Device*> devices, EngineFactory factory, LiveParams params, Options options)
     : devices_(std::move(devices)),
       factory_(std::move(factory)),
       options_(options),
@@ -197,8 +197,8 @@ void HapticLoop::request_params(const LiveParams& params) {
   req_cv_.notify_all();
 }
 
-std::future<void> HapticLoop::post(std::function<void(Simulation&)> task) {
-  std::packaged_task<void(Simulation&)> job(std::move(task));
+std::future<void> HapticLoop::post(std::function<void(Engine&)> task) {
+  std::packaged_task<void(Engine&)> job(std::move(task));
   std::future<void> done = job.get_future();
   if (!running_) {
     job(sim_);
@@ -224,7 +224,7 @@ void HapticLoop::set_status(std::string s) {
 }
 
 void HapticLoop::serve_requests() {
-  std::vector<std::packaged_task<void(Simulation&)>> tasks;
+  std::vector<std::packaged_task<void(Engine&)>> tasks;
   std::optional<LiveParams> params;
   {
     std::lock_guard lk(req_mutex_);
@@ -237,7 +237,7 @@ void HapticLoop::serve_requests() {
 }
 
 void HapticLoop::rebuild(const LiveParams& params) {
-  Simulation next;
+  Engine next;
   try {
     next = checked(factory_(params));
     if (std::abs(next.scheduler->settings().tick - period_) > 1e-12)

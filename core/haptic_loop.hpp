@@ -27,7 +27,7 @@
 //   display waits on the returned future, the haptic thread never waits;
 // - parameter changes (E, nu, region depth, precision) are requested by the
 //   display and applied by the haptic thread between ticks: it builds a new
-//   Simulation through the factory (a new model and backend; the tissue
+//   Engine through the factory (a new model and backend; the tissue
 //   restarts from rest, the device's clock and the coupling go on), and
 //   keeps the old one, reporting why, when the factory throws.
 // The owner thread (the one that constructs the loop) calls start, stop,
@@ -64,16 +64,16 @@ struct LiveParams {
 
 /// What the haptic loop runs: the model, a backend holding it, and the
 /// scheduler over both (built together, destroyed together).
-struct Simulation {
+struct Engine {
   std::unique_ptr<TissueModel<double>> model;
   std::unique_ptr<Backend> backend;
   std::unique_ptr<Scheduler> scheduler;
 };
 
-/// Builds a Simulation for the parameters (the app supplies it: scene ->
+/// Builds an Engine for the parameters (the app supplies it: scene ->
 /// model -> backend -> scheduler). Throws, with a message naming the rule
 /// broken, for parameters it cannot use.
-using SimulationFactory = std::function<Simulation(const LiveParams&)>;
+using EngineFactory = std::function<Engine(const LiveParams&)>;
 
 /// Timing of the loop. Window figures cover the last `window` ticks;
 /// session figures every tick since start() (or the first run_ticks()).
@@ -163,10 +163,10 @@ class HapticLoop {
   /// its own virtual coupling; the devices must outlive the loop; they are
   /// read and sent forces on the haptic thread only, so a device shared with
   /// the display must synchronise itself (viewer's MouseDevice does).
-  HapticLoop(std::vector<Device*> devices, SimulationFactory factory, LiveParams params, Options options);
-  HapticLoop(Device& device, SimulationFactory factory, LiveParams params, Options options)
+  HapticLoop(std::vector<Device*> devices, EngineFactory factory, LiveParams params, Options options);
+  HapticLoop(Device& device, EngineFactory factory, LiveParams params, Options options)
       : HapticLoop(std::vector<Device*>{&device}, std::move(factory), params, options) {}
-  HapticLoop(Device& device, SimulationFactory factory, LiveParams params)
+  HapticLoop(Device& device, EngineFactory factory, LiveParams params)
       : HapticLoop(device, std::move(factory), params, Options{}) {}
   ~HapticLoop();
   HapticLoop(const HapticLoop&) = delete;
@@ -191,7 +191,7 @@ class HapticLoop {
 
   /// Runs task(simulation) on the haptic thread between two ticks (on the
   /// calling thread when stopped). The future carries its exception.
-  std::future<void> post(std::function<void(Simulation&)> task);
+  std::future<void> post(std::function<void(Engine&)> task);
 
   /// "" when all is well; otherwise why the solver stopped or a parameter
   /// change was refused (any thread).
@@ -229,10 +229,10 @@ class HapticLoop {
   // owned by the haptic thread while running, by the owner otherwise
   // (declaration order matters: sim_ is built before coupled_ needs its tick)
   std::vector<Device*> devices_;
-  SimulationFactory factory_;
+  EngineFactory factory_;
   Options options_;
   LiveParams params_;
-  Simulation sim_;
+  Engine sim_;
   double period_ = 1e-3;
   double clock_offset_ = 0;  ///< simulated time of the simulations before the running one (s)
   std::vector<std::unique_ptr<SessionClock>> clocks_;     ///< per tool
@@ -258,7 +258,7 @@ class HapticLoop {
   mutable std::mutex req_mutex_;
   std::condition_variable req_cv_;
   std::atomic<bool> has_requests_{false};
-  std::vector<std::packaged_task<void(Simulation&)>> tasks_;
+  std::vector<std::packaged_task<void(Engine&)>> tasks_;
   std::optional<LiveParams> pending_params_;
   std::string status_;
 };

@@ -93,9 +93,9 @@ class StubBackend : public Backend {
 };
 
 /// Factory over the box: the cpu backend, or the stub (work per tick, failure tick).
-SimulationFactory box_factory(bool stub, std::chrono::microseconds work = 0us, long fail_at = 1L << 40) {
+EngineFactory box_factory(bool stub, std::chrono::microseconds work = 0us, long fail_at = 1L << 40) {
   return [=](const LiveParams& p) {
-    Simulation s;
+    Engine s;
     s.model = box_model(p);
     s.backend = stub ? std::make_unique<StubBackend>(work, fail_at) : create_backend("cpu", p.precision);
     s.backend->upload(*s.model);
@@ -185,7 +185,7 @@ TEST(HapticLoop, PostedTasksRunOnTheHapticThreadBetweenTicks) {
   std::thread::id ran_on;
   long before = -1, after = -2;
   std::vector<float> xyz(3 * 75);  // 5 x 5 x 3 nodes
-  loop.post([&](Simulation& sim) {
+  loop.post([&](Engine& sim) {
         ran_on = std::this_thread::get_id();
         before = sim.scheduler->ticks();
         sim.backend->write_positions(xyz.data());
@@ -196,12 +196,12 @@ TEST(HapticLoop, PostedTasksRunOnTheHapticThreadBetweenTicks) {
   EXPECT_EQ(before, after);
   EXPECT_NEAR(xyz[3 * 74 + 2], 0.01, 1e-3);  // the last node sits near the top face (z = 1 cm)
   // an exception in a task reaches the display through the future
-  std::future<void> bad = loop.post([](Simulation&) { throw std::runtime_error("task failed"); });
+  std::future<void> bad = loop.post([](Engine&) { throw std::runtime_error("task failed"); });
   EXPECT_THROW(bad.get(), std::runtime_error);
   EXPECT_TRUE(wait_for(loop, [&](const HapticSnapshot& s) { return s.tick > after + 5; }));  // still ticking
   loop.stop();
   // stopped: the task runs on the calling thread
-  loop.post([&](Simulation&) { ran_on = std::this_thread::get_id(); }).get();
+  loop.post([&](Engine&) { ran_on = std::this_thread::get_id(); }).get();
   EXPECT_EQ(ran_on, std::this_thread::get_id());
 }
 
@@ -223,7 +223,7 @@ TEST(HapticLoop, ParameterChangesAreAppliedBetweenTicksOrRefused) {
   EXPECT_EQ(s.params.precision, Precision::Double);
   EXPECT_EQ(loop.status(), "");
   std::string backend_precision;
-  loop.post([&](Simulation& sim) { backend_precision = to_string(sim.backend->precision()); }).get();
+  loop.post([&](Engine& sim) { backend_precision = to_string(sim.backend->precision()); }).get();
   EXPECT_EQ(backend_precision, "double");
   // nu = 0.6 is refused: the running simulation stays, the status says why
   LiveParams bad = p;
@@ -290,8 +290,8 @@ TEST(HapticLoop, ASolverSlowerThanThePeriodIsReportedLate) {
 TEST(HapticLoop, ASolverFailureStopsTicksUntilNewParameters) {
   ScriptedDevice dev = press_device();
   int built = 0;
-  SimulationFactory stub = box_factory(true, 0us, 30);  // non-finite from the 30th tick
-  SimulationFactory counting = [&](const LiveParams& p) {
+  EngineFactory stub = box_factory(true, 0us, 30);  // non-finite from the 30th tick
+  EngineFactory counting = [&](const LiveParams& p) {
     ++built;
     return built == 1 ? stub(p) : box_factory(true)(p);
   };
@@ -337,7 +337,7 @@ TEST(HapticLoop, FactoryErrorsReachTheConstructor) {
   LiveParams bad;
   bad.nu = 0.5;
   EXPECT_THROW(HapticLoop(dev, box_factory(false), bad), std::invalid_argument);
-  SimulationFactory empty = [](const LiveParams&) { return Simulation{}; };
+  EngineFactory empty = [](const LiveParams&) { return Engine{}; };
   EXPECT_THROW(HapticLoop(dev, empty, LiveParams{}), std::invalid_argument);
 }
 

@@ -99,11 +99,11 @@ struct Display {
     const HapticSnapshot s = loop.snapshot();
     if (host_positions) {  // a device backend writes device memory only: the viewer maps a GL buffer for it
       float* dst = staging.data();
-      loop.post([dst](Simulation& sim) { sim.backend->write_positions(dst); }).get();
+      loop.post([dst](Engine& sim) { sim.backend->write_positions(dst); }).get();
     }
     if (s.region_version != region_version) {
       region_version = s.region_version;
-      loop.post([this](Simulation& sim) { roles = sim.backend->region().role; }).get();
+      loop.post([this](Engine& sim) { roles = sim.backend->region().role; }).get();
       ++region_downloads;
     }
     if (mouse) {  // from the start to 4 mm past the surface target and back, once a second
@@ -192,7 +192,7 @@ int run(const Options& o) {
   auto sample = [&](double t) {
     const HapticSnapshot s = loop.snapshot();
     DeviceMemory dm;  // read on the haptic thread, between two ticks
-    loop.post([&dm](Simulation& sim) { dm = sim.backend->device_memory(); }).get();
+    loop.post([&dm](Engine& sim) { dm = sim.backend->device_memory(); }).get();
     Sample x{t, s.stats.ticks, s.stats.late, resident_bytes(), double(dm.held),
              dm.total >= 0 ? double(dm.total - dm.free) : -1.0, s.stats.work_p99, nonfinite};
     const auto mib = [](double b) { return b < 0 ? std::string("     n/a") : fmt::format("{:8.2f}", b / kMiB); };

@@ -14,7 +14,7 @@ class HostPositions : public PositionSource {
   explicit HostPositions(Renderer& r) : renderer_(r), staging_(3 * size_t(r.n_nodes())) {}
   void update(HapticLoop& loop) override {
     float* dst = staging_.data();
-    loop.post([dst](Simulation& sim) { sim.backend->write_positions(dst); }).get();
+    loop.post([dst](Engine& sim) { sim.backend->write_positions(dst); }).get();
     renderer_.upload_positions(dst);
   }
   std::string path() const override { return "host: write_positions -> glBufferSubData"; }

@@ -40,7 +40,7 @@ class InteropPositions : public PositionSource {
         throw std::runtime_error(fmt::format("tissue view: mapped vertex buffer holds {} bytes, {} needed", size, bytes_));
       float* dst = static_cast<float*>(ptr);
       // the backend's kernel writes X + u into the buffer and synchronises its stream
-      loop.post([dst](Simulation& sim) { sim.backend->write_positions(dst); }).get();
+      loop.post([dst](Engine& sim) { sim.backend->write_positions(dst); }).get();
     } catch (...) {
       cudaGraphicsUnmapResources(1, &resource_, 0);
       throw;
@@ -63,7 +63,7 @@ class StagedPositions : public PositionSource {
   ~StagedPositions() override { cudaFree(device_); }
   void update(HapticLoop& loop) override {
     float* dst = device_;
-    loop.post([dst](Simulation& sim) { sim.backend->write_positions(dst); }).get();
+    loop.post([dst](Engine& sim) { sim.backend->write_positions(dst); }).get();
     check(cudaMemcpy(host_.data(), device_, host_.size() * sizeof(float), cudaMemcpyDeviceToHost),
           "cudaMemcpy (positions to host)");
     renderer_.upload_positions(host_.data());

@@ -29,9 +29,9 @@ scene::Scene with_params(scene::Scene s, const LiveParams& p) {
   return s;
 }
 
-Simulation build_simulation(const scene::Scene& base, const LiveParams& p) {
+Engine build_simulation(const scene::Scene& base, const LiveParams& p) {
   const scene::Scene s = with_params(base, p);
-  Simulation sim;
+  Engine sim;
   sim.model = std::make_unique<TissueModel<double>>(scene::load_model(s));
   sim.backend = create_backend(s.solver.backend, s.solver.precision);
   sim.backend->upload(*sim.model);
@@ -39,7 +39,7 @@ Simulation build_simulation(const scene::Scene& base, const LiveParams& p) {
   return sim;
 }
 
-SimulationFactory Session::factory() const {
+EngineFactory Session::factory() const {
   auto shared = std::make_shared<const scene::Scene>(scene);
   return [shared](const LiveParams& p) { return build_simulation(*shared, p); };
 }

@@ -29,7 +29,7 @@ scene::Scene with_params(scene::Scene s, const LiveParams& p);
 /// Scene -> model -> backend (the scene's solver backend) -> scheduler, for
 /// the given parameters. Throws SceneError / ModelError / std::runtime_error
 /// with the scene's file and the rule broken.
-Simulation build_simulation(const scene::Scene& scene, const LiveParams& p);
+Engine build_simulation(const scene::Scene& scene, const LiveParams& p);
 
 struct Session {
   scene::Scene scene;
@@ -40,7 +40,7 @@ struct Session {
   double approach = 0;        ///< distance from the start to that target (m)
   double tool_radius = 1e-3;  ///< m
   /// A factory for HapticLoop over a copy of the scene.
-  SimulationFactory factory() const;
+  EngineFactory factory() const;
 };
 
 /// Reads the session's geometry and parameters from a loaded scene with the

@@ -94,7 +94,7 @@ DeviceChoice make_device(const std::string& kind, const Session& s, double mouse
 /// The parts of the model the renderer needs (mesh only; it never changes on rebuilds).
 TissueModel<double> mesh_of(HapticLoop& loop) {
   TissueModel<double> m;
-  loop.post([&m](Simulation& sim) {
+  loop.post([&m](Engine& sim) {
         m.n_nodes = sim.model->n_nodes;
         m.n_elems = sim.model->n_elems;
         m.n_tris = sim.model->n_tris;
@@ -107,7 +107,7 @@ TissueModel<double> mesh_of(HapticLoop& loop) {
 OverlayFacts facts_of(HapticLoop& loop, const TissueModel<double>& mesh, const Session& s, const GlContext& ctx,
                       const PositionSource& positions) {
   OverlayFacts f;
-  loop.post([&f](Simulation& sim) {
+  loop.post([&f](Engine& sim) {
         f.backend = sim.backend->name();
         f.device_name = sim.backend->device_name();
       }).get();
@@ -129,7 +129,7 @@ void update_roles(HapticLoop& loop, Renderer& r, const HapticSnapshot& snap, boo
     return;
   }
   std::vector<std::uint8_t> role;
-  loop.post([&role](Simulation& sim) { role = sim.backend->region().role; }).get();
+  loop.post([&role](Engine& sim) { role = sim.backend->region().role; }).get();
   r.upload_roles(role);
 }
 
