@@ -7,6 +7,7 @@
 #include <string>
 
 #include "scene/scene.hpp"
+#include "scene/text.hpp"
 
 namespace tissue::app {
 
@@ -36,10 +37,7 @@ const std::string& activity();
 /// Loads a scene file, or the built-in kidney for the name "@kidney".
 scene::Scene load_scene_arg(const std::string& arg);
 
-/// Parses "float" | "double".
-Precision parse_precision(const std::string& s);
-
-/// Parses a region depth: a number >= 0, "all" (kDepthAll) or "auto" (kDepthAuto).
-int parse_depth(const std::string& s);
+using scene::parse_depth;      // scene/text.hpp
+using scene::parse_precision;  // scene/text.hpp
 
 }  // namespace tissue::app

@@ -1,6 +1,5 @@
 #include <fmt/format.h>
 
-#include <charconv>
 #include <cstdio>
 #include <exception>
 #include <new>
@@ -43,22 +42,6 @@ scene::Scene load_scene_arg(const std::string& arg) {
   set_activity(fmt::format("reading the scene {}", arg));
   if (arg == "@kidney") return io::default_kidney_scene();
   return io::read_scene(arg);
-}
-
-Precision parse_precision(const std::string& s) {
-  if (s == "float") return Precision::Float;
-  if (s == "double") return Precision::Double;
-  throw std::invalid_argument(fmt::format("precision '{}' is neither 'float' nor 'double'", s));
-}
-
-int parse_depth(const std::string& s) {
-  if (s == "all") return kDepthAll;
-  if (s == "auto") return kDepthAuto;
-  int d = -1;
-  const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), d);
-  if (ec != std::errc() || end != s.data() + s.size() || d < 0)
-    throw std::invalid_argument(fmt::format("region depth '{}' is neither a whole number >= 0 nor 'all' nor 'auto'", s));
-  return d;
 }
 
 }  // namespace tissue::app

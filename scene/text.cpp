@@ -1,6 +1,11 @@
 #include "scene/text.hpp"
 
+#include <fmt/format.h>
+
 #include <charconv>
+#include <stdexcept>
+
+#include "core/region.hpp"
 
 namespace tissue::scene {
 namespace {
@@ -50,6 +55,22 @@ std::vector<std::string_view> split_blanks(std::string_view text) {
     i = text.find_first_not_of(kBlanks, j);
   }
   return out;
+}
+
+Precision parse_precision(const std::string& s) {
+  if (s == "float") return Precision::Float;
+  if (s == "double") return Precision::Double;
+  throw std::invalid_argument(fmt::format("precision '{}' is neither 'float' nor 'double'", s));
+}
+
+int parse_depth(const std::string& s) {
+  if (s == "all") return kDepthAll;
+  if (s == "auto") return kDepthAuto;
+  int d = -1;
+  const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), d);
+  if (ec != std::errc() || end != s.data() + s.size() || d < 0)
+    throw std::invalid_argument(fmt::format("region depth '{}' is neither a whole number >= 0 nor 'all' nor 'auto'", s));
+  return d;
 }
 
 }  // namespace tissue::scene

@@ -5,8 +5,11 @@
 #pragma once
 
 #include <optional>
+#include <string>
 #include <string_view>
 #include <vector>
+
+#include "core/hd.hpp"
 
 namespace tissue::scene {
 
@@ -24,5 +27,12 @@ std::vector<std::string_view> split_blanks(std::string_view text);
 
 /// `text` without leading and trailing blanks.
 std::string_view trim(std::string_view text);
+
+/// "float" | "double"; std::invalid_argument naming the text otherwise.
+Precision parse_precision(const std::string& s);
+
+/// A region depth: a whole number >= 0, "all" (kDepthAll) or "auto"
+/// (kDepthAuto); std::invalid_argument naming the text otherwise.
+int parse_depth(const std::string& s);
 
 }  // namespace tissue::scene
