@@ -1,0 +1,187 @@
+// Tissue's embedding interface (docs/embedding.md): one class a host
+// application drives without knowing the engine's wiring. It loads a scene
+// (an XML file or "@kidney") or a host's own tetrahedral mesh, runs it on a
+// backend ("cpu" or "cuda") at a precision ("float" or "double"), takes the
+// tools' poses and grasp buttons from the host, steps haptic ticks and gives
+// back forces, positions and fields.
+//
+// This header needs the standard library only: the engine's own headers,
+// Eigen, TBB, Embree and CUDA stay inside the library. Every error is a
+// std::exception whose what() names the file, element, node or value and the
+// rule broken (std::invalid_argument for a bad argument, std::runtime_error
+// for everything else: a scene that does not validate, a backend that is not
+// built or has no GPU, a simulation that went unstable).
+//
+// A Simulation is not thread-safe: call it from one thread at a time (a host
+// with a 1 kHz haptic thread calls step() there and reads fields between
+// ticks). The C interface over it is tissue/tissue_c.h.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace tissue {
+
+/// The library's version, "major.minor.patch".
+const char* version();
+
+/// Backend names this library was built with ("cpu", and "cuda" when the
+/// CUDA backend was compiled in) that can run on this machine now.
+std::vector<std::string> available_backends();
+
+using Vector3 = std::array<double, 3>;
+
+/// How to run: empty strings keep the scene's own setting.
+struct SimulationOptions {
+  std::string backend;    ///< "cpu" | "cuda"
+  std::string precision;  ///< "float" | "double"
+  std::string depth;      ///< region depth: "all" | "auto" | a whole number of rings
+};
+
+/// A host's own tetrahedral mesh with one Neo-Hookean material, the nodes
+/// it holds fixed and its tools (spheres or capsules). Solver settings are
+/// the scene format's defaults (docs/scene-format.md), region depth "auto".
+struct MeshScene {
+  std::string name = "<mesh>";        ///< for messages
+  std::vector<double> nodes;          ///< x y z per node (m)
+  std::vector<std::int32_t> tets;     ///< four 0-based node ids per tetrahedron
+  double youngs_modulus = 3000;       ///< E (Pa)
+  double poisson_ratio = 0.45;        ///< nu, in (-1, 0.5)
+  double density = 1000;              ///< rho (kg/m^3)
+  std::vector<std::int32_t> fixed_nodes;  ///< held at rest (a body with none is warned about)
+  std::vector<double> tool_radii = {2e-3};  ///< one tool per radius (m), at most 4
+  double tool_shaft = 0;              ///< shaft length of every tool (m); 0 = spheres
+};
+
+/// A surface meshed into tetrahedra (mesh_surface).
+struct VolumeMeshResult {
+  std::vector<double> nodes;          ///< x y z per node (m)
+  std::vector<std::int32_t> tets;     ///< four node ids per tetrahedron, positively oriented
+  std::string quality;                ///< the quality report, one finding per line
+};
+
+/// Repairs, remeshes and tetrahedralises a closed surface file (OBJ, STL,
+/// PLY, OFF, ...) as `tissue mesh` does (docs/meshing.md). unit: "m", "cm"
+/// or "mm"; target_tets: about this many tetrahedra (0 = the mesher's own
+/// sizing).
+VolumeMeshResult mesh_surface(const std::string& path, const std::string& unit = "m", int target_tets = 0);
+
+/// One tool at the end of a tick.
+struct ToolResult {
+  Vector3 tip = {};                   ///< m
+  Vector3 axis = {};                  ///< unit shaft axis (tip -> handle)
+  Vector3 force = {};                 ///< the force on the tool: what the hand feels (N)
+  int contact_nodes = 0;              ///< surface nodes in contact (pushed or grasped)
+  int grasped_nodes = 0;              ///< of which grasped
+  bool grasp = false;                 ///< grasp button held
+};
+
+/// What one haptic tick did.
+struct TickResult {
+  long tick = 0;                      ///< ticks run so far (1 after the first)
+  double time = 0;                    ///< simulated time at the end of the tick (s)
+  int steps = 0;                      ///< TLED steps in the tick
+  std::vector<ToolResult> tools;      ///< one per tool, scene order
+  double max_displacement = 0;        ///< m
+  double residual = 0;                ///< relative free-node residual
+  bool equilibrium = false;           ///< residual and kinetic energy under the scene's tolerances
+  int region_nodes = 0, region_elements = 0;  ///< the deformation region in use
+};
+
+/// Per-node and per-element fields (all in SI units).
+enum class Field {
+  Displacement,   ///< u, 3 per node (m)
+  Position,       ///< X + u, 3 per node (m)
+  Pressure,       ///< IANP nodal pressure, 1 per node (Pa)
+  InternalForce,  ///< internal nodal force, 3 per node (N)
+  Jacobian,       ///< J = det F, 1 per element (last computed value)
+};
+
+/// Values per node (or element) of a field: 3 or 1.
+int field_components(Field f);
+
+class Simulation {
+ public:
+  /// Loads a scene file (docs/scene-format.md) or "@kidney" (the built-in
+  /// kidney), validates it and uploads it to the backend.
+  static Simulation load(const std::string& scene, const SimulationOptions& options = {});
+  /// Builds a simulation of a host's mesh (validated as a scene is: zero
+  /// or inverted volumes, unused nodes and out-of-range ids are refused
+  /// naming the element or node).
+  static Simulation from_mesh(const MeshScene& mesh, const SimulationOptions& options = {});
+
+  Simulation(Simulation&&) noexcept;
+  Simulation& operator=(Simulation&&) noexcept;
+  ~Simulation();
+
+  // --- what is loaded ---
+  std::string name() const;            ///< the scene's file (or MeshScene::name)
+  std::string backend() const;         ///< "cpu" | "cuda"
+  std::string precision() const;       ///< "float" | "double"
+  std::string device_name() const;     ///< processor or GPU
+  std::size_t n_nodes() const;
+  std::size_t n_elements() const;
+  std::size_t n_surface_triangles() const;
+  int n_tools() const;
+  double tick_seconds() const;         ///< haptic period (s)
+  int steps_per_tick() const;          ///< TLED steps per tick
+  double dt() const;                   ///< TLED step (s)
+  /// Warnings found when the scene was loaded (a body with no support, ...).
+  const std::vector<std::string>& warnings() const;
+
+  /// The reference mesh (views valid for the Simulation's life).
+  std::span<const double> rest_positions() const;          ///< 3 per node (m)
+  std::span<const std::int32_t> tetrahedra() const;        ///< 4 per element
+  std::span<const std::int32_t> surface_triangles() const; ///< 3 per triangle, outward
+
+  // --- tools (index 0 .. n_tools()-1) ---
+  /// The pose tool `tool` reaches at the end of the next tick: tip (m) and
+  /// shaft axis (tip -> handle; {0, 0, 0} = the scene's direction). From
+  /// the first call on, the host drives the tool; before it, the tool
+  /// follows the scene's scripted path (or rests at its first point).
+  void set_tool_pose(int tool, const Vector3& tip, const Vector3& axis = {0, 0, 0});
+  /// The grasp button: down grasps the nodes in contact, up releases them.
+  void set_grasp(int tool, bool down);
+  /// Hands the tool back to the scene's scripted path.
+  void follow_scene_path(int tool);
+  /// The tool's shape: radius and shaft length (m).
+  double tool_radius(int tool) const;
+  double tool_shaft(int tool) const;
+
+  // --- time ---
+  /// Runs `ticks` haptic ticks (>= 1) and returns the last one's result.
+  TickResult step(long ticks = 1);
+  /// The last tick's result (a zero tick before the first step).
+  const TickResult& last() const;
+  Vector3 force(int tool) const;       ///< last().tools[tool].force (N)
+  long ticks() const;
+  double time() const;                 ///< simulated time (s)
+  /// Back to rest (u = 0, tick 0, every grasp released); keeps tool modes.
+  void reset();
+  /// Notes since the last call (a tool pressing a fixed support, ...).
+  std::vector<std::string> take_notes();
+
+  // --- fields (downloaded once per tick, on the first read) ---
+  /// Copies a field into out (size field_components(f) x n_nodes(), or x
+  /// n_elements() for Jacobian); throws std::invalid_argument naming both
+  /// sizes when out has another size.
+  void read_field(Field f, std::span<double> out);
+  std::vector<double> field(Field f);
+  /// Deformed positions as float xyz (3 x n_nodes) written straight from
+  /// the backend's store into dst: host memory when
+  /// !positions_on_device(), device memory (a CUDA pointer, such as a
+  /// mapped OpenGL vertex buffer) otherwise.
+  void write_positions(float* dst);
+  bool positions_on_device() const;
+
+ private:
+  struct Impl;
+  explicit Simulation(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace tissue

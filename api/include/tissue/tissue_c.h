@@ -1,0 +1,100 @@
+/* Tissue's C interface (docs/embedding.md): the Simulation facade of
+ * tissue/simulation.hpp for hosts that are not C++ (C, Rust, C#, Python's
+ * ctypes, game engines' plug-in layers).
+ *
+ * Conventions:
+ * - Every function that can fail returns a tissue_status; TISSUE_OK is 0.
+ *   On failure, tissue_last_error() gives the message (naming the file,
+ *   element, node or value and the rule broken) for the calling thread,
+ *   valid until that thread's next call into the library.
+ * - No exception, abort or signal crosses this interface; out of memory is
+ *   TISSUE_ERROR with a message.
+ * - Units are SI (m, N, Pa, s). Vectors are 3 doubles x, y, z. Arrays of
+ *   nodes are 3 values per node, interleaved.
+ * - A tissue_simulation is used from one thread at a time.
+ */
+#ifndef TISSUE_TISSUE_C_H
+#define TISSUE_TISSUE_C_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef enum tissue_status {
+  TISSUE_OK = 0,
+  TISSUE_BAD_ARGUMENT = 1, /* a null pointer, an index out of range, a wrong size, a non-finite value */
+  TISSUE_ERROR = 2,        /* a scene or mesh that does not validate, a backend that cannot run, out of memory */
+  TISSUE_UNSTABLE = 3      /* the simulation went unstable (NaN or an inverted element); tissue_reset to go on */
+} tissue_status;
+
+typedef enum tissue_field {
+  TISSUE_FIELD_DISPLACEMENT = 0,   /* 3 per node (m) */
+  TISSUE_FIELD_POSITION = 1,       /* 3 per node (m) */
+  TISSUE_FIELD_PRESSURE = 2,       /* 1 per node (Pa) */
+  TISSUE_FIELD_INTERNAL_FORCE = 3, /* 3 per node (N) */
+  TISSUE_FIELD_JACOBIAN = 4        /* 1 per element */
+} tissue_field;
+
+typedef struct tissue_simulation tissue_simulation;
+
+/* A host's mesh (tissue::MeshScene): pointers are read during the call only. */
+typedef struct tissue_mesh {
+  const double* nodes;       /* 3 x n_nodes (m) */
+  int32_t n_nodes;
+  const int32_t* tets;       /* 4 x n_tets, 0-based node ids */
+  int32_t n_tets;
+  double youngs_modulus;     /* Pa */
+  double poisson_ratio;
+  double density;            /* kg/m^3 */
+  const int32_t* fixed_nodes; /* may be NULL when n_fixed is 0 */
+  int32_t n_fixed;
+  double tool_radius;        /* one spherical tool (m) */
+} tissue_mesh;
+
+/* The message of this thread's last failure ("" after a success). */
+const char* tissue_last_error(void);
+/* "major.minor.patch". */
+const char* tissue_version(void);
+
+/* Opens a scene file or "@kidney". backend ("cpu", "cuda"), precision
+ * ("float", "double") and depth ("all", "auto", "N") may be NULL or "" to
+ * keep the scene's setting. */
+tissue_status tissue_open_scene(const char* scene, const char* backend, const char* precision, const char* depth,
+                                tissue_simulation** out);
+tissue_status tissue_open_mesh(const tissue_mesh* mesh, const char* backend, const char* precision,
+                               tissue_simulation** out);
+/* Frees the simulation (NULL is ignored). */
+void tissue_close(tissue_simulation* sim);
+
+/* Sizes; 0 for a NULL simulation. */
+size_t tissue_node_count(const tissue_simulation* sim);
+size_t tissue_element_count(const tissue_simulation* sim);
+int tissue_tool_count(const tissue_simulation* sim);
+double tissue_tick_seconds(const tissue_simulation* sim);
+
+/* The pose the tool reaches at the end of the next tick; axis may be NULL
+ * (the scene's shaft direction). From the first call the host drives it. */
+tissue_status tissue_set_tool_pose(tissue_simulation* sim, int tool, const double tip[3], const double axis[3]);
+tissue_status tissue_set_grasp(tissue_simulation* sim, int tool, int down);
+/* Runs ticks >= 1 haptic ticks. */
+tissue_status tissue_step(tissue_simulation* sim, long ticks);
+/* Back to rest (u = 0, tick 0). */
+tissue_status tissue_reset(tissue_simulation* sim);
+/* The force on the tool after the last tick (N): what the hand feels. */
+tissue_status tissue_tool_force(const tissue_simulation* sim, int tool, double force[3]);
+/* How many surface nodes touch the tool after the last tick. */
+tissue_status tissue_tool_contact_count(const tissue_simulation* sim, int tool, int32_t* count);
+/* Simulated time (s). */
+double tissue_time(const tissue_simulation* sim);
+/* Copies a field into out, which holds exactly count values (components x
+ * nodes, or elements for the Jacobian). */
+tissue_status tissue_read_field(tissue_simulation* sim, tissue_field field, double* out, size_t count);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* TISSUE_TISSUE_C_H */

@@ -1,0 +1,160 @@
+// The C interface (api/include/tissue/tissue_c.h) over the Simulation facade:
+// every exception becomes a status and a per-thread message.
+#include "tissue/tissue_c.h"
+
+#include <cmath>
+#include <exception>
+#include <new>
+#include <stdexcept>
+#include <string>
+
+#include "core/scheduler.hpp"
+#include "tissue/simulation.hpp"
+
+struct tissue_simulation {
+  tissue::Simulation sim;
+};
+
+static_assert(int(tissue::Field::Displacement) == TISSUE_FIELD_DISPLACEMENT &&
+              int(tissue::Field::Position) == TISSUE_FIELD_POSITION &&
+              int(tissue::Field::Pressure) == TISSUE_FIELD_PRESSURE &&
+              int(tissue::Field::InternalForce) == TISSUE_FIELD_INTERNAL_FORCE &&
+              int(tissue::Field::Jacobian) == TISSUE_FIELD_JACOBIAN);
+
+namespace {
+
+thread_local std::string g_error;
+
+tissue_status fail(tissue_status s, std::string message) {
+  g_error = std::move(message);
+  return s;
+}
+
+/// Runs f, turning what it throws into a status and g_error.
+template <class F>
+tissue_status guarded(F&& f) {
+  try {
+    g_error.clear();
+    f();
+    return TISSUE_OK;
+  } catch (const tissue::SimulationError& e) {
+    return fail(TISSUE_UNSTABLE, e.what());
+  } catch (const std::invalid_argument& e) {
+    return fail(TISSUE_BAD_ARGUMENT, e.what());
+  } catch (const std::bad_alloc&) {
+    return fail(TISSUE_ERROR, "out of memory");
+  } catch (const std::exception& e) {
+    return fail(TISSUE_ERROR, e.what());
+  } catch (...) {
+    return fail(TISSUE_ERROR, "unknown error");
+  }
+}
+
+std::string text(const char* s) { return s == nullptr ? std::string() : std::string(s); }
+
+tissue_status null_argument(const char* function, const char* argument) {
+  return fail(TISSUE_BAD_ARGUMENT, std::string(function) + ": " + argument + " is NULL");
+}
+
+}  // namespace
+
+extern "C" {
+
+const char* tissue_last_error(void) { return g_error.c_str(); }
+const char* tissue_version(void) { return tissue::version(); }
+
+tissue_status tissue_open_scene(const char* scene, const char* backend, const char* precision, const char* depth,
+                                tissue_simulation** out) {
+  if (out == nullptr) return null_argument("tissue_open_scene", "out");
+  *out = nullptr;
+  if (scene == nullptr) return null_argument("tissue_open_scene", "scene");
+  return guarded([&] {
+    *out = new tissue_simulation{tissue::Simulation::load(scene, {text(backend), text(precision), text(depth)})};
+  });
+}
+
+tissue_status tissue_open_mesh(const tissue_mesh* mesh, const char* backend, const char* precision,
+                               tissue_simulation** out) {
+  if (out == nullptr) return null_argument("tissue_open_mesh", "out");
+  *out = nullptr;
+  if (mesh == nullptr) return null_argument("tissue_open_mesh", "mesh");
+  if (mesh->n_nodes < 0 || mesh->n_tets < 0 || mesh->n_fixed < 0)
+    return fail(TISSUE_BAD_ARGUMENT, "tissue_open_mesh: a negative count (n_nodes " + std::to_string(mesh->n_nodes) +
+                                         ", n_tets " + std::to_string(mesh->n_tets) + ", n_fixed " +
+                                         std::to_string(mesh->n_fixed) + ")");
+  if ((mesh->n_nodes > 0 && mesh->nodes == nullptr) || (mesh->n_tets > 0 && mesh->tets == nullptr) ||
+      (mesh->n_fixed > 0 && mesh->fixed_nodes == nullptr))
+    return null_argument("tissue_open_mesh", "an array with a non-zero count");
+  return guarded([&] {
+    tissue::MeshScene m;
+    m.name = "<tissue_open_mesh>";
+    m.nodes.assign(mesh->nodes, mesh->nodes + 3 * std::size_t(mesh->n_nodes));
+    m.tets.assign(mesh->tets, mesh->tets + 4 * std::size_t(mesh->n_tets));
+    m.youngs_modulus = mesh->youngs_modulus;
+    m.poisson_ratio = mesh->poisson_ratio;
+    m.density = mesh->density;
+    if (mesh->n_fixed > 0) m.fixed_nodes.assign(mesh->fixed_nodes, mesh->fixed_nodes + mesh->n_fixed);
+    m.tool_radii = {mesh->tool_radius};
+    *out = new tissue_simulation{tissue::Simulation::from_mesh(m, {text(backend), text(precision), ""})};
+  });
+}
+
+void tissue_close(tissue_simulation* sim) { delete sim; }
+
+size_t tissue_node_count(const tissue_simulation* sim) { return sim ? sim->sim.n_nodes() : 0; }
+size_t tissue_element_count(const tissue_simulation* sim) { return sim ? sim->sim.n_elements() : 0; }
+int tissue_tool_count(const tissue_simulation* sim) { return sim ? sim->sim.n_tools() : 0; }
+double tissue_tick_seconds(const tissue_simulation* sim) { return sim ? sim->sim.tick_seconds() : 0; }
+double tissue_time(const tissue_simulation* sim) { return sim ? sim->sim.time() : 0; }
+
+tissue_status tissue_set_tool_pose(tissue_simulation* sim, int tool, const double tip[3], const double axis[3]) {
+  if (sim == nullptr) return null_argument("tissue_set_tool_pose", "sim");
+  if (tip == nullptr) return null_argument("tissue_set_tool_pose", "tip");
+  return guarded([&] {
+    const tissue::Vector3 a = axis ? tissue::Vector3{axis[0], axis[1], axis[2]} : tissue::Vector3{0, 0, 0};
+    sim->sim.set_tool_pose(tool, {tip[0], tip[1], tip[2]}, a);
+  });
+}
+
+tissue_status tissue_set_grasp(tissue_simulation* sim, int tool, int down) {
+  if (sim == nullptr) return null_argument("tissue_set_grasp", "sim");
+  return guarded([&] { sim->sim.set_grasp(tool, down != 0); });
+}
+
+tissue_status tissue_step(tissue_simulation* sim, long ticks) {
+  if (sim == nullptr) return null_argument("tissue_step", "sim");
+  return guarded([&] { sim->sim.step(ticks); });
+}
+
+tissue_status tissue_reset(tissue_simulation* sim) {
+  if (sim == nullptr) return null_argument("tissue_reset", "sim");
+  return guarded([&] { sim->sim.reset(); });
+}
+
+tissue_status tissue_tool_force(const tissue_simulation* sim, int tool, double force[3]) {
+  if (sim == nullptr) return null_argument("tissue_tool_force", "sim");
+  if (force == nullptr) return null_argument("tissue_tool_force", "force");
+  return guarded([&] {
+    const tissue::Vector3 f = sim->sim.force(tool);
+    for (int c = 0; c < 3; ++c) force[c] = f[c];
+  });
+}
+
+tissue_status tissue_tool_contact_count(const tissue_simulation* sim, int tool, int32_t* count) {
+  if (sim == nullptr) return null_argument("tissue_tool_contact_count", "sim");
+  if (count == nullptr) return null_argument("tissue_tool_contact_count", "count");
+  return guarded([&] {
+    sim->sim.force(tool);  // checks the index
+    *count = sim->sim.last().tools[tool].contact_nodes;
+  });
+}
+
+tissue_status tissue_read_field(tissue_simulation* sim, tissue_field field, double* out, size_t count) {
+  if (sim == nullptr) return null_argument("tissue_read_field", "sim");
+  if (out == nullptr) return null_argument("tissue_read_field", "out");
+  if (field < TISSUE_FIELD_DISPLACEMENT || field > TISSUE_FIELD_JACOBIAN)
+    return fail(TISSUE_BAD_ARGUMENT, "tissue_read_field: field " + std::to_string(int(field)) + " is not a tissue_field");
+  return guarded([&] { sim->sim.read_field(static_cast<tissue::Field>(field), {out, count}); });
+}
+
+}  // extern "C"
