@@ -1,0 +1,197 @@
+// The embedding facade (tissue/simulation.hpp, libtissue): it runs a scene
+// exactly as the Scheduler does, a host-driven tool equals the scripted
+// one, a host's mesh presses back with a force proportional to E (the
+// Neo-Hookean law's exact scaling at equilibrium), and every misuse is a
+// clear exception.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "backends/registry.hpp"
+#include "core/box_mesh.hpp"
+#include "core/scheduler.hpp"
+#include "io/kidney.hpp"
+#include "scene/validate.hpp"
+#include "tissue/simulation.hpp"
+
+namespace {
+
+using tissue::Simulation;
+
+/// A 20 x 20 x 10 mm block of 6 x 6 x 3 cells, its base fixed; one tool.
+tissue::MeshScene block(double E) {
+  tissue::ModelInput in;
+  tissue::box_mesh(in, 6, 6, 3, 0.02, 0.02, 0.01);
+  tissue::MeshScene m;
+  m.name = "block";
+  m.nodes = in.nodes;
+  m.tets.assign(in.tets.begin(), in.tets.end());
+  m.youngs_modulus = E;
+  m.poisson_ratio = 0.4;
+  for (int j = 0; j <= 6; ++j)
+    for (int i = 0; i <= 6; ++i) m.fixed_nodes.push_back(tissue::box_node(6, 6, i, j, 0));
+  m.tool_radii = {4e-3};
+  return m;
+}
+
+/// Presses the block's top centre `depth` deep over 200 ticks, holds for
+/// `hold` ticks; returns the force on the tool.
+tissue::Vector3 press(Simulation& sim, double depth, int hold) {
+  const double r = sim.tool_radius(0);
+  for (int k = 1; k <= 200 + hold; ++k) {
+    const double s = std::min(1.0, k / 200.0);
+    sim.set_tool_pose(0, {0.01, 0.01, 0.01 + r - s * depth});
+    sim.step();
+  }
+  return sim.force(0);
+}
+
+template <class F>
+std::string thrown(F&& f) {
+  try {
+    f();
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "(nothing thrown)";
+}
+
+TEST(Facade, RunsTheKidneyExactlyAsTheScheduler) {
+  Simulation sim = Simulation::load("@kidney", {"cpu", "double", "5"});
+  EXPECT_EQ(sim.backend(), "cpu");
+  EXPECT_EQ(sim.precision(), "double");
+
+  tissue::scene::Scene s = tissue::io::default_kidney_scene();
+  s.solver.backend = "cpu";
+  s.solver.precision = tissue::Precision::Double;
+  s.solver.depth = 5;
+  const tissue::TissueModel<double> model = tissue::scene::load_model(s);
+  auto backend = tissue::create_backend("cpu", tissue::Precision::Double);
+  backend->upload(model);
+  tissue::Scheduler sched(*backend, model, tissue::scene::scheduler_settings(s));
+  tissue::ScriptedDevice device(s.tools.at(0).path);
+
+  ASSERT_EQ(sim.n_nodes(), std::size_t(model.n_nodes));
+  ASSERT_EQ(sim.steps_per_tick(), sched.steps_per_tick());
+  double peak = 0;
+  for (int k = 0; k < 300; ++k) {
+    const tissue::TickReport r = sched.tick(device);
+    const tissue::TickResult t = sim.step();
+    ASSERT_EQ(t.tick, r.tick + 1);  // the report numbers ticks from 0, the facade counts them
+    for (int c = 0; c < 3; ++c) ASSERT_EQ(t.tools[0].force[c], r.force[c]) << "tick " << k;
+    peak = std::max(peak, std::fabs(r.force.z));
+  }
+  EXPECT_GT(peak, 1e-3);  // the scripted press has reached the kidney
+  const std::vector<double> u = sim.field(tissue::Field::Displacement);
+  const tissue::Fields f = backend->download();  // component-major; the facade gives x y z per node
+  const std::size_t n = sim.n_nodes();
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t c = 0; c < 3; ++c) ASSERT_EQ(u[3 * i + c], f.u[c * n + i]);
+}
+
+TEST(Facade, HostPoseEqualsTheScriptedPath) {
+  Simulation scripted = Simulation::load("@kidney", {"cpu", "double", ""});
+  Simulation hosted = Simulation::load("@kidney", {"cpu", "double", ""});
+  tissue::ScriptedDevice path(tissue::io::default_kidney_scene().tools.at(0).path);
+  for (int k = 1; k <= 250; ++k) {
+    const tissue::ToolInput in = path.read(k * hosted.tick_seconds());
+    hosted.set_tool_pose(0, {in.tip.x, in.tip.y, in.tip.z});
+    const tissue::Vector3 a = scripted.step().tools[0].force, b = hosted.step().tools[0].force;
+    for (int c = 0; c < 3; ++c) ASSERT_EQ(a[c], b[c]) << "tick " << k;
+  }
+  EXPECT_GT(std::fabs(scripted.force(0)[2]), 1e-3);
+}
+
+TEST(Facade, MeshPressesBackInProportionToE) {
+  // Neo-Hookean stress at a given deformation scales with E at fixed nu, so
+  // the equilibrium force of the same press doubles with E: exactly, up to
+  // the route dependence of the frictionless equilibria on a faceted
+  // surface (docs/contact.md section 7: 1-2 % on coarse boxes; 1.06 % here).
+  Simulation soft = Simulation::from_mesh(block(3000), {"cpu", "double", "all"});
+  Simulation stiff = Simulation::from_mesh(block(6000), {"cpu", "double", "all"});
+  EXPECT_TRUE(soft.warnings().empty()) << soft.warnings().front();
+  const tissue::Vector3 f1 = press(soft, 1e-3, 800), f2 = press(stiff, 1e-3, 800);
+  EXPECT_GT(f1[2], 1e-3);                                 // pushes the tool back up
+  EXPECT_NEAR(f2[2] / f1[2], 2.0, 0.03);
+  // a centred press: sideways only what the cells' diagonal split tilts (3.7 % here)
+  EXPECT_LT(std::fabs(f1[0]) + std::fabs(f1[1]), 0.05 * f1[2]);
+  EXPECT_GT(soft.last().tools[0].contact_nodes, 0);
+
+  // The fields: the top centre moved down about the press depth; J near 1.
+  const std::vector<double> u = soft.field(tissue::Field::Displacement);
+  const std::vector<double> x = soft.field(tissue::Field::Position);
+  const auto X = soft.rest_positions();
+  const std::size_t top = std::size_t(tissue::box_node(6, 6, 3, 3, 3));
+  EXPECT_NEAR(u[3 * top + 2], -1e-3, 2e-4);
+  EXPECT_DOUBLE_EQ(x[3 * top + 2], X[3 * top + 2] + u[3 * top + 2]);
+  for (double J : soft.field(tissue::Field::Jacobian)) ASSERT_NEAR(J, 1.0, 0.2);
+  std::vector<float> xf(3 * soft.n_nodes());
+  ASSERT_FALSE(soft.positions_on_device());
+  soft.write_positions(xf.data());
+  EXPECT_NEAR(xf[3 * top + 2], x[3 * top + 2], 1e-6);
+
+  soft.reset();
+  EXPECT_EQ(soft.ticks(), 0);
+  for (double v : soft.field(tissue::Field::Displacement)) ASSERT_EQ(v, 0.0);
+}
+
+TEST(Facade, MisuseIsAClearError) {
+  Simulation sim = Simulation::from_mesh(block(3000), {"cpu", "float", ""});
+  EXPECT_NE(thrown([&] { sim.set_tool_pose(1, {0, 0, 0}); }).find("tool 1 does not exist"), std::string::npos);
+  EXPECT_NE(thrown([&] { sim.set_tool_pose(0, {0, NAN, 0}); }).find("not finite"), std::string::npos);
+  EXPECT_NE(thrown([&] { sim.step(0); }).find("must be >= 1"), std::string::npos);
+  std::vector<double> small(5);
+  EXPECT_NE(thrown([&] { sim.read_field(tissue::Field::Pressure, small); }).find("holds 5"), std::string::npos);
+  EXPECT_NE(thrown([&] { sim.write_positions(nullptr); }).find("null"), std::string::npos);
+
+  tissue::MeshScene bad = block(3000);
+  bad.tets[4 * 7 + 2] = 100000;  // element 7 names a node that does not exist
+  EXPECT_NE(thrown([&] { Simulation::from_mesh(bad); }).find("7"), std::string::npos);
+  bad = block(3000);
+  bad.tets.pop_back();
+  EXPECT_NE(thrown([&] { Simulation::from_mesh(bad); }).find("not 4 per tetrahedron"), std::string::npos);
+  bad = block(3000);
+  bad.poisson_ratio = 0.5;
+  EXPECT_NE(thrown([&] { Simulation::from_mesh(bad); }).find("nu"), std::string::npos);
+  EXPECT_NE(thrown([&] { Simulation::load("@kidney", {"vulkan", "", ""}); }).find("vulkan"), std::string::npos);
+  EXPECT_NE(thrown([&] { Simulation::load("@kidney", {"", "half", ""}); }).find("half"), std::string::npos);
+  EXPECT_NE(thrown([&] { Simulation::load("/no/such/scene.xml"); }).find("/no/such/scene.xml"), std::string::npos);
+
+  tissue::MeshScene loose = block(3000);
+  loose.fixed_nodes.clear();
+  EXPECT_FALSE(Simulation::from_mesh(loose).warnings().empty());  // no support: warned, not refused
+}
+
+TEST(Facade, CudaRunsTheKidneyAsTheCpuDoes) {
+  const std::vector<std::string> b = tissue::available_backends();
+  if (std::find(b.begin(), b.end(), "cuda") == b.end()) GTEST_SKIP() << "no usable cuda backend here";
+  Simulation gpu = Simulation::load("@kidney", {"cuda", "double", ""});
+  Simulation cpu = Simulation::load("@kidney", {"cpu", "double", ""});
+  EXPECT_TRUE(gpu.positions_on_device());
+  double peak = 0, worst = 0;
+  for (int k = 0; k < 400; ++k) {
+    const tissue::Vector3 a = gpu.step().tools[0].force, c = cpu.step().tools[0].force;
+    peak = std::max(peak, std::hypot(c[0], c[1], c[2]));
+    worst = std::max(worst, std::hypot(a[0] - c[0], a[1] - c[1], a[2] - c[2]));
+  }
+  EXPECT_GT(peak, 1e-3);
+  // the backends' consistency tolerance on the kidney (tests/cuda/test_cuda_consistency.cpp)
+  EXPECT_LT(worst, 2e-3 * peak) << "peak " << peak;
+  const std::vector<double> xg = gpu.field(tissue::Field::Position), xc = cpu.field(tissue::Field::Position);
+  double dx = 0;
+  for (std::size_t i = 0; i < xg.size(); ++i) dx = std::max(dx, std::fabs(xg[i] - xc[i]));
+  EXPECT_LT(dx, 1e-5);  // m
+}
+
+TEST(Facade, ReportsTheVersionAndBackends) {
+  EXPECT_EQ(std::string(tissue::version()).substr(0, 4), "0.2.");
+  const std::vector<std::string> b = tissue::available_backends();
+  ASSERT_FALSE(b.empty());
+  EXPECT_EQ(b.front(), "cpu");
+}
+
+}  // namespace

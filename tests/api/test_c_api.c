@@ -1,0 +1,119 @@
+/* The C interface (tissue/tissue_c.h) from a C program: a host's mesh,
+ * a press, the force and a field, and every misuse answered by a status and
+ * a message (no crash). Exit 0 when every check passes; each failure is
+ * printed. */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "tissue/tissue_c.h"
+
+static int failures = 0;
+
+#define CHECK(cond)                                                  \
+  do {                                                               \
+    if (!(cond)) {                                                   \
+      fprintf(stderr, "%s:%d: check failed: %s\n", __FILE__, __LINE__, #cond); \
+      ++failures;                                                    \
+    }                                                                \
+  } while (0)
+
+static int contains(const char* text, const char* part) { return strstr(text, part) != NULL; }
+
+/* A 10 x 10 x 10 mm cube of 2 x 2 x 2 cells, 6 tets each (Kuhn split). */
+enum { N = 2, NN = (N + 1) * (N + 1) * (N + 1), NT = 6 * N * N * N };
+static int32_t id(int i, int j, int k) { return i + (N + 1) * (j + (N + 1) * k); }
+
+static void cube(double* nodes, int32_t* tets) {
+  for (int k = 0; k <= N; ++k)
+    for (int j = 0; j <= N; ++j)
+      for (int i = 0; i <= N; ++i) {
+        double* p = nodes + 3 * id(i, j, k);
+        p[0] = 0.005 * i, p[1] = 0.005 * j, p[2] = 0.005 * k;
+      }
+  /* The six tets around the diagonal 0-6 of a cell with corners c[0..7]. */
+  static const int split[6][4] = {{0, 1, 2, 6}, {0, 2, 3, 6}, {0, 3, 7, 6}, {0, 7, 4, 6}, {0, 4, 5, 6}, {0, 5, 1, 6}};
+  int t = 0;
+  for (int k = 0; k < N; ++k)
+    for (int j = 0; j < N; ++j)
+      for (int i = 0; i < N; ++i) {
+        const int32_t c[8] = {id(i, j, k),         id(i + 1, j, k),         id(i + 1, j + 1, k),     id(i, j + 1, k),
+                              id(i, j, k + 1),     id(i + 1, j, k + 1),     id(i + 1, j + 1, k + 1), id(i, j + 1, k + 1)};
+        for (int s = 0; s < 6; ++s, ++t)
+          for (int a = 0; a < 4; ++a) tets[4 * t + a] = c[split[s][a]];
+      }
+}
+
+int main(void) {
+  double nodes[3 * NN];
+  int32_t tets[4 * NT];
+  int32_t fixed[(N + 1) * (N + 1)];
+  cube(nodes, tets);
+  for (int j = 0; j <= N; ++j)
+    for (int i = 0; i <= N; ++i) fixed[i + (N + 1) * j] = id(i, j, 0);
+  tissue_mesh mesh = {nodes, NN, tets, NT, 3000.0, 0.4, 1000.0, fixed, (N + 1) * (N + 1), 3e-3};
+
+  CHECK(strncmp(tissue_version(), "0.2.", 4) == 0);
+  tissue_simulation* sim = NULL;
+  tissue_status st = tissue_open_mesh(&mesh, "cpu", "double", &sim);
+  if (st != TISSUE_OK) {
+    fprintf(stderr, "tissue_open_mesh: %s\n", tissue_last_error());
+    return 1;
+  }
+  CHECK(tissue_node_count(sim) == NN);
+  CHECK(tissue_element_count(sim) == NT);
+  CHECK(tissue_tool_count(sim) == 1);
+  CHECK(fabs(tissue_tick_seconds(sim) - 1e-3) < 1e-12);
+
+  /* Press the top centre 0.5 mm over 100 ticks, hold 300. */
+  for (int k = 1; k <= 400; ++k) {
+    const double s = k < 100 ? k / 100.0 : 1.0;
+    const double tip[3] = {0.005, 0.005, 0.01 + 3e-3 - s * 5e-4};
+    CHECK(tissue_set_tool_pose(sim, 0, tip, NULL) == TISSUE_OK);
+    CHECK(tissue_step(sim, 1) == TISSUE_OK);
+  }
+  double f[3];
+  CHECK(tissue_tool_force(sim, 0, f) == TISSUE_OK);
+  CHECK(f[2] > 1e-4);
+  CHECK(fabs(f[0]) < 0.05 * f[2] && fabs(f[1]) < 0.05 * f[2]);
+  int32_t touching = 0;
+  CHECK(tissue_tool_contact_count(sim, 0, &touching) == TISSUE_OK && touching > 0);
+  CHECK(fabs(tissue_time(sim) - 0.4) < 1e-9);
+  double u[3 * NN];
+  CHECK(tissue_read_field(sim, TISSUE_FIELD_DISPLACEMENT, u, 3 * NN) == TISSUE_OK);
+  CHECK(u[3 * id(1, 1, 2) + 2] < -2e-4); /* the top centre went down */
+  CHECK(u[3 * id(1, 1, 0) + 2] == 0.0);  /* the base is fixed */
+
+  /* Misuse: a status and a message, never a crash. */
+  CHECK(tissue_read_field(sim, TISSUE_FIELD_DISPLACEMENT, u, 7) == TISSUE_BAD_ARGUMENT);
+  CHECK(contains(tissue_last_error(), "holds 7"));
+  CHECK(tissue_read_field(sim, (tissue_field)9, u, 3 * NN) == TISSUE_BAD_ARGUMENT);
+  CHECK(tissue_tool_force(sim, 3, f) == TISSUE_BAD_ARGUMENT);
+  CHECK(contains(tissue_last_error(), "tool 3"));
+  CHECK(tissue_step(sim, 0) == TISSUE_BAD_ARGUMENT);
+  CHECK(tissue_tool_force(NULL, 0, f) == TISSUE_BAD_ARGUMENT);
+  CHECK(contains(tissue_last_error(), "NULL"));
+  const double nan_tip[3] = {0, NAN, 0};
+  CHECK(tissue_set_tool_pose(sim, 0, nan_tip, NULL) == TISSUE_BAD_ARGUMENT);
+  CHECK(tissue_reset(sim) == TISSUE_OK);
+  CHECK(tissue_time(sim) == 0.0);
+  CHECK(tissue_tool_force(sim, 0, f) == TISSUE_OK);
+  CHECK(strcmp(tissue_last_error(), "") == 0);
+  tissue_close(sim);
+  tissue_close(NULL);
+
+  tissue_simulation* none = NULL;
+  CHECK(tissue_open_scene("/no/such/scene.xml", NULL, NULL, NULL, &none) == TISSUE_ERROR);
+  CHECK(none == NULL && contains(tissue_last_error(), "/no/such/scene.xml"));
+  CHECK(tissue_open_scene("@kidney", "vulkan", NULL, NULL, &none) == TISSUE_ERROR);
+  CHECK(contains(tissue_last_error(), "vulkan"));
+  tets[4 * 5 + 1] = 999; /* element 5 names a node that does not exist */
+  CHECK(tissue_open_mesh(&mesh, "cpu", NULL, &none) != TISSUE_OK);
+  CHECK(contains(tissue_last_error(), "5"));
+  mesh.n_tets = -1;
+  CHECK(tissue_open_mesh(&mesh, "cpu", NULL, &none) == TISSUE_BAD_ARGUMENT);
+
+  if (failures) fprintf(stderr, "%d checks failed\n", failures);
+  else printf("all C interface checks passed\n");
+  return failures ? 1 : 0;
+}
