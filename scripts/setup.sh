@@ -10,7 +10,9 @@ PACKAGES=(build-essential cmake pkg-config libfmt-dev libeigen3-dev libtbb-dev l
           libglfw3-dev libglew-dev libgl-dev libegl-dev libopengl-dev libimgui-dev libstb-dev
           xvfb xauth libgl1-mesa-dri
           # scripts/fuzz: libFuzzer targets built with clang
-          clang-15 libfuzzer-15-dev)
+          clang-15 libfuzzer-15-dev
+          # the Python package (python/): pybind11, NumPy, pytest; matplotlib for scripts/plot and the examples
+          pybind11-dev python3-dev python3-numpy python3-pytest python3-matplotlib)
 
 install_packages() {
   local missing=()

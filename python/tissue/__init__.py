@@ -1,0 +1,21 @@
+"""Tissue: interactive nonlinear soft-tissue deformation (docs/python.md).
+
+    import tissue
+    sim = tissue.Simulation.load("@kidney", backend="cpu")
+    sim.set_tool_pose(0, [0.0, 0.0, 0.03])
+    result = sim.step(100)
+    print(result.tools[0].force)      # N, the force on the tool
+
+Fields (displacement, positions, pressure, internal_force, jacobian) are
+NumPy arrays; the reference mesh (rest_positions, tetrahedra,
+surface_triangles) is a read-only view of the simulation's own memory.
+Errors raise ValueError (a bad argument) or RuntimeError (a scene that does
+not validate, a backend that cannot run, an unstable simulation), with a
+message naming the file, element, node or value.
+"""
+from ._tissue import (Simulation, TickResult, ToolResult, VolumeMesh, __version__, available_backends,
+                      mesh_surface)
+from .meshes import box_mesh, box_node
+
+__all__ = ["Simulation", "TickResult", "ToolResult", "VolumeMesh", "available_backends", "mesh_surface",
+           "box_mesh", "box_node", "__version__"]
