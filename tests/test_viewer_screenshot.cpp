@@ -103,14 +103,15 @@ class ViewerPictures : public ::testing::Test {
   }
 
   /// Renders `tissue view @kidney --screenshot <name>.png <args>`, loads it.
-  Picture render(const std::string& name, const std::string& args, const std::string& gl = "") {
+  Picture render(const std::string& name, const std::string& args, const std::string& gl = "",
+                 const std::string& size = "--width 480 --height 360") {
     std::string how = launcher();
     if (how == "none") {  // no X at all: EGL (Mesa's software device, or a GPU)
       how = "";
       gl_fallback_ = " --gl egl";
     }
     const fs::path png = dir_ / (name + ".png");
-    const std::string cmd = how + tissue_exe().string() + " view @kidney --width 480 --height 360 --screenshot " +
+    const std::string cmd = how + tissue_exe().string() + " view @kidney " + size + " --screenshot " +
                             png.string() + " " + args + (gl.empty() ? gl_fallback_ : " --gl " + gl);
     std::string out;
     int rc = run(cmd, &out);
@@ -272,6 +273,49 @@ TEST_F(ViewerPictures, OverlayAndGlyphsAreDrawn) {
   ASSERT_EQ(tool.size(), 2u);
   const Difference d = difference(plain, full, tool[0], tool[1], 40);
   EXPECT_GT(d.near, 50) << "tool, contact marker and arrow near the tool";
+}
+
+TEST_F(ViewerPictures, TheSurfaceShowsTheDisplacementFieldWithALegendAndTheForcePlot) {
+  const std::string args = "--device scripted --ticks 300 --hide tool,region,overlay" + kLocal;
+  const Picture organ = render("organ", args);
+  const Picture field = render("field", args + " --field displacement");
+  if (HasFailure()) return;
+  EXPECT_NE(field.json.find("\"field\": \"displacement\""), std::string::npos) << field.json;
+  // the legend's top end is the largest |u| (mm) the press made
+  const std::vector<double> range = json_array(field.json, "field_range");
+  ASSERT_EQ(range.size(), 2u) << field.json;
+  EXPECT_EQ(range[0], 0.0);
+  const size_t k = field.json.find("\"max_displacement\": ");
+  const double max_disp = std::stod(field.json.substr(k + 20));
+  EXPECT_NEAR(range[1], 1e3 * max_disp, 1e-4 * range[1]);
+  EXPECT_GT(range[1], 0.5);  // the press moved the surface by millimetres
+  // 30 chunks of 10 ticks sampled for the force plot
+  EXPECT_NE(field.json.find("\"force_samples\": 30"), std::string::npos) << field.json;
+  // colours: the organ is red (R dominates); with the field, the still
+  // tissue is the map's violet (B > R) and the dent its green-yellow (G > R)
+  auto count = [](const Picture& p, auto pred) {
+    long n = 0;
+    for (int y = 0; y < p.h; ++y)
+      for (int x = 0; x < p.w; ++x)
+        if (!is_background(p.at(x, y)) && pred(p.at(x, y))) ++n;
+    return n;
+  };
+  auto violet = [](const unsigned char* c) { return c[2] > c[0] + 10 && c[2] > c[1] + 10; };
+  auto yellowish = [](const unsigned char* c) { return c[1] > c[0] + 5 && c[1] > c[2] + 20; };
+  const long organ_violet = count(organ, violet), field_violet = count(field, violet);
+  std::printf("violet pixels: organ %ld, field %ld; green-yellow: organ %ld, field %ld\n", organ_violet, field_violet,
+              count(organ, yellowish), count(field, yellowish));
+  EXPECT_GT(field_violet, 5 * organ_violet + 500);
+  EXPECT_GT(count(field, yellowish), 20);
+  EXPECT_EQ(count(organ, yellowish), 0);
+  // with the overlay: the legend and the force plot make the panel taller
+  const Picture panel = render("panel", "--device scripted --ticks 300 --field pressure", "", "--width 480 --height 900");
+  const Picture bare = render("bare_panel", "--device scripted --ticks 300", "", "--width 480 --height 900");
+  if (HasFailure()) return;
+  const std::vector<double> a = json_array(panel.json, "overlay_px"), b = json_array(bare.json, "overlay_px");
+  ASSERT_EQ(a.size(), 4u);
+  ASSERT_EQ(b.size(), 4u);
+  EXPECT_GT(a[3] - a[1], b[3] - b[1] + 20) << "legend rows";
 }
 
 TEST_F(ViewerPictures, EglAndHiddenWindowDrawTheSamePicture) {

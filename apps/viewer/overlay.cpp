@@ -19,6 +19,47 @@ void row(const char* label, const std::string& value) {
   ImGui::TextUnformatted(value.c_str());
 }
 
+ImU32 colour_u32(const std::array<std::uint8_t, 3>& c) { return IM_COL32(c[0], c[1], c[2], 255); }
+
+/// The field's colour bar, its ends and its name.
+void legend(const NodeField& f) {
+  const float width = ImGui::GetContentRegionAvail().x, height = 14;
+  const ImVec2 p = ImGui::GetCursorScreenPos();
+  ImDrawList* dl = ImGui::GetWindowDrawList();
+  constexpr int kSegments = 32;
+  for (int k = 0; k < kSegments; ++k) {
+    const ImU32 a = colour_u32(field_colour(f.kind, double(k) / kSegments)),
+                b = colour_u32(field_colour(f.kind, double(k + 1) / kSegments));
+    const float x0 = p.x + width * k / kSegments, x1 = p.x + width * (k + 1) / kSegments;
+    dl->AddRectFilledMultiColor(ImVec2(x0, p.y), ImVec2(x1, p.y + height), a, b, b, a);
+  }
+  ImGui::Dummy(ImVec2(width, height));
+  const std::string lo = fmt::format("{:.4g}", f.lo), mid = fmt::format("{:.4g}", 0.5 * (f.lo + f.hi)),
+                    hi = fmt::format("{:.4g}", f.hi);
+  ImGui::TextUnformatted(lo.c_str());
+  ImGui::SameLine(0.5f * (width - ImGui::CalcTextSize(mid.c_str()).x));
+  ImGui::TextUnformatted(mid.c_str());
+  ImGui::SameLine(width - ImGui::CalcTextSize(hi.c_str()).x);
+  ImGui::TextUnformatted(hi.c_str());
+  ImGui::TextDisabled("%s", f.label.c_str());
+}
+
+/// Each tool's |force| over the history's window, on one scale from zero.
+void force_plot(const ForceHistory& h) {
+  if (h.size() < 2) return;
+  double top = 0;
+  for (int k = 0; k < h.n_tools(); ++k) top = std::max(top, h.peak(k));
+  top = std::max(1.1 * top, 1e-3);
+  ImGui::TextDisabled("force on the tool over the last %.1f s (0 to %.3g N)", h.span(), top);
+  for (int k = 0; k < h.n_tools(); ++k) {
+    const std::vector<float> v = h.series(k);
+    const std::string label = h.n_tools() > 1 ? fmt::format("##force{}", k) : std::string("##force");
+    const std::string now = fmt::format("{}{:.4f} N", h.n_tools() > 1 ? fmt::format("tool {}: ", k + 1) : "", h.latest(k));
+    ImGui::PlotLines(label.c_str(), v.data(), int(v.size()), 0, now.c_str(), 0.0f, float(top),
+                     ImVec2(ImGui::GetContentRegionAvail().x, 56));
+  }
+}
+
 std::string mm(Vec3<double> p) { return fmt::format("({:.1f}, {:.1f}, {:.1f}) mm", 1e3 * p.x, 1e3 * p.y, 1e3 * p.z); }
 
 }  // namespace
@@ -44,7 +85,8 @@ bool Overlay::wants_mouse() const { return ImGui::GetIO().WantCaptureMouse; }
 
 void Overlay::panel_rect(float r[4]) const { std::copy_n(rect_, 4, r); }
 
-OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, const std::string& status, int w, int h) {
+OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, const std::string& status, int w, int h,
+                             const DisplayState& display) {
   OverlayActions act;
   if (!editing_) edit_ = s.params;
   ImGui_ImplOpenGL3_NewFrame();
@@ -94,6 +136,13 @@ OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, con
                                                s.region.n_halo, s.region.n_elems,
                                                s.params.depth == kDepthAuto ? "auto, " : "", s.region.depth));
   row("time", fmt::format("{:.3f} s simulated, max |u| {:.2f} mm", s.time, 1e3 * s.max_disp));
+  if (display.forces) force_plot(*display.forces);
+  ImGui::Separator();
+  const FieldKind shown = display.field ? display.field->kind : FieldKind::None;
+  int field = int(shown);
+  if (ImGui::Combo("surface", &field, "organ\0|u| displacement\0pressure\0J = det F\0"))
+    act.field = static_cast<FieldKind>(field);
+  if (shown != FieldKind::None) legend(*display.field);
   ImGui::Separator();
   bool changed = false;
   const double nu_min = 0.0, nu_max = 0.499;

@@ -2,7 +2,8 @@
 // reach the vertex buffer), how fast (TLED steps/s, haptic rate, tick
 // percentiles and jitter, late ticks), what the tool feels (force, contact,
 // region size), and controls for E, nu, region depth and precision that the
-// haptic loop applies between ticks. Uses Debian's libimgui (core) with the
+// haptic loop applies between ticks; the field the surface is coloured by
+// with its legend, and each tool's force over the last seconds. Uses Debian's libimgui (core) with the
 // GLFW and OpenGL 3 backends compiled from libimgui-dev's example sources;
 // without a GLFW window (EGL) it feeds ImGui the display size itself.
 #pragma once
@@ -10,6 +11,7 @@
 #include <optional>
 #include <string>
 
+#include "apps/viewer/field_view.hpp"
 #include "core/haptic_loop.hpp"
 
 struct GLFWwindow;
@@ -23,10 +25,18 @@ struct OverlayFacts {
   bool uniform_material = true;  ///< false: several materials; E/nu apply to all
 };
 
+/// What the display shows besides the snapshot: the surface's field (with
+/// its range, for the legend) and each tool's recent force (for the plot).
+struct DisplayState {
+  const NodeField* field = nullptr;     ///< null or kind None: the organ's colour, no legend
+  const ForceHistory* forces = nullptr; ///< null: no plot
+};
+
 /// What the user asked for in this frame.
 struct OverlayActions {
   std::optional<LiveParams> apply;  ///< rebuild with these parameters
   bool reset = false;               ///< rebuild with the running parameters (tissue at rest)
+  std::optional<FieldKind> field;   ///< colour the surface by this field from now on
 };
 
 class Overlay {
@@ -38,7 +48,8 @@ class Overlay {
   Overlay& operator=(const Overlay&) = delete;
 
   /// Builds and renders the panel into the bound framebuffer (w x h pixels).
-  OverlayActions draw(const OverlayFacts& facts, const HapticSnapshot& snap, const std::string& status, int w, int h);
+  OverlayActions draw(const OverlayFacts& facts, const HapticSnapshot& snap, const std::string& status, int w, int h,
+                      const DisplayState& display = {});
   /// True while ImGui uses the mouse (the tool and camera must not).
   bool wants_mouse() const;
   /// The panel's last rectangle (pixels: x0, y0, x1, y1).

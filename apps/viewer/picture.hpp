@@ -28,6 +28,9 @@ struct PictureFacts {
   bool overlay = false;
   float overlay_px[4] = {0, 0, 0, 0};  ///< x0, y0, x1, y1
   bool tool_shown = true, region_shown = true;
+  std::string field = "none";           ///< the surface's field (field_name)
+  double field_range[2] = {0, 0};       ///< its colour map's ends
+  long force_samples = 0;               ///< points of the overlay's force plot
 };
 
 /// The sidecar as JSON text.

@@ -16,25 +16,31 @@ constexpr double kPi = 3.14159265358979323846;
 const char* kVertexShader = R"(#version 330 core
 layout(location = 0) in vec3 a_pos;
 layout(location = 1) in vec2 a_role;  // (inner, halo) in 0..1
+layout(location = 2) in vec3 a_field; // the field's colour at the node
 uniform mat4 u_mvp;
 uniform mat4 u_mv;
 out vec3 v_view;
 out vec2 v_role;
+out vec3 v_field;
 void main() {
   v_view = (u_mv * vec4(a_pos, 1.0)).xyz;
   v_role = a_role;
+  v_field = a_field;
   gl_Position = u_mvp * vec4(a_pos, 1.0);
 }
 )";
 
 // Flat normal from the derivatives of the view-space position, turned to the
 // viewer (two-sided); a key light above-right of the eye, a fill light from
-// the eye, a little specular. Region tint: inner warm, halo blue.
+// the eye, a little specular. Region tint: inner warm, halo blue. With a
+// field shown, the field's colour replaces the organ's (and the tint).
 const char* kFragmentShader = R"(#version 330 core
 in vec3 v_view;
 in vec2 v_role;
+in vec3 v_field;
 uniform vec3 u_color;
 uniform float u_tint;
+uniform float u_field;
 out vec4 frag;
 void main() {
   vec3 n = normalize(cross(dFdx(v_view), dFdy(v_view)));
@@ -46,6 +52,7 @@ void main() {
   float spec = pow(max(dot(n, normalize(L + v)), 0.0), 48.0);
   vec3 base = mix(u_color, vec3(1.0, 0.80, 0.30), 0.45 * u_tint * v_role.x);
   base = mix(base, vec3(0.35, 0.60, 1.0), 0.45 * u_tint * v_role.y);
+  base = mix(base, v_field, u_field);
   frag = vec4(base * (0.18 + 0.62 * key + 0.25 * fill) + vec3(0.18) * spec, 1.0);
 }
 )";
@@ -134,6 +141,7 @@ Renderer::Renderer(const TissueModel<double>& model) : n_nodes_(model.n_nodes) {
   u_mv_ = glGetUniformLocation(program_, "u_mv");
   u_color_ = glGetUniformLocation(program_, "u_color");
   u_tint_ = glGetUniformLocation(program_, "u_tint");
+  u_field_ = glGetUniformLocation(program_, "u_field");
 
   // the tissue: positions of all nodes (reference until the first upload), surface triangles
   std::vector<float> xyz(3 * size_t(n_nodes_));
@@ -155,6 +163,11 @@ Renderer::Renderer(const TissueModel<double>& model) : n_nodes_(model.n_nodes) {
   glBufferData(GL_ARRAY_BUFFER, 2 * size_t(n_nodes_), nullptr, GL_DYNAMIC_DRAW);
   glVertexAttribPointer(1, 2, GL_UNSIGNED_BYTE, GL_TRUE, 2, nullptr);
   glEnableVertexAttribArray(1);
+  glGenBuffers(1, &vbo_field_);
+  glBindBuffer(GL_ARRAY_BUFFER, vbo_field_);
+  glBufferData(GL_ARRAY_BUFFER, 3 * size_t(n_nodes_), nullptr, GL_DYNAMIC_DRAW);
+  glVertexAttribPointer(2, 3, GL_UNSIGNED_BYTE, GL_TRUE, 3, nullptr);
+  glEnableVertexAttribArray(2);
   glGenBuffers(1, &ibo_);
   glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, ibo_);
   glBufferData(GL_ELEMENT_ARRAY_BUFFER, idx.size() * sizeof(unsigned), idx.data(), GL_STATIC_DRAW);
@@ -182,8 +195,8 @@ Renderer::~Renderer() {
     glDeleteBuffers(1, &m->ibo);
   }
   glDeleteVertexArrays(1, &vao_);
-  const unsigned buffers[3] = {vbo_pos_, vbo_role_, ibo_};
-  glDeleteBuffers(3, buffers);
+  const unsigned buffers[4] = {vbo_pos_, vbo_role_, vbo_field_, ibo_};
+  glDeleteBuffers(4, buffers);
   glDeleteProgram(program_);
 }
 
@@ -198,6 +211,7 @@ Renderer::Mesh Renderer::make_mesh(const std::vector<float>& xyz, const std::vec
   glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, 3 * sizeof(float), nullptr);
   glEnableVertexAttribArray(0);
   glVertexAttrib2f(1, 0, 0);  // no region role on glyphs
+  glVertexAttrib3f(2, 0, 0, 0);  // nor a field
   glGenBuffers(1, &m.ibo);
   glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, m.ibo);
   glBufferData(GL_ELEMENT_ARRAY_BUFFER, idx.size() * sizeof(unsigned), idx.data(), GL_STATIC_DRAW);
@@ -223,6 +237,14 @@ void Renderer::upload_roles(std::span<const std::uint8_t> role) {
   glBindBuffer(GL_ARRAY_BUFFER, 0);
 }
 
+void Renderer::upload_field_colours(std::span<const std::uint8_t> rgb) {
+  field_shown_ = rgb.size() == 3 * size_t(n_nodes_);
+  if (!field_shown_) return;
+  glBindBuffer(GL_ARRAY_BUFFER, vbo_field_);
+  glBufferSubData(GL_ARRAY_BUFFER, 0, rgb.size(), rgb.data());
+  glBindBuffer(GL_ARRAY_BUFFER, 0);
+}
+
 void Renderer::draw_glyph(const Mesh& mesh, const Mat4& view_proj, const Mat4& view, const Mat4& model,
                           const float rgb[3]) {
   const Mat4 mvp = view_proj * model, mv = view * model;
@@ -230,6 +252,7 @@ void Renderer::draw_glyph(const Mesh& mesh, const Mat4& view_proj, const Mat4& v
   glUniformMatrix4fv(u_mv_, 1, GL_FALSE, mv.m);
   glUniform3fv(u_color_, 1, rgb);
   glUniform1f(u_tint_, 0);
+  glUniform1f(u_field_, 0);
   glBindVertexArray(mesh.vao);
   glDrawElements(GL_TRIANGLES, mesh.count, GL_UNSIGNED_INT, nullptr);
 }
@@ -248,6 +271,7 @@ void Renderer::draw(const Camera& camera, const Glyphs& g) {
   glUniformMatrix4fv(u_mv_, 1, GL_FALSE, view.m);
   glUniform3fv(u_color_, 1, kOrgan);
   glUniform1f(u_tint_, 1);
+  glUniform1f(u_field_, field_shown_ ? 1.0f : 0.0f);
   glBindVertexArray(vao_);
   glDrawElements(GL_TRIANGLES, n_indices_, GL_UNSIGNED_INT, nullptr);
   if (!g.show_tool) {

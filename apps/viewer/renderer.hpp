@@ -6,7 +6,7 @@
 // position in the fragment shader, so no normal buffer has to follow the
 // deformation. A second per-node buffer holds the region role (outside,
 // inner, halo) that tints the active region; it changes only when the
-// region does.
+// region does. A third holds a colour per node when a field is shown.
 #pragma once
 
 #include <cstdint>
@@ -53,6 +53,9 @@ class Renderer {
   void upload_positions(const float* xyz);
   /// Replaces the node roles (NodeRole, n_nodes); empty: no highlight.
   void upload_roles(std::span<const std::uint8_t> role);
+  /// Colours the surface by a field: RGB bytes per node (3 x n_nodes,
+  /// apps/viewer/field_view.hpp); empty: the organ's own colour.
+  void upload_field_colours(std::span<const std::uint8_t> rgb);
 
   /// Clears to the background and draws tissue and glyphs into the bound
   /// framebuffer (viewport = camera size).
@@ -73,9 +76,10 @@ class Renderer {
   index_t n_nodes_ = 0;
   int n_indices_ = 0;
   unsigned program_ = 0;
-  unsigned vao_ = 0, vbo_pos_ = 0, vbo_role_ = 0, ibo_ = 0;
+  unsigned vao_ = 0, vbo_pos_ = 0, vbo_role_ = 0, vbo_field_ = 0, ibo_ = 0;
+  bool field_shown_ = false;
   Mesh sphere_, cylinder_, cone_;
-  int u_mvp_ = -1, u_mv_ = -1, u_color_ = -1, u_tint_ = -1;
+  int u_mvp_ = -1, u_mv_ = -1, u_color_ = -1, u_tint_ = -1, u_field_ = -1;
 };
 
 /// An offscreen render target of the given size (4x multisampled colour and

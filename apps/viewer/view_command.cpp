@@ -39,6 +39,9 @@ void add_view_options(CLI::App& cmd_app, int& rc) {
       ->check(whole_number(16, 16384));
   cmd->add_option("--gl", o->gl,
                   "window | hidden | egl (default: window; pictures: hidden under X, else egl without any X server)");
+  cmd->add_option("--field", o->field,
+                  "Colour the surface by a field, with a legend: none, displacement (|u|), pressure, J")
+      ->default_val("none");
   cmd->add_option("--hide", o->hide, "Leave out of the picture: comma list of tool, region, overlay");
   cmd->add_option("--mouse-events", o->mouse_events,
                   "With --screenshot and --device mouse: '<tick> wheel <n>; <tick> drag <x0>,<y0> <x1>,<y1>; "

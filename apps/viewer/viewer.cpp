@@ -16,6 +16,7 @@
 #include <thread>
 
 #include "apps/viewer/camera.hpp"
+#include "apps/viewer/field_view.hpp"
 #include "apps/viewer/gl_context.hpp"
 #include "apps/viewer/mouse_controller.hpp"
 #include "apps/viewer/mouse_device.hpp"
@@ -100,6 +101,8 @@ TissueModel<double> mesh_of(HapticLoop& loop) {
         m.n_tris = sim.model->n_tris;
         m.X = sim.model->X;
         m.tris = sim.model->tris;
+        m.node_elem_start = sim.model->node_elem_start;  // J from the elements to the nodes
+        m.node_elem = sim.model->node_elem;
       }).get();
   return m;
 }
@@ -163,7 +166,30 @@ struct Viewer {
   Camera camera;
   double arrow_scale = 0;
   double wheel_step = 0;
+  NodeField field;                      ///< what the surface shows (kind None: the organ's colour)
+  ForceHistory forces;                  ///< each tool's |force| for the overlay's plot
 };
+
+/// Downloads the store (between two ticks, on the haptic thread) and
+/// recolours the surface by v.field.kind; kind None restores the organ's
+/// colour without a download.
+void update_field(Viewer& v, FieldKind kind) {
+  if (kind == FieldKind::None) {
+    v.field = NodeField{};
+    v.renderer->upload_field_colours({});
+    return;
+  }
+  Fields f;
+  v.loop->post([&f](Engine& sim) { f = sim.backend->download(); }).get();
+  v.field = node_field(kind, f, v.mesh.n_nodes, v.mesh.node_elem_start, v.mesh.node_elem);
+  v.renderer->upload_field_colours(node_colours(v.field));
+}
+
+void sample_forces(Viewer& v, const HapticSnapshot& s) {
+  std::vector<double> f;
+  for (int t = 0; t < s.n_tools; ++t) f.push_back(norm(s.tools[t].rendered_force));
+  v.forces.add(s.time, f);
+}
 
 std::unique_ptr<Viewer> make_viewer(const ViewOptions& o, scene::Scene scene) {
   auto v = std::make_unique<Viewer>();
@@ -232,18 +258,25 @@ int run_picture(const ViewOptions& o, Viewer& v) {
       apply(mouse, e);
     }
   }
-  loop.run_ticks(ticks - done);
+  // the rest in chunks of 10 ticks, sampling the force plot between them
+  while (done < ticks) {
+    const long n = std::min(10L, ticks - done);
+    loop.run_ticks(n);
+    done += n;
+    sample_forces(v, loop.snapshot());
+  }
   const HapticSnapshot snap = loop.snapshot();
 
   OffscreenTarget target(o.width, o.height);
   v.positions->update(loop);
+  update_field(v, parse_field_kind(o.field));
   long shown = -1;
   update_roles(loop, *v.renderer, snap, !hide.region, &shown);
   std::unique_ptr<Overlay> overlay = hide.overlay ? nullptr : std::make_unique<Overlay>(nullptr);
   const OverlayFacts facts = facts_of(loop, v.mesh, v.session, *v.ctx, *v.positions);
   for (int frame = 0; frame < (overlay ? 2 : 1); ++frame) {  // ImGui lays windows out on the first frame
     v.renderer->draw(v.camera, glyphs_of(snap, v.arrow_scale, !hide.tool));
-    if (overlay) overlay->draw(facts, snap, loop.status(), o.width, o.height);
+    if (overlay) overlay->draw(facts, snap, loop.status(), o.width, o.height, {&v.field, &v.forces});
   }
   write_png(o.screenshot, o.width, o.height, target.read_rgb());
 
@@ -261,6 +294,10 @@ int run_picture(const ViewOptions& o, Viewer& v) {
   if (overlay) overlay->panel_rect(pf.overlay_px);
   pf.tool_shown = !hide.tool;
   pf.region_shown = !hide.region;
+  pf.field = field_name(v.field.kind);
+  pf.field_range[0] = v.field.lo;
+  pf.field_range[1] = v.field.hi;
+  pf.force_samples = long(v.forces.size());
   const std::string json_path = o.screenshot + ".json";
   io::write_file_atomic(json_path, picture_json(pf));
   fmt::print("wrote {} ({}x{}, {} ticks, {}, |F| = {:.4f} N, {}) and {}\n", o.screenshot, o.width, o.height,
@@ -353,6 +390,9 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
   auto next_frame = t0;
   long shown_region = -1, frames = 0;
   bool warned_realtime = false;
+  FieldKind field = parse_field_kind(o.field);
+  auto field_shown_at = t0 - std::chrono::seconds(1);
+  long field_tick = -1;
   while (!v.ctx->should_close()) {
     if (o.seconds > 0 && std::chrono::duration<double>(Clock::now() - t0).count() > o.seconds) break;
     // pace the display (Xvfb and some drivers do not block on swap): the
@@ -371,13 +411,24 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
     }
     update_roles(loop, *v.renderer, snap, !hide.region, &shown_region);
     v.positions->update(loop);
+    sample_forces(v, snap);
+    // the field: a download of the store at most 10 times a second (the
+    // haptic thread does it between two ticks), and when it is switched
+    if (field != v.field.kind ||
+        (field != FieldKind::None && snap.tick != field_tick && Clock::now() - field_shown_at > std::chrono::milliseconds(100))) {
+      update_field(v, field);
+      field_shown_at = Clock::now();
+      field_tick = snap.tick;
+    }
     if (offscreen) offscreen->bind();
     else glBindFramebuffer(GL_FRAMEBUFFER, 0);
     v.ctx->framebuffer_size(&v.camera.width, &v.camera.height);
     v.renderer->draw(v.camera, glyphs_of(snap, v.arrow_scale, !hide.tool));
     if (overlay) {
-      const OverlayActions act = overlay->draw(facts, snap, loop.status(), v.camera.width, v.camera.height);
+      const OverlayActions act =
+          overlay->draw(facts, snap, loop.status(), v.camera.width, v.camera.height, {&v.field, &v.forces});
       if (act.apply) loop.request_params(*act.apply);
+      if (act.field) field = *act.field;
       if (act.reset) loop.request_params(snap.params);
     }
     if (win) v.ctx->swap_buffers();
@@ -405,6 +456,7 @@ int run_view(const ViewOptions& o, scene::Scene scene) {
     throw std::invalid_argument(
         fmt::format("--width {} --height {}: each must lie in 16..8192 pixels", o.width, o.height));
   parse_hide(o.hide);  // option errors before the scene is built
+  parse_field_kind(o.field);
   if (!o.gl.empty()) parse_context_kind(o.gl);
   if (!o.mouse_events.empty()) parse_mouse_events(o.mouse_events);
   std::unique_ptr<Viewer> v = make_viewer(o, std::move(scene));

@@ -20,6 +20,7 @@ struct ViewOptions {
   int width = 960, height = 720;         ///< window or picture (pixels)
   std::string gl;                        ///< window | hidden | egl; "": window, or hidden / egl for pictures
   std::string hide;                      ///< comma-separated: tool, region, overlay
+  std::string field = "none";            ///< surface colour: none | displacement | pressure | J (field_view.hpp)
   std::string mouse_events;              ///< scripted mouse input for pictures (mouse_controller.hpp)
   double seconds = 0;                    ///< close after this long (0: when the window closes; required without one)
   bool repeat = false;                   ///< scripted device: play the path over and over
