@@ -7,7 +7,6 @@
 #include <cstdlib>
 #include <stdexcept>
 
-#include "accuracy/plot.hpp"
 #include "accuracy/reference.hpp"
 #include "core/model.hpp"
 #include "io/kidney.hpp"
@@ -111,57 +110,6 @@ PalpationScan run_palpation(const PalpationOptions& o) {
     }
   }
   return scan;
-}
-
-void write_palpation_plot(const PalpationOptions& o, const PalpationScan& scan, const std::string& path) {
-  using Colour = Canvas::Colour;
-  const int width = 1000, height = 620, left = 110, right = 230, top = 70, bottom = 80;
-  const int pw = width - left - right, ph = height - top - bottom;
-  Canvas cv(width, height);
-  const Colour black{0, 0, 0}, grey{200, 200, 200}, red{214, 39, 40}, blue{31, 119, 180}, tan{250, 225, 200};
-  double fhi = 0;
-  for (const auto* s : {&scan.with, &scan.without})
-    for (const PalpationPoint& p : *s) fhi = std::max(fhi, std::fabs(p.force.z));
-  fhi = fhi > 0 ? 1.15 * fhi : 1;
-  const double xlo = -0.5e3 * o.scan, xhi = 0.5e3 * o.scan;
-  auto px = [&](double xmm) { return left + pw * (xmm - xlo) / (xhi - xlo); };
-  auto py = [&](double f) { return top + ph * (1 - f / fhi); };
-  // the tumour's extent under the scan line
-  cv.fill_rect(int(px(-1e3 * o.tumour_radius)), top, int(px(1e3 * o.tumour_radius)), top + ph, tan);
-  for (int k = 0; k <= 4; ++k) {
-    const double xv = xlo + (xhi - xlo) * k / 4, fv = fhi * k / 4;
-    cv.line(px(xv), top, px(xv), top + ph, grey);
-    cv.line(left, py(fv), left + pw, py(fv), grey);
-    const std::string xl = fmt::format("{:g}", xv), fl = fmt::format("{:.3g}", fv);
-    cv.text(int(px(xv)) - Canvas::text_width(xl, 2) / 2, top + ph + 8, xl, black, 2);
-    cv.text(left - 10 - Canvas::text_width(fl, 2), int(py(fv)) - 7, fl, black, 2);
-  }
-  cv.line(left, top + ph, left + pw, top + ph, black, 2);
-  cv.line(left, top, left, top + ph, black, 2);
-  cv.text(left + pw / 2 - 150, top + ph + 40, "tool position along the scan x (mm)", black, 2);
-  cv.text(10, top - 30, "tool force |F_z| (N)", black, 2);
-  cv.text(left, 8,
-          fmt::format("palpation: {:g} mm press, tumour r = {:g} mm at {:g} mm depth, E x {:g}", 1e3 * o.press,
-                      1e3 * o.tumour_radius, 1e3 * o.tumour_depth, o.stiffness_ratio),
-          black, 2);
-  int ly = top + 6;
-  const int lx = left + pw + 20;
-  for (const auto& [s, c, name] :
-       {std::tuple{&scan.with, red, "with tumour"}, std::tuple{&scan.without, blue, "tumour as tissue"}}) {
-    for (std::size_t k = 0; k < s->size(); ++k) {
-      const PalpationPoint& p = (*s)[k];
-      cv.disc(px(1e3 * p.x), py(std::fabs(p.force.z)), 5, c);
-      if (k > 0)
-        cv.line(px(1e3 * (*s)[k - 1].x), py(std::fabs((*s)[k - 1].force.z)), px(1e3 * p.x),
-                py(std::fabs(p.force.z)), c, 2);
-    }
-    cv.disc(lx + 7, ly + 7, 5, c);
-    cv.text(lx + 20, ly, name, c, 2);
-    ly += 26;
-  }
-  cv.fill_rect(lx, ly, lx + 14, ly + 14, tan);
-  cv.text(lx + 20, ly, "tumour's width", black, 2);
-  cv.write_png(path);
 }
 
 }  // namespace tissue::accuracy

@@ -46,8 +46,4 @@ struct PalpationScan {
 /// reaches it, io::MeshError / ModelError from meshing and the model.
 PalpationScan run_palpation(const PalpationOptions& options);
 
-/// The profile as a PNG: |F_z| against x, with and without the tumour, the
-/// tumour's extent marked.
-void write_palpation_plot(const PalpationOptions& options, const PalpationScan& scan, const std::string& path);
-
 }  // namespace tissue::accuracy

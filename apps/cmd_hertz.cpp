@@ -1,10 +1,9 @@
 // tissue hertz: the contact verification against Hertz's closed form
-// (accuracy/hertz.hpp): a table on stdout, optional JSON and a PNG plot.
+// (accuracy/hertz.hpp): a table on stdout and optional JSON (scripts/plot hertz draws it).
 #include <fmt/format.h>
 
 
 #include "accuracy/hertz.hpp"
-#include "accuracy/plot.hpp"
 #include "apps/commands.hpp"
 #include "apps/options.hpp"
 #include "io/atomic_file.hpp"
@@ -15,7 +14,7 @@ namespace {
 struct HertzArgs {
   accuracy::HertzOptions options;
   std::vector<double> nus = {0.45, 0.49};
-  std::string json, plot;
+  std::string json;
   bool quick = false;
 };
 
@@ -31,10 +30,6 @@ int run_hertz_command(HertzArgs& a) {
     json += (k ? ",\n" : "\n") + accuracy::hertz_json(studies.back());
   }
   json += "]\n";
-  if (!a.plot.empty()) {
-    accuracy::write_hertz_plot(studies, a.plot);
-    fmt::print("wrote {}\n", a.plot);
-  }
   if (!a.json.empty()) {
     io::write_file_atomic(a.json, json);  // whole or not at all
     fmt::print("wrote {}\n", a.json);
@@ -59,8 +54,7 @@ void add_hertz_command(CLI::App& app, int& rc) {
       ->check(CLI::PositiveNumber);
   cmd->add_option("--block", args->options.block, "block edge L / contact radius at the deepest press")->capture_default_str()->check(CLI::PositiveNumber);
   cmd->add_option("--backend", args->options.backend, "cpu | cuda (relaxes in double)")->capture_default_str();
-  cmd->add_option("--json", args->json, "write the studies as JSON")->check(output_file());
-  cmd->add_option("--plot", args->plot, "write a PNG: force against indentation with the closed form, error against h")
+  cmd->add_option("--json", args->json, "write the studies as JSON (scripts/plot hertz draws them)")
       ->check(output_file());
   cmd->add_flag("--quick", args->quick, "two coarse meshes only (a smoke run)");
   cmd->callback([args, &rc] { rc = run_hertz_command(*args); });

@@ -16,7 +16,7 @@ namespace {
 
 struct PalpateArgs {
   accuracy::PalpationOptions o;
-  std::string json, plot;
+  std::string json;
 };
 
 int run_palpate(const PalpateArgs& a) {
@@ -41,10 +41,6 @@ int run_palpate(const PalpateArgs& a) {
                             a.o.E, a.o.nu, s.tets, rows));
     fmt::print("wrote {}\n", a.json);
   }
-  if (!a.plot.empty()) {
-    accuracy::write_palpation_plot(a.o, s, a.plot);
-    fmt::print("wrote {}\n", a.plot);
-  }
   return 0;
 }
 
@@ -65,8 +61,7 @@ void add_palpate_command(CLI::App& app, int& rc) {
       ->check(CLI::PositiveNumber);
   cmd->add_option("--backend", a->o.backend, "cpu | cuda (relaxes in double)")->capture_default_str()
       ->check(CLI::IsMember({"cpu", "cuda"}));
-  cmd->add_option("--json", a->json, "write the profile as JSON")->check(output_file());
-  cmd->add_option("--plot", a->plot, "write the profile as a PNG")->check(output_file());
+  cmd->add_option("--json", a->json, "write the profile as JSON (scripts/plot palpate draws it)")->check(output_file());
   cmd->callback([a, &rc] { rc = run_palpate(*a); });
 }
 

@@ -1,11 +1,10 @@
 // tissue tradeoff: the speed-accuracy sweep (accuracy/tradeoff.hpp) with a
-// table on stdout, optional JSON and a PNG plot of error against cost.
+// table on stdout and optional JSON (scripts/plot tradeoff draws it).
 #include <fmt/format.h>
 
 #include <algorithm>
 #include <memory>
 
-#include "accuracy/plot.hpp"
 #include "accuracy/tradeoff.hpp"
 #include "io/atomic_file.hpp"
 #include "apps/commands.hpp"
@@ -16,7 +15,7 @@ namespace tissue::app {
 namespace {
 
 struct TradeoffArgs {
-  std::string scene, json, plot, backend;
+  std::string scene, json, backend;
   accuracy::TradeoffOptions options;
   std::vector<std::string> depths;
   std::vector<int> meshes;
@@ -57,11 +56,6 @@ int run_tradeoff_command(TradeoffArgs& a) {
     io::write_file_atomic(a.json, accuracy::tradeoff_json(res));
     fmt::print("wrote {}\n", a.json);
   }
-  const bool any_row = std::any_of(res.rows.begin(), res.rows.end(), [](const auto& r) { return r.failed.empty(); });
-  if (!a.plot.empty() && (any_row || !res.interrupted)) {
-    accuracy::write_tradeoff_plot(res, a.plot);
-    fmt::print("wrote {}\n", a.plot);
-  }
   return res.interrupted ? InterruptGuard::exit_code() : 0;
 }
 
@@ -74,8 +68,7 @@ void add_tradeoff_command(CLI::App& app, int& rc) {
                                  "measure cost and error against the reference solution");
   auto a = std::make_shared<TradeoffArgs>();
   cmd->add_option("scene", a->scene, "Scene XML file, or @kidney for the built-in kidney")->required();
-  cmd->add_option("--json", a->json, "Write the results as JSON")->check(output_file());
-  cmd->add_option("--plot", a->plot, "Write a PNG plot of error against cost with the Pareto front")
+  cmd->add_option("--json", a->json, "Write the results as JSON (scripts/plot tradeoff draws error against cost)")
       ->check(output_file());
   cmd->add_option("--backend", a->backend, "cpu | cuda (default: the scene's)");
   cmd->add_option("--depths", a->depths, "Fixed depths to sweep (numbers or 'all')")->delimiter(',');

@@ -156,8 +156,8 @@ TEST(Options, CommandsRefuseBadValues) {
   // outputs are checked before the work that would write them
   EXPECT_EQ(parse_error({"run", "x.xml", "--out", ""}), "--out: an empty folder name");
   EXPECT_EQ(parse_error({"reference", "x.xml", "--json", "/"}), "--json: / is a folder; give a file name");
-  EXPECT_EQ(parse_error({"tradeoff", "x.xml", "--plot", "/no/such/dir/p.png"}),
-            "--plot: /no/such/dir/p.png: the folder /no/such/dir does not exist");
+  EXPECT_EQ(parse_error({"tradeoff", "x.xml", "--json", "/no/such/dir/t.json"}),
+            "--json: /no/such/dir/t.json: the folder /no/such/dir does not exist");
 }
 
 // ---------------------------------------------------- tick count and work

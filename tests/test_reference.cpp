@@ -1,20 +1,17 @@
 // The accuracy library: the reference solution (dynamic relaxation with
 // fictitious masses and adaptive damping), the held tool contact, point
 // location and field transfer between meshes, re-meshing, and the tradeoff
-// sweep with its table, JSON and PNG plot -- on small boxes.
+// sweep with its table and JSON (tests/python/test_plots.py draws it) -- on small boxes.
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
-#include <filesystem>
-#include <fstream>
 #include <random>
 #include <string>
 #include <vector>
 
 #include "accuracy/locking.hpp"
-#include "accuracy/plot.hpp"
 #include "accuracy/point_locator.hpp"
 #include "accuracy/reference.hpp"
 #include "accuracy/relaxation.hpp"
@@ -306,27 +303,8 @@ TEST(Pareto, FrontOfCostAndError) {
   EXPECT_TRUE(rows[3].pareto);
 }
 
-TEST(Canvas, DrawsLinesDiscsAndText) {
-  Canvas c(60, 40);
-  const Canvas::Colour red{255, 0, 0};
-  c.line(5, 5, 50, 5, red, 1);
-  EXPECT_EQ(c.at(30, 5).r, 255);
-  EXPECT_EQ(c.at(30, 5).g, 0);
-  EXPECT_EQ(c.at(30, 20).g, 255);  // background untouched
-  c.disc(30, 25, 3, red);
-  EXPECT_EQ(c.at(30, 25).g, 0);
-  const int w = c.text(2, 12, "Ab1", {0, 0, 0});
-  EXPECT_GT(w, 10);
-  int dark = 0;
-  for (int y = 12; y < 22; ++y)
-    for (int x = 2; x < 2 + w; ++x) dark += c.at(x, y).r == 0;
-  EXPECT_GT(dark, 10);
-  c.set(-1, 100, red);  // clipped, no crash
-  EXPECT_THROW(Canvas(0, 10), std::invalid_argument);
-}
-
 // The whole sweep on the box, trimmed to a handful of settings: the table,
-// the JSON and the plot come out, the whole-mesh double row is accurate,
+// and the JSON come out, the whole-mesh double row is accurate,
 // the depth-1 region is cheaper and worse, float stops at its floor.
 TEST(Tradeoff, SweepOnABox) {
   const scene::Scene s = box_scene();
@@ -401,14 +379,6 @@ TEST(Tradeoff, SweepOnABox) {
   EXPECT_NE(json.find("\"disp_err\""), std::string::npos);
   EXPECT_NE(json.find("\"press_force_err\""), std::string::npos);
   EXPECT_NE(table.find("press F"), std::string::npos);
-  const std::string png = (std::filesystem::temp_directory_path() / "tissue_tradeoff_test.png").string();
-  write_tradeoff_plot(res, png);
-  std::ifstream in(png, std::ios::binary);
-  char sig[8] = {};
-  in.read(sig, 8);
-  EXPECT_EQ(std::string(sig + 1, 3), "PNG");
-  EXPECT_GT(std::filesystem::file_size(png), 2000u);
-  std::filesystem::remove(png);
 }
 
 }  // namespace
