@@ -35,4 +35,20 @@ build_tissue() {
   jobs=$(nproc)
   cmake -S "$ROOT" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release ${TISSUE_CMAKE_ARGS:-}
   cmake --build "$BUILD" -j "$jobs"
+  register_python
+}
+
+# Makes Debian's python3 import the package just built (docs/python.md): a
+# tissue-build.pth naming $BUILD/python in /usr/local's site-packages. Root
+# only (as the apt-get step); otherwise it says what to export.
+register_python() {
+  [ -f "$BUILD/python/tissue/__init__.py" ] || return 0
+  local site
+  site=$(/usr/bin/python3 -c "import site; print(next(p for p in site.getsitepackages() if p.startswith('/usr/local/')))" 2>/dev/null) || site=""
+  if [ "$(id -u)" -eq 0 ] && [ -n "$site" ]; then
+    mkdir -p "$site" && echo "$BUILD/python" > "$site/tissue-build.pth"
+    echo "tissue: python3 imports tissue from $BUILD/python ($site/tissue-build.pth)"
+  else
+    echo "tissue: for Python, export PYTHONPATH=$BUILD/python"
+  fi
 }

@@ -16,6 +16,14 @@ cmake --build "$work/embed"
 out=$("$work/embed/embed" @kidney cpu)
 echo "$out"
 grep -q "nodes, .* tets on cpu" <<< "$out"
+# the Python package from the prefix alone (when it was built): its module
+# finds libtissue in the prefix's lib
+site=$(ls -d "$work/prefix"/lib*/python3*/dist-packages 2>/dev/null | head -1 || true)
+if [ -n "$site" ] && [ -f "$site/tissue/__init__.py" ]; then
+  py=/usr/bin/python3
+  [ -x "$py" ] || py=python3
+  PYTHONPATH="$site" "$py" -c "import tissue, sys; assert tissue.__file__.startswith('$work/prefix'), tissue.__file__; s = tissue.Simulation.load('@kidney', backend='cpu'); s.step(5); print('python from the prefix:', tissue.__file__, s)"
+fi
 # the last line's vertical force: the tool pushed into the kidney feels it push back up
 fz=$(tail -1 <<< "$out" | sed -E 's/.*force \([^,]+, [^,]+, ([^)]+)\) N.*/\1/')
 awk -v f="$fz" 'BEGIN { exit !(f > 0.001) }' || { echo "vertical force $fz N is not > 0.001 N"; exit 1; }
