@@ -21,6 +21,10 @@ void add_bench_command(CLI::App& app, int& rc) {
   cmd->add_option("--min-seconds", o->min_seconds, "Time each measurement at least this long")
       ->default_val(0.5)
       ->check(real_number(0, 3600, true));
+  cmd->add_option("--tick-dt-safety", o->tick_dt_safety,
+                  "dt-safety values of the haptic-tick rows, compared in one run (default: the kidney scene's)")
+      ->delimiter(',')
+      ->check(real_number(0, 1, true, true));
   cmd->add_flag("--quick", o->quick, "Smoke run on tiny meshes (CI)");
   cmd->callback([o, precision, &rc] {
     InterruptGuard interrupt;

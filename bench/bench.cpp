@@ -210,8 +210,9 @@ void bench_contact(Context& c, long want_tris, Precision p) {
   c.emit(r);
 }
 
-void bench_tick(Context& c, Precision p, int depth) {
-  const scene::Scene s = io::default_kidney_scene();
+void bench_tick(Context& c, Precision p, int depth, double dt_safety) {
+  scene::Scene s = io::default_kidney_scene();
+  if (dt_safety > 0) s.solver.dt_safety = dt_safety;
   const TissueModel<double> m = scene::load_model(s);
   SchedulerSettings st = scene::scheduler_settings(s);
   st.depth = depth;
@@ -231,6 +232,7 @@ void bench_tick(Context& c, Precision p, int depth) {
   Row r = c.row("haptic_tick", *b);
   r.add("mesh", std::string("kidney"));
   r.add("depth", depth == kDepthAll ? std::string("all") : std::to_string(depth));
+  r.add("dt_safety", s.solver.dt_safety);
   r.add("steps_per_tick", long(sched.steps_per_tick()));
   r.add("ticks_in_contact", long(lat.size()));
   r.add("tick_ms_p50", 1e3 * lat[lat.size() / 2]);
@@ -294,8 +296,10 @@ std::vector<std::string> run_bench(const BenchOptions& o) {
       if (!stopped()) bench_tled(c, mesh, p);
     for (long tris : {10'000L, 100'000L})
       if (!stopped()) bench_contact(c, tris, p);
+    const std::vector<double> safeties = o.tick_dt_safety.empty() ? std::vector<double>{0} : o.tick_dt_safety;
     for (int depth : {5, kDepthAll})
-      if (!stopped()) bench_tick(c, p, depth);
+      for (double safety : safeties)
+        if (!stopped()) bench_tick(c, p, depth, safety);
   }
   if (!o.json_path.empty()) {
     io::AtomicTextFile f(o.json_path);

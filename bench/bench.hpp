@@ -22,6 +22,9 @@ struct BenchOptions {
   double min_seconds = 0.5;  ///< time each measurement at least this long
   std::string json_path;     ///< empty: rows only on stdout
   bool quick = false;        ///< CI smoke run: tiny meshes, short timings
+  /// dt-safety values of the haptic-tick rows (empty: the kidney scene's own);
+  /// more than one compares their tick cost in one run
+  std::vector<double> tick_dt_safety;
   std::function<bool()> stop;  ///< asked before each measurement: true ends the run with the rows done
 };
 

@@ -66,7 +66,7 @@ struct Solver {
   std::string backend = "cpu";      ///< "cpu" | "cuda"
   Precision precision = Precision::Float;  ///< scalar of the backend's store and arithmetic
   std::optional<double> dt;         ///< s (> 0); unset ("auto") = dt-safety x dt_crit
-  double dt_safety = 0.9;           ///< fraction of dt_crit used when dt is auto, in (0, 1)
+  double dt_safety = 0.8;           ///< fraction of dt_crit used when dt is auto, in (0, 1) (docs/reliability.md: why 0.8)
   double mass_scaling = 0.025;      ///< selective mass scaling budget, a fraction of the total mass in [0, 1)
                                     ///< (core choose_mass_scaling); 0 = off
   std::optional<double> damping;    ///< alpha (1/s, >= 0); unset ("auto") = 2 x lowest-mode estimate

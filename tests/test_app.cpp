@@ -24,6 +24,7 @@
 #include "apps/options.hpp"
 #include "apps/run_session.hpp"
 #include "apps/viewer/view_command.hpp"
+#include "bench/bench.hpp"
 #include "io/scene_xml.hpp"
 #include "scene/validate.hpp"
 #include "tests/temp_dir.hpp"
@@ -320,6 +321,30 @@ TEST(Program, BadInputsGetClearErrors) {
   std::ofstream(t.file("nan.xml")) << scene;
   EXPECT_NE(error_of({"run", t.file("nan.xml")}).find("waypoint 1: t = nan is not a finite number"),
             std::string::npos);
+}
+
+// tissue bench --tick-dt-safety compares the haptic tick at several step
+// margins in one run: each row names its margin and the steps per tick it
+// gave (the kidney: 3 at 0.9, the previous default; 4 at 0.8, today's).
+TEST(Bench, TickRowsCompareStepMarginsInOneRun) {
+  bench::BenchOptions o;
+  o.quick = true;
+  o.precisions = {Precision::Float};
+  o.sizes = {};
+  o.tick_dt_safety = {0.9, 0.8};
+  std::vector<std::pair<double, long>> seen;
+  for (const std::string& row : bench::run_bench(o)) {
+    if (row.find("\"haptic_tick\"") == std::string::npos) continue;
+    const auto number = [&](const std::string& key) {
+      const size_t k = row.find("\"" + key + "\": ");
+      EXPECT_NE(k, std::string::npos) << row;
+      return std::stod(row.substr(k + key.size() + 4));
+    };
+    seen.emplace_back(number("dt_safety"), std::lround(number("steps_per_tick")));
+    EXPECT_GT(number("tick_ms_p50"), 0) << row;
+  }
+  const std::vector<std::pair<double, long>> want = {{0.9, 3}, {0.8, 4}, {0.9, 3}, {0.8, 4}};  // depth 5, then all
+  EXPECT_EQ(seen, want);
 }
 
 }  // namespace
