@@ -23,11 +23,16 @@
 //   double: 1e-9. Measured <= 1.5e-14 (displacements) and <= 2.5e-14
 //     (force) on every scene: five orders of margin, still far below any
 //     physical significance.
-//   float: 1e-3. Measured <= 1.0e-5 (displacements) and <= 1.8e-5 (force)
-//     on every scene, worst on the kidney: 50x margin. (Before the kidney
-//     ran 3 steps per tick it ran 23, at dt = 43 us, where float central
-//     differences lost digits and the two float backends drifted apart by
-//     up to 3.7e-3; that tolerance was 1e-2.)
+//   float: 1e-3 on the box (measured <= 1.0e-5 displacements, <= 5.5e-5
+//     force). The kidney in float: 1e-2 (measured 4.7e-3 displacements and
+//     4.8e-3 force, H100, 4 steps per tick), and 0.1 for the force on the
+//     ticks whose contact counts differ (measured 5.5e-2). A node resting on
+//     the tool's surface sits at the contact threshold at every step of the
+//     press and hold; in float rounding puts it in on one backend and out on
+//     the other now and then (4-5 of ~760 ticks here), which changes that
+//     tick's force by the node's share and the node's velocity by the
+//     contact's impact rule, and the runs drift apart from there. In double
+//     the kidney agrees to 1e-13 once its path avoids an exact tie (below).
 // Equilibrium (first tick of the held contact with Scheduler's equilibrium
 // flag): within +-1 tick in double and float on the box (measured: the
 // same tick), +-2 ticks for the float kidney (measured: the same tick).
@@ -60,6 +65,7 @@ struct ConsistencyScene {
   int float_equilibrium_ticks = 1; ///< allowed difference of the first equilibrium tick in float
   /// worst |du| / max |u| and |dF| / max |F| allowed, double and float
   double tol_double = 1e-9, tol_float = 1e-3;
+  double tol_edge = 1e-3;  ///< float force on ticks whose contact counts differ by one node
 };
 
 /// 60 x 60 x 30 mm box (10 x 10 x 5 cells, 3000 tets), bottom fixed, pressed
@@ -85,17 +91,22 @@ ConsistencyScene kidney_scene(int depth) {
   s.model = [] { return scene::load_model(io::default_kidney_scene()); };
   s.settings = scene::scheduler_settings(sc);
   s.settings.depth = depth;
+  // The scene's path, moved 3 um back along the tool's axis. Unmoved, the tip sphere reaches
+  // surface node 490 (the kidney's pole, where the tool is aimed) exactly at the 0.1 s waypoint, a
+  // step boundary: whether that node is in contact in that step is a tie that rounding decides, and
+  // it decides it differently on the two backends. The first contact sets the node's velocity to the
+  // tool's (the kinematic contact's impact rule), so a contact one step earlier moves it by v dt
+  // (25 um at the approach's 0.1 m/s): that was the 1.1e-3 (double) and 2.9e-2..5.2e-2 (float)
+  // disagreement measured before, on an H100, with the same contact sets at every tick's end. 3 um
+  // at the press's 25 mm/s is 120 us: the touch falls inside a step, and no tie is left.
   s.path = sc.tools.at(0).path;
+  const Vec3<double> back = unit_or(s.path.at(1).p - s.path.at(2).p, Vec3<double>{0, 0, 0});  // out of the tissue
+  for (Waypoint& w : s.path) w.p = w.p + 3e-6 * back;
   s.duration = s.path.back().t;
   s.expect_equilibrium = false;  // whether the kidney settles within its hold is the scene's business
   s.float_equilibrium_ticks = 2;
-  // Measured on an H100 (docs/contact.md section 3): the same contact sets every tick in double, but
-  // from the first touch (tick 100: the first contact node's 7.5 um differ by 1 %) the displacements
-  // differ by 1.1e-3 of the largest and the force by 1.4e-4 of its largest, in depth 5 and whole-mesh
-  // runs alike; in float 1.6e-2 and 2.9e-2. The box scenes agree to 1e-9. The kidney's probe has a
-  // 30 mm shaft and the scene 2.5 % mass scaling; the cause is open (an issue, not a tolerance to grow).
-  s.tol_double = 2e-3;
-  s.tol_float = 5e-2;
+  s.tol_float = 1e-2;
+  s.tol_edge = 0.1;
   return s;
 }
 
@@ -136,8 +147,8 @@ TEST_P(Consistency, SameRegionContactDisplacementForceAndEquilibrium) {
   Scheduler sc_cpu(*cpu, m, sc.settings), sc_gpu(*gpu, m, sc.settings);
   ScriptedDevice dev_cpu(sc.path), dev_gpu(sc.path);
 
-  double max_u = 0, max_f = 0, worst_u = 0, worst_f = 0;
-  long first_eq_cpu = -1, first_eq_gpu = -1, contact_ticks = 0, count_mismatches = 0;
+  double max_u = 0, max_f = 0, worst_u = 0, worst_f = 0, worst_f_edge = 0;
+  long first_eq_cpu = -1, first_eq_gpu = -1, contact_ticks = 0, count_mismatches = 0, worst_f_tick = -1;
   bool was_in_contact = false;
   while (sc_cpu.time() < sc.duration - 1e-9) {
     const TickReport rc = sc_cpu.tick(dev_cpu), rg = sc_gpu.tick(dev_gpu);
@@ -164,7 +175,17 @@ TEST_P(Consistency, SameRegionContactDisplacementForceAndEquilibrium) {
     was_in_contact = rc.contact_nodes > 0;
     // reaction force, relative to the largest seen so far
     max_f = std::max(max_f, norm(rc.force));
-    if (max_f > 0) worst_f = std::max(worst_f, norm(rg.force - rc.force) / max_f);
+    // (on a tick whose contact counts differ -- float, a node at the tool's surface rounded in on one
+    // backend and out on the other -- the force differs by that node's share: reported apart)
+    if (max_f > 0) {
+      const double d = norm(rg.force - rc.force) / max_f;
+      if (rg.contact_nodes != rc.contact_nodes) {
+        worst_f_edge = std::max(worst_f_edge, d);
+      } else if (d > worst_f) {
+        worst_f = d;
+        worst_f_tick = rc.tick;
+      }
+    }
     if (rc.contact_nodes > 0 && rc.equilibrium && first_eq_cpu < 0) first_eq_cpu = rc.tick;
     if (rg.contact_nodes > 0 && rg.equilibrium && first_eq_gpu < 0) first_eq_gpu = rg.tick;
     if (rc.tick % 20 == 0 || rc.tick + 1 == long(std::lround(sc.duration / sc.settings.tick))) {
@@ -178,16 +199,18 @@ TEST_P(Consistency, SameRegionContactDisplacementForceAndEquilibrium) {
     }
   }
   expect_same_region(*cpu, *gpu, sc_cpu.ticks());
-  std::printf("[measured] %s %s: max |u| %.3g m, max |F| %.3g N, worst du/max|u| %.3g, worst dF/max|F| %.3g, "
-              "first equilibrium tick cpu %ld cuda %ld, %ld contact ticks, %ld contact-count mismatches\n",
-              sc.name.c_str(), to_string(p), max_u, max_f, worst_u, worst_f, first_eq_cpu, first_eq_gpu,
-              contact_ticks, count_mismatches);
+  std::printf("[measured] %s %s: max |u| %.3g m, max |F| %.3g N, worst du/max|u| %.3g, worst dF/max|F| %.3g (tick %ld), "
+              "first equilibrium tick cpu %ld cuda %ld, %ld contact ticks, %ld contact-count mismatches (worst dF/max|F| "
+              "there %.3g)\n",
+              sc.name.c_str(), to_string(p), max_u, max_f, worst_u, worst_f, worst_f_tick, first_eq_cpu, first_eq_gpu,
+              contact_ticks, count_mismatches, worst_f_edge);
   EXPECT_GT(contact_ticks, 300);
   EXPECT_LE(count_mismatches, contact_ticks / 50);
   EXPECT_GT(max_u, 1e-3);  // the tool really pressed
   const double tol = p == Precision::Double ? sc.tol_double : sc.tol_float;
   EXPECT_LT(worst_u, tol);
   EXPECT_LT(worst_f, tol);
+  EXPECT_LT(worst_f_edge, sc.tol_edge);
   if (sc.expect_equilibrium) {
     ASSERT_GE(first_eq_cpu, 0) << "the cpu run never reached equilibrium under the held tool";
   }
