@@ -367,6 +367,35 @@ TISSUE_HD T face_allowance(const Vec3<T> x[3], T r) {
   return sag < cap ? sag : cap;
 }
 
+/// Whether triangle x[3] may come within reach of capsule `cap` (false: no
+/// corner and no point of it is inside the capsule). A conservative bound
+/// that costs one point-segment distance: the triangle lies within rho of
+/// its centroid g, so it is clear of the capsule when |g - axis| - rho
+/// exceeds the radius, with a margin of 1e-3 r plus rounding.
+template <class T>
+TISSUE_HD bool triangle_may_touch(const Capsule<T>& cap, const Vec3<T> x[3]) {
+  const Vec3<T> g = (T(1) / T(3)) * (x[0] + x[1] + x[2]);
+  T rho2 = T(0);
+  for (int i = 0; i < 3; ++i) rho2 = dot(x[i] - g, x[i] - g) > rho2 ? dot(x[i] - g, x[i] - g) : rho2;
+  const T rho = std::sqrt(rho2);
+  const T size = std::fabs(g.x) + std::fabs(g.y) + std::fabs(g.z) + rho + std::fabs(cap.r);
+  const Vec3<T> c = cap.a + closest_on_segment(cap.a, cap.b, g) * (cap.b - cap.a);
+  const T slack = T(1e-3) * cap.r + T(64) * std::numeric_limits<T>::epsilon() * size;
+  return !(norm(g - c) - rho > cap.r + slack);
+}
+
+/// Whether triangle x[3] may come within reach of any sub-check capsule of
+/// TLED step k (false: sweep_triangle would leave it untouched). Most of
+/// the triangles a box query returns around a tool smaller than the box
+/// fail it (docs/contact.md, "Cost").
+template <class T>
+TISSUE_HD bool triangle_may_touch(const ContactTools<T>& tools, int k, const Vec3<T> x[3]) {
+  for (int t = 0; t < tools.n_tools; ++t)
+    for (int j = 1; j <= tools.tool[t].substeps; ++j)
+      if (triangle_may_touch(tool_capsule(tools.tool[t], tools.steps, k, j), x)) return true;
+  return false;
+}
+
 /// The contact sweep of one surface triangle during TLED step k of the
 /// advance (see the rule at the top): x[3] are its corners' positions after
 /// the free update (m), block[3] their corner_block() values. Fills out[3].
@@ -375,6 +404,7 @@ TISSUE_HD void sweep_triangle(const ContactTools<T>& tools, int k, const Vec3<T>
                               CornerContact<T> out[3]) {
   Vec3<T> x[3] = {x_in[0], x_in[1], x_in[2]};
   for (int i = 0; i < 3; ++i) out[i] = {{T(0), T(0), T(0)}, -1, 0};
+  if (!triangle_may_touch(tools, k, x)) return;  // out as no contact leaves it: dx = 0, no tool
   for (int t = 0; t < tools.n_tools; ++t) {
     const ToolStep<T>& tool = tools.tool[t];
     for (int j = 1; j <= tool.substeps; ++j) {

@@ -45,6 +45,11 @@ class ContactStage {
   /// Nodes whose contact kind is not kNoContact, ascending (reductions, contacts()).
   const std::vector<index_t>& touched() const { return touched_; }
 
+  /// The next contact step or candidates() checks the whole surface against
+  /// the BVH's margin, not only the region's nodes: call after any change of
+  /// u beyond the region's nodes (new displacements, a new region, driven nodes).
+  void surface_moved() { bvh_.invalidate(); }
+
   /// The surface BVH (tests: builds only when the surface left the margin).
   const SurfaceBvh<T>& bvh() const { return bvh_; }
 
@@ -57,6 +62,7 @@ class ContactStage {
   const TissueModel<T>& m_;
   SurfaceBvh<T> bvh_;
   std::vector<index_t> tris_;                 ///< candidate triangles of the current query
+  std::vector<Capsule<T>> caps_;             ///< the current step's sub-check capsules
   struct Entry {
     index_t node, slot;
     CornerContact<T> c;

@@ -48,7 +48,7 @@ std::string CpuBackend<T>::device_name() const {
 
 template <class T>
 void CpuBackend<T>::do_upload(const TissueModel<double>& model) {
-  energy_.fresh = false;
+  energy_.fresh = energy_.synced = false;
   contact_.reset();
   model_ = convert<T>(model);
   state_.resize(model_.n_nodes, model_.n_elems);
@@ -69,7 +69,8 @@ template <class T>
 void CpuBackend<T>::do_set_displacements(std::span<const double> u) {
   const index_t n = model_.n_nodes;
   for (std::size_t k = 0; k < u.size(); ++k) state_.u[k] = state_.u_prev[k] = state_.u_next[k] = T(u[k]);
-  energy_.fresh = false;
+  energy_.fresh = energy_.synced = false;
+  if (contact_) contact_->surface_moved();
   for (index_t a = 0; a < n; ++a)
     if (state_.region.role[a] == kHalo) {
       const std::uint8_t keep = state_.driven[a] | fixed_axes(model_.node_flags[a]);
@@ -82,7 +83,8 @@ void CpuBackend<T>::do_set_displacements(std::span<const double> u) {
 template <class T>
 RegionSizes CpuBackend<T>::do_build_region(std::span<const index_t> seeds, int depth) {
   install_region(model_, state_, flood_fill(model_, seeds, depth));
-  energy_.fresh = false;
+  energy_.fresh = energy_.synced = false;
+  if (contact_) contact_->surface_moved();
   cpu::element_pressure(model_, state_, all_elems_, all_elems_part_);
   return state_.region.sizes();
 }
@@ -98,11 +100,13 @@ template <class T>
 void CpuBackend<T>::do_set_driven(std::span<const index_t> nodes, std::span<const double> u,
                                   std::span<const std::uint8_t> axes) {
   drive_nodes(model_, state_, driven_list_, nodes, u, axes);
+  if (contact_) contact_->surface_moved();
 }
 
 template <class T>
 void CpuBackend<T>::do_clear_driven() {
   release_driven(model_, state_, driven_list_);
+  if (contact_) contact_->surface_moved();
 }
 
 template <class T>

@@ -93,10 +93,15 @@ template <class T>
 double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<T>& node_divisor,
                      EnergyScratch<T>& scratch) {
   const std::span<const index_t> elems = s.region.elems, nodes = s.region.nodes;
-  scratch.elem_dv.assign(s.elem_dv.begin(), s.elem_dv.end());
-  scratch.elem_J.assign(s.elem_J.begin(), s.elem_J.end());
+  // passes 1-2 below rewrite the region's entries; the rest must equal the state's, so that
+  // take_passes can swap the arrays: copied whole only when they may not (O(mesh) per reduce before)
+  if (!scratch.synced || scratch.elem_dv.size() != s.elem_dv.size() || scratch.node_p.size() != s.node_p.size()) {
+    scratch.elem_dv.assign(s.elem_dv.begin(), s.elem_dv.end());
+    scratch.elem_J.assign(s.elem_J.begin(), s.elem_J.end());
+    scratch.node_p.assign(s.node_p.begin(), s.node_p.end());
+    scratch.synced = true;
+  }
   scratch.elem_F.resize(s.elem_F.size());
-  scratch.node_p.assign(s.node_p.begin(), s.node_p.end());
   element_pressure(m, s.u.data(), elems, scratch.elem_J.data(), scratch.elem_dv.data(), scratch.elem_F.data(),
                    scratch.pressure_part);
   nodal_pressure(m, scratch.elem_dv.data(), node_divisor, nodes, scratch.node_p.data(), scratch.nodal_part);

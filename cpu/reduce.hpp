@@ -42,6 +42,11 @@ struct EnergyScratch {
   std::vector<T> elem_F;   ///< F (9 x n_elems; the region's elements only)
   std::vector<T> node_p;   ///< nodal pressure (n_nodes) Pa
   bool fresh = false;      ///< holds passes 1-2 of the state's current u and region
+  /// elem_dv, elem_J and node_p equal the state's outside the region (the
+  /// passes rewrite the region's entries, so only a full copy makes them
+  /// equal; clear it whenever the state's arrays change beyond the region:
+  /// upload, new displacements, a new region)
+  bool synced = false;
   tbb::affinity_partitioner pressure_part, nodal_part;  ///< for its passes 1 and 2
 };
 

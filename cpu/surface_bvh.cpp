@@ -71,6 +71,8 @@ SurfaceBvh<T>::SurfaceBvh(const TissueModel<T>& m, double margin)
   if (!(margin > 0) || !std::isfinite(margin))
     throw std::invalid_argument(fmt::format("cpu backend: surface BVH margin {} m must be > 0", margin));
   at_build_.assign(3 * std::size_t(m.n_surf), 0.0);
+  surf_index_.assign(std::size_t(m.n_nodes), -1);
+  for (index_t i = 0; i < m.n_surf; ++i) surf_index_[m.surf_nodes[i]] = i;
   boxes_.assign(6 * std::size_t(m.n_tris), 0.0f);
   if (m.n_tris == 0) return;
   // default configuration: "threads=1" made Embree (built on TBB) cap the whole process at one TBB
@@ -123,10 +125,26 @@ void SurfaceBvh<T>::build(const T* u) {
 template <class T>
 void SurfaceBvh<T>::update(const T* u) {
   if (m_.n_tris == 0) return;
+  full_check_ = false;
   if (!built_) return build(u);
   const index_t n = m_.n_nodes;
   for (index_t i = 0; i < m_.n_surf; ++i) {
     const index_t a = m_.surf_nodes[i];
+    for (int c = 0; c < 3; ++c) {
+      const double x = double(m_.X[c * n + a]) + double(u[c * n + a]);
+      if (!(std::fabs(x - at_build_[3 * std::size_t(i) + c]) <= margin_)) return build(u);
+    }
+  }
+}
+
+template <class T>
+void SurfaceBvh<T>::update(const T* u, std::span<const index_t> moved) {
+  if (m_.n_tris == 0) return;
+  if (full_check_ || !built_) return update(u);
+  const index_t n = m_.n_nodes;
+  for (index_t a : moved) {
+    const index_t i = surf_index_[a];
+    if (i < 0) continue;
     for (int c = 0; c < 3; ++c) {
       const double x = double(m_.X[c * n + a]) + double(u[c * n + a]);
       if (!(std::fabs(x - at_build_[3 * std::size_t(i) + c]) <= margin_)) return build(u);

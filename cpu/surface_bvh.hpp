@@ -7,13 +7,18 @@
 // every side. The BVH stays valid while no surface node has moved more than
 // the margin (in any coordinate) from where it was at the build, because
 // each triangle then still lies in its fattened box; only then is it
-// rebuilt (a check of O(surface nodes) per query, no refit of the whole
-// surface per query). A query is an axis-aligned box: Embree's point query
+// rebuilt (no refit of the whole surface per query). Checking that is
+// O(surface nodes) when anything may have moved (the first query, after
+// invalidate()); otherwise only the nodes the caller says can have moved
+// since the last check -- the region's, since nodes outside it are held --
+// are checked: O(region), not O(surface), per query (issue 14: a 100k
+// triangle surface spent half its contact step in the full check). A query is an axis-aligned box: Embree's point query
 // (a sphere enclosing the box) walks the BVH, and each primitive it reports
 // is kept when its fattened box overlaps the query box.
 #pragma once
 
 #include <memory>
+#include <span>
 #include <vector>
 
 #include "core/model.hpp"
@@ -38,8 +43,17 @@ class SurfaceBvh {
   SurfaceBvh& operator=(const SurfaceBvh&) = delete;
 
   /// Makes the BVH valid for the surface deformed by u (3 x n_nodes, m):
-  /// rebuilds it when a surface node has left its margin.
+  /// rebuilds it when a surface node has left its margin. Checks every
+  /// surface node.
   void update(const T* u);
+  /// The same, checking only the nodes of `moved` (any order; non-surface
+  /// nodes are skipped) -- the caller's promise that no other node has
+  /// moved since the last update -- unless invalidate() was called since,
+  /// when every surface node is checked.
+  void update(const T* u, std::span<const index_t> moved);
+  /// The next update() checks every surface node (after a change of u that
+  /// is not confined to the nodes it will be given).
+  void invalidate() { full_check_ = true; }
 
   /// Surface triangles whose fattened box overlaps `box`, ascending, into
   /// out (cleared first). Call update() for the current u first.
@@ -58,8 +72,10 @@ class SurfaceBvh {
   std::unique_ptr<Embree> rtc_;
   std::vector<double> at_build_;  ///< surface node positions at the last build (n_surf x 3)
   std::vector<float> boxes_;      ///< fattened triangle boxes (n_tris x 6: lo xyz, hi xyz)
+  std::vector<index_t> surf_index_;  ///< node -> its surface index, -1 off the surface (n_nodes)
   long builds_ = 0;
   bool built_ = false;
+  bool full_check_ = true;
 };
 
 /// Median length of the surface triangles' edges (m) in the reference

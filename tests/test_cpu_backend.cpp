@@ -269,5 +269,38 @@ TEST(SurfaceBvh, RebuiltOnlyWhenTheSurfaceLeavesItsMargin) {
   EXPECT_GT(b.reduce().tools[0].contact, 0);
 }
 
+/// The margin check looks only at the region's nodes (nodes outside it are
+/// held), so a change of u beyond the region -- new displacements here --
+/// must make the next query check the whole surface: the upper half moved
+/// 5 mm (more than the 3.3 mm margin) outside a small region is still found
+/// under the tool (its nodes reported as outside the region), after one rebuild.
+TEST(SurfaceBvh, DisplacementsBeyondTheRegionAreSeenByTheNextQuery) {
+  const auto m = box_model(6, true);
+  cpu::CpuBackend<double> b;
+  b.upload(m);
+  const ToolShape tool{"probe", 0.003, 0};
+  b.set_tools(std::span<const ToolShape>(&tool, 1));
+  const Vec3<double> far{0.5 * kL, 0.5 * kL, 3 * kL};
+  ToolMotion mv{{far, {0, 0, 1}}, {far, {0, 0, 1}}};
+  b.move_tools(std::span<const ToolMotion>(&mv, 1));
+  b.advance(1);
+  ASSERT_EQ(b.surface_builds(), 1);
+  b.build_region(std::vector<index_t>{0}, 1);  // a corner of the bottom: the top's middle is outside
+  b.advance(1);
+  EXPECT_EQ(b.surface_builds(), 1);  // nothing moved
+  std::vector<double> u(3 * size_t(m.n_nodes), 0.0);
+  for (index_t a = 0; a < m.n_nodes; ++a)  // the upper half, far from the region
+    if (m.X[2 * size_t(m.n_nodes) + a] > 0.5 * kL) u[2 * size_t(m.n_nodes) + a] = 5e-3;
+  b.set_displacements(u);
+  const Vec3<double> top{0.5 * kL + 1e-4, 0.5 * kL + 2e-4, kL + 5e-3 + tool.radius - 1e-3};  // 1 mm into the moved top
+  mv = {{top, {0, 0, 1}}, {top, {0, 0, 1}}};
+  b.move_tools(std::span<const ToolMotion>(&mv, 1));
+  b.advance(1);
+  EXPECT_EQ(b.surface_builds(), 2);
+  const Reductions r = b.reduce();
+  EXPECT_GT(r.tools[0].outside, 0);
+  EXPECT_EQ(r.tools[0].contact, 0);
+}
+
 }  // namespace
 }  // namespace tissue
