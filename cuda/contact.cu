@@ -94,16 +94,42 @@ __device__ void combine(ContactPartial& a, const ContactPartial& b) {
   }
 }
 
-template <class T>
-__global__ void __launch_bounds__(kContactBlock) contact_reduce_kernel(ModelView<T> m, StateView<T> s, Reductions* out) {
-  __shared__ ContactPartial sh[kContactBlock];
-  ContactPartial p;
+/// Surface nodes one block of contact_partials_kernel reduces: a fixed
+/// split, so the partials and their order depend only on the mesh.
+constexpr index_t kContactChunk = 2048;
+
+__device__ void empty_partial(ContactPartial& p) {
   for (int t = 0; t < kMaxTools; ++t) {
     p.reaction[t][0] = p.reaction[t][1] = p.reaction[t][2] = 0;
     p.contact[t] = p.grasped[t] = p.rigid[t] = p.outside[t] = 0;
     p.rigid_first[t] = -1;
   }
-  for (index_t i = threadIdx.x; i < m.n_surf; i += kContactBlock) {
+}
+
+/// The block's tree reduction of its threads' partials into sh[0] (fixed order).
+__device__ void block_combine(ContactPartial* sh, const ContactPartial& p) {
+  sh[threadIdx.x] = p;
+  __syncthreads();
+  for (int w = kContactBlock / 2; w > 0; w /= 2) {
+    if (threadIdx.x < w) combine(sh[threadIdx.x], sh[threadIdx.x + w]);
+    __syncthreads();
+  }
+}
+
+__device__ void write_tools(const ContactPartial& q, Reductions* out);
+
+/// Stage 1: block b reduces surface nodes [b kContactChunk, (b + 1) kContactChunk) into partials[b];
+/// a surface of one chunk (the kidney's) is finished here, into out, with no second launch.
+/// (Before: one block walked the whole surface, 50k nodes on a 100k-triangle slab, latency-bound.)
+template <class T>
+__global__ void __launch_bounds__(kContactBlock) contact_partials_kernel(ModelView<T> m, StateView<T> s,
+                                                                         ContactPartial* partials, Reductions* out) {
+  __shared__ ContactPartial sh[kContactBlock];
+  ContactPartial p;
+  empty_partial(p);
+  const index_t first = index_t(blockIdx.x) * kContactChunk;
+  const index_t last = first + kContactChunk < m.n_surf ? first + kContactChunk : m.n_surf;
+  for (index_t i = first + index_t(threadIdx.x); i < last; i += kContactBlock) {
     const index_t a = m.surf_nodes[i];
     const int t = s.contact_tool[a];
     const std::uint8_t kind = s.contact[a];
@@ -120,14 +146,16 @@ __global__ void __launch_bounds__(kContactBlock) contact_reduce_kernel(ModelView
     }
     p.outside[t] += kind == kOutsideRegion ? 1 : 0;
   }
-  sh[threadIdx.x] = p;
-  __syncthreads();
-  for (int w = kContactBlock / 2; w > 0; w /= 2) {
-    if (threadIdx.x < w) combine(sh[threadIdx.x], sh[threadIdx.x + w]);
-    __syncthreads();
-  }
+  block_combine(sh, p);
   if (threadIdx.x != 0) return;
-  const ContactPartial& q = sh[0];
+  if (gridDim.x == 1)
+    write_tools(sh[0], out);
+  else
+    partials[blockIdx.x] = sh[0];
+}
+
+/// The tools' reductions of the combined partial q into out->tools.
+__device__ void write_tools(const ContactPartial& q, Reductions* out) {
   for (int t = 0; t < kMaxTools; ++t) {
     ToolReduction r;
     r.reaction = {q.reaction[t][0], q.reaction[t][1], q.reaction[t][2]};
@@ -140,6 +168,19 @@ __global__ void __launch_bounds__(kContactBlock) contact_reduce_kernel(ModelView
     out->finite = out->finite && isfinite(r.reaction.x + r.reaction.y + r.reaction.z);
   }
 }
+
+/// Stage 2: one block combines the n partials (fixed order) into out->tools.
+__global__ void __launch_bounds__(kContactBlock) contact_finish_kernel(const ContactPartial* partials, int n,
+                                                                       Reductions* out) {
+  __shared__ ContactPartial sh[kContactBlock];
+  ContactPartial p;
+  empty_partial(p);
+  for (int i = int(threadIdx.x); i < n; i += kContactBlock) combine(p, partials[i]);
+  block_combine(sh, p);
+  if (threadIdx.x == 0) write_tools(sh[0], out);
+}
+
+int contact_blocks(index_t n_surf) { return int((std::max<index_t>(n_surf, 1) + kContactChunk - 1) / kContactChunk); }
 
 }  // namespace
 
@@ -155,6 +196,7 @@ void DeviceContact<T>::allocate(index_t n_nodes, index_t n_surf) {
   n_selected_.allocate(1);
   n_selected_host_.allocate(1);
   records_.allocate(std::max<index_t>(n_surf, 1));
+  partials_.allocate(size_t(contact_blocks(n_surf)) * sizeof(ContactPartial));
   // the kernel writes the fields, not the padding between them: zero it once so that the copy to the
   // host reads no uninitialised byte (compute-sanitizer initcheck)
   CUDA_CHECK(cudaMemset(records_.data(), 0, records_.bytes()));
@@ -227,7 +269,12 @@ std::vector<ContactNode> DeviceContact<T>::contacts(const ModelView<T>& m, const
 
 template <class T>
 void DeviceContact<T>::reduce(const ModelView<T>& m, const StateView<T>& s, Reductions* out, cudaStream_t stream) {
-  launch_blocks(1, kContactBlock, stream, contact_reduce_kernel<T>, m, s, out);
+  const int blocks = contact_blocks(m.n_surf);
+  auto* partials = reinterpret_cast<ContactPartial*>(partials_.data());
+  launch_blocks(blocks, kContactBlock, stream, contact_partials_kernel<T>, m, s, partials, out);
+  if (blocks > 1)
+    launch_blocks(1, kContactBlock, stream, contact_finish_kernel, static_cast<const ContactPartial*>(partials), blocks,
+                  out);
 }
 
 template class DeviceContact<float>;

@@ -52,8 +52,9 @@ class DeviceContact {
                                     cudaStream_t stream);
 
   /// Per-tool contact reductions (core ToolReduction) over the surface, with
-  /// the internal force s.f, into out->tools (device memory); one block,
-  /// fixed order: deterministic.
+  /// the internal force s.f, into out->tools (device memory): one block per
+  /// 2,048 surface nodes, then (if more than one) one block over their
+  /// partials, each in a fixed order: deterministic.
   void reduce(const ModelView<T>& m, const StateView<T>& s, Reductions* out, cudaStream_t stream);
 
  private:
@@ -68,6 +69,7 @@ class DeviceContact {
   PinnedArray<int> n_selected_host_;
   DeviceArray<unsigned char> cub_temp_;
   DeviceArray<ContactRecord> records_;              ///< (n_surf)
+  DeviceArray<unsigned char> partials_;             ///< the reduction's per-block partials
 };
 
 }  // namespace tissue::gpu
