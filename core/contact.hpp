@@ -367,32 +367,27 @@ TISSUE_HD T face_allowance(const Vec3<T> x[3], T r) {
   return sag < cap ? sag : cap;
 }
 
-/// Whether triangle x[3] may come within reach of capsule `cap` (false: no
-/// corner and no point of it is inside the capsule). A conservative bound
-/// that costs one point-segment distance: the triangle lies within rho of
-/// its centroid g, so it is clear of the capsule when |g - axis| - rho
-/// exceeds the radius, with a margin of 1e-3 r plus rounding.
+/// Whether triangle x[3] may come within reach of any sub-check capsule of
+/// TLED step k (false: no corner and no point of it is inside any of them,
+/// so sweep_triangle leaves it untouched). A conservative bound that costs
+/// one point-segment distance per capsule: the triangle lies within rho of
+/// its centroid g, so it is clear of a capsule when |g - axis| - rho exceeds
+/// the radius, with a margin of 1e-3 r plus rounding. Most of the triangles
+/// a box query returns around a tool smaller than the box fail it.
 template <class T>
-TISSUE_HD bool triangle_may_touch(const Capsule<T>& cap, const Vec3<T> x[3]) {
+TISSUE_HD bool triangle_may_touch(const ContactTools<T>& tools, int k, const Vec3<T> x[3]) {
   const Vec3<T> g = (T(1) / T(3)) * (x[0] + x[1] + x[2]);
   T rho2 = T(0);
   for (int i = 0; i < 3; ++i) rho2 = dot(x[i] - g, x[i] - g) > rho2 ? dot(x[i] - g, x[i] - g) : rho2;
   const T rho = std::sqrt(rho2);
-  const T size = std::fabs(g.x) + std::fabs(g.y) + std::fabs(g.z) + rho + std::fabs(cap.r);
-  const Vec3<T> c = cap.a + closest_on_segment(cap.a, cap.b, g) * (cap.b - cap.a);
-  const T slack = T(1e-3) * cap.r + T(64) * std::numeric_limits<T>::epsilon() * size;
-  return !(norm(g - c) - rho > cap.r + slack);
-}
-
-/// Whether triangle x[3] may come within reach of any sub-check capsule of
-/// TLED step k (false: sweep_triangle would leave it untouched). Most of
-/// the triangles a box query returns around a tool smaller than the box
-/// fail it (docs/contact.md, "Cost").
-template <class T>
-TISSUE_HD bool triangle_may_touch(const ContactTools<T>& tools, int k, const Vec3<T> x[3]) {
+  const T size = std::fabs(g.x) + std::fabs(g.y) + std::fabs(g.z) + rho;
   for (int t = 0; t < tools.n_tools; ++t)
-    for (int j = 1; j <= tools.tool[t].substeps; ++j)
-      if (triangle_may_touch(tool_capsule(tools.tool[t], tools.steps, k, j), x)) return true;
+    for (int j = 1; j <= tools.tool[t].substeps; ++j) {
+      const Capsule<T> cap = tool_capsule(tools.tool[t], tools.steps, k, j);
+      const Vec3<T> c = cap.a + closest_on_segment(cap.a, cap.b, g) * (cap.b - cap.a);
+      const T slack = T(1e-3) * cap.r + T(64) * std::numeric_limits<T>::epsilon() * (size + std::fabs(cap.r));
+      if (!(norm(g - c) - rho > cap.r + slack)) return true;
+    }
   return false;
 }
 

@@ -78,18 +78,15 @@ void ContactStage<T>::step(TissueState<T>& s, const ContactTools<T>& tools, int 
   bvh_.update(s.u_next.data(), s.region.nodes);
   bvh_.query(sweep_box(tools, k, 1.0), tris_);
   entries_.clear();
-  caps_.clear();  // this step's sub-check capsules, for the quick rejection of the triangles found
-  for (int t = 0; t < tools.n_tools; ++t)
-    for (int j = 1; j <= tools.tool[t].substeps; ++j) caps_.push_back(tool_capsule(tools.tool[t], tools.steps, k, j));
   for (index_t t : tris_) {
     Vec3<T> x[3];
     std::uint8_t block[3];
     index_t c[3];
-    for (int i = 0; i < 3; ++i) x[i] = corner_position(s, tools, k, s.u_next.data(), c[i] = m_.tris[i * nt + t]);
-    if (std::none_of(caps_.begin(), caps_.end(), [&](const Capsule<T>& cap) { return triangle_may_touch(cap, x); }))
-      continue;  // sweep_triangle would find it clear too
-    for (int i = 0; i < 3; ++i)
-      block[i] = corner_block(s.region.role[c[i]] == kInner, s.held[c[i]] == kAllAxes, s.contact[c[i]] == kGrasped);
+    for (int i = 0; i < 3; ++i) {
+      const index_t a = c[i] = m_.tris[i * nt + t];
+      x[i] = corner_position(s, tools, k, s.u_next.data(), a);
+      block[i] = corner_block(s.region.role[a] == kInner, s.held[a] == kAllAxes, s.contact[a] == kGrasped);
+    }
     CornerContact<T> out[3];
     sweep_triangle(tools, k, x, block, out);
     for (int i = 0; i < 3; ++i)

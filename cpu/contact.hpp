@@ -62,7 +62,6 @@ class ContactStage {
   const TissueModel<T>& m_;
   SurfaceBvh<T> bvh_;
   std::vector<index_t> tris_;                 ///< candidate triangles of the current query
-  std::vector<Capsule<T>> caps_;             ///< the current step's sub-check capsules
   struct Entry {
     index_t node, slot;
     CornerContact<T> c;
