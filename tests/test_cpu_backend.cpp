@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstring>
+#include <memory>
 #include <vector>
 
 #include "core/box_mesh.hpp"
@@ -244,29 +245,41 @@ TEST_P(CpuBackendTest, WritePositionsGivesDeformedXyzTriples) {
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(pos[3 * i + c], m.X[c * n + i] + u[c * n + i], 1e-8) << i;
 }
 
+constexpr double kProbeRadius = 0.003;  ///< m: smaller than the 6-cell box's 3.3 mm surface edges
+
+/// Moves the probe from `from` to `to` over the next advance (axis +z).
+void move_probe(Backend& b, Vec3<double> from, Vec3<double> to) {
+  const ToolMotion mv{{from, {0, 0, 1}}, {to, {0, 0, 1}}};
+  b.move_tools(std::span<const ToolMotion>(&mv, 1));
+}
+
+/// A cpu backend (double) over m with one probe of kProbeRadius held at `at`.
+std::unique_ptr<cpu::CpuBackend<double>> probed(const TissueModel<double>& m, Vec3<double> at) {
+  auto b = std::make_unique<cpu::CpuBackend<double>>();
+  b->upload(m);
+  const ToolShape tool{"probe", kProbeRadius, 0};
+  b->set_tools(std::span<const ToolShape>(&tool, 1));
+  move_probe(*b, at, at);
+  return b;
+}
+
 /// A slab whose top the tool presses: the BVH is built once, then rebuilt
 /// only when a surface node has moved more than the margin since.
 TEST(SurfaceBvh, RebuiltOnlyWhenTheSurfaceLeavesItsMargin) {
   const auto m = box_model(6, true);
-  cpu::CpuBackend<double> b;
-  b.upload(m);
-  const ToolShape tool{"probe", 0.003, 0};
-  b.set_tools(std::span<const ToolShape>(&tool, 1));
-  const Vec3<double> top{0.5 * kL + 1e-4, 0.5 * kL + 2e-4, kL + tool.radius};
-  ToolMotion mv{{top, {0, 0, 1}}, {top, {0, 0, 1}}};
-  b.move_tools(std::span<const ToolMotion>(&mv, 1));
-  b.advance(5);
-  EXPECT_EQ(b.surface_builds(), 1);  // the first query builds it; nothing moved since
+  const Vec3<double> top{0.5 * kL + 1e-4, 0.5 * kL + 2e-4, kL + kProbeRadius};
+  auto b = probed(m, top);
+  b->advance(5);
+  EXPECT_EQ(b->surface_builds(), 1);  // the first query builds it; nothing moved since
   // press 4 mm (more than the margin, the median surface edge of 3.3 mm), then hold
   for (int k = 0; k < 40; ++k) {
-    mv = {mv.to, {top - Vec3<double>{0, 0, 1e-4 * (k + 1)}, {0, 0, 1}}};
-    b.move_tools(std::span<const ToolMotion>(&mv, 1));
-    b.advance(2);
+    move_probe(*b, top - Vec3<double>{0, 0, 1e-4 * k}, top - Vec3<double>{0, 0, 1e-4 * (k + 1)});
+    b->advance(2);
   }
-  const long after_press = b.surface_builds();
+  const long after_press = b->surface_builds();
   EXPECT_GE(after_press, 2);
   EXPECT_LE(after_press, 6);  // a few rebuilds for 4 mm of travel, not one per step (80 steps)
-  EXPECT_GT(b.reduce().tools[0].contact, 0);
+  EXPECT_GT(b->reduce().tools[0].contact, 0);
 }
 
 /// The margin check looks only at the region's nodes (nodes outside it are
@@ -276,28 +289,21 @@ TEST(SurfaceBvh, RebuiltOnlyWhenTheSurfaceLeavesItsMargin) {
 /// under the tool (its nodes reported as outside the region), after one rebuild.
 TEST(SurfaceBvh, DisplacementsBeyondTheRegionAreSeenByTheNextQuery) {
   const auto m = box_model(6, true);
-  cpu::CpuBackend<double> b;
-  b.upload(m);
-  const ToolShape tool{"probe", 0.003, 0};
-  b.set_tools(std::span<const ToolShape>(&tool, 1));
-  const Vec3<double> far{0.5 * kL, 0.5 * kL, 3 * kL};
-  ToolMotion mv{{far, {0, 0, 1}}, {far, {0, 0, 1}}};
-  b.move_tools(std::span<const ToolMotion>(&mv, 1));
-  b.advance(1);
-  ASSERT_EQ(b.surface_builds(), 1);
-  b.build_region(std::vector<index_t>{0}, 1);  // a corner of the bottom: the top's middle is outside
-  b.advance(1);
-  EXPECT_EQ(b.surface_builds(), 1);  // nothing moved
+  auto b = probed(m, {0.5 * kL, 0.5 * kL, 3 * kL});  // far above the box
+  b->advance(1);
+  ASSERT_EQ(b->surface_builds(), 1);
+  b->build_region(std::vector<index_t>{0}, 1);  // a corner of the bottom: the top's middle is outside
+  b->advance(1);
+  EXPECT_EQ(b->surface_builds(), 1);  // nothing moved
   std::vector<double> u(3 * size_t(m.n_nodes), 0.0);
   for (index_t a = 0; a < m.n_nodes; ++a)  // the upper half, far from the region
     if (m.X[2 * size_t(m.n_nodes) + a] > 0.5 * kL) u[2 * size_t(m.n_nodes) + a] = 5e-3;
-  b.set_displacements(u);
-  const Vec3<double> top{0.5 * kL + 1e-4, 0.5 * kL + 2e-4, kL + 5e-3 + tool.radius - 1e-3};  // 1 mm into the moved top
-  mv = {{top, {0, 0, 1}}, {top, {0, 0, 1}}};
-  b.move_tools(std::span<const ToolMotion>(&mv, 1));
-  b.advance(1);
-  EXPECT_EQ(b.surface_builds(), 2);
-  const Reductions r = b.reduce();
+  b->set_displacements(u);
+  const Vec3<double> top{0.5 * kL + 1e-4, 0.5 * kL + 2e-4, kL + 5e-3 + kProbeRadius - 1e-3};  // 1 mm into the moved top
+  move_probe(*b, top, top);
+  b->advance(1);
+  EXPECT_EQ(b->surface_builds(), 2);
+  const Reductions r = b->reduce();
   EXPECT_GT(r.tools[0].outside, 0);
   EXPECT_EQ(r.tools[0].contact, 0);
 }
