@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <optional>
 #include <cstring>
 #include <ctime>
 #include <fstream>
@@ -210,9 +211,9 @@ void bench_contact(Context& c, long want_tris, Precision p) {
   c.emit(r);
 }
 
-void bench_tick(Context& c, Precision p, int depth, double dt_safety) {
+void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_safety) {
   scene::Scene s = io::default_kidney_scene();
-  if (dt_safety > 0) s.solver.dt_safety = dt_safety;
+  s.solver.dt_safety = dt_safety.value_or(s.solver.dt_safety);
   const TissueModel<double> m = scene::load_model(s);
   SchedulerSettings st = scene::scheduler_settings(s);
   st.depth = depth;
@@ -296,9 +297,10 @@ std::vector<std::string> run_bench(const BenchOptions& o) {
       if (!stopped()) bench_tled(c, mesh, p);
     for (long tris : {10'000L, 100'000L})
       if (!stopped()) bench_contact(c, tris, p);
-    const std::vector<double> safeties = o.tick_dt_safety.empty() ? std::vector<double>{0} : o.tick_dt_safety;
+    std::vector<std::optional<double>> safeties(o.tick_dt_safety.begin(), o.tick_dt_safety.end());
+    if (safeties.empty()) safeties.emplace_back();  // the scene's own
     for (int depth : {5, kDepthAll})
-      for (double safety : safeties)
+      for (const std::optional<double>& safety : safeties)
         if (!stopped()) bench_tick(c, p, depth, safety);
   }
   if (!o.json_path.empty()) {

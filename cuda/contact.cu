@@ -74,12 +74,6 @@ __global__ void records_kernel(ModelView<T> m, StateView<T> s, ContactRecord* ou
   out[i] = {a, s.contact_tool[a], s.contact[a], {float(n.x), float(n.y), float(n.z)}};
 }
 
-/// Per-tool partial sums of one thread (double).
-struct ContactPartial {
-  double reaction[kMaxTools][3];
-  int contact[kMaxTools], grasped[kMaxTools], rigid[kMaxTools], rigid_first[kMaxTools], outside[kMaxTools];
-};
-
 constexpr int kContactBlock = 128;
 
 __device__ void combine(ContactPartial& a, const ContactPartial& b) {
@@ -116,7 +110,20 @@ __device__ void block_combine(ContactPartial* sh, const ContactPartial& p) {
   }
 }
 
-__device__ void write_tools(const ContactPartial& q, Reductions* out);
+/// The tools' reductions of the combined partial q into out->tools.
+__device__ void write_tools(const ContactPartial& q, Reductions* out) {
+  for (int t = 0; t < kMaxTools; ++t) {
+    ToolReduction r;
+    r.reaction = {q.reaction[t][0], q.reaction[t][1], q.reaction[t][2]};
+    r.contact = q.contact[t];
+    r.grasped = q.grasped[t];
+    r.rigid = q.rigid[t];
+    r.rigid_first = q.rigid_first[t];
+    r.outside = q.outside[t];
+    out->tools[t] = r;
+    out->finite = out->finite && isfinite(r.reaction.x + r.reaction.y + r.reaction.z);
+  }
+}
 
 /// Stage 1: block b reduces surface nodes [b kContactChunk, (b + 1) kContactChunk) into partials[b];
 /// a surface of one chunk (the kidney's) is finished here, into out, with no second launch.
@@ -154,21 +161,6 @@ __global__ void __launch_bounds__(kContactBlock) contact_partials_kernel(ModelVi
     partials[blockIdx.x] = sh[0];
 }
 
-/// The tools' reductions of the combined partial q into out->tools.
-__device__ void write_tools(const ContactPartial& q, Reductions* out) {
-  for (int t = 0; t < kMaxTools; ++t) {
-    ToolReduction r;
-    r.reaction = {q.reaction[t][0], q.reaction[t][1], q.reaction[t][2]};
-    r.contact = q.contact[t];
-    r.grasped = q.grasped[t];
-    r.rigid = q.rigid[t];
-    r.rigid_first = q.rigid_first[t];
-    r.outside = q.outside[t];
-    out->tools[t] = r;
-    out->finite = out->finite && isfinite(r.reaction.x + r.reaction.y + r.reaction.z);
-  }
-}
-
 /// Stage 2: one block combines the n partials (fixed order) into out->tools.
 __global__ void __launch_bounds__(kContactBlock) contact_finish_kernel(const ContactPartial* partials, int n,
                                                                        Reductions* out) {
@@ -196,7 +188,7 @@ void DeviceContact<T>::allocate(index_t n_nodes, index_t n_surf) {
   n_selected_.allocate(1);
   n_selected_host_.allocate(1);
   records_.allocate(std::max<index_t>(n_surf, 1));
-  partials_.allocate(size_t(contact_blocks(n_surf)) * sizeof(ContactPartial));
+  partials_.allocate(contact_blocks(n_surf));
   // the kernel writes the fields, not the padding between them: zero it once so that the copy to the
   // host reads no uninitialised byte (compute-sanitizer initcheck)
   CUDA_CHECK(cudaMemset(records_.data(), 0, records_.bytes()));
@@ -270,11 +262,10 @@ std::vector<ContactNode> DeviceContact<T>::contacts(const ModelView<T>& m, const
 template <class T>
 void DeviceContact<T>::reduce(const ModelView<T>& m, const StateView<T>& s, Reductions* out, cudaStream_t stream) {
   const int blocks = contact_blocks(m.n_surf);
-  auto* partials = reinterpret_cast<ContactPartial*>(partials_.data());
-  launch_blocks(blocks, kContactBlock, stream, contact_partials_kernel<T>, m, s, partials, out);
+  launch_blocks(blocks, kContactBlock, stream, contact_partials_kernel<T>, m, s, partials_.data(), out);
   if (blocks > 1)
-    launch_blocks(1, kContactBlock, stream, contact_finish_kernel, static_cast<const ContactPartial*>(partials), blocks,
-                  out);
+    launch_blocks(1, kContactBlock, stream, contact_finish_kernel, static_cast<const ContactPartial*>(partials_.data()),
+                  blocks, out);
 }
 
 template class DeviceContact<float>;

@@ -23,6 +23,13 @@ struct ContactRecord {
   float normal[3];
 };
 
+/// Per-tool partial sums of the contact reduction (double): one per thread,
+/// then one per block.
+struct ContactPartial {
+  double reaction[kMaxTools][3];
+  int contact[kMaxTools], grasped[kMaxTools], rigid[kMaxTools], rigid_first[kMaxTools], outside[kMaxTools];
+};
+
 template <class T>
 class DeviceContact {
  public:
@@ -69,7 +76,7 @@ class DeviceContact {
   PinnedArray<int> n_selected_host_;
   DeviceArray<unsigned char> cub_temp_;
   DeviceArray<ContactRecord> records_;              ///< (n_surf)
-  DeviceArray<unsigned char> partials_;             ///< the reduction's per-block partials
+  DeviceArray<ContactPartial> partials_;            ///< the reduction's per-block partials
 };
 
 }  // namespace tissue::gpu
