@@ -242,7 +242,8 @@ Simulation& Simulation::operator=(Simulation&&) noexcept = default;
 Simulation::~Simulation() = default;
 
 Simulation Simulation::load(const std::string& path, const SimulationOptions& options) {
-  scene::Scene s = path == "@kidney" ? io::default_kidney_scene() : io::read_scene(path);
+  std::optional<scene::Scene> builtin = io::builtin_scene(path);
+  scene::Scene s = builtin ? std::move(*builtin) : io::read_scene(path);
   apply(s, options);
   return Simulation(std::make_unique<Impl>(std::move(s)));
 }

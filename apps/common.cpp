@@ -40,7 +40,7 @@ const std::string& activity() {
 
 scene::Scene load_scene_arg(const std::string& arg) {
   set_activity(fmt::format("reading the scene {}", arg));
-  if (arg == "@kidney") return io::default_kidney_scene();
+  if (auto builtin = io::builtin_scene(arg)) return *builtin;
   return io::read_scene(arg);
 }
 

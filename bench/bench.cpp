@@ -45,14 +45,47 @@ struct NamedModel {
   TissueModel<double> model;
 };
 
-NamedModel mesh_by_name(const std::string& name, bool quick) {
-  if (name == "kidney") return {name, scene::load_model(io::default_kidney_scene())};
+/// Adds the terms of a bench law (BenchOptions::laws) to a material: two
+/// Prony terms (g = 0.3, 0.2; tau = 0.5, 5 s) and/or fibres along x with
+/// eta = 2 mu.
+void apply_law(const std::string& law, MaterialParams& p) {
+  if (law != "neo-hookean" && law != "visco" && law != "fibre" && law != "fibre-visco")
+    throw std::invalid_argument("unknown bench law '" + law + "' (neo-hookean, visco, fibre, fibre-visco)");
+  if (law == "visco" || law == "fibre-visco") {
+    p.prony_terms = 2;
+    p.prony_g[0] = 0.3, p.prony_tau[0] = 0.5;
+    p.prony_g[1] = 0.2, p.prony_tau[1] = 5;
+  }
+  if (law == "fibre" || law == "fibre-visco") {
+    p.fibre_eta = 2 * p.mu;
+    p.fibre_dir = {1, 0, 0};
+  }
+}
+
+NamedModel mesh_by_name(const std::string& name, bool quick, const std::string& law = "neo-hookean") {
+  if (name == "kidney") {
+    scene::Scene s = io::default_kidney_scene();
+    for (scene::Material& m : s.materials) {
+      MaterialParams p = m.params();
+      apply_law(law, p);
+      m.fibre_eta = p.fibre_eta;
+      m.fibre_dir = p.fibre_dir;
+      for (int i = 0; i < p.prony_terms; ++i) m.prony.push_back({p.prony_g[i], p.prony_tau[i], 0});
+    }
+    return {name, scene::load_model(s)};
+  }
   // cells per side of a cube with 6 c^3 ~ the asked count
   const long want = name == "100k" ? 100'000 : name == "1m" ? 1'000'000 : name == "4m" ? 4'000'000 : -1;
   if (want < 0) throw std::invalid_argument("unknown bench mesh '" + name + "' (kidney, 100k, 1m, 4m)");
   int c = static_cast<int>(std::lround(std::cbrt(want / 6.0)));
   if (quick) c = std::min(c, 8);
-  return {name, box_model(c, c, c, 0.1, 0.1, 0.1)};
+  if (law == "neo-hookean") return {name, box_model(c, c, c, 0.1, 0.1, 0.1)};
+  ModelInput in;
+  box_mesh(in, c, c, c, 0.1, 0.1, 0.1);
+  in.materials = {{3000 / 2.9, 3000 / 0.3, 1000}};  // as box_model
+  apply_law(law, in.materials[0]);
+  in.source = fmt::format("box {}x{}x{}", c, c, c);
+  return {name, build_model(in)};
 }
 
 struct Row {
@@ -123,8 +156,8 @@ void preload(Backend& b, const TissueModel<double>& m) {
   b.set_displacements(u);
 }
 
-void bench_tled(Context& c, const std::string& mesh, Precision p) {
-  NamedModel nm = mesh_by_name(mesh, c.o.quick);
+void bench_tled(Context& c, const std::string& mesh, Precision p, const std::string& law) {
+  NamedModel nm = mesh_by_name(mesh, c.o.quick, law);
   auto b = create_backend(c.o.backend, p);
   b->upload(nm.model);
   preload(*b, nm.model);
@@ -135,6 +168,7 @@ void bench_tled(Context& c, const std::string& mesh, Precision p) {
   const double bytes = bytes_per_step(nm.model.n_nodes, nm.model.n_elems, s);
   Row r = c.row("tled_whole_mesh", *b);
   r.add("mesh", nm.name);
+  r.add("law", law);
   r.add("nodes", long(nm.model.n_nodes));
   r.add("elements", long(nm.model.n_elems));
   r.add("region_elements", long(whole.n_elems));
@@ -146,7 +180,7 @@ void bench_tled(Context& c, const std::string& mesh, Precision p) {
   if (c.bandwidth > 0) r.add("bandwidth_fraction", sps * bytes / c.bandwidth);
   c.emit(r);
 
-  if (mesh != "kidney") return;
+  if (mesh != "kidney" || law != "neo-hookean") return;
   // region-limited (depth 5) against the whole mesh, seeded at the middle surface triangle
   const index_t t = nm.model.n_tris / 2;
   std::vector<index_t> seeds;
@@ -294,7 +328,8 @@ std::vector<std::string> run_bench(const BenchOptions& o) {
   const auto stopped = [&] { return o.stop && o.stop(); };
   for (Precision p : o.precisions) {
     for (const std::string& mesh : o.sizes)
-      if (!stopped()) bench_tled(c, mesh, p);
+      for (const std::string& law : o.laws)
+        if (!stopped()) bench_tled(c, mesh, p, law);
     for (long tris : {10'000L, 100'000L})
       if (!stopped()) bench_contact(c, tris, p);
     std::vector<std::optional<double>> safeties(o.tick_dt_safety.begin(), o.tick_dt_safety.end());

@@ -10,6 +10,7 @@
 #include <limits>
 
 #include "core/cube_root.hpp"
+#include "core/material.hpp"
 #include "core/vec.hpp"
 
 namespace tissue {
@@ -20,14 +21,23 @@ namespace tissue {
 /// Returns 0 when J <= 0 or is not finite: an inverted element has no
 /// energy of this law; the bad-element flag reports it. Branch-free (a
 /// select), like the force routines, so that it vectorises.
-template <class T>
-TISSUE_HD T element_strain_energy(const Mat3<T>& F, T J, T Jbar, T volume, T mu, T K) {
+template <class Terms, class T>
+TISSUE_HD T element_strain_energy(const Mat3<T>& F, T J, T Jbar, T volume, T mu, T K, const ElementLaw<T>& law) {
   const bool ok = (J > T(0)) & (J <= std::numeric_limits<T>::max());  // & not &&: no branch
-  const T cbrt_J = cube_root(ok ? J : T(1));
+  const T Js = ok ? J : T(1);
+  const T cbrt_J = cube_root(Js);
   const T I1 = trace(transpose(F) * F);
   const T iso = mu / T(2) * (I1 / (cbrt_J * cbrt_J) - T(3));
   const T vol = K / T(2) * (Jbar - T(1)) * (Jbar - T(1));
-  return ok ? volume * (iso + vol) : T(0);
+  const T w = iso + vol + extra_energy<Terms>(F, Js, law);  // the fibre term (core/material.hpp)
+  return ok ? volume * w : T(0);
+}
+
+/// Neo-Hookean alone.
+template <class T>
+TISSUE_HD T element_strain_energy(const Mat3<T>& F, T J, T Jbar, T volume, T mu, T K) {
+  ElementLaw<T> none;
+  return element_strain_energy<NeoHookeanTerms>(F, J, Jbar, volume, mu, K, none);
 }
 
 }  // namespace tissue

@@ -15,6 +15,32 @@ Vec3<double> node_pos(const std::vector<double>& xyz, index_t i) {
   return {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]};
 }
 
+/// The optional terms of material k (core/material.hpp): docs/materials.md's rules.
+void check_law_terms(const ModelInput& in, size_t k, const MaterialParams& m) {
+  const auto fail = [&](const std::string& why) {
+    throw ModelError(fmt::format("{}: material {}: {}", in.source, k, why));
+  };
+  if (!(m.fibre_eta >= 0) || !std::isfinite(m.fibre_eta))
+    fail(fmt::format("fibre stiffness eta = {} Pa must be finite and >= 0", m.fibre_eta));
+  const Vec3<double> a = m.fibre_dir;
+  if (m.fibre_eta > 0 && !(norm(a) > 0 && std::isfinite(norm(a))))
+    fail(fmt::format("fibre direction ({}, {}, {}) must be finite and non-zero", a.x, a.y, a.z));
+  if (m.prony_terms < 0 || m.prony_terms > kMaxProny)
+    fail(fmt::format("{} Prony terms given; 0..{} are allowed", m.prony_terms, kMaxProny));
+  double sum = 0;
+  for (int i = 0; i < m.prony_terms; ++i) {
+    if (!(m.prony_g[i] > 0) || !std::isfinite(m.prony_g[i]))
+      fail(fmt::format("Prony term {}: g = {} must be > 0", i + 1, m.prony_g[i]));
+    if (!(m.prony_tau[i] > 0) || !std::isfinite(m.prony_tau[i]))
+      fail(fmt::format("Prony term {}: tau = {} s must be > 0", i + 1, m.prony_tau[i]));
+    sum += m.prony_g[i];
+  }
+  if (!(sum < 1))
+    fail(fmt::format("the Prony moduli sum to {} (must be < 1: the relaxed shear modulus mu (1 - sum g) must "
+                     "stay > 0)",
+                     sum));
+}
+
 void check_materials(const ModelInput& in) {
   if (in.materials.empty()) throw ModelError(in.source + ": no material given");
   for (size_t k = 0; k < in.materials.size(); ++k) {
@@ -25,6 +51,7 @@ void check_materials(const ModelInput& in) {
       throw ModelError(fmt::format("{}: material {}: bulk modulus K = {} must be > 0", in.source, k, m.K));
     if (!(m.rho > 0) || !std::isfinite(m.rho))
       throw ModelError(fmt::format("{}: material {}: density rho = {} must be > 0", in.source, k, m.rho));
+    check_law_terms(in, k, m);
   }
 }
 
@@ -183,11 +210,50 @@ MassScaling mass_needed(const std::vector<double>& dt_e, const std::vector<doubl
   return r;
 }
 
+/// The optional terms' per-element data (core/material.hpp), allocated only
+/// when a set uses them. The Prony constants follow in set_time_step.
+void fill_law_terms(const ModelInput& in, TissueModel<double>& m) {
+  const index_t ne = m.n_elems;
+  const auto material = [&](index_t e) -> const MaterialParams& {
+    return in.materials[in.elem_material.empty() ? 0 : in.elem_material[e]];
+  };
+  bool fibre = false, visco = false;
+  for (const MaterialParams& p : in.materials) {
+    fibre = fibre || p.fibre_eta > 0;
+    visco = visco || p.prony_terms > 0;
+  }
+  if (fibre) {
+    m.fibre.assign(4 * size_t(ne), 0.0);
+    for (index_t e = 0; e < ne; ++e) {
+      const MaterialParams& p = material(e);
+      if (!(p.fibre_eta > 0)) continue;
+      const Vec3<double> a = (1.0 / norm(p.fibre_dir)) * p.fibre_dir;
+      for (int c = 0; c < 3; ++c) m.fibre[c * ne + e] = a[c];
+      m.fibre[3 * ne + e] = p.fibre_eta;
+    }
+  }
+  if (!visco) return;
+  m.visco_slot.assign(ne, -1);
+  for (index_t e = 0; e < ne; ++e)
+    if (material(e).prony_terms > 0) m.visco_slot[e] = m.n_visco++;
+  m.prony_g.assign(kMaxProny * size_t(m.n_visco), 0.0);
+  m.prony_tau.assign(kMaxProny * size_t(m.n_visco), 1.0);
+  for (index_t e = 0; e < ne; ++e) {
+    const index_t v = m.visco_slot[e];
+    if (v < 0) continue;
+    const MaterialParams& p = material(e);
+    for (int i = 0; i < p.prony_terms; ++i) {
+      m.prony_g[i * size_t(m.n_visco) + v] = p.prony_g[i];
+      m.prony_tau[i * size_t(m.n_visco) + v] = p.prony_tau[i];
+    }
+  }
+}
+
 }  // namespace
 
 double wave_speed(const MaterialParams& p) {
   const double lambda = p.K - 2.0 * p.mu / 3.0;
-  return std::sqrt((lambda + 2 * p.mu) / p.rho);
+  return std::sqrt((lambda + 2 * p.mu + fibre_wave_modulus(p.fibre_eta)) / p.rho);
 }
 
 double element_time_step(const Vec3<double> X[4], double volume, const MaterialParams& p, bool ianp) {
@@ -268,6 +334,14 @@ void set_time_step(TissueModel<double>& m, double dt, double damping) {
     m.cd_A[i] = k.A;
     m.cd_B[i] = k.B;
     m.cd_C[i] = k.C;
+  }
+  m.prony_decay.resize(m.prony_g.size());
+  m.prony_gain.resize(m.prony_g.size());
+  for (size_t k = 0; k < m.prony_g.size(); ++k) {
+    if (m.prony_g[k] > 0)
+      prony_constants(m.prony_g[k], m.prony_tau[k], dt, &m.prony_decay[k], &m.prony_gain[k]);
+    else
+      m.prony_decay[k] = m.prony_gain[k] = 0;  // an unused term: q stays 0
   }
 }
 
@@ -357,6 +431,7 @@ TissueModel<double> build_model(const ModelInput& in) {
     }
   }
   check_duplicates(in, ne);
+  fill_law_terms(in, m);
   for (index_t i = 0; i < n; ++i)
     if (uses[i] == 0)
       throw ModelError(fmt::format("{}: node {} belongs to no element (every node needs mass)", in.source, i));
@@ -459,6 +534,13 @@ TissueModel<T> convert(const TissueModel<double>& m) {
   r.volume = cv(m.volume);
   r.mu = cv(m.mu);
   r.K = cv(m.K);
+  r.fibre = cv(m.fibre);
+  r.visco_slot = m.visco_slot;
+  r.n_visco = m.n_visco;
+  r.prony_g = m.prony_g;
+  r.prony_tau = m.prony_tau;
+  r.prony_decay = cv(m.prony_decay);
+  r.prony_gain = cv(m.prony_gain);
   r.mass = cv(m.mass);
   r.cd_A = cv(m.cd_A);
   r.cd_B = cv(m.cd_B);

@@ -15,15 +15,23 @@
 #include <vector>
 
 #include "core/hd.hpp"
+#include "core/material.hpp"
 #include "core/vec.hpp"
 
 namespace tissue {
 
-/// Neo-Hookean parameters of one element set.
+/// The law of one element set (core/material.hpp): Neo-Hookean, plus
+/// optionally a tension-only fibre term and a Prony series on the
+/// isochoric stress.
 struct MaterialParams {
-  double mu = 0;   ///< shear modulus (Pa)
+  double mu = 0;   ///< shear modulus (Pa); the instantaneous one for a viscoelastic set
   double K = 0;    ///< bulk modulus (Pa)
   double rho = 0;  ///< density (kg/m^3)
+  double fibre_eta = 0;                  ///< fibre stiffness eta (Pa); 0 = no fibre term
+  Vec3<double> fibre_dir = {1, 0, 0};    ///< fibre direction (reference configuration; normalised by build_model)
+  int prony_terms = 0;                   ///< Prony terms (0..kMaxProny); 0 = elastic
+  double prony_g[kMaxProny] = {};        ///< relative moduli g_i (> 0, sum < 1)
+  double prony_tau[kMaxProny] = {};      ///< relaxation times tau_i (s, > 0)
 };
 
 /// Everything build_model() needs, in SI units, with no file format in it.
@@ -89,6 +97,15 @@ struct TissueModel {
   std::vector<T> volume;             ///< reference volume (n_elems) m^3
   std::vector<T> mu;                 ///< shear modulus (n_elems) Pa
   std::vector<T> K;                  ///< bulk modulus (n_elems) Pa
+  // Optional terms (core/material.hpp), present only when a set uses them:
+  std::vector<T> fibre;              ///< fibre direction and stiffness (4 x n_elems: a_x, a_y, a_z, eta Pa);
+                                     ///< empty when no set has fibres; eta = 0 in the other sets
+  std::vector<index_t> visco_slot;   ///< Prony state slot of each element, -1 = elastic (n_elems); empty when
+                                     ///< no set is viscoelastic
+  index_t n_visco = 0;               ///< viscoelastic elements (slots)
+  std::vector<double> prony_g, prony_tau;  ///< per slot (kMaxProny x n_visco, component-major); g = 0 unused
+  std::vector<T> prony_decay, prony_gain;  ///< exp(-dt/tau_i), g_i (1 - exp(-dt/tau_i)) (kMaxProny x n_visco);
+                                           ///< set_time_step recomputes them
   std::vector<T> mass;               ///< lumped nodal mass (n_nodes) kg
   std::vector<T> cd_A, cd_B, cd_C;   ///< central-difference constants (n_nodes each)
   std::vector<index_t> node_elem_start;  ///< CSR offsets into node_elem (n_nodes + 1)
@@ -116,6 +133,9 @@ struct TissueModel {
   double dt_crit_physical = 0;   ///< critical step without mass scaling (s)
   index_t reoriented = 0;   ///< inverted input tets whose corners were swapped
   bool ianp = true;         ///< pass 3 uses IANP (else plain tet forces, passes 1-2 unused)
+
+  bool has_fibre() const { return !fibre.empty(); }
+  bool has_visco() const { return n_visco > 0; }
 };
 
 /// Precomputes the model from the input; throws ModelError for zero-volume

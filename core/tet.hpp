@@ -7,6 +7,7 @@
 #include <cmath>
 
 #include "core/cube_root.hpp"
+#include "core/material.hpp"
 #include "core/vec.hpp"
 
 namespace tissue {
@@ -59,11 +60,13 @@ TISSUE_UNROLL
   return F;
 }
 
-/// Neo-Hookean second Piola-Kirchhoff stress (Pa) of docs/design.md section 2:
-/// S = mu J^(-2/3) (I - I1/3 C^-1) + K J (J - 1) C^-1, C = F^T F, I1 = tr C.
-/// J = det F must be > 0 (the caller checks).
-template <class T>
-TISSUE_HD Mat3<T> neo_hookean_pk2(const Mat3<T>& F, T J, T mu, T K) {
+/// Second Piola-Kirchhoff stress (Pa) of docs/design.md section 2's Neo-Hookean
+/// law, S = mu J^(-2/3) (I - I1/3 C^-1) + K J (J - 1) C^-1, C = F^T F,
+/// I1 = tr C, plus the optional terms of core/material.hpp that Terms
+/// instantiates (the Prony state in law advances). J = det F must be > 0
+/// (the caller checks).
+template <class Terms, class T>
+TISSUE_HD Mat3<T> law_pk2(const Mat3<T>& F, T J, T mu, T K, ElementLaw<T>& law) {
   const Mat3<T> C = transpose(F) * F;
   const T I1 = trace(C);
   const Mat3<T> Ci = inverse(C, J * J);  // det C = J^2
@@ -74,7 +77,22 @@ TISSUE_HD Mat3<T> neo_hookean_pk2(const Mat3<T>& F, T J, T mu, T K) {
   S(0, 0) += a;
   S(1, 1) += a;
   S(2, 2) += a;
+  if constexpr (Terms::visco) {
+    Mat3<T> S_iso = (-a * I1 / T(3)) * Ci;  // the isochoric part alone
+    S_iso(0, 0) += a;
+    S_iso(1, 1) += a;
+    S_iso(2, 2) += a;
+    S = S + T(-1) * prony_update(S_iso, law);
+  }
+  if constexpr (Terms::fibre) S = S + fibre_pk2(C, Ci, T(1) / (cbrt_J * cbrt_J), law.a, law.eta);
   return S;
+}
+
+/// Neo-Hookean alone.
+template <class T>
+TISSUE_HD Mat3<T> neo_hookean_pk2(const Mat3<T>& F, T J, T mu, T K) {
+  ElementLaw<T> none;
+  return law_pk2<NeoHookeanTerms>(F, J, mu, K, none);
 }
 
 /// Neo-Hookean strain energy density (J/m^3):
@@ -109,6 +127,16 @@ TISSUE_UNROLL
   for (int a = 0; a < 4; ++a) f[a] = {keep ? f[a].x : T(0), keep ? f[a].y : T(0), keep ? f[a].z : T(0)};
 }
 
+/// law.q = next.q when `ok`, else unchanged (a select): a bad element's
+/// stand-in arithmetic never reaches the Prony state.
+template <class T>
+TISSUE_HD void keep_state_unless_bad(bool ok, const ElementLaw<T>& next, ElementLaw<T>& law) {
+TISSUE_UNROLL
+  for (int i = 0; i < kMaxProny; ++i)
+TISSUE_UNROLL
+    for (int c = 0; c < kSymComponents; ++c) law.q[i][c] = ok ? next.q[i][c] : law.q[i][c];
+}
+
 /// IANP pass 3 for one element: from the averaged nodal pressure pbar (Pa),
 /// Jbar = 1 + pbar / K, Fbar = (Jbar / J)^(1/3) F, then f_a = V Fbar S(Fbar) dN_a.
 /// Returns J = det F of the unmodified gradient; a bad element (J <= 0,
@@ -117,16 +145,30 @@ TISSUE_UNROLL
 /// runs on stand-in values (J = Jbar = 1) and its forces are selected away,
 /// so SIMD lanes and GPU warps never diverge. F is the element's
 /// deformation_gradient (pass 1 may have computed it already).
-template <class T>
-TISSUE_HD T ianp_element_forces(const Mat3<T>& F, const T dN[12], T volume, T mu, T K, T pbar, Vec3<T> f[4]) {
+template <class Terms, class T>
+TISSUE_HD T ianp_element_forces(const Mat3<T>& F, const T dN[12], T volume, T mu, T K, T pbar, Vec3<T> f[4],
+                                ElementLaw<T>& law) {
   const T J = det(F);
   const T Jbar = T(1) + pbar / K;
   const bool ok = (J > T(0)) & (Jbar > T(0));  // & not &&: no branch
   const T Js = ok ? J : T(1), Jbars = ok ? Jbar : T(1);
   const Mat3<T> Fbar = cube_root(Jbars / Js) * F;
-  element_nodal_forces(Fbar, neo_hookean_pk2(Fbar, Jbars, mu, K), volume, dN, f);
+  if constexpr (Terms::visco) {
+    ElementLaw<T> next = law;
+    element_nodal_forces(Fbar, law_pk2<Terms>(Fbar, Jbars, mu, K, next), volume, dN, f);
+    keep_state_unless_bad(ok, next, law);
+  } else {
+    element_nodal_forces(Fbar, law_pk2<Terms>(Fbar, Jbars, mu, K, law), volume, dN, f);
+  }
   zero_unless(ok, f);
   return ok ? J : (J > T(0) ? Jbar : J);
+}
+
+/// Neo-Hookean alone.
+template <class T>
+TISSUE_HD T ianp_element_forces(const Mat3<T>& F, const T dN[12], T volume, T mu, T K, T pbar, Vec3<T> f[4]) {
+  ElementLaw<T> none;
+  return ianp_element_forces<NeoHookeanTerms>(F, dN, volume, mu, K, pbar, f, none);
 }
 
 /// The same from the corner displacements u (m).
@@ -139,13 +181,27 @@ TISSUE_HD T ianp_element_forces(const Vec3<T> u[4], const T dN[12], T volume, T 
 /// formulation, kept as a reference for tests and the locking study.
 /// Returns J; a bad element (J <= 0 or NaN) gets zero forces (branch-free,
 /// as above), from the deformation gradient F.
-template <class T>
-TISSUE_HD T plain_element_forces(const Mat3<T>& F, const T dN[12], T volume, T mu, T K, Vec3<T> f[4]) {
+template <class Terms, class T>
+TISSUE_HD T plain_element_forces(const Mat3<T>& F, const T dN[12], T volume, T mu, T K, Vec3<T> f[4],
+                                 ElementLaw<T>& law) {
   const T J = det(F);
   const bool ok = J > T(0);
-  element_nodal_forces(F, neo_hookean_pk2(F, ok ? J : T(1), mu, K), volume, dN, f);
+  if constexpr (Terms::visco) {
+    ElementLaw<T> next = law;
+    element_nodal_forces(F, law_pk2<Terms>(F, ok ? J : T(1), mu, K, next), volume, dN, f);
+    keep_state_unless_bad(ok, next, law);
+  } else {
+    element_nodal_forces(F, law_pk2<Terms>(F, ok ? J : T(1), mu, K, law), volume, dN, f);
+  }
   zero_unless(ok, f);
   return J;
+}
+
+/// Neo-Hookean alone.
+template <class T>
+TISSUE_HD T plain_element_forces(const Mat3<T>& F, const T dN[12], T volume, T mu, T K, Vec3<T> f[4]) {
+  ElementLaw<T> none;
+  return plain_element_forces<NeoHookeanTerms>(F, dN, volume, mu, K, f, none);
 }
 
 /// The same from the corner displacements u (m).

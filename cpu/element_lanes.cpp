@@ -27,6 +27,36 @@ inline Mat3<T> lane_F(const ElementLanes<T>& b, int l) {
   return F;
 }
 
+/// Lane l's law terms as core's ElementLaw.
+template <class Terms, class T>
+inline ElementLaw<T> lane_law(const LawLanes<T>& w, int l) {
+  ElementLaw<T> law;
+  if constexpr (Terms::fibre) {
+    law.a = {w.a[0][l], w.a[1][l], w.a[2][l]};
+    law.eta = w.eta[l];
+  }
+  if constexpr (Terms::visco) {
+    TISSUE_UNROLL
+    for (int i = 0; i < kMaxProny; ++i) {
+      law.decay[i] = w.decay[i][l];
+      law.gain[i] = w.gain[i][l];
+      TISSUE_UNROLL
+      for (int c = 0; c < kSymComponents; ++c) law.q[i][c] = w.q[kSymComponents * i + c][l];
+    }
+  }
+  return law;
+}
+
+template <class T>
+inline void store_forces(ElementLanes<T>& b, int l, const Vec3<T> f[4]) {
+  TISSUE_UNROLL
+  for (int a = 0; a < 4; ++a) {
+    b.f[3 * a][l] = f[a].x;
+    b.f[3 * a + 1][l] = f[a].y;
+    b.f[3 * a + 2][l] = f[a].z;
+  }
+}
+
 }  // namespace
 
 template <class T>
@@ -59,11 +89,29 @@ TISSUE_SIMD_CLONES void lanes_forces(ElementLanes<T>& b) {
       b.ret[l] = ianp_element_forces(F, dN, b.V(0, l), b.mu(0, l), b.K(0, l), b.pbar[l], f);
     else
       b.ret[l] = plain_element_forces(F, dN, b.V(0, l), b.mu(0, l), b.K(0, l), f);
-    TISSUE_UNROLL
-    for (int a = 0; a < 4; ++a) {
-      b.f[3 * a][l] = f[a].x;
-      b.f[3 * a + 1][l] = f[a].y;
-      b.f[3 * a + 2][l] = f[a].z;
+    store_forces(b, l, f);
+  }
+}
+
+template <class T, bool kIanp, class Terms>
+TISSUE_SIMD_CLONES void lanes_forces_law(ElementLanes<T>& b, LawLanes<T>& w) {
+#pragma GCC ivdep
+  for (int l = 0; l < kLanes; ++l) {
+    Vec3<T> f[4];
+    T dN[12];
+    lane_dN(b, l, dN);
+    const Mat3<T> F = lane_F(b, l);
+    ElementLaw<T> law = lane_law<Terms>(w, l);
+    if constexpr (kIanp)
+      b.ret[l] = ianp_element_forces<Terms>(F, dN, b.V(0, l), b.mu(0, l), b.K(0, l), b.pbar[l], f, law);
+    else
+      b.ret[l] = plain_element_forces<Terms>(F, dN, b.V(0, l), b.mu(0, l), b.K(0, l), f, law);
+    store_forces(b, l, f);
+    if constexpr (Terms::visco) {
+      TISSUE_UNROLL
+      for (int i = 0; i < kMaxProny; ++i)
+        TISSUE_UNROLL
+        for (int c = 0; c < kSymComponents; ++c) w.q[kSymComponents * i + c][l] = law.q[i][c];
     }
   }
 }
@@ -78,6 +126,29 @@ TISSUE_SIMD_CLONES void lanes_energy(ElementLanes<T>& b) {
     b.ret[l] = element_strain_energy(F, J, Jbar, b.V(0, l), b.mu(0, l), b.K(0, l));
   }
 }
+
+template <class T, bool kIanp>
+TISSUE_SIMD_CLONES void lanes_energy_fibre(ElementLanes<T>& b, const LawLanes<T>& w) {
+  using Fibre = LawTerms<true, false>;
+#pragma GCC ivdep
+  for (int l = 0; l < kLanes; ++l) {
+    const Mat3<T> F = lane_F(b, l);
+    const T J = det(F);
+    const T Jbar = kIanp ? T(1) + b.pbar[l] / b.K(0, l) : J;
+    b.ret[l] = element_strain_energy<Fibre>(F, J, Jbar, b.V(0, l), b.mu(0, l), b.K(0, l), lane_law<Fibre>(w, l));
+  }
+}
+
+#define TISSUE_CPU_LANES_LAW(T, I)                                                            \
+  template void lanes_forces_law<T, I, LawTerms<true, false>>(ElementLanes<T>&, LawLanes<T>&); \
+  template void lanes_forces_law<T, I, LawTerms<false, true>>(ElementLanes<T>&, LawLanes<T>&); \
+  template void lanes_forces_law<T, I, LawTerms<true, true>>(ElementLanes<T>&, LawLanes<T>&);  \
+  template void lanes_energy_fibre<T, I>(ElementLanes<T>&, const LawLanes<T>&);
+TISSUE_CPU_LANES_LAW(float, true)
+TISSUE_CPU_LANES_LAW(float, false)
+TISSUE_CPU_LANES_LAW(double, true)
+TISSUE_CPU_LANES_LAW(double, false)
+#undef TISSUE_CPU_LANES_LAW
 
 #define TISSUE_CPU_LANES(T)                         \
   template void lanes_pressure<T>(ElementLanes<T>&); \

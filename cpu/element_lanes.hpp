@@ -163,6 +163,56 @@ void gather_force_lanes(const TissueModel<T>& m, T* elem_F, const T* node_p, con
   }
 }
 
+/// The optional law terms of a batch (core/material.hpp), gathered only by
+/// the kernels that instantiate them: fibre direction and stiffness, the
+/// Prony constants and state. Lanes without a term (another set, padding)
+/// hold neutral values: eta = 0, gain = decay = 0, q = 0.
+template <class T>
+struct alignas(64) LawLanes {
+  T a[3][kLanes], eta[kLanes];
+  T decay[kMaxProny][kLanes], gain[kMaxProny][kLanes];
+  T q[kMaxProny * kSymComponents][kLanes];  ///< row 6 i + c
+  index_t slot[kLanes];                     ///< Prony state slot, -1 none
+};
+
+/// Gathers the batch's law terms that Terms instantiates: fibres from the
+/// model, the Prony constants and the state q (6 kMaxProny x n_visco) by slot.
+template <class Terms, class T>
+void gather_law_lanes(const TissueModel<T>& m, const T* q, const index_t* elems, int count, LawLanes<T>& w) {
+  const std::size_t ne = m.n_elems, nv = m.n_visco;
+  if constexpr (Terms::fibre) {
+    for (int l = 0; l < kLanes; ++l) {
+      const bool in = l < count;
+      for (int c = 0; c < 3; ++c) w.a[c][l] = in ? m.fibre[c * ne + elems[l]] : T(0);
+      w.eta[l] = in ? m.fibre[3 * ne + elems[l]] : T(0);
+    }
+  }
+  if constexpr (Terms::visco) {
+    for (int l = 0; l < kLanes; ++l) {
+      const index_t v = l < count ? m.visco_slot[elems[l]] : -1;
+      w.slot[l] = v;
+      for (int i = 0; i < kMaxProny; ++i) {
+        w.decay[i][l] = v < 0 ? T(0) : m.prony_decay[i * nv + v];
+        w.gain[i][l] = v < 0 ? T(0) : m.prony_gain[i * nv + v];
+      }
+      for (int k = 0; k < kMaxProny * kSymComponents; ++k) w.q[k][l] = v < 0 ? T(0) : q[k * nv + v];
+    }
+  }
+}
+
+/// Writes the advanced Prony state of the batch's viscoelastic lanes back.
+template <class Terms, class T>
+void scatter_law_lanes(const TissueModel<T>& m, T* q, const LawLanes<T>& w) {
+  if constexpr (Terms::visco) {
+    const std::size_t nv = m.n_visco;
+    for (int l = 0; l < kLanes; ++l) {
+      const index_t v = w.slot[l];
+      if (v < 0) continue;
+      for (int k = 0; k < kMaxProny * kSymComponents; ++k) q[k * nv + v] = w.q[k][l];
+    }
+  }
+}
+
 /// Pass 1 on every lane: F = deformation_gradient, J = det F,
 /// dv = (J - 1) V.
 template <class T>
@@ -173,9 +223,18 @@ void lanes_pressure(ElementLanes<T>& b);
 template <class T, bool kIanp>
 void lanes_forces(ElementLanes<T>& b);
 
+/// The same with the law terms Terms instantiates (w: gathered by
+/// gather_law_lanes; the Prony state in w advances).
+template <class T, bool kIanp, class Terms>
+void lanes_forces_law(ElementLanes<T>& b, LawLanes<T>& w);
+
 /// Strain energy on every lane from F: ret = element_strain_energy with
 /// Jbar from pbar (IANP) or Jbar = J (plain).
 template <class T, bool kIanp>
 void lanes_energy(ElementLanes<T>& b);
+
+/// The same with the fibre term (w: gather_law_lanes<LawTerms<true, ...>>).
+template <class T, bool kIanp>
+void lanes_energy_fibre(ElementLanes<T>& b, const LawLanes<T>& w);
 
 }  // namespace tissue::cpu

@@ -40,17 +40,28 @@ void for_each_batch(std::span<const index_t> idx, std::size_t grain, tbb::affini
       part);
 }
 
-template <class T, bool kIanp>
+/// Pass 3 with the law terms Terms instantiates (core/material.hpp): a
+/// Neo-Hookean model runs the plain lane kernel and gathers no law data.
+template <class T, bool kIanp, class Terms>
 void element_forces_impl(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems,
                          BadElementFlag& bad, tbb::affinity_partitioner& part) {
+  constexpr bool kLaw = Terms::fibre || Terms::visco;
   const index_t ne = m.n_elems;
   const T* p = kIanp ? s.node_p.data() : nullptr;
   const index_t* slot = m.elem_slot.data();
   T* fs = s.f_slot.data();
+  T* q = s.visco_q.data();
   for_each_batch(elems, kForceGrain, part, [&](const index_t* e, int count) {
     ElementLanes<T> b;
     gather_force_lanes(m, s.elem_F.data(), p, e, count, b);
-    lanes_forces<T, kIanp>(b);
+    if constexpr (kLaw) {
+      LawLanes<T> w;
+      gather_law_lanes<Terms>(m, q, e, count, w);
+      lanes_forces_law<T, kIanp, Terms>(b, w);
+      scatter_law_lanes<Terms>(m, q, w);
+    } else {
+      lanes_forces<T, kIanp>(b);
+    }
     for (int l = 0; l < count; ++l) {
       const T J = b.ret[l];
       if (!(J > T(0)) || !std::isfinite(J)) bad.record(e[l], double(J));
@@ -62,6 +73,19 @@ void element_forces_impl(const TissueModel<T>& m, TissueState<T>& s, std::span<c
       }
     }
   });
+}
+
+template <class T, bool kIanp>
+void element_forces_terms(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems,
+                          BadElementFlag& bad, tbb::affinity_partitioner& part) {
+  if (m.has_fibre() && m.has_visco())
+    element_forces_impl<T, kIanp, LawTerms<true, true>>(m, s, elems, bad, part);
+  else if (m.has_fibre())
+    element_forces_impl<T, kIanp, LawTerms<true, false>>(m, s, elems, bad, part);
+  else if (m.has_visco())
+    element_forces_impl<T, kIanp, LawTerms<false, true>>(m, s, elems, bad, part);
+  else
+    element_forces_impl<T, kIanp, NeoHookeanTerms>(m, s, elems, bad, part);
 }
 
 }  // namespace
@@ -106,9 +130,9 @@ template <class T>
 void element_forces(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems, BadElementFlag& bad,
                     tbb::affinity_partitioner& part) {
   if (m.ianp)
-    element_forces_impl<T, true>(m, s, elems, bad, part);
+    element_forces_terms<T, true>(m, s, elems, bad, part);
   else
-    element_forces_impl<T, false>(m, s, elems, bad, part);
+    element_forces_terms<T, false>(m, s, elems, bad, part);
 }
 
 template <class T>

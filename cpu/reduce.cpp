@@ -116,10 +116,18 @@ double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std
           ElementLanes<T> b;
           const int count = int(std::min<std::size_t>(kLanes, r.end() - k));
           gather_force_lanes(m, scratch.elem_F.data(), node_p, elems.data() + k, count, b);
-          if (m.ianp)
+          if (m.has_fibre()) {  // the fibre term's energy (core/material.hpp)
+            LawLanes<T> w;
+            gather_law_lanes<LawTerms<true, false>>(m, static_cast<const T*>(nullptr), elems.data() + k, count, w);
+            if (m.ianp)
+              lanes_energy_fibre<T, true>(b, w);
+            else
+              lanes_energy_fibre<T, false>(b, w);
+          } else if (m.ianp) {
             lanes_energy<T, true>(b);
-          else
+          } else {
             lanes_energy<T, false>(b);
+          }
           for (int l = 0; l < count; ++l) sum += double(b.ret[l]);
         }
         return sum;

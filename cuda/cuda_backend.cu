@@ -199,6 +199,7 @@ class CudaBackend final : public Backend {
     log_.to_device_now(scratch_.data(), u.data(), u.size_bytes(), stream());
     launch(n, stream(), set_displacements_kernel<T>, n, scratch_.data(), store_.model().node_flags, store_.state(),
            store_.u.current());
+    store_.clear_law_state(stream());  // a new initial state: no Prony history
     pass1_all();
   }
 

@@ -58,6 +58,10 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   upload_array(surf_nodes_, m.surf_nodes, log, stream);
   upload_array(surf_slot_start_, m.surf_slot_start, log, stream);
   upload_array(surf_slot_, m.surf_slot, log, stream);
+  upload_array(fibre_, m.fibre, log, stream);
+  upload_array(visco_slot_, m.visco_slot, log, stream);
+  upload_array(prony_decay_, m.prony_decay, log, stream);
+  upload_array(prony_gain_, m.prony_gain, log, stream);
   CUDA_CHECK(cudaStreamSynchronize(stream));  // the host sources above must outlive the copies
 
   model_ = {};
@@ -86,6 +90,11 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   model_.surf_slot = surf_slot_.data();
   model_.dt = m.dt;
   model_.ianp = m.ianp;
+  model_.fibre = m.has_fibre() ? fibre_.data() : nullptr;
+  model_.visco_slot = m.has_visco() ? visco_slot_.data() : nullptr;
+  model_.n_visco = m.n_visco;
+  model_.prony_decay = m.has_visco() ? prony_decay_.data() : nullptr;
+  model_.prony_gain = m.has_visco() ? prony_gain_.data() : nullptr;
 
   for (auto& b : u.buf) b.allocate(n);
   u_held_.allocate(n);
@@ -98,6 +107,7 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   elem_J_.allocate(ne);
   node_p_.allocate(n);
   bad_.allocate(1);
+  visco_q_.allocate(std::size_t(kSymComponents) * kMaxProny * m.n_visco);
   contact_.allocate(n);
   contact_tool_.allocate(n);
   contact_normal_.allocate(n);
@@ -118,6 +128,7 @@ void DeviceStore<T>::reset_state(cudaStream_t stream) {
   dv_slot_.fill_bytes(0, stream);
   node_p_.fill_bytes(0, stream);
   bad_.fill_bytes(0xff, stream);
+  clear_law_state(stream);
   contact_.fill_bytes(kNoContact, stream);
   contact_tool_.fill_bytes(0xff, stream);  // -1
   contact_normal_.fill_bytes(0, stream);
@@ -128,6 +139,11 @@ void DeviceStore<T>::reset_state(cudaStream_t stream) {
   launch(model_.n_nodes, stream, reset_nodes_kernel<T>, model_.n_nodes, model_.node_flags, held_.data(),
          driven_.data(), role_.data());
   launch(model_.n_elems, stream, reset_elems_kernel<T>, model_.n_elems, elem_J_.data());
+}
+
+template <class T>
+void DeviceStore<T>::clear_law_state(cudaStream_t stream) {
+  if (visco_q_.size()) visco_q_.fill_bytes(0, stream);
 }
 
 template <class T>
@@ -143,6 +159,7 @@ StateView<T> DeviceStore<T>::state() {
   s.f_slot = f_slot_.data();
   s.f = f_.data();
   s.bad = bad_.data();
+  s.visco_q = visco_q_.size() ? visco_q_.data() : nullptr;
   s.contact = contact_.data();
   s.contact_tool = contact_tool_.data();
   s.contact_normal = contact_normal_.data();

@@ -41,6 +41,9 @@ class DeviceStore {
   /// element, no contact.
   void reset_state(cudaStream_t stream);
 
+  /// Zeroes the law terms' state (the Prony q_i): no history.
+  void clear_law_state(cudaStream_t stream);
+
   ModelView<T> model() const { return model_; }
   StateView<T> state();
 
@@ -63,6 +66,8 @@ class DeviceStore {
   DeviceArray<std::uint8_t> held_, driven_, role_, contact_, corner_blocked_;
   DeviceArray<signed char> contact_tool_, corner_tool_;
   DeviceArray<T> dv_slot_, elem_J_, node_p_;
+  DeviceArray<T> fibre_, prony_decay_, prony_gain_, visco_q_;  // optional law terms: empty when unused
+  DeviceArray<index_t> visco_slot_;
   DeviceArray<unsigned long long> bad_;
 };
 

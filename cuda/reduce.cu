@@ -79,6 +79,12 @@ __device__ double element_energy(const ModelView<T>& m, const T* node_p, const P
     const T pbar = (node_p[d.c[0]] + node_p[d.c[1]] + node_p[d.c[2]] + node_p[d.c[3]]) / T(4);
     Jbar = T(1) + pbar / d.K;
   }
+  if (m.fibre) {  // the fibre term's energy (core/material.hpp)
+    ElementLaw<T> law;
+    law.a = {m.fibre[e], m.fibre[m.n_elems + e], m.fibre[2 * m.n_elems + e]};
+    law.eta = m.fibre[3 * m.n_elems + e];
+    return double(element_strain_energy<LawTerms<true, false>>(F, J, Jbar, d.V, d.mu, d.K, law));
+  }
   return double(element_strain_energy(F, J, Jbar, d.V, d.mu, d.K));
 }
 

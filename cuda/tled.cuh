@@ -76,18 +76,71 @@ __device__ void element_pressure_at(const StateView<T>& s, const ElementData<T>&
   for (int a = 0; a < 4; ++a) s.dv_slot[d.slot[a]] = dv;
 }
 
+/// An element's optional law terms (core/material.hpp): its fibre and, for a
+/// viscoelastic element (slot >= 0), its Prony constants and state. Absent
+/// terms keep ElementLaw's neutral values (eta = 0, gain = 0).
+template <class T>
+__device__ __forceinline__ index_t load_law(const ModelView<T>& m, const StateView<T>& s, index_t e,
+                                            ElementLaw<T>& law) {
+  const index_t ne = m.n_elems;
+  if (m.fibre) {
+    law.a = {__ldg(m.fibre + e), __ldg(m.fibre + ne + e), __ldg(m.fibre + 2 * ne + e)};
+    law.eta = __ldg(m.fibre + 3 * ne + e);
+  }
+  const index_t v = m.visco_slot ? __ldg(m.visco_slot + e) : index_t(-1);
+  if (v >= 0) {
+    const index_t nv = m.n_visco;
+#pragma unroll
+    for (int i = 0; i < kMaxProny; ++i) {
+      law.decay[i] = __ldg(m.prony_decay + i * nv + v);
+      law.gain[i] = __ldg(m.prony_gain + i * nv + v);
+#pragma unroll
+      for (int c = 0; c < kSymComponents; ++c) law.q[i][c] = s.visco_q[(kSymComponents * i + c) * nv + v];
+    }
+  }
+  return v;
+}
+
+/// Pass 3's stress and forces for a scene with law terms beyond
+/// Neo-Hookean: one instantiation with every term (neutral where an
+/// element's set lacks it), out of line so that the Neo-Hookean path keeps
+/// its registers. Returns J as the Neo-Hookean path does.
+template <class T>
+__device__ __noinline__ T law_element_forces(const ModelView<T>& m, const StateView<T>& s, const ElementData<T>& d,
+                                             const Vec3<T> ue[4], bool ianp, T pbar, Vec3<T> f[4]) {
+  using All = LawTerms<true, true>;
+  ElementLaw<T> law;
+  const index_t v = load_law(m, s, d.e, law);
+  const Mat3<T> F = deformation_gradient(ue, d.dN);
+  const T J = ianp ? ianp_element_forces<All>(F, d.dN, d.V, d.mu, d.K, pbar, f, law)
+                   : plain_element_forces<All>(F, d.dN, d.V, d.mu, d.K, f, law);
+  if (v >= 0) {
+    const index_t nv = m.n_visco;
+#pragma unroll
+    for (int i = 0; i < kMaxProny; ++i)
+#pragma unroll
+      for (int c = 0; c < kSymComponents; ++c) s.visco_q[(kSymComponents * i + c) * nv + v] = law.q[i][c];
+  }
+  return J;
+}
+
 /// Pass 3 for an element: pbar = (1/4) sum_a p_a, then IANP forces (or plain
 /// tet forces when the model has ianp off) into the node_elem slots of its
-/// corners. An element with J <= 0, Jbar <= 0 or a non-finite J is recorded
+/// corners, with the law terms of core/material.hpp when the model has any.
+/// An element with J <= 0, Jbar <= 0 or a non-finite J is recorded
 /// in s.bad (lowest wins; its forces are zero, as core's functions return).
 template <class T>
-__device__ void element_forces_at(const StateView<T>& s, const ElementData<T>& d, const Packed3<T>* u, bool ianp) {
+__device__ void element_forces_at(const ModelView<T>& m, const StateView<T>& s, const ElementData<T>& d,
+                                  const Packed3<T>* u) {
   Vec3<T> ue[4];
   corner_displacements(d, u, ue);
   Vec3<T> f[4];
   T J;
-  if (ianp) {
-    const T pbar = (s.node_p[d.c[0]] + s.node_p[d.c[1]] + s.node_p[d.c[2]] + s.node_p[d.c[3]]) / T(4);
+  const T pbar =
+      m.ianp ? (s.node_p[d.c[0]] + s.node_p[d.c[1]] + s.node_p[d.c[2]] + s.node_p[d.c[3]]) / T(4) : T(0);
+  if (!m.neo_hookean()) {  // uniform over the grid
+    J = law_element_forces(m, s, d, ue, m.ianp, pbar, f);
+  } else if (m.ianp) {
     J = ianp_element_forces(ue, d.dN, d.V, d.mu, d.K, pbar, f);
   } else {
     J = plain_element_forces(ue, d.dN, d.V, d.mu, d.K, f);
@@ -201,7 +254,7 @@ __global__ void element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView
   ElementData<T> d;
   if (active) d = load_element(m, r.elem(i));
   wait_for_previous_pass();
-  if (active) element_forces_at(s, d, u, m.ianp);
+  if (active) element_forces_at(m, s, d, u);
 }
 
 template <class T>
@@ -246,7 +299,7 @@ __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const Re
     for (index_t g = first; g < node_items; g += stride)
       nodal_pressure_at(m, s, load_node(m, r.node(g / kNodeLanes), lane, mask));
     barrier();
-    for (index_t i = first; i < r.n_elems; i += stride) element_forces_at(s, load_element(m, r.elem(i)), b.u, m.ianp);
+    for (index_t i = first; i < r.n_elems; i += stride) element_forces_at(m, s, load_element(m, r.elem(i)), b.u);
     barrier();
     for (index_t g = first; g < node_items; g += stride)
       node_update_at(m, s, b, load_node(m, r.node(g / kNodeLanes), lane, mask));

@@ -57,6 +57,13 @@ struct ModelView {
   const index_t* surf_slot = nullptr;     ///< each surface node's (triangle, corner) slots 3 t + k (3 n_tris)
   double dt = 0;                          ///< s
   bool ianp = true;
+  // optional law terms (core/material.hpp): null when no set uses them
+  const T* fibre = nullptr;               ///< (4 x n_elems: a_x, a_y, a_z, eta Pa)
+  const index_t* visco_slot = nullptr;    ///< Prony state slot per element, -1 elastic (n_elems)
+  index_t n_visco = 0;
+  const T* prony_decay = nullptr;         ///< (kMaxProny x n_visco)
+  const T* prony_gain = nullptr;          ///< (kMaxProny x n_visco)
+  TISSUE_HD bool neo_hookean() const { return !fibre && !visco_slot; }
 };
 
 /// The three displacement buffers of one step: pass 4 writes u_next from u
@@ -93,6 +100,7 @@ struct StateView {
   Packed3<T>* f_slot = nullptr;        ///< pass 3: f_a^e per node_elem slot (4 n_elems) N
   Packed3<T>* f = nullptr;             ///< pass 4: internal force (n_nodes) N
   unsigned long long* bad = nullptr;   ///< lowest bad element key (see bad_key), ~0 = none
+  T* visco_q = nullptr;                ///< Prony state q[(6 i + c) * n_visco + slot] (core/state.hpp); null without
   // contact (core/contact.hpp)
   std::uint8_t* contact = nullptr;     ///< ContactKind after the last step (n_nodes)
   signed char* contact_tool = nullptr; ///< the tool touched, -1 none (n_nodes)

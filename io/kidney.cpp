@@ -261,4 +261,26 @@ scene::Scene default_kidney_scene() {
   return s;
 }
 
+scene::Scene viscoelastic_kidney_scene() {
+  scene::Scene s = default_kidney_scene();
+  s.source = "@kidney-visco";
+  for (scene::Material& m : s.materials)
+    for (int i = 0; i < 2; ++i) m.prony.push_back({kKidneyPronyG[i], kKidneyPronyTau[i], 0});
+  for (scene::Tool& t : s.tools) {
+    // press_path: start, touch, deep, deep (the hold's end), start: lengthen the hold
+    std::vector<Waypoint>& w = t.path;
+    if (w.size() != 5) continue;
+    const double extra = kKidneyViscoHold - (w[3].t - w[2].t);
+    w[3].t += extra;
+    w[4].t += extra;
+  }
+  return s;
+}
+
+std::optional<scene::Scene> builtin_scene(const std::string& name) {
+  if (name == "@kidney") return default_kidney_scene();
+  if (name == "@kidney-visco") return viscoelastic_kidney_scene();
+  return std::nullopt;
+}
+
 }  // namespace tissue::io

@@ -4,6 +4,9 @@
 // construction and the sources of the numbers.
 #pragma once
 
+#include <optional>
+#include <string>
+
 #include "core/vec.hpp"
 #include "io/surface_import.hpp"
 #include "scene/scene.hpp"
@@ -97,5 +100,22 @@ Vec3<double> kidney_hilum_centre();
 /// damping, depth auto, 1 ms tick. Deterministic; the mesh is inline
 /// (Scene::nodes, Scene::tets).
 scene::Scene default_kidney_scene();
+
+/// Prony terms of the viscoelastic kidney (docs/materials.md): illustrative
+/// values of the order published for kidney and liver in indentation
+/// relaxation (a fast and a slow term), not a fit to one organ.
+inline constexpr double kKidneyPronyG[2] = {0.3, 0.2};
+inline constexpr double kKidneyPronyTau[2] = {0.2, 2.0};  ///< s
+/// How long the viscoelastic kidney's probe holds its press (s).
+inline constexpr double kKidneyViscoHold = 3.0;
+
+/// "@kidney-visco": the built-in kidney with its material viscoelastic
+/// (mu, K as "@kidney" are the instantaneous moduli; Prony terms
+/// kKidneyPronyG / kKidneyPronyTau on the isochoric stress) and the press
+/// held kKidneyViscoHold seconds, to feel and measure the relaxation.
+scene::Scene viscoelastic_kidney_scene();
+
+/// The built-in scene of a name ("@kidney", "@kidney-visco"), or nullopt.
+std::optional<scene::Scene> builtin_scene(const std::string& name);
 
 }  // namespace tissue::io

@@ -251,7 +251,7 @@ void Reader::read_mesh(pugi::xml_node n, scene::Scene& s) const {
 
 Material Reader::read_material(pugi::xml_node n) const {
   check_attributes(n, {"name", "E", "nu", "mu", "K", "lambda", "rho"});
-  check_no_text(n);
+  check_children(n, {"fibre", "prony"});
   Material m;
   m.line = line(n);
   m.name = required(n, "name");
@@ -275,6 +275,22 @@ Material Reader::read_material(pugi::xml_node n) const {
                         m.name));
   }
   m.rho = real(n, "rho");
+  const pugi::xml_node fibre = n.child("fibre");
+  if (fibre) {
+    if (fibre.next_sibling("fibre")) fail_at(line(fibre.next_sibling("fibre")), "a material has one <fibre>");
+    check_attributes(fibre, {"stiffness", "direction"});
+    check_no_text(fibre);
+    m.fibre_line = line(fibre);
+    m.fibre_eta = real(fibre, "stiffness");
+    double a[3];
+    triple(fibre, "direction", a);
+    m.fibre_dir = {a[0], a[1], a[2]};
+  }
+  for (pugi::xml_node t : n.children("prony")) {
+    check_attributes(t, {"g", "tau"});
+    check_no_text(t);
+    m.prony.push_back({real(t, "g"), real(t, "tau"), line(t)});
+  }
   return m;
 }
 
@@ -491,6 +507,16 @@ void write_material(pugi::xml_node root, const Material& m) {
   set(n, kNames[int(m.form)][0], num(m.a));
   set(n, kNames[int(m.form)][1], num(m.b));
   set(n, "rho", num(m.rho));
+  if (m.fibre_eta > 0 || m.fibre_line > 0) {
+    pugi::xml_node f = n.append_child("fibre");
+    set(f, "stiffness", num(m.fibre_eta));
+    set(f, "direction", triple_text(m.fibre_dir));
+  }
+  for (const Material::Prony& t : m.prony) {
+    pugi::xml_node p = n.append_child("prony");
+    set(p, "g", num(t.g));
+    set(p, "tau", num(t.tau));
+  }
 }
 
 void write_constraint(pugi::xml_node root, const Constraint& c) {

@@ -54,7 +54,7 @@ std::string step_cause(const Scene& s, const TissueModel<double>& m) {
     const index_t i = m.elem_nodes[size_t(a) * m.n_elems + e];
     X[a] = {m.X[i], m.X[size_t(m.n_nodes) + i], m.X[2 * size_t(m.n_nodes) + i]};
   }
-  const double c = p.rho > 0 ? std::sqrt((p.K + 4 * p.mu / 3) / p.rho) : 0;
+  const double c = p.rho > 0 ? wave_speed(p) : 0;
   const Material* mat = material_of(s, e);
   return fmt::format("element {} of {}: wave speed c = {:.4g} m/s across its smallest altitude L = {:.4g} m gives "
                      "dt_crit = L / c = {:.4g} s{}",

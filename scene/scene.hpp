@@ -14,18 +14,31 @@
 
 namespace tissue::scene {
 
-/// Neo-Hookean material given as (E, nu), (mu, K) or Lame (lambda, mu).
+/// A material (docs/materials.md): Neo-Hookean given as (E, nu), (mu, K) or
+/// Lame (lambda, mu), optionally with a tension-only fibre term
+/// (transversely isotropic) and a Prony series on the isochoric stress
+/// (viscoelastic; the elastic constants are then the instantaneous ones).
 struct Material {
   enum class Form { YoungPoisson, ShearBulk, Lame };
+  /// One Prony term: relative modulus g and relaxation time tau.
+  struct Prony {
+    double g = 0, tau = 0;  ///< dimensionless (> 0, sum < 1), s (> 0)
+    int line = 0;
+  };
   std::string name;
   Form form = Form::YoungPoisson;
   double a = 0, b = 0;   ///< (E, nu) | (mu, K) | (lambda, mu), in Pa (nu dimensionless)
   double rho = 1000;     ///< kg/m^3
   int line = 0;          ///< source line, for messages (0 = unknown)
+  double fibre_eta = 0;  ///< fibre stiffness eta (Pa); 0 = isotropic
+  Vec3<double> fibre_dir = {1, 0, 0};  ///< fibre direction (any length but 0)
+  int fibre_line = 0;    ///< line of the <fibre> element (0 = none)
+  std::vector<Prony> prony;  ///< empty = elastic
 
   /// mu and K of this material, with rho (no validation):
   /// YoungPoisson: mu = E / (2 (1 + nu)), K = E / (3 (1 - 2 nu));
-  /// ShearBulk: as given; Lame: K = lambda + 2 mu / 3.
+  /// ShearBulk: as given; Lame: K = lambda + 2 mu / 3; and the fibre and
+  /// Prony terms (at most kMaxProny are copied).
   MaterialParams params() const;
 };
 

@@ -78,6 +78,36 @@ void check_lame(const Scene& s, const Material& m, const std::string& what) {
                      what, K, m.a, m.b));
 }
 
+/// The fibre and Prony terms (docs/materials.md), each error at its own element's line.
+void check_law_terms(const Scene& s, const Material& m, const std::string& what) {
+  const int fl = m.fibre_line ? m.fibre_line : m.line;
+  check_finite(s, fl, what, "fibre stiffness", m.fibre_eta);
+  if (!(m.fibre_eta >= 0))
+    fail(s, fl, fmt::format("{}: fibre stiffness = {} Pa must be >= 0", what, m.fibre_eta));
+  const Vec3<double> a = m.fibre_dir;
+  if (m.fibre_line && !(std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z) && norm(a) > 0))
+    fail(s, fl,
+         fmt::format("{}: fibre direction ({}, {}, {}) must be finite and non-zero", what, a.x, a.y, a.z));
+  if (m.prony.size() > size_t(kMaxProny))
+    fail(s, m.prony[kMaxProny].line,
+         fmt::format("{}: {} Prony terms; at most {} are allowed", what, m.prony.size(), kMaxProny));
+  double sum = 0;
+  for (size_t i = 0; i < m.prony.size(); ++i) {
+    const Material::Prony& t = m.prony[i];
+    const std::string term = fmt::format("{}: Prony term {}", what, i + 1);
+    check_finite(s, t.line, term, "g", t.g);
+    check_finite(s, t.line, term, "tau", t.tau);
+    if (!(t.g > 0)) fail(s, t.line, fmt::format("{}: g = {} must be > 0 (a relative modulus)", term, t.g));
+    if (!(t.tau > 0)) fail(s, t.line, fmt::format("{}: tau = {} s must be > 0", term, t.tau));
+    sum += t.g;
+    if (!(sum < 1))
+      fail(s, t.line,
+           fmt::format("{}: the Prony moduli g sum to {} by this term; the sum must be < 1 (the relaxed shear "
+                       "modulus mu (1 - sum g) must stay > 0)",
+                       what, sum));
+  }
+}
+
 void check_material(const Scene& s, const Material& m) {
   const std::string what = fmt::format("material '{}'", m.name);
   if (m.name.empty()) fail(s, m.line, "material: the name is empty; element sets refer to materials by name");
@@ -98,6 +128,7 @@ void check_material(const Scene& s, const Material& m) {
       break;
   }
   if (!(m.rho > 0)) fail(s, m.line, fmt::format("{}: density rho = {} kg/m^3 must be > 0", what, m.rho));
+  check_law_terms(s, m, what);
 }
 
 /// Checks every material; returns name -> index into scene.materials.

@@ -1,0 +1,124 @@
+// The material seam (docs/materials.md): every constitutive law the engine
+// offers, written once for every backend (__host__ __device__, branch-free,
+// no libm call but exp in the host-side constants), as additive terms of one
+// PK2 stress:
+//
+//   S = S_iso(C) - sum_i q_i + S_vol(C) + S_fibre(C)   (core/tet.hpp law_pk2)
+//
+//   Neo-Hookean (always)    S_iso = mu J^(-2/3) (I - I1/3 C^-1),
+//                           S_vol = K J (J - 1) C^-1 (IANP evaluates it at Fbar);
+//   fibre (transversely     S_fibre = 2 eta (I4b - 1) J^(-2/3) (a (x) a - I4/3 C^-1)
+//   isotropic, tension        when I4b = J^(-2/3) a.C.a > 1, else 0
+//   only)                     (W_fibre = eta/2 (I4b - 1)^2, Taylor et al. 2009, NiftySim's TI law);
+//   viscoelastic (Prony     q_i: the relaxed part of S_iso, per element, integrated exactly for a
+//   series on S_iso)          stress constant over each step:
+//                             q_i^n = d_i q_i^(n-1) + g_i (1 - d_i) S_iso^n,  d_i = exp(-dt / tau_i),
+//                           so a held strain relaxes as G(t) = 1 - sum_i g_i (1 - exp(-t / tau_i)).
+//
+// mu is the instantaneous shear modulus; a viscoelastic set relaxes to
+// mu (1 - sum g_i). A kernel is instantiated for the terms a scene has
+// (LawTerms): a Neo-Hookean scene runs the Neo-Hookean kernel and carries
+// no fibre or Prony data. Elements of a set without a term run it with
+// neutral parameters (eta = 0, g_i = 0), so a warp never branches on the law.
+#pragma once
+
+#include <cmath>
+
+#include "core/cube_root.hpp"
+#include "core/vec.hpp"
+
+namespace tissue {
+
+/// Most Prony terms a viscoelastic set may give.
+inline constexpr int kMaxProny = 4;
+
+/// The terms a kernel instantiation computes (compile time).
+template <bool Fibre, bool Visco>
+struct LawTerms {
+  static constexpr bool fibre = Fibre, visco = Visco;
+};
+using NeoHookeanTerms = LawTerms<false, false>;
+
+/// Symmetric 3x3 as six components (xx, yy, zz, xy, yz, xz): the Prony state.
+inline constexpr int kSymComponents = 6;
+
+template <class T>
+TISSUE_HD T sym_component(const Mat3<T>& S, int c) {
+  const int i[6] = {0, 1, 2, 0, 1, 0}, j[6] = {0, 1, 2, 1, 2, 2};
+  return S(i[c], j[c]);
+}
+
+/// The per-element inputs and state of the optional terms. Only the fields
+/// of the instantiated terms are read.
+template <class T>
+struct ElementLaw {
+  Vec3<T> a = {T(0), T(0), T(0)};  ///< unit fibre direction in the reference configuration
+  T eta = T(0);                    ///< fibre stiffness (Pa); 0 = no fibres
+  T decay[kMaxProny] = {};         ///< d_i = exp(-dt / tau_i); unused terms: 0 (with gain 0)
+  T gain[kMaxProny] = {};          ///< g_i (1 - d_i); 0 = no such term
+  T q[kMaxProny][kSymComponents] = {};  ///< in: q_i^(n-1); out: q_i^n (Pa)
+};
+
+/// The fibre term's PK2 stress (tension only), from C, C^-1, J^(-2/3).
+template <class T>
+TISSUE_HD Mat3<T> fibre_pk2(const Mat3<T>& C, const Mat3<T>& Ci, T j23, Vec3<T> a, T eta) {
+  const T I4 = dot(a, C * a);
+  const T I4b = j23 * I4;
+  const T s = I4b > T(1) ? T(2) * eta * (I4b - T(1)) * j23 : T(0);  // a select: tension only
+  const T t = -s * I4 / T(3);
+  Mat3<T> S;
+  TISSUE_UNROLL
+  for (int i = 0; i < 3; ++i)
+    TISSUE_UNROLL
+    for (int j = 0; j < 3; ++j) S(i, j) = s * a[i] * a[j] + t * Ci(i, j);
+  return S;
+}
+
+/// The fibre term's strain energy density eta/2 (I4b - 1)^2 in tension, else 0.
+template <class T>
+TISSUE_HD T fibre_energy(const Mat3<T>& C, T j23, Vec3<T> a, T eta) {
+  const T e = j23 * dot(a, C * a) - T(1);
+  return e > T(0) ? eta / T(2) * e * e : T(0);
+}
+
+/// Advances the Prony state with this step's isochoric stress and returns
+/// sum_i q_i^n.
+template <class T>
+TISSUE_HD Mat3<T> prony_update(const Mat3<T>& S_iso, ElementLaw<T>& law) {
+  T sum[kSymComponents] = {};
+  TISSUE_UNROLL
+  for (int i = 0; i < kMaxProny; ++i)
+    TISSUE_UNROLL
+    for (int c = 0; c < kSymComponents; ++c) {
+      law.q[i][c] = law.decay[i] * law.q[i][c] + law.gain[i] * sym_component(S_iso, c);
+      sum[c] += law.q[i][c];
+    }
+  return {{sum[0], sum[3], sum[5], sum[3], sum[1], sum[4], sum[5], sum[4], sum[2]}};
+}
+
+/// The strain energy density (J/m^3) of the optional elastic terms at F
+/// (the Neo-Hookean part is core/energy.hpp's). The Prony state's stored
+/// energy is not included (docs/materials.md: a viscoelastic set reports
+/// its instantaneous elastic energy).
+template <class Terms, class T>
+TISSUE_HD T extra_energy(const Mat3<T>& F, T J, const ElementLaw<T>& law) {
+  const Mat3<T> C = transpose(F) * F;
+  const T cbrt_J = cube_root(J);
+  const T j23 = T(1) / (cbrt_J * cbrt_J);
+  if constexpr (Terms::fibre) return fibre_energy(C, j23, law.a, law.eta);
+  return T(0);
+}
+
+/// Stable-step stiffness added by the fibre term to the P-wave modulus
+/// lambda + 2 mu (Pa): 16 eta / 9 at rest along the fibre, taken as 4 eta
+/// to cover the stiffening of stretched fibres (docs/materials.md).
+inline double fibre_wave_modulus(double eta) { return 4 * eta; }
+
+/// The Prony constants of one term for step dt (s): decay d = exp(-dt /
+/// tau) and gain g (1 - d).
+inline void prony_constants(double g, double tau, double dt, double* decay, double* gain) {
+  *decay = std::exp(-dt / tau);
+  *gain = g * -std::expm1(-dt / tau);
+}
+
+}  // namespace tissue

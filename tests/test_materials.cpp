@@ -1,0 +1,447 @@
+// The material seam (core/material.hpp, docs/materials.md): the fibre and
+// Prony terms against closed forms written here from the principal
+// stretches (not from the code's tensor formulas), the stress against the
+// derivative of the energy, homogeneous deformations on every backend and
+// precision (uniaxial stretch along and across the fibres; a step strain
+// held in time, whose stress relaxes along the Prony series), a Neo-Hookean
+// model carrying no law data, a mixed-law dynamic run equal across
+// backends, and the scene format's rules with file:line messages.
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "backends/registry.hpp"
+#include "core/box_mesh.hpp"
+#include "core/energy.hpp"
+#include "core/tet.hpp"
+#include "io/scene_xml.hpp"
+#include "scene/validate.hpp"
+
+namespace tissue {
+namespace {
+
+constexpr double kMu = 1000, kK = 20000, kRho = 1000, kEta = 5000;
+constexpr double kG[2] = {0.3, 0.2}, kTau[2] = {0.02, 0.2};
+
+/// Principal-stretch closed forms for F = diag(l1, l2, l3) (Cauchy stress,
+/// Pa), fibre along x: Neo-Hookean sigma_ii = mu J^(-5/3) (l_i^2 - I1/3) +
+/// K (J - 1), the isochoric part scaled by G (the relaxation function);
+/// fibre in tension (I4b = J^(-2/3) l1^2 > 1): sigma_f = 2 eta/J (I4b - 1)
+/// I4b (e1 e1 - I/3).
+struct Closed {
+  double l[3];
+  double eta = 0;  // fibre along x
+  double G = 1;
+  double J() const { return l[0] * l[1] * l[2]; }
+  double sigma(int i) const {
+    const double J_ = J(), I1 = l[0] * l[0] + l[1] * l[1] + l[2] * l[2];
+    double s = G * kMu * std::pow(J_, -5.0 / 3) * (l[i] * l[i] - I1 / 3) + kK * (J_ - 1);
+    const double I4b = std::pow(J_, -2.0 / 3) * l[0] * l[0];
+    if (I4b > 1) s += 2 * eta / J_ * (I4b - 1) * I4b * ((i == 0 ? 1.0 : 0.0) - 1.0 / 3);
+    return s;
+  }
+  /// First Piola-Kirchhoff P_ii = J sigma_ii / l_i.
+  double P(int i) const { return J() * sigma(i) / l[i]; }
+};
+
+template <class T>
+Mat3<T> diag(const double l[3]) {
+  Mat3<T> F = Mat3<T>::zero();
+  for (int i = 0; i < 3; ++i) F(i, i) = T(l[i]);
+  return F;
+}
+
+/// Cauchy stress from the code's PK2: sigma = F S F^T / J.
+template <class Terms>
+Mat3<double> code_sigma(const Mat3<double>& F, ElementLaw<double>& law) {
+  const double J = det(F);
+  const Mat3<double> S = law_pk2<Terms>(F, J, kMu, kK, law);
+  return (1 / J) * (F * S * transpose(F));
+}
+
+ElementLaw<double> fibre_law(Vec3<double> a) {
+  ElementLaw<double> law;
+  law.a = a;
+  law.eta = kEta;
+  return law;
+}
+
+TEST(Material, FibreStressMatchesThePrincipalStretchClosedForm) {
+  using Fibre = LawTerms<true, false>;
+  for (const auto& l : {std::array<double, 3>{1.2, 0.93, 0.93}, std::array<double, 3>{1.05, 1.0, 0.97},
+                        std::array<double, 3>{0.8, 1.1, 1.1}}) {
+    SCOPED_TRACE(testing::Message() << "stretch " << l[0] << " " << l[1] << " " << l[2]);
+    const Closed along{{l[0], l[1], l[2]}, kEta};
+    ElementLaw<double> law = fibre_law({1, 0, 0});
+    const Mat3<double> s = code_sigma<Fibre>(diag<double>(l.data()), law);
+    for (int i = 0; i < 3; ++i) EXPECT_NEAR(s(i, i), along.sigma(i), 1e-9 * kMu) << "axis " << i;
+    EXPECT_NEAR(s(0, 1), 0, 1e-9 * kMu);
+  }
+  // compressed along the fibre: the fibre carries nothing (tension only)
+  const double l[3] = {0.9, 1.05, 1.05};
+  ElementLaw<double> law = fibre_law({1, 0, 0});
+  const Mat3<double> s = code_sigma<Fibre>(diag<double>(l), law);
+  const Closed iso{{l[0], l[1], l[2]}, 0};
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(s(i, i), iso.sigma(i), 1e-9 * kMu);
+}
+
+TEST(Material, FibreAcrossTheStretchIsInactive) {
+  // stretched along x with lateral contraction, fibre along y: I4b < 1
+  const double l[3] = {1.2, 0.93, 0.93};
+  ElementLaw<double> law = fibre_law({0, 1, 0});
+  const Mat3<double> s = code_sigma<LawTerms<true, false>>(diag<double>(l), law);
+  const Closed iso{{l[0], l[1], l[2]}, 0};
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(s(i, i), iso.sigma(i), 1e-9 * kMu);
+}
+
+TEST(Material, StressIsTheDerivativeOfTheEnergy) {
+  // S = 2 dW/dC: compare S : dC / 2 with the change of W along a random-ish
+  // symmetric perturbation of F, by central differences
+  using Fibre = LawTerms<true, false>;
+  const Mat3<double> F = {{1.15, 0.08, -0.03, 0.02, 0.95, 0.05, -0.04, 0.01, 1.02}};
+  const Mat3<double> dF = {{0.3, -0.2, 0.1, 0.4, 0.2, -0.1, 0.05, 0.3, -0.25}};
+  ElementLaw<double> law = fibre_law({0.6, 0.8, 0});
+  const auto W = [&](double h) {
+    const Mat3<double> Fh = F + h * dF;
+    const double J = det(Fh);
+    return element_strain_energy<Fibre>(Fh, J, J, 1.0, kMu, kK, law);
+  };
+  const double h = 1e-6;
+  const double dW = (W(h) - W(-h)) / (2 * h);
+  const Mat3<double> P = F * law_pk2<Fibre>(F, det(F), kMu, kK, law);  // dW/dF = P
+  double PdF = 0;
+  for (int k = 0; k < 9; ++k) PdF += P.m[k] * dF.m[k];
+  EXPECT_NEAR(PdF, dW, 1e-6 * std::abs(dW));
+  const double j23 = std::pow(det(F), -2.0 / 3);
+  EXPECT_GT(fibre_energy(transpose(F) * F, j23, law.a, law.eta), 0);  // stretched: the term is exercised
+}
+
+TEST(Material, HeldStrainRelaxesAlongThePronySeries) {
+  using Visco = LawTerms<false, true>;
+  const double l[3] = {1.1, 0.96, 0.96}, dt = 1e-3;
+  ElementLaw<double> law;
+  for (int i = 0; i < 2; ++i) prony_constants(kG[i], kTau[i], dt, &law.decay[i], &law.gain[i]);
+  const Mat3<double> F = diag<double>(l);
+  for (int n = 1; n <= 400; ++n) {
+    const Mat3<double> s = code_sigma<Visco>(F, law);
+    if (n % 50 != 0) continue;
+    const double t = n * dt;
+    Closed c{{l[0], l[1], l[2]}};
+    c.G = 1 - kG[0] * (1 - std::exp(-t / kTau[0])) - kG[1] * (1 - std::exp(-t / kTau[1]));
+    for (int i = 0; i < 3; ++i) EXPECT_NEAR(s(i, i), c.sigma(i), 1e-9 * kMu) << "t = " << t << " axis " << i;
+  }
+}
+
+// ---- every backend and precision -------------------------------------------
+
+struct Kind {
+  std::string backend;
+  Precision precision;
+};
+
+void PrintTo(const Kind& k, std::ostream* os) { *os << k.backend << " " << to_string(k.precision); }
+
+constexpr double kL = 0.01;  // box edge (m)
+
+/// A box of 2^3 cells; every element in set 0 unless `split`: then the
+/// elements with centroid x < kL/2 are in set 1 (Neo-Hookean).
+ModelInput box_input(const MaterialParams& law, bool split = false) {
+  ModelInput in;
+  box_mesh(in, 2, 2, 2, kL, kL, kL);
+  MaterialParams nh;
+  nh.mu = kMu;
+  nh.K = kK;
+  nh.rho = kRho;
+  in.materials = {law, nh};
+  in.elem_material.assign(in.tets.size() / 4, 0);
+  if (split)
+    for (size_t e = 0; e < in.elem_material.size(); ++e) {
+      double cx = 0;
+      for (int a = 0; a < 4; ++a) cx += in.nodes[3 * in.tets[4 * e + a]] / 4;
+      in.elem_material[e] = cx < kL / 2 ? 1 : 0;
+    }
+  in.source = "box";
+  return in;
+}
+
+MaterialParams law_params(bool fibre, bool visco, Vec3<double> dir = {1, 0, 0}) {
+  MaterialParams p;
+  p.mu = kMu;
+  p.K = kK;
+  p.rho = kRho;
+  if (fibre) {
+    p.fibre_eta = kEta;
+    p.fibre_dir = dir;
+  }
+  if (visco) {
+    p.prony_terms = 2;
+    for (int i = 0; i < 2; ++i) {
+      p.prony_g[i] = kG[i];
+      p.prony_tau[i] = kTau[i];
+    }
+  }
+  return p;
+}
+
+class Laws : public ::testing::TestWithParam<Kind> {
+ protected:
+  void SetUp() override {
+    for (const BackendInfo& b : list_backends())
+      if (b.name == GetParam().backend && !b.available)
+        GTEST_SKIP() << "backend '" << b.name << "' is not usable here: " << b.detail;
+  }
+  bool is_float() const { return GetParam().precision == Precision::Float; }
+  /// Prints a measured error for docs/materials.md.
+  void report(const std::string& what, double err) const {
+    fmt::print("[materials] {} {}: {}: relative error {:.2e}\n", GetParam().backend, to_string(GetParam().precision),
+               what, err);
+  }
+  double rel_tol() const { return is_float() ? 2e-3 : 1e-9; }
+  std::unique_ptr<Backend> make(const TissueModel<double>& m) const {
+    auto b = create_backend(GetParam().backend, GetParam().precision);
+    b->upload(m);
+    return b;
+  }
+
+  /// Holds every node at u = (diag(l) - I) X, then runs `steps` steps; returns
+  /// the x-resultant of the internal forces on the face x = kL (N) after
+  /// each step in `record` (1-based).
+  std::vector<double> face_force(const TissueModel<double>& m, const double l[3], int steps) const {
+    auto b = make(m);
+    const index_t n = m.n_nodes;
+    std::vector<double> u(3 * n);
+    std::vector<index_t> all(n);
+    std::vector<double> target(3 * n);
+    for (index_t i = 0; i < n; ++i) {
+      all[i] = i;
+      for (int c = 0; c < 3; ++c) {
+        u[c * n + i] = (l[c] - 1) * m.X[c * n + i];
+        target[3 * i + c] = u[c * n + i];
+      }
+    }
+    b->set_displacements(u);
+    b->set_driven(all, target);
+    std::vector<double> out;
+    for (int k = 0; k < steps; ++k) {
+      b->advance(1);
+      const Fields f = b->download();
+      double fx = 0;
+      for (index_t i = 0; i < n; ++i)
+        if (std::abs(m.X[i] - kL) < 1e-12) fx += f.f[i];
+      out.push_back(fx);
+    }
+    return out;
+  }
+};
+
+INSTANTIATE_TEST_SUITE_P(Backends, Laws,
+                         ::testing::Values(Kind{"cpu", Precision::Float}, Kind{"cpu", Precision::Double},
+                                           Kind{"cuda", Precision::Float}, Kind{"cuda", Precision::Double}),
+                         [](const auto& info) { return info.param.backend + "_" + to_string(info.param.precision); });
+
+TEST_P(Laws, UniaxialStretchAlongAndAcrossTheFibres) {
+  const double l[3] = {1.2, 0.93, 0.93};
+  const double area = kL * kL;  // the reference face: P acts on it
+  {
+    const auto m = build_model(box_input(law_params(true, false, {1, 0, 0})));
+    const double expect = Closed{{l[0], l[1], l[2]}, kEta}.P(0) * area;
+    const double got = face_force(m, l, 1).back();
+    EXPECT_NEAR(got, expect, rel_tol() * std::abs(expect)) << "along the fibres";
+    report("uniaxial along the fibres", std::abs(got / expect - 1));
+    const Closed iso{{l[0], l[1], l[2]}, 0};
+    EXPECT_GT(expect, 1.5 * iso.P(0) * area);  // the fibre term carries most
+  }
+  {
+    const auto m = build_model(box_input(law_params(true, false, {0, 1, 0})));
+    const double expect = Closed{{l[0], l[1], l[2]}, 0}.P(0) * area;
+    const double got = face_force(m, l, 1).back();
+    EXPECT_NEAR(got, expect, rel_tol() * std::abs(expect)) << "across the fibres";
+    report("uniaxial across the fibres", std::abs(got / expect - 1));
+  }
+}
+
+TEST_P(Laws, StepStrainRelaxesAlongThePronySeries) {
+  const double lt = 1 / std::sqrt(1.1);  // isochoric: the volumetric stress does not hide the relaxation
+  const double l[3] = {1.1, lt, lt};
+  const auto m = build_model(box_input(law_params(false, true)));
+  const int steps = int(std::ceil(3 * kTau[1] / m.dt));
+  const std::vector<double> fx = face_force(m, l, steps);
+  double worst = 0;
+  for (int n = 1; n <= steps; ++n) {
+    const double t = n * m.dt;
+    Closed c{{l[0], l[1], l[2]}};
+    c.G = 1 - kG[0] * (1 - std::exp(-t / kTau[0])) - kG[1] * (1 - std::exp(-t / kTau[1]));
+    worst = std::max(worst, std::abs(fx[n - 1] / (c.P(0) * kL * kL) - 1));
+  }
+  report(fmt::format("held step strain, {} steps to t = {:.3g} s", steps, steps * m.dt), worst);
+  for (int n = 1; n <= steps; n += steps / 12) {
+    const double t = n * m.dt;
+    Closed c{{l[0], l[1], l[2]}};
+    c.G = 1 - kG[0] * (1 - std::exp(-t / kTau[0])) - kG[1] * (1 - std::exp(-t / kTau[1]));
+    const double expect = c.P(0) * kL * kL;
+    EXPECT_NEAR(fx[n - 1], expect, rel_tol() * std::abs(expect)) << "step " << n << ", t = " << t << " s";
+  }
+  // relaxed by tens of percent: the series is exercised
+  EXPECT_LT(fx.back(), 0.75 * fx.front());
+}
+
+TEST_P(Laws, MixedLawsMatchTheCpuInDouble) {
+  // half the box Neo-Hookean, half fibre-reinforced and viscoelastic; the
+  // top pressed down over 400 steps with the bottom fixed
+  ModelInput in = box_input(law_params(true, true, {0.0, 0.6, 0.8}), true);
+  in.fixed.assign(in.nodes.size() / 3, 0);
+  std::vector<index_t> top;
+  std::vector<double> target;
+  for (size_t i = 0; i < in.fixed.size(); ++i) {
+    in.fixed[i] = in.nodes[3 * i + 2] == 0.0;
+    if (in.nodes[3 * i + 2] == kL) {
+      top.push_back(index_t(i));
+      target.insert(target.end(), {0.0, 0.0, -0.1 * kL});
+    }
+  }
+  const auto m = build_model(in);
+  EXPECT_GT(m.n_visco, 0);
+  EXPECT_LT(m.n_visco, m.n_elems);
+  const auto run = [&](Backend& b) {
+    b.upload(m);
+    b.set_driven(top, target);
+    b.advance(400);
+    return b.download().u;
+  };
+  auto ref = create_backend("cpu", Precision::Double);
+  const std::vector<double> expect = run(*ref);
+  auto b = create_backend(GetParam().backend, GetParam().precision);
+  const std::vector<double> got = run(*b);
+  double scale = 0, diff = 0;
+  for (size_t k = 0; k < expect.size(); ++k) {
+    scale = std::max(scale, std::abs(expect[k]));
+    diff = std::max(diff, std::abs(got[k] - expect[k]));
+  }
+  EXPECT_GT(scale, 0.05 * kL);
+  EXPECT_LE(diff, (is_float() ? 1e-3 : 1e-9) * scale);
+  report("mixed laws, 400 steps, |u - u_cpu_double| / max |u|", diff / scale);
+}
+
+TEST(MaterialModel, NeoHookeanCarriesNoLawData) {
+  MaterialParams nh = law_params(false, false);
+  const auto m = build_model(box_input(nh));
+  EXPECT_FALSE(m.has_fibre());
+  EXPECT_FALSE(m.has_visco());
+  EXPECT_TRUE(m.fibre.empty());
+  EXPECT_TRUE(m.visco_slot.empty());
+  EXPECT_TRUE(m.prony_decay.empty());
+}
+
+TEST(MaterialModel, PronyStateOnlyForTheViscoelasticSet) {
+  const auto m = build_model(box_input(law_params(false, true), true));
+  index_t visco = 0;
+  for (index_t e = 0; e < m.n_elems; ++e) visco += m.visco_slot[e] >= 0;
+  EXPECT_EQ(m.n_visco, visco);
+  EXPECT_EQ(m.n_visco, m.n_elems / 2);
+  EXPECT_EQ(m.prony_decay.size(), size_t(kMaxProny) * m.n_visco);
+  // the decay and gain follow the step (set_time_step recomputes them)
+  EXPECT_NEAR(m.prony_decay[0], std::exp(-m.dt / kTau[0]), 1e-15);
+  EXPECT_NEAR(m.prony_gain[0], kG[0] * (1 - std::exp(-m.dt / kTau[0])), 1e-15);
+}
+
+TEST(MaterialModel, FibresRaiseTheWaveSpeed) {
+  const MaterialParams nh = law_params(false, false), ti = law_params(true, false);
+  EXPECT_NEAR(wave_speed(ti), std::sqrt((kK + 4 * kMu / 3 + 4 * kEta) / kRho), 1e-12);
+  EXPECT_LT(build_model(box_input(ti)).dt_crit, build_model(box_input(nh)).dt_crit);
+}
+
+TEST(MaterialModel, BadTermsAreRefused) {
+  const auto expect_error = [](MaterialParams p, const std::string& text) {
+    try {
+      build_model(box_input(p));
+      ADD_FAILURE() << "no error for " << text;
+    } catch (const ModelError& e) {
+      EXPECT_NE(std::string(e.what()).find(text), std::string::npos) << e.what();
+    }
+  };
+  MaterialParams p = law_params(false, true);
+  p.prony_g[1] = -0.1;
+  expect_error(p, "Prony term 2: g = -0.1 must be > 0");
+  p = law_params(false, true);
+  p.prony_g[1] = 0.7;
+  expect_error(p, "sum to 1");
+  p = law_params(false, true);
+  p.prony_tau[0] = 0;
+  expect_error(p, "Prony term 1: tau = 0 s must be > 0");
+  p = law_params(true, false, {0, 0, 0});
+  expect_error(p, "fibre direction (0, 0, 0)");
+}
+
+// ---- the scene format ------------------------------------------------------
+
+std::string scene_xml(const std::string& material_body) {
+  return R"(<tissue-scene>
+  <mesh>
+    <nodes>0 0 0  0.01 0 0  0 0.01 0  0 0 0.01</nodes>
+    <elements>0 1 2 3</elements>
+  </mesh>
+  <material name="liver" E="4000" nu="0.45" rho="1000">
+)" + material_body +
+         R"(  </material>
+  <element-set material="liver" elements="all"/>
+  <fixed nodes="0"/>
+</tissue-scene>
+)";
+}
+
+void expect_scene_error(const std::string& body, const std::string& where, const std::string& text) {
+  try {
+    scene::validate(io::parse_scene(scene_xml(body), "liver.xml", "."));
+    ADD_FAILURE() << "no error for " << body;
+  } catch (const std::exception& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find(where), std::string::npos) << msg;
+    EXPECT_NE(msg.find(text), std::string::npos) << msg;
+  }
+}
+
+TEST(MaterialScene, ReadsTheTermsAndWritesThemBack) {
+  const std::string body = R"(    <fibre stiffness="20000" direction="0 0 2"/>
+    <prony g="0.3" tau="0.5"/>
+    <prony g="0.2" tau="5"/>
+)";
+  const scene::Scene s = io::parse_scene(scene_xml(body), "liver.xml", ".");
+  ASSERT_EQ(s.materials.size(), 1u);
+  const MaterialParams p = s.materials[0].params();
+  EXPECT_EQ(p.fibre_eta, 20000);
+  EXPECT_EQ(p.fibre_dir.z, 2);
+  ASSERT_EQ(p.prony_terms, 2);
+  EXPECT_EQ(p.prony_g[1], 0.2);
+  EXPECT_EQ(p.prony_tau[1], 5);
+  const TissueModel<double> m = scene::load_model(s);
+  EXPECT_NEAR(m.fibre[2 * m.n_elems], 1.0, 1e-15);  // normalised
+  EXPECT_EQ(m.n_visco, 1);
+  const scene::Scene again = io::parse_scene(io::format_scene(s, ""), "again.xml", ".");
+  ASSERT_EQ(again.materials[0].prony.size(), 2u);
+  EXPECT_EQ(again.materials[0].prony[0].tau, 0.5);
+  EXPECT_EQ(again.materials[0].fibre_eta, 20000);
+}
+
+TEST(MaterialScene, BadTermsNameTheFileAndLine) {
+  // the material opens on line 6; its children follow
+  expect_scene_error("    <prony g=\"-0.1\" tau=\"1\"/>\n", "liver.xml:7", "Prony term 1: g = -0.1 must be > 0");
+  expect_scene_error("    <prony g=\"0.6\" tau=\"1\"/>\n    <prony g=\"0.4\" tau=\"2\"/>\n", "liver.xml:8",
+                     "sum to 1");
+  expect_scene_error("    <prony g=\"0.2\" tau=\"0\"/>\n", "liver.xml:7", "tau = 0 s must be > 0");
+  expect_scene_error("    <prony g=\"0.2\" tau=\"-3\"/>\n", "liver.xml:7", "tau = -3 s must be > 0");
+  expect_scene_error("    <fibre stiffness=\"1000\" direction=\"0 0 0\"/>\n", "liver.xml:7",
+                     "fibre direction (0, 0, 0)");
+  expect_scene_error("    <fibre stiffness=\"-5\" direction=\"1 0 0\"/>\n", "liver.xml:7",
+                     "fibre stiffness = -5 Pa must be >= 0");
+  expect_scene_error("    <fibre stiffness=\"5\"/>\n", "liver.xml:7", "direction");
+  expect_scene_error("    <prony g=\"0.1\" tau=\"1\" beta=\"2\"/>\n", "liver.xml:7", "unknown attribute 'beta'");
+}
+
+}  // namespace
+}  // namespace tissue
