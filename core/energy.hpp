@@ -33,11 +33,15 @@ TISSUE_HD T element_strain_energy(const Mat3<T>& F, T J, T Jbar, T volume, T mu,
   return ok ? volume * w : T(0);
 }
 
-/// Neo-Hookean alone.
+/// Neo-Hookean alone (no law data).
 template <class T>
 TISSUE_HD T element_strain_energy(const Mat3<T>& F, T J, T Jbar, T volume, T mu, T K) {
-  ElementLaw<T> none;
-  return element_strain_energy<NeoHookeanTerms>(F, J, Jbar, volume, mu, K, none);
+  const bool ok = (J > T(0)) & (J <= std::numeric_limits<T>::max());  // & not &&: no branch
+  const T cbrt_J = cube_root(ok ? J : T(1));
+  const T I1 = trace(transpose(F) * F);
+  const T iso = mu / T(2) * (I1 / (cbrt_J * cbrt_J) - T(3));
+  const T vol = K / T(2) * (Jbar - T(1)) * (Jbar - T(1));
+  return ok ? volume * (iso + vol) : T(0);
 }
 
 }  // namespace tissue

@@ -60,17 +60,34 @@ TISSUE_UNROLL
   return F;
 }
 
-/// Second Piola-Kirchhoff stress (Pa) of docs/design.md section 2's Neo-Hookean
-/// law, S = mu J^(-2/3) (I - I1/3 C^-1) + K J (J - 1) C^-1, C = F^T F,
-/// I1 = tr C, plus the optional terms of core/material.hpp that Terms
-/// instantiates (the Prony state in law advances). J = det F must be > 0
-/// (the caller checks).
+/// Neo-Hookean second Piola-Kirchhoff stress (Pa) of docs/design.md section 2:
+/// S = mu J^(-2/3) (I - I1/3 C^-1) + K J (J - 1) C^-1, C = F^T F, I1 = tr C.
+/// J = det F must be > 0 (the caller checks).
+template <class T>
+TISSUE_HD Mat3<T> neo_hookean_pk2(const Mat3<T>& F, T J, T mu, T K) {
+  const Mat3<T> C = transpose(F) * F;
+  const T I1 = trace(C);
+  const Mat3<T> Ci = inverse(C, J * J);  // det C = J^2
+  const T cbrt_J = cube_root(J);
+  const T a = mu / (cbrt_J * cbrt_J);  // mu J^(-2/3)
+  const T b = -a * I1 / T(3) + K * J * (J - T(1));
+  Mat3<T> S = b * Ci;
+  S(0, 0) += a;
+  S(1, 1) += a;
+  S(2, 2) += a;
+  return S;
+}
+
+/// The same plus the optional terms of core/material.hpp that Terms
+/// instantiates (the Prony state in law advances). A Neo-Hookean scene
+/// never calls it: its kernels are neo_hookean_pk2's alone.
 template <class Terms, class T>
 TISSUE_HD Mat3<T> law_pk2(const Mat3<T>& F, T J, T mu, T K, ElementLaw<T>& law) {
   const Mat3<T> C = transpose(F) * F;
   const T I1 = trace(C);
   const Mat3<T> Ci = inverse(C, J * J);  // det C = J^2
   const T cbrt_J = cube_root(J);
+  const T j23 = T(1) / (cbrt_J * cbrt_J);
   const T a = mu / (cbrt_J * cbrt_J);  // mu J^(-2/3)
   const T b = -a * I1 / T(3) + K * J * (J - T(1));
   Mat3<T> S = b * Ci;
@@ -84,15 +101,8 @@ TISSUE_HD Mat3<T> law_pk2(const Mat3<T>& F, T J, T mu, T K, ElementLaw<T>& law) 
     S_iso(2, 2) += a;
     S = S + T(-1) * prony_update(S_iso, law);
   }
-  if constexpr (Terms::fibre) S = S + fibre_pk2(C, Ci, T(1) / (cbrt_J * cbrt_J), law.a, law.eta);
+  if constexpr (Terms::fibre) S = S + fibre_pk2(C, Ci, j23, law.a, law.eta);
   return S;
-}
-
-/// Neo-Hookean alone.
-template <class T>
-TISSUE_HD Mat3<T> neo_hookean_pk2(const Mat3<T>& F, T J, T mu, T K) {
-  ElementLaw<T> none;
-  return law_pk2<NeoHookeanTerms>(F, J, mu, K, none);
 }
 
 /// Neo-Hookean strain energy density (J/m^3):
@@ -164,11 +174,17 @@ TISSUE_HD T ianp_element_forces(const Mat3<T>& F, const T dN[12], T volume, T mu
   return ok ? J : (J > T(0) ? Jbar : J);
 }
 
-/// Neo-Hookean alone.
+/// Neo-Hookean alone (no law data: the kernels of a Neo-Hookean scene).
 template <class T>
 TISSUE_HD T ianp_element_forces(const Mat3<T>& F, const T dN[12], T volume, T mu, T K, T pbar, Vec3<T> f[4]) {
-  ElementLaw<T> none;
-  return ianp_element_forces<NeoHookeanTerms>(F, dN, volume, mu, K, pbar, f, none);
+  const T J = det(F);
+  const T Jbar = T(1) + pbar / K;
+  const bool ok = (J > T(0)) & (Jbar > T(0));  // & not &&: no branch
+  const T Js = ok ? J : T(1), Jbars = ok ? Jbar : T(1);
+  const Mat3<T> Fbar = cube_root(Jbars / Js) * F;
+  element_nodal_forces(Fbar, neo_hookean_pk2(Fbar, Jbars, mu, K), volume, dN, f);
+  zero_unless(ok, f);
+  return ok ? J : (J > T(0) ? Jbar : J);
 }
 
 /// The same from the corner displacements u (m).
@@ -197,11 +213,14 @@ TISSUE_HD T plain_element_forces(const Mat3<T>& F, const T dN[12], T volume, T m
   return J;
 }
 
-/// Neo-Hookean alone.
+/// Neo-Hookean alone (no law data).
 template <class T>
 TISSUE_HD T plain_element_forces(const Mat3<T>& F, const T dN[12], T volume, T mu, T K, Vec3<T> f[4]) {
-  ElementLaw<T> none;
-  return plain_element_forces<NeoHookeanTerms>(F, dN, volume, mu, K, f, none);
+  const T J = det(F);
+  const bool ok = J > T(0);
+  element_nodal_forces(F, neo_hookean_pk2(F, ok ? J : T(1), mu, K), volume, dN, f);
+  zero_unless(ok, f);
+  return J;
 }
 
 /// The same from the corner displacements u (m).

@@ -88,7 +88,10 @@ void Stepper<T>::nodal_pressure(const ModelView<T>& m, const StateView<T>& s, co
 template <class T>
 void Stepper<T>::element_forces(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                                 const Packed3<T>* u, cudaStream_t stream) {
-  launch_chained(r.n_elems, stream, element_forces_kernel<T>, m, s, r, u);
+  if (m.neo_hookean())
+    launch_chained(r.n_elems, stream, element_forces_kernel<T, false>, m, s, r, u);
+  else
+    launch_chained(r.n_elems, stream, element_forces_kernel<T, true>, m, s, r, u);
 }
 
 template <class T>

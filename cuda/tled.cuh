@@ -106,7 +106,7 @@ __device__ __forceinline__ index_t load_law(const ModelView<T>& m, const StateVi
 /// element's set lacks it), out of line so that the Neo-Hookean path keeps
 /// its registers. Returns J as the Neo-Hookean path does.
 template <class T>
-__device__ __noinline__ T law_element_forces(const ModelView<T>& m, const StateView<T>& s, const ElementData<T>& d,
+__device__ __forceinline__ T law_element_forces(const ModelView<T>& m, const StateView<T>& s, const ElementData<T>& d,
                                              const Vec3<T> ue[4], bool ianp, T pbar, Vec3<T> f[4]) {
   using All = LawTerms<true, true>;
   ElementLaw<T> law;
@@ -129,7 +129,9 @@ __device__ __noinline__ T law_element_forces(const ModelView<T>& m, const StateV
 /// corners, with the law terms of core/material.hpp when the model has any.
 /// An element with J <= 0, Jbar <= 0 or a non-finite J is recorded
 /// in s.bad (lowest wins; its forces are zero, as core's functions return).
-template <class T>
+/// kLaw: the instantiation for a model with law terms (the kernels pick it
+/// at launch), so a Neo-Hookean kernel holds no law code and no law registers.
+template <class T, bool kLaw>
 __device__ void element_forces_at(const ModelView<T>& m, const StateView<T>& s, const ElementData<T>& d,
                                   const Packed3<T>* u) {
   Vec3<T> ue[4];
@@ -138,7 +140,7 @@ __device__ void element_forces_at(const ModelView<T>& m, const StateView<T>& s, 
   T J;
   const T pbar =
       m.ianp ? (s.node_p[d.c[0]] + s.node_p[d.c[1]] + s.node_p[d.c[2]] + s.node_p[d.c[3]]) / T(4) : T(0);
-  if (!m.neo_hookean()) {  // uniform over the grid
+  if constexpr (kLaw) {
     J = law_element_forces(m, s, d, ue, m.ianp, pbar, f);
   } else if (m.ianp) {
     J = ianp_element_forces(ue, d.dN, d.V, d.mu, d.K, pbar, f);
@@ -148,6 +150,14 @@ __device__ void element_forces_at(const ModelView<T>& m, const StateView<T>& s, 
   if (!(J > T(0)) || !isfinite(J)) atomicMin(s.bad, bad_key(d.e, static_cast<float>(J)));
 #pragma unroll
   for (int a = 0; a < 4; ++a) s.f_slot[d.slot[a]] = Packed3<T>::of(f[a]);
+}
+
+/// The law instantiation out of line, for the persistent kernels (which
+/// branch at run time: one kernel serves every model).
+template <class T>
+__device__ __noinline__ void law_elements_at(const ModelView<T>& m, const StateView<T>& s, const ElementData<T>& d,
+                                             const Packed3<T>* u) {
+  element_forces_at<T, true>(m, s, d, u);
 }
 
 /// Lanes that share one node in passes 2 and 4: lane j of a node's group
@@ -246,7 +256,7 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
   if (active) nodal_pressure_at(m, s, d);
 }
 
-template <class T>
+template <class T, bool kLaw>
 __global__ void element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
   let_next_pass_launch();
   const index_t i = thread_index();
@@ -254,7 +264,7 @@ __global__ void element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView
   ElementData<T> d;
   if (active) d = load_element(m, r.elem(i));
   wait_for_previous_pass();
-  if (active) element_forces_at(m, s, d, u);
+  if (active) element_forces_at<T, kLaw>(m, s, d, u);
 }
 
 template <class T>
@@ -299,7 +309,12 @@ __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const Re
     for (index_t g = first; g < node_items; g += stride)
       nodal_pressure_at(m, s, load_node(m, r.node(g / kNodeLanes), lane, mask));
     barrier();
-    for (index_t i = first; i < r.n_elems; i += stride) element_forces_at(m, s, load_element(m, r.elem(i)), b.u);
+    for (index_t i = first; i < r.n_elems; i += stride) {
+      if (m.neo_hookean())  // uniform; the law path is out of line (law_elements_at)
+        element_forces_at<T, false>(m, s, load_element(m, r.elem(i)), b.u);
+      else
+        law_elements_at(m, s, load_element(m, r.elem(i)), b.u);
+    }
     barrier();
     for (index_t g = first; g < node_items; g += stride)
       node_update_at(m, s, b, load_node(m, r.node(g / kNodeLanes), lane, mask));
