@@ -13,6 +13,7 @@
 #include <array>
 #include <cmath>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -20,6 +21,7 @@
 #include "core/box_mesh.hpp"
 #include "core/energy.hpp"
 #include "core/tet.hpp"
+#include "io/kidney.hpp"
 #include "io/scene_xml.hpp"
 #include "scene/validate.hpp"
 
@@ -376,6 +378,25 @@ TEST(MaterialModel, BadTermsAreRefused) {
   expect_error(p, "Prony term 1: tau = 0 s must be > 0");
   p = law_params(true, false, {0, 0, 0});
   expect_error(p, "fibre direction (0, 0, 0)");
+}
+
+TEST(MaterialModel, TheViscoelasticKidneyHoldsItsPressAndCarriesPronyState) {
+  const std::optional<scene::Scene> s = io::builtin_scene("@kidney-visco");
+  ASSERT_TRUE(s.has_value());
+  ASSERT_EQ(s->materials.size(), 1u);
+  ASSERT_EQ(s->materials[0].prony.size(), 2u);
+  EXPECT_EQ(s->materials[0].prony[1].tau, io::kKidneyPronyTau[1]);
+  const std::vector<Waypoint>& w = s->tools.at(0).path;
+  ASSERT_EQ(w.size(), 5u);
+  EXPECT_NEAR(w[3].t - w[2].t, io::kKidneyViscoHold, 1e-12);  // the hold
+  EXPECT_EQ(norm(w[3].p - w[2].p), 0.0);
+  const TissueModel<double> m = scene::load_model(*s);
+  EXPECT_EQ(m.n_visco, m.n_elems);
+  // the elastic kidney is the same organ with no law data
+  const TissueModel<double> e = scene::load_model(io::default_kidney_scene());
+  EXPECT_FALSE(e.has_visco());
+  EXPECT_EQ(e.n_elems, m.n_elems);
+  EXPECT_EQ(e.dt, m.dt);  // mu is the instantaneous modulus: the stable step is unchanged
 }
 
 // ---- the scene format ------------------------------------------------------
