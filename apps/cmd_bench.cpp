@@ -18,7 +18,7 @@ void add_bench_command(CLI::App& app, int& rc) {
   cmd->add_option("--precision", *precision, "float | double | both")->default_val("both");
   cmd->add_option("--json", o->json_path, "Also write the rows as a JSON array to this file")->check(output_file());
   cmd->add_option("--sizes", o->sizes, "Whole-mesh TLED meshes: kidney 100k 1m 4m")->delimiter(',');
-  cmd->add_option("--laws", o->laws, "Material laws of the whole-mesh rows: neo-hookean visco fibre fibre-visco")
+  cmd->add_option("--laws", o->laws, "Material laws of the whole-mesh and haptic-tick rows: neo-hookean visco fibre fibre-visco")
       ->delimiter(',')
       ->check(CLI::IsMember({"neo-hookean", "visco", "fibre", "fibre-visco"}));
   cmd->add_option("--min-seconds", o->min_seconds, "Time each measurement at least this long")

@@ -62,18 +62,21 @@ void apply_law(const std::string& law, MaterialParams& p) {
   }
 }
 
-NamedModel mesh_by_name(const std::string& name, bool quick, const std::string& law = "neo-hookean") {
-  if (name == "kidney") {
-    scene::Scene s = io::default_kidney_scene();
-    for (scene::Material& m : s.materials) {
-      MaterialParams p = m.params();
-      apply_law(law, p);
-      m.fibre_eta = p.fibre_eta;
-      m.fibre_dir = p.fibre_dir;
-      for (int i = 0; i < p.prony_terms; ++i) m.prony.push_back({p.prony_g[i], p.prony_tau[i], 0});
-    }
-    return {name, scene::load_model(s)};
+/// The built-in kidney scene with a bench law's terms on its material.
+scene::Scene kidney_with_law(const std::string& law) {
+  scene::Scene s = io::default_kidney_scene();
+  for (scene::Material& m : s.materials) {
+    MaterialParams p = m.params();
+    apply_law(law, p);
+    m.fibre_eta = p.fibre_eta;
+    m.fibre_dir = p.fibre_dir;
+    for (int i = 0; i < p.prony_terms; ++i) m.prony.push_back({p.prony_g[i], p.prony_tau[i], 0});
   }
+  return s;
+}
+
+NamedModel mesh_by_name(const std::string& name, bool quick, const std::string& law = "neo-hookean") {
+  if (name == "kidney") return {name, scene::load_model(kidney_with_law(law))};
   // cells per side of a cube with 6 c^3 ~ the asked count
   const long want = name == "100k" ? 100'000 : name == "1m" ? 1'000'000 : name == "4m" ? 4'000'000 : -1;
   if (want < 0) throw std::invalid_argument("unknown bench mesh '" + name + "' (kidney, 100k, 1m, 4m)");
@@ -245,8 +248,8 @@ void bench_contact(Context& c, long want_tris, Precision p) {
   c.emit(r);
 }
 
-void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_safety) {
-  scene::Scene s = io::default_kidney_scene();
+void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_safety, const std::string& law) {
+  scene::Scene s = kidney_with_law(law);
   s.solver.dt_safety = dt_safety.value_or(s.solver.dt_safety);
   const TissueModel<double> m = scene::load_model(s);
   SchedulerSettings st = scene::scheduler_settings(s);
@@ -266,6 +269,7 @@ void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_saf
   std::sort(lat.begin(), lat.end());
   Row r = c.row("haptic_tick", *b);
   r.add("mesh", std::string("kidney"));
+  r.add("law", law);
   r.add("depth", depth == kDepthAll ? std::string("all") : std::to_string(depth));
   r.add("dt_safety", s.solver.dt_safety);
   r.add("steps_per_tick", long(sched.steps_per_tick()));
@@ -336,7 +340,8 @@ std::vector<std::string> run_bench(const BenchOptions& o) {
     if (safeties.empty()) safeties.emplace_back();  // the scene's own
     for (int depth : {5, kDepthAll})
       for (const std::optional<double>& safety : safeties)
-        if (!stopped()) bench_tick(c, p, depth, safety);
+        for (const std::string& law : o.laws)
+          if (!stopped()) bench_tick(c, p, depth, safety, law);
   }
   if (!o.json_path.empty()) {
     io::AtomicTextFile f(o.json_path);

@@ -19,7 +19,7 @@ struct BenchOptions {
   std::string backend = "cpu";
   std::vector<Precision> precisions = {Precision::Float, Precision::Double};
   std::vector<std::string> sizes = {"kidney", "100k", "1m", "4m"};  ///< whole-mesh TLED meshes
-  /// Material laws of the whole-mesh rows (docs/materials.md): neo-hookean,
+  /// Material laws of the whole-mesh and haptic-tick rows (docs/materials.md): neo-hookean,
   /// visco (2 Prony terms), fibre (transversely isotropic), fibre-visco.
   std::vector<std::string> laws = {"neo-hookean"};
   double min_seconds = 0.5;  ///< time each measurement at least this long

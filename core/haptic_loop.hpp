@@ -60,6 +60,11 @@ struct LiveParams {
   double nu = 0.45;   ///< Poisson's ratio (with E)
   int depth = 5;      ///< region depth; kDepthAll = whole mesh, kDepthAuto = adaptive
   Precision precision = Precision::Float;
+  /// The law's optional terms (docs/materials.md), for every element set;
+  /// < 0: keep the scene's.
+  double fibre_eta = -1;   ///< fibre stiffness (Pa; 0 = none); a set without a direction gets x
+  int prony_terms = -1;    ///< Prony terms (0 = elastic), with prony_g / prony_tau
+  double prony_g[kMaxProny] = {}, prony_tau[kMaxProny] = {};
 };
 
 /// What the haptic loop runs: the model, a backend holding it, and the

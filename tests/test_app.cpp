@@ -347,5 +347,26 @@ TEST(Bench, TickRowsCompareStepMarginsInOneRun) {
   EXPECT_EQ(seen, want);
 }
 
+TEST(Bench, LawRowsNameTheirLaw) {
+  bench::BenchOptions o;
+  o.quick = true;
+  o.precisions = {Precision::Float};
+  o.sizes = {"kidney"};
+  o.laws = {"neo-hookean", "visco", "fibre-visco"};
+  std::vector<std::string> whole, tick;
+  for (const std::string& row : bench::run_bench(o)) {
+    const size_t k = row.find("\"law\": \"");
+    if (k == std::string::npos) continue;
+    const std::string law = row.substr(k + 8, row.find('"', k + 8) - (k + 8));
+    if (row.find("\"tled_whole_mesh\"") != std::string::npos) whole.push_back(law);
+    if (row.find("\"haptic_tick\"") != std::string::npos) tick.push_back(law);
+  }
+  EXPECT_EQ(whole, o.laws);
+  const std::vector<std::string> twice = {"neo-hookean", "visco", "fibre-visco", "neo-hookean", "visco", "fibre-visco"};
+  EXPECT_EQ(tick, twice);  // depth 5, then all
+  o.laws = {"maxwell"};
+  EXPECT_THROW(bench::run_bench(o), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace tissue::app

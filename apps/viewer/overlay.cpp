@@ -152,6 +152,26 @@ OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, con
     changed = true;
   }
   changed |= ImGui::SliderScalar("nu", ImGuiDataType_Double, &edit_.nu, &nu_min, &nu_max, "%.3f");
+  if (edit_.fibre_eta >= 0 && ImGui::InputDouble("fibre eta [Pa]", &edit_.fibre_eta, 100, 1000, "%.0f")) {
+    edit_.fibre_eta = std::clamp(edit_.fibre_eta, 0.0, 1e8);
+    changed = true;
+  }
+  if (edit_.prony_terms >= 0) {  // the Prony series (docs/materials.md); the rules are checked on Apply
+    if (ImGui::SliderInt("Prony terms", &edit_.prony_terms, 0, kMaxProny)) {
+      for (int i = 0; i < edit_.prony_terms; ++i)
+        if (!(edit_.prony_tau[i] > 0)) edit_.prony_g[i] = 0.1, edit_.prony_tau[i] = 1.0;
+      changed = true;
+    }
+    for (int i = 0; i < edit_.prony_terms; ++i) {
+      ImGui::PushID(i);
+      ImGui::SetNextItemWidth(ImGui::GetContentRegionAvail().x * 0.3f);
+      changed |= ImGui::InputDouble("g", &edit_.prony_g[i], 0, 0, "%.3f");
+      ImGui::SameLine();
+      ImGui::SetNextItemWidth(ImGui::GetContentRegionAvail().x * 0.45f);
+      changed |= ImGui::InputDouble("tau [s]", &edit_.prony_tau[i], 0, 0, "%.3g");
+      ImGui::PopID();
+    }
+  }
   // the region: adaptive (grows until its front barely moves), the whole
   // mesh, or a fixed number of rings around the contact triangle
   int mode = edit_.depth == kDepthAuto ? 0 : edit_.depth == kDepthAll ? 1 : 2;

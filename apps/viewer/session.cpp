@@ -24,6 +24,16 @@ scene::Scene with_params(scene::Scene s, const LiveParams& p) {
       m.a = p.E;
       m.b = p.nu;
     }
+  for (scene::Material& m : s.materials) {
+    if (p.fibre_eta >= 0) {
+      m.fibre_eta = p.fibre_eta;
+      if (!m.fibre_line) m.fibre_line = m.line;  // validated as a <fibre> of the material (direction: x)
+    }
+    if (p.prony_terms >= 0) {
+      m.prony.clear();
+      for (int i = 0; i < std::min(p.prony_terms, kMaxProny); ++i) m.prony.push_back({p.prony_g[i], p.prony_tau[i], m.line});
+    }
+  }
   s.solver.depth = p.depth;
   s.solver.precision = p.precision;
   return s;
@@ -57,6 +67,15 @@ Session make_session(scene::Scene scene, const std::string& backend, const std::
   // keeps them all until the user sets one E and nu for every set
   if (!scene.materials.empty()) young_poisson(scene.materials.front().params(), &s.params.E, &s.params.nu);
   if (scene.materials.size() != 1) s.params.E = 0;
+  if (scene.materials.size() == 1) {  // its fibre and Prony terms, edited live; several: the scene's
+    const scene::Material& m = scene.materials.front();
+    s.params.fibre_eta = m.fibre_eta;
+    s.params.prony_terms = int(std::min<size_t>(m.prony.size(), kMaxProny));
+    for (int i = 0; i < s.params.prony_terms; ++i) {
+      s.params.prony_g[i] = m.prony[i].g;
+      s.params.prony_tau[i] = m.prony[i].tau;
+    }
+  }
   const double inf = std::numeric_limits<double>::infinity();
   s.bounds = {{inf, inf, inf}, {-inf, -inf, -inf}};
   for (size_t i = 0; i + 2 < scene.nodes.size(); i += 3)

@@ -23,7 +23,9 @@ struct Bounds {
 void young_poisson(const MaterialParams& m, double* E, double* nu);
 
 /// The scene with LiveParams applied: E > 0 gives every material (E, nu)
-/// (density kept); depth and precision replace the solver's.
+/// (density kept); fibre_eta >= 0 and prony_terms >= 0 give every material
+/// that fibre stiffness (direction kept, x where it had none) and Prony
+/// series; depth and precision replace the solver's.
 scene::Scene with_params(scene::Scene s, const LiveParams& p);
 
 /// Scene -> model -> backend (the scene's solver backend) -> scheduler, for
