@@ -90,11 +90,6 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   model_.surf_slot = surf_slot_.data();
   model_.dt = m.dt;
   model_.ianp = m.ianp;
-  model_.fibre = m.has_fibre() ? fibre_.data() : nullptr;
-  model_.visco_slot = m.has_visco() ? visco_slot_.data() : nullptr;
-  model_.n_visco = m.n_visco;
-  model_.prony_decay = m.has_visco() ? prony_decay_.data() : nullptr;
-  model_.prony_gain = m.has_visco() ? prony_gain_.data() : nullptr;
 
   for (auto& b : u.buf) b.allocate(n);
   u_held_.allocate(n);
@@ -108,6 +103,13 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   node_p_.allocate(n);
   bad_.allocate(1);
   visco_q_.allocate(std::size_t(kSymComponents) * kMaxProny * m.n_visco);
+  law_ = {};
+  law_.fibre = m.has_fibre() ? fibre_.data() : nullptr;
+  law_.visco_slot = m.has_visco() ? visco_slot_.data() : nullptr;
+  law_.n_visco = m.n_visco;
+  law_.prony_decay = m.has_visco() ? prony_decay_.data() : nullptr;
+  law_.prony_gain = m.has_visco() ? prony_gain_.data() : nullptr;
+  law_.visco_q = m.has_visco() ? visco_q_.data() : nullptr;
   contact_.allocate(n);
   contact_tool_.allocate(n);
   contact_normal_.allocate(n);
@@ -159,7 +161,6 @@ StateView<T> DeviceStore<T>::state() {
   s.f_slot = f_slot_.data();
   s.f = f_.data();
   s.bad = bad_.data();
-  s.visco_q = visco_q_.size() ? visco_q_.data() : nullptr;
   s.contact = contact_.data();
   s.contact_tool = contact_tool_.data();
   s.contact_normal = contact_normal_.data();

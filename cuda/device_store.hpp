@@ -45,6 +45,7 @@ class DeviceStore {
   void clear_law_state(cudaStream_t stream);
 
   ModelView<T> model() const { return model_; }
+  LawView<T> law() const { return law_; }
   StateView<T> state();
 
   index_t n_nodes() const { return model_.n_nodes; }
@@ -55,6 +56,7 @@ class DeviceStore {
 
  private:
   ModelView<T> model_;
+  LawView<T> law_;
   // model (read-only after upload)
   DeviceArray<Packed3<T>> X_;
   DeviceArray<index_t> elem_nodes_, node_elem_start_, node_elem_, slot_of_, tris_;

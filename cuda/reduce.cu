@@ -68,7 +68,8 @@ __device__ void accumulate_node(const ModelView<T>& m, const StateView<T>& s, co
 /// Element e's strain energy V W(Fbar) (core/energy.hpp) at the current u;
 /// node_p: nodal pressures at the current u (IANP only).
 template <class T>
-__device__ double element_energy(const ModelView<T>& m, const T* node_p, const Packed3<T>* u, index_t e) {
+__device__ double element_energy(const ModelView<T>& m, const T* node_p, const Packed3<T>* u, index_t e,
+                                 const T* fibre) {
   const ElementData<T> d = load_element(m, e);
   Vec3<T> ue[4];
   corner_displacements(d, u, ue);
@@ -79,10 +80,10 @@ __device__ double element_energy(const ModelView<T>& m, const T* node_p, const P
     const T pbar = (node_p[d.c[0]] + node_p[d.c[1]] + node_p[d.c[2]] + node_p[d.c[3]]) / T(4);
     Jbar = T(1) + pbar / d.K;
   }
-  if (m.fibre) {  // the fibre term's energy (core/material.hpp)
+  if (fibre) {  // the fibre term's energy (core/material.hpp)
     ElementLaw<T> law;
-    law.a = {m.fibre[e], m.fibre[m.n_elems + e], m.fibre[2 * m.n_elems + e]};
-    law.eta = m.fibre[3 * m.n_elems + e];
+    law.a = {fibre[e], fibre[m.n_elems + e], fibre[2 * m.n_elems + e]};
+    law.eta = fibre[3 * m.n_elems + e];
     return double(element_strain_energy<LawTerms<true, false>>(F, J, Jbar, d.V, d.mu, d.K, law));
   }
   return double(element_strain_energy(F, J, Jbar, d.V, d.mu, d.K));
@@ -91,11 +92,11 @@ __device__ double element_energy(const ModelView<T>& m, const T* node_p, const P
 template <class T>
 __global__ void __launch_bounds__(kReduceBlock)
     reduce_partial_kernel(ModelView<T> m, StateView<T> s, RegionView r, FrontView front, StepBuffers<T> b,
-                          const T* energy_node_p, ReducePartial* out) {
+                          const T* energy_node_p, const T* fibre, ReducePartial* out) {
   ReducePartial p = zero_partial();
   for (index_t i = thread_index(); i < r.n_nodes; i += thread_stride()) accumulate_node(m, s, b, front, r.node(i), p);
   for (index_t i = thread_index(); i < r.n_elems; i += thread_stride())
-    p.energy += element_energy(m, energy_node_p, b.u, r.elem(i));
+    p.energy += element_energy(m, energy_node_p, b.u, r.elem(i), fibre);
   const ReducePartial sum = block_reduce(p);
   if (threadIdx.x == 0) out[blockIdx.x] = sum;
 }
@@ -156,7 +157,7 @@ Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const R
   }
   const int blocks = std::min(grid_for(std::max(r.n_nodes, r.n_elems), kReduceBlock), kMaxReduceBlocks);
   launch_blocks(blocks, kReduceBlock, stream, reduce_partial_kernel<T>, m, s, r, front, b,
-                static_cast<const T*>(node_p_.data()), partial_.data());
+                static_cast<const T*>(node_p_.data()), fibre_, partial_.data());
   launch_blocks(1, kReduceBlock, stream, reduce_final_kernel, blocks, partial_.data(), s.bad, result_.data());
   contact.reduce(m, s, result_.data(), stream);
   log.to_host(result_host_.data(), result_.data(), sizeof(Reductions), stream);

@@ -37,6 +37,8 @@ class Reducer {
   /// Partials, result and the strain energy's scratch (passes 1-2 at the
   /// current u: 4 n_elems + n_elems + n_nodes scalars).
   void allocate(index_t n_nodes, index_t n_elems);
+  /// The model's fibre term (LawView::fibre; null: none) for the energy.
+  void set_fibre(const T* fibre) { fibre_ = fibre; }
 
   /// Reduces over region r with the current buffers b; clears the bad flag;
   /// `contact` adds the per-tool contact results before the one download.
@@ -51,6 +53,7 @@ class Reducer {
   DeviceArray<Reductions> result_;      ///< (1)
   PinnedArray<Reductions> result_host_;
   DeviceArray<T> dv_slot_, elem_J_, node_p_;  ///< energy scratch
+  const T* fibre_ = nullptr;
 };
 
 }  // namespace tissue::gpu

@@ -15,10 +15,10 @@ int current_device_attribute(cudaDeviceAttr attr) {
   return v;
 }
 
-template <class T>
+template <class T, bool kLaw>
 int largest_cluster() {
   if (current_device_attribute(cudaDevAttrComputeCapabilityMajor) < 9) return 0;
-  if (cudaFuncSetAttribute(persistent_cluster_kernel<T>, cudaFuncAttributeNonPortableClusterSizeAllowed, 1) !=
+  if (cudaFuncSetAttribute(persistent_cluster_kernel<T, kLaw>, cudaFuncAttributeNonPortableClusterSizeAllowed, 1) !=
       cudaSuccess) {
     cudaGetLastError();  // clear: clusters are then limited to the portable size
   }
@@ -34,7 +34,7 @@ int largest_cluster() {
     cfg.attrs = &attr;
     cfg.numAttrs = 1;
     int clusters = 0;
-    if (cudaOccupancyMaxActiveClusters(&clusters, persistent_cluster_kernel<T>, &cfg) != cudaSuccess) {
+    if (cudaOccupancyMaxActiveClusters(&clusters, persistent_cluster_kernel<T, kLaw>, &cfg) != cudaSuccess) {
       cudaGetLastError();
       continue;
     }
@@ -51,11 +51,16 @@ void Stepper<T>::init() {
   limits_ = {};
   limits_.block = kClusterBlock<T>;
   if (current_device_attribute(cudaDevAttrCooperativeLaunch)) {
-    int per_sm = 0;
-    CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, persistent_grid_kernel<T>, kGridBlock, 0));
+    int per_sm = 0, law_per_sm = 0;
+    CUDA_CHECK(
+        cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, persistent_grid_kernel<T, false>, kGridBlock, 0));
+    CUDA_CHECK(
+        cudaOccupancyMaxActiveBlocksPerMultiprocessor(&law_per_sm, persistent_grid_kernel<T, true>, kGridBlock, 0));
     limits_.grid_blocks = per_sm * current_device_attribute(cudaDevAttrMultiProcessorCount);
+    limits_.law_grid_blocks = law_per_sm * current_device_attribute(cudaDevAttrMultiProcessorCount);
   }
-  limits_.cluster_size = largest_cluster<T>();
+  limits_.cluster_size = largest_cluster<T, false>();
+  limits_.law_cluster_size = largest_cluster<T, true>();
 }
 
 template <class T>
@@ -88,10 +93,10 @@ void Stepper<T>::nodal_pressure(const ModelView<T>& m, const StateView<T>& s, co
 template <class T>
 void Stepper<T>::element_forces(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                                 const Packed3<T>* u, cudaStream_t stream) {
-  if (m.neo_hookean())
-    launch_chained(r.n_elems, stream, element_forces_kernel<T, false>, m, s, r, u);
+  if (law_.neo_hookean())
+    launch_chained(r.n_elems, stream, element_forces_kernel<T>, m, s, r, u);
   else
-    launch_chained(r.n_elems, stream, element_forces_kernel<T, true>, m, s, r, u);
+    launch_chained(r.n_elems, stream, law_element_forces_kernel<T>, m, s, r, u, law_);
 }
 
 template <class T>
@@ -163,21 +168,27 @@ void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, const Reg
       break;
     case CudaStepMode::Grid: {
       const index_t items = std::max({r.n_elems, kNodeLanes * r.n_nodes, tools ? m.n_tris : 0});
-      const int blocks = std::clamp(grid_for(items, kGridBlock), 1, limits_.grid_blocks);
+      const bool law = !law_.neo_hookean();
+      const int blocks = std::clamp(grid_for(items, kGridBlock), 1,
+                                    std::max(1, law ? limits_.law_grid_blocks : limits_.grid_blocks));
       ModelView<T> ma = m;
       StateView<T> sa = s;
       RegionView ra = r;
       StepBuffers<T> b = ring.current();
       const ContactTools<T>* ta = tools;
-      void* args[] = {&ma, &sa, &ra, &b, &steps, &ta};
-      CUDA_CHECK(cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(persistent_grid_kernel<T>), dim3(blocks),
-                                             dim3(kGridBlock), args, 0, stream));
+      LawView<T> wa = law_;
+      void* args[] = {&ma, &sa, &ra, &b, &steps, &ta, &wa};
+      const void* kernel = law ? reinterpret_cast<const void*>(persistent_grid_kernel<T, true>)
+                               : reinterpret_cast<const void*>(persistent_grid_kernel<T, false>);
+      CUDA_CHECK(cudaLaunchCooperativeKernel(kernel, dim3(blocks), dim3(kGridBlock), args, 0, stream));
       ring.advance(steps);
       break;
     }
     case CudaStepMode::Cluster: {
       const index_t items = std::max({r.n_elems, kNodeLanes * r.n_nodes, tools ? m.n_tris : 0});
-      const int blocks = std::clamp(grid_for(items, kClusterBlock<T>), 1, limits_.cluster_size);
+      const bool law = !law_.neo_hookean();
+      const int blocks = std::clamp(grid_for(items, kClusterBlock<T>), 1,
+                                    std::max(1, law ? limits_.law_cluster_size : limits_.cluster_size));
       cudaLaunchConfig_t cfg = {};
       cfg.gridDim = dim3(blocks);
       cfg.blockDim = dim3(kClusterBlock<T>);
@@ -189,7 +200,13 @@ void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, const Reg
       attr.val.clusterDim.z = 1;
       cfg.attrs = &attr;
       cfg.numAttrs = 1;
-      CUDA_CHECK(cudaLaunchKernelEx(&cfg, persistent_cluster_kernel<T>, m, s, r, ring.current(), steps, tools));
+      if (law) {
+        CUDA_CHECK(cudaLaunchKernelEx(&cfg, persistent_cluster_kernel<T, true>, m, s, r, ring.current(), steps, tools,
+                                      law_));
+      } else {
+        CUDA_CHECK(cudaLaunchKernelEx(&cfg, persistent_cluster_kernel<T, false>, m, s, r, ring.current(), steps,
+                                      tools, law_));
+      }
       ring.advance(steps);
       break;
     }

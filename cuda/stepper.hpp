@@ -55,6 +55,7 @@ struct PersistentLimits {
   int grid_blocks = 0;   ///< co-resident blocks of the grid kernel (0: no cooperative launch)
   int cluster_size = 0;  ///< blocks of the largest schedulable cluster (0: no clusters)
   int block = 0;         ///< threads per block of the cluster kernel
+  int law_grid_blocks = 0, law_cluster_size = 0;  ///< the same for the law-term kernels (core/material.hpp)
 };
 
 template <class T>
@@ -69,6 +70,12 @@ class Stepper {
   void invalidate() { graphs_.clear(); }
 
   void set_mode(CudaStepMode mode);
+  /// The model's law terms (DeviceStore::law()): pass 3 runs the law kernel
+  /// when it has any.
+  void set_law(const LawView<T>& law) {
+    law_ = law;
+    graphs_.clear();
+  }
   CudaStepMode mode() const { return mode_; }
   /// The mode advance() uses for a region of this size (Auto resolved).
   CudaStepMode choose(const RegionView& r) const;
@@ -97,6 +104,7 @@ class Stepper {
 
   CudaStepMode mode_ = CudaStepMode::Auto;
   PersistentLimits limits_;
+  LawView<T> law_;
   /// (phase, steps, contact) -> graph; the tools' buffer is the backend's one device array
   std::map<std::tuple<int, int, bool>, GraphExec> graphs_;
 };

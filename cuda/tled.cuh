@@ -80,22 +80,22 @@ __device__ void element_pressure_at(const StateView<T>& s, const ElementData<T>&
 /// viscoelastic element (slot >= 0), its Prony constants and state. Absent
 /// terms keep ElementLaw's neutral values (eta = 0, gain = 0).
 template <class T>
-__device__ __forceinline__ index_t load_law(const ModelView<T>& m, const StateView<T>& s, index_t e,
+__device__ __forceinline__ index_t load_law(const ModelView<T>& m, const LawView<T>& w, index_t e,
                                             ElementLaw<T>& law) {
   const index_t ne = m.n_elems;
-  if (m.fibre) {
-    law.a = {__ldg(m.fibre + e), __ldg(m.fibre + ne + e), __ldg(m.fibre + 2 * ne + e)};
-    law.eta = __ldg(m.fibre + 3 * ne + e);
+  if (w.fibre) {
+    law.a = {__ldg(w.fibre + e), __ldg(w.fibre + ne + e), __ldg(w.fibre + 2 * ne + e)};
+    law.eta = __ldg(w.fibre + 3 * ne + e);
   }
-  const index_t v = m.visco_slot ? __ldg(m.visco_slot + e) : index_t(-1);
+  const index_t v = w.visco_slot ? __ldg(w.visco_slot + e) : index_t(-1);
   if (v >= 0) {
-    const index_t nv = m.n_visco;
+    const index_t nv = w.n_visco;
 #pragma unroll
     for (int i = 0; i < kMaxProny; ++i) {
-      law.decay[i] = __ldg(m.prony_decay + i * nv + v);
-      law.gain[i] = __ldg(m.prony_gain + i * nv + v);
+      law.decay[i] = __ldg(w.prony_decay + i * nv + v);
+      law.gain[i] = __ldg(w.prony_gain + i * nv + v);
 #pragma unroll
-      for (int c = 0; c < kSymComponents; ++c) law.q[i][c] = s.visco_q[(kSymComponents * i + c) * nv + v];
+      for (int c = 0; c < kSymComponents; ++c) law.q[i][c] = w.visco_q[(kSymComponents * i + c) * nv + v];
     }
   }
   return v;
@@ -106,43 +106,37 @@ __device__ __forceinline__ index_t load_law(const ModelView<T>& m, const StateVi
 /// element's set lacks it), out of line so that the Neo-Hookean path keeps
 /// its registers. Returns J as the Neo-Hookean path does.
 template <class T>
-__device__ __forceinline__ T law_element_forces(const ModelView<T>& m, const StateView<T>& s, const ElementData<T>& d,
-                                             const Vec3<T> ue[4], bool ianp, T pbar, Vec3<T> f[4]) {
+__device__ __forceinline__ T law_element_forces(const ModelView<T>& m, const LawView<T>& w, const ElementData<T>& d,
+                                                const Vec3<T> ue[4], bool ianp, T pbar, Vec3<T> f[4]) {
   using All = LawTerms<true, true>;
   ElementLaw<T> law;
-  const index_t v = load_law(m, s, d.e, law);
+  const index_t v = load_law(m, w, d.e, law);
   const Mat3<T> F = deformation_gradient(ue, d.dN);
   const T J = ianp ? ianp_element_forces<All>(F, d.dN, d.V, d.mu, d.K, pbar, f, law)
                    : plain_element_forces<All>(F, d.dN, d.V, d.mu, d.K, f, law);
   if (v >= 0) {
-    const index_t nv = m.n_visco;
+    const index_t nv = w.n_visco;
 #pragma unroll
     for (int i = 0; i < kMaxProny; ++i)
 #pragma unroll
-      for (int c = 0; c < kSymComponents; ++c) s.visco_q[(kSymComponents * i + c) * nv + v] = law.q[i][c];
+      for (int c = 0; c < kSymComponents; ++c) w.visco_q[(kSymComponents * i + c) * nv + v] = law.q[i][c];
   }
   return J;
 }
 
 /// Pass 3 for an element: pbar = (1/4) sum_a p_a, then IANP forces (or plain
 /// tet forces when the model has ianp off) into the node_elem slots of its
-/// corners, with the law terms of core/material.hpp when the model has any.
-/// An element with J <= 0, Jbar <= 0 or a non-finite J is recorded
+/// corners. An element with J <= 0, Jbar <= 0 or a non-finite J is recorded
 /// in s.bad (lowest wins; its forces are zero, as core's functions return).
-/// kLaw: the instantiation for a model with law terms (the kernels pick it
-/// at launch), so a Neo-Hookean kernel holds no law code and no law registers.
-template <class T, bool kLaw>
-__device__ void element_forces_at(const ModelView<T>& m, const StateView<T>& s, const ElementData<T>& d,
-                                  const Packed3<T>* u) {
+/// Neo-Hookean: the kernels of a model without law terms run exactly this.
+template <class T>
+__device__ void element_forces_at(const StateView<T>& s, const ElementData<T>& d, const Packed3<T>* u, bool ianp) {
   Vec3<T> ue[4];
   corner_displacements(d, u, ue);
   Vec3<T> f[4];
   T J;
-  const T pbar =
-      m.ianp ? (s.node_p[d.c[0]] + s.node_p[d.c[1]] + s.node_p[d.c[2]] + s.node_p[d.c[3]]) / T(4) : T(0);
-  if constexpr (kLaw) {
-    J = law_element_forces(m, s, d, ue, m.ianp, pbar, f);
-  } else if (m.ianp) {
+  if (ianp) {
+    const T pbar = (s.node_p[d.c[0]] + s.node_p[d.c[1]] + s.node_p[d.c[2]] + s.node_p[d.c[3]]) / T(4);
     J = ianp_element_forces(ue, d.dN, d.V, d.mu, d.K, pbar, f);
   } else {
     J = plain_element_forces(ue, d.dN, d.V, d.mu, d.K, f);
@@ -152,12 +146,19 @@ __device__ void element_forces_at(const ModelView<T>& m, const StateView<T>& s, 
   for (int a = 0; a < 4; ++a) s.f_slot[d.slot[a]] = Packed3<T>::of(f[a]);
 }
 
-/// The law instantiation out of line, for the persistent kernels (which
-/// branch at run time: one kernel serves every model).
+/// The same with the law terms of core/material.hpp (a model that has any).
 template <class T>
-__device__ __noinline__ void law_elements_at(const ModelView<T>& m, const StateView<T>& s, const ElementData<T>& d,
-                                             const Packed3<T>* u) {
-  element_forces_at<T, true>(m, s, d, u);
+__device__ void law_element_forces_at(const ModelView<T>& m, const StateView<T>& s, const ElementData<T>& d,
+                                      const Packed3<T>* u, const LawView<T>& w) {
+  Vec3<T> ue[4];
+  corner_displacements(d, u, ue);
+  Vec3<T> f[4];
+  const T pbar =
+      m.ianp ? (s.node_p[d.c[0]] + s.node_p[d.c[1]] + s.node_p[d.c[2]] + s.node_p[d.c[3]]) / T(4) : T(0);
+  const T J = law_element_forces(m, w, d, ue, m.ianp, pbar, f);
+  if (!(J > T(0)) || !isfinite(J)) atomicMin(s.bad, bad_key(d.e, static_cast<float>(J)));
+#pragma unroll
+  for (int a = 0; a < 4; ++a) s.f_slot[d.slot[a]] = Packed3<T>::of(f[a]);
 }
 
 /// Lanes that share one node in passes 2 and 4: lane j of a node's group
@@ -256,7 +257,7 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
   if (active) nodal_pressure_at(m, s, d);
 }
 
-template <class T, bool kLaw>
+template <class T>
 __global__ void element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
   let_next_pass_launch();
   const index_t i = thread_index();
@@ -264,7 +265,20 @@ __global__ void element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView
   ElementData<T> d;
   if (active) d = load_element(m, r.elem(i));
   wait_for_previous_pass();
-  if (active) element_forces_at<T, kLaw>(m, s, d, u);
+  if (active) element_forces_at(s, d, u, m.ianp);
+}
+
+/// Pass 3 of a model with law terms (core/material.hpp).
+template <class T>
+__global__ void law_element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u,
+                                          LawView<T> w) {
+  let_next_pass_launch();
+  const index_t i = thread_index();
+  const bool active = i < r.n_elems;
+  ElementData<T> d;
+  if (active) d = load_element(m, r.elem(i));
+  wait_for_previous_pass();
+  if (active) law_element_forces_at(m, s, d, u, w);
 }
 
 template <class T>
@@ -296,9 +310,9 @@ struct ClusterBarrier {
 /// separates passes (and steps); with tools, each step ends with the
 /// contact stage (cuda/contact.cuh) over the surface. The buffers rotate per
 /// step.
-template <class T, class Barrier>
+template <class T, bool kLaw, class Barrier>
 __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
-                          int steps, const ContactTools<T>* tools, Barrier barrier) {
+                          int steps, const ContactTools<T>* tools, const LawView<T>& w, Barrier barrier) {
   const index_t first = thread_index(), stride = thread_stride();
   const index_t node_items = kNodeLanes * r.n_nodes;
   const int lane = first % kNodeLanes;
@@ -310,10 +324,10 @@ __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const Re
       nodal_pressure_at(m, s, load_node(m, r.node(g / kNodeLanes), lane, mask));
     barrier();
     for (index_t i = first; i < r.n_elems; i += stride) {
-      if (m.neo_hookean())  // uniform; the law path is out of line (law_elements_at)
-        element_forces_at<T, false>(m, s, load_element(m, r.elem(i)), b.u);
+      if constexpr (kLaw)
+        law_element_forces_at(m, s, load_element(m, r.elem(i)), b.u, w);
       else
-        law_elements_at(m, s, load_element(m, r.elem(i)), b.u);
+        element_forces_at(s, load_element(m, r.elem(i)), b.u, m.ianp);
     }
     barrier();
     for (index_t g = first; g < node_items; g += stride)
@@ -339,18 +353,20 @@ inline constexpr int kGridBlock = 256;
 template <class T>
 inline constexpr int kClusterBlock = sizeof(T) == 4 ? 1024 : 512;
 
-template <class T>
+/// kLaw: the instantiation for a model with law terms (core/material.hpp),
+/// chosen at launch like pass 3's kernels.
+template <class T, bool kLaw>
 __global__ void __launch_bounds__(kGridBlock)
     persistent_grid_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b, int steps,
-                           const ContactTools<T>* tools) {
-  run_steps(m, s, r, b, steps, tools, GridBarrier{});
+                           const ContactTools<T>* tools, LawView<T> w) {
+  run_steps<T, kLaw>(m, s, r, b, steps, tools, w, GridBarrier{});
 }
 
-template <class T>
+template <class T, bool kLaw>
 __global__ void __launch_bounds__(kClusterBlock<T>)
     persistent_cluster_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b, int steps,
-                              const ContactTools<T>* tools) {
-  run_steps(m, s, r, b, steps, tools, ClusterBarrier{});
+                              const ContactTools<T>* tools, LawView<T> w) {
+  run_steps<T, kLaw>(m, s, r, b, steps, tools, w, ClusterBarrier{});
 }
 
 }  // namespace tissue::gpu

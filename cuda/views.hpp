@@ -57,12 +57,20 @@ struct ModelView {
   const index_t* surf_slot = nullptr;     ///< each surface node's (triangle, corner) slots 3 t + k (3 n_tris)
   double dt = 0;                          ///< s
   bool ianp = true;
-  // optional law terms (core/material.hpp): null when no set uses them
+};
+
+/// The optional law terms (core/material.hpp) on the device: null when no
+/// set uses them. Kept out of ModelView so that a Neo-Hookean model's
+/// kernels take exactly the arguments they took before the terms existed;
+/// only the law kernels and the persistent kernels receive it.
+template <class T>
+struct LawView {
   const T* fibre = nullptr;               ///< (4 x n_elems: a_x, a_y, a_z, eta Pa)
   const index_t* visco_slot = nullptr;    ///< Prony state slot per element, -1 elastic (n_elems)
   index_t n_visco = 0;
   const T* prony_decay = nullptr;         ///< (kMaxProny x n_visco)
   const T* prony_gain = nullptr;          ///< (kMaxProny x n_visco)
+  T* visco_q = nullptr;                   ///< Prony state q[(6 i + c) * n_visco + slot] (core/state.hpp)
   TISSUE_HD bool neo_hookean() const { return !fibre && !visco_slot; }
 };
 
@@ -100,7 +108,6 @@ struct StateView {
   Packed3<T>* f_slot = nullptr;        ///< pass 3: f_a^e per node_elem slot (4 n_elems) N
   Packed3<T>* f = nullptr;             ///< pass 4: internal force (n_nodes) N
   unsigned long long* bad = nullptr;   ///< lowest bad element key (see bad_key), ~0 = none
-  T* visco_q = nullptr;                ///< Prony state q[(6 i + c) * n_visco + slot] (core/state.hpp); null without
   // contact (core/contact.hpp)
   std::uint8_t* contact = nullptr;     ///< ContactKind after the last step (n_nodes)
   signed char* contact_tool = nullptr; ///< the tool touched, -1 none (n_nodes)
