@@ -25,6 +25,7 @@ p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 p.add_argument("--backend", default=None, help="cpu or cuda (default: the scene's)")
 p.add_argument("--precision", default=None)
 p.add_argument("--ticks", type=int, default=0, help="ticks to run (default: the whole path)")
+p.add_argument("--quick", action="store_true", help="0.6 s of the hold only (tests)")
 p.add_argument("--json", default=None, help="also write the curves here")
 p.add_argument("-o", "--output", default=None, help="plot (PNG)")
 a = p.parse_args()
@@ -32,7 +33,7 @@ a = p.parse_args()
 visco = tissue.Simulation.load("@kidney-visco", backend=a.backend, precision=a.precision)
 elastic = tissue.Simulation.load("@kidney", backend=a.backend, precision=a.precision)
 visco.follow_scene_path(0)
-ticks = a.ticks or 3500
+ticks = a.ticks or (900 if a.quick else 3500)
 t, fv, fe, tip = [], [], [], []
 for k in range(ticks):
     rv = visco.step()
