@@ -26,25 +26,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-/// A generated test mesh: box of c^3 cells x 6 tets, soft tissue material.
-/// (fix_bottom: the nodes at z = 0 are fixed -- a pressed slab must not fly off)
-TissueModel<double> box_model(int nx, int ny, int nz, double lx, double ly, double lz, bool fix_bottom = false) {
-  ModelInput in;
-  box_mesh(in, nx, ny, nz, lx, ly, lz);
-  in.materials = {{3000 / 2.9, 3000 / 0.3, 1000}};  // E = 3000 Pa, nu = 0.45
-  if (fix_bottom) {
-    in.fixed.assign(in.nodes.size() / 3, 0);
-    for (std::size_t i = 0; i < in.fixed.size(); ++i) in.fixed[i] = in.nodes[3 * i + 2] == 0.0;
-  }
-  in.source = fmt::format("box {}x{}x{}", nx, ny, nz);
-  return build_model(in);
-}
-
-struct NamedModel {
-  std::string name;
-  TissueModel<double> model;
-};
-
 /// Adds the terms of a bench law (BenchOptions::laws) to a material: two
 /// Prony terms (g = 0.3, 0.2; tau = 0.5, 5 s) and/or fibres along x with
 /// eta = 2 mu.
@@ -61,6 +42,28 @@ void apply_law(const std::string& law, MaterialParams& p) {
     p.fibre_dir = {1, 0, 0};
   }
 }
+
+/// A generated test mesh: box of c^3 cells x 6 tets, soft tissue material
+/// with a bench law's terms. (fix_bottom: the nodes at z = 0 are fixed -- a
+/// pressed slab must not fly off)
+TissueModel<double> box_model(int nx, int ny, int nz, double lx, double ly, double lz, bool fix_bottom = false,
+                              const std::string& law = "neo-hookean") {
+  ModelInput in;
+  box_mesh(in, nx, ny, nz, lx, ly, lz);
+  in.materials = {{3000 / 2.9, 3000 / 0.3, 1000}};  // E = 3000 Pa, nu = 0.45
+  apply_law(law, in.materials[0]);
+  if (fix_bottom) {
+    in.fixed.assign(in.nodes.size() / 3, 0);
+    for (std::size_t i = 0; i < in.fixed.size(); ++i) in.fixed[i] = in.nodes[3 * i + 2] == 0.0;
+  }
+  in.source = fmt::format("box {}x{}x{}", nx, ny, nz);
+  return build_model(in);
+}
+
+struct NamedModel {
+  std::string name;
+  TissueModel<double> model;
+};
 
 /// The built-in kidney scene with a bench law's terms on its material.
 scene::Scene kidney_with_law(const std::string& law) {
@@ -82,13 +85,7 @@ NamedModel mesh_by_name(const std::string& name, bool quick, const std::string& 
   if (want < 0) throw std::invalid_argument("unknown bench mesh '" + name + "' (kidney, 100k, 1m, 4m)");
   int c = static_cast<int>(std::lround(std::cbrt(want / 6.0)));
   if (quick) c = std::min(c, 8);
-  if (law == "neo-hookean") return {name, box_model(c, c, c, 0.1, 0.1, 0.1)};
-  ModelInput in;
-  box_mesh(in, c, c, c, 0.1, 0.1, 0.1);
-  in.materials = {{3000 / 2.9, 3000 / 0.3, 1000}};  // as box_model
-  apply_law(law, in.materials[0]);
-  in.source = fmt::format("box {}x{}x{}", c, c, c);
-  return {name, build_model(in)};
+  return {name, box_model(c, c, c, 0.1, 0.1, 0.1, false, law)};
 }
 
 struct Row {

@@ -24,12 +24,11 @@ namespace tissue {
 template <class Terms, class T>
 TISSUE_HD T element_strain_energy(const Mat3<T>& F, T J, T Jbar, T volume, T mu, T K, const ElementLaw<T>& law) {
   const bool ok = (J > T(0)) & (J <= std::numeric_limits<T>::max());  // & not &&: no branch
-  const T Js = ok ? J : T(1);
-  const T cbrt_J = cube_root(Js);
-  const T I1 = trace(transpose(F) * F);
-  const T iso = mu / T(2) * (I1 / (cbrt_J * cbrt_J) - T(3));
+  const T cbrt_J = cube_root(ok ? J : T(1));
+  const Mat3<T> C = transpose(F) * F;
+  const T iso = mu / T(2) * (trace(C) / (cbrt_J * cbrt_J) - T(3));
   const T vol = K / T(2) * (Jbar - T(1)) * (Jbar - T(1));
-  const T w = iso + vol + extra_energy<Terms>(F, Js, law);  // the fibre term (core/material.hpp)
+  const T w = iso + vol + extra_energy<Terms>(C, T(1) / (cbrt_J * cbrt_J), law);  // the fibre term
   return ok ? volume * w : T(0);
 }
 

@@ -96,15 +96,12 @@ TISSUE_HD Mat3<T> prony_update(const Mat3<T>& S_iso, ElementLaw<T>& law) {
   return {{sum[0], sum[3], sum[5], sum[3], sum[1], sum[4], sum[5], sum[4], sum[2]}};
 }
 
-/// The strain energy density (J/m^3) of the optional elastic terms at F
-/// (the Neo-Hookean part is core/energy.hpp's). The Prony state's stored
-/// energy is not included (docs/materials.md: a viscoelastic set reports
-/// its instantaneous elastic energy).
+/// The strain energy density (J/m^3) of the optional elastic terms, from
+/// C = F^T F and J^(-2/3) (the Neo-Hookean part is core/energy.hpp's). The
+/// Prony state's stored energy is not included (docs/materials.md: a
+/// viscoelastic set reports its instantaneous elastic energy).
 template <class Terms, class T>
-TISSUE_HD T extra_energy(const Mat3<T>& F, T J, const ElementLaw<T>& law) {
-  const Mat3<T> C = transpose(F) * F;
-  const T cbrt_J = cube_root(J);
-  const T j23 = T(1) / (cbrt_J * cbrt_J);
+TISSUE_HD T extra_energy(const Mat3<T>& C, T j23, const ElementLaw<T>& law) {
   if constexpr (Terms::fibre) return fibre_energy(C, j23, law.a, law.eta);
   return T(0);
 }

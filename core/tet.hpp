@@ -83,19 +83,14 @@ TISSUE_HD Mat3<T> neo_hookean_pk2(const Mat3<T>& F, T J, T mu, T K) {
 /// never calls it: its kernels are neo_hookean_pk2's alone.
 template <class Terms, class T>
 TISSUE_HD Mat3<T> law_pk2(const Mat3<T>& F, T J, T mu, T K, ElementLaw<T>& law) {
-  const Mat3<T> C = transpose(F) * F;
-  const T I1 = trace(C);
-  const Mat3<T> Ci = inverse(C, J * J);  // det C = J^2
+  Mat3<T> S = neo_hookean_pk2(F, J, mu, K);
+  const Mat3<T> C = transpose(F) * F;  // the compiler shares these with neo_hookean_pk2's
+  const Mat3<T> Ci = inverse(C, J * J);
   const T cbrt_J = cube_root(J);
   const T j23 = T(1) / (cbrt_J * cbrt_J);
-  const T a = mu / (cbrt_J * cbrt_J);  // mu J^(-2/3)
-  const T b = -a * I1 / T(3) + K * J * (J - T(1));
-  Mat3<T> S = b * Ci;
-  S(0, 0) += a;
-  S(1, 1) += a;
-  S(2, 2) += a;
   if constexpr (Terms::visco) {
-    Mat3<T> S_iso = (-a * I1 / T(3)) * Ci;  // the isochoric part alone
+    const T a = mu / (cbrt_J * cbrt_J);  // mu J^(-2/3)
+    Mat3<T> S_iso = (-a * trace(C) / T(3)) * Ci;  // the isochoric part alone
     S_iso(0, 0) += a;
     S_iso(1, 1) += a;
     S_iso(2, 2) += a;

@@ -77,66 +77,73 @@ TISSUE_SIMD_CLONES void lanes_pressure(ElementLanes<T>& b) {
   }
 }
 
-template <class T, bool kIanp>
-TISSUE_SIMD_CLONES void lanes_forces(ElementLanes<T>& b) {
+/// Pass 3's lane loop for the terms Terms instantiates (w: their lanes;
+/// unused for Neo-Hookean, whose lanes call core's Neo-Hookean routines
+/// and touch no law data). Inlined into each SIMD clone below.
+template <class T, bool kIanp, class Terms>
+__attribute__((always_inline)) inline void forces_loop(ElementLanes<T>& b, LawLanes<T>* w) {
+  constexpr bool kLaw = Terms::fibre || Terms::visco;
 #pragma GCC ivdep
   for (int l = 0; l < kLanes; ++l) {
     Vec3<T> f[4];
     T dN[12];
     lane_dN(b, l, dN);
     const Mat3<T> F = lane_F(b, l);
-    if constexpr (kIanp)
+    if constexpr (kLaw) {
+      ElementLaw<T> law = lane_law<Terms>(*w, l);
+      if constexpr (kIanp)
+        b.ret[l] = ianp_element_forces<Terms>(F, dN, b.V(0, l), b.mu(0, l), b.K(0, l), b.pbar[l], f, law);
+      else
+        b.ret[l] = plain_element_forces<Terms>(F, dN, b.V(0, l), b.mu(0, l), b.K(0, l), f, law);
+      if constexpr (Terms::visco) {
+        TISSUE_UNROLL
+        for (int i = 0; i < kMaxProny; ++i)
+          TISSUE_UNROLL
+          for (int c = 0; c < kSymComponents; ++c) w->q[kSymComponents * i + c][l] = law.q[i][c];
+      }
+    } else if constexpr (kIanp) {
       b.ret[l] = ianp_element_forces(F, dN, b.V(0, l), b.mu(0, l), b.K(0, l), b.pbar[l], f);
-    else
+    } else {
       b.ret[l] = plain_element_forces(F, dN, b.V(0, l), b.mu(0, l), b.K(0, l), f);
+    }
     store_forces(b, l, f);
   }
+}
+
+template <class T, bool kIanp>
+TISSUE_SIMD_CLONES void lanes_forces(ElementLanes<T>& b) {
+  forces_loop<T, kIanp, NeoHookeanTerms>(b, nullptr);
 }
 
 template <class T, bool kIanp, class Terms>
 TISSUE_SIMD_CLONES void lanes_forces_law(ElementLanes<T>& b, LawLanes<T>& w) {
-#pragma GCC ivdep
-  for (int l = 0; l < kLanes; ++l) {
-    Vec3<T> f[4];
-    T dN[12];
-    lane_dN(b, l, dN);
-    const Mat3<T> F = lane_F(b, l);
-    ElementLaw<T> law = lane_law<Terms>(w, l);
-    if constexpr (kIanp)
-      b.ret[l] = ianp_element_forces<Terms>(F, dN, b.V(0, l), b.mu(0, l), b.K(0, l), b.pbar[l], f, law);
-    else
-      b.ret[l] = plain_element_forces<Terms>(F, dN, b.V(0, l), b.mu(0, l), b.K(0, l), f, law);
-    store_forces(b, l, f);
-    if constexpr (Terms::visco) {
-      TISSUE_UNROLL
-      for (int i = 0; i < kMaxProny; ++i)
-        TISSUE_UNROLL
-        for (int c = 0; c < kSymComponents; ++c) w.q[kSymComponents * i + c][l] = law.q[i][c];
-    }
-  }
+  forces_loop<T, kIanp, Terms>(b, &w);
 }
 
-template <class T, bool kIanp>
-TISSUE_SIMD_CLONES void lanes_energy(ElementLanes<T>& b) {
-#pragma GCC ivdep
-  for (int l = 0; l < kLanes; ++l) {
-    const Mat3<T> F = lane_F(b, l);
-    const T J = det(F);
-    const T Jbar = kIanp ? T(1) + b.pbar[l] / b.K(0, l) : J;
-    b.ret[l] = element_strain_energy(F, J, Jbar, b.V(0, l), b.mu(0, l), b.K(0, l));
-  }
-}
-
-template <class T, bool kIanp>
-TISSUE_SIMD_CLONES void lanes_energy_fibre(ElementLanes<T>& b, const LawLanes<T>& w) {
+/// The energy's lane loop: Neo-Hookean (w unused) or with the fibre term.
+template <class T, bool kIanp, bool kFibre>
+__attribute__((always_inline)) inline void energy_loop(ElementLanes<T>& b, const LawLanes<T>* w) {
   using Fibre = LawTerms<true, false>;
 #pragma GCC ivdep
   for (int l = 0; l < kLanes; ++l) {
     const Mat3<T> F = lane_F(b, l);
     const T J = det(F);
     const T Jbar = kIanp ? T(1) + b.pbar[l] / b.K(0, l) : J;
-    b.ret[l] = element_strain_energy<Fibre>(F, J, Jbar, b.V(0, l), b.mu(0, l), b.K(0, l), lane_law<Fibre>(w, l));
+    if constexpr (kFibre)
+      b.ret[l] = element_strain_energy<Fibre>(F, J, Jbar, b.V(0, l), b.mu(0, l), b.K(0, l), lane_law<Fibre>(*w, l));
+    else
+      b.ret[l] = element_strain_energy(F, J, Jbar, b.V(0, l), b.mu(0, l), b.K(0, l));
   }
+}
+
+template <class T, bool kIanp>
+TISSUE_SIMD_CLONES void lanes_energy(ElementLanes<T>& b) {
+  energy_loop<T, kIanp, false>(b, nullptr);
+}
+
+template <class T, bool kIanp>
+TISSUE_SIMD_CLONES void lanes_energy_fibre(ElementLanes<T>& b, const LawLanes<T>& w) {
+  energy_loop<T, kIanp, true>(b, &w);
 }
 
 #define TISSUE_CPU_LANES_LAW(T, I)                                                            \

@@ -82,8 +82,7 @@ __device__ double element_energy(const ModelView<T>& m, const T* node_p, const P
   }
   if (fibre) {  // the fibre term's energy (core/material.hpp)
     ElementLaw<T> law;
-    law.a = {fibre[e], fibre[m.n_elems + e], fibre[2 * m.n_elems + e]};
-    law.eta = fibre[3 * m.n_elems + e];
+    load_fibre(fibre, m.n_elems, e, law);
     return double(element_strain_energy<LawTerms<true, false>>(F, J, Jbar, d.V, d.mu, d.K, law));
   }
   return double(element_strain_energy(F, J, Jbar, d.V, d.mu, d.K));

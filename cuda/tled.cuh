@@ -79,14 +79,17 @@ __device__ void element_pressure_at(const StateView<T>& s, const ElementData<T>&
 /// An element's optional law terms (core/material.hpp): its fibre and, for a
 /// viscoelastic element (slot >= 0), its Prony constants and state. Absent
 /// terms keep ElementLaw's neutral values (eta = 0, gain = 0).
+/// Element e's fibre direction and stiffness from LawView::fibre (4 x ne).
+template <class T>
+__device__ __forceinline__ void load_fibre(const T* fibre, index_t ne, index_t e, ElementLaw<T>& law) {
+  law.a = {__ldg(fibre + e), __ldg(fibre + ne + e), __ldg(fibre + 2 * ne + e)};
+  law.eta = __ldg(fibre + 3 * ne + e);
+}
+
 template <class T>
 __device__ __forceinline__ index_t load_law(const ModelView<T>& m, const LawView<T>& w, index_t e,
                                             ElementLaw<T>& law) {
-  const index_t ne = m.n_elems;
-  if (w.fibre) {
-    law.a = {__ldg(w.fibre + e), __ldg(w.fibre + ne + e), __ldg(w.fibre + 2 * ne + e)};
-    law.eta = __ldg(w.fibre + 3 * ne + e);
-  }
+  if (w.fibre) load_fibre(w.fibre, m.n_elems, e, law);
   const index_t v = w.visco_slot ? __ldg(w.visco_slot + e) : index_t(-1);
   if (v >= 0) {
     const index_t nv = w.n_visco;

@@ -33,7 +33,7 @@ struct Material {
   double fibre_eta = 0;  ///< fibre stiffness eta (Pa); 0 = isotropic
   Vec3<double> fibre_dir = {1, 0, 0};  ///< fibre direction (any length but 0)
   int fibre_line = 0;    ///< line of the <fibre> element (0 = none)
-  std::vector<Prony> prony;  ///< empty = elastic
+  std::vector<Prony> prony = {};  ///< empty = elastic
 
   /// mu and K of this material, with rho (no validation):
   /// YoungPoisson: mu = E / (2 (1 + nu)), K = E / (3 (1 - 2 nu));

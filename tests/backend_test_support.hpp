@@ -4,10 +4,15 @@
 // inverted element).
 #pragma once
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
+#include <ostream>
+#include <string>
 #include <vector>
 
+#include "backends/registry.hpp"
 #include "core/box_mesh.hpp"
 #include "core/model.hpp"
 #include "core/tet.hpp"
@@ -15,6 +20,38 @@
 namespace tissue::test {
 
 constexpr double kL = 0.02;  // box edge (m)
+
+/// One backend and precision of the suites that run over every one (the
+/// contract, the materials): cpu and cuda, float and double.
+struct BackendKind {
+  std::string backend;
+  Precision precision;
+};
+
+inline void PrintTo(const BackendKind& k, std::ostream* os) { *os << k.backend << " " << to_string(k.precision); }
+
+inline std::vector<BackendKind> all_backend_kinds() {
+  return {{"cpu", Precision::Float}, {"cpu", Precision::Double}, {"cuda", Precision::Float}, {"cuda", Precision::Double}};
+}
+
+/// Test name suffix: "cpu_float", ...
+inline std::string backend_kind_name(const ::testing::TestParamInfo<BackendKind>& info) {
+  return info.param.backend + "_" + to_string(info.param.precision);
+}
+
+/// Why `backend` cannot run here (not built, no device), or "" when it can.
+inline std::string unusable_reason(const std::string& backend) {
+  for (const BackendInfo& b : list_backends())
+    if (b.name == backend && !b.available) return b.detail;
+  return "";
+}
+
+/// Skips the calling test when its backend cannot run here, naming why.
+#define SKIP_UNLESS_USABLE(backend)                                                          \
+  do {                                                                                       \
+    if (const std::string why = ::tissue::test::unusable_reason(backend); !why.empty())     \
+      GTEST_SKIP() << "backend '" << (backend) << "' is not usable here: " << why;           \
+  } while (0)
 
 /// A kL-sized box of n^3 cells, brain-like tissue (E = 3000 Pa, nu = 0.45,
 /// rho = 1000 kg/m^3); optionally the bottom face z = 0 fixed.

@@ -28,20 +28,9 @@ namespace {
 
 using namespace tissue::test;
 
-struct Kind {
-  std::string backend;
-  Precision precision;
-};
-
-void PrintTo(const Kind& k, std::ostream* os) { *os << k.backend << " " << to_string(k.precision); }
-
-class Contract : public ::testing::TestWithParam<Kind> {
+class Contract : public ::testing::TestWithParam<test::BackendKind> {
  protected:
-  void SetUp() override {
-    for (const BackendInfo& b : list_backends())
-      if (b.name == GetParam().backend && !b.available)
-        GTEST_SKIP() << "backend '" << b.name << "' is not usable here: " << b.detail;
-  }
+  void SetUp() override { SKIP_UNLESS_USABLE(GetParam().backend); }
   bool is_float() const { return GetParam().precision == Precision::Float; }
   std::unique_ptr<Backend> make() const { return create_backend(GetParam().backend, GetParam().precision); }
   std::unique_ptr<Backend> make(const TissueModel<double>& m) const {
@@ -54,9 +43,7 @@ class Contract : public ::testing::TestWithParam<Kind> {
 };
 
 INSTANTIATE_TEST_SUITE_P(Backends, Contract,
-                         ::testing::Values(Kind{"cpu", Precision::Float}, Kind{"cpu", Precision::Double},
-                                           Kind{"cuda", Precision::Float}, Kind{"cuda", Precision::Double}),
-                         [](const auto& info) { return info.param.backend + "_" + to_string(info.param.precision); });
+                         ::testing::ValuesIn(test::all_backend_kinds()), test::backend_kind_name);
 
 TEST_P(Contract, IdentifiesItself) {
   auto b = make();

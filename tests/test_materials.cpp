@@ -24,6 +24,7 @@
 #include "io/kidney.hpp"
 #include "io/scene_xml.hpp"
 #include "scene/validate.hpp"
+#include "tests/backend_test_support.hpp"
 
 namespace tissue {
 namespace {
@@ -142,13 +143,6 @@ TEST(Material, HeldStrainRelaxesAlongThePronySeries) {
 
 // ---- every backend and precision -------------------------------------------
 
-struct Kind {
-  std::string backend;
-  Precision precision;
-};
-
-void PrintTo(const Kind& k, std::ostream* os) { *os << k.backend << " " << to_string(k.precision); }
-
 constexpr double kL = 0.01;  // box edge (m)
 
 /// A box of 2^3 cells; every element in set 0 unless `split`: then the
@@ -191,13 +185,9 @@ MaterialParams law_params(bool fibre, bool visco, Vec3<double> dir = {1, 0, 0}) 
   return p;
 }
 
-class Laws : public ::testing::TestWithParam<Kind> {
+class Laws : public ::testing::TestWithParam<test::BackendKind> {
  protected:
-  void SetUp() override {
-    for (const BackendInfo& b : list_backends())
-      if (b.name == GetParam().backend && !b.available)
-        GTEST_SKIP() << "backend '" << b.name << "' is not usable here: " << b.detail;
-  }
+  void SetUp() override { SKIP_UNLESS_USABLE(GetParam().backend); }
   bool is_float() const { return GetParam().precision == Precision::Float; }
   /// Prints a measured error for docs/materials.md.
   void report(const std::string& what, double err) const {
@@ -243,9 +233,7 @@ class Laws : public ::testing::TestWithParam<Kind> {
 };
 
 INSTANTIATE_TEST_SUITE_P(Backends, Laws,
-                         ::testing::Values(Kind{"cpu", Precision::Float}, Kind{"cpu", Precision::Double},
-                                           Kind{"cuda", Precision::Float}, Kind{"cuda", Precision::Double}),
-                         [](const auto& info) { return info.param.backend + "_" + to_string(info.param.precision); });
+                         ::testing::ValuesIn(test::all_backend_kinds()), test::backend_kind_name);
 
 TEST_P(Laws, UniaxialStretchAlongAndAcrossTheFibres) {
   const double l[3] = {1.2, 0.93, 0.93};
