@@ -48,6 +48,7 @@ void Backend::upload(const TissueModel<double>& m) {
   motion_.clear();
   grasp_pose_.clear();
   grasping_.clear();
+  loaded_.clear();
 }
 
 void Backend::set_displacements(std::span<const double> u) {
@@ -132,6 +133,36 @@ void Backend::set_driven_axes(std::span<const index_t> nodes, std::span<const do
 void Backend::clear_driven() {
   require_upload("clear_driven");
   do_clear_driven();
+}
+
+void Backend::set_loads(std::span<const index_t> nodes, std::span<const double> force) {
+  require_upload("set_loads");
+  if (force.size() != 3 * nodes.size())
+    throw std::invalid_argument(
+        fmt::format("set_loads: {} force values for {} nodes (need 3 per node)", force.size(), nodes.size()));
+  const index_t n = n_nodes_;
+  std::vector<double> load;
+  std::vector<index_t> loaded;
+  if (!nodes.empty()) load.assign(3 * std::size_t(n), 0.0);
+  for (std::size_t k = 0; k < nodes.size(); ++k) {
+    const index_t a = nodes[k];
+    if (a < 0 || a >= n) throw std::invalid_argument(fmt::format("set_loads: node {} out of range (0..{})", a, n - 1));
+    for (int c = 0; c < 3; ++c) {
+      if (!std::isfinite(force[3 * k + c]))
+        throw std::invalid_argument(
+            fmt::format("set_loads: node {}: force {} = {} N is not finite", a, "xyz"[c], force[3 * k + c]));
+      load[c * std::size_t(n) + a] += force[3 * k + c];
+    }
+    loaded.push_back(a);
+  }
+  for (std::size_t k = 0; k < load.size(); ++k)
+    if (!std::isfinite(load[k]))
+      throw std::invalid_argument(fmt::format("set_loads: node {}: the forces given for it sum to {} N in {}",
+                                              k % n, load[k], "xyz"[k / n]));
+  std::sort(loaded.begin(), loaded.end());
+  loaded.erase(std::unique(loaded.begin(), loaded.end()), loaded.end());
+  do_set_loads(load);
+  loaded_ = std::move(loaded);
 }
 
 void Backend::set_tools(std::span<const ToolShape> tools, const ContactOptions& options) {

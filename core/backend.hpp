@@ -76,7 +76,7 @@ struct Fields {
   std::vector<double> u;       ///< displacements (3 x n_nodes) m
   std::vector<double> node_p;  ///< nodal pressure (n_nodes) Pa
   std::vector<double> elem_J;  ///< J per element (n_elems), last computed value
-  std::vector<double> f;       ///< internal nodal force (3 x n_nodes) N
+  std::vector<double> f;       ///< internal nodal force minus the applied load (set_loads) (3 x n_nodes) N
 };
 
 /// A tool's motion over the next advance() (m; axes unit or normalised).
@@ -141,6 +141,18 @@ class Backend {
   void set_driven(std::span<const index_t> nodes, std::span<const double> u);
   void set_driven_axes(std::span<const index_t> nodes, std::span<const double> u, std::span<const std::uint8_t> axes);
   void clear_driven();
+
+  /// Applies constant external forces (dead loads, N; 3 per node, xyz) to
+  /// nodes: the R of the central difference (docs/design.md section 2),
+  /// which was 0 before. Replaces the previous loads; a node given twice
+  /// gets the sum; empty lists remove every load. A load moves the
+  /// components a node integrates; a held component's support takes it
+  /// (Reductions::reaction and Fields::f are the internal force minus the
+  /// load, the out-of-balance force). Only region nodes integrate: the
+  /// Scheduler seeds its region with the loaded nodes (Scheduler::set_loads).
+  void set_loads(std::span<const index_t> nodes, std::span<const double> force);
+  /// The nodes set_loads gave (ascending, each once).
+  const std::vector<index_t>& loaded_nodes() const { return loaded_; }
 
   /// The scene's tools (at most kMaxTools; radius > 0, shaft >= 0) and how
   /// contact is computed. Releases every grasp; the tools rest at the
@@ -207,6 +219,9 @@ class Backend {
   virtual void do_set_driven(std::span<const index_t> nodes, std::span<const double> u,
                              std::span<const std::uint8_t> axes) = 0;
   virtual void do_clear_driven() = 0;
+  /// load: the applied force per node (3 x n_nodes, component-major, N;
+  /// finite), or empty for none.
+  virtual void do_set_loads(std::span<const double> load) = 0;
   /// Tool `tool` at `pose` starts grasping: its pushed contact nodes become grasped.
   virtual void do_begin_grasp(int tool, const ToolPose& pose) = 0;
   /// Releases the nodes tool `tool` grasps.
@@ -238,6 +253,7 @@ class Backend {
   std::vector<ToolMotion> motion_;      ///< pending motion per tool
   std::vector<ToolPose> grasp_pose_;    ///< pose when each tool's grasp started
   std::vector<std::uint8_t> grasping_;  ///< per tool
+  std::vector<index_t> loaded_;         ///< set_loads' nodes
 };
 
 }  // namespace tissue

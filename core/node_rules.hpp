@@ -22,8 +22,9 @@
 namespace tissue {
 
 /// u^{n+1} of one node: the held components (axis mask h) at their targets
-/// u_held, the others by the damped central difference with R = 0 and
-/// internal force f.
+/// u_held, the others by the damped central difference with the
+/// out-of-balance force f = f_int - R (R: the applied load, Backend::set_loads;
+/// 0 without).
 template <class T>
 TISSUE_HD Vec3<T> node_next(std::uint8_t h, Vec3<T> u_held, const CentralDifference<T>& cd, Vec3<T> f, Vec3<T> u,
                             Vec3<T> u_prev) {

@@ -104,6 +104,17 @@ std::vector<std::string> Scheduler::take_notes() {
   return out;
 }
 
+void Scheduler::set_loads(std::span<const index_t> nodes, std::span<const double> force) {
+  backend_.set_loads(nodes, force);
+  if (region_.whole()) return;
+  const std::vector<index_t>& loaded = backend_.loaded_nodes();
+  std::vector<index_t> seeds;
+  std::set_union(seeds_.begin(), seeds_.end(), loaded.begin(), loaded.end(), std::back_inserter(seeds));
+  if (seeds == seeds_) return;
+  seeds_ = std::move(seeds);
+  region_ = backend_.build_region(seeds_, depth_);
+}
+
 void Scheduler::seed_region() {
   if (region_.whole()) return;
   const std::vector<index_t> cand = backend_.contact_candidates();

@@ -123,6 +123,11 @@ class Scheduler {
   const SchedulerSettings& settings() const { return settings_; }
   int n_tools() const { return static_cast<int>(settings_.tools.size()); }
 
+  /// Applies constant loads (Backend::set_loads: N, 3 per node) from the
+  /// next tick on. A region of limited depth is seeded with the loaded
+  /// nodes as well as the contacts, so that they move.
+  void set_loads(std::span<const index_t> nodes, std::span<const double> force);
+
   /// Notices since the last call (a tool pressing a rigid support, naming
   /// its nodes; a tool starting inside the body): one line each.
   std::vector<std::string> take_notes();

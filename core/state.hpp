@@ -28,7 +28,8 @@ struct TissueState {
   std::vector<T> node_p;   ///< pass 2: nodal pressure p_a (n_nodes) Pa
   std::vector<T> f_slot;   ///< pass 3: element nodal forces in node order: slot k = model.elem_slot of
                            ///< (corner, element), xyz interleaved (4 n_elems x 3) N
-  std::vector<T> f;        ///< pass 4: internal nodal force (3 x n_nodes) N
+  std::vector<T> f;        ///< pass 4: internal nodal force minus the applied load (3 x n_nodes) N
+  std::vector<T> load;     ///< applied load R (Backend::set_loads; 3 x n_nodes) N; empty = none
   std::vector<std::uint8_t> contact;      ///< ContactKind of each node after the last step (n_nodes)
   std::vector<signed char> contact_tool;  ///< the tool it touches, -1 none (n_nodes)
   std::vector<T> contact_normal;  ///< contact normal of pushed nodes, unit, out of the tool (3 x n_nodes)
@@ -39,6 +40,7 @@ struct TissueState {
   Region region;           ///< active nodes and elements
 
   void resize(index_t n_nodes, index_t n_elems, index_t n_visco = 0) {
+    load.clear();
     visco_q.assign(std::size_t(kSymComponents) * kMaxProny * n_visco, T(0));
     for (auto* v : {&u, &u_prev, &u_next, &u_held, &f, &contact_normal, &grasp_offset})
       v->assign(3 * size_t(n_nodes), T(0));

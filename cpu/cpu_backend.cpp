@@ -106,6 +106,11 @@ void CpuBackend<T>::do_set_driven(std::span<const index_t> nodes, std::span<cons
 }
 
 template <class T>
+void CpuBackend<T>::do_set_loads(std::span<const double> load) {
+  state_.load.assign(load.begin(), load.end());
+}
+
+template <class T>
 void CpuBackend<T>::do_clear_driven() {
   release_driven(model_, state_, driven_list_);
   if (contact_) contact_->surface_moved();

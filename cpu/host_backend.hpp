@@ -42,6 +42,7 @@ class CpuBackend final : public Backend {
   void do_set_driven(std::span<const index_t> nodes, std::span<const double> u,
                      std::span<const std::uint8_t> axes) override;
   void do_clear_driven() override;
+  void do_set_loads(std::span<const double> load) override;
   void do_begin_grasp(int tool, const ToolPose& pose) override;
   void do_end_grasp(int tool) override;
   void do_reset_contacts() override;

@@ -145,12 +145,14 @@ void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const ind
   const T* u_prev = s.u_prev.data();
   const T* u_held = s.u_held.data();
   const std::uint8_t* held = s.held.data();
+  const T* applied = s.load.empty() ? nullptr : s.load.data();
   T* f_out = s.f.data();
   T* u_next = s.u_next.data();
   for_each_index(nodes, kNodeGrain, part, [&](index_t a) {
     Vec3<T> f = {0, 0, 0};
     for (index_t k = start[a]; k < start[a + 1]; ++k) f = f + Vec3<T>{fs[3 * size_t(k)], fs[3 * size_t(k) + 1], fs[3 * size_t(k) + 2]};
     const auto load = [&](const T* v) { return Vec3<T>{v[a], v[n + a], v[2 * size_t(n) + a]}; };
+    if (applied) f = f - load(applied);  // the out-of-balance force f - R
     const Vec3<T> next = node_next(held[a], load(u_held), CentralDifference<T>{m.cd_A[a], m.cd_B[a], m.cd_C[a]}, f,
                                    load(u), load(u_prev));
     for (int c = 0; c < 3; ++c) {

@@ -269,6 +269,12 @@ class CudaBackend final : public Backend {
     n_driven_ = 0;
   }
 
+  /// The load is in the StateView the captured graphs hold: they are made again.
+  void do_set_loads(std::span<const double> load) override {
+    store_.set_load(load, log_, stream());
+    stepper_.invalidate();
+  }
+
   void do_begin_grasp(int tool, const ToolPose& pose) override {
     contact_.begin_grasp(store_.model(), store_.state(), store_.u.current().u, tool, pose.tip, stream());
   }

@@ -103,6 +103,7 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   node_p_.allocate(n);
   bad_.allocate(1);
   visco_q_.allocate(std::size_t(kSymComponents) * kMaxProny * m.n_visco);
+  load_.allocate(0);
   law_ = {};
   law_.fibre = m.has_fibre() ? fibre_.data() : nullptr;
   law_.visco_slot = m.has_visco() ? visco_slot_.data() : nullptr;
@@ -149,6 +150,19 @@ void DeviceStore<T>::clear_law_state(cudaStream_t stream) {
 }
 
 template <class T>
+void DeviceStore<T>::set_load(std::span<const double> load, Transfers& log, cudaStream_t stream) {
+  const index_t n = model_.n_nodes;
+  if (load.empty()) {
+    load_.allocate(0);
+    return;
+  }
+  std::vector<Packed3<T>> r(n);
+  for (index_t i = 0; i < n; ++i)
+    r[i] = {T(load[i]), T(load[n + i]), T(load[2 * std::size_t(n) + i]), T(0)};
+  upload_array(load_, r, log, stream);
+}
+
+template <class T>
 StateView<T> DeviceStore<T>::state() {
   StateView<T> s;
   s.u_held = u_held_.data();
@@ -160,6 +174,7 @@ StateView<T> DeviceStore<T>::state() {
   s.node_p = node_p_.data();
   s.f_slot = f_slot_.data();
   s.f = f_.data();
+  s.load = load_.size() ? load_.data() : nullptr;
   s.bad = bad_.data();
   s.contact = contact_.data();
   s.contact_tool = contact_tool_.data();

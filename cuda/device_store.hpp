@@ -8,6 +8,7 @@
 
 #include <array>
 #include <cstdint>
+#include <span>
 
 #include "core/model.hpp"
 #include "cuda/device_array.hpp"
@@ -44,6 +45,10 @@ class DeviceStore {
   /// Zeroes the law terms' state (the Prony q_i): no history.
   void clear_law_state(cudaStream_t stream);
 
+  /// The applied load (Backend::set_loads): 3 x n_nodes component-major
+  /// (N), or empty for none (frees it; state().load is then null).
+  void set_load(std::span<const double> load, Transfers& log, cudaStream_t stream);
+
   ModelView<T> model() const { return model_; }
   LawView<T> law() const { return law_; }
   StateView<T> state();
@@ -70,6 +75,7 @@ class DeviceStore {
   DeviceArray<T> dv_slot_, elem_J_, node_p_;
   DeviceArray<T> fibre_, prony_decay_, prony_gain_, visco_q_;  // optional law terms: empty when unused
   DeviceArray<index_t> visco_slot_;
+  DeviceArray<Packed3<T>> load_;  // applied load: empty when none
   DeviceArray<unsigned long long> bad_;
 };
 

@@ -212,9 +212,9 @@ __device__ void nodal_pressure_at(const ModelView<T>& m, const StateView<T>& s, 
 }
 
 /// Pass 4 for a node (one lane of its group): f_a = sum of its corners'
-/// element forces (a gather: no atomics), then lane 0 sets u_next: u_held
-/// for the held components (axis mask), the damped central difference with
-/// R = 0 for the others.
+/// element forces (a gather: no atomics) minus the applied load R (none
+/// when s.load is null), then lane 0 sets u_next: u_held for the held
+/// components (axis mask), the damped central difference for the others.
 template <class T>
 __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, const StepBuffers<T>& b,
                                const NodeData<T>& d) {
@@ -224,6 +224,7 @@ __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, con
   f = {node_group_sum(f.x, d.mask), node_group_sum(f.y, d.mask), node_group_sum(f.z, d.mask)};
   if (d.lane != 0) return;
   const index_t a = d.a;
+  if (s.load) f = f - s.load[a].vec();
   s.f[a] = Packed3<T>::of(f);
   const CentralDifference<T> k = {__ldg(m.cd_A + a), __ldg(m.cd_B + a), __ldg(m.cd_C + a)};
   b.u_next[a] = Packed3<T>::of(node_next(s.held[a], s.u_held[a].vec(), k, f, b.u[a].vec(), b.u_prev[a].vec()));

@@ -106,7 +106,8 @@ struct StateView {
   T* elem_J = nullptr;                 ///< pass 1: J_e (n_elems)
   T* node_p = nullptr;                 ///< pass 2: p_a (n_nodes) Pa
   Packed3<T>* f_slot = nullptr;        ///< pass 3: f_a^e per node_elem slot (4 n_elems) N
-  Packed3<T>* f = nullptr;             ///< pass 4: internal force (n_nodes) N
+  Packed3<T>* f = nullptr;             ///< pass 4: internal force minus the applied load (n_nodes) N
+  const Packed3<T>* load = nullptr;    ///< applied load R (Backend::set_loads; n_nodes) N; null = none
   unsigned long long* bad = nullptr;   ///< lowest bad element key (see bad_key), ~0 = none
   // contact (core/contact.hpp)
   std::uint8_t* contact = nullptr;     ///< ContactKind after the last step (n_nodes)

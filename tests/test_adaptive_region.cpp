@@ -199,6 +199,16 @@ class NoFrontBackend final : public Backend {
     b_->set_driven_axes(n, u, axes);
   }
   void do_clear_driven() override { b_->clear_driven(); }
+  void do_set_loads(std::span<const double> load) override {  // forwarded as (node, force) lists
+    std::vector<index_t> nodes;
+    std::vector<double> force;
+    const std::size_t n = load.size() / 3;
+    for (std::size_t a = 0; a < n; ++a) {
+      nodes.push_back(index_t(a));
+      force.insert(force.end(), {load[a], load[n + a], load[2 * n + a]});
+    }
+    b_->set_loads(nodes, force);
+  }
   void do_begin_grasp(int, const ToolPose&) override {}
   void do_end_grasp(int) override {}
   void do_reset_contacts() override { b_->set_tools(tools()); }

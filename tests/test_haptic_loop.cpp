@@ -64,6 +64,7 @@ class StubBackend : public Backend {
   }
   void do_set_driven(std::span<const index_t>, std::span<const double>, std::span<const std::uint8_t>) override {}
   void do_clear_driven() override {}
+  void do_set_loads(std::span<const double>) override {}
   void do_begin_grasp(int, const ToolPose&) override {}
   void do_end_grasp(int) override {}
   void do_reset_contacts() override {}

@@ -173,6 +173,41 @@ TEST(SchedulerRegion, LimitedRegionIsSmallerAndSeededByTheContactCandidates) {
   for (index_t a : sched.seeds()) EXPECT_TRUE(m.node_flags[a] & kSurface);
 }
 
+TEST(SchedulerRegion, LoadedNodesSeedTheRegionAndMove) {
+  const auto m = pressed_box();
+  auto backend = make_cpu_backend(Precision::Double);
+  backend->upload(m);
+  SchedulerSettings settings;
+  settings.depth = 1;
+  Scheduler sched(*backend, m, settings);
+  // a top node far from the tool's path, pulled up by 1 mN
+  const index_t a = box_node(4, 4, 1, 3, 2);
+  ASSERT_TRUE(m.node_flags[a] & kSurface);
+  const std::vector<index_t> nodes = {a};
+  const std::vector<double> force = {0.0, 0.0, 1e-3};
+  sched.set_loads(nodes, force);
+  EXPECT_EQ(sched.seeds(), nodes);
+  EXPECT_EQ(backend->loaded_nodes(), nodes);
+  const Region want = flood_fill(m, std::span<const index_t>(nodes), 1);
+  EXPECT_EQ(backend->region().nodes, want.nodes);
+  // the tool waits above the box until kPressStart: only the load acts
+  ScriptedDevice tool(press_path(kTarget, kDown, kDepth, kApproach, kPressStart, kPressEnd - kPressStart,
+                                 kHoldEnd - kPressEnd, kRetractEnd - kHoldEnd));
+  TickReport rep;
+  for (int k = 0; k < 50; ++k) rep = sched.tick(tool);
+  EXPECT_FALSE(sched.in_contact());
+  const Fields f = backend->download();
+  const index_t n = m.n_nodes;
+  EXPECT_GT(f.u[2 * n + a], 1e-6);  // lifted (m)
+  for (index_t b = 0; b < n; ++b)   // nothing outside the region moved
+    if (!std::binary_search(want.nodes.begin(), want.nodes.end(), b)) EXPECT_EQ(f.u[2 * n + b], 0.0) << "node " << b;
+  // clearing the loads keeps the region, and the node springs back
+  sched.set_loads({}, {});
+  EXPECT_TRUE(backend->loaded_nodes().empty());
+  for (int k = 0; k < 50; ++k) sched.tick(tool);
+  EXPECT_LT(std::abs(backend->download().u[2 * n + a]), 0.05 * f.u[2 * n + a]);
+}
+
 /// The message of the std::invalid_argument f throws ("" when none).
 template <class F>
 std::string refusal(F&& f) {
