@@ -227,7 +227,19 @@ void fill_law_terms(const ModelInput& in, TissueModel<double>& m) {
     for (index_t e = 0; e < ne; ++e) {
       const MaterialParams& p = material(e);
       if (!(p.fibre_eta > 0)) continue;
-      const Vec3<double> a = (1.0 / norm(p.fibre_dir)) * p.fibre_dir;
+      Vec3<double> a = p.fibre_dir;
+      if (!in.fibre_dirs.empty()) {  // the element's own direction (a fibre field or file)
+        a = node_pos(in.fibre_dirs, e);
+        const double len = norm(a);
+        if (!(len > 0) || !std::isfinite(len) || !std::isfinite(a.x) || !std::isfinite(a.y) || !std::isfinite(a.z)) {
+          const size_t k = in.elem_material.empty() ? 0 : size_t(in.elem_material[e]);
+          throw ModelError(fmt::format("{}: element {} ({}, fibre stiffness {} Pa): fibre direction ({}, {}, {}) "
+                                       "must be finite and non-zero (fibre_dirs gives every fibre element a "
+                                       "direction)",
+                                       in.source, e, material_name(in, k), p.fibre_eta, a.x, a.y, a.z));
+        }
+      }
+      a = (1.0 / norm(a)) * a;
       for (int c = 0; c < 3; ++c) m.fibre[c * ne + e] = a[c];
       m.fibre[3 * ne + e] = p.fibre_eta;
     }
@@ -361,6 +373,10 @@ TissueModel<double> build_model(const ModelInput& in) {
     throw ModelError(fmt::format("{}: {} element material ids for {} elements", in.source, in.elem_material.size(), ne));
   if (!in.fixed.empty() && in.fixed.size() != size_t(n))
     throw ModelError(fmt::format("{}: {} fixed flags for {} nodes", in.source, in.fixed.size(), n));
+  if (!in.fibre_dirs.empty() && in.fibre_dirs.size() != 3 * size_t(ne))
+    throw ModelError(fmt::format("{}: {} fibre direction components for {} elements; fibre_dirs holds x y z per "
+                                 "element ({} numbers) or is empty",
+                                 in.source, in.fibre_dirs.size(), ne, 3 * size_t(ne)));
   if (!in.fixed_axes.empty() && in.fixed_axes.size() != size_t(n))
     throw ModelError(fmt::format("{}: {} fixed-axis masks for {} nodes", in.source, in.fixed_axes.size(), n));
   for (size_t i = 0; i < in.fixed_axes.size(); ++i)

@@ -55,6 +55,10 @@ struct ModelInput {
   double tick = 0;                       ///< haptic period (s): with mass scaling and dt = 0, dt = tick / n
   std::string source = "<model>";        ///< names the input in error messages
   std::vector<std::string> material_names;  ///< names of the materials, for messages (empty = by index)
+  std::vector<double> fibre_dirs;        ///< fibre direction per element (n_elems x 3, xyz interleaved; any length
+                                         ///< but 0, normalised by build_model), used for the elements whose material
+                                         ///< has fibres (fibre_eta > 0) and ignored for the others; empty = each
+                                         ///< element takes its material's fibre_dir (a scene's fibre field or file)
 };
 
 /// The most TLED steps one haptic tick may take (build_model,
@@ -141,7 +145,8 @@ struct TissueModel {
 /// Precomputes the model from the input; throws ModelError for zero-volume
 /// tets (relative to the tet's size; coordinates whose volumes overflow or
 /// underflow are named as such), two elements with the same four nodes,
-/// unused nodes, bad materials, a stable step so small that one haptic tick
+/// unused nodes, bad materials, per-element fibre directions of the wrong
+/// count or zero / non-finite in a fibre element (naming the element), a stable step so small that one haptic tick
 /// would need more than kMaxStepsPerTick steps (naming the element, its
 /// material and wave speed) or a dt above the stable limit (the message
 /// names the limit and the element that sets it). Inverted tets

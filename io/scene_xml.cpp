@@ -11,8 +11,10 @@
 #include <sstream>
 
 #include "io/atomic_file.hpp"
+#include "io/fibre_csv.hpp"
 #include "io/path_csv.hpp"
 #include "io/tetgen_files.hpp"
+#include "scene/fibre_field.hpp"
 #include "scene/text.hpp"
 
 namespace tissue::io {
@@ -278,13 +280,48 @@ Material Reader::read_material(pugi::xml_node n) const {
   const pugi::xml_node fibre = n.child("fibre");
   if (fibre) {
     if (fibre.next_sibling("fibre")) fail_at(line(fibre.next_sibling("fibre")), "a material has one <fibre>");
-    check_attributes(fibre, {"stiffness", "direction"});
+    check_attributes(fibre, {"stiffness", "direction", "field", "axis", "origin", "file"});
     check_no_text(fibre);
     m.fibre_line = line(fibre);
     m.fibre_eta = real(fibre, "stiffness");
+    const bool field = fibre.attribute("field"), file = fibre.attribute("file");
+    if (field && file)
+      fail(fibre, "give either field= (a direction field) or file= (a direction per element), not both");
+    if (!field && (fibre.attribute("axis") || fibre.attribute("origin")))
+      fail(fibre, "axis= and origin= belong to a direction field: give field=\"circumferential\" or "
+                  "field=\"radial\" with them");
     double a[3];
-    triple(fibre, "direction", a);
-    m.fibre_dir = {a[0], a[1], a[2]};
+    if (field) {
+      const std::string_view name = scene::trim(fibre.attribute("field").value());
+      const auto f = scene::parse_fibre_field(name);
+      if (!f) fail(fibre, fmt::format("field = '{}' is unknown; expected circumferential or radial", name));
+      if (fibre.attribute("direction"))
+        fail(fibre, fmt::format("direction= is not used with field= (the {} field gives every element its "
+                                "direction); remove one",
+                                name));
+      m.fibre_field = *f;
+      triple(fibre, "axis", a);
+      m.fibre_axis = {a[0], a[1], a[2]};
+      if (fibre.attribute("origin")) {
+        triple(fibre, "origin", a);
+        m.fibre_origin = {a[0], a[1], a[2]};
+      }
+    } else {
+      if (!file || fibre.attribute("direction")) {  // with file=: the direction of the elements it does not list
+        triple(fibre, "direction", a);
+        m.fibre_dir = {a[0], a[1], a[2]};
+      }
+      if (file) {
+        m.fibre_field = Material::FibreField::File;
+        m.fibre_file = fibre.attribute("file").value();
+        m.fibre_file_path = resolve(base_dir_, m.fibre_file);
+        try {
+          m.fibre_rows = read_fibre_csv(m.fibre_file_path);
+        } catch (const FibreCsvError& e) {
+          fail(fibre, fmt::format("material '{}' fibre file '{}': {}", m.name, m.fibre_file, e.what()));
+        }
+      }
+    }
   }
   for (pugi::xml_node t : n.children("prony")) {
     check_attributes(t, {"g", "tau"});
@@ -507,10 +544,24 @@ void write_material(pugi::xml_node root, const Material& m) {
   set(n, kNames[int(m.form)][0], num(m.a));
   set(n, kNames[int(m.form)][1], num(m.b));
   set(n, "rho", num(m.rho));
-  if (m.fibre_eta > 0 || m.fibre_line > 0) {
+  if (m.fibre_eta > 0 || m.fibre_line > 0 || m.fibre_field != Material::FibreField::Uniform) {
     pugi::xml_node f = n.append_child("fibre");
     set(f, "stiffness", num(m.fibre_eta));
-    set(f, "direction", triple_text(m.fibre_dir));
+    switch (m.fibre_field) {
+      case Material::FibreField::Uniform:
+        set(f, "direction", triple_text(m.fibre_dir));
+        break;
+      case Material::FibreField::Circumferential:
+      case Material::FibreField::Radial:
+        set(f, "field", std::string(scene::to_string(m.fibre_field)));
+        set(f, "axis", triple_text(m.fibre_axis));
+        set(f, "origin", triple_text(m.fibre_origin));
+        break;
+      case Material::FibreField::File:
+        set(f, "file", m.fibre_file);
+        set(f, "direction", triple_text(m.fibre_dir));
+        break;
+    }
   }
   for (const Material::Prony& t : m.prony) {
     pugi::xml_node p = n.append_child("prony");
@@ -620,6 +671,9 @@ void write_scene(const scene::Scene& s, const std::string& path, bool inline_mes
   }
   for (const scene::Tool& t : s.tools)
     if (!t.path_file.empty() && !t.path.empty()) write_path_csv((dir / t.path_file).string(), t.path);
+  for (const Material& m : s.materials)
+    if (m.fibre_field == Material::FibreField::File && !m.fibre_file.empty() && !m.fibre_rows.empty())
+      write_fibre_csv((dir / m.fibre_file).string(), m.fibre_rows);
   write_file_atomic(path, format_scene(s, mesh_file));
 }
 

@@ -19,14 +19,15 @@
 
 namespace tissue::io {
 
-/// Reads a scene file; a mesh file and tool path files are resolved relative
-/// to the scene file's folder and loaded (Scene::nodes/tets, Tool::path).
+/// Reads a scene file; a mesh file, tool path files and fibre direction files
+/// are resolved relative to the scene file's folder and loaded
+/// (Scene::nodes/tets, Tool::path, Material::fibre_rows).
 /// Scene::source is `path`. Throws scene::SceneError.
 scene::Scene read_scene(const std::string& path);
 
 /// Parses scene XML held in memory. `source` names it in messages and becomes
 /// Scene::source; `base_dir` is the folder that relative file references
-/// (mesh file, tool path CSV) are resolved against ("" = the working folder).
+/// (mesh file, tool path CSV, fibre CSV) are resolved against ("" = the working folder).
 /// Throws scene::SceneError.
 scene::Scene parse_scene(std::string_view xml, const std::string& source, const std::string& base_dir);
 
@@ -34,8 +35,8 @@ scene::Scene parse_scene(std::string_view xml, const std::string& source, const 
 /// that read_scene(path) gives the same scene (up to source lines). With
 /// inline_mesh the mesh goes into the XML; otherwise into a TetGen .node/.ele
 /// pair beside it, named Scene::mesh_file if set, else "<stem of path>.node".
-/// A tool with a path_file gets its path written to that CSV (relative to
-/// path's folder). Each file is written whole under "<name>.part" and renamed
+/// A tool with a path_file gets its path written to that CSV, and a material
+/// with a fibre file its rows to that CSV (both relative to path's folder). Each file is written whole under "<name>.part" and renamed
 /// (io/atomic_file.hpp). Throws std::runtime_error when a file cannot be written.
 void write_scene(const scene::Scene& scene, const std::string& path, bool inline_mesh);
 

@@ -18,8 +18,24 @@ namespace tissue::scene {
 /// Lame (lambda, mu), optionally with a tension-only fibre term
 /// (transversely isotropic) and a Prony series on the isochoric stress
 /// (viscoelastic; the elastic constants are then the instantaneous ones).
+/// The fibre direction is one for the whole material (fibre_dir), or a
+/// field evaluated at each element's centroid, or read per element from a
+/// file (FibreField; scene/fibre_field.hpp).
 struct Material {
   enum class Form { YoungPoisson, ShearBulk, Lame };
+  /// Where the fibre direction of each element comes from.
+  enum class FibreField {
+    Uniform,          ///< fibre_dir everywhere
+    Circumferential,  ///< a = axis x (c - origin) at the centroid c: fibres wound around the axis
+    Radial,           ///< a = (c - origin) less its component along the axis: fibres pointing away from it
+    File,             ///< fibre_rows per element (a CSV file); elements not listed take fibre_dir
+  };
+  /// One row of a fibre direction file: an element and its direction.
+  struct FibreRow {
+    index_t element = 0;                 ///< 0-based element id of the mesh
+    Vec3<double> dir = {0, 0, 0};        ///< any length but 0
+    int line = 0;                        ///< line in the file, for messages (0 = unknown)
+  };
   /// One Prony term: relative modulus g and relaxation time tau.
   struct Prony {
     double g = 0, tau = 0;  ///< dimensionless (> 0, sum < 1), s (> 0)
@@ -34,6 +50,12 @@ struct Material {
   Vec3<double> fibre_dir = {1, 0, 0};  ///< fibre direction (any length but 0)
   int fibre_line = 0;    ///< line of the <fibre> element (0 = none)
   std::vector<Prony> prony = {};  ///< empty = elastic
+  FibreField fibre_field = FibreField::Uniform;  ///< how fibre directions vary over the material's elements
+  Vec3<double> fibre_axis = {0, 0, 1};    ///< Circumferential / Radial: the axis direction (any length but 0)
+  Vec3<double> fibre_origin = {0, 0, 0};  ///< Circumferential / Radial: a point of the axis (m)
+  std::string fibre_file = {};            ///< File: the CSV as named in the scene (relative to the scene file)
+  std::string fibre_file_path = {};       ///< File: the CSV as opened, for messages ("" = fibre_file)
+  std::vector<FibreRow> fibre_rows = {};  ///< File: the directions read from it (read_scene loads them)
 
   /// mu and K of this material, with rho (no validation):
   /// YoungPoisson: mu = E / (2 (1 + nu)), K = E / (3 (1 - 2 nu));

@@ -8,6 +8,7 @@
 #include <string_view>
 
 #include "scene/constraints.hpp"
+#include "scene/fibre_field.hpp"
 
 namespace tissue::scene {
 namespace {
@@ -88,6 +89,24 @@ void check_law_terms(const Scene& s, const Material& m, const std::string& what)
   if (m.fibre_line && !(std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z) && norm(a) > 0))
     fail(s, fl,
          fmt::format("{}: fibre direction ({}, {}, {}) must be finite and non-zero", what, a.x, a.y, a.z));
+  using Field = Material::FibreField;
+  if (m.fibre_field == Field::Circumferential || m.fibre_field == Field::Radial) {
+    const std::string field = fmt::format("{}: fibre field {}", what, to_string(m.fibre_field));
+    const Vec3<double> n = m.fibre_axis, o = m.fibre_origin;
+    for (int c = 0; c < 3; ++c) check_finite(s, fl, field, fmt::format("axis {}", "xyz"[c]), n[c]);
+    for (int c = 0; c < 3; ++c) check_finite(s, fl, field, fmt::format("origin {}", "xyz"[c]), o[c]);
+    if (!(norm(n) > 0))
+      fail(s, fl,
+           fmt::format("{}: axis ({}, {}, {}) must be non-zero (the fibres wind around it or point away from it)",
+                       field, n.x, n.y, n.z));
+  }
+  if (m.fibre_field == Field::File) {
+    if (m.fibre_file.empty())
+      fail(s, fl, what + ": a fibre direction file needs a file name (file=\"dirs.csv\", relative to the scene)");
+    if (m.fibre_rows.empty())
+      fail(s, fl,
+           fmt::format("{}: fibre file '{}' gives no directions; expected rows element,ax,ay,az", what, m.fibre_file));
+  }
   if (m.prony.size() > size_t(kMaxProny))
     fail(s, m.prony[kMaxProny].line,
          fmt::format("{}: {} Prony terms; at most {} are allowed", what, m.prony.size(), kMaxProny));
@@ -385,6 +404,7 @@ ModelInput to_model_input(const Scene& scene) {
   const auto materials = check_materials(scene);
   ModelInput in;
   in.elem_material = resolve_sets(scene, materials);
+  in.fibre_dirs = resolve_fibre_dirs(scene, in.elem_material);
   in.fixed = resolve_constraints(scene);
   for (const Tool& t : scene.tools) check_tool(scene, t);
   check_solver(scene);

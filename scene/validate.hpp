@@ -8,8 +8,15 @@
 //   materials:   names unique and non-empty; numbers finite; rho > 0;
 //                (E, nu): E > 0 and -1 < nu < 0.5; (mu, K): mu > 0, K > 0;
 //                Lame (lambda, mu): mu > 0 and K = lambda + 2 mu / 3 > 0;
+//                fibre stiffness >= 0 and direction finite and non-zero; a
+//                fibre field's axis finite and non-zero, its origin finite; a
+//                fibre file named and giving rows; Prony g > 0, tau > 0, sum g < 1;
 //   sets:        material defined; element ids in range; no element twice
 //                (within or across sets); every element in a set;
+//   fibres:      (scene/fibre_field.hpp) a fibre file's rows: element in
+//                range, listed once, direction finite and non-zero (cited at
+//                the file's line), and at least one of its material's elements
+//                listed; a fibre field's axis off every element centroid;
 //   constraints: node ids in range; numbers finite; box min <= max; plane
 //                normal non-zero; every constraint fixes at least one node;
 //   tools:       radius finite, > 0 and at most half the body's largest
@@ -54,7 +61,9 @@ void validate_material(const Scene& scene, const Material& material);
 /// Validates the scene and resolves it for build_model(): nodes and tets
 /// copied, element sets turned into one material index per element (the
 /// index of the set's material in scene.materials), materials into
-/// (mu, K, rho), constraints into the `fixed` mask (n_nodes, 1 = fixed), and
+/// (mu, K, rho) and their terms, fibre fields and files into one direction
+/// per element (fibre_dirs; empty when every material has one direction),
+/// constraints into the `fixed` mask (n_nodes, 1 = fixed), and
 /// the solver's dt, dt_safety, damping and ianp plus the scene's source name
 /// copied. Throws SceneError.
 ModelInput to_model_input(const Scene& scene);

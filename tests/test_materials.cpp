@@ -25,6 +25,7 @@
 #include "io/scene_xml.hpp"
 #include "scene/validate.hpp"
 #include "tests/backend_test_support.hpp"
+#include "tests/temp_dir.hpp"
 
 namespace tissue {
 namespace {
@@ -185,6 +186,60 @@ MaterialParams law_params(bool fibre, bool visco, Vec3<double> dir = {1, 0, 0}) 
   return p;
 }
 
+/// The box as a scene whose fibres (eta = kEta) come from a CSV written and
+/// read back beside the scene file: the elements of the half x < kL/2 are
+/// listed with direction (0, 2, 0); the others, not listed, keep
+/// direction="1 0 0". Loaded through read_scene and load_model.
+TissueModel<double> half_fibre_model(const testing_support::TempDir& dir) {
+  scene::Scene s;
+  ModelInput in;
+  box_mesh(in, 2, 2, 2, kL, kL, kL);
+  s.nodes = in.nodes;
+  s.tets = in.tets;
+  scene::Material m{.name = "muscle", .form = scene::Material::Form::ShearBulk, .a = kMu, .b = kK, .rho = kRho};
+  m.fibre_eta = kEta;
+  m.fibre_dir = {1, 0, 0};
+  m.fibre_field = scene::Material::FibreField::File;
+  m.fibre_file = "halves.csv";
+  for (index_t e = 0; e < index_t(s.tets.size() / 4); ++e) {
+    double cx = 0;
+    for (int a = 0; a < 4; ++a) cx += s.nodes[3 * s.tets[4 * e + a]] / 4;
+    if (cx < kL / 2) m.fibre_rows.push_back({e, {0, 2, 0}, 0});
+  }
+  s.materials = {m};
+  s.sets.push_back({.name = "muscle", .material = "muscle", .all = true, .elements = {}});
+  io::write_scene(s, dir.file("halves.xml"), true);
+  const scene::Scene r = io::read_scene(dir.file("halves.xml"));
+  EXPECT_EQ(r.materials.at(0).fibre_rows.size(), s.tets.size() / 8);  // half the elements listed
+  return scene::load_model(r);
+}
+
+TEST(MaterialScene, EachHalfStressesAsItsPerElementDirectionPredicts) {
+  // every element's own direction and eta, from the model, through law_pk2
+  // at a uniaxial stretch along x: the listed half (fibres along y) has the
+  // Neo-Hookean closed form, the other half (x) the fibre one
+  testing_support::TempDir dir;
+  const TissueModel<double> m = half_fibre_model(dir);
+  const double l[3] = {1.2, 0.93, 0.93};
+  const Closed along{{l[0], l[1], l[2]}, kEta}, across{{l[0], l[1], l[2]}, 0};
+  int n_along = 0, n_across = 0;
+  for (index_t e = 0; e < m.n_elems; ++e) {
+    ElementLaw<double> law;
+    law.a = {m.fibre[e], m.fibre[m.n_elems + e], m.fibre[2 * m.n_elems + e]};
+    law.eta = m.fibre[3 * m.n_elems + e];
+    ASSERT_EQ(law.eta, kEta);
+    double cx = 0;
+    for (int a = 0; a < 4; ++a) cx += m.X[m.elem_nodes[a * m.n_elems + e]] / 4;
+    const Closed& expect = cx < kL / 2 ? across : along;
+    (cx < kL / 2 ? n_across : n_along)++;
+    const Mat3<double> sigma = code_sigma<LawTerms<true, false>>(diag<double>(l), law);
+    for (int i = 0; i < 3; ++i) EXPECT_NEAR(sigma(i, i), expect.sigma(i), 1e-9 * kMu) << "element " << e;
+  }
+  EXPECT_EQ(n_along, m.n_elems / 2);
+  EXPECT_EQ(n_across, m.n_elems / 2);
+  EXPECT_GT(along.sigma(0), 1.5 * across.sigma(0));  // the directions matter
+}
+
 class Laws : public ::testing::TestWithParam<test::BackendKind> {
  protected:
   void SetUp() override { SKIP_UNLESS_USABLE(GetParam().backend); }
@@ -202,9 +257,10 @@ class Laws : public ::testing::TestWithParam<test::BackendKind> {
   }
 
   /// Holds every node at u = (diag(l) - I) X, then runs `steps` steps; returns
-  /// the x-resultant of the internal forces on the face x = kL (N) after
-  /// each step in `record` (1-based).
-  std::vector<double> face_force(const TissueModel<double>& m, const double l[3], int steps) const {
+  /// the x-resultant of the internal forces on the face x = face_x (N) after
+  /// each step.
+  std::vector<double> face_force(const TissueModel<double>& m, const double l[3], int steps,
+                                 double face_x = kL) const {
     auto b = make(m);
     const index_t n = m.n_nodes;
     std::vector<double> u(3 * n);
@@ -225,7 +281,7 @@ class Laws : public ::testing::TestWithParam<test::BackendKind> {
       const Fields f = b->download();
       double fx = 0;
       for (index_t i = 0; i < n; ++i)
-        if (std::abs(m.X[i] - kL) < 1e-12) fx += f.f[i];
+        if (std::abs(m.X[i] - face_x) < 1e-12) fx += f.f[i];
       out.push_back(fx);
     }
     return out;
@@ -254,6 +310,26 @@ TEST_P(Laws, UniaxialStretchAlongAndAcrossTheFibres) {
     EXPECT_NEAR(got, expect, rel_tol() * std::abs(expect)) << "across the fibres";
     report("uniaxial across the fibres", std::abs(got / expect - 1));
   }
+}
+
+TEST_P(Laws, PerElementFibresFromAFileCarryTheStretchInTheirHalfOnly) {
+  // a uniaxial stretch along x of the box whose half x < kL/2 has fibres
+  // along y (from the CSV) and the half x > kL/2 along x (direction=): the
+  // face x = kL touches only the second half, so its force is the fibre
+  // closed form; the face x = 0 only the first, so its force is the
+  // Neo-Hookean one (the reaction, -P A)
+  testing_support::TempDir dir;
+  const TissueModel<double> m = half_fibre_model(dir);
+  const double l[3] = {1.2, 0.93, 0.93};
+  const double area = kL * kL;
+  const double along = Closed{{l[0], l[1], l[2]}, kEta}.P(0) * area;
+  const double across = Closed{{l[0], l[1], l[2]}, 0}.P(0) * area;
+  const double right = face_force(m, l, 1, kL).back(), left = face_force(m, l, 1, 0.0).back();
+  EXPECT_NEAR(right, along, rel_tol() * std::abs(along)) << "face x = kL: fibres along the stretch";
+  EXPECT_NEAR(left, -across, rel_tol() * std::abs(across)) << "face x = 0: fibres across it";
+  EXPECT_GT(right, 1.5 * -left);
+  report("per-element fibres from a file, face along", std::abs(right / along - 1));
+  report("per-element fibres from a file, face across", std::abs(-left / across - 1));
 }
 
 TEST_P(Laws, StepStrainRelaxesAlongThePronySeries) {

@@ -562,6 +562,85 @@ TEST(ModelErrors, BadMaterialsNamed) {
   expect_model_error([&] { build_model(in); }, {"box", "material ids"});
 }
 
+// ---------------------------------------------------------------- per-element fibre directions
+
+/// A 2 x 1 x 1 box: material 0 (fibres, eta = 5000 Pa along z) for the
+/// elements of the cell x < 0.01, material 1 (Neo-Hookean) for the others.
+ModelInput fibre_box() {
+  ModelInput in = box_input(2, 1, 1, 0.02, 0.01, 0.01);
+  MaterialParams fibre = material(kE, kNu, kRho);
+  fibre.fibre_eta = 5000;
+  fibre.fibre_dir = {0, 0, 1};
+  in.materials = {fibre, material(kE, kNu, kRho)};
+  in.material_names = {"muscle", "fat"};
+  in.elem_material.assign(12, 0);
+  for (index_t e = 0; e < 12; ++e) {
+    double cx = 0;
+    for (int a = 0; a < 4; ++a) cx += in.nodes[3 * in.tets[4 * e + a]] / 4;
+    in.elem_material[e] = cx < 0.01 ? 0 : 1;
+  }
+  return in;
+}
+
+TEST(Model, PerElementFibreDirectionsAreNormalisedInTheFibreElementsOnly) {
+  ModelInput in = fibre_box();
+  // without fibre_dirs: the material's direction in every fibre element
+  TissueModel<double> m = build_model(in);
+  ASSERT_EQ(m.fibre.size(), 4u * 12);
+  for (index_t e = 0; e < 12; ++e) {
+    const bool fibre = in.elem_material[e] == 0;
+    EXPECT_EQ(m.fibre[2 * 12 + e], fibre ? 1.0 : 0.0) << e;
+    EXPECT_EQ(m.fibre[3 * 12 + e], fibre ? 5000.0 : 0.0) << e;
+  }
+  // with them: element e's own direction, of length e + 1, normalised; the
+  // Neo-Hookean elements keep eta = 0 whatever their entry (here zero)
+  in.fibre_dirs.assign(3 * 12, 0.0);
+  for (index_t e = 0; e < 12; ++e)
+    if (in.elem_material[e] == 0) {
+      const double t = 0.3 * e, len = e + 1.0;
+      in.fibre_dirs[3 * e] = len * std::cos(t);
+      in.fibre_dirs[3 * e + 1] = len * std::sin(t);
+      in.fibre_dirs[3 * e + 2] = 0;
+    }
+  m = build_model(in);
+  int fibres = 0;
+  for (index_t e = 0; e < 12; ++e) {
+    if (in.elem_material[e] != 0) {
+      for (int c = 0; c < 4; ++c) EXPECT_EQ(m.fibre[c * 12 + e], 0.0) << e;
+      continue;
+    }
+    ++fibres;
+    EXPECT_NEAR(m.fibre[0 * 12 + e], std::cos(0.3 * e), 1e-15) << e;
+    EXPECT_NEAR(m.fibre[1 * 12 + e], std::sin(0.3 * e), 1e-15) << e;
+    EXPECT_EQ(m.fibre[2 * 12 + e], 0.0) << e;
+    EXPECT_EQ(m.fibre[3 * 12 + e], 5000.0) << e;
+  }
+  EXPECT_EQ(fibres, 6);
+}
+
+TEST(ModelErrors, BadPerElementFibreDirectionsNamed) {
+  ModelInput in = fibre_box();
+  in.fibre_dirs.assign(3 * 11, 1.0);
+  expect_model_error([&] { build_model(in); }, {"box: ", "33 fibre direction components for 12 elements", "36"});
+  const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+  index_t first = 0;
+  while (in.elem_material[first] != 0) ++first;
+  for (const Vec3<double> bad : {Vec3<double>{0, 0, 0}, Vec3<double>{nan, 1, 0}, Vec3<double>{1, inf, 0}}) {
+    in.fibre_dirs.assign(3 * 12, 1.0);
+    for (int c = 0; c < 3; ++c) in.fibre_dirs[3 * first + c] = bad[c];
+    SCOPED_TRACE(fmt::format("{} {} {}", bad.x, bad.y, bad.z));
+    expect_model_error([&] { build_model(in); },
+                       {"box: ", fmt::format("element {} (material 'muscle', fibre stiffness 5000 Pa)", first),
+                        fmt::format("fibre direction ({}, {}, {}) must be finite and non-zero", bad.x, bad.y, bad.z)});
+  }
+  // a zero entry of an element without fibres is not used, so not an error
+  in.fibre_dirs.assign(3 * 12, 1.0);
+  index_t plain = 0;
+  while (in.elem_material[plain] != 1) ++plain;
+  for (int c = 0; c < 3; ++c) in.fibre_dirs[3 * plain + c] = 0;
+  EXPECT_NO_THROW(build_model(in));
+}
+
 // ---------------------------------------------------------------- conversion
 
 TEST(Model, ConvertFloatKeepsSizesAndValues) {

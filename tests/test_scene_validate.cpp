@@ -11,6 +11,7 @@
 #include <string>
 
 #include "core/box_mesh.hpp"
+#include "scene/fibre_field.hpp"
 #include "scene/validate.hpp"
 
 namespace tissue::scene {
@@ -533,6 +534,185 @@ TEST(SceneValidate, MaterialParamsOfEachForm) {
   const MaterialParams la = Material{.name = "m", .form = Material::Form::Lame, .a = 1200, .b = 1200}.params();
   EXPECT_DOUBLE_EQ(la.mu, 1200);
   EXPECT_DOUBLE_EQ(la.K, 2000);
+}
+
+// ---- per-element fibre directions (scene/fibre_field.hpp) ----
+
+/// A 4 x 4 x 2 box of 0.04 x 0.04 x 0.02 m (192 tets), one material with
+/// fibres (eta = 20 kPa) given by `field` around (or from) the vertical line
+/// x = y = 0.02 m; the <fibre> on line 7.
+Scene vessel_scene(Material::FibreField field, Vec3<double> axis, Vec3<double> origin) {
+  Scene s;
+  s.source = "vessel.xml";
+  ModelInput in;
+  box_mesh(in, 4, 4, 2, 0.04, 0.04, 0.02);
+  s.nodes = in.nodes;
+  s.tets = in.tets;
+  s.mesh_line = 2;
+  Material m{.name = "wall", .form = Material::Form::YoungPoisson, .a = 6000, .b = 0.45, .rho = 1060, .line = 6};
+  m.fibre_eta = 20000;
+  m.fibre_line = 7;
+  m.fibre_field = field;
+  m.fibre_axis = axis;
+  m.fibre_origin = origin;
+  s.materials = {m};
+  s.sets.push_back({.name = "wall", .material = "wall", .all = true, .elements = {}, .line = 9});
+  return s;
+}
+
+/// Element e's centroid, computed here from the scene's nodes.
+Vec3<double> centroid_of(const Scene& s, index_t e) {
+  double c[3] = {0, 0, 0};
+  for (int a = 0; a < 4; ++a)
+    for (int k = 0; k < 3; ++k) c[k] += s.nodes[3 * s.tets[4 * e + a] + k] / 4;
+  return {c[0], c[1], c[2]};
+}
+
+/// The unit fibre of element e in the built model.
+Vec3<double> model_fibre(const TissueModel<double>& m, index_t e) {
+  return {m.fibre[e], m.fibre[m.n_elems + e], m.fibre[2 * m.n_elems + e]};
+}
+
+TEST(SceneFibres, CircumferentialFieldIsTheUnitTangentAroundTheAxis) {
+  // axis z through (0.02, 0.02, 0.005): the tangent at (x, y) is
+  // (-(y - 0.02), x - 0.02, 0) / r, r the distance from the axis
+  for (const double sense : {1.0, -1.0}) {
+    SCOPED_TRACE(sense);
+    const Scene s = vessel_scene(Material::FibreField::Circumferential, {0, 0, 2.5 * sense}, {0.02, 0.02, 0.005});
+    const TissueModel<double> m = load_model(s);
+    ASSERT_EQ(m.n_elems, 192);
+    ASSERT_EQ(m.fibre.size(), 4u * 192);
+    for (index_t e = 0; e < m.n_elems; ++e) {
+      const Vec3<double> c = centroid_of(s, e);
+      const double rx = c.x - 0.02, ry = c.y - 0.02, r = std::hypot(rx, ry);
+      ASSERT_GT(r, 1e-3);  // no centroid near the axis in this mesh
+      const Vec3<double> a = model_fibre(m, e);
+      EXPECT_NEAR(a.x, -sense * ry / r, 1e-14) << "element " << e;
+      EXPECT_NEAR(a.y, sense * rx / r, 1e-14) << "element " << e;
+      EXPECT_NEAR(a.z, 0, 1e-14) << "element " << e;
+      EXPECT_EQ(m.fibre[3 * m.n_elems + e], 20000);
+      // a tangent: perpendicular to the radius and to the axis
+      EXPECT_NEAR(a.x * rx + a.y * ry, 0, 1e-14 * r);
+    }
+  }
+}
+
+TEST(SceneFibres, RadialFieldPointsAwayFromTheAxis) {
+  // axis z through (0.02, 0.02, 0.005): the component along z (c.z - 0.005)
+  // is dropped, leaving (x - 0.02, y - 0.02, 0) / r
+  Scene s = vessel_scene(Material::FibreField::Radial, {0, 0, 1}, {0.02, 0.02, 0.005});
+  TissueModel<double> m = load_model(s);
+  for (index_t e = 0; e < m.n_elems; ++e) {
+    const Vec3<double> c = centroid_of(s, e);
+    const double rx = c.x - 0.02, ry = c.y - 0.02, r = std::hypot(rx, ry);
+    const Vec3<double> a = model_fibre(m, e);
+    EXPECT_NEAR(a.x, rx / r, 1e-14) << "element " << e;
+    EXPECT_NEAR(a.y, ry / r, 1e-14) << "element " << e;
+    EXPECT_NEAR(a.z, 0, 1e-14) << "element " << e;
+  }
+  // an axis along x through (0, 0.02, 0.01) (not through any centroid: the
+  // centroids sit at quarter-cell heights): (0, y - 0.02, z - 0.01) / r
+  s = vessel_scene(Material::FibreField::Radial, {-3, 0, 0}, {0.5, 0.02, 0.01});
+  m = load_model(s);
+  for (index_t e = 0; e < m.n_elems; ++e) {
+    const Vec3<double> c = centroid_of(s, e);
+    const double ry = c.y - 0.02, rz = c.z - 0.01, r = std::hypot(ry, rz);
+    const Vec3<double> a = model_fibre(m, e);
+    EXPECT_NEAR(a.x, 0, 1e-14) << "element " << e;
+    EXPECT_NEAR(a.y, ry / r, 1e-14) << "element " << e;
+    EXPECT_NEAR(a.z, rz / r, 1e-14) << "element " << e;
+  }
+}
+
+TEST(SceneFibres, UniformMaterialsGiveNoPerElementDirections) {
+  Scene s = valid_scene();
+  s.materials[0].fibre_eta = 1000;
+  s.materials[0].fibre_line = 20;
+  s.materials[0].fibre_dir = {0, 2, 0};
+  EXPECT_TRUE(to_model_input(s).fibre_dirs.empty());
+}
+
+TEST(SceneFibres, FileRowsGiveTheirElementsAndTheRestKeepTheDirection) {
+  Scene s = valid_scene();  // brain: elements 0..5, capsule: 6..11
+  Material& m = s.materials[0];
+  m.fibre_eta = 1000;
+  m.fibre_line = 20;
+  m.fibre_dir = {0, 0, 3};
+  m.fibre_field = Material::FibreField::File;
+  m.fibre_file = "dirs.csv";
+  m.fibre_rows = {{0, {0, 2, 0}, 2}, {4, {1, 1, 0}, 3}, {7, {5, 0, 0}, 4}};  // element 7 is the capsule's: not used
+  const ModelInput in = to_model_input(s);
+  ASSERT_EQ(in.fibre_dirs.size(), 36u);
+  const auto dir = [&](index_t e) {
+    return Vec3<double>{in.fibre_dirs[3 * e], in.fibre_dirs[3 * e + 1], in.fibre_dirs[3 * e + 2]};
+  };
+  EXPECT_EQ(dir(0).y, 2);
+  EXPECT_EQ(dir(4).x, 1);
+  EXPECT_EQ(dir(4).y, 1);
+  for (index_t e : {1, 2, 3, 5}) EXPECT_EQ(dir(e).z, 3) << e;  // not listed: direction=
+  const TissueModel<double> model = build_model(in);
+  EXPECT_NEAR(model_fibre(model, 4).x, std::sqrt(0.5), 1e-15);
+  EXPECT_NEAR(model_fibre(model, 2).z, 1, 1e-15);
+  EXPECT_EQ(model.fibre[3 * 12 + 7], 0);  // the capsule has no fibres
+}
+
+/// valid_scene with fibres in 'brain' (<fibre> on line 20) from `field`.
+Scene fibre_scene(Material::FibreField field) {
+  Scene s = valid_scene();
+  Material& m = s.materials[0];
+  m.fibre_eta = 1000;
+  m.fibre_line = 20;
+  m.fibre_field = field;
+  m.fibre_file = "dirs.csv";
+  m.fibre_file_path = "/data/dirs.csv";
+  m.fibre_rows = {{0, {1, 0, 0}, 2}, {2, {0, 1, 0}, 3}};
+  return s;
+}
+
+TEST(SceneFibres, BadFieldAxisOrOrigin) {
+  Scene s = fibre_scene(Material::FibreField::Circumferential);
+  s.materials[0].fibre_axis = {0, 0, 0};
+  EXPECT_TRUE(rejects(s, {"organ.xml:20: ", "material 'brain': fibre field circumferential: axis (0, 0, 0) must be "
+                          "non-zero"}));
+  s.materials[0].fibre_axis = {0, kNaN, 1};
+  EXPECT_TRUE(rejects(s, {"organ.xml:20: ", "fibre field circumferential: axis y = nan is not a finite number"}));
+  s = fibre_scene(Material::FibreField::Radial);
+  s.materials[0].fibre_origin = {kInf, 0, 0};
+  EXPECT_TRUE(rejects(s, {"organ.xml:20: ", "fibre field radial: origin x = inf is not a finite number"}));
+}
+
+TEST(SceneFibres, CentroidOnTheAxisIsNamed) {
+  for (const auto field : {Material::FibreField::Circumferential, Material::FibreField::Radial}) {
+    Scene s = fibre_scene(field);
+    s.materials[0].fibre_axis = {1, 2, 3};
+    s.materials[0].fibre_origin = centroid_of(s, 3) + Vec3<double>{0.001, 0.002, 0.003};  // on the line, off the point
+    const std::string name(to_string(field));
+    EXPECT_TRUE(rejects(s, {"organ.xml:20: ", "material 'brain': fibre field " + name, "element 3's centroid",
+                            "lies on the axis", "the " + name + " direction is undefined there"}));
+  }
+}
+
+TEST(SceneFibres, BadFileRowsCiteTheFileLine) {
+  Scene s = fibre_scene(Material::FibreField::File);
+  s.materials[0].fibre_rows.push_back({12, {1, 0, 0}, 4});
+  EXPECT_TRUE(rejects(s, {"/data/dirs.csv:4: ", "material 'brain', fibre file 'dirs.csv' (<fibre> at organ.xml:20)",
+                          "element 12 is out of range (the mesh has 12 elements, ids 0..11"}));
+  s.materials[0].fibre_rows.back() = {-1, {1, 0, 0}, 4};
+  EXPECT_TRUE(rejects(s, {"/data/dirs.csv:4: ", "element -1 is out of range"}));
+  s.materials[0].fibre_rows.back() = {2, {1, 0, 0}, 4};
+  EXPECT_TRUE(rejects(s, {"/data/dirs.csv:4: ", "element 2 is listed twice (first at line 3)"}));
+  s.materials[0].fibre_rows.back() = {3, {0, 0, 0}, 4};
+  EXPECT_TRUE(rejects(s, {"/data/dirs.csv:4: ", "element 3: fibre direction (0, 0, 0) must be finite and non-zero"}));
+  s.materials[0].fibre_rows.back() = {3, {kNaN, 0, 1}, 4};
+  EXPECT_TRUE(rejects(s, {"/data/dirs.csv:4: ", "element 3: fibre direction (nan, 0, 1) must be finite"}));
+  // rows only for the capsule's elements: the file of another mesh or set
+  s = fibre_scene(Material::FibreField::File);
+  s.materials[0].fibre_rows = {{6, {1, 0, 0}, 2}, {9, {1, 0, 0}, 3}};
+  EXPECT_TRUE(rejects(s, {"organ.xml:20: ", "fibre file 'dirs.csv' lists none of the material's 6 elements"}));
+  s.materials[0].fibre_rows.clear();
+  EXPECT_TRUE(rejects(s, {"organ.xml:20: ", "fibre file 'dirs.csv' gives no directions"}));
+  s.materials[0].fibre_file.clear();
+  EXPECT_TRUE(rejects(s, {"organ.xml:20: ", "a fibre direction file needs a file name"}));
 }
 
 }  // namespace

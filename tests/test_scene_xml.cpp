@@ -581,6 +581,154 @@ TEST(SceneXml, MissingFilesAreNamed) {
       throws_with<SceneError>([&] { (void)read_scene(dir.file("absent.xml")); }, {"absent.xml", "cannot open"}));
 }
 
+// ---- per-element fibre directions ------------------------------------------
+
+TEST(SceneXml, FibreFieldAndFileRoundTrip) {
+  TempDir dir;
+  Scene s = rich_scene();
+  Material& brain = s.materials[0];
+  brain.fibre_eta = 20000;
+  brain.fibre_field = Material::FibreField::Circumferential;
+  brain.fibre_axis = {0, 0.1, 1};
+  brain.fibre_origin = {0.015, 0.01, 1.0 / 3};
+  Material& capsule = s.materials[1];
+  capsule.fibre_eta = 5000;
+  capsule.fibre_field = Material::FibreField::File;
+  capsule.fibre_dir = {0, 0, 1};
+  capsule.fibre_file = "capsule-fibres.csv";
+  for (index_t e = 1; e < 20; e += 3) capsule.fibre_rows.push_back({e, {1.0 / 3, -0.25, e * 1e-3}, 0});
+  Material& fat = s.materials[2];
+  fat.fibre_eta = 100;
+  fat.fibre_field = Material::FibreField::Radial;
+  fat.fibre_axis = {1, 0, 0};
+  fat.fibre_origin = {0, 0.01, 0.0085};  // through the box's middle, along x
+  write_scene(s, dir.file("rich.xml"), true);
+  ASSERT_TRUE(fs::exists(dir.file("capsule-fibres.csv")));
+  const std::string text = testing_support::slurp(dir.file("rich.xml"));
+  EXPECT_NE(text.find("field=\"circumferential\" axis=\"0 0.1 1\" origin=\"0.015 0.01 0.3333333333333333\""),
+            std::string::npos)
+      << text;
+  EXPECT_NE(text.find("<fibre stiffness=\"5000\" file=\"capsule-fibres.csv\" direction=\"0 0 1\""), std::string::npos)
+      << text;
+  EXPECT_NE(text.find("field=\"radial\""), std::string::npos) << text;
+
+  // read from another working folder: the CSV resolves against the scene's folder
+  const Scene r = read_scene(dir.file("rich.xml"));
+  expect_same_scene(s, r);
+  for (size_t k = 0; k < 3; ++k) {
+    const Material &x = s.materials[k], &y = r.materials[k];
+    SCOPED_TRACE(x.name);
+    EXPECT_EQ(y.fibre_eta, x.fibre_eta);
+    EXPECT_EQ(y.fibre_field, x.fibre_field);
+    EXPECT_GT(y.fibre_line, 0);
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_EQ(y.fibre_dir[c], x.fibre_dir[c]);
+      if (x.fibre_field != Material::FibreField::File) {
+        EXPECT_EQ(y.fibre_axis[c], x.fibre_axis[c]);
+        EXPECT_EQ(y.fibre_origin[c], x.fibre_origin[c]);
+      }
+    }
+    EXPECT_EQ(y.fibre_file, x.fibre_file);
+    ASSERT_EQ(y.fibre_rows.size(), x.fibre_rows.size());
+    for (size_t i = 0; i < x.fibre_rows.size(); ++i) {
+      EXPECT_EQ(y.fibre_rows[i].element, x.fibre_rows[i].element);
+      for (int c = 0; c < 3; ++c) EXPECT_EQ(y.fibre_rows[i].dir[c], x.fibre_rows[i].dir[c]);
+      EXPECT_EQ(y.fibre_rows[i].line, int(i) + 2);  // after the header
+    }
+  }
+  EXPECT_EQ(r.materials[1].fibre_file_path, dir.file("capsule-fibres.csv"));
+  EXPECT_EQ(format_scene(r, ""), format_scene(s, ""));
+  // and the directions reach the model input: the file's rows in the capsule's listed elements
+  const ModelInput in = scene::to_model_input(r);
+  ASSERT_EQ(in.fibre_dirs.size(), 3 * r.tets.size() / 4);
+  EXPECT_EQ(in.fibre_dirs[3 * 4 + 1], -0.25);    // element 4: a row
+  EXPECT_EQ(in.fibre_dirs[3 * 22 + 2], 1.0);     // element 22 (capsule), not listed: direction=
+}
+
+/// A one-tet scene whose material 'm' (line 6) has the <fibre> (line 7) `fibre`.
+std::string fibre_xml(const std::string& fibre) {
+  return fmt::format(R"(<tissue-scene version="1">
+  <mesh>
+    <nodes>0 0 0  1 0 0  0 1 0  0 0 1</nodes>
+    <elements>0 1 2 3</elements>
+  </mesh>
+  <material name="m" E="3000" nu="0.45" rho="1000">
+    {}
+  </material>
+  <element-set material="m" elements="all"/>
+</tissue-scene>
+)",
+                     fibre);
+}
+
+TEST(SceneXml, FibreAttributeErrorsNameTheLine) {
+  EXPECT_TRUE(xml_error(fibre_xml(R"(<fibre stiffness="1" field="spiral" axis="0 0 1"/>)"),
+                        {"scene.xml:7: ", "<fibre>: field = 'spiral' is unknown; expected circumferential or radial"}));
+  EXPECT_TRUE(xml_error(fibre_xml(R"(<fibre stiffness="1" field="radial" axis="0 0 1" file="d.csv"/>)"),
+                        {"scene.xml:7: ", "give either field= (a direction field) or file=", "not both"}));
+  EXPECT_TRUE(xml_error(fibre_xml(R"(<fibre stiffness="1" direction="1 0 0" axis="0 0 1"/>)"),
+                        {"scene.xml:7: ", "axis= and origin= belong to a direction field"}));
+  EXPECT_TRUE(xml_error(fibre_xml(R"(<fibre stiffness="1" file="d.csv" origin="0 0 1"/>)"),
+                        {"scene.xml:7: ", "axis= and origin= belong to a direction field"}));
+  EXPECT_TRUE(xml_error(fibre_xml(R"(<fibre stiffness="1" field="radial" axis="0 0 1" direction="1 0 0"/>)"),
+                        {"scene.xml:7: ", "direction= is not used with field="}));
+  EXPECT_TRUE(xml_error(fibre_xml(R"(<fibre stiffness="1" field="radial"/>)"),
+                        {"scene.xml:7: ", "<fibre>: missing required attribute 'axis'"}));
+  EXPECT_TRUE(xml_error(fibre_xml(R"(<fibre stiffness="1" field="circumferential" axis="0 0 z"/>)"),
+                        {"scene.xml:7: ", "attribute axis: z = 'z' is not a number"}));
+  EXPECT_TRUE(xml_error(fibre_xml(R"(<fibre stiffness="1" field="circumferential" axis="0 0 1" origin="1 2"/>)"),
+                        {"scene.xml:7: ", "attribute origin = '1 2' must be three numbers"}));
+  EXPECT_TRUE(xml_error(fibre_xml(R"(<fibre stiffness="1" fiel="radial"/>)"),
+                        {"scene.xml:7: ", "unknown attribute 'fiel'"}));
+  // rules checked by validation, at the <fibre>'s line
+  const auto rule = [](const std::string& fibre, std::initializer_list<std::string> parts) {
+    return throws_with<SceneError>([&] { scene::validate(parse_scene(fibre_xml(fibre), "scene.xml", "")); }, parts);
+  };
+  EXPECT_TRUE(rule(R"(<fibre stiffness="1" field="radial" axis="0 0 0"/>)",
+                   {"scene.xml:7: ", "material 'm': fibre field radial: axis (0, 0, 0) must be non-zero"}));
+  EXPECT_TRUE(rule(R"(<fibre stiffness="1" field="radial" axis="0 0 nan"/>)",
+                   {"scene.xml:7: ", "fibre field radial: axis z = nan is not a finite number"}));
+  // the one tet's centroid is (0.25, 0.25, 0.25)
+  EXPECT_TRUE(rule(R"(<fibre stiffness="1" field="circumferential" axis="1 1 1" origin="0 0 0"/>)",
+                   {"scene.xml:7: ", "element 0's centroid (0.25, 0.25, 0.25) m lies on the axis",
+                    "the circumferential direction is undefined there"}));
+}
+
+TEST(SceneXml, FibreFileErrorsNameTheCsvLine) {
+  TempDir dir;
+  const auto scene_error = [&](const std::string& csv, std::initializer_list<std::string> parts) {
+    dir.write("dirs.csv", csv);
+    dir.write("s.xml", fibre_xml(R"(<fibre stiffness="1" file="dirs.csv" direction="1 0 0"/>)"));
+    return throws_with<SceneError>([&] { scene::validate(read_scene(dir.file("s.xml"))); }, parts);
+  };
+  const std::string csv = dir.file("dirs.csv");
+  // syntax, by the reader: the scene's line, then the CSV's file:line
+  EXPECT_TRUE(scene_error("element,ax,ay,az\n0,abc,0,0\n",
+                          {"s.xml:7: ", "<fibre>: material 'm' fibre file 'dirs.csv': ", csv + ":2: ",
+                           "ax 'abc' is not a number"}));
+  EXPECT_TRUE(scene_error("# fibres\n\n0,1,0,inf\n", {"s.xml:7: ", csv + ":3: ", "az = inf is not a finite number"}));
+  EXPECT_TRUE(scene_error("0,1,0\n", {csv + ":1: ", "3 fields; a row is element,ax,ay,az"}));
+  EXPECT_TRUE(scene_error("0.5,1,0,0\n", {csv + ":1: ", "element '0.5' is not an element id"}));
+  EXPECT_TRUE(scene_error("elem,x,y,z\n0,1,0,0\n", {csv + ":1: ", "header is 'elem,x,y,z'; expected 'element,ax,ay,az'"}));
+  EXPECT_TRUE(scene_error("element,ax,ay,az\n", {csv + ":1: ", "no rows"}));
+  // rules, by validation: the CSV's file:line and the <fibre>'s
+  EXPECT_TRUE(scene_error("element,ax,ay,az\n5,1,0,0\n",
+                          {csv + ":2: ", "material 'm', fibre file 'dirs.csv' (<fibre> at " + dir.file("s.xml") + ":7)",
+                           "element 5 is out of range (the mesh has 1 elements, ids 0..0"}));
+  EXPECT_TRUE(scene_error("0,1,0,0\n0,0,1,0\n", {csv + ":2: ", "element 0 is listed twice (first at line 1)"}));
+  EXPECT_TRUE(scene_error("0,0,0,0\n", {csv + ":1: ", "element 0: fibre direction (0, 0, 0) must be finite and "
+                                                       "non-zero"}));
+  // a missing file
+  dir.write("t.xml", fibre_xml(R"(<fibre stiffness="1" file="gone.csv"/>)"));
+  EXPECT_TRUE(throws_with<SceneError>([&] { (void)read_scene(dir.file("t.xml")); },
+                                      {"t.xml:7: ", "fibre file 'gone.csv'", "cannot open"}));
+  // a good file: direction= is optional with file= (default 1 0 0)
+  dir.write("dirs.csv", "element, ax, ay, az\n 0 , 0, -2, 0 \n");
+  dir.write("u.xml", fibre_xml(R"(<fibre stiffness="1" file="dirs.csv"/>)"));
+  const TissueModel<double> m = scene::load_model(read_scene(dir.file("u.xml")));
+  EXPECT_EQ(m.fibre[1], -1.0);  // a_y of element 0, normalised
+}
+
 // ---- TetGen .node/.ele -----------------------------------------------------
 
 TEST(TetgenFiles, ReadsOneBasedFilesWithCommentsAttributesAndMarkers) {
