@@ -52,6 +52,9 @@ struct Reductions {
                                ///< tets: W(F_e)). -1 = not computed by this backend
   double front_disp = -1;      ///< max |u_a| over the region's front ring (Region::front; 0 when it is
                                ///< empty), the adaptive region's truncation indicator (m); -1 = not computed
+  double visco_power = 0;      ///< W: what the Prony terms dissipate now, over the region's viscoelastic
+                               ///< elements (core/material.hpp prony_energy); 0 without Prony terms
+  double visco_stored = 0;     ///< J: the energy their Maxwell branches store now
   index_t bad_elem = -1;       ///< lowest element with J <= 0 or non-finite since the last reduce; -1 none
   double bad_J = 1;            ///< its J
   bool finite = true;          ///< every reduced value finite

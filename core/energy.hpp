@@ -43,4 +43,24 @@ TISSUE_HD T element_strain_energy(const Mat3<T>& F, T J, T Jbar, T volume, T mu,
   return ok ? volume * (iso + vol) : T(0);
 }
 
+/// The Prony branches' viscous power (W) and stored energy (J) of an
+/// element (core/material.hpp prony_energy) of reference volume V (m^3),
+/// instantaneous shear modulus mu (Pa), at F with J = det F and the Jbar
+/// of element_strain_energy: pass 3 relaxed S_iso(Fbar) = mu Jbar^(-2/3)
+/// (I - I1/3 C^-1) (the scaling to Fbar cancels in I1 C^-1). q: the
+/// element's Prony state; g, tau: its set's terms (g = 0: none). Zero when
+/// J <= 0 or is not finite.
+template <class T>
+TISSUE_HD PronyEnergy element_prony_energy(const Mat3<T>& F, T J, T Jbar, T volume, T mu,
+                                           const T q[kMaxProny][kSymComponents], const double g[kMaxProny],
+                                           const double tau[kMaxProny]) {
+  const bool ok = (J > T(0)) & (J <= std::numeric_limits<T>::max()) & (Jbar > T(0));
+  if (!ok) return {};
+  const Mat3<T> C = transpose(F) * F;
+  const T cbrt_Jbar = cube_root(Jbar);
+  const PronyEnergy e =
+      prony_energy(isochoric_pk2(C, inverse(C, J * J), mu / (cbrt_Jbar * cbrt_Jbar)), q, g, tau, double(mu));
+  return {double(volume) * e.power, double(volume) * e.stored};
+}
+
 }  // namespace tissue

@@ -96,10 +96,51 @@ TISSUE_HD Mat3<T> prony_update(const Mat3<T>& S_iso, ElementLaw<T>& law) {
   return {{sum[0], sum[3], sum[5], sum[3], sum[1], sum[4], sum[5], sum[4], sum[2]}};
 }
 
+/// The Neo-Hookean isochoric PK2 stress S_iso = a (I - I1/3 C^-1) from C,
+/// C^-1 and a = mu J^(-2/3): what the Prony terms relax.
+template <class T>
+TISSUE_HD Mat3<T> isochoric_pk2(const Mat3<T>& C, const Mat3<T>& Ci, T a) {
+  Mat3<T> S = (-a * trace(C) / T(3)) * Ci;
+  S(0, 0) += a;
+  S(1, 1) += a;
+  S(2, 2) += a;
+  return S;
+}
+
+/// The Prony terms' viscous power and stored energy, per unit reference
+/// volume, at an element's current state (docs/materials.md, energy):
+/// term i's Maxwell branch still carries h_i = g_i S_iso - q_i (what has
+/// not relaxed yet); with the branch's shear modulus g_i mu and viscosity
+/// g_i mu tau_i, it dissipates h_i:h_i / (2 g_i mu tau_i) (W/m^3) and
+/// stores h_i:h_i / (4 g_i mu) (J/m^3). The linear standard solid's exact
+/// energies, taken as the finite-strain definition (S in PK2, the
+/// reference volume). g[i] = 0: no term i.
+struct PronyEnergy {
+  double power = 0;   ///< W/m^3
+  double stored = 0;  ///< J/m^3
+};
+
+template <class T>
+TISSUE_HD PronyEnergy prony_energy(const Mat3<T>& S_iso, const T q[kMaxProny][kSymComponents], const double g[kMaxProny],
+                                   const double tau[kMaxProny], double mu) {
+  PronyEnergy e;
+  for (int i = 0; i < kMaxProny; ++i) {
+    if (!(g[i] > 0)) continue;
+    double hh = 0;
+    for (int c = 0; c < kSymComponents; ++c) {
+      const double h = g[i] * double(sym_component(S_iso, c)) - double(q[i][c]);
+      hh += (c < 3 ? 1.0 : 2.0) * h * h;  // the off-diagonal components count twice
+    }
+    e.power += hh / (2 * g[i] * mu * tau[i]);
+    e.stored += hh / (4 * g[i] * mu);
+  }
+  return e;
+}
+
 /// The strain energy density (J/m^3) of the optional elastic terms, from
 /// C = F^T F and J^(-2/3) (the Neo-Hookean part is core/energy.hpp's). The
-/// Prony state's stored energy is not included (docs/materials.md: a
-/// viscoelastic set reports its instantaneous elastic energy).
+/// Prony branches' energy is prony_energy's (docs/materials.md: a
+/// viscoelastic set reports its instantaneous elastic energy here).
 template <class Terms, class T>
 TISSUE_HD T extra_energy(const Mat3<T>& C, T j23, const ElementLaw<T>& law) {
   if constexpr (Terms::fibre) return fibre_energy(C, j23, law.a, law.eta);

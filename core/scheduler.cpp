@@ -234,6 +234,11 @@ TickReport Scheduler::tick(std::span<Device* const> devices) {
   rep.residual = std::sqrt(r.free_force2) / std::max(held, settings_.force_floor);
   rep.kinetic = r.kinetic;
   rep.strain_energy = r.strain_energy;
+  rep.visco_power = r.visco_power;
+  rep.visco_stored = r.visco_stored;
+  dissipated_ += 0.5 * (visco_power_ + r.visco_power) * (steps_per_tick_ * model_.dt);  // the tick's simulated time
+  visco_power_ = r.visco_power;
+  rep.dissipated = dissipated_;
   rep.max_disp = r.max_disp;
   rep.front_disp = r.front_disp;
   const double energy_scale = std::max(0.5 * held * r.max_disp, 1e-18);

@@ -87,6 +87,10 @@ struct TickReport {
   double max_disp = 0;         ///< m
   double front_disp = -1;      ///< max |u| on the region's front ring (m); -1 = not computed
   int depth = kDepthAll;       ///< region depth in use at the end of the tick (rings; kDepthAll = whole)
+  double visco_power = 0;      ///< W dissipated by the Prony terms at the end of the tick (0 without)
+  double visco_stored = 0;     ///< J stored in their Maxwell branches
+  double dissipated = 0;       ///< J dissipated by the Prony terms since the first tick (the trapezoid rule
+                               ///< over the ticks' visco_power)
   bool equilibrium = false;
   int steps = 0;               ///< TLED steps in this tick
 };
@@ -153,6 +157,8 @@ class Scheduler {
   std::vector<index_t> rigid_reported_;  ///< per tool: rigid count last reported (0 = none)
   RegionSizes region_;
   std::vector<index_t> seeds_;  ///< seeds of the current region (sorted)
+  double visco_power_ = 0;      ///< the last tick's Reductions::visco_power (W)
+  double dissipated_ = 0;       ///< J, TickReport::dissipated
   std::vector<std::string> notes_;
 };
 

@@ -89,12 +89,7 @@ TISSUE_HD Mat3<T> law_pk2(const Mat3<T>& F, T J, T mu, T K, ElementLaw<T>& law) 
   const T cbrt_J = cube_root(J);
   const T j23 = T(1) / (cbrt_J * cbrt_J);
   if constexpr (Terms::visco) {
-    const T a = mu / (cbrt_J * cbrt_J);  // mu J^(-2/3)
-    Mat3<T> S_iso = (-a * trace(C) / T(3)) * Ci;  // the isochoric part alone
-    S_iso(0, 0) += a;
-    S_iso(1, 1) += a;
-    S_iso(2, 2) += a;
-    S = S + T(-1) * prony_update(S_iso, law);
+    S = S + T(-1) * prony_update(isochoric_pk2(C, Ci, mu / (cbrt_J * cbrt_J)), law);  // a = mu J^(-2/3)
   }
   if constexpr (Terms::fibre) S = S + fibre_pk2(C, Ci, j23, law.a, law.eta);
   return S;

@@ -194,6 +194,9 @@ template <class T>
 Reductions CpuBackend<T>::do_reduce() {
   Reductions r = reduce_region(model_, state_, state_.region.nodes);
   r.strain_energy = strain_energy(model_, state_, node_divisor_, energy_);
+  const PronyEnergy visco = prony_energy_sum(model_, state_, energy_);
+  r.visco_power = visco.power;
+  r.visco_stored = visco.stored;
   r.front_disp = front_displacement(model_, state_);
   r.bad_elem = bad_.take(&r.bad_J);
   if (r.bad_elem < 0) r.bad_J = 1;

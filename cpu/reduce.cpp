@@ -8,6 +8,7 @@
 #include <cmath>
 #include <functional>
 
+#include "core/energy.hpp"
 #include "core/node_rules.hpp"
 #include "cpu/element_lanes.hpp"
 #include "cpu/passes.hpp"
@@ -136,6 +137,49 @@ double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std
 }
 
 template <class T>
+PronyEnergy prony_energy_sum(const TissueModel<T>& m, const TissueState<T>& s, const EnergyScratch<T>& scratch) {
+  if (!m.has_visco()) return {};
+  const std::span<const index_t> elems = s.region.elems;
+  const std::size_t ne = std::size_t(m.n_elems), nv = std::size_t(m.n_visco);
+  const auto element = [&](index_t e) -> PronyEnergy {
+    const index_t slot = m.visco_slot[e];
+    if (slot < 0) return {};
+    Mat3<T> F;
+    for (int k = 0; k < 9; ++k) F(k / 3, k % 3) = scratch.elem_F[k * ne + e];
+    const T J = det(F);
+    T Jbar = J;
+    if (m.ianp) {
+      T pbar = 0;
+      for (int a = 0; a < 4; ++a) pbar += scratch.node_p[m.elem_nodes[a * ne + e]];
+      Jbar = T(1) + pbar / T(4) / m.K[e];
+    }
+    T q[kMaxProny][kSymComponents];
+    double g[kMaxProny], tau[kMaxProny];
+    for (int i = 0; i < kMaxProny; ++i) {
+      g[i] = m.prony_g[i * nv + slot];
+      tau[i] = m.prony_tau[i * nv + slot];
+      for (int c = 0; c < kSymComponents; ++c) q[i][c] = s.visco_q[(kSymComponents * i + c) * nv + slot];
+    }
+    return element_prony_energy(F, J, Jbar, m.volume[e], m.mu[e], q, g, tau);
+  };
+  return tbb::parallel_deterministic_reduce(
+      tbb::blocked_range<std::size_t>(0, elems.size(), kReduceGrain), PronyEnergy{},
+      [&](const tbb::blocked_range<std::size_t>& r, PronyEnergy sum) {
+        for (std::size_t k = r.begin(); k < r.end(); ++k) {
+          const PronyEnergy p = element(elems[k]);
+          sum.power += p.power;
+          sum.stored += p.stored;
+        }
+        return sum;
+      },
+      [](PronyEnergy a, const PronyEnergy& b) {
+        a.power += b.power;
+        a.stored += b.stored;
+        return a;
+      });
+}
+
+template <class T>
 bool take_passes(EnergyScratch<T>& scratch, TissueState<T>& s) {
   if (!scratch.fresh) return false;
   scratch.fresh = false;
@@ -151,6 +195,7 @@ bool take_passes(EnergyScratch<T>& scratch, TissueState<T>& s) {
   template double front_displacement(const TissueModel<T>&, const TissueState<T>&);                          \
   template double strain_energy(const TissueModel<T>&, const TissueState<T>&, const std::vector<T>&,         \
                                 EnergyScratch<T>&);                                                          \
+  template PronyEnergy prony_energy_sum(const TissueModel<T>&, const TissueState<T>&, const EnergyScratch<T>&); \
   template bool take_passes(EnergyScratch<T>&, TissueState<T>&);
 TISSUE_CPU_REDUCE(float)
 TISSUE_CPU_REDUCE(double)

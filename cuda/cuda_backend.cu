@@ -180,7 +180,7 @@ class CudaBackend final : public Backend {
     const index_t n = m.n_nodes;
     region_.allocate(n, m.n_elems, stream());
     reducer_.allocate(n, m.n_elems);
-    reducer_.set_fibre(store_.law().fibre);
+    reducer_.set_law(store_.law());
     stepper_.set_law(store_.law());
     contact_.allocate(n, m.n_surf);
     driven_list_.allocate(n);

@@ -62,6 +62,8 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   upload_array(visco_slot_, m.visco_slot, log, stream);
   upload_array(prony_decay_, m.prony_decay, log, stream);
   upload_array(prony_gain_, m.prony_gain, log, stream);
+  upload_array(prony_g_, m.prony_g, log, stream);
+  upload_array(prony_tau_, m.prony_tau, log, stream);
   CUDA_CHECK(cudaStreamSynchronize(stream));  // the host sources above must outlive the copies
 
   model_ = {};
@@ -110,6 +112,8 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   law_.n_visco = m.n_visco;
   law_.prony_decay = m.has_visco() ? prony_decay_.data() : nullptr;
   law_.prony_gain = m.has_visco() ? prony_gain_.data() : nullptr;
+  law_.prony_g = m.has_visco() ? prony_g_.data() : nullptr;
+  law_.prony_tau = m.has_visco() ? prony_tau_.data() : nullptr;
   law_.visco_q = m.has_visco() ? visco_q_.data() : nullptr;
   contact_.allocate(n);
   contact_tool_.allocate(n);

@@ -75,6 +75,7 @@ class DeviceStore {
   DeviceArray<T> dv_slot_, elem_J_, node_p_;
   DeviceArray<T> fibre_, prony_decay_, prony_gain_, visco_q_;  // optional law terms: empty when unused
   DeviceArray<index_t> visco_slot_;
+  DeviceArray<double> prony_g_, prony_tau_;
   DeviceArray<Packed3<T>> load_;  // applied load: empty when none
   DeviceArray<unsigned long long> bad_;
 };

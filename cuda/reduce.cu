@@ -17,6 +17,7 @@ __device__ ReducePartial zero_partial() {
   ReducePartial p;
   for (int c = 0; c < 3; ++c) p.reaction[c] = p.internal[c] = 0;
   p.free2 = p.held2 = p.kinetic = p.max_disp = p.front_disp = p.energy = 0;
+  p.visco_power = p.visco_stored = 0;
   p.nonfinite = 0;
   return p;
 }
@@ -32,6 +33,8 @@ __device__ void combine(ReducePartial& a, const ReducePartial& b) {
   a.max_disp = fmax(a.max_disp, b.max_disp);
   a.front_disp = fmax(a.front_disp, b.front_disp);
   a.energy += b.energy;
+  a.visco_power += b.visco_power;
+  a.visco_stored += b.visco_stored;
   a.nonfinite += b.nonfinite;
 }
 
@@ -88,14 +91,44 @@ __device__ double element_energy(const ModelView<T>& m, const T* node_p, const P
   return double(element_strain_energy(F, J, Jbar, d.V, d.mu, d.K));
 }
 
+/// Element e's Prony power and stored energy (core/energy.hpp
+/// element_prony_energy) at the current u; adds them to p. Elastic
+/// elements add nothing.
+template <class T>
+__device__ void add_element_prony(const ModelView<T>& m, const T* node_p, const Packed3<T>* u, index_t e,
+                                  const LawView<T>& w, ReducePartial& p) {
+  const index_t slot = w.visco_slot[e];
+  if (slot < 0) return;
+  const ElementData<T> d = load_element(m, e);
+  Vec3<T> ue[4];
+  corner_displacements(d, u, ue);
+  const Mat3<T> F = deformation_gradient(ue, d.dN);
+  const T J = det(F);
+  T Jbar = J;
+  if (m.ianp) Jbar = T(1) + (node_p[d.c[0]] + node_p[d.c[1]] + node_p[d.c[2]] + node_p[d.c[3]]) / T(4) / d.K;
+  T q[kMaxProny][kSymComponents];
+  double g[kMaxProny], tau[kMaxProny];
+  const index_t nv = w.n_visco;
+  for (int i = 0; i < kMaxProny; ++i) {
+    g[i] = w.prony_g[i * nv + slot];
+    tau[i] = w.prony_tau[i * nv + slot];
+    for (int c = 0; c < kSymComponents; ++c) q[i][c] = w.visco_q[(kSymComponents * i + c) * nv + slot];
+  }
+  const PronyEnergy pe = element_prony_energy(F, J, Jbar, d.V, d.mu, q, g, tau);
+  p.visco_power += pe.power;
+  p.visco_stored += pe.stored;
+}
+
 template <class T>
 __global__ void __launch_bounds__(kReduceBlock)
     reduce_partial_kernel(ModelView<T> m, StateView<T> s, RegionView r, FrontView front, StepBuffers<T> b,
-                          const T* energy_node_p, const T* fibre, ReducePartial* out) {
+                          const T* energy_node_p, LawView<T> w, ReducePartial* out) {
   ReducePartial p = zero_partial();
   for (index_t i = thread_index(); i < r.n_nodes; i += thread_stride()) accumulate_node(m, s, b, front, r.node(i), p);
-  for (index_t i = thread_index(); i < r.n_elems; i += thread_stride())
-    p.energy += element_energy(m, energy_node_p, b.u, r.elem(i), fibre);
+  for (index_t i = thread_index(); i < r.n_elems; i += thread_stride()) {
+    p.energy += element_energy(m, energy_node_p, b.u, r.elem(i), w.fibre);
+    if (w.visco_slot) add_element_prony(m, energy_node_p, b.u, r.elem(i), w, p);
+  }
   const ReducePartial sum = block_reduce(p);
   if (threadIdx.x == 0) out[blockIdx.x] = sum;
 }
@@ -115,6 +148,8 @@ __global__ void __launch_bounds__(kReduceBlock)
   r.max_disp = sum.max_disp;
   r.front_disp = sum.front_disp;
   r.strain_energy = sum.energy;
+  r.visco_power = sum.visco_power;
+  r.visco_stored = sum.visco_stored;
   const unsigned long long key = *bad;
   if (key != ~0ull) {
     r.bad_elem = static_cast<index_t>(key >> 32);
@@ -156,7 +191,7 @@ Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const R
   }
   const int blocks = std::min(grid_for(std::max(r.n_nodes, r.n_elems), kReduceBlock), kMaxReduceBlocks);
   launch_blocks(blocks, kReduceBlock, stream, reduce_partial_kernel<T>, m, s, r, front, b,
-                static_cast<const T*>(node_p_.data()), fibre_, partial_.data());
+                static_cast<const T*>(node_p_.data()), law_, partial_.data());
   launch_blocks(1, kReduceBlock, stream, reduce_final_kernel, blocks, partial_.data(), s.bad, result_.data());
   contact.reduce(m, s, result_.data(), stream);
   log.to_host(result_host_.data(), result_.data(), sizeof(Reductions), stream);

@@ -2,7 +2,8 @@
 // tool-driven components, internal force and residual parts over inner
 // nodes (per held / free component), kinetic energy and max displacement
 // over region nodes, the front ring's displacement, the strain energy of the
-// computed elements at the current u, and the bad-element flag (read and
+// computed elements at the current u, the Prony terms' viscous power and
+// stored energy, and the bad-element flag (read and
 // cleared). Accumulated in double in two deterministic stages (fixed-order
 // block partials, then one block); one struct comes back.
 #pragma once
@@ -21,6 +22,7 @@ struct ReducePartial {
   double reaction[3];
   double internal[3];
   double free2, held2, kinetic, max_disp, front_disp, energy;
+  double visco_power, visco_stored;  ///< the Prony terms' (core/energy.hpp element_prony_energy)
   int nonfinite;  ///< region nodes with a non-finite u, f or velocity
 };
 
@@ -37,8 +39,9 @@ class Reducer {
   /// Partials, result and the strain energy's scratch (passes 1-2 at the
   /// current u: 4 n_elems + n_elems + n_nodes scalars).
   void allocate(index_t n_nodes, index_t n_elems);
-  /// The model's fibre term (LawView::fibre; null: none) for the energy.
-  void set_fibre(const T* fibre) { fibre_ = fibre; }
+  /// The model's law terms: the fibre term's energy (LawView::fibre; null:
+  /// none) and the Prony terms' power and stored energy (null visco_slot: none).
+  void set_law(const LawView<T>& law) { law_ = law; }
 
   /// Reduces over region r with the current buffers b; clears the bad flag;
   /// `contact` adds the per-tool contact results before the one download.
@@ -53,7 +56,7 @@ class Reducer {
   DeviceArray<Reductions> result_;      ///< (1)
   PinnedArray<Reductions> result_host_;
   DeviceArray<T> dv_slot_, elem_J_, node_p_;  ///< energy scratch
-  const T* fibre_ = nullptr;
+  LawView<T> law_;
 };
 
 }  // namespace tissue::gpu

@@ -71,6 +71,8 @@ struct LawView {
   const T* prony_decay = nullptr;         ///< (kMaxProny x n_visco)
   const T* prony_gain = nullptr;          ///< (kMaxProny x n_visco)
   T* visco_q = nullptr;                   ///< Prony state q[(6 i + c) * n_visco + slot] (core/state.hpp)
+  const double* prony_g = nullptr;        ///< g_i per slot (kMaxProny x n_visco): the energy reduction's
+  const double* prony_tau = nullptr;      ///< tau_i per slot (kMaxProny x n_visco) s
   TISSUE_HD bool neo_hookean() const { return !fibre && !visco_slot; }
 };
 

@@ -12,7 +12,7 @@ std::string TickLog::header(int n_tools) {
   std::string h =
       "tick,time,tool_x,tool_y,tool_z,contact_nodes,force_x,force_y,force_z,grasp,internal_x,internal_y,internal_z,"
       "region_nodes,region_elems,residual,kinetic,max_disp,equilibrium,steps,strain_energy,kinetic_rel,front_disp,"
-      "depth";
+      "depth,visco_power,visco_stored,dissipated";
   for (int k = 2; k <= n_tools; ++k)
     h += fmt::format(",tool{0}_x,tool{0}_y,tool{0}_z,tool{0}_contact_nodes,tool{0}_force_x,tool{0}_force_y,"
                      "tool{0}_force_z,tool{0}_grasp",
@@ -43,10 +43,11 @@ void TickLog::write(const TickReport& r) {
   const ToolReport& t0 = r.tools[0];
   out_ << fmt::format(
       "{},{:.9g},{:.9g},{:.9g},{:.9g},{},{:.9g},{:.9g},{:.9g},{},{:.9g},{:.9g},{:.9g},{},{},{:.6g},{:.6g},{:.9g},{},{},"
-      "{:.9g},{:.6g},{:.9g},{}",
+      "{:.9g},{:.6g},{:.9g},{},{:.9g},{:.9g},{:.9g}",
       r.tick, r.time, t0.tip.x, t0.tip.y, t0.tip.z, t0.contact_nodes, t0.force.x, t0.force.y, t0.force.z,
       t0.grasp ? 1 : 0, r.internal.x, r.internal.y, r.internal.z, r.region_nodes, r.region_elems, r.residual,
-      r.kinetic, r.max_disp, r.equilibrium ? 1 : 0, r.steps, r.strain_energy, r.kinetic_rel, r.front_disp, r.depth);
+      r.kinetic, r.max_disp, r.equilibrium ? 1 : 0, r.steps, r.strain_energy, r.kinetic_rel, r.front_disp, r.depth,
+      r.visco_power, r.visco_stored, r.dissipated);
   for (int k = 1; k < n_tools_; ++k) {
     const ToolReport& t = r.tools[k];
     out_ << fmt::format(",{:.9g},{:.9g},{:.9g},{},{:.9g},{:.9g},{:.9g},{}", t.tip.x, t.tip.y, t.tip.z,

@@ -21,14 +21,17 @@ namespace tissue::io {
 /// Writes a header row, then one row per tick with the columns
 /// tick,time,tool_x,tool_y,tool_z,contact_nodes,force_x,force_y,force_z,grasp,
 /// internal_x,internal_y,internal_z,region_nodes,region_elems,residual,
-/// kinetic,max_disp,equilibrium,steps,strain_energy,kinetic_rel,front_disp,depth
+/// kinetic,max_disp,equilibrium,steps,strain_energy,kinetic_rel,front_disp,depth,visco_power,
+/// visco_stored,dissipated
 /// and, for every further tool k = 2, 3, ...: toolk_x,toolk_y,toolk_z,
 /// toolk_contact_nodes,toolk_force_x,toolk_force_y,toolk_force_z,toolk_grasp.
 /// SI units (s, m, N, J); tool_* is the tip of the first tool, force_* the
 /// force on it, contact_nodes its surface nodes in contact, grasp its grasp
 /// button (0/1); equilibrium 0/1; strain_energy and front_disp -1 where the
 /// backend does not compute them; kinetic_rel the equilibrium test's
-/// relative kinetic energy; depth the region's rings, -1 = the whole mesh.
+/// relative kinetic energy; depth the region's rings, -1 = the whole mesh;
+/// visco_power (W), visco_stored and dissipated (J) the Prony terms' energy
+/// (TickReport; 0 without Prony terms).
 class TickLog {
  public:
   /// Rows between flushes (at most; a second of wall time flushes too).

@@ -199,8 +199,11 @@ TEST(SchedulerRegion, LoadedNodesSeedTheRegionAndMove) {
   const Fields f = backend->download();
   const index_t n = m.n_nodes;
   EXPECT_GT(f.u[2 * n + a], 1e-6);  // lifted (m)
-  for (index_t b = 0; b < n; ++b)   // nothing outside the region moved
-    if (!std::binary_search(want.nodes.begin(), want.nodes.end(), b)) EXPECT_EQ(f.u[2 * n + b], 0.0) << "node " << b;
+  for (index_t b = 0; b < n; ++b) {  // nothing outside the region moved
+    if (!std::binary_search(want.nodes.begin(), want.nodes.end(), b)) {
+      EXPECT_EQ(f.u[2 * n + b], 0.0) << "node " << b;
+    }
+  }
   // clearing the loads keeps the region, and the node springs back
   sched.set_loads({}, {});
   EXPECT_TRUE(backend->loaded_nodes().empty());

@@ -202,6 +202,9 @@ TEST(TickLog, HeaderAndRows) {
     r.kinetic_rel = 0.05;
     r.front_disp = 1e-3;
     r.depth = 6;
+    r.visco_power = 2.5e-4;
+    r.visco_stored = 1e-7;
+    r.dissipated = 3.25e-6;
     log.write(r);
     r.tick = 8;
     r.tools[0].contact_nodes = 0;
@@ -219,10 +222,10 @@ TEST(TickLog, HeaderAndRows) {
   EXPECT_EQ(header,
             "tick,time,tool_x,tool_y,tool_z,contact_nodes,force_x,force_y,force_z,grasp,internal_x,internal_y,"
             "internal_z,region_nodes,region_elems,residual,kinetic,max_disp,equilibrium,steps,strain_energy,"
-            "kinetic_rel,front_disp,depth");
+            "kinetic_rel,front_disp,depth,visco_power,visco_stored,dissipated");
   EXPECT_EQ(row1,
             "7,0.007,0.01,0.02,-0.03,42,0.5,-0.25,1.5,1,1e-06,0,-2e-06,120,300,0.0001,2e-09,0.004,1,23,3e-06,0.05,"
-            "0.001,6");
+            "0.001,6,0.00025,1e-07,3.25e-06");
   EXPECT_EQ(row2.substr(0, 2), "8,");
   EXPECT_NE(row2.find(",-0.03,0,0.5,"), std::string::npos);
   EXPECT_NE(row2.find(",0,23,"), std::string::npos);
@@ -248,7 +251,7 @@ TEST(TickLog, EveryFurtherToolHasItsColumns) {
   std::string header, row;
   std::getline(in, header);
   std::getline(in, row);
-  EXPECT_NE(header.find(",depth,tool2_x,tool2_y,tool2_z,tool2_contact_nodes,tool2_force_x,tool2_force_y,"
+  EXPECT_NE(header.find(",dissipated,tool2_x,tool2_y,tool2_z,tool2_contact_nodes,tool2_force_x,tool2_force_y,"
                         "tool2_force_z,tool2_grasp"),
             std::string::npos)
       << header;
