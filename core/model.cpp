@@ -247,9 +247,12 @@ void fill_law_terms(const ModelInput& in, TissueModel<double>& m) {
   if (!visco) return;
   m.visco_slot.assign(ne, -1);
   for (index_t e = 0; e < ne; ++e)
-    if (material(e).prony_terms > 0) m.visco_slot[e] = m.n_visco++;
-  m.prony_g.assign(kMaxProny * size_t(m.n_visco), 0.0);
-  m.prony_tau.assign(kMaxProny * size_t(m.n_visco), 1.0);
+    if (material(e).prony_terms > 0) {
+      m.visco_slot[e] = m.n_visco++;
+      m.n_prony = std::max(m.n_prony, material(e).prony_terms);
+    }
+  m.prony_g.assign(m.n_prony * size_t(m.n_visco), 0.0);
+  m.prony_tau.assign(m.n_prony * size_t(m.n_visco), 1.0);
   for (index_t e = 0; e < ne; ++e) {
     const index_t v = m.visco_slot[e];
     if (v < 0) continue;
@@ -553,6 +556,7 @@ TissueModel<T> convert(const TissueModel<double>& m) {
   r.fibre = cv(m.fibre);
   r.visco_slot = m.visco_slot;
   r.n_visco = m.n_visco;
+  r.n_prony = m.n_prony;
   r.prony_g = m.prony_g;
   r.prony_tau = m.prony_tau;
   r.prony_decay = cv(m.prony_decay);

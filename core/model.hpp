@@ -107,8 +107,10 @@ struct TissueModel {
   std::vector<index_t> visco_slot;   ///< Prony state slot of each element, -1 = elastic (n_elems); empty when
                                      ///< no set is viscoelastic
   index_t n_visco = 0;               ///< viscoelastic elements (slots)
-  std::vector<double> prony_g, prony_tau;  ///< per slot (kMaxProny x n_visco, component-major); g = 0 unused
-  std::vector<T> prony_decay, prony_gain;  ///< exp(-dt/tau_i), g_i (1 - exp(-dt/tau_i)) (kMaxProny x n_visco);
+  int n_prony = 0;                   ///< Prony terms stored per slot: the most any set gives (0..kMaxProny);
+                                     ///< a set with fewer has g = 0 in the rest
+  std::vector<double> prony_g, prony_tau;  ///< per slot (n_prony x n_visco, component-major); g = 0 unused
+  std::vector<T> prony_decay, prony_gain;  ///< exp(-dt/tau_i), g_i (1 - exp(-dt/tau_i)) (n_prony x n_visco);
                                            ///< set_time_step recomputes them
   std::vector<T> mass;               ///< lumped nodal mass (n_nodes) kg
   std::vector<T> cd_A, cd_B, cd_C;   ///< central-difference constants (n_nodes each)

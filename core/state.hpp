@@ -36,12 +36,12 @@ struct TissueState {
   std::vector<T> grasp_offset;    ///< grasped nodes: position minus the tool tip when the grasp started
                                   ///< (3 x n_nodes) m
   std::vector<T> visco_q;  ///< Prony state q_i of the viscoelastic elements (core/material.hpp), by slot:
-                           ///< q[(6 i + c) * n_visco + slot] (6 kMaxProny x n_visco) Pa; empty without
+                           ///< q[(6 i + c) * n_visco + slot] (6 n_prony x n_visco) Pa; empty without
   Region region;           ///< active nodes and elements
 
-  void resize(index_t n_nodes, index_t n_elems, index_t n_visco = 0) {
+  void resize(index_t n_nodes, index_t n_elems, index_t n_visco = 0, int n_prony = 0) {
     load.clear();
-    visco_q.assign(std::size_t(kSymComponents) * kMaxProny * n_visco, T(0));
+    visco_q.assign(std::size_t(kSymComponents) * n_prony * n_visco, T(0));
     for (auto* v : {&u, &u_prev, &u_next, &u_held, &f, &contact_normal, &grasp_offset})
       v->assign(3 * size_t(n_nodes), T(0));
     contact.assign(n_nodes, kNoContact);

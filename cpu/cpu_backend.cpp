@@ -52,7 +52,7 @@ void CpuBackend<T>::do_upload(const TissueModel<double>& model) {
   energy_.fresh = energy_.synced = false;
   contact_.reset();
   model_ = convert<T>(model);
-  state_.resize(model_.n_nodes, model_.n_elems, model_.n_visco);
+  state_.resize(model_.n_nodes, model_.n_elems, model_.n_visco, model_.n_prony);
   node_divisor_ = nodal_pressure_divisors(model_);
   all_elems_.resize(model_.n_elems);
   std::iota(all_elems_.begin(), all_elems_.end(), 0);

@@ -176,10 +176,12 @@ struct alignas(64) LawLanes {
 };
 
 /// Gathers the batch's law terms that Terms instantiates: fibres from the
-/// model, the Prony constants and the state q (6 kMaxProny x n_visco) by slot.
+/// model, the Prony constants and the state q (6 n_prony x n_visco) by slot;
+/// terms beyond the model's n_prony are neutral (0).
 template <class Terms, class T>
 void gather_law_lanes(const TissueModel<T>& m, const T* q, const index_t* elems, int count, LawLanes<T>& w) {
   const std::size_t ne = m.n_elems, nv = m.n_visco;
+  const int np = m.n_prony;
   if constexpr (Terms::fibre) {
     for (int l = 0; l < kLanes; ++l) {
       const bool in = l < count;
@@ -192,10 +194,11 @@ void gather_law_lanes(const TissueModel<T>& m, const T* q, const index_t* elems,
       const index_t v = l < count ? m.visco_slot[elems[l]] : -1;
       w.slot[l] = v;
       for (int i = 0; i < kMaxProny; ++i) {
-        w.decay[i][l] = v < 0 ? T(0) : m.prony_decay[i * nv + v];
-        w.gain[i][l] = v < 0 ? T(0) : m.prony_gain[i * nv + v];
+        w.decay[i][l] = v < 0 || i >= np ? T(0) : m.prony_decay[i * nv + v];
+        w.gain[i][l] = v < 0 || i >= np ? T(0) : m.prony_gain[i * nv + v];
       }
-      for (int k = 0; k < kMaxProny * kSymComponents; ++k) w.q[k][l] = v < 0 ? T(0) : q[k * nv + v];
+      for (int k = 0; k < kMaxProny * kSymComponents; ++k)
+        w.q[k][l] = v < 0 || k >= np * kSymComponents ? T(0) : q[k * nv + v];
     }
   }
 }
@@ -208,7 +211,7 @@ void scatter_law_lanes(const TissueModel<T>& m, T* q, const LawLanes<T>& w) {
     for (int l = 0; l < kLanes; ++l) {
       const index_t v = w.slot[l];
       if (v < 0) continue;
-      for (int k = 0; k < kMaxProny * kSymComponents; ++k) q[k * nv + v] = w.q[k][l];
+      for (int k = 0; k < m.n_prony * kSymComponents; ++k) q[k * nv + v] = w.q[k][l];
     }
   }
 }

@@ -156,9 +156,10 @@ PronyEnergy prony_energy_sum(const TissueModel<T>& m, const TissueState<T>& s, c
     T q[kMaxProny][kSymComponents];
     double g[kMaxProny], tau[kMaxProny];
     for (int i = 0; i < kMaxProny; ++i) {
-      g[i] = m.prony_g[i * nv + slot];
-      tau[i] = m.prony_tau[i * nv + slot];
-      for (int c = 0; c < kSymComponents; ++c) q[i][c] = s.visco_q[(kSymComponents * i + c) * nv + slot];
+      const bool in = i < m.n_prony;
+      g[i] = in ? m.prony_g[i * nv + slot] : 0.0;
+      tau[i] = in ? m.prony_tau[i * nv + slot] : 1.0;
+      for (int c = 0; c < kSymComponents; ++c) q[i][c] = in ? s.visco_q[(kSymComponents * i + c) * nv + slot] : T(0);
     }
     return element_prony_energy(F, J, Jbar, m.volume[e], m.mu[e], q, g, tau);
   };

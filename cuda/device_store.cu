@@ -104,12 +104,13 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   elem_J_.allocate(ne);
   node_p_.allocate(n);
   bad_.allocate(1);
-  visco_q_.allocate(std::size_t(kSymComponents) * kMaxProny * m.n_visco);
+  visco_q_.allocate(std::size_t(kSymComponents) * m.n_prony * m.n_visco);
   load_.allocate(0);
   law_ = {};
   law_.fibre = m.has_fibre() ? fibre_.data() : nullptr;
   law_.visco_slot = m.has_visco() ? visco_slot_.data() : nullptr;
   law_.n_visco = m.n_visco;
+  law_.n_prony = m.n_prony;
   law_.prony_decay = m.has_visco() ? prony_decay_.data() : nullptr;
   law_.prony_gain = m.has_visco() ? prony_gain_.data() : nullptr;
   law_.prony_g = m.has_visco() ? prony_g_.data() : nullptr;

@@ -110,9 +110,10 @@ __device__ void add_element_prony(const ModelView<T>& m, const T* node_p, const 
   double g[kMaxProny], tau[kMaxProny];
   const index_t nv = w.n_visco;
   for (int i = 0; i < kMaxProny; ++i) {
-    g[i] = w.prony_g[i * nv + slot];
-    tau[i] = w.prony_tau[i * nv + slot];
-    for (int c = 0; c < kSymComponents; ++c) q[i][c] = w.visco_q[(kSymComponents * i + c) * nv + slot];
+    const bool in = i < w.n_prony;
+    g[i] = in ? w.prony_g[i * nv + slot] : 0.0;
+    tau[i] = in ? w.prony_tau[i * nv + slot] : 1.0;
+    for (int c = 0; c < kSymComponents; ++c) q[i][c] = in ? w.visco_q[(kSymComponents * i + c) * nv + slot] : T(0);
   }
   const PronyEnergy pe = element_prony_energy(F, J, Jbar, d.V, d.mu, q, g, tau);
   p.visco_power += pe.power;

@@ -95,6 +95,7 @@ __device__ __forceinline__ index_t load_law(const ModelView<T>& m, const LawView
     const index_t nv = w.n_visco;
 #pragma unroll
     for (int i = 0; i < kMaxProny; ++i) {
+      if (i >= w.n_prony) break;  // the rest stay neutral (decay = gain = q = 0): no loads
       law.decay[i] = __ldg(w.prony_decay + i * nv + v);
       law.gain[i] = __ldg(w.prony_gain + i * nv + v);
 #pragma unroll
@@ -120,9 +121,11 @@ __device__ __forceinline__ T law_element_forces(const ModelView<T>& m, const Law
   if (v >= 0) {
     const index_t nv = w.n_visco;
 #pragma unroll
-    for (int i = 0; i < kMaxProny; ++i)
+    for (int i = 0; i < kMaxProny; ++i) {
+      if (i >= w.n_prony) break;
 #pragma unroll
       for (int c = 0; c < kSymComponents; ++c) w.visco_q[(kSymComponents * i + c) * nv + v] = law.q[i][c];
+    }
   }
   return J;
 }

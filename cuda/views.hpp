@@ -68,11 +68,12 @@ struct LawView {
   const T* fibre = nullptr;               ///< (4 x n_elems: a_x, a_y, a_z, eta Pa)
   const index_t* visco_slot = nullptr;    ///< Prony state slot per element, -1 elastic (n_elems)
   index_t n_visco = 0;
-  const T* prony_decay = nullptr;         ///< (kMaxProny x n_visco)
-  const T* prony_gain = nullptr;          ///< (kMaxProny x n_visco)
+  int n_prony = 0;                        ///< Prony terms stored per slot (core TissueModel::n_prony)
+  const T* prony_decay = nullptr;         ///< (n_prony x n_visco)
+  const T* prony_gain = nullptr;          ///< (n_prony x n_visco)
   T* visco_q = nullptr;                   ///< Prony state q[(6 i + c) * n_visco + slot] (core/state.hpp)
-  const double* prony_g = nullptr;        ///< g_i per slot (kMaxProny x n_visco): the energy reduction's
-  const double* prony_tau = nullptr;      ///< tau_i per slot (kMaxProny x n_visco) s
+  const double* prony_g = nullptr;        ///< g_i per slot (n_prony x n_visco): the energy reduction's
+  const double* prony_tau = nullptr;      ///< tau_i per slot (n_prony x n_visco) s
   TISSUE_HD bool neo_hookean() const { return !fibre && !visco_slot; }
 };
 

@@ -674,10 +674,45 @@ TEST(MaterialModel, PronyStateOnlyForTheViscoelasticSet) {
   for (index_t e = 0; e < m.n_elems; ++e) visco += m.visco_slot[e] >= 0;
   EXPECT_EQ(m.n_visco, visco);
   EXPECT_EQ(m.n_visco, m.n_elems / 2);
-  EXPECT_EQ(m.prony_decay.size(), size_t(kMaxProny) * m.n_visco);
+  // sized by the terms the scene gives (2 here), not kMaxProny
+  EXPECT_EQ(m.n_prony, 2);
+  EXPECT_EQ(m.prony_decay.size(), size_t(2) * m.n_visco);
+  EXPECT_EQ(m.prony_g.size(), size_t(2) * m.n_visco);
   // the decay and gain follow the step (set_time_step recomputes them)
   EXPECT_NEAR(m.prony_decay[0], std::exp(-m.dt / kTau[0]), 1e-15);
   EXPECT_NEAR(m.prony_gain[0], kG[0] * (1 - std::exp(-m.dt / kTau[0])), 1e-15);
+}
+
+TEST(MaterialModel, PronyArraysHoldTheMostTermsAnySetGives) {
+  MaterialParams one = law_params(false, false), three = law_params(false, false);
+  one.prony_terms = 1;
+  one.prony_g[0] = 0.1;
+  one.prony_tau[0] = 0.5;
+  three.prony_terms = 3;
+  for (int i = 0; i < 3; ++i) {
+    three.prony_g[i] = 0.1 * (i + 1);
+    three.prony_tau[i] = 0.01 * (i + 1);
+  }
+  ModelInput in = box_input(one, true);
+  in.materials[1] = three;  // the elements with centroid x < kL/2
+  const auto m = build_model(in);
+  EXPECT_EQ(m.n_visco, m.n_elems);
+  EXPECT_EQ(m.n_prony, 3);
+  ASSERT_EQ(m.prony_g.size(), size_t(3) * m.n_visco);
+  const std::size_t nv = m.n_visco;
+  for (index_t e = 0; e < m.n_elems; ++e) {
+    const index_t v = m.visco_slot[e];
+    const bool is_three = in.elem_material[e] == 1;
+    EXPECT_EQ(m.prony_g[v], is_three ? 0.1 : 0.1);
+    EXPECT_EQ(m.prony_g[nv + v], is_three ? 0.2 : 0.0) << "element " << e;  // the 1-term set's unused terms: g = 0
+    EXPECT_EQ(m.prony_g[2 * nv + v], is_three ? 0.30000000000000004 : 0.0) << "element " << e;
+    EXPECT_EQ(m.prony_gain[nv + v], is_three ? m.prony_gain[nv + v] : 0.0);
+  }
+  // a backend's state follows: 6 values per term and slot
+  auto b = create_backend("cpu", Precision::Double);
+  b->upload(m);
+  b->advance(3);
+  EXPECT_TRUE(b->reduce().finite);
 }
 
 TEST(MaterialModel, FibresRaiseTheWaveSpeed) {
