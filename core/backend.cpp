@@ -39,6 +39,12 @@ void Backend::upload(const TissueModel<double>& m) {
     throw std::invalid_argument("upload: the model's arrays do not match its sizes (build it with build_model)");
   if (!(m.dt > 0) || !std::isfinite(m.dt))
     throw std::invalid_argument(fmt::format("upload: the model's time step {} s must be > 0", m.dt));
+#define TISSUE_LAW_CHECK(kind, name, len)                                                                    \
+  if (m.name.size() != (len))                                                                                 \
+    throw std::invalid_argument(fmt::format("upload: the model's law array {} holds {} values; it needs {}", #name, \
+                                            m.name.size(), std::size_t(len)));
+  TISSUE_LAW_MODEL_FIELDS(TISSUE_LAW_CHECK)
+#undef TISSUE_LAW_CHECK
   uploaded_ = false;
   do_upload(m);
   n_nodes_ = m.n_nodes;

@@ -32,6 +32,41 @@ namespace tissue {
 /// Most Prony terms a viscoelastic set may give.
 inline constexpr int kMaxProny = 4;
 
+// ---- the law terms' store, written once ----------------------------------
+// Every array the optional terms keep, one line each: X(kind, name, len).
+// kind: Scalar (the backend's T), Index (index_t) or Real (double, kept in
+// double); len: its length, from a model m. An array is empty when no set
+// uses its term. From these lists come TissueModel's and TissueState's
+// members (core/model.hpp, core/state.hpp), convert(), and the CUDA store's
+// device arrays, uploads and LawView pointers (cuda/device_store.*,
+// cuda/views.hpp): a new term's data is a line here.
+//
+// Model (read-only after build_model; set_time_step rewrites the decays and gains):
+//   fibre        4 x n_elems: a_x, a_y, a_z, eta (Pa); eta = 0 in the sets without fibres
+//   visco_slot   the Prony state slot of each element, -1 elastic (n_elems)
+//   prony_g      g_i per slot, component-major (n_prony x n_visco); g = 0: no such term
+//   prony_tau    tau_i per slot (n_prony x n_visco) s
+//   prony_decay  exp(-dt / tau_i) per slot (n_prony x n_visco)
+//   prony_gain   g_i (1 - exp(-dt / tau_i)) per slot (n_prony x n_visco)
+#define TISSUE_LAW_MODEL_FIELDS(X)                              \
+  X(Scalar, fibre, m.has_fibre() ? 4 * std::size_t(m.n_elems) : 0) \
+  X(Index, visco_slot, m.has_visco() ? std::size_t(m.n_elems) : 0) \
+  X(Real, prony_g, std::size_t(m.n_prony) * m.n_visco)           \
+  X(Real, prony_tau, std::size_t(m.n_prony) * m.n_visco)         \
+  X(Scalar, prony_decay, std::size_t(m.n_prony) * m.n_visco)     \
+  X(Scalar, prony_gain, std::size_t(m.n_prony) * m.n_visco)
+// State (per step; zero after upload and set_displacements):
+//   visco_q      the Prony state q_i by slot: q[(6 i + c) * n_visco + slot] (6 n_prony x n_visco) Pa
+#define TISSUE_LAW_STATE_FIELDS(X) X(Scalar, visco_q, std::size_t(kSymComponents) * m.n_prony * m.n_visco)
+
+/// The element type of a law array of kind K for a backend of scalar T.
+template <class T>
+struct LawFieldTypes {
+  using Scalar = T;
+  using Index = index_t;
+  using Real = double;
+};
+
 /// The terms a kernel instantiation computes (compile time).
 template <bool Fibre, bool Visco>
 struct LawTerms {

@@ -553,14 +553,12 @@ TissueModel<T> convert(const TissueModel<double>& m) {
   r.volume = cv(m.volume);
   r.mu = cv(m.mu);
   r.K = cv(m.K);
-  r.fibre = cv(m.fibre);
-  r.visco_slot = m.visco_slot;
   r.n_visco = m.n_visco;
   r.n_prony = m.n_prony;
-  r.prony_g = m.prony_g;
-  r.prony_tau = m.prony_tau;
-  r.prony_decay = cv(m.prony_decay);
-  r.prony_gain = cv(m.prony_gain);
+#define TISSUE_LAW_CONVERT(kind, name, len) \
+  r.name.assign(m.name.begin(), m.name.end());  // element-wise to LawFieldTypes<T>::kind
+  TISSUE_LAW_MODEL_FIELDS(TISSUE_LAW_CONVERT)
+#undef TISSUE_LAW_CONVERT
   r.mass = cv(m.mass);
   r.cd_A = cv(m.cd_A);
   r.cd_B = cv(m.cd_B);

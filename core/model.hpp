@@ -102,16 +102,14 @@ struct TissueModel {
   std::vector<T> mu;                 ///< shear modulus (n_elems) Pa
   std::vector<T> K;                  ///< bulk modulus (n_elems) Pa
   // Optional terms (core/material.hpp), present only when a set uses them:
-  std::vector<T> fibre;              ///< fibre direction and stiffness (4 x n_elems: a_x, a_y, a_z, eta Pa);
-                                     ///< empty when no set has fibres; eta = 0 in the other sets
-  std::vector<index_t> visco_slot;   ///< Prony state slot of each element, -1 = elastic (n_elems); empty when
-                                     ///< no set is viscoelastic
   index_t n_visco = 0;               ///< viscoelastic elements (slots)
   int n_prony = 0;                   ///< Prony terms stored per slot: the most any set gives (0..kMaxProny);
                                      ///< a set with fewer has g = 0 in the rest
-  std::vector<double> prony_g, prony_tau;  ///< per slot (n_prony x n_visco, component-major); g = 0 unused
-  std::vector<T> prony_decay, prony_gain;  ///< exp(-dt/tau_i), g_i (1 - exp(-dt/tau_i)) (n_prony x n_visco);
-                                           ///< set_time_step recomputes them
+  // fibre, visco_slot, prony_g, prony_tau, prony_decay, prony_gain: the law
+  // arrays, one std::vector each (core/material.hpp TISSUE_LAW_MODEL_FIELDS)
+#define TISSUE_LAW_MEMBER(kind, name, len) std::vector<typename LawFieldTypes<T>::kind> name;
+  TISSUE_LAW_MODEL_FIELDS(TISSUE_LAW_MEMBER)
+#undef TISSUE_LAW_MEMBER
   std::vector<T> mass;               ///< lumped nodal mass (n_nodes) kg
   std::vector<T> cd_A, cd_B, cd_C;   ///< central-difference constants (n_nodes each)
   std::vector<index_t> node_elem_start;  ///< CSR offsets into node_elem (n_nodes + 1)

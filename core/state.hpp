@@ -4,6 +4,7 @@
 // same fields as device buffers.
 #pragma once
 
+#include <algorithm>
 #include <vector>
 
 #include "core/contact.hpp"
@@ -35,13 +36,27 @@ struct TissueState {
   std::vector<T> contact_normal;  ///< contact normal of pushed nodes, unit, out of the tool (3 x n_nodes)
   std::vector<T> grasp_offset;    ///< grasped nodes: position minus the tool tip when the grasp started
                                   ///< (3 x n_nodes) m
-  std::vector<T> visco_q;  ///< Prony state q_i of the viscoelastic elements (core/material.hpp), by slot:
-                           ///< q[(6 i + c) * n_visco + slot] (6 n_prony x n_visco) Pa; empty without
+  // visco_q: the law terms' state, one std::vector each (core/material.hpp TISSUE_LAW_STATE_FIELDS)
+#define TISSUE_LAW_MEMBER(kind, name, len) std::vector<typename LawFieldTypes<T>::kind> name;
+  TISSUE_LAW_STATE_FIELDS(TISSUE_LAW_MEMBER)
+#undef TISSUE_LAW_MEMBER
   Region region;           ///< active nodes and elements
 
-  void resize(index_t n_nodes, index_t n_elems, index_t n_visco = 0, int n_prony = 0) {
+  /// Zeroes the law terms' state (a new initial condition: no history).
+  void clear_law_state() {
+#define TISSUE_LAW_ZERO(kind, name, len) std::fill(name.begin(), name.end(), typename LawFieldTypes<T>::kind(0));
+    TISSUE_LAW_STATE_FIELDS(TISSUE_LAW_ZERO)
+#undef TISSUE_LAW_ZERO
+  }
+
+  /// Sizes every array for model m (and zeroes it): no load, no law history.
+  template <class Model>
+  void resize(const Model& m) {
+    const index_t n_nodes = m.n_nodes, n_elems = m.n_elems;
     load.clear();
-    visco_q.assign(std::size_t(kSymComponents) * n_prony * n_visco, T(0));
+#define TISSUE_LAW_ZERO(kind, name, len) name.assign(len, typename LawFieldTypes<T>::kind(0));
+    TISSUE_LAW_STATE_FIELDS(TISSUE_LAW_ZERO)
+#undef TISSUE_LAW_ZERO
     for (auto* v : {&u, &u_prev, &u_next, &u_held, &f, &contact_normal, &grasp_offset})
       v->assign(3 * size_t(n_nodes), T(0));
     contact.assign(n_nodes, kNoContact);

@@ -52,7 +52,7 @@ void CpuBackend<T>::do_upload(const TissueModel<double>& model) {
   energy_.fresh = energy_.synced = false;
   contact_.reset();
   model_ = convert<T>(model);
-  state_.resize(model_.n_nodes, model_.n_elems, model_.n_visco, model_.n_prony);
+  state_.resize(model_);
   node_divisor_ = nodal_pressure_divisors(model_);
   all_elems_.resize(model_.n_elems);
   std::iota(all_elems_.begin(), all_elems_.end(), 0);
@@ -70,7 +70,7 @@ template <class T>
 void CpuBackend<T>::do_set_displacements(std::span<const double> u) {
   const index_t n = model_.n_nodes;
   for (std::size_t k = 0; k < u.size(); ++k) state_.u[k] = state_.u_prev[k] = state_.u_next[k] = T(u[k]);
-  std::fill(state_.visco_q.begin(), state_.visco_q.end(), T(0));  // a new initial state: no Prony history
+  state_.clear_law_state();  // a new initial state: no Prony history
   energy_.fresh = energy_.synced = false;
   if (contact_) contact_->surface_moved();
   for (index_t a = 0; a < n; ++a)

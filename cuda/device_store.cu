@@ -58,12 +58,9 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   upload_array(surf_nodes_, m.surf_nodes, log, stream);
   upload_array(surf_slot_start_, m.surf_slot_start, log, stream);
   upload_array(surf_slot_, m.surf_slot, log, stream);
-  upload_array(fibre_, m.fibre, log, stream);
-  upload_array(visco_slot_, m.visco_slot, log, stream);
-  upload_array(prony_decay_, m.prony_decay, log, stream);
-  upload_array(prony_gain_, m.prony_gain, log, stream);
-  upload_array(prony_g_, m.prony_g, log, stream);
-  upload_array(prony_tau_, m.prony_tau, log, stream);
+#define TISSUE_LAW_UPLOAD(kind, name, len) upload_array(law_arrays_.name, m.name, log, stream);
+  TISSUE_LAW_MODEL_FIELDS(TISSUE_LAW_UPLOAD)
+#undef TISSUE_LAW_UPLOAD
   CUDA_CHECK(cudaStreamSynchronize(stream));  // the host sources above must outlive the copies
 
   model_ = {};
@@ -104,18 +101,19 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   elem_J_.allocate(ne);
   node_p_.allocate(n);
   bad_.allocate(1);
-  visco_q_.allocate(std::size_t(kSymComponents) * m.n_prony * m.n_visco);
   load_.allocate(0);
+  // the law arrays (core/material.hpp's lists): state sized from the model,
+  // and a null pointer for every empty array
+#define TISSUE_LAW_ALLOCATE(kind, name, len) law_arrays_.name.allocate(len);
+  TISSUE_LAW_STATE_FIELDS(TISSUE_LAW_ALLOCATE)
+#undef TISSUE_LAW_ALLOCATE
   law_ = {};
-  law_.fibre = m.has_fibre() ? fibre_.data() : nullptr;
-  law_.visco_slot = m.has_visco() ? visco_slot_.data() : nullptr;
   law_.n_visco = m.n_visco;
   law_.n_prony = m.n_prony;
-  law_.prony_decay = m.has_visco() ? prony_decay_.data() : nullptr;
-  law_.prony_gain = m.has_visco() ? prony_gain_.data() : nullptr;
-  law_.prony_g = m.has_visco() ? prony_g_.data() : nullptr;
-  law_.prony_tau = m.has_visco() ? prony_tau_.data() : nullptr;
-  law_.visco_q = m.has_visco() ? visco_q_.data() : nullptr;
+#define TISSUE_LAW_POINT(kind, name, len) law_.name = law_arrays_.name.size() ? law_arrays_.name.data() : nullptr;
+  TISSUE_LAW_MODEL_FIELDS(TISSUE_LAW_POINT)
+  TISSUE_LAW_STATE_FIELDS(TISSUE_LAW_POINT)
+#undef TISSUE_LAW_POINT
   contact_.allocate(n);
   contact_tool_.allocate(n);
   contact_normal_.allocate(n);
@@ -151,7 +149,10 @@ void DeviceStore<T>::reset_state(cudaStream_t stream) {
 
 template <class T>
 void DeviceStore<T>::clear_law_state(cudaStream_t stream) {
-  if (visco_q_.size()) visco_q_.fill_bytes(0, stream);
+#define TISSUE_LAW_ZERO(kind, name, len) \
+  if (law_arrays_.name.size()) law_arrays_.name.fill_bytes(0, stream);
+  TISSUE_LAW_STATE_FIELDS(TISSUE_LAW_ZERO)
+#undef TISSUE_LAW_ZERO
 }
 
 template <class T>

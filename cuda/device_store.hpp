@@ -73,9 +73,14 @@ class DeviceStore {
   DeviceArray<std::uint8_t> held_, driven_, role_, contact_, corner_blocked_;
   DeviceArray<signed char> contact_tool_, corner_tool_;
   DeviceArray<T> dv_slot_, elem_J_, node_p_;
-  DeviceArray<T> fibre_, prony_decay_, prony_gain_, visco_q_;  // optional law terms: empty when unused
-  DeviceArray<index_t> visco_slot_;
-  DeviceArray<double> prony_g_, prony_tau_;
+  /// The law terms' arrays, one per line of core/material.hpp's lists (empty when unused).
+  struct LawArrays {
+#define TISSUE_LAW_DEVICE_ARRAY(kind, name, len) DeviceArray<typename LawFieldTypes<T>::kind> name;
+    TISSUE_LAW_MODEL_FIELDS(TISSUE_LAW_DEVICE_ARRAY)
+    TISSUE_LAW_STATE_FIELDS(TISSUE_LAW_DEVICE_ARRAY)
+#undef TISSUE_LAW_DEVICE_ARRAY
+  };
+  LawArrays law_arrays_;
   DeviceArray<Packed3<T>> load_;  // applied load: empty when none
   DeviceArray<unsigned long long> bad_;
 };

@@ -65,15 +65,16 @@ struct ModelView {
 /// only the law kernels and the persistent kernels receive it.
 template <class T>
 struct LawView {
-  const T* fibre = nullptr;               ///< (4 x n_elems: a_x, a_y, a_z, eta Pa)
-  const index_t* visco_slot = nullptr;    ///< Prony state slot per element, -1 elastic (n_elems)
-  index_t n_visco = 0;
+  index_t n_visco = 0;                    ///< Prony state slots (core TissueModel::n_visco)
   int n_prony = 0;                        ///< Prony terms stored per slot (core TissueModel::n_prony)
-  const T* prony_decay = nullptr;         ///< (n_prony x n_visco)
-  const T* prony_gain = nullptr;          ///< (n_prony x n_visco)
-  T* visco_q = nullptr;                   ///< Prony state q[(6 i + c) * n_visco + slot] (core/state.hpp)
-  const double* prony_g = nullptr;        ///< g_i per slot (n_prony x n_visco): the energy reduction's
-  const double* prony_tau = nullptr;      ///< tau_i per slot (n_prony x n_visco) s
+  // one pointer per law array, generated from core/material.hpp's lists
+  // (layouts there): the model's read-only, the state's writable
+#define TISSUE_LAW_MODEL_POINTER(kind, name, len) const typename LawFieldTypes<T>::kind* name = nullptr;
+#define TISSUE_LAW_STATE_POINTER(kind, name, len) typename LawFieldTypes<T>::kind* name = nullptr;
+  TISSUE_LAW_MODEL_FIELDS(TISSUE_LAW_MODEL_POINTER)
+  TISSUE_LAW_STATE_FIELDS(TISSUE_LAW_STATE_POINTER)
+#undef TISSUE_LAW_MODEL_POINTER
+#undef TISSUE_LAW_STATE_POINTER
   TISSUE_HD bool neo_hookean() const { return !fibre && !visco_slot; }
 };
 

@@ -715,6 +715,29 @@ TEST(MaterialModel, PronyArraysHoldTheMostTermsAnySetGives) {
   EXPECT_TRUE(b->reduce().finite);
 }
 
+TEST(MaterialModel, UploadChecksEveryLawArrayAgainstItsListedLength) {
+  // the lengths come from core/material.hpp's field lists, like the members
+  auto m = build_model(box_input(law_params(true, true)));
+  auto b = create_backend("cpu", Precision::Double);
+  b->upload(m);  // as built: accepted
+  m.prony_tau.pop_back();
+  try {
+    b->upload(m);
+    FAIL() << "a short prony_tau was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_EQ(std::string(e.what()), fmt::format("upload: the model's law array prony_tau holds {} values; it needs {}",
+                                                 m.prony_tau.size(), m.prony_tau.size() + 1));
+  }
+  m = build_model(box_input(law_params(true, false)));
+  m.fibre.resize(3 * std::size_t(m.n_elems));  // a fibre term without its stiffness row
+  try {
+    b->upload(m);
+    FAIL() << "a short fibre array was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("law array fibre holds"), std::string::npos) << e.what();
+  }
+}
+
 TEST(MaterialModel, FibresRaiseTheWaveSpeed) {
   const MaterialParams nh = law_params(false, false), ti = law_params(true, false);
   EXPECT_NEAR(wave_speed(ti), std::sqrt((kK + 4 * kMu / 3 + 4 * kEta) / kRho), 1e-12);
