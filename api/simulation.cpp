@@ -195,6 +195,7 @@ struct Simulation::Impl {
     scheduler.reset();
     backend->upload(model);
     scheduler = std::make_unique<Scheduler>(*backend, model, settings);
+    scene::apply_loads(scene, *scheduler);
     last = TickResult{};
     last.tools.resize(devices.size());
     fields.reset();

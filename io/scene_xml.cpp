@@ -92,6 +92,8 @@ class Reader {
   Material read_material(pugi::xml_node n) const;
   scene::ElementSet read_set(pugi::xml_node n) const;
   Constraint read_fixed(pugi::xml_node n) const;
+  Constraint read_selection(pugi::xml_node n) const;
+  scene::Load read_load(pugi::xml_node n) const;
   scene::Tool read_tool(pugi::xml_node n) const;
   scene::Solver read_solver(pugi::xml_node n) const;
 
@@ -348,6 +350,26 @@ scene::ElementSet Reader::read_set(pugi::xml_node n) const {
 
 Constraint Reader::read_fixed(pugi::xml_node n) const {
   check_attributes(n, {"nodes", "box-min", "box-max", "plane-point", "plane-normal"});
+  return read_selection(n);
+}
+
+scene::Load Reader::read_load(pugi::xml_node n) const {
+  check_attributes(n, {"force", "distribute", "nodes", "box-min", "box-max", "plane-point", "plane-normal"});
+  scene::Load l;
+  l.where = read_selection(n);
+  if (!n.attribute("force")) fail(n, "a <load> needs force=\"fx fy fz\" (N)");
+  triple(n, "force", l.force);
+  if (n.attribute("distribute")) {
+    const std::string d = n.attribute("distribute").value();
+    if (d != "area" && d != "each")
+      fail(n, "distribute=\"" + d + "\": use \"area\" (the force is the total, spread over the selected surface by "
+                                     "area) or \"each\" (every selected node gets the force)");
+    l.each = d == "each";
+  }
+  return l;
+}
+
+Constraint Reader::read_selection(pugi::xml_node n) const {
   check_no_text(n);
   Constraint c;
   c.line = line(n);
@@ -480,7 +502,7 @@ scene::Scene Reader::read() {
   if (root.attribute("version") && scene::trim(root.attribute("version").value()) != "1")
     fail(root, fmt::format("version = '{}' is not supported; this reader knows version 1",
                            root.attribute("version").value()));
-  check_children(root, {"mesh", "material", "element-set", "fixed", "tool", "solver"});
+  check_children(root, {"mesh", "material", "element-set", "fixed", "load", "tool", "solver"});
 
   scene::Scene s;
   s.source = source_;
@@ -491,6 +513,7 @@ scene::Scene Reader::read() {
   for (pugi::xml_node n : root.children("material")) s.materials.push_back(read_material(n));
   for (pugi::xml_node n : root.children("element-set")) s.sets.push_back(read_set(n));
   for (pugi::xml_node n : root.children("fixed")) s.constraints.push_back(read_fixed(n));
+  for (pugi::xml_node n : root.children("load")) s.loads.push_back(read_load(n));
   for (pugi::xml_node n : root.children("tool")) s.tools.push_back(read_tool(n));
   if (const pugi::xml_node n = root.child("solver")) {
     if (n.next_sibling("solver")) fail_at(line(n.next_sibling("solver")), "a second <solver>; a scene has one");
@@ -570,8 +593,18 @@ void write_material(pugi::xml_node root, const Material& m) {
   }
 }
 
-void write_constraint(pugi::xml_node root, const Constraint& c) {
-  pugi::xml_node n = root.append_child("fixed");
+void write_selection(pugi::xml_node n, const Constraint& c);
+
+void write_constraint(pugi::xml_node root, const Constraint& c) { write_selection(root.append_child("fixed"), c); }
+
+void write_load(pugi::xml_node root, const scene::Load& l) {
+  pugi::xml_node n = root.append_child("load");
+  set(n, "force", triple_text(l.force));
+  if (l.each) set(n, "distribute", "each");
+  write_selection(n, l.where);
+}
+
+void write_selection(pugi::xml_node n, const Constraint& c) {
   switch (c.kind) {
     case Constraint::Kind::Nodes:
       set(n, "nodes", id_list(c.nodes));
@@ -655,6 +688,7 @@ std::string format_scene(const scene::Scene& s, const std::string& mesh_file) {
     set(n, "elements", es.all ? "all" : id_list(es.elements));
   }
   for (const Constraint& c : s.constraints) write_constraint(root, c);
+  for (const scene::Load& l : s.loads) write_load(root, l);
   for (const scene::Tool& t : s.tools) write_tool(root, t);
   write_solver(root, s.solver);
   std::ostringstream out;

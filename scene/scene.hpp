@@ -83,6 +83,15 @@ struct Constraint {
   int line = 0;                     ///< source line, for messages (0 = unknown)
 };
 
+/// A constant external force (a dead load: Backend::set_loads) on the nodes
+/// a selection picks, as <fixed> picks them.
+struct Load {
+  Constraint where;                 ///< the selection (its line is the <load>'s)
+  double force[3] = {0, 0, 0};      ///< N: the total over the selected surface faces, spread by area (each =
+                                    ///< false), or the force on every selected node (each = true)
+  bool each = false;
+};
+
 /// A rigid tool -- a capsule (core/tool.hpp) -- and the device that drives it.
 struct Tool {
   std::string name = "probe";
@@ -123,6 +132,7 @@ struct Scene {
   std::vector<Material> materials;
   std::vector<ElementSet> sets;
   std::vector<Constraint> constraints;
+  std::vector<Load> loads;
   std::vector<Tool> tools;
   Solver solver;                    ///< defaults when the file has no <solver>
 };

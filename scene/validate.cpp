@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <string_view>
@@ -232,22 +233,30 @@ std::vector<index_t> resolve_sets(const Scene& s, const std::map<std::string, in
 
 // ---- constraints -----------------------------------------------------------
 
-void check_constraint(const Scene& s, const Constraint& c) {
-  const std::string what = describe(c);
+/// The selection's words with the element's name ("fixed" or "load") first.
+std::string describe_as(const Constraint& c, const std::string& noun) { return noun + describe(c).substr(5); }
+
+/// What a selection must do, for messages.
+std::string selection_rule(const std::string& noun) {
+  return noun == "fixed" ? "a constraint must fix at least one node" : "a load must act on at least one node";
+}
+
+void check_constraint(const Scene& s, const Constraint& c, const std::string& noun = "fixed") {
+  const std::string what = describe_as(c, noun);
   const index_t n = node_count(s);
   switch (c.kind) {
     case Constraint::Kind::Nodes:
       if (c.nodes.empty())
-        fail(s, c.line, "fixed nodes: the node list is empty; a constraint must fix at least one node");
+        fail(s, c.line, noun + " nodes: the node list is empty; " + selection_rule(noun));
       for (index_t i : c.nodes)
         if (i < 0 || i >= n)
           fail(s, c.line,
-               fmt::format("fixed nodes: node {} is out of range (the mesh has {} nodes, ids 0..{})", i, n, n - 1));
+               fmt::format("{} nodes: node {} is out of range (the mesh has {} nodes, ids 0..{})", noun, i, n, n - 1));
       break;
     case Constraint::Kind::Box:
       for (int k = 0; k < 3; ++k) {
-        check_finite(s, c.line, "fixed box", fmt::format("box-min {}", "xyz"[k]), c.lo[k]);
-        check_finite(s, c.line, "fixed box", fmt::format("box-max {}", "xyz"[k]), c.hi[k]);
+        check_finite(s, c.line, noun + " box", fmt::format("box-min {}", "xyz"[k]), c.lo[k]);
+        check_finite(s, c.line, noun + " box", fmt::format("box-max {}", "xyz"[k]), c.hi[k]);
       }
       for (int k = 0; k < 3; ++k)
         if (c.lo[k] > c.hi[k])
@@ -257,8 +266,8 @@ void check_constraint(const Scene& s, const Constraint& c) {
       break;
     case Constraint::Kind::Plane:
       for (int k = 0; k < 3; ++k) {
-        check_finite(s, c.line, "fixed plane", fmt::format("plane-point {}", "xyz"[k]), c.point[k]);
-        check_finite(s, c.line, "fixed plane", fmt::format("plane-normal {}", "xyz"[k]), c.normal[k]);
+        check_finite(s, c.line, noun + " plane", fmt::format("plane-point {}", "xyz"[k]), c.point[k]);
+        check_finite(s, c.line, noun + " plane", fmt::format("plane-normal {}", "xyz"[k]), c.normal[k]);
       }
       if (c.normal[0] == 0 && c.normal[1] == 0 && c.normal[2] == 0)
         fail(s, c.line, what + ": the plane normal is zero; it must have a non-zero length");
@@ -281,6 +290,94 @@ std::vector<std::uint8_t> resolve_constraints(const Scene& s) {
   }
   return fixed;
 }
+
+// ---- loads -----------------------------------------------------------------
+
+/// The mesh's boundary faces (each a face of exactly one tet), as node triples.
+std::vector<std::array<index_t, 3>> boundary_faces(const Scene& s) {
+  std::map<std::array<index_t, 3>, std::pair<int, std::array<index_t, 3>>> faces;
+  static constexpr int kFace[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
+  for (std::size_t e = 0; 4 * e < s.tets.size(); ++e)
+    for (const auto& f : kFace) {
+      std::array<index_t, 3> t = {s.tets[4 * e + f[0]], s.tets[4 * e + f[1]], s.tets[4 * e + f[2]]};
+      std::array<index_t, 3> key = t;
+      std::sort(key.begin(), key.end());
+      auto& entry = faces[key];
+      ++entry.first;
+      entry.second = t;
+    }
+  std::vector<std::array<index_t, 3>> out;
+  for (const auto& [key, entry] : faces)
+    if (entry.first == 1) out.push_back(entry.second);
+  return out;
+}
+
+}  // namespace
+
+SceneLoads resolve_loads(const Scene& s) {
+  SceneLoads out;
+  if (s.loads.empty()) return out;
+  const index_t n = node_count(s);
+  const double tol = selection_tolerance(s.nodes);
+  std::vector<double> force(3 * std::size_t(n), 0.0);
+  std::vector<std::uint8_t> loaded(n, 0);
+  std::vector<std::array<index_t, 3>> surface;
+  for (const Load& l : s.loads) {
+    const Constraint& c = l.where;
+    check_constraint(s, c, "load");
+    for (int k = 0; k < 3; ++k) check_finite(s, c.line, "load", fmt::format("force {}", "xyz"[k]), l.force[k]);
+    const std::vector<index_t> sel = constrained_nodes(c, s.nodes, tol);
+    if (sel.empty())
+      fail(s, c.line, fmt::format("{} selects no node of the mesh; {}", describe_as(c, "load"), selection_rule("load")));
+    if (l.each) {
+      for (index_t a : sel) {
+        loaded[a] = 1;
+        for (int k = 0; k < 3; ++k) force[3 * std::size_t(a) + k] += l.force[k];
+      }
+      continue;
+    }
+    // the total spread by area over the surface faces whose three corners are selected
+    // (consistent nodal loads of a uniform traction: a third of each face's share per corner)
+    if (surface.empty()) surface = boundary_faces(s);
+    std::vector<std::uint8_t> in(n, 0);
+    for (index_t a : sel) in[a] = 1;
+    std::vector<std::pair<std::array<index_t, 3>, double>> faces;
+    double total = 0;
+    for (const auto& f : surface) {
+      if (!(in[f[0]] && in[f[1]] && in[f[2]])) continue;
+      Vec3<double> x[3];
+      for (int k = 0; k < 3; ++k) x[k] = {s.nodes[3 * f[k]], s.nodes[3 * f[k] + 1], s.nodes[3 * f[k] + 2]};
+      const double area = 0.5 * norm(cross(x[1] - x[0], x[2] - x[0]));
+      faces.emplace_back(f, area);
+      total += area;
+    }
+    if (!(total > 0))
+      fail(s, c.line,
+           fmt::format("{} selects {} node(s) but no surface face (a boundary triangle with all three corners "
+                       "selected) to spread the force over; select a patch of the surface, or give "
+                       "distribute=\"each\" for a force on every selected node",
+                       describe_as(c, "load"), sel.size()));
+    for (const auto& [f, area] : faces)
+      for (int corner = 0; corner < 3; ++corner) {
+        loaded[f[corner]] = 1;
+        for (int k = 0; k < 3; ++k) force[3 * std::size_t(f[corner]) + k] += l.force[k] * area / total / 3;
+      }
+  }
+  for (index_t a = 0; a < n; ++a)
+    if (loaded[a]) {
+      out.nodes.push_back(a);
+      out.force.insert(out.force.end(), {force[3 * std::size_t(a)], force[3 * std::size_t(a) + 1],
+                                         force[3 * std::size_t(a) + 2]});
+    }
+  return out;
+}
+
+void apply_loads(const Scene& scene, Scheduler& scheduler) {
+  const SceneLoads loads = resolve_loads(scene);
+  if (!loads.nodes.empty()) scheduler.set_loads(loads.nodes, loads.force);
+}
+
+namespace {
 
 // ---- tools -----------------------------------------------------------------
 
@@ -406,6 +503,7 @@ ModelInput to_model_input(const Scene& scene) {
   in.elem_material = resolve_sets(scene, materials);
   in.fibre_dirs = resolve_fibre_dirs(scene, in.elem_material);
   in.fixed = resolve_constraints(scene);
+  (void)resolve_loads(scene);  // its rules, with file:line, before any work
   for (const Tool& t : scene.tools) check_tool(scene, t);
   check_solver(scene);
   in.nodes = scene.nodes;

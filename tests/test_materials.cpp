@@ -850,5 +850,121 @@ TEST(MaterialScene, BadTermsNameTheFileAndLine) {
   expect_scene_error("    <prony g=\"0.1\" tau=\"1\" beta=\"2\"/>\n", "liver.xml:7", "unknown attribute 'beta'");
 }
 
+// ---- loads in the scene format ---------------------------------------------
+
+/// A 1 cm box of 2^3 cells, clamped on x = 0, with `loads` (scene text) and
+/// one Prony term.
+std::string load_scene(const std::string& loads) {
+  ModelInput in;
+  box_mesh(in, 2, 2, 2, kL, kL, kL);
+  std::string nodes, tets;
+  for (double x : in.nodes) nodes += fmt::format("{} ", x);
+  for (index_t t : in.tets) tets += fmt::format("{} ", t);
+  return fmt::format(R"(<tissue-scene>
+  <mesh>
+    <nodes>{}</nodes>
+    <elements>{}</elements>
+  </mesh>
+  <material name="liver" mu="1000" K="20000" rho="1000">
+    <prony g="0.4" tau="0.05"/>
+  </material>
+  <element-set material="liver" elements="all"/>
+  <fixed box-min="-1 -1 -1" box-max="0 1 1"/>
+{}  <solver depth="all"/>
+</tissue-scene>
+)",
+                     nodes, tets, loads);
+}
+
+TEST(Loads, ASceneLoadSpreadsItsTotalOverTheFaceByArea) {
+  const scene::Scene s = io::parse_scene(
+      load_scene("  <load box-min=\"0.01 -1 -1\" box-max=\"1 1 1\" force=\"0.3 0 -0.06\"/>\n"), "box.xml", ".");
+  const scene::SceneLoads l = scene::resolve_loads(s);
+  ASSERT_EQ(l.nodes.size(), 9u);  // the 3 x 3 nodes of the face x = L
+  double sum[3] = {0, 0, 0}, moment_y = 0, moment_z = 0;
+  for (std::size_t k = 0; k < l.nodes.size(); ++k) {
+    const index_t a = l.nodes[k];
+    EXPECT_DOUBLE_EQ(s.nodes[3 * a], kL) << "node " << a;
+    for (int c = 0; c < 3; ++c) sum[c] += l.force[3 * k + c];
+    // a uniform traction's resultant acts at the face's centre: no moment about it
+    moment_y += l.force[3 * k] * (s.nodes[3 * a + 1] - kL / 2);
+    moment_z += l.force[3 * k] * (s.nodes[3 * a + 2] - kL / 2);
+  }
+  EXPECT_NEAR(sum[0], 0.3, 1e-15);
+  EXPECT_NEAR(sum[1], 0.0, 1e-15);
+  EXPECT_NEAR(sum[2], -0.06, 1e-15);
+  EXPECT_NEAR(moment_y, 0, 1e-15);
+  EXPECT_NEAR(moment_z, 0, 1e-15);
+  // each corner of the face gets less than the centre node (fewer faces around it)
+  double lo = 1, hi = 0;
+  for (std::size_t k = 0; k < l.nodes.size(); ++k) {
+    lo = std::min(lo, l.force[3 * k]);
+    hi = std::max(hi, l.force[3 * k]);
+  }
+  EXPECT_LT(lo, hi);
+  // distribute="each": every selected node gets the whole force
+  const scene::SceneLoads each = scene::resolve_loads(io::parse_scene(
+      load_scene("  <load nodes=\"3 5\" force=\"0 0 1e-3\" distribute=\"each\"/>\n"), "box.xml", "."));
+  EXPECT_EQ(each.nodes, (std::vector<index_t>{3, 5}));
+  EXPECT_EQ(each.force, (std::vector<double>{0, 0, 1e-3, 0, 0, 1e-3}));
+}
+
+TEST(Loads, ASceneLoadIsReadWrittenBackAndHeldByTheClampedFace) {
+  const std::string text = load_scene(
+      "  <load box-min=\"0.01 -1 -1\" box-max=\"1 1 1\" force=\"0.05 0 0\"/>\n"
+      "  <load nodes=\"4\" force=\"0 0 0.001\" distribute=\"each\"/>\n");
+  const scene::Scene s = io::parse_scene(text, "box.xml", ".");
+  ASSERT_EQ(s.loads.size(), 2u);
+  const scene::Scene back = io::parse_scene(io::format_scene(s, ""), "box.xml", ".");
+  ASSERT_EQ(back.loads.size(), 2u);
+  EXPECT_EQ(scene::resolve_loads(back).force, scene::resolve_loads(s).force);
+  EXPECT_TRUE(back.loads[1].each);
+  // run to rest: the clamped face holds the total load (internal forces sum to zero over the body, so the
+  // supports' internal force is minus the loads')
+  auto m = scene::load_model(s);
+  auto b = create_backend("cpu", Precision::Double);
+  b->upload(m);
+  SchedulerSettings settings = scene::scheduler_settings(s);
+  Scheduler sched(*b, m, settings);
+  scene::apply_loads(s, sched);
+  TickReport rep;
+  std::vector<Device*> none;
+  while (sched.time() < 1.0) rep = sched.tick(none);
+  EXPECT_NEAR(rep.internal.x, -0.05, 1e-3 * 0.05);
+  EXPECT_NEAR(rep.internal.z, -0.001, 1e-3 * 0.05);
+  EXPECT_GT(rep.dissipated, 0);  // it crept under the load
+  EXPECT_NEAR(rep.visco_power, 0, 1e-6 * rep.dissipated);  // and came to rest
+}
+
+TEST(Loads, BadSceneLoadsNameTheFileAndLine) {
+  const auto error = [](const std::string& load) {
+    try {
+      scene::validate(io::parse_scene(load_scene(load), "box.xml", "."));
+    } catch (const std::exception& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  // the <load> is line 11 of load_scene's text
+  EXPECT_NE(error("  <load nodes=\"4\"/>\n").find("box.xml:11"), std::string::npos);
+  EXPECT_NE(error("  <load nodes=\"4\"/>\n").find("needs force="), std::string::npos) << error("  <load nodes=\"4\"/>\n");
+  const std::string unknown = error("  <load nodes=\"4\" force=\"1 0 0\" distribute=\"uniform\"/>\n");
+  EXPECT_NE(unknown.find("box.xml:11"), std::string::npos) << unknown;
+  EXPECT_NE(unknown.find("distribute=\"uniform\""), std::string::npos) << unknown;
+  const std::string nan = error("  <load nodes=\"4\" force=\"1 nan 0\"/>\n");
+  EXPECT_NE(nan.find("box.xml:11"), std::string::npos) << nan;
+  EXPECT_NE(nan.find("force y"), std::string::npos) << nan;
+  const std::string range = error("  <load nodes=\"400\" force=\"1 0 0\"/>\n");
+  EXPECT_NE(range.find("load nodes: node 400 is out of range"), std::string::npos) << range;
+  const std::string none = error("  <load box-min=\"1 1 1\" box-max=\"2 2 2\" force=\"1 0 0\"/>\n");
+  EXPECT_NE(none.find("selects no node of the mesh; a load must act on at least one node"), std::string::npos)
+      << none;
+  const std::string point = error("  <load nodes=\"4\" force=\"1 0 0\"/>\n");
+  EXPECT_NE(point.find("no surface face"), std::string::npos) << point;
+  EXPECT_NE(point.find("distribute=\"each\""), std::string::npos) << point;
+  const std::string two = error("  <load nodes=\"4\" box-min=\"0 0 0\" box-max=\"1 1 1\" force=\"1 0 0\"/>\n");
+  EXPECT_NE(two.find("give exactly one kind"), std::string::npos) << two;
+}
+
 }  // namespace
 }  // namespace tissue

@@ -46,6 +46,7 @@ Engine build_simulation(const scene::Scene& base, const LiveParams& p) {
   sim.backend = create_backend(s.solver.backend, s.solver.precision);
   sim.backend->upload(*sim.model);
   sim.scheduler = std::make_unique<Scheduler>(*sim.backend, *sim.model, scene::scheduler_settings(s));
+  scene::apply_loads(s, *sim.scheduler);
   return sim;
 }
 
