@@ -102,7 +102,10 @@ void Stepper<T>::element_forces(const ModelView<T>& m, const StateView<T>& s, co
 template <class T>
 void Stepper<T>::node_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
                              cudaStream_t stream) {
-  launch_chained(kNodeLanes * r.n_nodes, stream, node_update_kernel<T>, m, s, r, b);
+  if (s.load)
+    launch_chained(kNodeLanes * r.n_nodes, stream, node_update_kernel<T, true>, m, s, r, b);
+  else
+    launch_chained(kNodeLanes * r.n_nodes, stream, node_update_kernel<T, false>, m, s, r, b);
 }
 
 template <class T>

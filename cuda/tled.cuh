@@ -218,7 +218,9 @@ __device__ void nodal_pressure_at(const ModelView<T>& m, const StateView<T>& s, 
 /// element forces (a gather: no atomics) minus the applied load R (none
 /// when s.load is null), then lane 0 sets u_next: u_held for the held
 /// components (axis mask), the damped central difference for the others.
-template <class T>
+/// kLoad: the instantiation for a scene with loads (chosen at launch, so that
+/// a scene without pays nothing).
+template <class T, bool kLoad>
 __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, const StepBuffers<T>& b,
                                const NodeData<T>& d) {
   Vec3<T> f = {T(0), T(0), T(0)};
@@ -227,7 +229,7 @@ __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, con
   f = {node_group_sum(f.x, d.mask), node_group_sum(f.y, d.mask), node_group_sum(f.z, d.mask)};
   if (d.lane != 0) return;
   const index_t a = d.a;
-  if (s.load) f = f - s.load[a].vec();
+  if constexpr (kLoad) f = f - s.load[a].vec();
   s.f[a] = Packed3<T>::of(f);
   const CentralDifference<T> k = {__ldg(m.cd_A + a), __ldg(m.cd_B + a), __ldg(m.cd_C + a)};
   b.u_next[a] = Packed3<T>::of(node_next(s.held[a], s.u_held[a].vec(), k, f, b.u[a].vec(), b.u_prev[a].vec()));
@@ -288,7 +290,7 @@ __global__ void law_element_forces_kernel(ModelView<T> m, StateView<T> s, Region
   if (active) law_element_forces_at(m, s, d, u, w);
 }
 
-template <class T>
+template <class T, bool kLoad>
 __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
   let_next_pass_launch();
   const index_t g = thread_index(), i = g / kNodeLanes;
@@ -296,7 +298,7 @@ __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r,
   NodeData<T> d;
   if (active) d = load_node(m, r.node(i), g % kNodeLanes, node_group_mask());
   wait_for_previous_pass();
-  if (active) node_update_at(m, s, b, d);
+  if (active) node_update_at<T, kLoad>(m, s, b, d);
 }
 
 // ---- persistent kernels: whole steps, a barrier between passes ----------------
@@ -337,8 +339,12 @@ __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const Re
         element_forces_at(s, load_element(m, r.elem(i)), b.u, m.ianp);
     }
     barrier();
-    for (index_t g = first; g < node_items; g += stride)
-      node_update_at(m, s, b, load_node(m, r.node(g / kNodeLanes), lane, mask));
+    for (index_t g = first; g < node_items; g += stride) {
+      if (s.load)  // (a uniform branch)
+        node_update_at<T, true>(m, s, b, load_node(m, r.node(g / kNodeLanes), lane, mask));
+      else
+        node_update_at<T, false>(m, s, b, load_node(m, r.node(g / kNodeLanes), lane, mask));
+    }
     if (tools) {  // the contact stage
       barrier();
       for (index_t t = first; t < m.n_tris; t += stride) sweep_triangle_at(m, s, *tools, k, b.u_next, t);
