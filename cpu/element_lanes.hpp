@@ -173,6 +173,7 @@ struct alignas(64) LawLanes {
   T decay[kMaxProny][kLanes], gain[kMaxProny][kLanes];
   T q[kMaxProny * kSymComponents][kLanes];  ///< row 6 i + c
   index_t slot[kLanes];                     ///< Prony state slot, -1 none
+  bool run = false;                         ///< every lane viscoelastic, slots slot[0] + l: rows copy whole
 };
 
 /// Gathers the batch's law terms that Terms instantiates: fibres from the
@@ -190,6 +191,35 @@ void gather_law_lanes(const TissueModel<T>& m, const T* q, const index_t* elems,
     }
   }
   if constexpr (Terms::visco) {
+    // a full batch of consecutive viscoelastic elements has consecutive slots (build_model numbers
+    // them in element order): its rows are contiguous and copy as vectors
+    const index_t v0 = m.visco_slot[elems[0]];
+    w.run = count == kLanes && v0 >= 0 && elems[count - 1] - elems[0] == count - 1 &&
+            m.visco_slot[elems[count - 1]] == v0 + count - 1;
+    if (w.run) {
+      for (int l = 0; l < kLanes; ++l) w.slot[l] = v0 + l;
+      for (int i = 0; i < kMaxProny; ++i) {
+        if (i < np) {
+          const T* d = m.prony_decay.data() + i * nv + v0;
+          const T* g = m.prony_gain.data() + i * nv + v0;
+          for (int l = 0; l < kLanes; ++l) {
+            w.decay[i][l] = d[l];
+            w.gain[i][l] = g[l];
+          }
+        } else {
+          for (int l = 0; l < kLanes; ++l) w.decay[i][l] = w.gain[i][l] = T(0);
+        }
+      }
+      for (int k = 0; k < kMaxProny * kSymComponents; ++k) {
+        if (k < np * kSymComponents) {
+          const T* row = q + k * nv + v0;
+          for (int l = 0; l < kLanes; ++l) w.q[k][l] = row[l];
+        } else {
+          for (int l = 0; l < kLanes; ++l) w.q[k][l] = T(0);
+        }
+      }
+      return;
+    }
     for (int l = 0; l < kLanes; ++l) {
       const index_t v = l < count ? m.visco_slot[elems[l]] : -1;
       w.slot[l] = v;
@@ -208,6 +238,13 @@ template <class Terms, class T>
 void scatter_law_lanes(const TissueModel<T>& m, T* q, const LawLanes<T>& w) {
   if constexpr (Terms::visco) {
     const std::size_t nv = m.n_visco;
+    if (w.run) {
+      for (int k = 0; k < m.n_prony * kSymComponents; ++k) {
+        T* row = q + k * nv + w.slot[0];
+        for (int l = 0; l < kLanes; ++l) row[l] = w.q[k][l];
+      }
+      return;
+    }
     for (int l = 0; l < kLanes; ++l) {
       const index_t v = w.slot[l];
       if (v < 0) continue;
