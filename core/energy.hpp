@@ -50,17 +50,18 @@ TISSUE_HD T element_strain_energy(const Mat3<T>& F, T J, T Jbar, T volume, T mu,
 /// (I - I1/3 C^-1) (the scaling to Fbar cancels in I1 C^-1). q: the
 /// element's Prony state; g, tau: its set's terms (g = 0: none). Zero when
 /// J <= 0 or is not finite.
-template <class T>
+/// R: the arithmetic of prony_energy. Branch-free, like the energy.
+template <class T, class R>
 TISSUE_HD PronyEnergy element_prony_energy(const Mat3<T>& F, T J, T Jbar, T volume, T mu,
-                                           const T q[kMaxProny][kSymComponents], const double g[kMaxProny],
-                                           const double tau[kMaxProny]) {
-  const bool ok = (J > T(0)) & (J <= std::numeric_limits<T>::max()) & (Jbar > T(0));
-  if (!ok) return {};
+                                           const T q[kMaxProny][kSymComponents], const R g[kMaxProny],
+                                           const R tau[kMaxProny]) {
+  const bool ok = (J > T(0)) & (J <= std::numeric_limits<T>::max()) & (Jbar > T(0));  // & not &&: no branch
+  const T Js = ok ? J : T(1), Jbars = ok ? Jbar : T(1);
   const Mat3<T> C = transpose(F) * F;
-  const T cbrt_Jbar = cube_root(Jbar);
-  const PronyEnergy e =
-      prony_energy(isochoric_pk2(C, inverse(C, J * J), mu / (cbrt_Jbar * cbrt_Jbar)), q, g, tau, double(mu));
-  return {double(volume) * e.power, double(volume) * e.stored};
+  const T cbrt_Jbar = cube_root(Jbars);
+  const PronyEnergy e = prony_energy(isochoric_pk2(C, inverse(C, Js * Js), mu / (cbrt_Jbar * cbrt_Jbar)), q, g, tau, R(mu));
+  const double v = ok ? double(volume) : 0.0;
+  return {v * e.power, v * e.stored};
 }
 
 }  // namespace tissue

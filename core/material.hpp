@@ -155,21 +155,26 @@ struct PronyEnergy {
   double stored = 0;  ///< J/m^3
 };
 
-template <class T>
-TISSUE_HD PronyEnergy prony_energy(const Mat3<T>& S_iso, const T q[kMaxProny][kSymComponents], const double g[kMaxProny],
-                                   const double tau[kMaxProny], double mu) {
-  PronyEnergy e;
+/// Computed in R (double on the GPU; the cpu's lanes use their own T, so
+/// that they vectorise); branch-free.
+template <class T, class R>
+TISSUE_HD PronyEnergy prony_energy(const Mat3<T>& S_iso, const T q[kMaxProny][kSymComponents], const R g[kMaxProny],
+                                   const R tau[kMaxProny], R mu) {
+  R power = R(0), stored = R(0);
+  TISSUE_UNROLL
   for (int i = 0; i < kMaxProny; ++i) {
-    if (!(g[i] > 0)) continue;
-    double hh = 0;
+    R hh = R(0);
+    TISSUE_UNROLL
     for (int c = 0; c < kSymComponents; ++c) {
-      const double h = g[i] * double(sym_component(S_iso, c)) - double(q[i][c]);
-      hh += (c < 3 ? 1.0 : 2.0) * h * h;  // the off-diagonal components count twice
+      const R h = g[i] * R(sym_component(S_iso, c)) - R(q[i][c]);
+      hh += (c < 3 ? R(1) : R(2)) * h * h;  // the off-diagonal components count twice
     }
-    e.power += hh / (2 * g[i] * mu * tau[i]);
-    e.stored += hh / (4 * g[i] * mu);
+    const bool on = g[i] > R(0);
+    const R gm = on ? g[i] * mu : R(1);  // (no division by zero for an unused term)
+    power += on ? hh / (R(2) * gm * tau[i]) : R(0);
+    stored += on ? hh / (R(4) * gm) : R(0);
   }
-  return e;
+  return {double(power), double(stored)};
 }
 
 /// The strain energy density (J/m^3) of the optional elastic terms, from

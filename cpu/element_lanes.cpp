@@ -146,11 +146,36 @@ TISSUE_SIMD_CLONES void lanes_energy_fibre(ElementLanes<T>& b, const LawLanes<T>
   energy_loop<T, kIanp, true>(b, &w);
 }
 
+template <class T, bool kIanp>
+TISSUE_SIMD_CLONES void lanes_prony_energy(ElementLanes<T>& b, const LawLanes<T>& w, const T (&g)[kMaxProny][kLanes],
+                                           const T (&tau)[kMaxProny][kLanes], T (&power)[kLanes],
+                                           T (&stored)[kLanes]) {
+  using Visco = LawTerms<false, true>;
+#pragma GCC ivdep
+  for (int l = 0; l < kLanes; ++l) {
+    const Mat3<T> F = lane_F(b, l);
+    const T J = det(F);
+    const T Jbar = kIanp ? T(1) + b.pbar[l] / b.K(0, l) : J;
+    const ElementLaw<T> law = lane_law<Visco>(w, l);
+    T gl[kMaxProny], tl[kMaxProny];
+    TISSUE_UNROLL
+    for (int i = 0; i < kMaxProny; ++i) {
+      gl[i] = g[i][l];
+      tl[i] = tau[i][l];
+    }
+    const PronyEnergy e = element_prony_energy(F, J, Jbar, b.V(0, l), b.mu(0, l), law.q, gl, tl);
+    power[l] = T(e.power);
+    stored[l] = T(e.stored);
+  }
+}
+
 #define TISSUE_CPU_LANES_LAW(T, I)                                                            \
   template void lanes_forces_law<T, I, LawTerms<true, false>>(ElementLanes<T>&, LawLanes<T>&); \
   template void lanes_forces_law<T, I, LawTerms<false, true>>(ElementLanes<T>&, LawLanes<T>&); \
   template void lanes_forces_law<T, I, LawTerms<true, true>>(ElementLanes<T>&, LawLanes<T>&);  \
-  template void lanes_energy_fibre<T, I>(ElementLanes<T>&, const LawLanes<T>&);
+  template void lanes_energy_fibre<T, I>(ElementLanes<T>&, const LawLanes<T>&);                \
+  template void lanes_prony_energy<T, I>(ElementLanes<T>&, const LawLanes<T>&, const T(&)[kMaxProny][kLanes], \
+                                         const T(&)[kMaxProny][kLanes], T(&)[kLanes], T(&)[kLanes]);
 TISSUE_CPU_LANES_LAW(float, true)
 TISSUE_CPU_LANES_LAW(float, false)
 TISSUE_CPU_LANES_LAW(double, true)

@@ -277,4 +277,11 @@ void lanes_energy(ElementLanes<T>& b);
 template <class T, bool kIanp>
 void lanes_energy_fibre(ElementLanes<T>& b, const LawLanes<T>& w);
 
+/// The Prony terms' power (W) and stored energy (J) on every lane (core
+/// element_prony_energy, in T): w from gather_law_lanes<LawTerms<false,
+/// true>>, g and tau per term and lane (g = 0: none, with tau = 1).
+template <class T, bool kIanp>
+void lanes_prony_energy(ElementLanes<T>& b, const LawLanes<T>& w, const T (&g)[kMaxProny][kLanes],
+                        const T (&tau)[kMaxProny][kLanes], T (&power)[kLanes], T (&stored)[kLanes]);
+
 }  // namespace tissue::cpu

@@ -137,39 +137,37 @@ double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std
 }
 
 template <class T>
-PronyEnergy prony_energy_sum(const TissueModel<T>& m, const TissueState<T>& s, const EnergyScratch<T>& scratch) {
+PronyEnergy prony_energy_sum(const TissueModel<T>& m, const TissueState<T>& s, EnergyScratch<T>& scratch) {
   if (!m.has_visco()) return {};
   const std::span<const index_t> elems = s.region.elems;
-  const std::size_t ne = std::size_t(m.n_elems), nv = std::size_t(m.n_visco);
-  const auto element = [&](index_t e) -> PronyEnergy {
-    const index_t slot = m.visco_slot[e];
-    if (slot < 0) return {};
-    Mat3<T> F;
-    for (int k = 0; k < 9; ++k) F(k / 3, k % 3) = scratch.elem_F[k * ne + e];
-    const T J = det(F);
-    T Jbar = J;
-    if (m.ianp) {
-      T pbar = 0;
-      for (int a = 0; a < 4; ++a) pbar += scratch.node_p[m.elem_nodes[a * ne + e]];
-      Jbar = T(1) + pbar / T(4) / m.K[e];
-    }
-    T q[kMaxProny][kSymComponents];
-    double g[kMaxProny], tau[kMaxProny];
-    for (int i = 0; i < kMaxProny; ++i) {
-      const bool in = i < m.n_prony;
-      g[i] = in ? m.prony_g[i * nv + slot] : 0.0;
-      tau[i] = in ? m.prony_tau[i * nv + slot] : 1.0;
-      for (int c = 0; c < kSymComponents; ++c) q[i][c] = in ? s.visco_q[(kSymComponents * i + c) * nv + slot] : T(0);
-    }
-    return element_prony_energy(F, J, Jbar, m.volume[e], m.mu[e], q, g, tau);
-  };
+  const std::size_t nv = std::size_t(m.n_visco);
+  const T* node_p = m.ianp ? scratch.node_p.data() : nullptr;
+  // batches aligned to kLanes inside every fixed-grain chunk, as strain_energy's
   return tbb::parallel_deterministic_reduce(
       tbb::blocked_range<std::size_t>(0, elems.size(), kReduceGrain), PronyEnergy{},
       [&](const tbb::blocked_range<std::size_t>& r, PronyEnergy sum) {
-        for (std::size_t k = r.begin(); k < r.end(); ++k) {
-          const PronyEnergy p = element(elems[k]);
-          sum.power += p.power;
-          sum.stored += p.stored;
+        for (std::size_t k = r.begin(); k < r.end(); k += kLanes) {
+          const int count = int(std::min<std::size_t>(kLanes, r.end() - k));
+          ElementLanes<T> b;
+          gather_force_lanes(m, scratch.elem_F.data(), node_p, elems.data() + k, count, b);
+          LawLanes<T> w;
+          gather_law_lanes<LawTerms<false, true>>(m, s.visco_q.data(), elems.data() + k, count, w);
+          alignas(64) T g[kMaxProny][kLanes], tau[kMaxProny][kLanes], power[kLanes], stored[kLanes];
+          for (int i = 0; i < kMaxProny; ++i)
+            for (int l = 0; l < kLanes; ++l) {
+              const index_t v = w.slot[l];
+              const bool in = v >= 0 && i < m.n_prony;
+              g[i][l] = in ? T(m.prony_g[i * nv + v]) : T(0);
+              tau[i][l] = in ? T(m.prony_tau[i * nv + v]) : T(1);
+            }
+          if (m.ianp)
+            lanes_prony_energy<T, true>(b, w, g, tau, power, stored);
+          else
+            lanes_prony_energy<T, false>(b, w, g, tau, power, stored);
+          for (int l = 0; l < count; ++l) {
+            sum.power += double(power[l]);
+            sum.stored += double(stored[l]);
+          }
         }
         return sum;
       },
@@ -196,7 +194,7 @@ bool take_passes(EnergyScratch<T>& scratch, TissueState<T>& s) {
   template double front_displacement(const TissueModel<T>&, const TissueState<T>&);                          \
   template double strain_energy(const TissueModel<T>&, const TissueState<T>&, const std::vector<T>&,         \
                                 EnergyScratch<T>&);                                                          \
-  template PronyEnergy prony_energy_sum(const TissueModel<T>&, const TissueState<T>&, const EnergyScratch<T>&); \
+  template PronyEnergy prony_energy_sum(const TissueModel<T>&, const TissueState<T>&, EnergyScratch<T>&); \
   template bool take_passes(EnergyScratch<T>&, TissueState<T>&);
 TISSUE_CPU_REDUCE(float)
 TISSUE_CPU_REDUCE(double)

@@ -63,10 +63,10 @@ double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std
 /// The Prony terms' viscous power (W) and stored energy (J) over the
 /// region's viscoelastic elements (core/energy.hpp element_prony_energy),
 /// at the u of strain_energy's scratch (call it first) and the state's
-/// Prony history; summed in double by a deterministic reduction. Zero
-/// without Prony terms.
+/// Prony history, in T by lanes; summed in double by a deterministic
+/// reduction. Zero without Prony terms.
 template <class T>
-PronyEnergy prony_energy_sum(const TissueModel<T>& m, const TissueState<T>& s, const EnergyScratch<T>& scratch);
+PronyEnergy prony_energy_sum(const TissueModel<T>& m, const TissueState<T>& s, EnergyScratch<T>& scratch);
 
 /// If scratch is fresh, swaps its passes 1-2 into the state (the values the
 /// next step's passes 1 and 2 would compute) and returns true; the caller
