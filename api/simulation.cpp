@@ -174,6 +174,8 @@ struct Simulation::Impl {
   TickResult last;
   std::optional<Fields> fields;  ///< this tick's download, on the first read
   std::string failure;           ///< why the last step threw; steps refused until reset()
+  std::optional<std::pair<std::vector<index_t>, std::vector<double>>> loads;  ///< set_loads' (else the scene's)
+  double dissipated = 0, visco_stored = 0;  ///< the last tick's TickReport
   // The reference mesh interleaved (the model stores it component-major).
   std::vector<double> rest;
   std::vector<std::int32_t> tets, tris;
@@ -195,7 +197,11 @@ struct Simulation::Impl {
     scheduler.reset();
     backend->upload(model);
     scheduler = std::make_unique<Scheduler>(*backend, model, settings);
-    scene::apply_loads(scene, *scheduler);
+    if (loads)
+      scheduler->set_loads(loads->first, loads->second);
+    else
+      scene::apply_loads(scene, *scheduler);
+    dissipated = visco_stored = 0;
     last = TickResult{};
     last.tools.resize(devices.size());
     fields.reset();
@@ -229,6 +235,8 @@ struct Simulation::Impl {
     last.equilibrium = r.equilibrium;
     last.region_nodes = int(r.region_nodes);
     last.region_elements = int(r.region_elems);
+    dissipated = r.dissipated;
+    visco_stored = r.visco_stored;
   }
 
   const Fields& snapshot() {
@@ -284,6 +292,20 @@ void Simulation::set_grasp(int tool, bool down) {
   impl_->check_tool(tool);
   impl_->devices[tool].set_grasp(down);
 }
+
+void Simulation::set_loads(std::span<const std::int32_t> nodes, std::span<const double> forces) {
+  std::vector<index_t> ids(nodes.begin(), nodes.end());
+  std::vector<double> f(forces.begin(), forces.end());
+  try {
+    impl_->scheduler->set_loads(ids, f);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(fmt::format("{}: {}", name(), e.what()));
+  }
+  impl_->loads.emplace(std::move(ids), std::move(f));
+}
+
+double Simulation::dissipated_energy() const { return impl_->dissipated; }
+double Simulation::viscous_stored_energy() const { return impl_->visco_stored; }
 
 void Simulation::follow_scene_path(int tool) {
   impl_->check_tool(tool);

@@ -106,6 +106,7 @@ size_t tissue_element_count(const tissue_simulation* sim) { return sim ? sim->si
 int tissue_tool_count(const tissue_simulation* sim) { return sim ? sim->sim.n_tools() : 0; }
 double tissue_tick_seconds(const tissue_simulation* sim) { return sim ? sim->sim.tick_seconds() : 0; }
 double tissue_time(const tissue_simulation* sim) { return sim ? sim->sim.time() : 0; }
+double tissue_dissipated_energy(const tissue_simulation* sim) { return sim ? sim->sim.dissipated_energy() : 0; }
 
 tissue_status tissue_set_tool_pose(tissue_simulation* sim, int tool, const double tip[3], const double axis[3]) {
   if (sim == nullptr) return null_argument("tissue_set_tool_pose", "sim");
@@ -119,6 +120,15 @@ tissue_status tissue_set_tool_pose(tissue_simulation* sim, int tool, const doubl
 tissue_status tissue_set_grasp(tissue_simulation* sim, int tool, int down) {
   if (sim == nullptr) return null_argument("tissue_set_grasp", "sim");
   return guarded([&] { sim->sim.set_grasp(tool, down != 0); });
+}
+
+tissue_status tissue_set_loads(tissue_simulation* sim, const int32_t* nodes, const double* forces, size_t count) {
+  if (sim == nullptr) return null_argument("tissue_set_loads", "sim");
+  if (count > 0 && nodes == nullptr) return null_argument("tissue_set_loads", "nodes");
+  if (count > 0 && forces == nullptr) return null_argument("tissue_set_loads", "forces");
+  return guarded([&] {
+    sim->sim.set_loads(std::span<const std::int32_t>(nodes, count), std::span<const double>(forces, 3 * count));
+  });
 }
 
 tissue_status tissue_step(tissue_simulation* sim, long ticks) {

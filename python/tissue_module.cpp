@@ -198,7 +198,25 @@ PYBIND11_MODULE(_tissue, m) {
       .def_property_readonly("last", &Simulation::last)
       .def("force", [](const Simulation& s, int tool) { return numpy3(s.force(tool)); }, py::arg("tool") = 0,
            "Force on the tool after the last tick (N)")
-      .def("reset", &Simulation::reset, "Back to rest (u = 0, tick 0)")
+      .def("reset", &Simulation::reset, "Back to rest (u = 0, tick 0); keeps the loads")
+      .def(
+          "set_loads",
+          [](Simulation& s, py::array_t<std::int32_t, py::array::c_style | py::array::forcecast> nodes,
+             py::array_t<double, py::array::c_style | py::array::forcecast> forces) {
+            if (forces.size() != 3 * nodes.size())
+              throw std::invalid_argument("set_loads: forces must hold 3 values (x y z, N) per node: " +
+                                          std::to_string(forces.size()) + " values for " +
+                                          std::to_string(nodes.size()) + " nodes");
+            s.set_loads(std::span<const std::int32_t>(nodes.data(), std::size_t(nodes.size())),
+                        std::span<const double>(forces.data(), std::size_t(forces.size())));
+          },
+          py::arg("nodes"), py::arg("forces"),
+          "Constant external forces (N) from the next tick on: nodes (n,), forces (n, 3); replaces the scene's "
+          "loads; empty arrays remove them")
+      .def("dissipated_energy", &Simulation::dissipated_energy,
+           "J dissipated by the viscoelastic (Prony) terms since the start")
+      .def("viscous_stored_energy", &Simulation::viscous_stored_energy,
+           "J stored in the Prony terms' branches after the last tick")
       .def("take_notes", &Simulation::take_notes)
       .def("displacement", [](Simulation& s) { return field_array(s, Field::Displacement); }, "(n_nodes, 3) m")
       .def("positions", [](Simulation& s) { return field_array(s, Field::Position); }, "(n_nodes, 3) X + u (m)")

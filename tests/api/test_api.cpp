@@ -139,6 +139,57 @@ TEST(Facade, MeshPressesBackInProportionToE) {
   for (double v : soft.field(tissue::Field::Displacement)) ASSERT_EQ(v, 0.0);
 }
 
+TEST(Facade, LoadsAreHeldByTheFixedBaseAndKeptByReset) {
+  // 1 mN up on each of the top's 49 nodes, the tool far away: at rest the
+  // fixed base holds the total (internal forces sum to zero over the body)
+  Simulation sim = Simulation::from_mesh(block(3000), {"cpu", "double", ""});
+  std::vector<std::int32_t> top;
+  std::vector<double> forces;
+  for (int j = 0; j <= 6; ++j)
+    for (int i = 0; i <= 6; ++i) {
+      top.push_back(tissue::box_node(6, 6, i, j, 3));
+      forces.insert(forces.end(), {0.0, 0.0, 1e-3});
+    }
+  sim.set_loads(top, forces);
+  const auto rest = [&] {
+    for (int k = 0; k < 1500; ++k) {
+      sim.set_tool_pose(0, {0.01, 0.01, 0.1});
+      sim.step();
+    }
+    const std::vector<double> f = sim.field(tissue::Field::InternalForce), u = sim.field(tissue::Field::Displacement);
+    double base = 0;
+    for (int j = 0; j <= 6; ++j)
+      for (int i = 0; i <= 6; ++i) base += f[3 * tissue::box_node(6, 6, i, j, 0) + 2];
+    return std::pair{base, u[3 * top[24] + 2]};
+  };
+  const auto [base, lift] = rest();
+  EXPECT_NEAR(base, -49e-3, 1e-3 * 49e-3);
+  EXPECT_GT(lift, 0);
+  EXPECT_EQ(sim.dissipated_energy(), 0.0);  // an elastic block
+  sim.reset();  // keeps the loads
+  const auto [base2, lift2] = rest();
+  EXPECT_NEAR(base2, base, 1e-9 * 49e-3);
+  EXPECT_NEAR(lift2, lift, 1e-9 * lift);
+  sim.set_loads({}, {});  // none: the block rests unloaded
+  const auto [base3, lift3] = rest();
+  EXPECT_NEAR(lift3, 0, 1e-3 * lift);
+  const std::vector<std::int32_t> far = {100000};
+  const std::vector<double> one = {1, 0, 0};
+  EXPECT_NE(thrown([&] { sim.set_loads(far, one); }).find("node 100000 out of range"), std::string::npos);
+  EXPECT_NE(thrown([&] { sim.set_loads(top, one); }).find("need 3 per node"), std::string::npos);
+}
+
+TEST(Facade, TheViscoelasticKidneyReportsTheEnergyItDissipates) {
+  Simulation sim = Simulation::load("@kidney-visco", {"cpu", "float", ""});
+  EXPECT_EQ(sim.dissipated_energy(), 0.0);
+  sim.step(600);  // into the press
+  EXPECT_GT(sim.dissipated_energy(), 0.0);
+  EXPECT_GT(sim.viscous_stored_energy(), 0.0);
+  const double d = sim.dissipated_energy();
+  sim.step(100);
+  EXPECT_GT(sim.dissipated_energy(), d);  // it only grows
+}
+
 TEST(Facade, MisuseIsAClearError) {
   Simulation sim = Simulation::from_mesh(block(3000), {"cpu", "float", ""});
   EXPECT_NE(thrown([&] { sim.set_tool_pose(1, {0, 0, 0}); }).find("tool 1 does not exist"), std::string::npos);

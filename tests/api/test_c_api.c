@@ -95,6 +95,19 @@ int main(void) {
   CHECK(contains(tissue_last_error(), "NULL"));
   const double nan_tip[3] = {0, NAN, 0};
   CHECK(tissue_set_tool_pose(sim, 0, nan_tip, NULL) == TISSUE_BAD_ARGUMENT);
+  {
+    const int32_t loaded[2] = {0, 1};
+    const double pull[6] = {0, 0, 1e-3, 0, 0, 1e-3};
+    CHECK(tissue_set_loads(sim, loaded, pull, 2) == TISSUE_OK);
+    CHECK(tissue_set_loads(sim, NULL, pull, 2) == TISSUE_BAD_ARGUMENT);
+    CHECK(contains(tissue_last_error(), "nodes"));
+    const int32_t bad[1] = {1000000};
+    CHECK(tissue_set_loads(sim, bad, pull, 1) == TISSUE_BAD_ARGUMENT);
+    CHECK(contains(tissue_last_error(), "node 1000000 out of range"));
+    CHECK(tissue_set_loads(sim, NULL, NULL, 0) == TISSUE_OK);
+    CHECK(tissue_dissipated_energy(sim) == 0.0); /* an elastic mesh */
+    CHECK(tissue_dissipated_energy(NULL) == 0.0);
+  }
   CHECK(tissue_reset(sim) == TISSUE_OK);
   CHECK(tissue_time(sim) == 0.0);
   CHECK(tissue_tool_force(sim, 0, f) == TISSUE_OK);

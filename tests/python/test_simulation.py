@@ -195,3 +195,23 @@ def test_viscoelastic_kidney_relaxes_as_the_prony_series(tmp_path):
     assert later["elastic_N"] > 0.9 * start["elastic_N"]        # the elastic kidney holds its force
     for row in (start, later):
         assert abs(row["visco_over_prediction"] - 1) < 0.06, row  # measured 1.9 % and 3.1 %
+
+
+def test_loads_are_held_by_the_fixed_base():
+    """A constant pull on the top: at rest the fixed base holds the total (internal forces sum to zero)."""
+    sim = block(E=3000.0)
+    top = np.array([tissue.box_node(6, 6, i, j, 3) for j in range(7) for i in range(7)], dtype=np.int32)
+    forces = np.tile([0.0, 0.0, 1e-3], (len(top), 1))
+    sim.set_loads(top, forces)
+    for _ in range(1500):
+        sim.set_tool_pose(0, [0.01, 0.01, 0.1])  # far above
+        sim.step()
+    base = [tissue.box_node(6, 6, i, j, 0) for j in range(7) for i in range(7)]
+    held = sim.internal_force()[base, 2].sum()
+    assert held == pytest.approx(-49e-3, rel=1e-3)
+    assert sim.displacement()[top, 2].mean() > 0
+    assert sim.dissipated_energy() == 0.0  # an elastic block
+    with pytest.raises(ValueError, match="3 values"):
+        sim.set_loads(top, np.zeros(len(top)))
+    with pytest.raises(ValueError, match="out of range"):
+        sim.set_loads([10 ** 6], [[1.0, 0.0, 0.0]])

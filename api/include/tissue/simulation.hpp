@@ -97,7 +97,7 @@ enum class Field {
   Displacement,   ///< u, 3 per node (m)
   Position,       ///< X + u, 3 per node (m)
   Pressure,       ///< IANP nodal pressure, 1 per node (Pa)
-  InternalForce,  ///< internal nodal force, 3 per node (N)
+  InternalForce,  ///< internal nodal force less the applied load (set_loads), 3 per node (N)
   Jacobian,       ///< J = det F, 1 per element (last computed value)
 };
 
@@ -152,6 +152,15 @@ class Simulation {
   double tool_radius(int tool) const;
   double tool_shaft(int tool) const;
 
+  // --- loads ---
+  /// Constant external forces (dead loads) from the next tick on: x y z
+  /// (N) per node of `nodes` (forces.size() = 3 nodes.size()). Replaces the
+  /// scene's <load>s and any earlier call, also across reset(); a node given
+  /// twice gets the sum; empty lists remove every load. Throws
+  /// std::invalid_argument naming the node and the rule (out of range, not
+  /// finite, wrong count).
+  void set_loads(std::span<const std::int32_t> nodes, std::span<const double> forces);
+
   // --- time ---
   /// Runs `ticks` haptic ticks (>= 1) and returns the last one's result.
   TickResult step(long ticks = 1);
@@ -160,8 +169,14 @@ class Simulation {
   Vector3 force(int tool) const;       ///< last().tools[tool].force (N)
   long ticks() const;
   double time() const;                 ///< simulated time (s)
-  /// Back to rest (u = 0, tick 0, every grasp released); keeps tool modes.
+  /// Back to rest (u = 0, tick 0, every grasp released); keeps tool modes
+  /// and loads.
   void reset();
+  /// The energy the viscoelastic (Prony) terms dissipated since the start
+  /// (J) and what their Maxwell branches store after the last tick (J);
+  /// 0 for elastic materials (docs/materials.md, energy).
+  double dissipated_energy() const;
+  double viscous_stored_energy() const;
   /// Notes since the last call (a tool pressing a fixed support, ...).
   std::vector<std::string> take_notes();
 

@@ -79,6 +79,10 @@ double tissue_tick_seconds(const tissue_simulation* sim);
  * (the scene's shaft direction). From the first call the host drives it. */
 tissue_status tissue_set_tool_pose(tissue_simulation* sim, int tool, const double tip[3], const double axis[3]);
 tissue_status tissue_set_grasp(tissue_simulation* sim, int tool, int down);
+/* Constant external forces from the next tick on: x y z (N) per node of
+ * nodes (count nodes, 3 count forces); replaces the scene's loads; count 0
+ * removes every load (nodes and forces may then be NULL). */
+tissue_status tissue_set_loads(tissue_simulation* sim, const int32_t* nodes, const double* forces, size_t count);
 /* Runs ticks >= 1 haptic ticks. */
 tissue_status tissue_step(tissue_simulation* sim, long ticks);
 /* Back to rest (u = 0, tick 0). */
@@ -89,6 +93,9 @@ tissue_status tissue_tool_force(const tissue_simulation* sim, int tool, double f
 tissue_status tissue_tool_contact_count(const tissue_simulation* sim, int tool, int32_t* count);
 /* Simulated time (s). */
 double tissue_time(const tissue_simulation* sim);
+/* Energy the viscoelastic (Prony) terms dissipated since the start (J); 0
+ * for elastic materials or a NULL simulation. */
+double tissue_dissipated_energy(const tissue_simulation* sim);
 /* Copies a field into out, which holds exactly count values (components x
  * nodes, or elements for the Jacobian). */
 tissue_status tissue_read_field(tissue_simulation* sim, tissue_field field, double* out, size_t count);
