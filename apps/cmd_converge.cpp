@@ -43,6 +43,7 @@ std::string row_json(const accuracy::ConvergenceRow& r, bool in_limit) {
 
 int run_converge(const ConvergeArgs& a) {
   const scene::Scene s = load_scene_arg(a.scene);
+  refuse_loads(s, "converge");
   if (s.source != "@kidney") throw std::runtime_error(s.source + ": tissue converge refines the built-in @kidney only");
   std::vector<accuracy::ConvergenceLevel> levels = accuracy::default_convergence_levels();
   if (a.levels < 3 || a.levels > static_cast<int>(levels.size()))

@@ -30,6 +30,7 @@ struct ReferenceArgs {
 int run_reference(const ReferenceArgs& a) {
   InterruptGuard interrupt;
   const scene::Scene s = load_scene_arg(a.scene);
+  refuse_loads(s, "reference");
   if (s.tools.empty() || s.tools.front().path.empty())
     throw std::runtime_error(s.source + ": the scene has no scripted tool path to hold");
   const std::vector<Waypoint>& path = s.tools.front().path;

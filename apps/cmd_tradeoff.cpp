@@ -25,6 +25,7 @@ struct TradeoffArgs {
 int run_tradeoff_command(TradeoffArgs& a) {
   InterruptGuard interrupt;
   const scene::Scene s = load_scene_arg(a.scene);
+  refuse_loads(s, "tradeoff");
   accuracy::TradeoffOptions& o = a.options;
   o.backend = a.backend;
   if (!a.depths.empty()) {

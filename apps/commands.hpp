@@ -36,6 +36,9 @@ const std::string& activity();
 
 /// Loads a scene file, or the built-in kidney for the name "@kidney".
 scene::Scene load_scene_arg(const std::string& arg);
+/// Refuses a scene with <load>s (file:line of the first) for a command that
+/// cannot apply them.
+void refuse_loads(const scene::Scene& s, const std::string& command);
 
 using scene::parse_depth;      // scene/text.hpp
 using scene::parse_precision;  // scene/text.hpp

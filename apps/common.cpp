@@ -8,6 +8,7 @@
 #include "apps/commands.hpp"
 #include "io/kidney.hpp"
 #include "io/scene_xml.hpp"
+#include "scene/validate.hpp"
 
 namespace tissue::app {
 
@@ -42,6 +43,14 @@ scene::Scene load_scene_arg(const std::string& arg) {
   set_activity(fmt::format("reading the scene {}", arg));
   if (auto builtin = io::builtin_scene(arg)) return *builtin;
   return io::read_scene(arg);
+}
+
+void refuse_loads(const scene::Scene& s, const std::string& command) {
+  if (s.loads.empty()) return;
+  throw std::runtime_error(fmt::format(
+      "{}: <load>: `tissue {}` does not apply loads (its reference solution holds the tool, with no applied-load "
+      "term); remove the scene's <load>s, or use `tissue run`",
+      scene::location(s, s.loads.front().where.line), command));
 }
 
 }  // namespace tissue::app

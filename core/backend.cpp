@@ -45,6 +45,25 @@ void Backend::upload(const TissueModel<double>& m) {
                                             m.name.size(), std::size_t(len)));
   TISSUE_LAW_MODEL_FIELDS(TISSUE_LAW_CHECK)
 #undef TISSUE_LAW_CHECK
+  if (m.n_prony < 0 || m.n_prony > kMaxProny || (m.n_prony > 0) != (m.n_visco > 0))
+    throw std::invalid_argument(fmt::format("upload: the model has {} Prony terms per slot for {} viscoelastic "
+                                            "elements; it needs 1..{} terms with elements, 0 without",
+                                            m.n_prony, m.n_visco, kMaxProny));
+  for (index_t e = 0, next = 0; e < index_t(m.visco_slot.size()); ++e) {  // slots count up in element order
+    const index_t v = m.visco_slot[e];
+    if (v != -1 && v != next)
+      throw std::invalid_argument(fmt::format("upload: element {} has Prony slot {}; slots must be -1 (elastic) or "
+                                              "count up 0, 1, 2, ... in element order (expected {})",
+                                              e, v, next));
+    next += v >= 0;
+  }
+  if (!m.visco_slot.empty() && m.visco_slot.size() == std::size_t(m.n_elems)) {
+    index_t count = 0;
+    for (index_t v : m.visco_slot) count += v >= 0;
+    if (count != m.n_visco)
+      throw std::invalid_argument(fmt::format("upload: {} elements have a Prony slot but the model counts {}", count,
+                                              m.n_visco));
+  }
   uploaded_ = false;
   do_upload(m);
   n_nodes_ = m.n_nodes;

@@ -39,8 +39,9 @@ struct ToolReduction {
 /// Reductions over the region after a batch of steps (one call per tick).
 struct Reductions {
   Vec3<double> reaction = {};  ///< sum of internal forces on the set_driven components (N)
-  Vec3<double> internal = {};  ///< sum of internal forces on inner nodes (N): zero by construction over the
-                               ///< whole mesh, minus the halo's support in a limited region; the
+  Vec3<double> internal = {};  ///< sum of the out-of-balance forces f - R on inner nodes (N): minus the
+                               ///< applied loads (set_loads) over the whole mesh, since internal forces sum
+                               ///< to zero there, less the halo's support in a limited region; the
                                ///< equilibrium measure is the free-node residual below
   double free_force2 = 0;      ///< sum f_ac^2 over free (integrated) components of inner nodes (N^2); a
                                ///< pushed contact node's tangential part counts as free

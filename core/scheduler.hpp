@@ -78,7 +78,7 @@ struct TickReport {
   Vec3<double> tool = {};      ///< tools[0].tip (m)
   Vec3<double> force = {};     ///< tools[0].force (N)
   index_t contact_nodes = 0;   ///< nodes in contact with any tool
-  Vec3<double> internal = {};  ///< sum of internal forces over inner nodes (N)
+  Vec3<double> internal = {};  ///< sum of internal forces less the applied loads over inner nodes (N)
   index_t region_nodes = 0, region_elems = 0;
   double residual = 0;         ///< relative free-node residual
   double kinetic = 0;          ///< J

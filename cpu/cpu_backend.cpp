@@ -197,6 +197,7 @@ Reductions CpuBackend<T>::do_reduce() {
   const PronyEnergy visco = prony_energy_sum(model_, state_, energy_);
   r.visco_power = visco.power;
   r.visco_stored = visco.stored;
+  r.finite = r.finite && std::isfinite(visco.power) && std::isfinite(visco.stored);
   r.front_disp = front_displacement(model_, state_);
   r.bad_elem = bad_.take(&r.bad_J);
   if (r.bad_elem < 0) r.bad_J = 1;

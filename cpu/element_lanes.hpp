@@ -191,11 +191,11 @@ void gather_law_lanes(const TissueModel<T>& m, const T* q, const index_t* elems,
     }
   }
   if constexpr (Terms::visco) {
-    // a full batch of consecutive viscoelastic elements has consecutive slots (build_model numbers
-    // them in element order): its rows are contiguous and copy as vectors
+    // a full batch whose slots are consecutive (build_model numbers them in element order, so a run of
+    // viscoelastic elements has them): its rows are contiguous and copy as vectors
     const index_t v0 = m.visco_slot[elems[0]];
-    w.run = count == kLanes && v0 >= 0 && elems[count - 1] - elems[0] == count - 1 &&
-            m.visco_slot[elems[count - 1]] == v0 + count - 1;
+    w.run = count == kLanes && v0 >= 0;
+    for (int l = 1; l < kLanes && w.run; ++l) w.run = m.visco_slot[elems[l]] == v0 + l;
     if (w.run) {
       for (int l = 0; l < kLanes; ++l) w.slot[l] = v0 + l;
       for (int i = 0; i < kMaxProny; ++i) {

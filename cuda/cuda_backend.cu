@@ -271,8 +271,8 @@ class CudaBackend final : public Backend {
 
   /// The load is in the StateView the captured graphs hold: they are made again.
   void do_set_loads(std::span<const double> load) override {
+    stepper_.invalidate();  // first: no graph may keep the old array if the new one fails to allocate
     store_.set_load(load, log_, stream());
-    stepper_.invalidate();
   }
 
   void do_begin_grasp(int tool, const ToolPose& pose) override {

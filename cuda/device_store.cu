@@ -165,7 +165,8 @@ void DeviceStore<T>::set_load(std::span<const double> load, Transfers& log, cuda
   std::vector<Packed3<T>> r(n);
   for (index_t i = 0; i < n; ++i)
     r[i] = {T(load[i]), T(load[n + i]), T(load[2 * std::size_t(n) + i]), T(0)};
-  upload_array(load_, r, log, stream);
+  load_.allocate(r.size());
+  log.to_device_now(load_.data(), r.data(), load_.bytes(), stream);  // r is pageable and local
 }
 
 template <class T>

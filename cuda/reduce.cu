@@ -157,7 +157,7 @@ __global__ void __launch_bounds__(kReduceBlock)
     r.bad_J = __uint_as_float(static_cast<unsigned>(key & 0xffffffffu));
     *bad = ~0ull;
   }
-  double all = r.free_force2 + r.held_force2 + r.kinetic + r.max_disp;
+  double all = r.free_force2 + r.held_force2 + r.kinetic + r.max_disp + r.visco_power + r.visco_stored;
   for (int c = 0; c < 3; ++c) all += r.reaction[c] + r.internal[c];
   r.finite = sum.nonfinite == 0 && isfinite(all);
   *out = r;

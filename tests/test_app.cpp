@@ -267,6 +267,23 @@ void expect_complete_outputs(const std::string& dir, const std::string& summary)
   EXPECT_NEAR(last_time, 1e-3 * ticks, 1e-9);
 }
 
+TEST(Program, CommandsWithoutLoadsRefuseASceneWithLoads) {
+  // tradeoff, reference and converge compare against a held-tool reference with no applied-load term
+  TempDir t;
+  std::string scene = kBlock;
+  const std::string load = "  <load box-min=\"-1 -1 0.01\" box-max=\"1 1 1\" force=\"0 0 0.01\"/>\n";
+  scene.insert(scene.find("</tissue-scene>"), load);
+  std::ofstream(t.file("loaded.xml")) << scene;
+  const int line = 1 + int(std::count(scene.begin(), scene.begin() + long(scene.find("<load")), '\n'));
+  for (const std::string cmd : {"tradeoff", "reference", "converge"}) {
+    EXPECT_EQ(run_tissue(t, cmd, {cmd, t.file("loaded.xml")}), 1) << cmd;
+    const std::string err = slurp(t.file(cmd + ".err"));
+    EXPECT_NE(err.find(fmt::format("loaded.xml:{}: <load>: `tissue {}` does not apply loads", line, cmd)),
+              std::string::npos)
+        << err;
+  }
+}
+
 class Interrupted : public testing::TestWithParam<int> {};
 
 TEST_P(Interrupted, RunStopsAtATickWritesEverythingAndExitsWith128PlusSignal) {
