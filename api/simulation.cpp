@@ -200,7 +200,7 @@ struct Simulation::Impl {
     if (loads)
       scheduler->set_loads(loads->first, loads->second);
     else
-      scene::apply_loads(scene, *scheduler);
+      scene::apply_loads(scene, model, *scheduler);
     dissipated = visco_stored = 0;
     last = TickResult{};
     last.tools.resize(devices.size());

@@ -145,7 +145,7 @@ int run_scene(const RunOptions& o) {
   std::unique_ptr<Backend> backend = create_backend(s.solver.backend, s.solver.precision);
   backend->upload(model);
   Scheduler sched(*backend, model, settings);
-  scene::apply_loads(s, sched);
+  scene::apply_loads(s, model, sched);
 
   if (model.reoriented > 0) fmt::print("note: {} inverted input tets were reoriented\n", model.reoriented);
   fmt::print("running {} ticks of {} on {} ({}), region depth {}\n", n_ticks, s.source, backend->name(),

@@ -193,11 +193,11 @@ std::vector<ContactNode> CpuBackend<T>::do_contacts() {
 template <class T>
 Reductions CpuBackend<T>::do_reduce() {
   Reductions r = reduce_region(model_, state_, state_.region.nodes);
-  r.strain_energy = strain_energy(model_, state_, node_divisor_, energy_);
-  const PronyEnergy visco = prony_energy_sum(model_, state_, energy_);
-  r.visco_power = visco.power;
-  r.visco_stored = visco.stored;
-  r.finite = r.finite && std::isfinite(visco.power) && std::isfinite(visco.stored);
+  const ElementEnergies energy = element_energies(model_, state_, node_divisor_, energy_);
+  r.strain_energy = energy.strain;
+  r.visco_power = energy.prony.power;
+  r.visco_stored = energy.prony.stored;
+  r.finite = r.finite && std::isfinite(energy.prony.power) && std::isfinite(energy.prony.stored);
   r.front_disp = front_displacement(model_, state_);
   r.bad_elem = bad_.take(&r.bad_J);
   if (r.bad_elem < 0) r.bad_J = 1;

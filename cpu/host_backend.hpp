@@ -68,7 +68,7 @@ class CpuBackend final : public Backend {
   std::vector<index_t> all_elems_;    ///< 0..n_elems-1: pass 1 over every element
   std::vector<index_t> driven_list_;  ///< currently driven nodes
   std::unique_ptr<ContactStage<T>> contact_;
-  EnergyScratch<T> energy_;           ///< strain_energy's passes 1-2, taken by the next step
+  EnergyScratch<T> energy_;           ///< element_energies' passes 1-2, taken by the next step
   BadElementFlag bad_;
   PassPartitioners parts_;
   tbb::affinity_partitioner all_elems_part_;

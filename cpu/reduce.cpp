@@ -91,8 +91,8 @@ double front_displacement(const TissueModel<T>& m, const TissueState<T>& s) {
 }
 
 template <class T>
-double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<T>& node_divisor,
-                     EnergyScratch<T>& scratch) {
+ElementEnergies element_energies(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<T>& node_divisor,
+                                 EnergyScratch<T>& scratch) {
   const std::span<const index_t> elems = s.region.elems, nodes = s.region.nodes;
   // passes 1-2 below rewrite the region's entries; the rest must equal the state's, so that
   // take_passes can swap the arrays: copied whole only when they may not (O(mesh) per reduce before)
@@ -108,11 +108,12 @@ double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std
   nodal_pressure(m, scratch.elem_dv.data(), node_divisor, nodes, scratch.node_p.data(), scratch.nodal_part);
   scratch.fresh = true;
   const T* node_p = m.ianp ? scratch.node_p.data() : nullptr;
+  const std::size_t nv = std::size_t(m.n_visco);
   // batches aligned to kLanes inside every fixed-grain chunk: the same
   // batches and the same summation order at any thread count
   return tbb::parallel_deterministic_reduce(
-      tbb::blocked_range<std::size_t>(0, elems.size(), kReduceGrain), 0.0,
-      [&](const tbb::blocked_range<std::size_t>& r, double sum) {
+      tbb::blocked_range<std::size_t>(0, elems.size(), kReduceGrain), ElementEnergies{},
+      [&](const tbb::blocked_range<std::size_t>& r, ElementEnergies sum) {
         for (std::size_t k = r.begin(); k < r.end(); k += kLanes) {
           ElementLanes<T> b;
           const int count = int(std::min<std::size_t>(kLanes, r.end() - k));
@@ -129,27 +130,9 @@ double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std
           } else {
             lanes_energy<T, false>(b);
           }
-          for (int l = 0; l < count; ++l) sum += double(b.ret[l]);
-        }
-        return sum;
-      },
-      std::plus<double>());
-}
-
-template <class T>
-PronyEnergy prony_energy_sum(const TissueModel<T>& m, const TissueState<T>& s, EnergyScratch<T>& scratch) {
-  if (!m.has_visco()) return {};
-  const std::span<const index_t> elems = s.region.elems;
-  const std::size_t nv = std::size_t(m.n_visco);
-  const T* node_p = m.ianp ? scratch.node_p.data() : nullptr;
-  // batches aligned to kLanes inside every fixed-grain chunk, as strain_energy's
-  return tbb::parallel_deterministic_reduce(
-      tbb::blocked_range<std::size_t>(0, elems.size(), kReduceGrain), PronyEnergy{},
-      [&](const tbb::blocked_range<std::size_t>& r, PronyEnergy sum) {
-        for (std::size_t k = r.begin(); k < r.end(); k += kLanes) {
-          const int count = int(std::min<std::size_t>(kLanes, r.end() - k));
-          ElementLanes<T> b;
-          gather_force_lanes(m, scratch.elem_F.data(), node_p, elems.data() + k, count, b);
+          for (int l = 0; l < count; ++l) sum.strain += double(b.ret[l]);
+          if (!m.has_visco()) continue;
+          // the Prony terms' power and stored energy from the same F and pbar
           LawLanes<T> w;
           gather_law_lanes<LawTerms<false, true>>(m, s.visco_q.data(), elems.data() + k, count, w);
           alignas(64) T g[kMaxProny][kLanes], tau[kMaxProny][kLanes], power[kLanes], stored[kLanes];
@@ -165,15 +148,16 @@ PronyEnergy prony_energy_sum(const TissueModel<T>& m, const TissueState<T>& s, E
           else
             lanes_prony_energy<T, false>(b, w, g, tau, power, stored);
           for (int l = 0; l < count; ++l) {
-            sum.power += double(power[l]);
-            sum.stored += double(stored[l]);
+            sum.prony.power += double(power[l]);
+            sum.prony.stored += double(stored[l]);
           }
         }
         return sum;
       },
-      [](PronyEnergy a, const PronyEnergy& b) {
-        a.power += b.power;
-        a.stored += b.stored;
+      [](ElementEnergies a, const ElementEnergies& b) {
+        a.strain += b.strain;
+        a.prony.power += b.prony.power;
+        a.prony.stored += b.prony.stored;
         return a;
       });
 }
@@ -192,9 +176,8 @@ bool take_passes(EnergyScratch<T>& scratch, TissueState<T>& s) {
 #define TISSUE_CPU_REDUCE(T)                                                                                 \
   template Reductions reduce_region(const TissueModel<T>&, const TissueState<T>&, std::span<const index_t>); \
   template double front_displacement(const TissueModel<T>&, const TissueState<T>&);                          \
-  template double strain_energy(const TissueModel<T>&, const TissueState<T>&, const std::vector<T>&,         \
-                                EnergyScratch<T>&);                                                          \
-  template PronyEnergy prony_energy_sum(const TissueModel<T>&, const TissueState<T>&, EnergyScratch<T>&); \
+  template ElementEnergies element_energies(const TissueModel<T>&, const TissueState<T>&, const std::vector<T>&, \
+                                            EnergyScratch<T>&);                                                \
   template bool take_passes(EnergyScratch<T>&, TissueState<T>&);
 TISSUE_CPU_REDUCE(float)
 TISSUE_CPU_REDUCE(double)

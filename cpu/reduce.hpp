@@ -29,7 +29,7 @@ Reductions reduce_region(const TissueModel<T>& m, const TissueState<T>& s, std::
 template <class T>
 double front_displacement(const TissueModel<T>& m, const TissueState<T>& s);
 
-/// Passes 1 and 2 at the current u, as strain_energy computes them (sized
+/// Passes 1 and 2 at the current u, as element_energies computes them (sized
 /// on first use, then reused: no allocation per tick). The next TLED step
 /// would compute exactly these numbers from the same u (a tick's driving
 /// changes targets, not u), so the backend swaps them into its state
@@ -50,23 +50,22 @@ struct EnergyScratch {
   tbb::affinity_partitioner pressure_part, nodal_part;  ///< for its passes 1 and 2
 };
 
-/// Strain energy sum_e V_e W(Fbar_e) over the region's elements at the
-/// current u (J; core/energy.hpp), summed in double by a deterministic
-/// reduction, from passes 1 and 2 run into `scratch` (the state's own pass
-/// arrays are left as the last step wrote them, so download() is
-/// unchanged); node_divisor is pass 2's divisor (n_nodes, m^3/Pa). Leaves
-/// scratch.fresh set.
-template <class T>
-double strain_energy(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<T>& node_divisor,
-                     EnergyScratch<T>& scratch);
+/// What the region's elements hold at the current u (J; W for the power).
+struct ElementEnergies {
+  double strain = 0;  ///< sum_e V_e W(Fbar_e) (core/energy.hpp)
+  PronyEnergy prony;  ///< the Prony terms' power and stored energy (core/energy.hpp element_prony_energy; 0 without)
+};
 
-/// The Prony terms' viscous power (W) and stored energy (J) over the
-/// region's viscoelastic elements (core/energy.hpp element_prony_energy),
-/// at the u of strain_energy's scratch (call it first) and the state's
-/// Prony history, in T by lanes; summed in double by a deterministic
-/// reduction. Zero without Prony terms.
+/// The strain energy and the Prony terms' energy over the region's elements
+/// at the current u, from one traversal: passes 1 and 2 run into `scratch`
+/// (the state's own pass arrays are left as the last step wrote them, so
+/// download() is unchanged), then per batch of lanes the energy and, for a
+/// viscoelastic model, the Prony power and stored energy from the state's
+/// Prony history (in T); summed in double by a deterministic reduction.
+/// node_divisor is pass 2's divisor (n_nodes, m^3/Pa). Leaves scratch.fresh set.
 template <class T>
-PronyEnergy prony_energy_sum(const TissueModel<T>& m, const TissueState<T>& s, EnergyScratch<T>& scratch);
+ElementEnergies element_energies(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<T>& node_divisor,
+                                 EnergyScratch<T>& scratch);
 
 /// If scratch is fresh, swaps its passes 1-2 into the state (the values the
 /// next step's passes 1 and 2 would compute) and returns true; the caller

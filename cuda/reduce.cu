@@ -68,11 +68,13 @@ __device__ void accumulate_node(const ModelView<T>& m, const StateView<T>& s, co
   if (!t.finite) ++p.nonfinite;
 }
 
-/// Element e's strain energy V W(Fbar) (core/energy.hpp) at the current u;
-/// node_p: nodal pressures at the current u (IANP only).
+/// Element e's strain energy V W(Fbar) (core/energy.hpp) and, for a
+/// viscoelastic element, its Prony power and stored energy (core/energy.hpp
+/// element_prony_energy) at the current u, added to p; node_p: nodal
+/// pressures at the current u (IANP only).
 template <class T>
-__device__ double element_energy(const ModelView<T>& m, const T* node_p, const Packed3<T>* u, index_t e,
-                                 const T* fibre) {
+__device__ void add_element_energy(const ModelView<T>& m, const T* node_p, const Packed3<T>* u, index_t e,
+                                   const LawView<T>& w, ReducePartial& p) {
   const ElementData<T> d = load_element(m, e);
   Vec3<T> ue[4];
   corner_displacements(d, u, ue);
@@ -83,29 +85,15 @@ __device__ double element_energy(const ModelView<T>& m, const T* node_p, const P
     const T pbar = (node_p[d.c[0]] + node_p[d.c[1]] + node_p[d.c[2]] + node_p[d.c[3]]) / T(4);
     Jbar = T(1) + pbar / d.K;
   }
-  if (fibre) {  // the fibre term's energy (core/material.hpp)
+  if (w.fibre) {  // the fibre term's energy (core/material.hpp)
     ElementLaw<T> law;
-    load_fibre(fibre, m.n_elems, e, law);
-    return double(element_strain_energy<LawTerms<true, false>>(F, J, Jbar, d.V, d.mu, d.K, law));
+    load_fibre(w.fibre, m.n_elems, e, law);
+    p.energy += double(element_strain_energy<LawTerms<true, false>>(F, J, Jbar, d.V, d.mu, d.K, law));
+  } else {
+    p.energy += double(element_strain_energy(F, J, Jbar, d.V, d.mu, d.K));
   }
-  return double(element_strain_energy(F, J, Jbar, d.V, d.mu, d.K));
-}
-
-/// Element e's Prony power and stored energy (core/energy.hpp
-/// element_prony_energy) at the current u; adds them to p. Elastic
-/// elements add nothing.
-template <class T>
-__device__ void add_element_prony(const ModelView<T>& m, const T* node_p, const Packed3<T>* u, index_t e,
-                                  const LawView<T>& w, ReducePartial& p) {
-  const index_t slot = w.visco_slot[e];
+  const index_t slot = w.visco_slot ? w.visco_slot[e] : index_t(-1);
   if (slot < 0) return;
-  const ElementData<T> d = load_element(m, e);
-  Vec3<T> ue[4];
-  corner_displacements(d, u, ue);
-  const Mat3<T> F = deformation_gradient(ue, d.dN);
-  const T J = det(F);
-  T Jbar = J;
-  if (m.ianp) Jbar = T(1) + (node_p[d.c[0]] + node_p[d.c[1]] + node_p[d.c[2]] + node_p[d.c[3]]) / T(4) / d.K;
   T q[kMaxProny][kSymComponents];
   double g[kMaxProny], tau[kMaxProny];
   const index_t nv = w.n_visco;
@@ -126,10 +114,8 @@ __global__ void __launch_bounds__(kReduceBlock)
                           const T* energy_node_p, LawView<T> w, ReducePartial* out) {
   ReducePartial p = zero_partial();
   for (index_t i = thread_index(); i < r.n_nodes; i += thread_stride()) accumulate_node(m, s, b, front, r.node(i), p);
-  for (index_t i = thread_index(); i < r.n_elems; i += thread_stride()) {
-    p.energy += element_energy(m, energy_node_p, b.u, r.elem(i), w.fibre);
-    if (w.visco_slot) add_element_prony(m, energy_node_p, b.u, r.elem(i), w, p);
-  }
+  for (index_t i = thread_index(); i < r.n_elems; i += thread_stride())
+    add_element_energy(m, energy_node_p, b.u, r.elem(i), w, p);
   const ReducePartial sum = block_reduce(p);
   if (threadIdx.x == 0) out[blockIdx.x] = sum;
 }

@@ -20,19 +20,7 @@ using Row = scene::Material::FibreRow;
   throw FibreCsvError(fmt::format("{}:{}: {}", source, line, what));
 }
 
-std::vector<std::string_view> split_commas(std::string_view text) {
-  std::vector<std::string_view> out;
-  size_t i = 0;
-  for (size_t j; (j = text.find(',', i)) != std::string_view::npos; i = j + 1)
-    out.push_back(scene::trim(text.substr(i, j - i)));
-  out.push_back(scene::trim(text.substr(i)));
-  return out;
-}
-
-bool skipped(std::string_view line) {
-  const std::string_view t = scene::trim(line);
-  return t.empty() || t.front() == '#';
-}
+using scene::split_commas;
 
 constexpr const char* kColumns = "element,ax,ay,az";
 
@@ -68,7 +56,7 @@ std::vector<Row> parse_fibre_csv(std::istream& in, const std::string& source) {
   std::vector<Row> rows;
   while (std::getline(in, text)) {
     ++line;
-    if (skipped(text)) continue;
+    if (scene::csv_skipped(text)) continue;
     if (first) {
       first = false;
       const auto f = split_commas(text);

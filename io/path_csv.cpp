@@ -17,19 +17,7 @@ namespace {
   throw PathCsvError(fmt::format("{}:{}: {}", source, line, what));
 }
 
-std::vector<std::string_view> split_commas(std::string_view text) {
-  std::vector<std::string_view> out;
-  size_t i = 0;
-  for (size_t j; (j = text.find(',', i)) != std::string_view::npos; i = j + 1)
-    out.push_back(scene::trim(text.substr(i, j - i)));
-  out.push_back(scene::trim(text.substr(i)));
-  return out;
-}
-
-bool skipped(std::string_view line) {
-  const std::string_view t = scene::trim(line);
-  return t.empty() || t.front() == '#';
-}
+using scene::split_commas;
 
 /// Column layout from the header: t,x,y,z first, then optionally grasp and
 /// ax,ay,az (together), in any order.
@@ -92,7 +80,7 @@ std::vector<Waypoint> parse_path_csv(std::istream& in, const std::string& source
   std::vector<Waypoint> path;
   while (std::getline(in, text)) {
     ++line;
-    if (skipped(text)) continue;
+    if (scene::csv_skipped(text)) continue;
     if (!have_header) {
       cols = parse_header(text, source, line);
       have_header = true;

@@ -73,4 +73,17 @@ int parse_depth(const std::string& s) {
   return d;
 }
 
+std::vector<std::string_view> split_commas(std::string_view text) {
+  std::vector<std::string_view> out;
+  size_t i = 0;
+  for (size_t j; (j = text.find(',', i)) != std::string_view::npos; i = j + 1) out.push_back(trim(text.substr(i, j - i)));
+  out.push_back(trim(text.substr(i)));
+  return out;
+}
+
+bool csv_skipped(std::string_view line) {
+  const std::string_view t = trim(line);
+  return t.empty() || t.front() == '#';
+}
+
 }  // namespace tissue::scene

@@ -28,6 +28,12 @@ std::vector<std::string_view> split_blanks(std::string_view text);
 /// `text` without leading and trailing blanks.
 std::string_view trim(std::string_view text);
 
+/// The comma-separated fields of one CSV line, each trimmed (views into it).
+std::vector<std::string_view> split_commas(std::string_view text);
+
+/// True for a CSV line to skip: blank, or a comment starting with '#'.
+bool csv_skipped(std::string_view line);
+
 /// "float" | "double"; std::invalid_argument naming the text otherwise.
 Precision parse_precision(const std::string& s);
 

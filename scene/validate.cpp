@@ -3,7 +3,6 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <map>
 #include <string_view>
@@ -293,42 +292,34 @@ std::vector<std::uint8_t> resolve_constraints(const Scene& s) {
 
 // ---- loads -----------------------------------------------------------------
 
-/// The mesh's boundary faces (each a face of exactly one tet), as node triples.
-std::vector<std::array<index_t, 3>> boundary_faces(const Scene& s) {
-  std::map<std::array<index_t, 3>, std::pair<int, std::array<index_t, 3>>> faces;
-  static constexpr int kFace[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
-  for (std::size_t e = 0; 4 * e < s.tets.size(); ++e)
-    for (const auto& f : kFace) {
-      std::array<index_t, 3> t = {s.tets[4 * e + f[0]], s.tets[4 * e + f[1]], s.tets[4 * e + f[2]]};
-      std::array<index_t, 3> key = t;
-      std::sort(key.begin(), key.end());
-      auto& entry = faces[key];
-      ++entry.first;
-      entry.second = t;
-    }
-  std::vector<std::array<index_t, 3>> out;
-  for (const auto& [key, entry] : faces)
-    if (entry.first == 1) out.push_back(entry.second);
-  return out;
+/// Checks one <load> (selection, force) and returns the nodes it selects.
+std::vector<index_t> selected_load_nodes(const Scene& s, const Load& l, double tol) {
+  const Constraint& c = l.where;
+  check_constraint(s, c, "load");
+  for (int k = 0; k < 3; ++k) check_finite(s, c.line, "load", fmt::format("force {}", "xyz"[k]), l.force[k]);
+  std::vector<index_t> sel = constrained_nodes(c, s.nodes, tol);
+  if (sel.empty())
+    fail(s, c.line, fmt::format("{} selects no node of the mesh; {}", describe_as(c, "load"), selection_rule("load")));
+  return sel;
+}
+
+/// The <load>s' rules that need no model (to_model_input checks them).
+void check_loads(const Scene& s) {
+  const double tol = selection_tolerance(s.nodes);
+  for (const Load& l : s.loads) (void)selected_load_nodes(s, l, tol);
 }
 
 }  // namespace
 
-SceneLoads resolve_loads(const Scene& s) {
+SceneLoads resolve_loads(const Scene& s, const TissueModel<double>& m) {
   SceneLoads out;
   if (s.loads.empty()) return out;
-  const index_t n = node_count(s);
+  const index_t n = m.n_nodes, nt = m.n_tris;
   const double tol = selection_tolerance(s.nodes);
   std::vector<double> force(3 * std::size_t(n), 0.0);
   std::vector<std::uint8_t> loaded(n, 0);
-  std::vector<std::array<index_t, 3>> surface;
   for (const Load& l : s.loads) {
-    const Constraint& c = l.where;
-    check_constraint(s, c, "load");
-    for (int k = 0; k < 3; ++k) check_finite(s, c.line, "load", fmt::format("force {}", "xyz"[k]), l.force[k]);
-    const std::vector<index_t> sel = constrained_nodes(c, s.nodes, tol);
-    if (sel.empty())
-      fail(s, c.line, fmt::format("{} selects no node of the mesh; {}", describe_as(c, "load"), selection_rule("load")));
+    const std::vector<index_t> sel = selected_load_nodes(s, l, tol);
     if (l.each) {
       for (index_t a : sel) {
         loaded[a] = 1;
@@ -336,31 +327,32 @@ SceneLoads resolve_loads(const Scene& s) {
       }
       continue;
     }
-    // the total spread by area over the surface faces whose three corners are selected
-    // (consistent nodal loads of a uniform traction: a third of each face's share per corner)
-    if (surface.empty()) surface = boundary_faces(s);
+    // the total spread by area over the model's surface triangles whose three corners are selected
+    // (consistent nodal loads of a uniform traction: a third of each triangle's share per corner)
     std::vector<std::uint8_t> in(n, 0);
     for (index_t a : sel) in[a] = 1;
-    std::vector<std::pair<std::array<index_t, 3>, double>> faces;
+    std::vector<std::pair<index_t, double>> faces;  // (triangle, area)
     double total = 0;
-    for (const auto& f : surface) {
-      if (!(in[f[0]] && in[f[1]] && in[f[2]])) continue;
+    for (index_t t = 0; t < nt; ++t) {
+      const index_t v[3] = {m.tris[t], m.tris[nt + t], m.tris[2 * std::size_t(nt) + t]};
+      if (!(in[v[0]] && in[v[1]] && in[v[2]])) continue;
       Vec3<double> x[3];
-      for (int k = 0; k < 3; ++k) x[k] = {s.nodes[3 * f[k]], s.nodes[3 * f[k] + 1], s.nodes[3 * f[k] + 2]};
+      for (int k = 0; k < 3; ++k) x[k] = {m.X[v[k]], m.X[n + v[k]], m.X[2 * std::size_t(n) + v[k]]};
       const double area = 0.5 * norm(cross(x[1] - x[0], x[2] - x[0]));
-      faces.emplace_back(f, area);
+      faces.emplace_back(t, area);
       total += area;
     }
     if (!(total > 0))
-      fail(s, c.line,
+      fail(s, l.where.line,
            fmt::format("{} selects {} node(s) but no surface face (a boundary triangle with all three corners "
                        "selected) to spread the force over; select a patch of the surface, or give "
                        "distribute=\"each\" for a force on every selected node",
-                       describe_as(c, "load"), sel.size()));
-    for (const auto& [f, area] : faces)
+                       describe_as(l.where, "load"), sel.size()));
+    for (const auto& [t, area] : faces)
       for (int corner = 0; corner < 3; ++corner) {
-        loaded[f[corner]] = 1;
-        for (int k = 0; k < 3; ++k) force[3 * std::size_t(f[corner]) + k] += l.force[k] * area / total / 3;
+        const index_t a = m.tris[corner * std::size_t(nt) + t];
+        loaded[a] = 1;
+        for (int k = 0; k < 3; ++k) force[3 * std::size_t(a) + k] += l.force[k] * area / total / 3;
       }
   }
   for (index_t a = 0; a < n; ++a)
@@ -372,8 +364,8 @@ SceneLoads resolve_loads(const Scene& s) {
   return out;
 }
 
-void apply_loads(const Scene& scene, Scheduler& scheduler) {
-  const SceneLoads loads = resolve_loads(scene);
+void apply_loads(const Scene& scene, const TissueModel<double>& model, Scheduler& scheduler) {
+  const SceneLoads loads = resolve_loads(scene, model);
   if (!loads.nodes.empty()) scheduler.set_loads(loads.nodes, loads.force);
 }
 
@@ -503,7 +495,7 @@ ModelInput to_model_input(const Scene& scene) {
   in.elem_material = resolve_sets(scene, materials);
   in.fibre_dirs = resolve_fibre_dirs(scene, in.elem_material);
   in.fixed = resolve_constraints(scene);
-  (void)resolve_loads(scene);  // its rules, with file:line, before any work
+  check_loads(scene);  // the <load>s' rules, with file:line, before any work
   for (const Tool& t : scene.tools) check_tool(scene, t);
   check_solver(scene);
   in.nodes = scene.nodes;

@@ -68,23 +68,25 @@ void validate_material(const Scene& scene, const Material& material);
 /// copied. Throws SceneError.
 ModelInput to_model_input(const Scene& scene);
 
-/// The scene's loads as Backend::set_loads / Scheduler::set_loads take
-/// them: each loaded node once (ascending) with its summed force (N, xyz).
-/// A <load>'s force is its total, spread over the surface faces whose three
-/// corners its selection picks in proportion to their area, a third of each
-/// face's share to each corner (the consistent nodal loads of a uniform
-/// traction); with distribute="each" every selected node gets the force.
-/// Throws SceneError (file:line) for a bad selection, a non-finite force, a
-/// selection of no node, or an area load that selects no surface face.
+/// The scene's loads on its model (load_model(scene)) as Backend::set_loads
+/// / Scheduler::set_loads take them: each loaded node once (ascending) with
+/// its summed force (N, xyz). A <load>'s force is its total, spread over the
+/// model's surface triangles whose three corners its selection picks in
+/// proportion to their area, a third of each triangle's share to each corner
+/// (the consistent nodal loads of a uniform traction); with
+/// distribute="each" every selected node gets the force. Throws SceneError
+/// (file:line) for a bad selection, a non-finite force, a selection of no
+/// node (to_model_input checks these three first), or an area load that
+/// selects no surface triangle.
 struct SceneLoads {
   std::vector<index_t> nodes;
   std::vector<double> force;  ///< 3 per node
 };
-SceneLoads resolve_loads(const Scene& scene);
+SceneLoads resolve_loads(const Scene& scene, const TissueModel<double>& model);
 
 /// Gives the scene's loads to the scheduler (Scheduler::set_loads, which
 /// also seeds a region of limited depth with them); nothing without loads.
-void apply_loads(const Scene& scene, Scheduler& scheduler);
+void apply_loads(const Scene& scene, const TissueModel<double>& model, Scheduler& scheduler);
 
 /// build_model(to_model_input(scene)): throws SceneError for scene rules and
 /// core ModelError (naming the source and the element or node) for the mesh

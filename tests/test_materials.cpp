@@ -241,6 +241,47 @@ TEST(MaterialScene, EachHalfStressesAsItsPerElementDirectionPredicts) {
   EXPECT_GT(along.sigma(0), 1.5 * across.sigma(0));  // the directions matter
 }
 
+/// Every node held at the homogeneous deformation u = (diag(l) - I) X: u
+/// component-major (set_displacements), and the node ids with their xyz
+/// targets (set_driven).
+struct HeldStretch {
+  std::vector<index_t> nodes;
+  std::vector<double> u, target;
+};
+
+HeldStretch held_stretch(const TissueModel<double>& m, const double l[3]) {
+  const index_t n = m.n_nodes;
+  HeldStretch h{std::vector<index_t>(n), std::vector<double>(3 * n), std::vector<double>(3 * n)};
+  for (index_t i = 0; i < n; ++i) {
+    h.nodes[i] = i;
+    for (int c = 0; c < 3; ++c) h.target[3 * i + c] = h.u[c * n + i] = (l[c] - 1) * m.X[c * n + i];
+  }
+  return h;
+}
+
+/// |S_iso|^2 (Pa^2) at F = diag(l), from the principal stretches:
+/// S_ii = mu J^(-2/3) (1 - I1 / (3 l_i^2)).
+double iso_pk2_squared(const double l[3]) {
+  const double J = l[0] * l[1] * l[2], I1 = l[0] * l[0] + l[1] * l[1] + l[2] * l[2];
+  double SS = 0;
+  for (int i = 0; i < 3; ++i) SS += std::pow(kMu * std::pow(J, -2.0 / 3) * (1 - I1 / (3 * l[i] * l[i])), 2);
+  return SS;
+}
+
+/// max |u - u_ref| and max |u_ref| (m) of run(backend) on `got` against run
+/// on the cpu in double.
+template <class Run>
+std::pair<double, double> against_cpu_double(Backend& got, const Run& run) {
+  auto ref = create_backend("cpu", Precision::Double);
+  const std::vector<double> expect = run(*ref), u = run(got);
+  double scale = 0, diff = 0;
+  for (size_t k = 0; k < expect.size(); ++k) {
+    scale = std::max(scale, std::abs(expect[k]));
+    diff = std::max(diff, std::abs(u[k] - expect[k]));
+  }
+  return {diff, scale};
+}
+
 class Laws : public ::testing::TestWithParam<test::BackendKind> {
  protected:
   void SetUp() override { SKIP_UNLESS_USABLE(GetParam().backend); }
@@ -264,18 +305,9 @@ class Laws : public ::testing::TestWithParam<test::BackendKind> {
                                  double face_x = kL) const {
     auto b = make(m);
     const index_t n = m.n_nodes;
-    std::vector<double> u(3 * n);
-    std::vector<index_t> all(n);
-    std::vector<double> target(3 * n);
-    for (index_t i = 0; i < n; ++i) {
-      all[i] = i;
-      for (int c = 0; c < 3; ++c) {
-        u[c * n + i] = (l[c] - 1) * m.X[c * n + i];
-        target[3 * i + c] = u[c * n + i];
-      }
-    }
-    b->set_displacements(u);
-    b->set_driven(all, target);
+    const HeldStretch h = held_stretch(m, l);
+    b->set_displacements(h.u);
+    b->set_driven(h.nodes, h.target);
     std::vector<double> out;
     for (int k = 0; k < steps; ++k) {
       b->advance(1);
@@ -369,18 +401,10 @@ TEST_P(Laws, HeldStrainDissipatesWhatTheBranchesStoredAtTheStep) {
   const double l[3] = {1.1, lt, lt};
   const auto m = build_model(box_input(law_params(false, true)));
   auto b = make(m);
-  const index_t n = m.n_nodes;
-  std::vector<double> u(3 * n), target(3 * n);
-  std::vector<index_t> all(n);
-  for (index_t i = 0; i < n; ++i) {
-    all[i] = i;
-    for (int c = 0; c < 3; ++c) target[3 * i + c] = u[c * n + i] = (l[c] - 1) * m.X[c * n + i];
-  }
-  b->set_displacements(u);
-  b->set_driven(all, target);
-  const double J = l[0] * l[1] * l[2], I1 = l[0] * l[0] + l[1] * l[1] + l[2] * l[2];
-  double SS = 0;
-  for (int i = 0; i < 3; ++i) SS += std::pow(kMu * std::pow(J, -2.0 / 3) * (1 - I1 / (3 * l[i] * l[i])), 2);
+  const HeldStretch h = held_stretch(m, l);
+  b->set_displacements(h.u);
+  b->set_driven(h.nodes, h.target);
+  const double SS = iso_pk2_squared(l);
   const double V = kL * kL * kL;
   const auto stored = [&](double t) {
     double e = 0;
@@ -599,15 +623,8 @@ TEST_P(Laws, LoadsChangedMidRunMatchTheCpuInDouble) {
     b.advance(60);
     return b.download().u;
   };
-  auto ref = create_backend("cpu", Precision::Double);
-  const std::vector<double> expect = run(*ref);
   auto b = create_backend(GetParam().backend, GetParam().precision);
-  const std::vector<double> got = run(*b);
-  double scale = 0, diff = 0;
-  for (size_t k = 0; k < expect.size(); ++k) {
-    scale = std::max(scale, std::abs(expect[k]));
-    diff = std::max(diff, std::abs(got[k] - expect[k]));
-  }
+  const auto [diff, scale] = against_cpu_double(*b, run);
   EXPECT_GT(scale, 1e-3 * kL);
   EXPECT_LE(diff, (is_float() ? 1e-4 : 1e-10) * scale);
   report("loads changed mid-run, |u - u_cpu_double| / max |u|", diff / scale);
@@ -636,15 +653,8 @@ TEST_P(Laws, MixedLawsMatchTheCpuInDouble) {
     b.advance(400);
     return b.download().u;
   };
-  auto ref = create_backend("cpu", Precision::Double);
-  const std::vector<double> expect = run(*ref);
   auto b = create_backend(GetParam().backend, GetParam().precision);
-  const std::vector<double> got = run(*b);
-  double scale = 0, diff = 0;
-  for (size_t k = 0; k < expect.size(); ++k) {
-    scale = std::max(scale, std::abs(expect[k]));
-    diff = std::max(diff, std::abs(got[k] - expect[k]));
-  }
+  const auto [diff, scale] = against_cpu_double(*b, run);
   EXPECT_GT(scale, 0.05 * kL);
   EXPECT_LE(diff, (is_float() ? 1e-3 : 1e-9) * scale);
   report("mixed laws, 400 steps, |u - u_cpu_double| / max |u|", diff / scale);
@@ -669,18 +679,9 @@ TEST(MaterialModel, TheSchedulerAccumulatesTheDissipatedEnergy) {
   settings.tools.clear();  // the drives hold the strain
   Scheduler sched(*b, m, settings);
   const double l[3] = {1.1, 1 / std::sqrt(1.1), 1 / std::sqrt(1.1)};
-  const index_t n = m.n_nodes;
-  std::vector<index_t> all(n);
-  std::vector<double> target(3 * n);
-  for (index_t i = 0; i < n; ++i) {
-    all[i] = i;
-    for (int c = 0; c < 3; ++c) target[3 * i + c] = (l[c] - 1) * m.X[c * n + i];
-  }
-  b->set_driven(all, target);
-  const double I1 = l[0] * l[0] + l[1] * l[1] + l[2] * l[2];
-  double SS = 0;
-  for (int i = 0; i < 3; ++i) SS += std::pow(kMu * (1 - I1 / (3 * l[i] * l[i])), 2);
-  const double W0 = kL * kL * kL * g * SS / (4 * kMu);
+  const HeldStretch h = held_stretch(m, l);
+  b->set_driven(h.nodes, h.target);
+  const double W0 = kL * kL * kL * g * iso_pk2_squared(l) / (4 * kMu);
   TickReport rep;
   std::vector<Device*> none;
   while (sched.time() < 2 * tau - 1e-9) rep = sched.tick(none);
@@ -939,7 +940,7 @@ std::string load_scene(const std::string& loads) {
 TEST(Loads, ASceneLoadSpreadsItsTotalOverTheFaceByArea) {
   const scene::Scene s = io::parse_scene(
       load_scene("  <load box-min=\"0.01 -1 -1\" box-max=\"1 1 1\" force=\"0.3 0 -0.06\"/>\n"), "box.xml", ".");
-  const scene::SceneLoads l = scene::resolve_loads(s);
+  const scene::SceneLoads l = scene::resolve_loads(s, scene::load_model(s));
   ASSERT_EQ(l.nodes.size(), 9u);  // the 3 x 3 nodes of the face x = L
   double sum[3] = {0, 0, 0}, moment_y = 0, moment_z = 0;
   for (std::size_t k = 0; k < l.nodes.size(); ++k) {
@@ -963,8 +964,9 @@ TEST(Loads, ASceneLoadSpreadsItsTotalOverTheFaceByArea) {
   }
   EXPECT_LT(lo, hi);
   // distribute="each": every selected node gets the whole force
-  const scene::SceneLoads each = scene::resolve_loads(io::parse_scene(
-      load_scene("  <load nodes=\"3 5\" force=\"0 0 1e-3\" distribute=\"each\"/>\n"), "box.xml", "."));
+  const scene::Scene pinned =
+      io::parse_scene(load_scene("  <load nodes=\"3 5\" force=\"0 0 1e-3\" distribute=\"each\"/>\n"), "box.xml", ".");
+  const scene::SceneLoads each = scene::resolve_loads(pinned, scene::load_model(pinned));
   EXPECT_EQ(each.nodes, (std::vector<index_t>{3, 5}));
   EXPECT_EQ(each.force, (std::vector<double>{0, 0, 1e-3, 0, 0, 1e-3}));
 }
@@ -977,16 +979,16 @@ TEST(Loads, ASceneLoadIsReadWrittenBackAndHeldByTheClampedFace) {
   ASSERT_EQ(s.loads.size(), 2u);
   const scene::Scene back = io::parse_scene(io::format_scene(s, ""), "box.xml", ".");
   ASSERT_EQ(back.loads.size(), 2u);
-  EXPECT_EQ(scene::resolve_loads(back).force, scene::resolve_loads(s).force);
+  auto m = scene::load_model(s);
+  EXPECT_EQ(scene::resolve_loads(back, m).force, scene::resolve_loads(s, m).force);
   EXPECT_TRUE(back.loads[1].each);
   // run to rest: the clamped face holds the total load (internal forces sum to zero over the body, so the
   // supports' internal force is minus the loads')
-  auto m = scene::load_model(s);
   auto b = create_backend("cpu", Precision::Double);
   b->upload(m);
   SchedulerSettings settings = scene::scheduler_settings(s);
   Scheduler sched(*b, m, settings);
-  scene::apply_loads(s, sched);
+  scene::apply_loads(s, m, sched);
   TickReport rep;
   std::vector<Device*> none;
   while (sched.time() < 1.0) rep = sched.tick(none);
@@ -1012,9 +1014,11 @@ TEST(Loads, ASceneLoadIsReadWrittenBackAndHeldByTheClampedFace) {
 }
 
 TEST(Loads, BadSceneLoadsNameTheFileAndLine) {
-  const auto error = [](const std::string& load) {
+  const auto error = [](const std::string& load) {  // the scene's rules, then the load's spread on the model
     try {
-      scene::validate(io::parse_scene(load_scene(load), "box.xml", "."));
+      const scene::Scene s = io::parse_scene(load_scene(load), "box.xml", ".");
+      scene::validate(s);
+      (void)scene::resolve_loads(s, scene::load_model(s));
     } catch (const std::exception& e) {
       return std::string(e.what());
     }

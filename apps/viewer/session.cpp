@@ -46,7 +46,7 @@ Engine build_simulation(const scene::Scene& base, const LiveParams& p) {
   sim.backend = create_backend(s.solver.backend, s.solver.precision);
   sim.backend->upload(*sim.model);
   sim.scheduler = std::make_unique<Scheduler>(*sim.backend, *sim.model, scene::scheduler_settings(s));
-  scene::apply_loads(s, *sim.scheduler);
+  scene::apply_loads(s, *sim.model, *sim.scheduler);
   return sim;
 }
 
