@@ -116,7 +116,8 @@ std::string lower(std::string s) {
 ///    end_header line (Assimp 5.2 loops forever without one), and its
 ///    elements must fit in the file: at least one byte each;
 ///  - an OFF file's vertex and face counts must fit in the file: at least
-///    two bytes per number of each vertex and face line.
+///    two bytes per number of each vertex and face line (a vertex count
+///    given alone as well).
 /// Headers are a few hundred bytes; the first 1 MiB is read.
 void guard_header(const std::string& path) {
   std::ifstream f(path, std::ios::binary | std::ios::ate);
@@ -183,8 +184,9 @@ void guard_header(const std::string& path) {
     std::istringstream in(rest);
     std::string nv, nf;
     in >> nv >> nf;
-    if (nv.empty() || nf.empty()) return;  // Assimp reports the malformed header
-    const unsigned long long v = count(nv, at), t = count(nf, at);
+    if (nv.empty()) return;  // Assimp reports the malformed header
+    // a vertex count alone is checked too: Assimp allocates for it before it finds no face count
+    const unsigned long long v = count(nv, at), t = nf.empty() ? 0 : count(nf, at);
     if (v > size / 6 || t > size / 6 || 6 * v + 8 * t > size)
       throw MeshError(fmt::format("{}:{}: the header claims {} vertices and {} faces; the file's {} bytes cannot "
                                   "hold them",

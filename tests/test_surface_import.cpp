@@ -403,6 +403,14 @@ TEST(LoadSurface, HeaderCountsBeyondTheFileAreRefusedBeforeAllocating) {
   write_text(t.file("huge.off"), "OFF\n" + std::string(80, '4') + " 4 6\n0 0 0\n");
   msg = load_error(t.file("huge.off"));
   EXPECT_NE(msg.find("cannot hold them"), std::string::npos) << msg;
+  // found by fuzzing (2026-11-25): a vertex count alone on its line, the face count missing; Assimp took 3 GB
+  write_text(t.file("alone.off"), "OFF\n" + std::string(86, '7') + "3\n3 0\n3 2\n3 1 2\n");
+  msg = load_error(t.file("alone.off"));
+  EXPECT_NE(msg.find(t.file("alone.off") + ":2:"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("cannot hold them"), std::string::npos) << msg;
+  write_text(t.file("alone-small.off"), "OFF\n900000\n0 0 0\n");
+  msg = load_error(t.file("alone-small.off"));
+  EXPECT_NE(msg.find("900000 vertices and 0 faces"), std::string::npos) << msg;
   write_text(t.file("big.ply"), "ply\nformat ascii 1.0\nelement vertex 3000000000\nproperty float x\n"
                                 "property float y\nproperty float z\nend_header\n0 0 0\n");
   msg = load_error(t.file("big.ply"));
