@@ -13,6 +13,7 @@
 #include <sstream>
 #include <cstdlib>
 #include <cerrno>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <unordered_map>
@@ -115,9 +116,9 @@ std::string lower(std::string s) {
 ///  - a PLY file (magic "ply" in any case, after blanks) must have an
 ///    end_header line (Assimp 5.2 loops forever without one), and its
 ///    elements must fit in the file: at least one byte each;
-///  - an OFF file's vertex and face counts must fit in the file: at least
-///    two bytes per number of each vertex and face line (a vertex count
-///    given alone as well).
+///  - an OFF file's vertex and face counts (a .off file's, with or without
+///    the OFF keyword; a vertex count given alone as well) must fit in the
+///    file: at least two bytes per number of each vertex and face line.
 /// Headers are a few hundred bytes; the first 1 MiB is read.
 void guard_header(const std::string& path) {
   std::ifstream f(path, std::ios::binary | std::ios::ate);
@@ -175,16 +176,20 @@ void guard_header(const std::string& path) {
         throw MeshError(fmt::format("{}:{}: the header claims {} {} elements; the file's {} bytes cannot hold them",
                                     path, at, c, name, size));
     }
-  } else if (magic.rfind("off", 0) == 0 || (magic.size() > 3 && magic.find("off") != std::string::npos &&
-                                             magic.find_first_not_of("stcn4off ") == std::string::npos)) {
-    // counts on the magic's line (after "OFF") or on the next one
-    std::string rest = magic.substr(magic.find("off") + 3);
+  } else if (const bool keyword = magic.rfind("off", 0) == 0 ||
+                                   (magic.size() > 3 && magic.find("off") != std::string::npos &&
+                                    magic.find_first_not_of("stcn4off ") == std::string::npos);
+             keyword || lower(std::filesystem::path(path).extension().string()) == ".off") {
+    // counts on the keyword's line (after "OFF") or on the next one; a .off file without the keyword
+    // (Assimp reads it) has them on its first line
+    std::string rest = keyword ? magic.substr(magic.find("off") + 3) : magic;
     int at = magic_line;
-    if (rest.find_first_not_of(" \t\r") == std::string::npos) std::tie(rest, at) = next_line(head, pos, line);
+    if (keyword && rest.find_first_not_of(" \t\r") == std::string::npos) std::tie(rest, at) = next_line(head, pos, line);
     std::istringstream in(rest);
     std::string nv, nf;
     in >> nv >> nf;
     if (nv.empty()) return;  // Assimp reports the malformed header
+    if (!keyword && nv.find_first_not_of("0123456789") != std::string::npos) return;  // no counts: Assimp's call
     // a vertex count alone is checked too: Assimp allocates for it before it finds no face count
     const unsigned long long v = count(nv, at), t = nf.empty() ? 0 : count(nf, at);
     if (v > size / 6 || t > size / 6 || 6 * v + 8 * t > size)

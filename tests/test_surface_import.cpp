@@ -408,6 +408,11 @@ TEST(LoadSurface, HeaderCountsBeyondTheFileAreRefusedBeforeAllocating) {
   msg = load_error(t.file("alone.off"));
   EXPECT_NE(msg.find(t.file("alone.off") + ":2:"), std::string::npos) << msg;
   EXPECT_NE(msg.find("cannot hold them"), std::string::npos) << msg;
+  // found by fuzzing (2026-11-25): a .off file without the OFF keyword, its counts on the first line
+  write_text(t.file("bare.off"), std::string(50, '7') + " 4 6\n0 0 0\n1 0 0\n0 1 0\n");
+  msg = load_error(t.file("bare.off"));
+  EXPECT_NE(msg.find(t.file("bare.off") + ":1:"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("cannot hold them"), std::string::npos) << msg;
   write_text(t.file("alone-small.off"), "OFF\n900000\n0 0 0\n");
   msg = load_error(t.file("alone-small.off"));
   EXPECT_NE(msg.find("900000 vertices and 0 faces"), std::string::npos) << msg;
