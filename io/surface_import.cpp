@@ -188,10 +188,12 @@ void guard_header(const std::string& path) {
     std::istringstream in(rest);
     std::string nv, nf;
     in >> nv >> nf;
+    const auto digits = [](const std::string& w) { return !w.empty() && w.find_first_not_of("0123456789") == std::string::npos; };
     if (nv.empty()) return;  // Assimp reports the malformed header
-    if (!keyword && nv.find_first_not_of("0123456789") != std::string::npos) return;  // no counts: Assimp's call
-    // a vertex count alone is checked too: Assimp allocates for it before it finds no face count
-    const unsigned long long v = count(nv, at), t = nf.empty() ? 0 : count(nf, at);
+    if (!keyword && !digits(nv)) return;  // no counts: Assimp's call
+    // Assimp reads the counts across line ends: a face count missing from the line may start the next one
+    if (nf.empty()) std::istringstream(next_line(head, pos, line).first) >> nf;
+    const unsigned long long v = count(nv, at), t = nf.empty() || (!keyword && !digits(nf)) ? 0 : count(nf, at);
     if (v > size / 6 || t > size / 6 || 6 * v + 8 * t > size)
       throw MeshError(fmt::format("{}:{}: the header claims {} vertices and {} faces; the file's {} bytes cannot "
                                   "hold them",

@@ -413,6 +413,10 @@ TEST(LoadSurface, HeaderCountsBeyondTheFileAreRefusedBeforeAllocating) {
   msg = load_error(t.file("bare.off"));
   EXPECT_NE(msg.find(t.file("bare.off") + ":1:"), std::string::npos) << msg;
   EXPECT_NE(msg.find("cannot hold them"), std::string::npos) << msg;
+  // found by fuzzing (2026-11-25): the face count on the line after the vertex count
+  write_text(t.file("split.off"), "6\n0" + std::string(70, '7') + " 4 1 3\n3 0\n3 2\n");
+  msg = load_error(t.file("split.off"));
+  EXPECT_NE(msg.find("cannot hold them"), std::string::npos) << msg;
   write_text(t.file("alone-small.off"), "OFF\n900000\n0 0 0\n");
   msg = load_error(t.file("alone-small.off"));
   EXPECT_NE(msg.find("900000 vertices and 0 faces"), std::string::npos) << msg;
