@@ -12,6 +12,7 @@
 #include <stdexcept>
 
 #include "cpu/constraints.hpp"
+#include "cpu/element_lanes.hpp"
 #include "cpu/host_backend.hpp"
 
 namespace tissue {
@@ -60,6 +61,7 @@ void CpuBackend<T>::do_upload(const TissueModel<double>& model) {
   driven_list_.reserve(64);
   init_constraints(model_, state_);
   state_.region = flood_fill(model_, std::span<const index_t>{}, kDepthAll);
+  slices_.parts = 0;
   cpu::element_pressure(model_, state_, all_elems_, all_elems_part_);
   double J;
   bad_.take(&J);
@@ -85,6 +87,7 @@ void CpuBackend<T>::do_set_displacements(std::span<const double> u) {
 template <class T>
 RegionSizes CpuBackend<T>::do_build_region(std::span<const index_t> seeds, int depth) {
   install_region(model_, state_, flood_fill(model_, seeds, depth));
+  slices_.parts = 0;
   energy_.fresh = energy_.synced = false;
   if (contact_) contact_->surface_moved();
   cpu::element_pressure(model_, state_, all_elems_, all_elems_part_);
@@ -155,22 +158,47 @@ void CpuBackend<T>::do_node_update() {
 }
 
 template <class T>
-void CpuBackend<T>::step(const ContactTools<T>& tools, int k) {
-  if (!take_passes(energy_, state_)) {  // reduce() may have run passes 1-2 at this u already
-    do_element_pressure();
-    do_nodal_pressure();
+const Slices& CpuBackend<T>::team_slices() {
+  const int size = team_size_ > 0 ? team_size_ : default_team_size();
+  if (!team_ || team_->size() != size) {
+    team_ = std::make_unique<ThreadTeam>(size);
+    slices_.parts = 0;
   }
-  do_element_forces();
-  energy_.fresh = false;
-  cpu::node_update(model_, state_, state_.region.nodes, parts_.node_update);
-  contact_->step(state_, tools, k);
-  rotate(state_);
+  const int members = busy_members(state_.region.elems.size(), size);
+  if (slices_.parts != members) slices_ = slice_region(state_.region, model_.node_elem_start.data(), members, kLanes);
+  return slices_;
 }
 
 template <class T>
 void CpuBackend<T>::do_advance(int steps, const ContactTools<double>& tools) {
   const ContactTools<T> t = contact_tools_as<T>(tools);
-  for (int k = 0; k < steps; ++k) step(t, k);
+  // reduce() may have run passes 1-2 at this u already
+  const bool have_pressure = take_passes(energy_, state_);
+  energy_.fresh = false;  // u moves
+  const std::span<const index_t> elems = state_.region.elems, nodes = state_.region.nodes;
+  const int members = team_slices().parts;
+  ThreadTeam& team = *team_;
+  // each pass reads what the others' slices wrote in the pass before: a barrier between passes;
+  // the contact stage and the rotation run once, on the last member to finish pass 4
+  team.run(members, [&](int r) {
+    const std::span<const index_t> my_elems = slices_.elems(elems, r), my_nodes = slices_.nodes(nodes, r);
+    for (int k = 0; k < steps; ++k) {
+      if (k > 0 || !have_pressure) {
+        cpu::element_pressure(model_, state_, my_elems);
+        team.barrier();
+        cpu::nodal_pressure(model_, state_, node_divisor_, my_nodes);
+        team.barrier();
+      }
+      cpu::element_forces(model_, state_, my_elems, bad_);
+      team.barrier();
+      cpu::node_update(model_, state_, my_nodes);
+      if (!team.barrier([&] {
+            contact_->step(state_, t, k);
+            rotate(state_);
+          }))
+        return;
+    }
+  });
 }
 
 template <class T>
@@ -192,12 +220,8 @@ std::vector<ContactNode> CpuBackend<T>::do_contacts() {
 
 template <class T>
 Reductions CpuBackend<T>::do_reduce() {
-  Reductions r = reduce_region(model_, state_, state_.region.nodes);
-  const ElementEnergies energy = element_energies(model_, state_, node_divisor_, energy_);
-  r.strain_energy = energy.strain;
-  r.visco_power = energy.prony.power;
-  r.visco_stored = energy.prony.stored;
-  r.finite = r.finite && std::isfinite(energy.prony.power) && std::isfinite(energy.prony.stored);
+  const Slices& slices = team_slices();
+  Reductions r = reduce_region(model_, state_, node_divisor_, energy_, sums_, *team_, slices);
   r.front_disp = front_displacement(model_, state_);
   r.bad_elem = bad_.take(&r.bad_J);
   if (r.bad_elem < 0) r.bad_J = 1;

@@ -2,7 +2,9 @@
 // make_cpu_backend() and the Backend interface). It owns the model and the
 // state in its scalar T (float or double), allocated once in upload(); the
 // step loop (advance: the four passes and the contact stage, reduce)
-// allocates nothing once the contact scratch has grown. Stages are the free
+// allocates nothing once the contact scratch has grown. advance runs all its
+// steps as one job of a persistent thread team (cpu/thread_team.hpp) over
+// fixed slices of the region (cpu/partition.hpp). Stages are the free
 // functions of cpu/passes.hpp, cpu/constraints.hpp, cpu/reduce.hpp and the
 // contact stage of cpu/contact.hpp; this class only sequences them. Not
 // thread-safe: one thread (the haptic loop) drives it.
@@ -15,8 +17,10 @@
 #include "core/state.hpp"
 #include "cpu/bad_element.hpp"
 #include "cpu/contact.hpp"
+#include "cpu/partition.hpp"
 #include "cpu/passes.hpp"
 #include "cpu/reduce.hpp"
+#include "cpu/thread_team.hpp"
 
 namespace tissue::cpu {
 
@@ -32,6 +36,11 @@ class CpuBackend final : public Backend {
   const TissueState<T>& state() const { return state_; }
   /// Surface BVH builds so far (tests: rebuilt only when the surface left its margin).
   long surface_builds() const { return contact_ ? contact_->bvh().builds() : 0; }
+  /// Runs advance on a team of `size` members instead of default_team_size()
+  /// (0: the default again). Tests: results must not depend on it.
+  void set_team_size(int size) { team_size_ = size; }
+  /// The members the last advance kept busy (0 before the first).
+  int busy_team_members() const { return slices_.parts; }
 
  protected:
   void do_upload(const TissueModel<double>& model) override;
@@ -60,7 +69,9 @@ class CpuBackend final : public Backend {
   void do_write_positions(float* dst) override;
 
  private:
-  void step(const ContactTools<T>& tools, int k);
+  /// Creates team_ (default_team_size() or set_team_size's members) and
+  /// slices the region for it when either changed; returns the slices.
+  const Slices& team_slices();
 
   TissueModel<T> model_;
   TissueState<T> state_;
@@ -68,9 +79,13 @@ class CpuBackend final : public Backend {
   std::vector<index_t> all_elems_;    ///< 0..n_elems-1: pass 1 over every element
   std::vector<index_t> driven_list_;  ///< currently driven nodes
   std::unique_ptr<ContactStage<T>> contact_;
-  EnergyScratch<T> energy_;           ///< element_energies' passes 1-2, taken by the next step
+  EnergyScratch<T> energy_;           ///< reduce's passes 1-2, taken by the next step
   BadElementFlag bad_;
-  PassPartitioners parts_;
+  PassPartitioners parts_;            ///< the one-pass calls' TBB loops
+  std::unique_ptr<ThreadTeam> team_;  ///< advance's threads (created on first use, sized by default_team_size)
+  Slices slices_;                     ///< the region's slices for team_ (parts 0 after the region changes)
+  ReduceScratch sums_;                ///< reduce's per-chunk sums
+  int team_size_ = 0;                 ///< set_team_size's, 0 = default_team_size()
   tbb::affinity_partitioner all_elems_part_;
 };
 

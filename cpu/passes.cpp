@@ -14,44 +14,55 @@
 namespace tissue::cpu {
 namespace {
 
-/// Runs body(idx[k]) for every k, in parallel chunks of at least `grain`.
-template <class Body>
-void for_each_index(std::span<const index_t> idx, std::size_t grain, tbb::affinity_partitioner& part,
-                    const Body& body) {
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, idx.size(), grain),
-      [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t k = r.begin(); k != r.end(); ++k) body(idx[k]);
-      },
-      part);
+/// A pass's loop over its index list: TBB chunks of at least `grain` entries
+/// with the pass's affinity partitioner (Tbb), or the whole list on the
+/// calling thread, a team member's slice (Serial). Both call body(begin, end).
+struct Tbb {
+  tbb::affinity_partitioner& part;
+  template <class Body>
+  void operator()(std::size_t n, std::size_t grain, const Body& body) const {
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, n, grain),
+        [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); }, part);
+  }
+};
+struct Serial {
+  template <class Body>
+  void operator()(std::size_t n, std::size_t, const Body& body) const {
+    body(std::size_t(0), n);
+  }
+};
+
+/// Runs body(idx[k]) for every k.
+template <class Run, class Body>
+void for_each_index(const Run& run, std::span<const index_t> idx, std::size_t grain, const Body& body) {
+  run(idx.size(), grain, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t k = begin; k != end; ++k) body(idx[k]);
+  });
 }
 
 /// Runs body(first, count) over consecutive batches of at most kLanes
-/// entries of idx, in parallel chunks of at least `grain` entries.
-template <class Body>
-void for_each_batch(std::span<const index_t> idx, std::size_t grain, tbb::affinity_partitioner& part,
-                    const Body& body) {
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, idx.size(), grain),
-      [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t k = r.begin(); k < r.end(); k += kLanes)
-          body(idx.data() + k, int(std::min<std::size_t>(kLanes, r.end() - k)));
-      },
-      part);
+/// entries of idx (a chunk's last batch may be partial).
+template <class Run, class Body>
+void for_each_batch(const Run& run, std::span<const index_t> idx, std::size_t grain, const Body& body) {
+  run(idx.size(), grain, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t k = begin; k < end; k += kLanes)
+      body(idx.data() + k, int(std::min<std::size_t>(kLanes, end - k)));
+  });
 }
 
 /// Pass 3 with the law terms Terms instantiates (core/material.hpp): a
 /// Neo-Hookean model runs the plain lane kernel and gathers no law data.
-template <class T, bool kIanp, class Terms>
+template <class T, bool kIanp, class Terms, class Run>
 void element_forces_impl(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems,
-                         BadElementFlag& bad, tbb::affinity_partitioner& part) {
+                         BadElementFlag& bad, const Run& run) {
   constexpr bool kLaw = Terms::fibre || Terms::visco;
   const index_t ne = m.n_elems;
   const T* p = kIanp ? s.node_p.data() : nullptr;
   const index_t* slot = m.elem_slot.data();
   T* fs = s.f_slot.data();
   T* q = s.visco_q.data();
-  for_each_batch(elems, kForceGrain, part, [&](const index_t* e, int count) {
+  for_each_batch(run, elems, kForceGrain, [&](const index_t* e, int count) {
     ElementLanes<T> b;
     gather_force_lanes(m, s.elem_F.data(), p, e, count, b);
     if constexpr (kLaw) {
@@ -75,25 +86,23 @@ void element_forces_impl(const TissueModel<T>& m, TissueState<T>& s, std::span<c
   });
 }
 
-template <class T, bool kIanp>
+template <class T, bool kIanp, class Run>
 void element_forces_terms(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems,
-                          BadElementFlag& bad, tbb::affinity_partitioner& part) {
+                          BadElementFlag& bad, const Run& run) {
   if (m.has_fibre() && m.has_visco())
-    element_forces_impl<T, kIanp, LawTerms<true, true>>(m, s, elems, bad, part);
+    element_forces_impl<T, kIanp, LawTerms<true, true>>(m, s, elems, bad, run);
   else if (m.has_fibre())
-    element_forces_impl<T, kIanp, LawTerms<true, false>>(m, s, elems, bad, part);
+    element_forces_impl<T, kIanp, LawTerms<true, false>>(m, s, elems, bad, run);
   else if (m.has_visco())
-    element_forces_impl<T, kIanp, LawTerms<false, true>>(m, s, elems, bad, part);
+    element_forces_impl<T, kIanp, LawTerms<false, true>>(m, s, elems, bad, run);
   else
-    element_forces_impl<T, kIanp, NeoHookeanTerms>(m, s, elems, bad, part);
+    element_forces_impl<T, kIanp, NeoHookeanTerms>(m, s, elems, bad, run);
 }
 
-}  // namespace
-
-template <class T>
-void element_pressure(const TissueModel<T>& m, const T* u, std::span<const index_t> elems, T* J_out, T* dv_out,
-                      T* F_out, tbb::affinity_partitioner& part) {
-  for_each_batch(elems, kElemGrain, part, [&](const index_t* e, int count) {
+template <class T, class Run>
+void element_pressure_run(const TissueModel<T>& m, const T* u, std::span<const index_t> elems, T* J_out,
+                          T* dv_out, T* F_out, const Run& run) {
+  for_each_batch(run, elems, kElemGrain, [&](const index_t* e, int count) {
     ElementLanes<T> b;
     gather_pressure_lanes(m, u, e, count, J_out, dv_out, F_out, b);
     lanes_pressure(b);
@@ -101,43 +110,30 @@ void element_pressure(const TissueModel<T>& m, const T* u, std::span<const index
   });
 }
 
-template <class T>
-void element_pressure(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems,
-                      tbb::affinity_partitioner& part) {
-  element_pressure(m, s.u.data(), elems, s.elem_J.data(), s.elem_dv.data(), s.elem_F.data(), part);
-}
-
-template <class T>
-void nodal_pressure(const TissueModel<T>& m, const T* dv, const std::vector<T>& node_divisor,
-                    std::span<const index_t> nodes, T* p, tbb::affinity_partitioner& part) {
+template <class T, class Run>
+void nodal_pressure_run(const TissueModel<T>& m, const T* dv, const std::vector<T>& node_divisor,
+                        std::span<const index_t> nodes, T* p, const Run& run) {
   const index_t* start = m.node_elem_start.data();
   const index_t* list = m.node_elem.data();
   const T* divisor = node_divisor.data();
-  for_each_index(nodes, kNodeGrain, part, [&](index_t a) {
+  for_each_index(run, nodes, kNodeGrain, [&](index_t a) {
     T sum = 0;
     for (index_t k = start[a]; k < start[a + 1]; ++k) sum += dv[list[k] >> 2];
     p[a] = sum / divisor[a];
   });
 }
 
-template <class T>
-void nodal_pressure(const TissueModel<T>& m, TissueState<T>& s, const std::vector<T>& node_divisor,
-                    std::span<const index_t> nodes, tbb::affinity_partitioner& part) {
-  nodal_pressure(m, s.elem_dv.data(), node_divisor, nodes, s.node_p.data(), part);
-}
-
-template <class T>
-void element_forces(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems, BadElementFlag& bad,
-                    tbb::affinity_partitioner& part) {
+template <class T, class Run>
+void element_forces_run(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems,
+                        BadElementFlag& bad, const Run& run) {
   if (m.ianp)
-    element_forces_terms<T, true>(m, s, elems, bad, part);
+    element_forces_terms<T, true>(m, s, elems, bad, run);
   else
-    element_forces_terms<T, false>(m, s, elems, bad, part);
+    element_forces_terms<T, false>(m, s, elems, bad, run);
 }
 
-template <class T>
-void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> nodes,
-                 tbb::affinity_partitioner& part) {
+template <class T, class Run>
+void node_update_run(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> nodes, const Run& run) {
   const index_t n = m.n_nodes;
   const index_t* start = m.node_elem_start.data();
   const T* fs = s.f_slot.data();
@@ -148,7 +144,7 @@ void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const ind
   const T* applied = s.load.empty() ? nullptr : s.load.data();
   T* f_out = s.f.data();
   T* u_next = s.u_next.data();
-  for_each_index(nodes, kNodeGrain, part, [&](index_t a) {
+  for_each_index(run, nodes, kNodeGrain, [&](index_t a) {
     Vec3<T> f = {0, 0, 0};
     for (index_t k = start[a]; k < start[a + 1]; ++k) f = f + Vec3<T>{fs[3 * size_t(k)], fs[3 * size_t(k) + 1], fs[3 * size_t(k) + 2]};
     const auto load = [&](const T* v) { return Vec3<T>{v[a], v[n + a], v[2 * size_t(n) + a]}; };
@@ -160,6 +156,77 @@ void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const ind
       u_next[c * n + a] = next[c];
     }
   });
+}
+
+}  // namespace
+
+template <class T>
+void element_pressure(const TissueModel<T>& m, const T* u, std::span<const index_t> elems, T* J_out, T* dv_out,
+                      T* F_out, tbb::affinity_partitioner& part) {
+  element_pressure_run(m, u, elems, J_out, dv_out, F_out, Tbb{part});
+}
+
+template <class T>
+void element_pressure(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems,
+                      tbb::affinity_partitioner& part) {
+  element_pressure_run(m, s.u.data(), elems, s.elem_J.data(), s.elem_dv.data(), s.elem_F.data(), Tbb{part});
+}
+
+template <class T>
+void element_pressure(const TissueModel<T>& m, const T* u, std::span<const index_t> elems, T* J_out, T* dv_out,
+                      T* F_out) {
+  element_pressure_run(m, u, elems, J_out, dv_out, F_out, Serial{});
+}
+
+template <class T>
+void element_pressure(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems) {
+  element_pressure_run(m, s.u.data(), elems, s.elem_J.data(), s.elem_dv.data(), s.elem_F.data(), Serial{});
+}
+
+template <class T>
+void nodal_pressure(const TissueModel<T>& m, const T* dv, const std::vector<T>& node_divisor,
+                    std::span<const index_t> nodes, T* p, tbb::affinity_partitioner& part) {
+  nodal_pressure_run(m, dv, node_divisor, nodes, p, Tbb{part});
+}
+
+template <class T>
+void nodal_pressure(const TissueModel<T>& m, TissueState<T>& s, const std::vector<T>& node_divisor,
+                    std::span<const index_t> nodes, tbb::affinity_partitioner& part) {
+  nodal_pressure_run(m, s.elem_dv.data(), node_divisor, nodes, s.node_p.data(), Tbb{part});
+}
+
+template <class T>
+void nodal_pressure(const TissueModel<T>& m, const T* dv, const std::vector<T>& node_divisor,
+                    std::span<const index_t> nodes, T* p) {
+  nodal_pressure_run(m, dv, node_divisor, nodes, p, Serial{});
+}
+
+template <class T>
+void nodal_pressure(const TissueModel<T>& m, TissueState<T>& s, const std::vector<T>& node_divisor,
+                    std::span<const index_t> nodes) {
+  nodal_pressure_run(m, s.elem_dv.data(), node_divisor, nodes, s.node_p.data(), Serial{});
+}
+
+template <class T>
+void element_forces(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems, BadElementFlag& bad,
+                    tbb::affinity_partitioner& part) {
+  element_forces_run(m, s, elems, bad, Tbb{part});
+}
+
+template <class T>
+void element_forces(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems, BadElementFlag& bad) {
+  element_forces_run(m, s, elems, bad, Serial{});
+}
+
+template <class T>
+void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> nodes,
+                 tbb::affinity_partitioner& part) {
+  node_update_run(m, s, nodes, Tbb{part});
+}
+
+template <class T>
+void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> nodes) {
+  node_update_run(m, s, nodes, Serial{});
 }
 
 template <class T>
@@ -181,6 +248,14 @@ void rotate(TissueState<T>& s) {
                                tbb::affinity_partitioner&);                                                       \
   template void node_update(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>,                     \
                             tbb::affinity_partitioner&);                                                          \
+  template void element_pressure(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>);               \
+  template void element_pressure(const TissueModel<T>&, const T*, std::span<const index_t>, T*, T*, T*);          \
+  template void nodal_pressure(const TissueModel<T>&, const T*, const std::vector<T>&, std::span<const index_t>,  \
+                               T*);                                                                               \
+  template void nodal_pressure(const TissueModel<T>&, TissueState<T>&, const std::vector<T>&,                     \
+                               std::span<const index_t>);                                                         \
+  template void element_forces(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>, BadElementFlag&); \
+  template void node_update(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>);                     \
   template void rotate(TissueState<T>&);
 TISSUE_CPU_PASSES(float)
 TISSUE_CPU_PASSES(double)

@@ -1,5 +1,6 @@
 // The four IANP passes of docs/design.md section 2 on the host, as TBB loops over
-// the region's index lists. Each pass is a function of (const model&,
+// the region's index lists, or serially over one slice of them (the backend's
+// thread team, cpu/thread_team.hpp). Each pass is a function of (const model&,
 // state&): it only loops; the per-element and per-node math is core/tet.hpp.
 // The element passes run in batches of kLanes elements through the
 // vectorised lane kernels of element_lanes.hpp.
@@ -75,6 +76,25 @@ void element_forces(const TissueModel<T>& m, TissueState<T>& s, std::span<const 
 template <class T>
 void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> nodes,
                  tbb::affinity_partitioner& part);
+
+/// The same four passes on the calling thread alone, over `elems` / `nodes`
+/// (a team member's slice, cpu/partition.hpp): the same per-element and
+/// per-node arithmetic, so a slice computes exactly what the TBB loops do.
+template <class T>
+void element_pressure(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems);
+template <class T>
+void element_pressure(const TissueModel<T>& m, const T* u, std::span<const index_t> elems, T* J_out, T* dv_out,
+                      T* F_out);
+template <class T>
+void nodal_pressure(const TissueModel<T>& m, TissueState<T>& s, const std::vector<T>& node_divisor,
+                    std::span<const index_t> nodes);
+template <class T>
+void nodal_pressure(const TissueModel<T>& m, const T* dv, const std::vector<T>& node_divisor,
+                    std::span<const index_t> nodes, T* p_out);
+template <class T>
+void element_forces(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems, BadElementFlag& bad);
+template <class T>
+void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> nodes);
 
 /// Rotates u_prev <- u <- u_next by swapping the vectors (nodes outside the
 /// region must have u == u_prev == u_next, which build_region guarantees).

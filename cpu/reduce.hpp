@@ -1,29 +1,30 @@
-// Backend::reduce on the host: one deterministic parallel reduction over the
-// region's nodes (tbb::parallel_deterministic_reduce with a fixed grain, so
-// the chunking and the summation order do not depend on the thread count:
-// results are bit-reproducible). Every sum is accumulated in double.
+// Backend::reduce on the host, on the backend's thread team
+// (cpu/thread_team.hpp): each member sums fixed chunks of kReduceGrain nodes
+// or elements, then the chunks' sums are added in chunk order, so the
+// chunking and the summation order do not depend on the team's size:
+// results are bit-reproducible. Every sum is accumulated in double.
 #pragma once
-
-#include <tbb/partitioner.h>
 
 #include <span>
 #include <vector>
 
 #include "core/backend.hpp"
 #include "core/state.hpp"
+#include "cpu/partition.hpp"
+#include "cpu/thread_team.hpp"
 
 namespace tissue::cpu {
 
-/// Chunk size of the reduction (nodes).
+/// Chunk size of the reduction (nodes or elements; a multiple of kLanes).
 inline constexpr std::size_t kReduceGrain = 1024;
 
-/// Reductions over `nodes` (the region's inner and halo nodes): the sum of
-/// core node_terms (core/node_rules.hpp) from state.f, u, u_prev, driven,
-/// held, region.role and the contact records. bad_elem / bad_J are left at
-/// "none", strain_energy and front_disp at "not computed", the per-tool
-/// contact results empty; the caller fills them.
-template <class T>
-Reductions reduce_region(const TissueModel<T>& m, const TissueState<T>& s, std::span<const index_t> nodes);
+/// One chunk's sums of core node_terms (all double).
+struct NodeSums {
+  double reaction[3] = {0, 0, 0};
+  double internal[3] = {0, 0, 0};
+  double free2 = 0, held2 = 0, kinetic = 0, max_disp = 0;
+  bool finite = true;
+};
 
 /// max |u_a| over the region's front ring (state.region.front), m; 0 when it is empty.
 template <class T>
@@ -47,7 +48,6 @@ struct EnergyScratch {
   /// equal; clear it whenever the state's arrays change beyond the region:
   /// upload, new displacements, a new region)
   bool synced = false;
-  tbb::affinity_partitioner pressure_part, nodal_part;  ///< for its passes 1 and 2
 };
 
 /// What the region's elements hold at the current u (J; W for the power).
@@ -56,16 +56,29 @@ struct ElementEnergies {
   PronyEnergy prony;  ///< the Prony terms' power and stored energy (core/energy.hpp element_prony_energy; 0 without)
 };
 
-/// The strain energy and the Prony terms' energy over the region's elements
-/// at the current u, from one traversal: passes 1 and 2 run into `scratch`
-/// (the state's own pass arrays are left as the last step wrote them, so
-/// download() is unchanged), then per batch of lanes the energy and, for a
-/// viscoelastic model, the Prony power and stored energy from the state's
-/// Prony history (in T); summed in double by a deterministic reduction.
-/// node_divisor is pass 2's divisor (n_nodes, m^3/Pa). Leaves scratch.fresh set.
+/// Per-chunk sums, kept between reduces (no allocation per tick).
+struct ReduceScratch {
+  std::vector<NodeSums> nodes;
+  std::vector<ElementEnergies> elems;
+};
+
+/// Backend::reduce's sums over the region, on `slices.parts` members of
+/// `team` (slices: the region's, cpu/partition.hpp):
+/// - over the region's nodes (inner and halo), core node_terms
+///   (core/node_rules.hpp) from state.f, u, u_prev, driven, held,
+///   region.role and the contact records;
+/// - over its elements, the strain energy and the Prony terms' energy at the
+///   current u: passes 1 and 2 run into `energy` (the state's own pass
+///   arrays are left as the last step wrote them, so download() is
+///   unchanged), then per batch of lanes the energy and, for a viscoelastic
+///   model, the Prony power and stored energy from the state's Prony history
+///   (in T). Leaves energy.fresh set.
+/// node_divisor is pass 2's divisor (n_nodes, m^3/Pa). bad_elem / bad_J are
+/// left at "none", front_disp at "not computed", the per-tool contact
+/// results empty; the caller fills them.
 template <class T>
-ElementEnergies element_energies(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<T>& node_divisor,
-                                 EnergyScratch<T>& scratch);
+Reductions reduce_region(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<T>& node_divisor,
+                         EnergyScratch<T>& energy, ReduceScratch& sums, ThreadTeam& team, const Slices& slices);
 
 /// If scratch is fresh, swaps its passes 1-2 into the state (the values the
 /// next step's passes 1 and 2 would compute) and returns true; the caller

@@ -54,8 +54,14 @@ struct RunResult {
   std::vector<Reductions> red;
 };
 
-RunResult scripted_run(Precision p, const TissueModel<double>& m) {
+RunResult scripted_run(Precision p, const TissueModel<double>& m, int team_size = 0) {
   auto b = make_cpu_backend(p);
+  if (team_size > 0) {
+    if (p == Precision::Float)
+      static_cast<cpu::CpuBackend<float>&>(*b).set_team_size(team_size);
+    else
+      static_cast<cpu::CpuBackend<double>&>(*b).set_team_size(team_size);
+  }
   b->upload(m);
   RunResult out;
   b->set_displacements(field(m, [](Vec3<double> X) { return Vec3<double>{0.03 * X.x, 0.01 * X.z, -0.02 * X.z}; }));
@@ -94,6 +100,45 @@ TEST_P(CpuBackendTest, RunsAreBitIdenticalAcrossThreadCounts) {
       EXPECT_EQ(std::memcmp(&a.red[k], &r->red[k], offsetof(Reductions, bad_elem)), 0) << "reduction " << k;
   }
   EXPECT_GT(max_abs(a.fields.f), 0.0);
+}
+
+// The advance's thread team (cpu/thread_team.hpp) slices the region by its
+// size; sizes beyond this machine's cores run oversubscribed. Every size must
+// give the same bits, on the whole mesh and (set_driven seeds nothing, so
+// via build_region) a limited region.
+TEST_P(CpuBackendTest, RunsAreBitIdenticalAcrossTeamSizes) {
+  const auto m = box_model(12, true);
+  const RunResult a = scripted_run(GetParam(), m, 1);
+  for (int size : {2, 3, 5, 16}) {
+    const RunResult r = scripted_run(GetParam(), m, size);
+    EXPECT_TRUE(same_bits(a.fields.u, r.fields.u)) << size << " members";
+    EXPECT_TRUE(same_bits(a.fields.f, r.fields.f)) << size << " members";
+    EXPECT_TRUE(same_bits(a.fields.node_p, r.fields.node_p)) << size << " members";
+    EXPECT_TRUE(same_bits(a.fields.elem_J, r.fields.elem_J)) << size << " members";
+    ASSERT_EQ(a.red.size(), r.red.size());
+    for (size_t k = 0; k < a.red.size(); ++k)
+      EXPECT_EQ(std::memcmp(&a.red[k], &r.red[k], offsetof(Reductions, bad_elem)), 0) << size << " members, reduction " << k;
+  }
+  // a small region keeps fewer members busy, with the same bits
+  const auto region_run = [&](int size, int* busy) {
+    auto b = std::make_unique<cpu::CpuBackend<double>>();
+    b->set_team_size(size);
+    b->upload(m);
+    b->set_displacements(field(m, [](Vec3<double> X) { return Vec3<double>{0.02 * X.x, 0.0, -0.01 * X.z}; }));
+    const index_t seed = box_node(12, 12, 6, 6, 12);
+    b->build_region(std::span<const index_t>(&seed, 1), 4);
+    b->advance(20);
+    *busy = b->busy_team_members();
+    return b->download();
+  };
+  int busy1 = 0, busy16 = 0;
+  const Fields f1 = region_run(1, &busy1), f16 = region_run(16, &busy16);
+  EXPECT_EQ(busy1, 1);
+  EXPECT_GT(busy16, 1);
+  EXPECT_LT(busy16, 16);
+  EXPECT_TRUE(same_bits(f1.u, f16.u));
+  EXPECT_TRUE(same_bits(f1.f, f16.f));
+  EXPECT_GT(max_abs(f1.f), 0.0);
 }
 
 TEST(CpuBackendPrecision, FloatAgreesWithDouble) {

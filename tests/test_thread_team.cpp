@@ -1,0 +1,193 @@
+// The cpu backend's persistent thread team (cpu/thread_team.hpp) and its
+// region slices (cpu/partition.hpp): every member runs the job, a barrier
+// orders every member's writes before any member's next reads, its `last`
+// runs exactly once per barrier, a throw in it reaches the caller, idle
+// members that went to sleep wake for the next job, and the slices cover the
+// region's lists exactly once. scripts/tsan runs this file under
+// ThreadSanitizer (the team is our code, so TSan sees its synchronisation).
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <atomic>
+#include <chrono>
+#include <numeric>
+#include <stdexcept>
+#include <thread>
+#include <vector>
+
+#include "core/region.hpp"
+#include "cpu/host_backend.hpp"
+#include "cpu/partition.hpp"
+#include "cpu/thread_team.hpp"
+#include "tests/backend_test_support.hpp"
+
+namespace tissue::cpu {
+namespace {
+
+TEST(ThreadTeam, RejectsSizesOutsideItsRange) {
+  EXPECT_THROW(ThreadTeam(0), std::invalid_argument);
+  EXPECT_THROW(ThreadTeam(ThreadTeam::kMaxSize + 1), std::invalid_argument);
+  ThreadTeam team(2);
+  EXPECT_THROW(team.run(3, [](int) {}), std::invalid_argument);
+  EXPECT_THROW(team.run(0, [](int) {}), std::invalid_argument);
+}
+
+// Each round, every member writes its slot; after the barrier every member
+// must see every slot of that round (a barrier that released early, or a
+// `last` that ran on a stale view, fails the sums).
+void rounds_see_each_others_writes(int size, int active, int rounds) {
+  ThreadTeam team(size);
+  std::vector<long> slot(std::size_t(active), 0);
+  std::vector<long> seen(std::size_t(active), 0);
+  long last_runs = 0, last_sum_errors = 0;
+  team.run(active, [&](int r) {
+    for (int k = 1; k <= rounds; ++k) {
+      slot[r] = long(k) * (r + 1);
+      team.barrier([&] {
+        ++last_runs;
+        const long expect = long(k) * active * (active + 1) / 2;
+        if (std::accumulate(slot.begin(), slot.end(), 0L) != expect) ++last_sum_errors;
+      });
+      seen[r] += std::accumulate(slot.begin(), slot.end(), 0L);
+      team.barrier();  // nobody writes round k + 1 before everyone has read round k
+    }
+  });
+  EXPECT_EQ(last_runs, rounds);
+  EXPECT_EQ(last_sum_errors, 0);
+  const long per_member = long(active) * (active + 1) / 2 * long(rounds) * (rounds + 1) / 2;
+  for (int r = 0; r < active; ++r) EXPECT_EQ(seen[r], per_member) << "member " << r;
+}
+
+TEST(ThreadTeam, BarrierOrdersEveryMembersWrites) {
+  rounds_see_each_others_writes(1, 1, 100);
+  rounds_see_each_others_writes(2, 2, 2000);
+  rounds_see_each_others_writes(4, 4, 500);
+  rounds_see_each_others_writes(6, 3, 500);  // a job on part of the team
+  rounds_see_each_others_writes(9, 9, 50);   // more members than this machine may have cores
+}
+
+TEST(ThreadTeam, EveryActiveMemberRunsEachJobOnce) {
+  ThreadTeam team(5);
+  for (int job = 0; job < 300; ++job) {
+    const int active = 1 + job % 5;
+    std::vector<std::atomic<int>> ran(5);
+    team.run(active, [&](int r) { ran[r].fetch_add(1); });
+    for (int r = 0; r < 5; ++r) ASSERT_EQ(ran[r].load(), r < active ? 1 : 0) << "job " << job << " member " << r;
+  }
+}
+
+TEST(ThreadTeam, SleepingMembersWakeForTheNextJob) {
+  ThreadTeam team(3);
+  for (int job = 0; job < 5; ++job) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));  // far past the idle spin: the members sleep
+    std::atomic<int> ran{0};
+    team.run(3, [&](int) {
+      ran.fetch_add(1);
+      team.barrier();
+    });
+    EXPECT_EQ(ran.load(), 3);
+  }
+}
+
+TEST(ThreadTeam, AThrowInABarriersLastReachesTheCallerAndTheTeamCarriesOn) {
+  ThreadTeam team(3);
+  std::atomic<int> after{0};
+  EXPECT_THROW(team.run(3,
+                        [&](int) {
+                          for (int k = 0; k < 10; ++k) {
+                            if (!team.barrier([&] {
+                                  if (k == 4) throw std::runtime_error("contact stage failed");
+                                }))
+                              return;
+                            after.fetch_add(1);
+                          }
+                        }),
+               std::runtime_error);
+  EXPECT_EQ(after.load(), 3 * 4);  // rounds 0..3 completed by all three, nobody went on past round 4
+  std::atomic<int> ran{0};
+  team.run(3, [&](int) { ran.fetch_add(1); });
+  EXPECT_EQ(ran.load(), 3);
+}
+
+TEST(RegionSlices, CoverTheRegionOnceWithLaneAlignedElementCuts) {
+  const auto m = test::box_model(6, true);
+  for (int depth : {kDepthAll, 1, 3}) {
+    const index_t seed = m.n_nodes / 2;
+    const Region region = flood_fill(m, std::span<const index_t>(&seed, depth == kDepthAll ? 0 : 1), depth);
+    for (int parts : {1, 2, 3, 7, 16}) {
+      const Slices s = slice_region(region, m.node_elem_start.data(), parts, 16);
+      ASSERT_EQ(s.parts, parts);
+      EXPECT_EQ(s.elem_cut.front(), 0u);
+      EXPECT_EQ(s.elem_cut.back(), region.elems.size());
+      EXPECT_EQ(s.node_cut.front(), 0u);
+      EXPECT_EQ(s.node_cut.back(), region.nodes.size());
+      std::size_t elems = 0, nodes = 0;
+      for (int r = 0; r < parts; ++r) {
+        ASSERT_LE(s.elem_cut[r], s.elem_cut[r + 1]);
+        ASSERT_LE(s.node_cut[r], s.node_cut[r + 1]);
+        if (s.elem_cut[r + 1] != region.elems.size()) {
+          EXPECT_EQ(s.elem_cut[r + 1] % 16, 0u) << "cut " << r + 1;
+        }
+        elems += s.elems(region.elems, r).size();
+        nodes += s.nodes(region.nodes, r).size();
+      }
+      EXPECT_EQ(elems, region.elems.size());
+      EXPECT_EQ(nodes, region.nodes.size());
+      if (parts == 2 && region.nodes.size() > 100) {  // node shares balance their list lengths
+        const auto cost = [&](std::size_t b, std::size_t e) {
+          std::size_t c = 0;
+          for (std::size_t k = b; k < e; ++k) c += 1 + m.node_elem_start[region.nodes[k] + 1] - m.node_elem_start[region.nodes[k]];
+          return double(c);
+        };
+        const double c0 = cost(0, s.node_cut[1]), c1 = cost(s.node_cut[1], s.node_cut[2]);
+        EXPECT_NEAR(c0 / (c0 + c1), 0.5, 0.02);
+      }
+    }
+  }
+}
+
+// The backend's advance and reduce on a team of 4, with TBB held to the
+// calling thread (its prebuilt pool is invisible to ThreadSanitizer, so
+// under scripts/tsan only the team's threads run): the same bits as one member.
+TEST(TeamOnTheCpuBackend, FourMembersGiveOneMembersBits) {
+  const tbb::global_control one_tbb_thread(tbb::global_control::max_allowed_parallelism, 1);
+  const auto m = test::box_model(8, true);
+  const auto run = [&](int members) {
+    CpuBackend<float> b;
+    b.set_team_size(members);
+    b.upload(m);
+    std::vector<double> u(3 * std::size_t(m.n_nodes), 0.0);
+    for (index_t a = 0; a < m.n_nodes; ++a) u[2 * std::size_t(m.n_nodes) + a] = -0.01 * m.X[2 * std::size_t(m.n_nodes) + a];
+    b.set_displacements(u);
+    std::vector<Reductions> red;
+    for (int k = 0; k < 5; ++k) {
+      b.advance(7);
+      red.push_back(b.reduce());
+    }
+    EXPECT_EQ(b.busy_team_members(), members);
+    return std::pair{b.download(), red};
+  };
+  const auto [f1, r1] = run(1);
+  const auto [f4, r4] = run(4);
+  EXPECT_EQ(f1.u, f4.u);
+  EXPECT_EQ(f1.f, f4.f);
+  EXPECT_EQ(f1.node_p, f4.node_p);
+  ASSERT_EQ(r1.size(), r4.size());
+  for (std::size_t k = 0; k < r1.size(); ++k) {
+    EXPECT_EQ(r1[k].kinetic, r4[k].kinetic) << k;
+    EXPECT_EQ(r1[k].strain_energy, r4[k].strain_energy) << k;
+    EXPECT_EQ(r1[k].free_force2, r4[k].free_force2) << k;
+    EXPECT_GT(r1[k].kinetic, 0.0) << k;
+  }
+}
+
+TEST(RegionSlices, SmallRegionsKeepFewerMembersBusy) {
+  EXPECT_EQ(busy_members(10, 16), 1);
+  EXPECT_EQ(busy_members(kMinMemberElems * 3, 16), 3);
+  EXPECT_EQ(busy_members(8576, 16), 16);
+  EXPECT_EQ(busy_members(8576, 2), 2);
+  EXPECT_EQ(busy_members(0, 4), 1);
+}
+
+}  // namespace
+}  // namespace tissue::cpu
