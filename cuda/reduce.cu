@@ -38,16 +38,44 @@ __device__ void combine(ReducePartial& a, const ReducePartial& b) {
   a.nonfinite += b.nonfinite;
 }
 
-/// Tree reduction of one value per thread in shared memory (fixed order).
-__device__ ReducePartial block_reduce(ReducePartial mine) {
-  __shared__ ReducePartial sh[kReduceBlock];
-  sh[threadIdx.x] = mine;
-  __syncthreads();
-  for (int w = kReduceBlock / 2; w > 0; w /= 2) {
-    if (threadIdx.x < w) combine(sh[threadIdx.x], sh[threadIdx.x + w]);
-    __syncthreads();
+/// Lane 0 of each warp gets the warp's partials combined by a shuffle tree
+/// (a fixed shape: the same sums in the same order every time).
+__device__ void warp_combine(ReducePartial& p) {
+  for (int off = 16; off > 0; off /= 2) {
+    const auto down = [&](auto v) { return __shfl_down_sync(0xffffffffu, v, off); };
+    ReducePartial o;
+    for (int c = 0; c < 3; ++c) {
+      o.reaction[c] = down(p.reaction[c]);
+      o.internal[c] = down(p.internal[c]);
+    }
+    o.free2 = down(p.free2);
+    o.held2 = down(p.held2);
+    o.kinetic = down(p.kinetic);
+    o.max_disp = down(p.max_disp);
+    o.front_disp = down(p.front_disp);
+    o.energy = down(p.energy);
+    o.visco_power = down(p.visco_power);
+    o.visco_stored = down(p.visco_stored);
+    o.nonfinite = down(p.nonfinite);
+    combine(p, o);
   }
-  return sh[0];
+}
+
+/// The block's reduction of one value per thread (fixed order): within each
+/// warp by shuffles, then the warps' results by warp 0; thread 0's return
+/// value is the block's. (Before: a shared-memory tree with a __syncthreads
+/// per level, 7 us for the final combine of 34 partials on the kidney.)
+__device__ ReducePartial block_reduce(ReducePartial mine) {
+  constexpr int kWarps = kReduceBlock / 32;
+  __shared__ ReducePartial sh[kWarps];
+  warp_combine(mine);
+  const int warp = int(threadIdx.x) / 32, lane = int(threadIdx.x) % 32;
+  if (lane == 0) sh[warp] = mine;
+  __syncthreads();
+  if (warp != 0) return mine;
+  mine = lane < kWarps ? sh[lane] : zero_partial();
+  warp_combine(mine);
+  return mine;
 }
 
 /// Node a's share (core node_terms) and its front-ring displacement.
