@@ -199,6 +199,24 @@ void bench_tled(Context& c, const std::string& mesh, Precision p, const std::str
   q.add("element_steps_per_s", sps5 * reg.n_elems);
   q.add("speedup_vs_whole", sps5 / sps);
   c.emit(q);
+
+  // the whole mesh again with a tool set but 1 m away: every step runs the contact
+  // stage (the sweep of the surface, the merge per surface node) and finds nothing
+  b->build_region({}, kDepthAll);
+  const ToolShape tool{"probe", 0.002, 0.02};
+  b->set_tools(std::span<const ToolShape>(&tool, 1));
+  const ToolPose away{{1.0, 1.0, 1.0}, {0, 0, 1}};
+  const ToolMotion still{away, away};
+  b->move_tools(std::span<const ToolMotion>(&still, 1));
+  const double sps_tool = time_steps(*b, c.o.min_seconds, steps);
+  Row w = c.row("tled_whole_mesh_tool", *b);
+  w.add("mesh", nm.name);
+  w.add("elements", long(nm.model.n_elems));
+  w.add("surface_triangles", long(nm.model.n_tris));
+  w.add("steps", steps);
+  w.add("steps_per_s", sps_tool);
+  w.add("contact_stage_us_per_step", 1e6 * (1 / sps_tool - 1 / sps));
+  c.emit(w);
 }
 
 void bench_contact(Context& c, long want_tris, Precision p) {

@@ -1,7 +1,8 @@
 // `tissue bench`: throughput and latency of the active backend, as JSON rows.
 // Measured: whole-mesh TLED steps/s and element-steps/s on the kidney and on
 // generated box meshes (~100k, 1M, 4M tets); region-limited (depth 5) versus
-// whole mesh on the kidney; the contact stage's step latency against ~10k and
+// whole mesh on the kidney; the kidney's whole mesh with a tool set far away
+// (the contact stage's cost per step); the contact stage's step latency against ~10k and
 // ~100k surface triangles (a one-ring region, so the step is mostly contact);
 // the time of one full haptic tick; the device's measured copy
 // bandwidth and the fraction of it a TLED step achieves (bytes_per_step below).

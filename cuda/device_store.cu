@@ -121,6 +121,7 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   corner_dx_.allocate(3 * size_t(m.n_tris));
   corner_tool_.allocate(3 * size_t(m.n_tris));
   corner_blocked_.allocate(3 * size_t(m.n_tris));
+  proposed_.allocate(n);
   reset_state(stream);
 }
 
@@ -142,6 +143,7 @@ void DeviceStore<T>::reset_state(cudaStream_t stream) {
   corner_dx_.fill_bytes(0, stream);
   corner_tool_.fill_bytes(0xff, stream);
   corner_blocked_.fill_bytes(0, stream);
+  proposed_.fill_bytes(0, stream);
   launch(model_.n_nodes, stream, reset_nodes_kernel<T>, model_.n_nodes, model_.node_flags, held_.data(),
          driven_.data(), role_.data());
   launch(model_.n_elems, stream, reset_elems_kernel<T>, model_.n_elems, elem_J_.data());
@@ -190,6 +192,7 @@ StateView<T> DeviceStore<T>::state() {
   s.corner_dx = corner_dx_.data();
   s.corner_tool = corner_tool_.data();
   s.corner_blocked = corner_blocked_.data();
+  s.proposed = proposed_.data();
   return s;
 }
 

@@ -70,7 +70,7 @@ class DeviceStore {
   DeviceArray<std::uint8_t> node_flags_;
   // state
   DeviceArray<Packed3<T>> u_held_, f_slot_, f_, contact_normal_, grasp_offset_, corner_dx_;
-  DeviceArray<std::uint8_t> held_, driven_, role_, contact_, corner_blocked_;
+  DeviceArray<std::uint8_t> held_, driven_, role_, contact_, corner_blocked_, proposed_;
   DeviceArray<signed char> contact_tool_, corner_tool_;
   DeviceArray<T> dv_slot_, elem_J_, node_p_;
   /// The law terms' arrays, one per line of core/material.hpp's lists (empty when unused).

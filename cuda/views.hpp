@@ -121,6 +121,8 @@ struct StateView {
   Packed3<T>* corner_dx = nullptr;     ///< the sweep's correction per (triangle, corner) slot 3 t + k (3 n_tris) m
   signed char* corner_tool = nullptr;  ///< its tool, -1 none (3 n_tris)
   std::uint8_t* corner_blocked = nullptr;  ///< ContactKind of a blocked penetration, 0 none (3 n_tris)
+  std::uint8_t* proposed = nullptr;    ///< 1: some triangle proposed a correction or a block for the node
+                                       ///< in this step's sweep; the gather clears it (n_nodes)
 };
 
 }  // namespace tissue::gpu
