@@ -385,5 +385,31 @@ TEST(Bench, LawRowsNameTheirLaw) {
   EXPECT_THROW(bench::run_bench(o), std::invalid_argument);
 }
 
+// The kidney's whole mesh with a tool set 1 m away: a row of its own whose
+// contact-stage cost is the difference of the two step rates.
+TEST(Bench, ToolRowTimesTheContactStage) {
+  bench::BenchOptions o;
+  o.quick = true;
+  o.precisions = {Precision::Float};
+  o.sizes = {"kidney"};
+  const auto number = [](const std::string& row, const std::string& key) {
+    const size_t k = row.find("\"" + key + "\": ");
+    return k == std::string::npos ? std::nan("") : std::stod(row.substr(k + key.size() + 4));
+  };
+  double whole = 0, with_tool = 0, stage = std::nan("");
+  for (const std::string& row : bench::run_bench(o)) {
+    if (row.find("\"tled_whole_mesh\"") != std::string::npos) whole = number(row, "steps_per_s");
+    if (row.find("\"tled_whole_mesh_tool\"") != std::string::npos) {
+      with_tool = number(row, "steps_per_s");
+      stage = number(row, "contact_stage_us_per_step");
+      EXPECT_EQ(number(row, "surface_triangles"), 3580.0) << row;
+    }
+  }
+  ASSERT_GT(whole, 0.0);
+  ASSERT_GT(with_tool, 0.0);
+  // the rows print 6 significant digits
+  EXPECT_NEAR(stage, 1e6 * (1 / with_tool - 1 / whole), 1e6 * 1e-5 * (1 / with_tool + 1 / whole));
+}
+
 }  // namespace
 }  // namespace tissue::app
