@@ -165,7 +165,7 @@ const Slices& CpuBackend<T>::team_slices() {
     slices_.parts = 0;
   }
   const int members = busy_members(state_.region.elems.size(), size);
-  if (slices_.parts != members) slices_ = slice_region(state_.region, model_.node_elem_start.data(), members, kLanes);
+  if (slices_.parts != members) slice_region(state_.region, model_.node_elem_start.data(), members, kLanes, slices_);
   return slices_;
 }
 

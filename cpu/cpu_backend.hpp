@@ -1,5 +1,6 @@
-// The cpu backend: TBB parallel loops over the region's elements and nodes,
-// Embree for the tool-segment query against the deformed surface.
+// The cpu backend: a persistent thread team over fixed slices of the region
+// (cpu/thread_team.hpp; TBB for the one-off whole-mesh passes), Embree for
+// the tool-segment query against the deformed surface.
 #pragma once
 
 #include <memory>

@@ -11,6 +11,8 @@
 #pragma once
 
 #include <memory>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "core/backend.hpp"
@@ -36,10 +38,16 @@ class CpuBackend final : public Backend {
   const TissueState<T>& state() const { return state_; }
   /// Surface BVH builds so far (tests: rebuilt only when the surface left its margin).
   long surface_builds() const { return contact_ ? contact_->bvh().builds() : 0; }
-  /// Runs advance on a team of `size` members instead of default_team_size()
-  /// (0: the default again). Tests: results must not depend on it.
-  void set_team_size(int size) { team_size_ = size; }
-  /// The members the last advance kept busy (0 before the first).
+  /// Runs advance and reduce on a team of `size` members (1..255) instead
+  /// of default_team_size() (0: the default again). Tests: results must not
+  /// depend on it.
+  void set_team_size(int size) {
+    if (size < 0 || size > ThreadTeam::kMaxSize)
+      throw std::invalid_argument("set_team_size: " + std::to_string(size) + " is outside 0..255");
+    team_size_ = size;
+  }
+  /// The members the last advance or reduce kept busy (0 before the first,
+  /// and after upload or build_region until the next).
   int busy_team_members() const { return slices_.parts; }
 
  protected:

@@ -8,8 +8,7 @@ int busy_members(std::size_t n_elems, int team_size) {
   return int(std::clamp<std::size_t>(n_elems / kMinMemberElems, 1, std::size_t(std::max(team_size, 1))));
 }
 
-Slices slice_region(const Region& region, const index_t* node_elem_start, int parts, std::size_t align) {
-  Slices s;
+void slice_region(const Region& region, const index_t* node_elem_start, int parts, std::size_t align, Slices& s) {
   s.parts = parts;
   const std::size_t ne = region.elems.size(), nn = region.nodes.size();
   s.elem_cut.resize(std::size_t(parts) + 1);
@@ -28,7 +27,6 @@ Slices slice_region(const Region& region, const index_t* node_elem_start, int pa
     s.node_cut[r] = k;
   }
   s.node_cut[parts] = nn;
-  return s;
 }
 
 }  // namespace tissue::cpu

@@ -5,6 +5,7 @@
 // the slicing (every pass writes each slot from one iteration).
 #pragma once
 
+#include <cassert>
 #include <cstddef>
 #include <span>
 #include <vector>
@@ -23,10 +24,14 @@ struct Slices {
   std::vector<std::size_t> elem_cut;   ///< member r's elements are region.elems[elem_cut[r] .. elem_cut[r + 1])
   std::vector<std::size_t> node_cut;   ///< and its nodes region.nodes[node_cut[r] .. node_cut[r + 1])
 
+  /// Member r's part of the region's element / node list (the list the
+  /// slices were cut from: its size is the last cut).
   std::span<const index_t> elems(std::span<const index_t> all, int r) const {
+    assert(all.size() == elem_cut.back());
     return all.subspan(elem_cut[r], elem_cut[r + 1] - elem_cut[r]);
   }
   std::span<const index_t> nodes(std::span<const index_t> all, int r) const {
+    assert(all.size() == node_cut.back());
     return all.subspan(node_cut[r], node_cut[r + 1] - node_cut[r]);
   }
 };
@@ -39,6 +44,7 @@ int busy_members(std::size_t n_elems, int team_size);
 /// multiples of `align` (the lane batch, so only a slice's last batch is
 /// partial); nodes in equal shares of their cost, 1 + the length of their
 /// node->element list (node_elem_start, n_nodes + 1), which passes 2 and 4 walk.
-Slices slice_region(const Region& region, const index_t* node_elem_start, int parts, std::size_t align);
+/// Fills `out` (reusing its vectors: no allocation once they have grown).
+void slice_region(const Region& region, const index_t* node_elem_start, int parts, std::size_t align, Slices& out);
 
 }  // namespace tissue::cpu

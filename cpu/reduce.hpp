@@ -17,6 +17,7 @@ namespace tissue::cpu {
 
 /// Chunk size of the reduction (nodes or elements; a multiple of kLanes).
 inline constexpr std::size_t kReduceGrain = 1024;
+static_assert(kReduceGrain % 16 == 0, "a reduction chunk holds whole lane batches (element_lanes.hpp kLanes)");
 
 /// One chunk's sums of core node_terms (all double).
 struct NodeSums {

@@ -10,13 +10,22 @@
 namespace tissue::cpu {
 namespace {
 
+using Clock = std::chrono::steady_clock;
+
 /// How long an idle worker spins for the next job before it sleeps: longer
-/// than the gap between a tick's advance and its reductions, far shorter
-/// than the haptic loop's 1 ms period.
+/// than the gap between a tick's advance and its reduce, far shorter than
+/// the haptic loop's 1 ms period (spinning for it would keep every core busy).
 constexpr auto kIdleSpin = std::chrono::microseconds(100);
-/// Barrier spins before a waiting member starts yielding its core (only
-/// matters when the machine has fewer free cores than the team has members).
-constexpr int kBarrierSpins = 1 << 14;
+/// How a member waits at a barrier (and the caller for the job's end): it
+/// spins for kBarrierSpin (a pass takes microseconds, the contact stage in a
+/// barrier's last() tens of them), then yields its core between looks until
+/// kBarrierYield (a longer wait means a member lost its core, maybe to this
+/// very thread), then sleeps on a futex. (Yielding after 20 us instead gave
+/// 1.2-1.8 ms p99 haptic ticks on a 2-core machine: a yield hands the core
+/// to any runnable thread, such as a TBB worker Embree woke, for a whole
+/// time slice.)
+constexpr auto kBarrierSpin = std::chrono::microseconds(300);
+constexpr auto kBarrierYield = std::chrono::microseconds(2000);
 
 inline void cpu_relax() {
 #if defined(__x86_64__) || defined(__i386__)
@@ -24,6 +33,41 @@ inline void cpu_relax() {
 #elif defined(__aarch64__)
   asm volatile("yield");
 #endif
+}
+
+/// Waits until a != old: spins for `spin`, then yields between looks until
+/// `yield` has passed since the start, then sleeps on a futex
+/// (std::atomic::wait), counted in `sleepers` so that the writer knows to
+/// notify. Returns the new value.
+template <class V>
+V wait_for_change(const std::atomic<V>& a, V old, Clock::duration spin, Clock::duration yield,
+                  std::atomic<int>& sleepers) {
+  V v;
+  const auto start = Clock::now();
+  bool yielding = false;
+  for (int k = 0; (v = a.load(std::memory_order_acquire)) == old; ++k) {
+    if (yielding) {
+      std::this_thread::yield();
+    } else {
+      cpu_relax();
+    }
+    if ((k & 63) != 63) continue;
+    const auto waited = Clock::now() - start;
+    if (waited > yield) {
+      sleepers.fetch_add(1, std::memory_order_seq_cst);
+      a.wait(old, std::memory_order_seq_cst);
+      sleepers.fetch_sub(1, std::memory_order_seq_cst);
+    } else if (waited > spin) {
+      yielding = true;
+    }
+  }
+  return v;
+}
+
+/// After a writer changed `a` (seq_cst): wakes its sleepers, if any.
+template <class V>
+void wake(std::atomic<V>& a, const std::atomic<int>& sleepers) {
+  if (sleepers.load(std::memory_order_seq_cst) > 0) a.notify_all();
 }
 
 }  // namespace
@@ -36,18 +80,27 @@ int default_team_size() {
 ThreadTeam::ThreadTeam(int size) : size_(size) {
   if (size < 1 || size > kMaxSize) throw std::invalid_argument("ThreadTeam: size must be in 1..255");
   threads_.reserve(std::size_t(size - 1));
-  for (int r = 1; r < size; ++r) threads_.emplace_back([this, r] { worker(r); });
+  try {
+    for (int r = 1; r < size; ++r) threads_.emplace_back([this, r] { worker(r); });
+  } catch (...) {  // (the system refused a thread) stop the ones started
+    shut_down();
+    throw;
+  }
 }
 
-ThreadTeam::~ThreadTeam() {
+ThreadTeam::~ThreadTeam() { shut_down(); }
+
+void ThreadTeam::shut_down() {
   stop_.store(true, std::memory_order_seq_cst);
   job_word_.fetch_add(std::uint64_t(1) << 8, std::memory_order_seq_cst);
   job_word_.notify_all();
   for (std::thread& t : threads_) t.join();
+  threads_.clear();
 }
 
 void ThreadTeam::launch(int active, JobFn fn, const void* job) {
   if (active < 1 || active > size_) throw std::invalid_argument("ThreadTeam::run: active members outside 1..size");
+  if (running_.exchange(true)) throw std::logic_error("ThreadTeam::run: called while a job runs (not re-entrant)");
   fn_ = fn;
   job_ = job;
   active_ = active;
@@ -57,45 +110,38 @@ void ThreadTeam::launch(int active, JobFn fn, const void* job) {
   if (active > 1) {
     const std::uint64_t word = ((job_word_.load(std::memory_order_relaxed) >> 8) + 1) << 8 | std::uint64_t(active);
     job_word_.store(word, std::memory_order_seq_cst);
-    if (sleepers_.load(std::memory_order_seq_cst) > 0) job_word_.notify_all();
+    wake(job_word_, sleepers_);
   }
-  fn(job, 0);
-  for (int spins = 0; done_.load(std::memory_order_acquire) != active - 1; ++spins) {
-    cpu_relax();
-    if (spins > kBarrierSpins) std::this_thread::yield();
-  }
+  fn(job, 0);  // noexcept (run's trampoline)
+  for (int d = 0; d != active - 1;) d = wait_for_change(done_, d, kBarrierSpin, kBarrierYield, done_sleepers_);
+  running_.store(false);
   if (error_) std::rethrow_exception(error_);
 }
 
 void ThreadTeam::worker(int rank) {
   std::uint64_t seen = 0;
+  bool was_member = false;
   for (;;) {
-    std::uint64_t word = job_word_.load(std::memory_order_acquire);
-    if (word == seen) {
-      const auto until = std::chrono::steady_clock::now() + kIdleSpin;
-      for (int k = 0; (word = job_word_.load(std::memory_order_acquire)) == seen; ++k) {
-        cpu_relax();
-        if ((k & 255) == 255 && std::chrono::steady_clock::now() > until) {
-          sleepers_.fetch_add(1, std::memory_order_seq_cst);
-          job_word_.wait(seen, std::memory_order_seq_cst);
-          sleepers_.fetch_sub(1, std::memory_order_seq_cst);
-        }
-      }
-    }
-    seen = word;
+    // a member of the last job spins a little for the next; the others sleep at once
+    const Clock::duration spin = was_member ? Clock::duration(kIdleSpin) : Clock::duration::zero();
+    seen = wait_for_change(job_word_, seen, spin, spin, sleepers_);
     if (stop_.load(std::memory_order_acquire)) return;
-    if (rank < int(word & 0xff)) {
+    was_member = rank < int(seen & 0xff);
+    if (was_member) {
       fn_(job_, rank);
-      done_.fetch_add(1, std::memory_order_release);
+      done_.fetch_add(1, std::memory_order_seq_cst);
+      wake(done_, done_sleepers_);
     }
   }
 }
 
-void ThreadTeam::wait_barrier(std::uint32_t gen) const {
-  for (int spins = 0; barrier_gen_.load(std::memory_order_acquire) == gen; ++spins) {
-    cpu_relax();
-    if (spins > kBarrierSpins) std::this_thread::yield();
-  }
+void ThreadTeam::wait_barrier(std::uint32_t gen) {
+  wait_for_change(barrier_gen_, gen, kBarrierSpin, kBarrierYield, barrier_sleepers_);
+}
+
+void ThreadTeam::release_barrier(std::uint32_t gen) {
+  barrier_gen_.store(gen + 1, std::memory_order_seq_cst);
+  wake(barrier_gen_, barrier_sleepers_);
 }
 
 }  // namespace tissue::cpu

@@ -5,12 +5,16 @@
 // threads once, hands a whole advance (every step, every pass) to them in
 // one job, and separates the passes with a spinning barrier (about a
 // microsecond). Each member works on a fixed slice of the region
-// (partition.hpp), the same slice every step, so its elements and nodes stay
-// in its core's cache.
+// (partition.hpp), the same slice every step, so its elements and nodes tend
+// to stay in one core's cache (the threads are not pinned).
 //
 // Members: rank 0 is the thread that calls run(); ranks 1..size-1 are the
-// team's own threads. Between jobs they spin for kIdleSpin, then sleep on a
-// futex (std::atomic::wait), so an idle backend costs no CPU.
+// team's own threads (created by the first caller, whose scheduling policy
+// they inherit). Between jobs the last job's members spin for 100 us, the
+// others not at all, then they sleep on a futex (std::atomic::wait), so an
+// idle backend costs no CPU; a member that waits at a barrier for more than
+// 300 us yields its core between looks (another member may have lost it),
+// and after 2 ms sleeps too.
 #pragma once
 
 #include <atomic>
@@ -34,17 +38,22 @@ class ThreadTeam {
 
   /// Runs job(rank) on ranks 0..active-1 (1 <= active <= size; rank 0 on the
   /// calling thread) and returns when every one has returned. The other
-  /// members stay idle. If a barrier's `last` threw, rethrows it here.
-  /// One caller at a time; not re-entrant.
+  /// members stay idle. If a barrier's `last` threw, rethrows it here. The
+  /// job itself must not throw (a throw outside `last` ends the program:
+  /// the other members would wait for it at the next barrier forever).
+  /// One caller at a time; run() inside a job throws std::logic_error.
   template <class Job>
   void run(int active, const Job& job) {
-    launch(active, [](const void* j, int rank) { (*static_cast<const Job*>(j))(rank); }, &job);
+    launch(active, [](const void* j, int rank) noexcept { (*static_cast<const Job*>(j))(rank); }, &job);
   }
 
-  /// Inside a job: returns once all the job's members have called it. The
-  /// last to arrive runs last() before releasing the others (so last() sees
-  /// every member's writes and they see its). Returns false when a barrier's
+  /// Inside a job: returns once all the job's members have called it (every
+  /// member must call barrier the same number of times in a job). The last
+  /// to arrive runs last() before releasing the others (so last() sees every
+  /// member's writes and they see its). Returns false when a barrier's
   /// last() has thrown in this job: the members should then leave the job.
+  /// A member that waits longer than 300 us yields its core between looks;
+  /// after 2 ms it sleeps on a futex.
   template <class Last>
   bool barrier(const Last& last) {
     const std::uint32_t gen = barrier_gen_.load(std::memory_order_acquire);
@@ -58,7 +67,7 @@ class ThreadTeam {
           failed_.store(true, std::memory_order_relaxed);
         }
       }
-      barrier_gen_.store(gen + 1, std::memory_order_release);
+      release_barrier(gen);
     } else {
       wait_barrier(gen);
     }
@@ -72,7 +81,9 @@ class ThreadTeam {
   using JobFn = void (*)(const void*, int);
   void launch(int active, JobFn fn, const void* job);
   void worker(int rank);
-  void wait_barrier(std::uint32_t gen) const;
+  void wait_barrier(std::uint32_t gen);
+  void release_barrier(std::uint32_t gen);
+  void shut_down();
 
   int size_;
   std::vector<std::thread> threads_;
@@ -88,7 +99,10 @@ class ThreadTeam {
   alignas(64) std::atomic<int> arrived_{0};   ///< members at the current barrier
   alignas(64) std::atomic<std::uint32_t> barrier_gen_{0};
   alignas(64) std::atomic<int> sleepers_{0};  ///< workers asleep on job_word_
+  std::atomic<int> barrier_sleepers_{0};      ///< members asleep on barrier_gen_
+  std::atomic<int> done_sleepers_{0};         ///< the caller, asleep on done_
   std::atomic<bool> stop_{false};
+  std::atomic<bool> running_{false};
 };
 
 /// The number of threads the cpu backend's team uses: TBB's current limit

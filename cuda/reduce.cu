@@ -196,7 +196,10 @@ template <class T>
 Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
                            StepBuffers<T> b, DeviceContact<T>& contact, Transfers& log, cudaStream_t stream) {
   if (m.ianp && r.n_elems > 0) {  // nodal pressures at the current u, into scratch
-    CUDA_CHECK(cudaMemcpyAsync(dv_slot_.data(), s.dv_slot, dv_slot_.bytes(), cudaMemcpyDeviceToDevice, stream));
+    // pass 1 below rewrites the region's elements' slots; the others must be the state's (a whole-mesh
+    // region rewrites every slot, so the copy is only needed for a limited one)
+    if (r.n_elems < m.n_elems)
+      CUDA_CHECK(cudaMemcpyAsync(dv_slot_.data(), s.dv_slot, dv_slot_.bytes(), cudaMemcpyDeviceToDevice, stream));
     StateView<T> e = s;
     e.dv_slot = dv_slot_.data();
     e.elem_J = elem_J_.data();

@@ -7,6 +7,7 @@
 // ThreadSanitizer (the team is our code, so TSan sees its synchronisation).
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include <atomic>
 #include <chrono>
@@ -115,7 +116,8 @@ TEST(RegionSlices, CoverTheRegionOnceWithLaneAlignedElementCuts) {
     const index_t seed = m.n_nodes / 2;
     const Region region = flood_fill(m, std::span<const index_t>(&seed, depth == kDepthAll ? 0 : 1), depth);
     for (int parts : {1, 2, 3, 7, 16}) {
-      const Slices s = slice_region(region, m.node_elem_start.data(), parts, 16);
+      Slices s;
+      slice_region(region, m.node_elem_start.data(), parts, 16, s);
       ASSERT_EQ(s.parts, parts);
       EXPECT_EQ(s.elem_cut.front(), 0u);
       EXPECT_EQ(s.elem_cut.back(), region.elems.size());
@@ -179,6 +181,92 @@ TEST(TeamOnTheCpuBackend, FourMembersGiveOneMembersBits) {
     EXPECT_EQ(r1[k].free_force2, r4[k].free_force2) << k;
     EXPECT_GT(r1[k].kinetic, 0.0) << k;
   }
+}
+
+// The same with a tool pressing into the top: the contact stage runs in the
+// barrier's last(), on whichever member arrives last.
+TEST(TeamOnTheCpuBackend, TheContactStageGivesTheSameBitsOnAnyMember) {
+  const tbb::global_control one_tbb_thread(tbb::global_control::max_allowed_parallelism, 1);
+  const auto m = test::box_model(8, true);
+  double top = 0;
+  for (index_t a = 0; a < m.n_nodes; ++a) top = std::max(top, m.X[2 * std::size_t(m.n_nodes) + a]);
+  const auto run = [&](int members) {
+    CpuBackend<double> b;
+    b.set_team_size(members);
+    b.upload(m);
+    const ToolShape tool{"probe", 0.1 * top, 0};
+    b.set_tools(std::span<const ToolShape>(&tool, 1));
+    std::vector<Reductions> red;
+    for (int k = 0; k < 8; ++k) {  // down 2 % of the height per advance, from just above the top
+      const auto at = [&](int j) { return ToolPose{{0.5 * top, 0.5 * top, top + tool.radius - 0.02 * top * j}, {0, 0, 1}}; };
+      const ToolMotion mv{at(k), at(k + 1)};
+      b.move_tools(std::span<const ToolMotion>(&mv, 1));
+      b.advance(5);
+      red.push_back(b.reduce());
+    }
+    return std::pair{b.download(), red};
+  };
+  const auto [f1, r1] = run(1);
+  const auto [f4, r4] = run(4);
+  EXPECT_EQ(f1.u, f4.u);
+  EXPECT_EQ(f1.f, f4.f);
+  ASSERT_EQ(r1.size(), r4.size());
+  for (std::size_t k = 0; k < r1.size(); ++k) {
+    EXPECT_EQ(r1[k].tools[0].contact, r4[k].tools[0].contact) << k;
+    EXPECT_EQ(r1[k].tools[0].reaction.z, r4[k].tools[0].reaction.z) << k;
+    EXPECT_EQ(r1[k].kinetic, r4[k].kinetic) << k;
+  }
+  EXPECT_GT(r1.back().tools[0].contact, 0);  // the tool did press
+  EXPECT_GT(std::fabs(r1.back().tools[0].reaction.z), 0.0);
+}
+
+// A new region after steps on the whole mesh, with as many busy members as
+// before: the slices are cut again (stale cuts would run past the region's lists).
+TEST(TeamOnTheCpuBackend, ANewRegionIsSlicedAgain) {
+  const tbb::global_control one_tbb_thread(tbb::global_control::max_allowed_parallelism, 1);
+  const auto m = test::box_model(10, true);
+  const auto run = [&](int members) {
+    CpuBackend<float> b;
+    b.set_team_size(members);
+    b.upload(m);
+    std::vector<double> u(3 * std::size_t(m.n_nodes), 0.0);
+    for (index_t a = 0; a < m.n_nodes; ++a) u[a] = 0.01 * m.X[2 * std::size_t(m.n_nodes) + a];
+    b.set_displacements(u);
+    b.advance(5);
+    const int whole = b.busy_team_members();
+    const index_t seed = m.n_nodes - 1;
+    const RegionSizes r = b.build_region(std::span<const index_t>(&seed, 1), 6);
+    EXPECT_LT(r.n_elems, m.n_elems);
+    b.advance(5);
+    EXPECT_EQ(b.busy_team_members(), whole) << "the test wants the same member count for both regions";
+    return b.download();
+  };
+  const Fields one = run(1), four = run(4);
+  EXPECT_EQ(one.u, four.u);
+  EXPECT_EQ(one.f, four.f);
+}
+
+TEST(ThreadTeam, DefaultSizeFollowsTbbsLimits) {
+  {
+    const tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
+    EXPECT_LE(default_team_size(), 2);
+    EXPECT_GE(default_team_size(), 1);
+  }
+  tbb::task_arena one(1);
+  one.execute([] { EXPECT_EQ(default_team_size(), 1); });
+}
+
+TEST(ThreadTeam, RunInsideAJobIsRefused) {
+  ThreadTeam team(2);
+  std::atomic<int> refused{0};
+  team.run(1, [&](int) {
+    try {
+      team.run(1, [](int) {});
+    } catch (const std::logic_error&) {
+      refused.fetch_add(1);
+    }
+  });
+  EXPECT_EQ(refused.load(), 1);
 }
 
 TEST(RegionSlices, SmallRegionsKeepFewerMembersBusy) {
