@@ -161,12 +161,6 @@ void node_update_run(const TissueModel<T>& m, TissueState<T>& s, std::span<const
 }  // namespace
 
 template <class T>
-void element_pressure(const TissueModel<T>& m, const T* u, std::span<const index_t> elems, T* J_out, T* dv_out,
-                      T* F_out, tbb::affinity_partitioner& part) {
-  element_pressure_run(m, u, elems, J_out, dv_out, F_out, Tbb{part});
-}
-
-template <class T>
 void element_pressure(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems,
                       tbb::affinity_partitioner& part) {
   element_pressure_run(m, s.u.data(), elems, s.elem_J.data(), s.elem_dv.data(), s.elem_F.data(), Tbb{part});
@@ -181,12 +175,6 @@ void element_pressure(const TissueModel<T>& m, const T* u, std::span<const index
 template <class T>
 void element_pressure(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems) {
   element_pressure_run(m, s.u.data(), elems, s.elem_J.data(), s.elem_dv.data(), s.elem_F.data(), Serial{});
-}
-
-template <class T>
-void nodal_pressure(const TissueModel<T>& m, const T* dv, const std::vector<T>& node_divisor,
-                    std::span<const index_t> nodes, T* p, tbb::affinity_partitioner& part) {
-  nodal_pressure_run(m, dv, node_divisor, nodes, p, Tbb{part});
 }
 
 template <class T>
@@ -238,12 +226,8 @@ void rotate(TissueState<T>& s) {
 #define TISSUE_CPU_PASSES(T)                                                                                      \
   template void element_pressure(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>,                \
                                  tbb::affinity_partitioner&);                                                     \
-  template void element_pressure(const TissueModel<T>&, const T*, std::span<const index_t>, T*, T*, T*,           \
-                                 tbb::affinity_partitioner&);                                                     \
   template void nodal_pressure(const TissueModel<T>&, TissueState<T>&, const std::vector<T>&,                     \
                                std::span<const index_t>, tbb::affinity_partitioner&);                             \
-  template void nodal_pressure(const TissueModel<T>&, const T*, const std::vector<T>&, std::span<const index_t>,  \
-                               T*, tbb::affinity_partitioner&);                                                   \
   template void element_forces(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>, BadElementFlag&, \
                                tbb::affinity_partitioner&);                                                       \
   template void node_update(const TissueModel<T>&, TissueState<T>&, std::span<const index_t>,                     \

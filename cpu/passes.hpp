@@ -42,10 +42,11 @@ void element_pressure(const TissueModel<T>& m, TissueState<T>& s, std::span<cons
 
 /// Pass 1 from displacements u (3 x n_nodes, m) into J_out[e] (n_elems),
 /// dv_out[e] = p_e V_e (n_elems, N m) and the deformation gradient F_out
-/// (9 x n_elems), which pass 3 reads.
+/// (9 x n_elems), which pass 3 reads; on the calling thread (the
+/// reduction's team member, cpu/reduce.cpp).
 template <class T>
 void element_pressure(const TissueModel<T>& m, const T* u, std::span<const index_t> elems, T* J_out, T* dv_out,
-                      T* F_out, tbb::affinity_partitioner& part);
+                      T* F_out);
 
 /// Pass 2 over `nodes`: node_p[a] = sum_e (J_e - 1) V_e / node_divisor[a]
 /// over the node's node_elem list, in stored order: p_a = K_a theta_a.
@@ -54,10 +55,10 @@ template <class T>
 void nodal_pressure(const TissueModel<T>& m, TissueState<T>& s, const std::vector<T>& node_divisor,
                     std::span<const index_t> nodes, tbb::affinity_partitioner& part);
 
-/// Pass 2 from dv (n_elems, m^3) into p_out (n_nodes, Pa).
+/// Pass 2 from dv (n_elems, m^3) into p_out (n_nodes, Pa), on the calling thread.
 template <class T>
 void nodal_pressure(const TissueModel<T>& m, const T* dv, const std::vector<T>& node_divisor,
-                    std::span<const index_t> nodes, T* p_out, tbb::affinity_partitioner& part);
+                    std::span<const index_t> nodes, T* p_out);
 
 /// Pass 3 over `elems`, from pass 1's elem_F (u has not moved since): pbar =
 /// (1/4) sum of the element's four nodal pressures, then ianp_element_forces (or plain_element_forces when
@@ -83,14 +84,8 @@ void node_update(const TissueModel<T>& m, TissueState<T>& s, std::span<const ind
 template <class T>
 void element_pressure(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems);
 template <class T>
-void element_pressure(const TissueModel<T>& m, const T* u, std::span<const index_t> elems, T* J_out, T* dv_out,
-                      T* F_out);
-template <class T>
 void nodal_pressure(const TissueModel<T>& m, TissueState<T>& s, const std::vector<T>& node_divisor,
                     std::span<const index_t> nodes);
-template <class T>
-void nodal_pressure(const TissueModel<T>& m, const T* dv, const std::vector<T>& node_divisor,
-                    std::span<const index_t> nodes, T* p_out);
 template <class T>
 void element_forces(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems, BadElementFlag& bad);
 template <class T>

@@ -44,15 +44,9 @@ NodeSums node_sums(const TissueModel<T>& m, const TissueState<T>& s, std::span<c
     const NodeTerms t = node_terms(load(s.f, a), load(s.u, a), load(s.u_prev, a), double(m.mass[a]), m.dt,
                                    s.region.role[a] == kInner, s.held[a], s.driven[a], s.contact[a],
                                    load(s.contact_normal, a));
-    for (int c = 0; c < 3; ++c) {
-      p.reaction[c] += t.reaction[c];
-      p.internal[c] += t.internal[c];
-    }
-    p.free2 += t.free2;
-    p.held2 += t.held2;
-    p.kinetic += t.kinetic;
-    p.max_disp = std::max(p.max_disp, t.disp);
-    p.finite = p.finite && t.finite;
+    p = combine(p, NodeSums{{t.reaction[0], t.reaction[1], t.reaction[2]},
+                            {t.internal[0], t.internal[1], t.internal[2]},
+                            t.free2, t.held2, t.kinetic, t.disp, t.finite});
   }
   return p;
 }

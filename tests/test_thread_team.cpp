@@ -148,6 +148,15 @@ TEST(RegionSlices, CoverTheRegionOnceWithLaneAlignedElementCuts) {
   }
 }
 
+/// A cpu backend on a team of `members`, uploaded with m.
+template <class T>
+std::unique_ptr<CpuBackend<T>> team_backend(int members, const TissueModel<double>& m) {
+  auto b = std::make_unique<CpuBackend<T>>();
+  b->set_team_size(members);
+  b->upload(m);
+  return b;
+}
+
 // The backend's advance and reduce on a team of 4, with TBB held to the
 // calling thread (its prebuilt pool is invisible to ThreadSanitizer, so
 // under scripts/tsan only the team's threads run): the same bits as one member.
@@ -155,12 +164,9 @@ TEST(TeamOnTheCpuBackend, FourMembersGiveOneMembersBits) {
   const tbb::global_control one_tbb_thread(tbb::global_control::max_allowed_parallelism, 1);
   const auto m = test::box_model(8, true);
   const auto run = [&](int members) {
-    CpuBackend<float> b;
-    b.set_team_size(members);
-    b.upload(m);
-    std::vector<double> u(3 * std::size_t(m.n_nodes), 0.0);
-    for (index_t a = 0; a < m.n_nodes; ++a) u[2 * std::size_t(m.n_nodes) + a] = -0.01 * m.X[2 * std::size_t(m.n_nodes) + a];
-    b.set_displacements(u);
+    const auto owner = team_backend<float>(members, m);
+    CpuBackend<float>& b = *owner;
+    b.set_displacements(test::field(m, [](Vec3<double> X) { return Vec3<double>{0, 0, -0.01 * X.z}; }));
     std::vector<Reductions> red;
     for (int k = 0; k < 5; ++k) {
       b.advance(7);
@@ -191,9 +197,8 @@ TEST(TeamOnTheCpuBackend, TheContactStageGivesTheSameBitsOnAnyMember) {
   double top = 0;
   for (index_t a = 0; a < m.n_nodes; ++a) top = std::max(top, m.X[2 * std::size_t(m.n_nodes) + a]);
   const auto run = [&](int members) {
-    CpuBackend<double> b;
-    b.set_team_size(members);
-    b.upload(m);
+    const auto owner = team_backend<double>(members, m);
+    CpuBackend<double>& b = *owner;
     const ToolShape tool{"probe", 0.1 * top, 0};
     b.set_tools(std::span<const ToolShape>(&tool, 1));
     std::vector<Reductions> red;
@@ -226,12 +231,9 @@ TEST(TeamOnTheCpuBackend, ANewRegionIsSlicedAgain) {
   const tbb::global_control one_tbb_thread(tbb::global_control::max_allowed_parallelism, 1);
   const auto m = test::box_model(10, true);
   const auto run = [&](int members) {
-    CpuBackend<float> b;
-    b.set_team_size(members);
-    b.upload(m);
-    std::vector<double> u(3 * std::size_t(m.n_nodes), 0.0);
-    for (index_t a = 0; a < m.n_nodes; ++a) u[a] = 0.01 * m.X[2 * std::size_t(m.n_nodes) + a];
-    b.set_displacements(u);
+    const auto owner = team_backend<float>(members, m);
+    CpuBackend<float>& b = *owner;
+    b.set_displacements(test::field(m, [](Vec3<double> X) { return Vec3<double>{0.01 * X.z, 0, 0}; }));
     b.advance(5);
     const int whole = b.busy_team_members();
     const index_t seed = m.n_nodes - 1;
