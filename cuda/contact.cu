@@ -4,6 +4,7 @@
 
 #include <algorithm>
 
+#include "cuda/block_sum.cuh"
 #include "cuda/contact.cuh"
 #include "cuda/launch.cuh"
 
@@ -102,40 +103,13 @@ __device__ void empty_partial(ContactPartial& p) {
   }
 }
 
-/// Lane 0 of each warp gets the warp's partials combined by a shuffle tree
-/// (a fixed shape: the same sums in the same order every time).
-__device__ void warp_combine(ContactPartial& p) {
-  for (int off = 16; off > 0; off /= 2) {
-    ContactPartial o;
-    for (int t = 0; t < kMaxTools; ++t) {
-      for (int c = 0; c < 3; ++c) o.reaction[t][c] = __shfl_down_sync(0xffffffffu, p.reaction[t][c], off);
-      o.contact[t] = __shfl_down_sync(0xffffffffu, p.contact[t], off);
-      o.grasped[t] = __shfl_down_sync(0xffffffffu, p.grasped[t], off);
-      o.rigid[t] = __shfl_down_sync(0xffffffffu, p.rigid[t], off);
-      o.rigid_first[t] = __shfl_down_sync(0xffffffffu, p.rigid_first[t], off);
-      o.outside[t] = __shfl_down_sync(0xffffffffu, p.outside[t], off);
-    }
-    combine(p, o);
-  }
-}
-
-/// The block's reduction of its threads' partials (fixed order): within
-/// each warp by shuffles, then the warps' results by warp 0. Thread 0 gets
-/// the block's partial. (Before: a shared-memory tree over 128 threads with
-/// a __syncthreads per level, 20 us on the kidney's 1.8k surface nodes.)
-__device__ ContactPartial block_combine(ContactPartial* sh, ContactPartial p) {
-  warp_combine(p);
-  const int warp = int(threadIdx.x) / 32, lane = int(threadIdx.x) % 32;
-  if (lane == 0) sh[warp] = p;
-  __syncthreads();
-  if (warp == 0) {
-    if (lane < kContactWarps)
-      p = sh[lane];
-    else
-      empty_partial(p);
-    warp_combine(p);
-  }
-  return p;
+/// The block's combined partial, in thread 0 (cuda/block_sum.cuh; before: a
+/// shared-memory tree over 128 threads with a __syncthreads per level, 20 us
+/// on the kidney's 1.8k surface nodes).
+__device__ ContactPartial block_combine(ContactPartial* sh, const ContactPartial& p) {
+  ContactPartial empty;
+  empty_partial(empty);
+  return block_sum<kContactBlock>(p, empty, sh, [](ContactPartial& a, const ContactPartial& b) { combine(a, b); });
 }
 
 /// The tools' reductions of the combined partial q into out->tools.

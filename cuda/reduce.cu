@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "core/energy.hpp"
+#include "cuda/block_sum.cuh"
 #include "cuda/launch.cuh"
 #include "cuda/tled.cuh"
 
@@ -38,44 +39,13 @@ __device__ void combine(ReducePartial& a, const ReducePartial& b) {
   a.nonfinite += b.nonfinite;
 }
 
-/// Lane 0 of each warp gets the warp's partials combined by a shuffle tree
-/// (a fixed shape: the same sums in the same order every time).
-__device__ void warp_combine(ReducePartial& p) {
-  for (int off = 16; off > 0; off /= 2) {
-    const auto down = [&](auto v) { return __shfl_down_sync(0xffffffffu, v, off); };
-    ReducePartial o;
-    for (int c = 0; c < 3; ++c) {
-      o.reaction[c] = down(p.reaction[c]);
-      o.internal[c] = down(p.internal[c]);
-    }
-    o.free2 = down(p.free2);
-    o.held2 = down(p.held2);
-    o.kinetic = down(p.kinetic);
-    o.max_disp = down(p.max_disp);
-    o.front_disp = down(p.front_disp);
-    o.energy = down(p.energy);
-    o.visco_power = down(p.visco_power);
-    o.visco_stored = down(p.visco_stored);
-    o.nonfinite = down(p.nonfinite);
-    combine(p, o);
-  }
-}
-
-/// The block's reduction of one value per thread (fixed order): within each
-/// warp by shuffles, then the warps' results by warp 0; thread 0's return
-/// value is the block's. (Before: a shared-memory tree with a __syncthreads
-/// per level, 7 us for the final combine of 34 partials on the kidney.)
-__device__ ReducePartial block_reduce(ReducePartial mine) {
-  constexpr int kWarps = kReduceBlock / 32;
-  __shared__ ReducePartial sh[kWarps];
-  warp_combine(mine);
-  const int warp = int(threadIdx.x) / 32, lane = int(threadIdx.x) % 32;
-  if (lane == 0) sh[warp] = mine;
-  __syncthreads();
-  if (warp != 0) return mine;
-  mine = lane < kWarps ? sh[lane] : zero_partial();
-  warp_combine(mine);
-  return mine;
+/// The block's sum of one partial per thread, in thread 0 (cuda/block_sum.cuh;
+/// before: a shared-memory tree with a __syncthreads per level, 7 us for the
+/// final combine of 34 partials on the kidney).
+__device__ ReducePartial block_reduce(const ReducePartial& mine) {
+  __shared__ ReducePartial sh[kReduceBlock / 32];
+  return block_sum<kReduceBlock>(mine, zero_partial(), sh,
+                                 [](ReducePartial& a, const ReducePartial& b) { combine(a, b); });
 }
 
 /// Node a's share (core node_terms) and its front-ring displacement.
