@@ -299,6 +299,20 @@ Reductions Backend::reduce() {
   return do_reduce();
 }
 
+Reductions Backend::advance_reduce(int steps) {
+  require_upload("advance_reduce");
+  if (steps < 0) throw std::invalid_argument(fmt::format("advance_reduce: step count {} must be >= 0", steps));
+  if (steps == 0) return do_reduce();
+  const Reductions r = do_advance_reduce(steps, contact_tools(steps));
+  for (ToolMotion& m : motion_) m.from = m.to;
+  return r;
+}
+
+Reductions Backend::do_advance_reduce(int steps, const ContactTools<double>& tools) {
+  do_advance(steps, tools);
+  return do_reduce();
+}
+
 Fields Backend::download() {
   require_upload("download");
   return do_download();

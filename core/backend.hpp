@@ -197,6 +197,12 @@ class Backend {
   /// (which it clears).
   Reductions reduce();
 
+  /// advance(steps) then reduce(), as one unit of work: the haptic tick's.
+  /// Results are those of the two calls; a backend may run both without
+  /// returning to the host in between (the cuda backend replays one graph:
+  /// the tools' upload, the steps, the reductions and their download).
+  Reductions advance_reduce(int steps);
+
   /// Copies the store's fields to the host (output, tests).
   Fields download();
 
@@ -241,6 +247,8 @@ class Backend {
   virtual std::vector<index_t> do_contact_candidates(const ContactTools<double>& sweep) = 0;
   virtual std::vector<ContactNode> do_contacts() = 0;
   virtual Reductions do_reduce() = 0;
+  /// Default: do_advance, then do_reduce.
+  virtual Reductions do_advance_reduce(int steps, const ContactTools<double>& tools);
   virtual Fields do_download() = 0;
   virtual void do_write_positions(float* dst) = 0;
 

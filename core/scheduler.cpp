@@ -205,9 +205,8 @@ TickReport Scheduler::tick(std::span<Device* const> devices) {
   backend_.move_tools(motion_);
   seed_region();
   const long first_step = total_steps_;
-  backend_.advance(steps_per_tick_);
+  const Reductions r = backend_.advance_reduce(steps_per_tick_);
   total_steps_ += steps_per_tick_;
-  const Reductions r = backend_.reduce();
   check_health(r, first_step);
   note_contacts(r);
 

@@ -201,11 +201,21 @@ void DeviceContact<T>::allocate(index_t n_nodes, index_t n_surf) {
 }
 
 template <class T>
-const ContactTools<T>* DeviceContact<T>::upload(const ContactTools<T>& tools, Transfers& log, cudaStream_t stream) {
+std::size_t DeviceContact<T>::stage(const ContactTools<T>& tools) {
   if (tools_pending_) tools_copied_.sync();  // the staging is free again
   tools_host_[0] = tools;
   // only the tools in use cross (the struct's head and n_tools entries)
-  const size_t bytes = offsetof(ContactTools<T>, tool) + sizeof(ToolStep<T>) * size_t(tools.n_tools);
+  return offsetof(ContactTools<T>, tool) + sizeof(ToolStep<T>) * size_t(tools.n_tools);
+}
+
+template <class T>
+void DeviceContact<T>::enqueue_copy(std::size_t bytes, cudaStream_t stream) {
+  CUDA_CHECK(cudaMemcpyAsync(tools_.data(), tools_host_.data(), bytes, cudaMemcpyHostToDevice, stream));
+}
+
+template <class T>
+const ContactTools<T>* DeviceContact<T>::upload(const ContactTools<T>& tools, Transfers& log, cudaStream_t stream) {
+  const std::size_t bytes = stage(tools);
   log.to_device(tools_.data(), tools_host_.data(), bytes, stream);
   tools_copied_.record(stream);
   tools_pending_ = true;

@@ -39,6 +39,13 @@ class DeviceContact {
   /// Queues the upload of the tools' motion over the next steps (pinned
   /// staging, guarded by an event); returns the device copy the kernels read.
   const ContactTools<T>* upload(const ContactTools<T>& tools, Transfers& log, cudaStream_t stream);
+  /// upload() in two parts, for a graph that the caller synchronises
+  /// before the next stage(): stage() writes the pinned staging (once its
+  /// last upload has been read) and returns the bytes to copy;
+  /// enqueue_copy() queues that copy (in a graph: its memcpy node).
+  std::size_t stage(const ContactTools<T>& tools);
+  void enqueue_copy(std::size_t bytes, cudaStream_t stream);
+  const ContactTools<T>* device_tools() const { return tools_.data(); }
 
   /// Tool `tool` at tip (m) grasps its pushed nodes (offsets from the tip).
   void begin_grasp(const ModelView<T>& m, const StateView<T>& s, const Packed3<T>* u, int tool, Vec3<double> tip,

@@ -308,6 +308,41 @@ class CudaBackend final : public Backend {
     }
   }
 
+  /// The haptic tick's work as one graph (Graph mode, the usual case): the
+  /// tools' upload, the steps with their contact stage, the reductions and
+  /// their download, then one wait. Kernels and order are advance()'s and
+  /// reduce()'s, so the results are the same bits. Steps beyond one graph's
+  /// length go first through do_advance; other modes run the two calls.
+  Reductions do_advance_reduce(int steps, const ContactTools<double>& tools) override {
+    const RegionView r = region_.view();
+    const bool moves = r.n_elems > 0 || r.n_nodes > 0 || tools.n_tools > 0;
+    if (stepper_.choose(r) != CudaStepMode::Graph || !moves) return Backend::do_advance_reduce(steps, tools);
+    const int last = std::min(steps, Stepper<T>::kMaxGraphSteps), before = steps - last;
+    if (before > 0) do_advance(before, slice(tools, 0, before));
+    const ContactTools<double> tail = slice(tools, before, last);
+    const std::size_t tool_bytes = tail.n_tools > 0 ? contact_.stage(contact_tools_as<T>(tail)) : 0;
+    const ContactTools<T>* dtools = tail.n_tools > 0 ? contact_.device_tools() : nullptr;
+    // the copy's size (the tools in use) is part of the graph
+    const GraphKey key{store_.u.phase, last, dtools != nullptr, 1 + tail.n_tools};
+    const cudaGraphExec_t exec = stepper_.cached_graph(
+        key,
+        [&](cudaStream_t st) {
+          if (tool_bytes > 0) contact_.enqueue_copy(tool_bytes, st);
+          stepper_.enqueue_steps(store_.model(), store_.state(), r, store_.u.current(), last, dtools, st);
+          reducer_.enqueue(store_.model(), store_.state(), r, region_.front(), store_.u.at(store_.u.phase + last),
+                           contact_, st);
+          CUDA_CHECK(cudaMemcpyAsync(reducer_.result_host(), reducer_.result(), sizeof(Reductions),
+                                     cudaMemcpyDeviceToHost, st));
+        },
+        stream());
+    CUDA_CHECK(cudaGraphLaunch(exec, stream()));
+    store_.u.advance(last);
+    stream_.sync();
+    if (tool_bytes > 0) log_.count_to_device(tool_bytes);
+    log_.count_to_host(sizeof(Reductions));
+    return reducer_.result_host()[0];
+  }
+
   std::vector<index_t> do_contact_candidates(const ContactTools<double>& sweep) override {
     return contact_.candidates(store_.model(), store_.state(), store_.u.current().u, contact_tools_as<T>(sweep),
                                log_, stream());

@@ -170,6 +170,15 @@ class Transfers {
     ++c_.d2h;
     c_.d2h_bytes += bytes;
   }
+  /// Counts copies that a graph made (its memcpy nodes).
+  void count_to_device(std::size_t bytes) {
+    ++c_.h2d;
+    c_.h2d_bytes += bytes;
+  }
+  void count_to_host(std::size_t bytes) {
+    ++c_.d2h;
+    c_.d2h_bytes += bytes;
+  }
   const TransferCounters& counters() const { return c_; }
 
  private:

@@ -165,6 +165,14 @@ void Reducer<T>::allocate(index_t n_nodes, index_t n_elems) {
 template <class T>
 Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
                            StepBuffers<T> b, DeviceContact<T>& contact, Transfers& log, cudaStream_t stream) {
+  enqueue(m, s, r, front, b, contact, stream);
+  log.to_host(result_host_.data(), result_.data(), sizeof(Reductions), stream);
+  return result_host_[0];
+}
+
+template <class T>
+void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
+                         StepBuffers<T> b, DeviceContact<T>& contact, cudaStream_t stream) {
   if (m.ianp && r.n_elems > 0) {  // nodal pressures at the current u, into scratch
     // pass 1 below rewrites the region's elements' slots; the others must be the state's (a whole-mesh
     // region rewrites every slot, so the copy is only needed for a limited one)
@@ -182,8 +190,6 @@ Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const R
                 static_cast<const T*>(node_p_.data()), law_, partial_.data());
   launch_blocks(1, kReduceBlock, stream, reduce_final_kernel, blocks, partial_.data(), s.bad, result_.data());
   contact.reduce(m, s, result_.data(), stream);
-  log.to_host(result_host_.data(), result_.data(), sizeof(Reductions), stream);
-  return result_host_[0];
 }
 
 template class Reducer<float>;

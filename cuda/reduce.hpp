@@ -51,6 +51,14 @@ class Reducer {
   Reductions run(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
                  StepBuffers<T> b, DeviceContact<T>& contact, Transfers& log, cudaStream_t stream);
 
+  /// run()'s kernels without the download: the result stays in device
+  /// memory (result()), for a graph that downloads it itself.
+  void enqueue(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front, StepBuffers<T> b,
+               DeviceContact<T>& contact, cudaStream_t stream);
+  const Reductions* result() const { return result_.data(); }
+  /// Pinned host memory for the result's download.
+  Reductions* result_host() { return result_host_.data(); }
+
  private:
   DeviceArray<ReducePartial> partial_;  ///< one per stage-1 block
   DeviceArray<Reductions> result_;      ///< (1)

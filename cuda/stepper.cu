@@ -126,14 +126,13 @@ void Stepper<T>::launch_steps(const ModelView<T>& m, const StateView<T>& s, cons
 }
 
 template <class T>
-cudaGraphExec_t Stepper<T>::graph(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
-                                  BufferRing<T>& ring, int steps, const ContactTools<T>* tools, cudaStream_t stream) {
-  const std::tuple<int, int, bool> key{ring.phase, steps, tools != nullptr};
+cudaGraphExec_t Stepper<T>::cached_graph(const GraphKey& key, const std::function<void(cudaStream_t)>& enqueue,
+                                         cudaStream_t stream) {
   if (auto it = graphs_.find(key); it != graphs_.end()) return it->second.get();
   cudaGraph_t g = nullptr;
   CUDA_CHECK(cudaStreamBeginCapture(stream, cudaStreamCaptureModeThreadLocal));
   try {
-    launch_steps(m, s, r, ring.current(), steps, tools, stream);
+    enqueue(stream);
   } catch (...) {
     cudaStreamEndCapture(stream, &g);
     if (g) cudaGraphDestroy(g);
@@ -145,6 +144,14 @@ cudaGraphExec_t Stepper<T>::graph(const ModelView<T>& m, const StateView<T>& s, 
   cudaGraphDestroy(g);
   CUDA_CHECK(err);
   return graphs_.emplace(key, GraphExec(exec)).first->second.get();
+}
+
+template <class T>
+cudaGraphExec_t Stepper<T>::graph(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
+                                  BufferRing<T>& ring, int steps, const ContactTools<T>* tools, cudaStream_t stream) {
+  return cached_graph(
+      {ring.phase, steps, tools != nullptr, 0},
+      [&](cudaStream_t st) { launch_steps(m, s, r, ring.current(), steps, tools, st); }, stream);
 }
 
 template <class T>

@@ -19,8 +19,9 @@
 
 #include <cuda_runtime.h>
 
+#include <compare>
+#include <functional>
 #include <map>
-#include <tuple>
 #include <utility>
 
 #include "cuda/cuda_backend.hpp"
@@ -48,6 +49,16 @@ class GraphExec {
 
  private:
   cudaGraphExec_t e_ = nullptr;
+};
+
+/// What a cached graph holds: `steps` steps from buffer phase `phase`,
+/// with or without the contact stage, framed by a caller's work (frame 0:
+/// the steps alone; the backend's tick graph uses its own frame values).
+struct GraphKey {
+  int phase = 0, steps = 0;
+  bool contact = false;
+  int frame = 0;
+  auto operator<=>(const GraphKey&) const = default;
 };
 
 /// What the device allows for the persistent modes.
@@ -96,6 +107,19 @@ class Stepper {
   void advance(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, BufferRing<T>& ring, int steps,
                const ContactTools<T>* tools, cudaStream_t stream);
 
+  /// Queues the kernels of `steps` whole steps from buffers b (the Graph
+  /// mode's launches), for a caller's own graph; the ring's phase is the
+  /// caller's to advance.
+  void enqueue_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b, int steps,
+                     const ContactTools<T>* tools, cudaStream_t stream) {
+    launch_steps(m, s, r, b, steps, tools, stream);
+  }
+
+  /// The graph cached under `key`, captured on first use from what
+  /// `enqueue` queues on the stream; dropped with the others (invalidate).
+  cudaGraphExec_t cached_graph(const GraphKey& key, const std::function<void(cudaStream_t)>& enqueue,
+                               cudaStream_t stream);
+
  private:
   void launch_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b, int steps,
                     const ContactTools<T>* tools, cudaStream_t stream);
@@ -105,8 +129,8 @@ class Stepper {
   CudaStepMode mode_ = CudaStepMode::Auto;
   PersistentLimits limits_;
   LawView<T> law_;
-  /// (phase, steps, contact) -> graph; the tools' buffer is the backend's one device array
-  std::map<std::tuple<int, int, bool>, GraphExec> graphs_;
+  /// the tools' buffer is the backend's one device array
+  std::map<GraphKey, GraphExec> graphs_;
 };
 
 }  // namespace tissue::gpu

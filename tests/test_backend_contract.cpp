@@ -624,6 +624,77 @@ TEST_P(Contract, ContactCandidatesSeedALimitedRegion) {
   }
 }
 
+/// Every member of two reductions, bit for bit.
+void expect_same(const Reductions& a, const Reductions& b) {
+  const auto same3 = [](Vec3<double> x, Vec3<double> y) { return x.x == y.x && x.y == y.y && x.z == y.z; };
+  EXPECT_TRUE(same3(a.reaction, b.reaction));
+  EXPECT_TRUE(same3(a.internal, b.internal));
+  EXPECT_EQ(a.free_force2, b.free_force2);
+  EXPECT_EQ(a.held_force2, b.held_force2);
+  EXPECT_EQ(a.kinetic, b.kinetic);
+  EXPECT_EQ(a.max_disp, b.max_disp);
+  EXPECT_EQ(a.strain_energy, b.strain_energy);
+  EXPECT_EQ(a.front_disp, b.front_disp);
+  EXPECT_EQ(a.visco_power, b.visco_power);
+  EXPECT_EQ(a.visco_stored, b.visco_stored);
+  EXPECT_EQ(a.bad_elem, b.bad_elem);
+  EXPECT_EQ(a.finite, b.finite);
+  for (int t = 0; t < kMaxTools; ++t) {
+    EXPECT_TRUE(same3(a.tools[t].reaction, b.tools[t].reaction)) << "tool " << t;
+    EXPECT_EQ(a.tools[t].contact, b.tools[t].contact) << "tool " << t;
+    EXPECT_EQ(a.tools[t].grasped, b.tools[t].grasped) << "tool " << t;
+    EXPECT_EQ(a.tools[t].rigid, b.tools[t].rigid) << "tool " << t;
+    EXPECT_EQ(a.tools[t].outside, b.tools[t].outside) << "tool " << t;
+  }
+}
+
+// advance_reduce (one graph on the cuda backend) against advance then reduce:
+// a tool pressing and then grasping, over the whole mesh and a limited
+// region, with step counts that start graphs at every buffer phase, one of
+// more steps than a graph holds, and none.
+TEST_P(Contract, AdvanceReduceGivesTheBitsOfAdvanceThenReduce) {
+  const auto m = slab(8);
+  const double r = 0.004;
+  const ToolShape shape{"probe", r, 0.01};
+  for (int depth : {kDepthAll, 2}) {
+    SCOPED_TRACE(::testing::Message() << "depth " << depth);
+    auto twice = make(m), once = make(m);
+    for (Backend* b : {twice.get(), once.get()}) b->set_tools(std::span<const ToolShape>(&shape, 1));
+    double z = kTop + r + 5e-4;
+    int tick = 0;
+    bool seeded = depth == kDepthAll;
+    for (int steps : {4, 4, 7, 1, 33, 4, 0, 5, 4}) {
+      SCOPED_TRACE(::testing::Message() << "tick " << tick << ", " << steps << " steps");
+      const double z1 = std::max(z - 8e-4, kTop + r - 2.5e-3);
+      const ToolMotion mv{{{0.0203, 0.0196, z}, {0, 0, 1}}, {{0.0203, 0.0196, z1}, {0, 0, 1}}, tick >= 7};
+      z = z1;
+      for (Backend* b : {twice.get(), once.get()}) {
+        b->move_tools(std::span<const ToolMotion>(&mv, 1));
+        if (seeded) continue;
+        b->build_region({}, depth);  // empty, as the Scheduler starts: candidates are nodes outside the region
+        const std::vector<index_t> seeds = b->contact_candidates();
+        ASSERT_FALSE(seeds.empty());
+        b->build_region(seeds, depth);
+      }
+      seeded = true;
+      twice->advance(steps);
+      const Reductions want = twice->reduce();
+      const Reductions got = once->advance_reduce(steps);
+      expect_same(got, want);
+      if (tick >= 3) EXPECT_GT(got.tools[0].contact, 0);
+      if (tick >= 7) EXPECT_GT(got.tools[0].grasped, 0);
+      const Fields a = twice->download(), b = once->download();
+      EXPECT_EQ(b.u, a.u);
+      EXPECT_EQ(b.f, a.f);
+      ++tick;
+    }
+  }
+  auto b = make();
+  EXPECT_THROW(b->advance_reduce(1), std::logic_error);
+  b->upload(m);
+  EXPECT_THROW(b->advance_reduce(-1), std::invalid_argument);
+}
+
 TEST_P(Contract, AToolStartingInsideTheSurfaceIsInContactFromTheFirstTick) {
   const auto m = slab(8);
   auto b = make(m);
