@@ -4,7 +4,6 @@
 
 #include <algorithm>
 
-#include "cuda/block_sum.cuh"
 #include "cuda/contact.cuh"
 #include "cuda/launch.cuh"
 
@@ -75,107 +74,6 @@ __global__ void records_kernel(ModelView<T> m, StateView<T> s, ContactRecord* ou
   out[i] = {a, s.contact_tool[a], s.contact[a], {float(n.x), float(n.y), float(n.z)}};
 }
 
-/// Threads of a contact-reduction block (a multiple of 32, at most 32 warps).
-constexpr int kContactBlock = 256;
-constexpr int kContactWarps = kContactBlock / 32;
-
-__device__ void combine(ContactPartial& a, const ContactPartial& b) {
-  for (int t = 0; t < kMaxTools; ++t) {
-    for (int c = 0; c < 3; ++c) a.reaction[t][c] += b.reaction[t][c];
-    a.contact[t] += b.contact[t];
-    a.grasped[t] += b.grasped[t];
-    a.rigid[t] += b.rigid[t];
-    a.outside[t] += b.outside[t];
-    if (b.rigid_first[t] >= 0 && (a.rigid_first[t] < 0 || b.rigid_first[t] < a.rigid_first[t]))
-      a.rigid_first[t] = b.rigid_first[t];
-  }
-}
-
-/// Surface nodes one block of contact_partials_kernel reduces: a fixed
-/// split, so the partials and their order depend only on the mesh.
-constexpr index_t kContactChunk = 2048;
-
-__device__ void empty_partial(ContactPartial& p) {
-  for (int t = 0; t < kMaxTools; ++t) {
-    p.reaction[t][0] = p.reaction[t][1] = p.reaction[t][2] = 0;
-    p.contact[t] = p.grasped[t] = p.rigid[t] = p.outside[t] = 0;
-    p.rigid_first[t] = -1;
-  }
-}
-
-/// The block's combined partial, in thread 0 (cuda/block_sum.cuh; before: a
-/// shared-memory tree over 128 threads with a __syncthreads per level, 20 us
-/// on the kidney's 1.8k surface nodes).
-__device__ ContactPartial block_combine(ContactPartial* sh, const ContactPartial& p) {
-  ContactPartial empty;
-  empty_partial(empty);
-  return block_sum<kContactBlock>(p, empty, sh, [](ContactPartial& a, const ContactPartial& b) { combine(a, b); });
-}
-
-/// The tools' reductions of the combined partial q into out->tools.
-__device__ void write_tools(const ContactPartial& q, Reductions* out) {
-  for (int t = 0; t < kMaxTools; ++t) {
-    ToolReduction r;
-    r.reaction = {q.reaction[t][0], q.reaction[t][1], q.reaction[t][2]};
-    r.contact = q.contact[t];
-    r.grasped = q.grasped[t];
-    r.rigid = q.rigid[t];
-    r.rigid_first = q.rigid_first[t];
-    r.outside = q.outside[t];
-    out->tools[t] = r;
-    out->finite = out->finite && isfinite(r.reaction.x + r.reaction.y + r.reaction.z);
-  }
-}
-
-/// Stage 1: block b reduces surface nodes [b kContactChunk, (b + 1) kContactChunk) into partials[b];
-/// a surface of one chunk (the kidney's) is finished here, into out, with no second launch.
-/// (Before: one block walked the whole surface, 50k nodes on a 100k-triangle slab, latency-bound.)
-template <class T>
-__global__ void __launch_bounds__(kContactBlock) contact_partials_kernel(ModelView<T> m, StateView<T> s,
-                                                                         ContactPartial* partials, Reductions* out) {
-  __shared__ ContactPartial sh[kContactWarps];
-  ContactPartial p;
-  empty_partial(p);
-  const index_t first = index_t(blockIdx.x) * kContactChunk;
-  const index_t last = first + kContactChunk < m.n_surf ? first + kContactChunk : m.n_surf;
-  for (index_t i = first + index_t(threadIdx.x); i < last; i += kContactBlock) {
-    const index_t a = m.surf_nodes[i];
-    const int t = s.contact_tool[a];
-    const std::uint8_t kind = s.contact[a];
-    if (t < 0 || t >= kMaxTools || kind == kNoContact) continue;
-    const Vec3<T> r = contact_reaction(kind, s.f[a].vec(), s.contact_normal[a].vec(), fixed_axes(m.node_flags[a]));
-    p.reaction[t][0] += double(r.x);
-    p.reaction[t][1] += double(r.y);
-    p.reaction[t][2] += double(r.z);
-    p.contact[t] += (kind == kPushed || kind == kGrasped) ? 1 : 0;
-    p.grasped[t] += kind == kGrasped ? 1 : 0;
-    if (kind == kRigidContact) {
-      if (p.rigid_first[t] < 0 || a < p.rigid_first[t]) p.rigid_first[t] = a;
-      ++p.rigid[t];
-    }
-    p.outside[t] += kind == kOutsideRegion ? 1 : 0;
-  }
-  p = block_combine(sh, p);
-  if (threadIdx.x != 0) return;
-  if (gridDim.x == 1)
-    write_tools(p, out);
-  else
-    partials[blockIdx.x] = p;
-}
-
-/// Stage 2: one block combines the n partials (fixed order) into out->tools.
-__global__ void __launch_bounds__(kContactBlock) contact_finish_kernel(const ContactPartial* partials, int n,
-                                                                       Reductions* out) {
-  __shared__ ContactPartial sh[kContactWarps];
-  ContactPartial p;
-  empty_partial(p);
-  for (int i = int(threadIdx.x); i < n; i += kContactBlock) combine(p, partials[i]);
-  p = block_combine(sh, p);
-  if (threadIdx.x == 0) write_tools(p, out);
-}
-
-int contact_blocks(index_t n_surf) { return int((std::max<index_t>(n_surf, 1) + kContactChunk - 1) / kContactChunk); }
-
 }  // namespace
 
 template <class T>
@@ -190,7 +88,6 @@ void DeviceContact<T>::allocate(index_t n_nodes, index_t n_surf) {
   n_selected_.allocate(1);
   n_selected_host_.allocate(1);
   records_.allocate(std::max<index_t>(n_surf, 1));
-  partials_.allocate(contact_blocks(n_surf));
   // the kernel writes the fields, not the padding between them: zero it once so that the copy to the
   // host reads no uninitialised byte (compute-sanitizer initcheck)
   CUDA_CHECK(cudaMemset(records_.data(), 0, records_.bytes()));
@@ -269,15 +166,6 @@ std::vector<ContactNode> DeviceContact<T>::contacts(const ModelView<T>& m, const
       out.push_back({r.node, r.tool, r.kind,
                      r.kind == kPushed ? Vec3<double>{r.normal[0], r.normal[1], r.normal[2]} : Vec3<double>{}});
   return out;
-}
-
-template <class T>
-void DeviceContact<T>::reduce(const ModelView<T>& m, const StateView<T>& s, Reductions* out, cudaStream_t stream) {
-  const int blocks = contact_blocks(m.n_surf);
-  launch_blocks(blocks, kContactBlock, stream, contact_partials_kernel<T>, m, s, partials_.data(), out);
-  if (blocks > 1)
-    launch_blocks(1, kContactBlock, stream, contact_finish_kernel, static_cast<const ContactPartial*>(partials_.data()),
-                  blocks, out);
 }
 
 template class DeviceContact<float>;

@@ -1,8 +1,9 @@
 // The tool contact of the cuda backend outside the step loop (the per-step
 // kernels are cuda/contact.cuh, run by the stepper): the tools' motion in
 // device memory (one small upload per advance), grasp start and release,
-// the region's contact candidates, the contact list, and the per-tool
-// reductions. The rule is core/contact.hpp's (docs/contact.md).
+// the region's contact candidates and the contact list (the per-tool
+// reductions are part of cuda/reduce.cu's kernel). The rule is
+// core/contact.hpp's (docs/contact.md).
 #pragma once
 
 #include <cuda_runtime.h>
@@ -21,13 +22,6 @@ struct ContactRecord {
   signed char tool;
   std::uint8_t kind;
   float normal[3];
-};
-
-/// Per-tool partial sums of the contact reduction (double): one per thread,
-/// then one per block.
-struct ContactPartial {
-  double reaction[kMaxTools][3];
-  int contact[kMaxTools], grasped[kMaxTools], rigid[kMaxTools], rigid_first[kMaxTools], outside[kMaxTools];
 };
 
 template <class T>
@@ -65,12 +59,6 @@ class DeviceContact {
   std::vector<ContactNode> contacts(const ModelView<T>& m, const StateView<T>& s, Transfers& log,
                                     cudaStream_t stream);
 
-  /// Per-tool contact reductions (core ToolReduction) over the surface, with
-  /// the internal force s.f, into out->tools (device memory): one block per
-  /// 2,048 surface nodes, then (if more than one) one block over their
-  /// partials, each in a fixed order: deterministic.
-  void reduce(const ModelView<T>& m, const StateView<T>& s, Reductions* out, cudaStream_t stream);
-
  private:
   DeviceArray<ContactTools<T>> tools_;       ///< (1)
   PinnedArray<ContactTools<T>> tools_host_;  ///< its staging
@@ -83,7 +71,6 @@ class DeviceContact {
   PinnedArray<int> n_selected_host_;
   DeviceArray<unsigned char> cub_temp_;
   DeviceArray<ContactRecord> records_;              ///< (n_surf)
-  DeviceArray<ContactPartial> partials_;            ///< the reduction's per-block partials
 };
 
 }  // namespace tissue::gpu

@@ -329,8 +329,7 @@ class CudaBackend final : public Backend {
         [&](cudaStream_t st) {
           if (tool_bytes > 0) contact_.enqueue_copy(tool_bytes, st);
           stepper_.enqueue_steps(store_.model(), store_.state(), r, store_.u.current(), last, dtools, st);
-          reducer_.enqueue(store_.model(), store_.state(), r, region_.front(), store_.u.at(store_.u.phase + last),
-                           contact_, st);
+          reducer_.enqueue(store_.model(), store_.state(), r, region_.front(), store_.u.at(store_.u.phase + last), st);
           CUDA_CHECK(cudaMemcpyAsync(reducer_.result_host(), reducer_.result(), sizeof(Reductions),
                                      cudaMemcpyDeviceToHost, st));
         },
@@ -351,8 +350,8 @@ class CudaBackend final : public Backend {
   std::vector<ContactNode> do_contacts() override { return contact_.contacts(store_.model(), store_.state(), log_, stream()); }
 
   Reductions do_reduce() override {
-    return reducer_.run(store_.model(), store_.state(), region_.view(), region_.front(), store_.u.current(), contact_,
-                        log_, stream());
+    return reducer_.run(store_.model(), store_.state(), region_.view(), region_.front(), store_.u.current(), log_,
+                        stream());
   }
 
   Fields do_download() override {

@@ -2,8 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
+#include "core/contact.hpp"
 #include "core/energy.hpp"
+#include "core/node_rules.hpp"
 #include "cuda/block_sum.cuh"
 #include "cuda/launch.cuh"
 #include "cuda/tled.cuh"
@@ -46,6 +49,66 @@ __device__ ReducePartial block_reduce(const ReducePartial& mine) {
   __shared__ ReducePartial sh[kReduceBlock / 32];
   return block_sum<kReduceBlock>(mine, zero_partial(), sh,
                                  [](ReducePartial& a, const ReducePartial& b) { combine(a, b); });
+}
+
+__device__ void empty_partial(ContactPartial& p) {
+  for (int t = 0; t < kMaxTools; ++t) {
+    p.reaction[t][0] = p.reaction[t][1] = p.reaction[t][2] = 0;
+    p.contact[t] = p.grasped[t] = p.rigid[t] = p.outside[t] = 0;
+    p.rigid_first[t] = -1;
+  }
+}
+
+__device__ void combine(ContactPartial& a, const ContactPartial& b) {
+  for (int t = 0; t < kMaxTools; ++t) {
+    for (int c = 0; c < 3; ++c) a.reaction[t][c] += b.reaction[t][c];
+    a.contact[t] += b.contact[t];
+    a.grasped[t] += b.grasped[t];
+    a.rigid[t] += b.rigid[t];
+    a.outside[t] += b.outside[t];
+    if (b.rigid_first[t] >= 0 && (a.rigid_first[t] < 0 || b.rigid_first[t] < a.rigid_first[t]))
+      a.rigid_first[t] = b.rigid_first[t];
+  }
+}
+
+/// The block's sum of one contact partial per thread, in thread 0.
+__device__ ContactPartial block_reduce(const ContactPartial& mine) {
+  __shared__ ContactPartial sh[kReduceBlock / 32];
+  ContactPartial empty;
+  empty_partial(empty);
+  return block_sum<kReduceBlock>(mine, empty, sh, [](ContactPartial& a, const ContactPartial& b) { combine(a, b); });
+}
+
+/// Surface node a's contact share (core contact_reaction) for its tool.
+template <class T>
+__device__ void accumulate_contact(const ModelView<T>& m, const StateView<T>& s, index_t a, ContactPartial& p) {
+  const int t = s.contact_tool[a];
+  const std::uint8_t kind = s.contact[a];
+  if (t < 0 || t >= kMaxTools || kind == kNoContact) return;
+  const Vec3<T> r = contact_reaction(kind, s.f[a].vec(), s.contact_normal[a].vec(), fixed_axes(m.node_flags[a]));
+  p.reaction[t][0] += double(r.x);
+  p.reaction[t][1] += double(r.y);
+  p.reaction[t][2] += double(r.z);
+  p.contact[t] += (kind == kPushed || kind == kGrasped) ? 1 : 0;
+  p.grasped[t] += kind == kGrasped ? 1 : 0;
+  if (kind == kRigidContact) {
+    if (p.rigid_first[t] < 0 || a < p.rigid_first[t]) p.rigid_first[t] = a;
+    ++p.rigid[t];
+  }
+  p.outside[t] += kind == kOutsideRegion ? 1 : 0;
+}
+
+/// A partial another block wrote (made visible by its fence), read from L2
+/// (never a stale line of this SM's L1).
+template <class P>
+__device__ P load_written(const P* p) {
+  static_assert(sizeof(P) % sizeof(int) == 0);
+  int w[sizeof(P) / sizeof(int)];
+  const int* src = reinterpret_cast<const int*>(p);
+  for (int k = 0; k < int(sizeof(P) / sizeof(int)); ++k) w[k] = __ldcg(src + k);
+  P out;
+  memcpy(&out, w, sizeof(P));
+  return out;
 }
 
 /// Node a's share (core node_terms) and its front-ring displacement.
@@ -106,24 +169,10 @@ __device__ void add_element_energy(const ModelView<T>& m, const T* node_p, const
   p.visco_stored += pe.stored;
 }
 
-template <class T>
-__global__ void __launch_bounds__(kReduceBlock)
-    reduce_partial_kernel(ModelView<T> m, StateView<T> s, RegionView r, FrontView front, StepBuffers<T> b,
-                          const T* energy_node_p, LawView<T> w, ReducePartial* out) {
-  ReducePartial p = zero_partial();
-  for (index_t i = thread_index(); i < r.n_nodes; i += thread_stride()) accumulate_node(m, s, b, front, r.node(i), p);
-  for (index_t i = thread_index(); i < r.n_elems; i += thread_stride())
-    add_element_energy(m, energy_node_p, b.u, r.elem(i), w, p);
-  const ReducePartial sum = block_reduce(p);
-  if (threadIdx.x == 0) out[blockIdx.x] = sum;
-}
-
-__global__ void __launch_bounds__(kReduceBlock)
-    reduce_final_kernel(int n_partial, const ReducePartial* partial, unsigned long long* bad, Reductions* out) {
-  ReducePartial p = zero_partial();
-  for (int i = threadIdx.x; i < n_partial; i += kReduceBlock) combine(p, partial[i]);
-  const ReducePartial sum = block_reduce(p);
-  if (threadIdx.x != 0) return;
+/// Thread 0 of the block that finishes last: the result from the combined
+/// partials (region sums `sum`, contact sums `c`); reads and clears the bad flag.
+__device__ void write_result(const ReducePartial& sum, const ContactPartial& c, unsigned long long* bad,
+                             Reductions* out) {
   Reductions r;
   r.reaction = {sum.reaction[0], sum.reaction[1], sum.reaction[2]};
   r.internal = {sum.internal[0], sum.internal[1], sum.internal[2]};
@@ -142,9 +191,61 @@ __global__ void __launch_bounds__(kReduceBlock)
     *bad = ~0ull;
   }
   double all = r.free_force2 + r.held_force2 + r.kinetic + r.max_disp + r.visco_power + r.visco_stored;
-  for (int c = 0; c < 3; ++c) all += r.reaction[c] + r.internal[c];
-  r.finite = sum.nonfinite == 0 && isfinite(all);
+  for (int k = 0; k < 3; ++k) all += r.reaction[k] + r.internal[k];
+  bool finite = sum.nonfinite == 0 && isfinite(all);
+  for (int t = 0; t < kMaxTools; ++t) {
+    ToolReduction& tr = r.tools[t];
+    tr.reaction = {c.reaction[t][0], c.reaction[t][1], c.reaction[t][2]};
+    tr.contact = c.contact[t];
+    tr.grasped = c.grasped[t];
+    tr.rigid = c.rigid[t];
+    tr.rigid_first = c.rigid_first[t];
+    tr.outside = c.outside[t];
+    finite = finite && isfinite(tr.reaction.x + tr.reaction.y + tr.reaction.z);
+  }
+  r.finite = finite;
   *out = r;
+}
+
+/// Every reduction in one launch (before: a partial kernel, a final block
+/// and the contact's kernel, 3 launches). Each block sums its share of the
+/// region's nodes and elements and of the surface nodes; the last block to
+/// finish combines every block's partials in block order.
+template <class T>
+__global__ void __launch_bounds__(kReduceBlock)
+    reduce_kernel(ModelView<T> m, StateView<T> s, RegionView r, FrontView front, StepBuffers<T> b,
+                  const T* energy_node_p, LawView<T> w, ReducePartial* partial, ContactPartial* contact,
+                  unsigned* done, Reductions* out) {
+  ReducePartial p = zero_partial();
+  for (index_t i = thread_index(); i < r.n_nodes; i += thread_stride()) accumulate_node(m, s, b, front, r.node(i), p);
+  for (index_t i = thread_index(); i < r.n_elems; i += thread_stride())
+    add_element_energy(m, energy_node_p, b.u, r.elem(i), w, p);
+  ContactPartial c;
+  empty_partial(c);
+  for (index_t i = thread_index(); i < m.n_surf; i += thread_stride()) accumulate_contact(m, s, m.surf_nodes[i], c);
+  p = block_reduce(p);
+  c = block_reduce(c);
+  __shared__ bool last;
+  if (threadIdx.x == 0) {
+    partial[blockIdx.x] = p;
+    contact[blockIdx.x] = c;
+    __threadfence();  // the partials are visible before the count says so
+    last = atomicAdd(done, 1u) == gridDim.x - 1;
+  }
+  __syncthreads();
+  if (!last) return;
+  __threadfence();
+  p = zero_partial();
+  empty_partial(c);
+  for (int i = int(threadIdx.x); i < int(gridDim.x); i += kReduceBlock) {
+    combine(p, load_written(partial + i));
+    combine(c, load_written(contact + i));
+  }
+  p = block_reduce(p);
+  c = block_reduce(c);
+  if (threadIdx.x != 0) return;
+  write_result(p, c, s.bad, out);
+  *done = 0;  // for the next launch
 }
 
 }  // namespace
@@ -152,6 +253,9 @@ __global__ void __launch_bounds__(kReduceBlock)
 template <class T>
 void Reducer<T>::allocate(index_t n_nodes, index_t n_elems) {
   partial_.allocate(kMaxReduceBlocks);
+  contact_partial_.allocate(kMaxReduceBlocks);
+  done_.allocate(1);
+  CUDA_CHECK(cudaMemset(done_.data(), 0, done_.bytes()));
   result_.allocate(1);
   // every byte of the result is defined (its padding too: compute-sanitizer's
   // initcheck reads the whole struct when it comes back)
@@ -164,15 +268,15 @@ void Reducer<T>::allocate(index_t n_nodes, index_t n_elems) {
 
 template <class T>
 Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
-                           StepBuffers<T> b, DeviceContact<T>& contact, Transfers& log, cudaStream_t stream) {
-  enqueue(m, s, r, front, b, contact, stream);
+                           StepBuffers<T> b, Transfers& log, cudaStream_t stream) {
+  enqueue(m, s, r, front, b, stream);
   log.to_host(result_host_.data(), result_.data(), sizeof(Reductions), stream);
   return result_host_[0];
 }
 
 template <class T>
 void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
-                         StepBuffers<T> b, DeviceContact<T>& contact, cudaStream_t stream) {
+                         StepBuffers<T> b, cudaStream_t stream) {
   if (m.ianp && r.n_elems > 0) {  // nodal pressures at the current u, into scratch
     // pass 1 below rewrites the region's elements' slots; the others must be the state's (a whole-mesh
     // region rewrites every slot, so the copy is only needed for a limited one)
@@ -185,11 +289,11 @@ void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const Reg
     launch(r.n_elems, stream, element_pressure_kernel<T>, m, e, r, static_cast<const Packed3<T>*>(b.u));
     launch(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, e, r);
   }
-  const int blocks = std::min(grid_for(std::max(r.n_nodes, r.n_elems), kReduceBlock), kMaxReduceBlocks);
-  launch_blocks(blocks, kReduceBlock, stream, reduce_partial_kernel<T>, m, s, r, front, b,
-                static_cast<const T*>(node_p_.data()), law_, partial_.data());
-  launch_blocks(1, kReduceBlock, stream, reduce_final_kernel, blocks, partial_.data(), s.bad, result_.data());
-  contact.reduce(m, s, result_.data(), stream);
+  const index_t items = std::max({r.n_nodes, r.n_elems, m.n_surf, index_t(1)});
+  const int blocks = std::min(grid_for(items, kReduceBlock), kMaxReduceBlocks);
+  launch_blocks(blocks, kReduceBlock, stream, reduce_kernel<T>, m, s, r, front, b,
+                static_cast<const T*>(node_p_.data()), law_, partial_.data(), contact_partial_.data(), done_.data(),
+                result_.data());
 }
 
 template class Reducer<float>;

@@ -1,17 +1,20 @@
-// The per-tick reductions over the region (core Reductions): reaction on the
+// The per-tick reductions over the region (core Reductions), in one kernel
+// after passes 1-2 (the strain energy's): reaction on the
 // tool-driven components, internal force and residual parts over inner
 // nodes (per held / free component), kinetic energy and max displacement
 // over region nodes, the front ring's displacement, the strain energy of the
 // computed elements at the current u, the Prony terms' viscous power and
-// stored energy, and the bad-element flag (read and
-// cleared). Accumulated in double in two deterministic stages (fixed-order
-// block partials, then one block); one struct comes back.
+// stored energy, the per-tool contact results over the surface, and the
+// bad-element flag (read and cleared). Accumulated in double in two
+// deterministic stages: each block's partials in a fixed order, then the
+// block that finishes last combines all blocks' partials in block order
+// (the partials and their order depend only on the region, not on which
+// block is last). One struct comes back.
 #pragma once
 
 #include <cuda_runtime.h>
 
 #include "core/backend.hpp"
-#include "cuda/contact.hpp"
 #include "cuda/device_array.hpp"
 #include "cuda/views.hpp"
 
@@ -24,6 +27,13 @@ struct ReducePartial {
   double free2, held2, kinetic, max_disp, front_disp, energy;
   double visco_power, visco_stored;  ///< the Prony terms' (core/energy.hpp element_prony_energy)
   int nonfinite;  ///< region nodes with a non-finite u, f or velocity
+};
+
+/// Per-tool partial sums of the contact reduction (double): one per thread,
+/// then one per block.
+struct ContactPartial {
+  double reaction[kMaxTools][3];
+  int contact[kMaxTools], grasped[kMaxTools], rigid[kMaxTools], rigid_first[kMaxTools], outside[kMaxTools];
 };
 
 /// The front ring of the region: nodes whose flood-fill ring equals depth
@@ -43,24 +53,26 @@ class Reducer {
   /// none) and the Prony terms' power and stored energy (null visco_slot: none).
   void set_law(const LawView<T>& law) { law_ = law; }
 
-  /// Reduces over region r with the current buffers b; clears the bad flag;
-  /// `contact` adds the per-tool contact results before the one download.
+  /// Reduces over region r with the current buffers b, and the tools'
+  /// contact over the surface; clears the bad flag; one download.
   /// For IANP the energy needs the nodal pressures at the current u: passes
   /// 1 and 2 run again into scratch (the state's pass arrays stay as the last
   /// step wrote them).
   Reductions run(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
-                 StepBuffers<T> b, DeviceContact<T>& contact, Transfers& log, cudaStream_t stream);
+                 StepBuffers<T> b, Transfers& log, cudaStream_t stream);
 
   /// run()'s kernels without the download: the result stays in device
   /// memory (result()), for a graph that downloads it itself.
   void enqueue(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front, StepBuffers<T> b,
-               DeviceContact<T>& contact, cudaStream_t stream);
+               cudaStream_t stream);
   const Reductions* result() const { return result_.data(); }
   /// Pinned host memory for the result's download.
   Reductions* result_host() { return result_host_.data(); }
 
  private:
-  DeviceArray<ReducePartial> partial_;  ///< one per stage-1 block
+  DeviceArray<ReducePartial> partial_;  ///< one per block
+  DeviceArray<ContactPartial> contact_partial_;  ///< one per block
+  DeviceArray<unsigned> done_;          ///< blocks finished (the last one resets it to 0)
   DeviceArray<Reductions> result_;      ///< (1)
   PinnedArray<Reductions> result_host_;
   DeviceArray<T> dv_slot_, elem_J_, node_p_;  ///< energy scratch
