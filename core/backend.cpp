@@ -248,6 +248,7 @@ ContactTools<double> Backend::contact_tools(int steps) const {
     s.radius = shapes_[t].radius;
     s.shaft = shapes_[t].shaft;
     s.substeps = contact_substeps(m.from, m.to, s.radius, s.shaft, c.steps, contact_options_.max_travel);
+    c.sweep_substeps[t] = contact_substeps(m.from, m.to, s.radius, s.shaft, 1, contact_options_.max_travel);
     s.grasping = grasping_[t];
     s.grasp_tip = grasp_pose_[t].tip;
     s.grasp_axis = grasp_pose_[t].axis;
@@ -311,6 +312,22 @@ Reductions Backend::advance_reduce(int steps) {
 Reductions Backend::do_advance_reduce(int steps, const ContactTools<double>& tools) {
   do_advance(steps, tools);
   return do_reduce();
+}
+
+std::optional<Reductions> Backend::advance_reduce_in_region(int steps) {
+  require_upload("advance_reduce_in_region");
+  if (steps < 0)
+    throw std::invalid_argument(fmt::format("advance_reduce_in_region: step count {} must be >= 0", steps));
+  if (shapes_.empty() || steps == 0) return advance_reduce(steps);
+  std::optional<Reductions> r = do_advance_reduce_in_region(steps, contact_tools(steps));
+  if (r)
+    for (ToolMotion& m : motion_) m.from = m.to;
+  return r;
+}
+
+std::optional<Reductions> Backend::do_advance_reduce_in_region(int steps, const ContactTools<double>& tools) {
+  if (!do_contact_candidates(contact_tools(1)).empty()) return std::nullopt;
+  return do_advance_reduce(steps, tools);
 }
 
 Fields Backend::download() {

@@ -12,6 +12,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -203,6 +204,15 @@ class Backend {
   /// the tools' upload, the steps, the reductions and their download).
   Reductions advance_reduce(int steps);
 
+  /// advance_reduce(steps), unless the pending tool motion reaches surface
+  /// nodes that are not inner region nodes (contact_candidates() is not
+  /// empty): then nothing runs, the tools stay where they were, and the
+  /// result is empty; the caller grows the region (Scheduler) and calls
+  /// advance_reduce. The cuda backend makes that check on the device, in
+  /// the tick's graph, so that a tick whose region holds needs no host
+  /// round trip before its steps.
+  std::optional<Reductions> advance_reduce_in_region(int steps);
+
   /// Copies the store's fields to the host (output, tests).
   Fields download();
 
@@ -249,6 +259,8 @@ class Backend {
   virtual Reductions do_reduce() = 0;
   /// Default: do_advance, then do_reduce.
   virtual Reductions do_advance_reduce(int steps, const ContactTools<double>& tools);
+  /// Default: do_contact_candidates over the whole motion, then do_advance_reduce if it is empty.
+  virtual std::optional<Reductions> do_advance_reduce_in_region(int steps, const ContactTools<double>& tools);
   virtual Fields do_download() = 0;
   virtual void do_write_positions(float* dst) = 0;
 

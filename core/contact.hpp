@@ -88,6 +88,10 @@ struct ContactTools {
   int n_tools = 0;
   int steps = 1;              ///< TLED steps of the advance (the poses are interpolated across them)
   int face = 1;               ///< 1 = face contact on (0: node contact only; a tradeoff setting)
+  /// Checks of the region's candidate sweep (contact_candidates: the whole
+  /// advance as one step), per tool: for a backend that checks on the
+  /// device whether the region must grow before the steps.
+  int sweep_substeps[kMaxTools] = {};
   ToolStep<T> tool[kMaxTools];
 };
 
@@ -99,6 +103,7 @@ ContactTools<T> contact_tools_as(const ContactTools<double>& d) {
   c.n_tools = d.n_tools;
   c.steps = d.steps;
   c.face = d.face;
+  for (int t = 0; t < kMaxTools; ++t) c.sweep_substeps[t] = d.sweep_substeps[t];
   for (int t = 0; t < d.n_tools; ++t) {
     const ToolStep<double>& s = d.tool[t];
     c.tool[t] = {v(s.tip0), v(s.axis0), v(s.tip1), v(s.axis1), T(s.radius), T(s.shaft), s.substeps, s.grasping,

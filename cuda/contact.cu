@@ -39,13 +39,12 @@ __global__ void reset_contacts_kernel(ModelView<T> m, StateView<T> s) {
   s.contact_tool[a] = -1;
 }
 
-/// Flags the non-inner corners of triangles within 1.5 radii of a sub-check capsule.
+/// Whether surface triangle t has a corner that is not an inner region node
+/// and comes within 1.5 radii of a sub-check capsule of the sweep (current
+/// u); c gets its corners.
 template <class T>
-__global__ void flag_candidates_kernel(ModelView<T> m, StateView<T> s, const Packed3<T>* u, ContactTools<T> sweep,
-                                       std::uint8_t* flag) {
-  const index_t t = thread_index();
-  if (t >= m.n_tris) return;
-  index_t c[3];
+__device__ bool reaches_outside(const ModelView<T>& m, const StateView<T>& s, const Packed3<T>* u,
+                                const ContactTools<T>& sweep, index_t t, index_t c[3]) {
   Vec3<T> x[3];
   bool all_inner = true;
   for (int i = 0; i < 3; ++i) {
@@ -53,10 +52,37 @@ __global__ void flag_candidates_kernel(ModelView<T> m, StateView<T> s, const Pac
     x[i] = sweep_position(m, s, sweep, 0, u, c[i]);
     all_inner = all_inner && s.role[c[i]] == kInner;
   }
-  if (all_inner) return;
-  if (!triangle_near_tools(sweep, x)) return;
+  return !all_inner && triangle_near_tools(sweep, x);
+}
+
+/// Flags the non-inner corners of triangles within 1.5 radii of a sub-check capsule.
+template <class T>
+__global__ void flag_candidates_kernel(ModelView<T> m, StateView<T> s, const Packed3<T>* u, ContactTools<T> sweep,
+                                       std::uint8_t* flag) {
+  const index_t t = thread_index();
+  index_t c[3];
+  if (t >= m.n_tris || !reaches_outside(m, s, u, sweep, t, c)) return;
   for (int i = 0; i < 3; ++i)
     if (s.role[c[i]] != kInner) flag[c[i]] = 1;
+}
+
+/// Sets *reach when any triangle has a candidate (flag_candidates_kernel's
+/// test) for the sweep of the advance's tools, tools as one step with their
+/// sweep_substeps: the same sweep as Backend::contact_candidates'.
+template <class T>
+__global__ void reach_outside_kernel(ModelView<T> m, StateView<T> s, const Packed3<T>* u, const ContactTools<T>* tools,
+                                     int* reach) {
+  __shared__ alignas(ContactTools<T>) unsigned char raw[sizeof(ContactTools<T>)];
+  ContactTools<T>& sweep = *reinterpret_cast<ContactTools<T>*>(raw);
+  if (threadIdx.x == 0) {
+    sweep = *tools;
+    sweep.steps = 1;
+    for (int k = 0; k < sweep.n_tools; ++k) sweep.tool[k].substeps = sweep.sweep_substeps[k];
+  }
+  __syncthreads();
+  const index_t t = thread_index();
+  index_t c[3];
+  if (t < m.n_tris && reaches_outside(m, s, u, sweep, t, c)) *reach = 1;  // any writer: no atomics
 }
 
 template <class T>
@@ -88,6 +114,8 @@ void DeviceContact<T>::allocate(index_t n_nodes, index_t n_surf) {
   n_selected_.allocate(1);
   n_selected_host_.allocate(1);
   records_.allocate(std::max<index_t>(n_surf, 1));
+  reach_.allocate(1);
+  reach_host_.allocate(1);
   // the kernel writes the fields, not the padding between them: zero it once so that the copy to the
   // host reads no uninitialised byte (compute-sanitizer initcheck)
   CUDA_CHECK(cudaMemset(records_.data(), 0, records_.bytes()));
@@ -151,6 +179,14 @@ std::vector<index_t> DeviceContact<T>::candidates(const ModelView<T>& m, const S
   std::vector<index_t> out(count);
   if (count > 0) log.to_host(out.data(), selected_.data(), sizeof(index_t) * size_t(count), stream);
   return out;  // surf_nodes is ascending and Flagged keeps the order
+}
+
+template <class T>
+void DeviceContact<T>::enqueue_reach_check(const ModelView<T>& m, const StateView<T>& s, const Packed3<T>* u,
+                                           cudaStream_t stream) {
+  CUDA_CHECK(cudaMemsetAsync(reach_.data(), 0, sizeof(int), stream));
+  launch(m.n_tris, stream, reach_outside_kernel<T>, m, s, u, static_cast<const ContactTools<T>*>(tools_.data()),
+         reach_.data());
 }
 
 template <class T>

@@ -16,6 +16,13 @@
 
 namespace tissue::gpu {
 
+/// Whether the kernels of a checked tick must do nothing (StateView::skip);
+/// read after the previous kernel has finished.
+template <class T>
+__device__ __forceinline__ bool skipped(const StateView<T>& s) {
+  return s.skip != nullptr && *s.skip != 0;
+}
+
 /// Where grasped node a goes at the end of step k (its tool's pose then).
 template <class T>
 __device__ __forceinline__ Vec3<T> grasped_target(const ContactTools<T>& tools, int k, const StateView<T>& s,
@@ -107,7 +114,7 @@ __global__ void sweep_triangles_kernel(ModelView<T> m, StateView<T> s, const Con
   let_next_pass_launch();
   const index_t t = thread_index();
   wait_for_previous_pass();
-  if (t < m.n_tris) sweep_triangle_at(m, s, *tools, k, u_next, t);
+  if (t < m.n_tris && !skipped(s)) sweep_triangle_at(m, s, *tools, k, u_next, t);
 }
 
 template <class T>
@@ -116,7 +123,7 @@ __global__ void gather_contacts_kernel(ModelView<T> m, StateView<T> s, const Con
   let_next_pass_launch();
   const index_t i = thread_index();
   wait_for_previous_pass();
-  if (i < m.n_surf) gather_contact_at(m, s, *tools, k, u, u_next, i);
+  if (i < m.n_surf && !skipped(s)) gather_contact_at(m, s, *tools, k, u, u_next, i);
 }
 
 }  // namespace tissue::gpu

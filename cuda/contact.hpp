@@ -41,6 +41,14 @@ class DeviceContact {
   void enqueue_copy(std::size_t bytes, cudaStream_t stream);
   const ContactTools<T>* device_tools() const { return tools_.data(); }
 
+  /// Queues the check whether the uploaded tools' candidate sweep (tools as
+  /// one step, ContactTools::sweep_substeps) reaches a surface node that is
+  /// not an inner region node, the test of candidates(), at u: reach() is
+  /// then non-zero (device memory); reach_host() is pinned memory for its download.
+  void enqueue_reach_check(const ModelView<T>& m, const StateView<T>& s, const Packed3<T>* u, cudaStream_t stream);
+  const int* reach() const { return reach_.data(); }
+  int* reach_host() { return reach_host_.data(); }
+
   /// Tool `tool` at tip (m) grasps its pushed nodes (offsets from the tip).
   void begin_grasp(const ModelView<T>& m, const StateView<T>& s, const Packed3<T>* u, int tool, Vec3<double> tip,
                    cudaStream_t stream);
@@ -71,6 +79,8 @@ class DeviceContact {
   PinnedArray<int> n_selected_host_;
   DeviceArray<unsigned char> cub_temp_;
   DeviceArray<ContactRecord> records_;              ///< (n_surf)
+  DeviceArray<int> reach_;                          ///< enqueue_reach_check's answer (1)
+  PinnedArray<int> reach_host_;
 };
 
 }  // namespace tissue::gpu

@@ -17,6 +17,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -314,32 +315,20 @@ class CudaBackend final : public Backend {
   /// reduce()'s, so the results are the same bits. Steps beyond one graph's
   /// length go first through do_advance; other modes run the two calls.
   Reductions do_advance_reduce(int steps, const ContactTools<double>& tools) override {
-    const RegionView r = region_.view();
-    const bool moves = r.n_elems > 0 || r.n_nodes > 0 || tools.n_tools > 0;
-    if (stepper_.choose(r) != CudaStepMode::Graph || !moves) return Backend::do_advance_reduce(steps, tools);
+    if (!tick_graphs()) return Backend::do_advance_reduce(steps, tools);
     const int last = std::min(steps, Stepper<T>::kMaxGraphSteps), before = steps - last;
     if (before > 0) do_advance(before, slice(tools, 0, before));
-    const ContactTools<double> tail = slice(tools, before, last);
-    const std::size_t tool_bytes = tail.n_tools > 0 ? contact_.stage(contact_tools_as<T>(tail)) : 0;
-    const ContactTools<T>* dtools = tail.n_tools > 0 ? contact_.device_tools() : nullptr;
-    // the copy's size (the tools in use) is part of the graph
-    const GraphKey key{store_.u.phase, last, dtools != nullptr, 1 + tail.n_tools};
-    const cudaGraphExec_t exec = stepper_.cached_graph(
-        key,
-        [&](cudaStream_t st) {
-          if (tool_bytes > 0) contact_.enqueue_copy(tool_bytes, st);
-          stepper_.enqueue_steps(store_.model(), store_.state(), r, store_.u.current(), last, dtools, st);
-          reducer_.enqueue(store_.model(), store_.state(), r, region_.front(), store_.u.at(store_.u.phase + last), st);
-          CUDA_CHECK(cudaMemcpyAsync(reducer_.result_host(), reducer_.result(), sizeof(Reductions),
-                                     cudaMemcpyDeviceToHost, st));
-        },
-        stream());
-    CUDA_CHECK(cudaGraphLaunch(exec, stream()));
-    store_.u.advance(last);
-    stream_.sync();
-    if (tool_bytes > 0) log_.count_to_device(tool_bytes);
-    log_.count_to_host(sizeof(Reductions));
-    return reducer_.result_host()[0];
+    return *tick_graph(last, slice(tools, before, last), false);
+  }
+
+  /// The same graph, led by the candidates' test (DeviceContact::enqueue_reach_check):
+  /// when the motion reaches beyond the region, every later kernel of the
+  /// graph does nothing (StateView::skip) and the answer says so. It replaces
+  /// the candidates' query and its round trip before each tick of a limited region.
+  std::optional<Reductions> do_advance_reduce_in_region(int steps, const ContactTools<double>& tools) override {
+    if (!tick_graphs() || steps > Stepper<T>::kMaxGraphSteps || store_.model().n_surf == 0)
+      return Backend::do_advance_reduce_in_region(steps, tools);
+    return tick_graph(steps, tools, true);
   }
 
   std::vector<index_t> do_contact_candidates(const ContactTools<double>& sweep) override {
@@ -384,6 +373,52 @@ class CudaBackend final : public Backend {
 
  private:
   cudaStream_t stream() const { return stream_.get(); }
+
+  /// Whether ticks run as one graph: the Graph mode, and something moves.
+  bool tick_graphs() const {
+    const RegionView r = region_.view();
+    return stepper_.choose(r) == CudaStepMode::Graph && (r.n_elems > 0 || r.n_nodes > 0 || n_tools() > 0);
+  }
+
+  /// One tick graph of `steps` (<= kMaxGraphSteps) steps over `tools`,
+  /// cached per buffer phase, step count, tool count and check; with
+  /// `check`, led by the region's reach check: empty when the region must
+  /// grow first (nothing ran).
+  std::optional<Reductions> tick_graph(int steps, const ContactTools<double>& tools, bool check) {
+    const RegionView r = region_.view();
+    const std::size_t tool_bytes = tools.n_tools > 0 ? contact_.stage(contact_tools_as<T>(tools)) : 0;
+    const ContactTools<T>* dtools = tools.n_tools > 0 ? contact_.device_tools() : nullptr;
+    check = check && dtools != nullptr;
+    // the copy's size (the tools in use) is part of the graph
+    const GraphKey key{store_.u.phase, steps, dtools != nullptr, (check ? 2 : 1) * (1 + kMaxTools) + tools.n_tools};
+    const cudaGraphExec_t exec = stepper_.cached_graph(
+        key,
+        [&](cudaStream_t st) {
+          StateView<T> s = store_.state();
+          if (tool_bytes > 0) contact_.enqueue_copy(tool_bytes, st);
+          if (check) {
+            contact_.enqueue_reach_check(store_.model(), s, store_.u.current().u, st);
+            s.skip = contact_.reach();
+            CUDA_CHECK(cudaMemcpyAsync(contact_.reach_host(), contact_.reach(), sizeof(int), cudaMemcpyDeviceToHost,
+                                       st));
+          }
+          stepper_.enqueue_steps(store_.model(), s, r, store_.u.current(), steps, dtools, st);
+          reducer_.enqueue(store_.model(), s, r, region_.front(), store_.u.at(store_.u.phase + steps), st);
+          CUDA_CHECK(cudaMemcpyAsync(reducer_.result_host(), reducer_.result(), sizeof(Reductions),
+                                     cudaMemcpyDeviceToHost, st));
+        },
+        stream());
+    CUDA_CHECK(cudaGraphLaunch(exec, stream()));
+    stream_.sync();
+    if (tool_bytes > 0) log_.count_to_device(tool_bytes);
+    log_.count_to_host(sizeof(Reductions));
+    if (check) {
+      log_.count_to_host(sizeof(int));
+      if (contact_.reach_host()[0] != 0) return std::nullopt;  // nothing ran: the same phase, the same state
+    }
+    store_.u.advance(steps);
+    return reducer_.result_host()[0];
+  }
 
   /// The part of the tools' motion covering steps [first, first + count) of
   /// `steps`, as a motion of its own over `count` steps.

@@ -216,6 +216,7 @@ __global__ void __launch_bounds__(kReduceBlock)
     reduce_kernel(ModelView<T> m, StateView<T> s, RegionView r, FrontView front, StepBuffers<T> b,
                   const T* energy_node_p, LawView<T> w, ReducePartial* partial, ContactPartial* contact,
                   unsigned* done, Reductions* out) {
+  if (skipped(s)) return;  // every block: the count stays at 0
   ReducePartial p = zero_partial();
   for (index_t i = thread_index(); i < r.n_nodes; i += thread_stride()) accumulate_node(m, s, b, front, r.node(i), p);
   for (index_t i = thread_index(); i < r.n_elems; i += thread_stride())

@@ -239,7 +239,8 @@ __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, con
 // Each lets the next pass's grid launch at once, loads its model data (and
 // the region's lists, written before any pass ran), then waits for the
 // previous grid (programmatic dependent launch; both calls are no-ops for a
-// plain launch) before it touches the state.
+// plain launch) before it touches the state, and does nothing in a tick
+// whose region must grow first (StateView::skip).
 
 
 template <class T>
@@ -250,6 +251,7 @@ __global__ void element_pressure_kernel(ModelView<T> m, StateView<T> s, RegionVi
   ElementData<T> d;
   if (active) d = load_element(m, r.elem(i));
   wait_for_previous_pass();
+  if (skipped(s)) return;
   if (active) element_pressure_at(s, d, u);
 }
 
@@ -263,6 +265,7 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
   NodeData<T> d;
   if (active) d = load_node(m, r.node(i), g % kNodeLanes, node_group_mask());
   wait_for_previous_pass();
+  if (skipped(s)) return;
   if (active) nodal_pressure_at(m, s, d);
 }
 
@@ -274,6 +277,7 @@ __global__ void element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView
   ElementData<T> d;
   if (active) d = load_element(m, r.elem(i));
   wait_for_previous_pass();
+  if (skipped(s)) return;
   if (active) element_forces_at(s, d, u, m.ianp);
 }
 
@@ -287,6 +291,7 @@ __global__ void law_element_forces_kernel(ModelView<T> m, StateView<T> s, Region
   ElementData<T> d;
   if (active) d = load_element(m, r.elem(i));
   wait_for_previous_pass();
+  if (skipped(s)) return;
   if (active) law_element_forces_at(m, s, d, u, w);
 }
 
@@ -298,6 +303,7 @@ __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r,
   NodeData<T> d;
   if (active) d = load_node(m, r.node(i), g % kNodeLanes, node_group_mask());
   wait_for_previous_pass();
+  if (skipped(s)) return;
   if (active) node_update_at<T, kLoad>(m, s, b, d);
 }
 

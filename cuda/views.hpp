@@ -123,6 +123,10 @@ struct StateView {
   std::uint8_t* corner_blocked = nullptr;  ///< ContactKind of a blocked penetration, 0 none (3 n_tris)
   std::uint8_t* proposed = nullptr;    ///< 1: some triangle proposed a correction or a block for the node
                                        ///< in this step's sweep; the gather clears it (n_nodes)
+  /// Set only in a tick graph that checks its region first (one int): while
+  /// it is non-zero the region must grow before this tick, and the step and
+  /// reduction kernels do nothing. Null: they always run.
+  const int* skip = nullptr;
 };
 
 }  // namespace tissue::gpu

@@ -681,8 +681,12 @@ TEST_P(Contract, AdvanceReduceGivesTheBitsOfAdvanceThenReduce) {
       const Reductions want = twice->reduce();
       const Reductions got = once->advance_reduce(steps);
       expect_same(got, want);
-      if (tick >= 3) EXPECT_GT(got.tools[0].contact, 0);
-      if (tick >= 7) EXPECT_GT(got.tools[0].grasped, 0);
+      if (tick >= 3) {
+        EXPECT_GT(got.tools[0].contact, 0);
+      }
+      if (tick >= 7) {
+        EXPECT_GT(got.tools[0].grasped, 0);
+      }
       const Fields a = twice->download(), b = once->download();
       EXPECT_EQ(b.u, a.u);
       EXPECT_EQ(b.f, a.f);
@@ -693,6 +697,62 @@ TEST_P(Contract, AdvanceReduceGivesTheBitsOfAdvanceThenReduce) {
   EXPECT_THROW(b->advance_reduce(1), std::logic_error);
   b->upload(m);
   EXPECT_THROW(b->advance_reduce(-1), std::invalid_argument);
+}
+
+// advance_reduce_in_region runs the tick exactly when contact_candidates()
+// is empty (the cuda backend tests that inside the tick's graph), with the
+// bits of advance_reduce; otherwise nothing moves and the tools stay.
+TEST_P(Contract, AdvanceReduceInRegionRunsOnlyWhileTheRegionHolds) {
+  const auto m = slab(8);
+  const double r = 0.004;
+  const ToolShape shape{"probe", r, 0.01};
+  auto checked = make(m), plain = make(m);
+  for (Backend* b : {checked.get(), plain.get()}) {
+    b->set_tools(std::span<const ToolShape>(&shape, 1));
+    const ToolMotion start{{{0.0203, 0.0196, kTop + r + 5e-4}, {0, 0, 1}}, {{0.0203, 0.0196, kTop + r - 5e-4}, {0, 0, 1}}};
+    b->move_tools(std::span<const ToolMotion>(&start, 1));
+    b->build_region({}, 2);
+    b->build_region(b->contact_candidates(), 2);
+  }
+  double z = kTop + r - 5e-4;
+  int ran = 0, refused = 0;
+  // pressing in place (the region holds), then a slide that leaves the region; steps 4 then 7 (two graphs)
+  for (int tick = 0; tick < 10; ++tick) {
+    SCOPED_TRACE(::testing::Message() << "tick " << tick);
+    const double x0 = tick < 6 ? 0.0203 : 0.0203 + 0.004 * (tick - 6), x1 = tick < 5 ? 0.0203 : x0 + 0.004;
+    const ToolMotion mv{{{x0, 0.0196, z}, {0, 0, 1}}, {{x1, 0.0196, z - 1e-4}, {0, 0, 1}}};
+    const int steps = tick % 2 ? 7 : 4;
+    for (Backend* b : {checked.get(), plain.get()}) b->move_tools(std::span<const ToolMotion>(&mv, 1));
+    const bool reaches = !plain->contact_candidates().empty();
+    const Fields before = checked->download();
+    const std::optional<Reductions> got = checked->advance_reduce_in_region(steps);
+    EXPECT_EQ(got.has_value(), !reaches);
+    if (!got) {
+      ++refused;
+      const Fields after = checked->download();
+      EXPECT_EQ(after.u, before.u) << "nothing ran";
+      EXPECT_EQ(after.f, before.f);
+      // the caller grows the region with the same candidates, then runs the tick
+      for (Backend* b : {checked.get(), plain.get()}) {
+        const std::vector<index_t> cand = b->contact_candidates();
+        ASSERT_FALSE(cand.empty());
+        std::vector<index_t> seeds = cand;
+        for (index_t a : b->region().seeds) seeds.push_back(a);
+        std::sort(seeds.begin(), seeds.end());
+        seeds.erase(std::unique(seeds.begin(), seeds.end()), seeds.end());
+        b->build_region(seeds, 2);
+      }
+      expect_same(checked->advance_reduce(steps), plain->advance_reduce(steps));
+    } else {
+      ++ran;
+      expect_same(*got, plain->advance_reduce(steps));
+    }
+    EXPECT_EQ(checked->download().u, plain->download().u);
+    z -= 1e-4;
+  }
+  EXPECT_GT(ran, 3);
+  EXPECT_GT(refused, 0);
+  EXPECT_THROW(checked->advance_reduce_in_region(-1), std::invalid_argument);
 }
 
 TEST_P(Contract, AToolStartingInsideTheSurfaceIsInContactFromTheFirstTick) {
