@@ -425,6 +425,7 @@ TISSUE_HD void sweep_triangle(const ContactTools<T>& tools, int k, const Vec3<T>
       const bool crossed = behind && dot(tip_before - q, N) >= T(0);
       const bool under = behind && w[0] > T(0) && w[1] > T(0) && w[2] > T(0);
       const bool through = at_tip && (!(norm(q - c) > kPierced<T> * cap.r) || crossed || under);
+      bool moved = false;  // by (a): else (b) starts from the deepest point found above
       for (int i = 0; i < 3; ++i) {  // (a) node contact
         Vec3<T> xi = x[i], n;
         if (!push_out_of_capsule(cap, xi, n)) continue;
@@ -439,10 +440,11 @@ TISSUE_HD void sweep_triangle(const ContactTools<T>& tools, int k, const Vec3<T>
           continue;
         }
         x[i] = xi;
+        moved = true;
         out[i].tool = static_cast<signed char>(t);
       }
       if (!tools.face) continue;
-      q = triangle_deepest_point(cap, x, w, c);  // (b) face contact, after (a)
+      if (moved) q = triangle_deepest_point(cap, x, w, c);  // (b) face contact, after (a)
       const Vec3<T> d = q - c;
       const T dist = norm(d);
       const T reach = cap.r - face_allowance(x, cap.r);  // how close the face may come to the axis

@@ -25,6 +25,15 @@ __device__ __forceinline__ P shuffle_down(const P& p, int off) {
   return o;
 }
 
+/// The warp's combined partial (valid in lane 0) of every lane's p: five
+/// shuffle levels in a fixed order. Every lane of the warp must call it.
+template <class P, class Combine>
+__device__ __forceinline__ P warp_sum(P p, Combine combine) {
+#pragma unroll
+  for (int off = 16; off > 0; off /= 2) combine(p, shuffle_down(p, off));
+  return p;
+}
+
 /// The block's combined partial (valid in thread 0) of every thread's p, for
 /// blocks of kBlock threads (a multiple of 32, at most 1024): combine(a, b)
 /// adds b into a, `empty` adds nothing, sh is kBlock / 32 partials of shared
@@ -33,18 +42,13 @@ template <int kBlock, class P, class Combine>
 __device__ P block_sum(P p, const P& empty, P* sh, Combine combine) {
   static_assert(kBlock % 32 == 0 && kBlock <= 1024);
   constexpr int kWarps = kBlock / 32;
-  const auto warp_sum = [&](P& q) {
-#pragma unroll
-    for (int off = 16; off > 0; off /= 2) combine(q, shuffle_down(q, off));
-  };
-  warp_sum(p);
+  p = warp_sum(p, combine);
   const int warp = int(threadIdx.x) / 32, lane = int(threadIdx.x) % 32;
   if (lane == 0) sh[warp] = p;
   __syncthreads();
   if (warp != 0) return p;
   p = lane < kWarps ? sh[lane] : empty;
-  warp_sum(p);
-  return p;
+  return warp_sum(p, combine);
 }
 
 }  // namespace tissue::gpu

@@ -69,6 +69,10 @@ __device__ void sweep_triangle_at(const ModelView<T>& m, const StateView<T>& s, 
   }
 }
 
+/// Proposals of one surface node (its surface triangles) that the gather
+/// holds in registers; a node with more merges them from memory.
+inline constexpr int kHeldProposals = 12;
+
 /// Merges surface node i's proposals (ascending slots) and applies them to
 /// u_next, and to u (u^n) the contact's velocity rule (core
 /// contact_previous); grasped nodes go to their tool. A node for which no
@@ -93,10 +97,21 @@ __device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, 
     return;
   }
   const index_t first = m.surf_slot_start[i];
-  const NodeContact<T> acc = merge_proposals<T>(int(m.surf_slot_start[i + 1] - first), [&](int j) {
+  const int count = int(m.surf_slot_start[i + 1] - first);
+  const auto proposal = [&](int j) {
     const index_t slot = m.surf_slot[first + j];
     return CornerContact<T>{s.corner_dx[slot].vec(), s.corner_tool[slot], s.corner_blocked[slot]};
-  });
+  };
+  NodeContact<T> acc;
+  if (count <= kHeldProposals) {  // every proposal read once, the loads issued together
+    CornerContact<T> held[kHeldProposals];
+#pragma unroll
+    for (int j = 0; j < kHeldProposals; ++j)
+      if (j < count) held[j] = proposal(j);
+    acc = merge_proposals_unrolled<kHeldProposals, T>(count, [&](int j) { return held[j]; });
+  } else {
+    acc = merge_proposals<T>(count, proposal);
+  }
   s.contact[a] = acc.kind;
   s.contact_tool[a] = acc.tool;
   if (acc.kind != kPushed) return;
