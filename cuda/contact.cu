@@ -74,10 +74,14 @@ __global__ void reach_outside_kernel(ModelView<T> m, StateView<T> s, const Packe
                                      int* reach) {
   __shared__ alignas(ContactTools<T>) unsigned char raw[sizeof(ContactTools<T>)];
   ContactTools<T>& sweep = *reinterpret_cast<ContactTools<T>*>(raw);
-  if (threadIdx.x == 0) {
-    sweep = *tools;
+  if (threadIdx.x == 0) {  // only the head and the tools in use were uploaded
+    sweep.n_tools = tools->n_tools;
     sweep.steps = 1;
-    for (int k = 0; k < sweep.n_tools; ++k) sweep.tool[k].substeps = sweep.sweep_substeps[k];
+    sweep.face = tools->face;
+    for (int k = 0; k < sweep.n_tools; ++k) {
+      sweep.tool[k] = tools->tool[k];
+      sweep.tool[k].substeps = tools->sweep_substeps[k];
+    }
   }
   __syncthreads();
   const index_t t = thread_index();

@@ -690,6 +690,8 @@ TEST_P(Contract, AdvanceReduceGivesTheBitsOfAdvanceThenReduce) {
       const Fields a = twice->download(), b = once->download();
       EXPECT_EQ(b.u, a.u);
       EXPECT_EQ(b.f, a.f);
+      EXPECT_EQ(b.node_p, a.node_p);
+      EXPECT_EQ(b.elem_J, a.elem_J);
       ++tick;
     }
   }

@@ -471,8 +471,8 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
   const index_t driven[3] = {seeds[3], seeds[4], seeds[5]};
   const auto u = random_field(m.n_nodes, 1e-4, 29);
   for (int depth : {kDepthAll, 2}) {
-    std::vector<double> ref_u, ref_f;
-    for (CudaStepMode mode : {CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Grid, CudaStepMode::Cluster,
+    std::vector<double> ref_u, ref_f, ref_p, ref_J, ref_energy;
+    for (CudaStepMode mode : {CudaStepMode::Grid, CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Cluster,
                               CudaStepMode::Auto}) {
       SCOPED_TRACE(::testing::Message() << "depth " << depth << " mode " << to_string(mode));
       auto gpu = make_cuda_backend(p);
@@ -485,19 +485,30 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
       gpu->set_tools(tool);
       const ToolMotion mv[] = {{{{0.031, 0.027, 0.0445}, {0, 0, 1}}, {{0.031, 0.027, 0.0425}, {0, 0, 1}}}};
       gpu->move_tools(mv);
+      // a reduce between advances leaves passes 1-2 of the current u for the next step: Launch and Graph
+      // take them (the spare pass arrays swapped in), Grid and Cluster compute them again
       gpu->advance(7);   // graph: a 7-step graph from phase 0
+      std::vector<double> energies = {gpu->reduce().strain_energy};
       gpu->advance(1);   // then phase 1
+      energies.push_back(gpu->reduce().strain_energy);
       gpu->advance(33);  // a 30-step chunk and 3 more
       const Reductions r = gpu->reduce();
+      energies.push_back(r.strain_energy);
       EXPECT_GT(r.tools[0].contact, 0);
       const Fields f = gpu->download();
       if (ref_u.empty()) {
         ref_u = f.u;
         ref_f = f.f;
+        ref_p = f.node_p;
+        ref_J = f.elem_J;
+        ref_energy = energies;
         continue;
       }
       EXPECT_EQ(f.u, ref_u);
       EXPECT_EQ(f.f, ref_f);
+      EXPECT_EQ(f.node_p, ref_p);  // the last step's passes, in every mode
+      EXPECT_EQ(f.elem_J, ref_J);
+      EXPECT_EQ(energies, ref_energy);
     }
   }
 }
