@@ -180,7 +180,7 @@ class CudaBackend final : public Backend {
     store_.upload(m, log_, stream());
     const index_t n = m.n_nodes;
     region_.allocate(n, m.n_elems, stream());
-    reducer_.allocate();
+    reducer_.allocate(n, m.n_elems);
     reducer_.set_law(store_.law());
     stepper_.set_law(store_.law());
     contact_.allocate(n, m.n_surf);
@@ -283,19 +283,15 @@ class CudaBackend final : public Backend {
   void do_reset_contacts() override { contact_.reset(store_.model(), store_.state(), stream()); }
 
   void do_element_pressure() override {
-    fresh_ = false;  // a caller running the passes one by one
     stepper_.element_pressure(store_.model(), store_.state(), region_.view(), store_.u.current().u, stream());
   }
   void do_nodal_pressure() override {
-    fresh_ = false;  // a caller running the passes one by one
     stepper_.nodal_pressure(store_.model(), store_.state(), region_.view(), stream());
   }
   void do_element_forces() override {
-    fresh_ = false;  // a caller running the passes one by one
     stepper_.element_forces(store_.model(), store_.state(), region_.view(), store_.u.current().u, stream());
   }
   void do_node_update() override {
-    fresh_ = false;  // a caller running the passes one by one
     stepper_.node_update(store_.model(), store_.state(), region_.view(), store_.u.current(), stream());
     store_.u.advance(1);
   }
@@ -304,13 +300,11 @@ class CudaBackend final : public Backend {
   /// slice of the tools' motion is one small upload.
   void do_advance(int steps, const ContactTools<double>& tools) override {
     const int chunk = Stepper<T>::kMaxGraphSteps;
-    int passes = take_passes();
     for (int done = 0; done < steps;) {
       const int k = std::min(chunk, steps - done);
       const ContactTools<T>* dtools = nullptr;
       if (tools.n_tools > 0) dtools = contact_.upload(contact_tools_as<T>(slice(tools, done, k)), log_, stream());
-      stepper_.advance(store_.model(), store_.state(), region_.view(), store_.u, k, dtools, passes, stream());
-      passes &= ~1;
+      stepper_.advance(store_.model(), store_.state(), region_.view(), store_.u, k, dtools, stream());
       done += k;
     }
   }
@@ -345,12 +339,8 @@ class CudaBackend final : public Backend {
   std::vector<ContactNode> do_contacts() override { return contact_.contacts(store_.model(), store_.state(), log_, stream()); }
 
   Reductions do_reduce() override {
-    const RegionView r = region_.view();
-    ready_spare(r);
-    const Reductions out = reducer_.run(store_.model(), store_.state(), store_.spare_state(), r, region_.front(),
-                                        store_.u.current(), log_, stream());
-    fresh_ = store_.model().ianp && r.n_elems > 0;
-    return out;
+    return reducer_.run(store_.model(), store_.state(), region_.view(), region_.front(), store_.u.current(), log_,
+                        stream());
   }
 
   Fields do_download() override {
@@ -396,14 +386,11 @@ class CudaBackend final : public Backend {
   /// grow first (nothing ran).
   std::optional<Reductions> tick_graph(int steps, const ContactTools<double>& tools, bool check) {
     const RegionView r = region_.view();
-    const int passes = take_passes();
-    ready_spare(r);
     const std::size_t tool_bytes = tools.n_tools > 0 ? contact_.stage(contact_tools_as<T>(tools)) : 0;
     const ContactTools<T>* dtools = tools.n_tools > 0 ? contact_.device_tools() : nullptr;
     check = check && dtools != nullptr;
     // the copy's size (the tools in use) is part of the graph
-    const GraphKey key{store_.u.phase, steps, dtools != nullptr, (check ? 2 : 1) * (1 + kMaxTools) + tools.n_tools,
-                       passes};
+    const GraphKey key{store_.u.phase, steps, dtools != nullptr, (check ? 2 : 1) * (1 + kMaxTools) + tools.n_tools};
     const cudaGraphExec_t exec = stepper_.cached_graph(
         key,
         [&](cudaStream_t st) {
@@ -415,10 +402,8 @@ class CudaBackend final : public Backend {
             CUDA_CHECK(cudaMemcpyAsync(contact_.reach_host(), contact_.reach(), sizeof(int), cudaMemcpyDeviceToHost,
                                        st));
           }
-          StateView<T> spare = store_.spare_state();
-          spare.skip = s.skip;
-          stepper_.enqueue_steps(store_.model(), s, r, store_.u.current(), steps, dtools, passes & 1, st);
-          reducer_.enqueue(store_.model(), s, spare, r, region_.front(), store_.u.at(store_.u.phase + steps), st);
+          stepper_.enqueue_steps(store_.model(), s, r, store_.u.current(), steps, dtools, st);
+          reducer_.enqueue(store_.model(), s, r, region_.front(), store_.u.at(store_.u.phase + steps), st);
           CUDA_CHECK(cudaMemcpyAsync(reducer_.result_host(), reducer_.result(), sizeof(Reductions),
                                      cudaMemcpyDeviceToHost, st));
         },
@@ -432,25 +417,7 @@ class CudaBackend final : public Backend {
       if (contact_.reach_host()[0] != 0) return std::nullopt;  // nothing ran: the same phase, the same state
     }
     store_.u.advance(steps);
-    fresh_ = store_.model().ianp && r.n_elems > 0;
     return reducer_.result_host()[0];
-  }
-
-  /// GraphKey::passes for the next steps. When the last reduce left passes
-  /// 1-2 of the current u in the spare pass arrays and the mode can use them,
-  /// swaps them in, and the first step skips its own (the cpu backend's
-  /// take_passes).
-  int take_passes() {
-    const bool take = fresh_ && stepper_.takes_passes(region_.view());
-    fresh_ = false;
-    if (take) store_.swap_passes();
-    return 2 * store_.live_passes() + (take ? 1 : 0);
-  }
-
-  /// The spare pass arrays equal the live ones outside a limited region
-  /// before a reduce computes passes 1-2 over it into them.
-  void ready_spare(const RegionView& r) {
-    if (r.n_elems < store_.n_elems() || r.n_nodes < store_.n_nodes()) store_.sync_spare(stream());
   }
 
   /// The part of the tools' motion covering steps [first, first + count) of
@@ -469,12 +436,8 @@ class CudaBackend final : public Backend {
     return c;
   }
 
-  /// Pass 1 over every element (after a region build or new displacements):
-  /// the live pass arrays change beyond any region, and the spare ones no
-  /// longer hold passes 1-2 of the current state.
+  /// Pass 1 over every element (after a region build or new displacements).
   void pass1_all() {
-    fresh_ = false;
-    store_.passes_changed();
     const RegionView all = {nullptr, nullptr, store_.n_nodes(), store_.n_elems()};
     stepper_.element_pressure(store_.model(), store_.state(), all, store_.u.current().u, stream());
   }
@@ -491,7 +454,6 @@ class CudaBackend final : public Backend {
   DeviceArray<unsigned char> drive_dev_;  ///< set_driven upload: values (3n T), ids (n), axis masks (n bytes)
   PinnedArray<unsigned char> drive_host_; ///< its pinned staging
   Event drive_copied_;                    ///< the staging's last upload has been read
-  bool fresh_ = false;                    ///< the spare pass arrays hold passes 1-2 of the current state
   bool drive_pending_ = false;
   index_t n_driven_ = 0;
   DeviceArray<std::uint8_t> probe_dev_;   ///< roles of nodes to drive (n_nodes)

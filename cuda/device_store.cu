@@ -94,14 +94,12 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   u_held_.allocate(n);
   f_.allocate(n);
   f_slot_.allocate(4 * size_t(ne));
-  for (PassArrays& a : passes_) {
-    a.dv_slot.allocate(4 * size_t(ne));
-    a.elem_J.allocate(ne);
-    a.node_p.allocate(n);
-  }
+  dv_slot_.allocate(4 * size_t(ne));
   held_.allocate(n);
   driven_.allocate(n);
   role_.allocate(n);
+  elem_J_.allocate(ne);
+  node_p_.allocate(n);
   bad_.allocate(1);
   load_.allocate(0);
   // the law arrays (core/material.hpp's lists): state sized from the model,
@@ -134,10 +132,8 @@ void DeviceStore<T>::reset_state(cudaStream_t stream) {
   u_held_.fill_bytes(0, stream);
   f_.fill_bytes(0, stream);
   f_slot_.fill_bytes(0, stream);
-  live_ = 0;
-  synced_ = false;
-  passes_[0].dv_slot.fill_bytes(0, stream);
-  passes_[0].node_p.fill_bytes(0, stream);
+  dv_slot_.fill_bytes(0, stream);
+  node_p_.fill_bytes(0, stream);
   bad_.fill_bytes(0xff, stream);
   clear_law_state(stream);
   contact_.fill_bytes(kNoContact, stream);
@@ -150,30 +146,7 @@ void DeviceStore<T>::reset_state(cudaStream_t stream) {
   proposed_.fill_bytes(0, stream);
   launch(model_.n_nodes, stream, reset_nodes_kernel<T>, model_.n_nodes, model_.node_flags, held_.data(),
          driven_.data(), role_.data());
-  launch(model_.n_elems, stream, reset_elems_kernel<T>, model_.n_elems, passes_[0].elem_J.data());
-}
-
-template <class T>
-void DeviceStore<T>::sync_spare(cudaStream_t stream) {
-  if (synced_) return;
-  PassArrays &from = passes_[live_], &to = passes_[live_ ^ 1];
-  CUDA_CHECK(cudaMemcpyAsync(to.dv_slot.data(), from.dv_slot.data(), from.dv_slot.bytes(), cudaMemcpyDeviceToDevice,
-                             stream));
-  CUDA_CHECK(cudaMemcpyAsync(to.elem_J.data(), from.elem_J.data(), from.elem_J.bytes(), cudaMemcpyDeviceToDevice,
-                             stream));
-  CUDA_CHECK(cudaMemcpyAsync(to.node_p.data(), from.node_p.data(), from.node_p.bytes(), cudaMemcpyDeviceToDevice,
-                             stream));
-  synced_ = true;
-}
-
-template <class T>
-StateView<T> DeviceStore<T>::spare_state() {
-  StateView<T> s = state();
-  PassArrays& a = passes_[live_ ^ 1];
-  s.dv_slot = a.dv_slot.data();
-  s.elem_J = a.elem_J.data();
-  s.node_p = a.node_p.data();
-  return s;
+  launch(model_.n_elems, stream, reset_elems_kernel<T>, model_.n_elems, elem_J_.data());
 }
 
 template <class T>
@@ -205,9 +178,9 @@ StateView<T> DeviceStore<T>::state() {
   s.held = held_.data();
   s.driven = driven_.data();
   s.role = role_.data();
-  s.dv_slot = passes_[live_].dv_slot.data();
-  s.elem_J = passes_[live_].elem_J.data();
-  s.node_p = passes_[live_].node_p.data();
+  s.dv_slot = dv_slot_.data();
+  s.elem_J = elem_J_.data();
+  s.node_p = node_p_.data();
   s.f_slot = f_slot_.data();
   s.f = f_.data();
   s.load = load_.size() ? load_.data() : nullptr;

@@ -53,21 +53,6 @@ class DeviceStore {
   LawView<T> law() const { return law_; }
   StateView<T> state();
 
-  // Passes 1-2 twice over (the cpu backend's EnergyScratch and take_passes):
-  // state() points at the live set; the reduction computes passes 1-2 at
-  // the current u into the spare set (spare_state()), and the next advance
-  // swaps them in (swap_passes) instead of recomputing them in its first step.
-  /// state() with the spare pass arrays.
-  StateView<T> spare_state();
-  /// Which set is live (0 or 1): captured graphs hold its pointers.
-  int live_passes() const { return live_; }
-  void swap_passes() { live_ ^= 1; }
-  /// Copies the live pass arrays to the spare, once after they changed
-  /// beyond a region (upload, a region build, new displacements: call
-  /// passes_changed()), so that the spare equals the live outside any region.
-  void sync_spare(cudaStream_t stream);
-  void passes_changed() { synced_ = false; }
-
   index_t n_nodes() const { return model_.n_nodes; }
   index_t n_elems() const { return model_.n_elems; }
   index_t n_tris() const { return model_.n_tris; }
@@ -87,12 +72,7 @@ class DeviceStore {
   DeviceArray<Packed3<T>> u_held_, f_slot_, f_, contact_normal_, grasp_offset_, corner_dx_;
   DeviceArray<std::uint8_t> held_, driven_, role_, contact_, corner_blocked_, proposed_;
   DeviceArray<signed char> contact_tool_, corner_tool_;
-  struct PassArrays {
-    DeviceArray<T> dv_slot, elem_J, node_p;
-  };
-  PassArrays passes_[2];
-  int live_ = 0;
-  bool synced_ = false;  ///< the spare equals the live outside the region
+  DeviceArray<T> dv_slot_, elem_J_, node_p_;
   /// The law terms' arrays, one per line of core/material.hpp's lists (empty when unused).
   struct LawArrays {
 #define TISSUE_LAW_DEVICE_ARRAY(kind, name, len) DeviceArray<typename LawFieldTypes<T>::kind> name;

@@ -270,7 +270,7 @@ __global__ void __launch_bounds__(kReduceBlock)
 }  // namespace
 
 template <class T>
-void Reducer<T>::allocate() {
+void Reducer<T>::allocate(index_t n_nodes, index_t n_elems) {
   partial_.allocate(kMaxReduceBlocks);
   contact_partial_.allocate(kMaxReduceBlocks);
   done_.allocate(1);
@@ -280,28 +280,38 @@ void Reducer<T>::allocate() {
   // initcheck reads the whole struct when it comes back)
   CUDA_CHECK(cudaMemset(result_.data(), 0, result_.bytes()));
   result_host_.allocate(1);
+  dv_slot_.allocate(4 * size_t(n_elems));
+  elem_J_.allocate(n_elems);
+  node_p_.allocate(n_nodes);
 }
 
 template <class T>
-Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const StateView<T>& spare,
-                           const RegionView& r, FrontView front, StepBuffers<T> b, Transfers& log,
-                           cudaStream_t stream) {
-  enqueue(m, s, spare, r, front, b, stream);
+Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
+                           StepBuffers<T> b, Transfers& log, cudaStream_t stream) {
+  enqueue(m, s, r, front, b, stream);
   log.to_host(result_host_.data(), result_.data(), sizeof(Reductions), stream);
   return result_host_[0];
 }
 
 template <class T>
-void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const StateView<T>& spare, const RegionView& r,
-                         FrontView front, StepBuffers<T> b, cudaStream_t stream) {
-  if (m.ianp && r.n_elems > 0) {  // nodal pressures at the current u, into the spare pass arrays
-    launch(r.n_elems, stream, element_pressure_kernel<T>, m, spare, r, static_cast<const Packed3<T>*>(b.u));
-    launch(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, spare, r);
+void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
+                         StepBuffers<T> b, cudaStream_t stream) {
+  if (m.ianp && r.n_elems > 0) {  // nodal pressures at the current u, into scratch
+    // pass 1 below rewrites the region's elements' slots; the others must be the state's (a whole-mesh
+    // region rewrites every slot, so the copy is only needed for a limited one)
+    if (r.n_elems < m.n_elems)
+      CUDA_CHECK(cudaMemcpyAsync(dv_slot_.data(), s.dv_slot, dv_slot_.bytes(), cudaMemcpyDeviceToDevice, stream));
+    StateView<T> e = s;
+    e.dv_slot = dv_slot_.data();
+    e.elem_J = elem_J_.data();
+    e.node_p = node_p_.data();
+    launch(r.n_elems, stream, element_pressure_kernel<T>, m, e, r, static_cast<const Packed3<T>*>(b.u));
+    launch(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, e, r);
   }
   const index_t items = std::max({r.n_nodes, r.n_elems, m.n_surf, index_t(1)});
   const int blocks = std::min(grid_for(items, kReduceBlock), kMaxReduceBlocks);
   launch_blocks(blocks, kReduceBlock, stream, reduce_kernel<T>, m, s, r, front, b,
-                static_cast<const T*>(spare.node_p), law_, partial_.data(), contact_partial_.data(), done_.data(),
+                static_cast<const T*>(node_p_.data()), law_, partial_.data(), contact_partial_.data(), done_.data(),
                 result_.data());
 }
 

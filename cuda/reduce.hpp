@@ -46,25 +46,25 @@ struct FrontView {
 template <class T>
 class Reducer {
  public:
-  /// Partials and the result.
-  void allocate();
+  /// Partials, result and the strain energy's scratch (passes 1-2 at the
+  /// current u: 4 n_elems + n_elems + n_nodes scalars).
+  void allocate(index_t n_nodes, index_t n_elems);
   /// The model's law terms: the fibre term's energy (LawView::fibre; null:
   /// none) and the Prony terms' power and stored energy (null visco_slot: none).
   void set_law(const LawView<T>& law) { law_ = law; }
 
   /// Reduces over region r with the current buffers b, and the tools'
-  /// contact over the surface; clears the bad flag; one download. For IANP
-  /// the energy needs the nodal pressures at the current u: passes 1 and 2
-  /// run into `spare` (the state with the spare pass arrays,
-  /// DeviceStore::spare_state, which must equal the live ones outside r);
-  /// the state's own stay as the last step wrote them.
-  Reductions run(const ModelView<T>& m, const StateView<T>& s, const StateView<T>& spare, const RegionView& r,
-                 FrontView front, StepBuffers<T> b, Transfers& log, cudaStream_t stream);
+  /// contact over the surface; clears the bad flag; one download.
+  /// For IANP the energy needs the nodal pressures at the current u: passes
+  /// 1 and 2 run again into scratch (the state's pass arrays stay as the last
+  /// step wrote them).
+  Reductions run(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
+                 StepBuffers<T> b, Transfers& log, cudaStream_t stream);
 
   /// run()'s kernels without the download: the result stays in device
   /// memory (result()), for a graph that downloads it itself.
-  void enqueue(const ModelView<T>& m, const StateView<T>& s, const StateView<T>& spare, const RegionView& r,
-               FrontView front, StepBuffers<T> b, cudaStream_t stream);
+  void enqueue(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front, StepBuffers<T> b,
+               cudaStream_t stream);
   const Reductions* result() const { return result_.data(); }
   /// Pinned host memory for the result's download.
   Reductions* result_host() { return result_host_.data(); }
@@ -75,6 +75,7 @@ class Reducer {
   DeviceArray<unsigned> done_;          ///< blocks finished (the last one resets it to 0)
   DeviceArray<Reductions> result_;      ///< (1)
   PinnedArray<Reductions> result_host_;
+  DeviceArray<T> dv_slot_, elem_J_, node_p_;  ///< energy scratch
   LawView<T> law_;
 };
 

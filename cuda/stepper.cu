@@ -110,12 +110,10 @@ void Stepper<T>::node_update(const ModelView<T>& m, const StateView<T>& s, const
 
 template <class T>
 void Stepper<T>::launch_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
-                              int steps, const ContactTools<T>* tools, bool skip_first_passes, cudaStream_t stream) {
+                              int steps, const ContactTools<T>* tools, cudaStream_t stream) {
   for (int k = 0; k < steps; ++k) {
-    if (k > 0 || !skip_first_passes) {
-      element_pressure(m, s, r, b.u, stream);
-      nodal_pressure(m, s, r, stream);
-    }
+    element_pressure(m, s, r, b.u, stream);
+    nodal_pressure(m, s, r, stream);
     element_forces(m, s, r, b.u, stream);
     node_update(m, s, r, b, stream);
     if (tools) {  // the contact stage over the surface (cuda/contact.cuh)
@@ -150,16 +148,15 @@ cudaGraphExec_t Stepper<T>::cached_graph(const GraphKey& key, const std::functio
 
 template <class T>
 cudaGraphExec_t Stepper<T>::graph(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
-                                  BufferRing<T>& ring, int steps, const ContactTools<T>* tools, int passes,
-                                  cudaStream_t stream) {
+                                  BufferRing<T>& ring, int steps, const ContactTools<T>* tools, cudaStream_t stream) {
   return cached_graph(
-      {ring.phase, steps, tools != nullptr, 0, passes},
-      [&](cudaStream_t st) { launch_steps(m, s, r, ring.current(), steps, tools, passes & 1, st); }, stream);
+      {ring.phase, steps, tools != nullptr, 0},
+      [&](cudaStream_t st) { launch_steps(m, s, r, ring.current(), steps, tools, st); }, stream);
 }
 
 template <class T>
 void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, BufferRing<T>& ring,
-                         int steps, const ContactTools<T>* tools, int passes, cudaStream_t stream) {
+                         int steps, const ContactTools<T>* tools, cudaStream_t stream) {
   if (steps <= 0) return;
   if (r.n_elems == 0 && r.n_nodes == 0 && !tools) {  // nothing moves; every buffer holds the same (frozen) values
     ring.advance(steps);
@@ -168,16 +165,15 @@ void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, const Reg
   switch (choose(r)) {
     case CudaStepMode::Auto:  // resolved by choose()
     case CudaStepMode::Launch:
-      launch_steps(m, s, r, ring.current(), steps, tools, passes & 1, stream);
+      launch_steps(m, s, r, ring.current(), steps, tools, stream);
       ring.advance(steps);
       break;
     case CudaStepMode::Graph:
       while (steps > 0) {
         const int k = std::min(steps, kMaxGraphSteps);
-        CUDA_CHECK(cudaGraphLaunch(graph(m, s, r, ring, k, tools, passes, stream), stream));
+        CUDA_CHECK(cudaGraphLaunch(graph(m, s, r, ring, k, tools, stream), stream));
         ring.advance(k);
         steps -= k;
-        passes &= ~1;  // only the first chunk's first step
       }
       break;
     case CudaStepMode::Grid: {

@@ -58,8 +58,6 @@ struct GraphKey {
   int phase = 0, steps = 0;
   bool contact = false;
   int frame = 0;
-  int passes = 0;  ///< the live pass-array set (DeviceStore::live_passes), x 2, + 1 when the first step
-                   ///< skips passes 1-2
   auto operator<=>(const GraphKey&) const = default;
 };
 
@@ -106,22 +104,15 @@ class Stepper {
   /// `steps` whole steps from ring's current phase; advances the phase.
   /// With `tools` (device memory: the tools' motion over these steps), each
   /// step ends with the contact stage (cuda/contact.cuh); null: none.
-  /// `passes`: GraphKey::passes; with its bit 0 the first step skips passes
-  /// 1-2 (their results are in s already: takes_passes() says which modes can).
   void advance(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, BufferRing<T>& ring, int steps,
-               const ContactTools<T>* tools, int passes, cudaStream_t stream);
-  /// Whether advance() can skip the first step's passes 1-2 in this region's mode (Launch and Graph).
-  bool takes_passes(const RegionView& r) const {
-    const CudaStepMode mode = choose(r);
-    return mode == CudaStepMode::Launch || mode == CudaStepMode::Graph;
-  }
+               const ContactTools<T>* tools, cudaStream_t stream);
 
   /// Queues the kernels of `steps` whole steps from buffers b (the Graph
   /// mode's launches), for a caller's own graph; the ring's phase is the
   /// caller's to advance.
   void enqueue_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b, int steps,
-                     const ContactTools<T>* tools, bool skip_first_passes, cudaStream_t stream) {
-    launch_steps(m, s, r, b, steps, tools, skip_first_passes, stream);
+                     const ContactTools<T>* tools, cudaStream_t stream) {
+    launch_steps(m, s, r, b, steps, tools, stream);
   }
 
   /// The graph cached under `key`, captured on first use from what
@@ -131,9 +122,9 @@ class Stepper {
 
  private:
   void launch_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b, int steps,
-                    const ContactTools<T>* tools, bool skip_first_passes, cudaStream_t stream);
+                    const ContactTools<T>* tools, cudaStream_t stream);
   cudaGraphExec_t graph(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, BufferRing<T>& ring,
-                        int steps, const ContactTools<T>* tools, int passes, cudaStream_t stream);
+                        int steps, const ContactTools<T>* tools, cudaStream_t stream);
 
   CudaStepMode mode_ = CudaStepMode::Auto;
   PersistentLimits limits_;

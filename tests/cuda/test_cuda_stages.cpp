@@ -485,8 +485,8 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
       gpu->set_tools(tool);
       const ToolMotion mv[] = {{{{0.031, 0.027, 0.0445}, {0, 0, 1}}, {{0.031, 0.027, 0.0425}, {0, 0, 1}}}};
       gpu->move_tools(mv);
-      // a reduce between advances leaves passes 1-2 of the current u for the next step: Launch and Graph
-      // take them (the spare pass arrays swapped in), Grid and Cluster compute them again
+      // a reduce between advances (its own passes 1-2 at the current u into scratch) changes nothing in
+      // the steps, in any mode
       gpu->advance(7);   // graph: a 7-step graph from phase 0
       std::vector<double> energies = {gpu->reduce().strain_energy};
       gpu->advance(1);   // then phase 1
