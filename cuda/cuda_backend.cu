@@ -9,10 +9,10 @@
 //   (u_prev = u_next = u, f = 0), elements leaving it get zero forces; after
 //   a region build or set_displacements pass 1 is recomputed over all
 //   elements, so pass 2 averages valid p_e V_e on halo nodes too.
-// Per haptic tick the only copies are the tools' motion (up: the head of
-// ContactTools and one ToolStep per tool) and the Reductions struct (down),
-// plus, while the region is not the whole mesh, the contact candidates'
-// count (down); see transfers() and docs/cuda.md.
+// Per haptic tick (one graph: do_advance_reduce) the only copies are the
+// tools' motion (up: the head of ContactTools and one ToolStep per tool) and
+// the Reductions struct (down), plus, while the region is not the whole
+// mesh, the region check's answer (down); see transfers() and docs/cuda.md.
 #include "cuda/cuda_backend.hpp"
 
 #include <algorithm>
