@@ -180,7 +180,7 @@ class CudaBackend final : public Backend {
     store_.upload(m, log_, stream());
     const index_t n = m.n_nodes;
     region_.allocate(n, m.n_elems, stream());
-    reducer_.allocate(n, m.n_elems);
+    reducer_.allocate(n, m.n_elems, stream());
     reducer_.set_law(store_.law());
     stepper_.set_law(store_.law());
     contact_.allocate(n, m.n_surf);
@@ -312,13 +312,12 @@ class CudaBackend final : public Backend {
   /// The haptic tick's work as one graph (Graph mode, the usual case): the
   /// tools' upload, the steps with their contact stage, the reductions and
   /// their download, then one wait. Kernels and order are advance()'s and
-  /// reduce()'s, so the results are the same bits. Steps beyond one graph's
-  /// length go first through do_advance; other modes run the two calls.
+  /// reduce()'s, so the results are the same bits. A tick of more steps than
+  /// one graph holds, and the other modes, run the two calls (do_advance cuts
+  /// the tools' motion into its chunks from the first step).
   Reductions do_advance_reduce(int steps, const ContactTools<double>& tools) override {
-    if (!tick_graphs()) return Backend::do_advance_reduce(steps, tools);
-    const int last = std::min(steps, Stepper<T>::kMaxGraphSteps), before = steps - last;
-    if (before > 0) do_advance(before, slice(tools, 0, before));
-    return *tick_graph(last, slice(tools, before, last), false);
+    if (!tick_graphs() || steps > Stepper<T>::kMaxGraphSteps) return Backend::do_advance_reduce(steps, tools);
+    return *tick_graph(steps, tools, false);
   }
 
   /// The same graph, led by the candidates' test (DeviceContact::enqueue_reach_check):

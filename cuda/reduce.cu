@@ -270,15 +270,15 @@ __global__ void __launch_bounds__(kReduceBlock)
 }  // namespace
 
 template <class T>
-void Reducer<T>::allocate(index_t n_nodes, index_t n_elems) {
+void Reducer<T>::allocate(index_t n_nodes, index_t n_elems, cudaStream_t stream) {
   partial_.allocate(kMaxReduceBlocks);
   contact_partial_.allocate(kMaxReduceBlocks);
   done_.allocate(1);
-  CUDA_CHECK(cudaMemset(done_.data(), 0, done_.bytes()));
+  done_.fill_bytes(0, stream);  // on the stream the kernel runs on: ordered before its first launch
   result_.allocate(1);
   // every byte of the result is defined (its padding too: compute-sanitizer's
   // initcheck reads the whole struct when it comes back)
-  CUDA_CHECK(cudaMemset(result_.data(), 0, result_.bytes()));
+  result_.fill_bytes(0, stream);
   result_host_.allocate(1);
   dv_slot_.allocate(4 * size_t(n_elems));
   elem_J_.allocate(n_elems);

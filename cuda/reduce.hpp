@@ -48,7 +48,7 @@ class Reducer {
  public:
   /// Partials, result and the strain energy's scratch (passes 1-2 at the
   /// current u: 4 n_elems + n_elems + n_nodes scalars).
-  void allocate(index_t n_nodes, index_t n_elems);
+  void allocate(index_t n_nodes, index_t n_elems, cudaStream_t stream);
   /// The model's law terms: the fibre term's energy (LawView::fibre; null:
   /// none) and the Prony terms' power and stored energy (null visco_slot: none).
   void set_law(const LawView<T>& law) { law_ = law; }
