@@ -287,12 +287,20 @@ void Backend::node_update() {
   do_node_update();
 }
 
+void Backend::check_steps(const char* what, int steps) const {
+  require_upload(what);
+  if (steps < 0) throw std::invalid_argument(fmt::format("{}: step count {} must be >= 0", what, steps));
+}
+
+void Backend::tools_arrived() {
+  for (ToolMotion& m : motion_) m.from = m.to;
+}
+
 void Backend::advance(int steps) {
-  require_upload("advance");
-  if (steps < 0) throw std::invalid_argument(fmt::format("advance: step count {} must be >= 0", steps));
+  check_steps("advance", steps);
   if (steps == 0) return;
   do_advance(steps, contact_tools(steps));
-  for (ToolMotion& m : motion_) m.from = m.to;
+  tools_arrived();
 }
 
 Reductions Backend::reduce() {
@@ -301,11 +309,10 @@ Reductions Backend::reduce() {
 }
 
 Reductions Backend::advance_reduce(int steps) {
-  require_upload("advance_reduce");
-  if (steps < 0) throw std::invalid_argument(fmt::format("advance_reduce: step count {} must be >= 0", steps));
+  check_steps("advance_reduce", steps);
   if (steps == 0) return do_reduce();
   const Reductions r = do_advance_reduce(steps, contact_tools(steps));
-  for (ToolMotion& m : motion_) m.from = m.to;
+  tools_arrived();
   return r;
 }
 
@@ -315,13 +322,10 @@ Reductions Backend::do_advance_reduce(int steps, const ContactTools<double>& too
 }
 
 std::optional<Reductions> Backend::advance_reduce_in_region(int steps) {
-  require_upload("advance_reduce_in_region");
-  if (steps < 0)
-    throw std::invalid_argument(fmt::format("advance_reduce_in_region: step count {} must be >= 0", steps));
+  check_steps("advance_reduce_in_region", steps);
   if (shapes_.empty() || steps == 0) return advance_reduce(steps);
   std::optional<Reductions> r = do_advance_reduce_in_region(steps, contact_tools(steps));
-  if (r)
-    for (ToolMotion& m : motion_) m.from = m.to;
+  if (r) tools_arrived();
   return r;
 }
 

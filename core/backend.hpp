@@ -269,6 +269,10 @@ class Backend {
 
  private:
   void require_upload(const char* what) const;
+  /// require_upload, and steps >= 0 (invalid_argument naming `what`).
+  void check_steps(const char* what, int steps) const;
+  /// After an advance: the tools rest where their motion ended.
+  void tools_arrived();
 
   bool uploaded_ = false;
   index_t n_nodes_ = 0, n_elems_ = 0;

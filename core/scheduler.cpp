@@ -206,10 +206,13 @@ TickReport Scheduler::tick(std::span<Device* const> devices) {
   const long first_step = total_steps_;
   // a limited region grows first where the tools' motion reaches beyond it (the cuda backend checks that
   // inside the tick's own graph: no round trip when the region holds)
-  std::optional<Reductions> in_region;
-  if (!region_.whole()) in_region = backend_.advance_reduce_in_region(steps_per_tick_);
-  if (!in_region) seed_region();
-  const Reductions r = in_region ? *in_region : backend_.advance_reduce(steps_per_tick_);
+  std::optional<Reductions> ran;
+  if (!region_.whole()) ran = backend_.advance_reduce_in_region(steps_per_tick_);
+  if (!ran) {
+    seed_region();
+    ran = backend_.advance_reduce(steps_per_tick_);
+  }
+  const Reductions& r = *ran;
   total_steps_ += steps_per_tick_;
   check_health(r, first_step);
   note_contacts(r);

@@ -316,7 +316,7 @@ class CudaBackend final : public Backend {
   /// one graph holds, and the other modes, run the two calls (do_advance cuts
   /// the tools' motion into its chunks from the first step).
   Reductions do_advance_reduce(int steps, const ContactTools<double>& tools) override {
-    if (!tick_graphs() || steps > Stepper<T>::kMaxGraphSteps) return Backend::do_advance_reduce(steps, tools);
+    if (!tick_graph_runs(steps)) return Backend::do_advance_reduce(steps, tools);
     return *tick_graph(steps, tools, false);
   }
 
@@ -325,8 +325,7 @@ class CudaBackend final : public Backend {
   /// graph does nothing (StateView::skip) and the answer says so. It replaces
   /// the candidates' query and its round trip before each tick of a limited region.
   std::optional<Reductions> do_advance_reduce_in_region(int steps, const ContactTools<double>& tools) override {
-    if (!tick_graphs() || steps > Stepper<T>::kMaxGraphSteps || store_.model().n_surf == 0)
-      return Backend::do_advance_reduce_in_region(steps, tools);
+    if (!tick_graph_runs(steps) || store_.model().n_surf == 0) return Backend::do_advance_reduce_in_region(steps, tools);
     return tick_graph(steps, tools, true);
   }
 
@@ -373,14 +372,16 @@ class CudaBackend final : public Backend {
  private:
   cudaStream_t stream() const { return stream_.get(); }
 
-  /// Whether ticks run as one graph: the Graph mode, and something moves.
-  bool tick_graphs() const {
+  /// Whether a tick of `steps` steps runs as one graph: the Graph mode,
+  /// something moves, and one graph holds the steps.
+  bool tick_graph_runs(int steps) const {
     const RegionView r = region_.view();
-    return stepper_.choose(r) == CudaStepMode::Graph && (r.n_elems > 0 || r.n_nodes > 0 || n_tools() > 0);
+    return stepper_.choose(r) == CudaStepMode::Graph && (r.n_elems > 0 || r.n_nodes > 0 || n_tools() > 0) &&
+           steps <= Stepper<T>::kMaxGraphSteps;
   }
 
   /// One tick graph of `steps` (<= kMaxGraphSteps) steps over `tools`,
-  /// cached per buffer phase, step count, tool count and check; with
+  /// cached per buffer phase, step count, upload size and check; with
   /// `check`, led by the region's reach check: empty when the region must
   /// grow first (nothing ran).
   std::optional<Reductions> tick_graph(int steps, const ContactTools<double>& tools, bool check) {
@@ -388,8 +389,8 @@ class CudaBackend final : public Backend {
     const std::size_t tool_bytes = tools.n_tools > 0 ? contact_.stage(contact_tools_as<T>(tools)) : 0;
     const ContactTools<T>* dtools = tools.n_tools > 0 ? contact_.device_tools() : nullptr;
     check = check && dtools != nullptr;
-    // the copy's size (the tools in use) is part of the graph
-    const GraphKey key{store_.u.phase, steps, dtools != nullptr, (check ? 2 : 1) * (1 + kMaxTools) + tools.n_tools};
+    const GraphKey key{store_.u.phase, steps, dtools != nullptr, check ? GraphKey::kCheckedTick : GraphKey::kTick,
+                       tool_bytes};
     const cudaGraphExec_t exec = stepper_.cached_graph(
         key,
         [&](cudaStream_t st) {

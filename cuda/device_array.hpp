@@ -156,8 +156,7 @@ class Transfers {
   void to_device(void* dst, const void* src, std::size_t bytes, cudaStream_t s) {
     if (bytes == 0) return;
     CUDA_CHECK(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyHostToDevice, s));
-    ++c_.h2d;
-    c_.h2d_bytes += bytes;
+    count_to_device(bytes);
   }
   void to_device_now(void* dst, const void* src, std::size_t bytes, cudaStream_t s) {
     to_device(dst, src, bytes, s);
@@ -167,10 +166,9 @@ class Transfers {
     if (bytes == 0) return;
     CUDA_CHECK(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyDeviceToHost, s));
     CUDA_CHECK(cudaStreamSynchronize(s));
-    ++c_.d2h;
-    c_.d2h_bytes += bytes;
+    count_to_host(bytes);
   }
-  /// Counts copies that a graph made (its memcpy nodes).
+  /// Counts a copy made elsewhere (a graph's memcpy node).
   void count_to_device(std::size_t bytes) {
     ++c_.h2d;
     c_.h2d_bytes += bytes;

@@ -150,7 +150,7 @@ template <class T>
 cudaGraphExec_t Stepper<T>::graph(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                                   BufferRing<T>& ring, int steps, const ContactTools<T>* tools, cudaStream_t stream) {
   return cached_graph(
-      {ring.phase, steps, tools != nullptr, 0},
+      {ring.phase, steps, tools != nullptr, GraphKey::kSteps, 0},
       [&](cudaStream_t st) { launch_steps(m, s, r, ring.current(), steps, tools, st); }, stream);
 }
 

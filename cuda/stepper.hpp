@@ -20,6 +20,7 @@
 #include <cuda_runtime.h>
 
 #include <compare>
+#include <cstddef>
 #include <functional>
 #include <map>
 #include <utility>
@@ -51,13 +52,16 @@ class GraphExec {
   cudaGraphExec_t e_ = nullptr;
 };
 
-/// What a cached graph holds: `steps` steps from buffer phase `phase`,
-/// with or without the contact stage, framed by a caller's work (frame 0:
-/// the steps alone; the backend's tick graph uses its own frame values).
+/// What a cached graph holds: `steps` steps from buffer phase `phase`, with
+/// or without the contact stage, alone or as a haptic tick (the backend's
+/// tick graph: the tools' upload of `upload_bytes` first, the reductions and
+/// their download after, led by the region check when `checked`).
 struct GraphKey {
+  enum Frame { kSteps, kTick, kCheckedTick };
   int phase = 0, steps = 0;
   bool contact = false;
-  int frame = 0;
+  Frame frame = kSteps;
+  std::size_t upload_bytes = 0;
   auto operator<=>(const GraphKey&) const = default;
 };
 
