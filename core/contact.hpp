@@ -130,6 +130,18 @@ TISSUE_HD Capsule<T> tool_capsule(const ToolStep<T>& t, int steps, int k, int j)
   return {tip, tip + t.shaft * axis, t.radius};
 }
 
+/// The sub-check capsules of TLED step k of an advance, as the sweep reads
+/// them: capsule(t, j) for tool t and j = 0..substeps (0: where the previous
+/// step's last check left it). This one computes each on demand (a GPU
+/// thread sweeps one triangle); a host stage that sweeps many triangles per
+/// step may compute them once into a table with the same values.
+template <class T>
+struct StepCapsules {
+  const ContactTools<T>& tools;
+  int k;
+  TISSUE_HD Capsule<T> operator()(int t, int j) const { return tool_capsule(tools.tool[t], tools.steps, k, j); }
+};
+
 /// How far the axis point of tool t level with x moves during TLED step k
 /// of the advance (m): its tip's motion plus the turn of its axis at x's
 /// axial coordinate (clamped to the shaft).
@@ -373,14 +385,15 @@ TISSUE_HD T face_allowance(const Vec3<T> x[3], T r) {
 }
 
 /// Whether triangle x[3] may come within reach of any sub-check capsule of
-/// TLED step k (false: no corner and no point of it is inside any of them,
-/// so sweep_triangle leaves it untouched). A conservative bound that costs
+/// a TLED step (capsule(t, j): StepCapsules or a table of the same values)
+/// (false: no corner and no point of it is inside any of them, so
+/// sweep_triangle leaves it untouched). A conservative bound that costs
 /// one point-segment distance per capsule: the triangle lies within rho of
 /// its centroid g, so it is clear of a capsule when |g - axis| - rho exceeds
 /// the radius, with a margin of 1e-3 r plus rounding. Most of the triangles
 /// a box query returns around a tool smaller than the box fail it.
-template <class T>
-TISSUE_HD bool triangle_may_touch(const ContactTools<T>& tools, int k, const Vec3<T> x[3]) {
+template <class T, class Capsules>
+TISSUE_HD bool triangle_may_touch(const ContactTools<T>& tools, const Capsules& capsule, const Vec3<T> x[3]) {
   const Vec3<T> g = (T(1) / T(3)) * (x[0] + x[1] + x[2]);
   T rho2 = T(0);
   for (int i = 0; i < 3; ++i) rho2 = dot(x[i] - g, x[i] - g) > rho2 ? dot(x[i] - g, x[i] - g) : rho2;
@@ -388,7 +401,7 @@ TISSUE_HD bool triangle_may_touch(const ContactTools<T>& tools, int k, const Vec
   const T size = std::fabs(g.x) + std::fabs(g.y) + std::fabs(g.z) + rho;
   for (int t = 0; t < tools.n_tools; ++t)
     for (int j = 1; j <= tools.tool[t].substeps; ++j) {
-      const Capsule<T> cap = tool_capsule(tools.tool[t], tools.steps, k, j);
+      const Capsule<T> cap = capsule(t, j);
       const Vec3<T> c = cap.a + closest_on_segment(cap.a, cap.b, g) * (cap.b - cap.a);
       const T slack = T(1e-3) * cap.r + T(64) * std::numeric_limits<T>::epsilon() * (size + std::fabs(cap.r));
       if (!(norm(g - c) - rho > cap.r + slack)) return true;
@@ -396,19 +409,18 @@ TISSUE_HD bool triangle_may_touch(const ContactTools<T>& tools, int k, const Vec
   return false;
 }
 
-/// The contact sweep of one surface triangle during TLED step k of the
-/// advance (see the rule at the top): x[3] are its corners' positions after
-/// the free update (m), block[3] their corner_block() values. Fills out[3].
-template <class T>
-TISSUE_HD void sweep_triangle(const ContactTools<T>& tools, int k, const Vec3<T> x_in[3], const std::uint8_t block[3],
-                              CornerContact<T> out[3]) {
+/// sweep_triangle for a triangle that triangle_may_touch(tools, capsule, x)
+/// accepted, over the step's capsules (StepCapsules or a table of
+/// the same values).
+template <class T, class Capsules>
+TISSUE_HD void sweep_touching_triangle(const ContactTools<T>& tools, const Capsules& capsule, const Vec3<T> x_in[3],
+                                       const std::uint8_t block[3], CornerContact<T> out[3]) {
   Vec3<T> x[3] = {x_in[0], x_in[1], x_in[2]};
   for (int i = 0; i < 3; ++i) out[i] = {{T(0), T(0), T(0)}, -1, 0};
-  if (!triangle_may_touch(tools, k, x)) return;  // out as no contact leaves it: dx = 0, no tool
   for (int t = 0; t < tools.n_tools; ++t) {
     const ToolStep<T>& tool = tools.tool[t];
     for (int j = 1; j <= tool.substeps; ++j) {
-      const Capsule<T> cap = tool_capsule(tool, tools.steps, k, j);
+      const Capsule<T> cap = capsule(t, j);
       // has the tool passed through this face? (sidedness, at the top of this file)
       T w[3];
       Vec3<T> c;
@@ -420,7 +432,7 @@ TISSUE_HD void sweep_triangle(const ContactTools<T>& tools, int k, const Vec3<T>
       // A face beside the shaft is a hole's rim, and a face whose edge the tissue tilted past the
       // tip is rounded off: both are pushed radially.
       const bool at_tip = !(norm(c - cap.a) > kPierced<T> * cap.r);
-      const Vec3<T> tip_before = tool_capsule(tool, tools.steps, k, j - 1).a;
+      const Vec3<T> tip_before = capsule(t, j - 1).a;
       const bool behind = dot(c - q, N) < -kThrough<T> * cap.r;
       const bool crossed = behind && dot(tip_before - q, N) >= T(0);
       const bool under = behind && w[0] > T(0) && w[1] > T(0) && w[2] > T(0);
@@ -473,6 +485,18 @@ TISSUE_HD void sweep_triangle(const ContactTools<T>& tools, int k, const Vec3<T>
     }
   }
   for (int i = 0; i < 3; ++i) out[i].dx = x[i] - x_in[i];
+}
+
+/// The contact sweep of one surface triangle during TLED step k of the
+/// advance (see the rule at the top): x[3] are its corners' positions after
+/// the free update (m), block[3] their corner_block() values. Fills out[3]
+/// (a triangle that triangle_may_touch rejects: no tool, dx = 0).
+template <class T>
+TISSUE_HD void sweep_triangle(const ContactTools<T>& tools, int k, const Vec3<T> x[3], const std::uint8_t block[3],
+                              CornerContact<T> out[3]) {
+  const StepCapsules<T> capsule{tools, k};
+  if (triangle_may_touch(tools, capsule, x)) return sweep_touching_triangle(tools, capsule, x, block, out);
+  for (int i = 0; i < 3; ++i) out[i] = {{T(0), T(0), T(0)}, -1, 0};  // no contact: dx = 0, no tool
 }
 
 /// How near a triangle must come to a tool's axis, in radii, for its corners

@@ -1,6 +1,9 @@
 #include "cpu/contact.hpp"
 
 #include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
 
 #include "core/node_rules.hpp"
 
@@ -19,24 +22,40 @@ void put(std::vector<T>& v, index_t n, index_t a, Vec3<T> x) {
   v[2 * size_t(n) + a] = x.z;
 }
 
-}  // namespace
-
-template <class T>
-ContactStage<T>::ContactStage(const TissueModel<T>& m) : m_(m), bvh_(m, std::max(median_surface_edge(m), 1e-9)) {}
-
-template <class T>
-Box ContactStage<T>::sweep_box(const ContactTools<T>& tools, int k, double pad) const {
+/// The box of the sub-check capsules (j = 1..substeps of every tool), padded by pad radii.
+template <class T, class Capsules>
+Box sweep_box(const ContactTools<T>& tools, const Capsules& capsule, double pad) {
   Box box;
-  for (int t = 0; t < tools.n_tools; ++t) {
-    const ToolStep<T>& tool = tools.tool[t];
-    for (int j = 1; j <= tool.substeps; ++j) {
-      const Capsule<T> cap = tool_capsule(tool, tools.steps, k, j);
+  for (int t = 0; t < tools.n_tools; ++t)
+    for (int j = 1; j <= tools.tool[t].substeps; ++j) {
+      const Capsule<T> cap = capsule(t, j);
       const double a[3] = {cap.a.x, cap.a.y, cap.a.z}, b[3] = {cap.b.x, cap.b.y, cap.b.z};
       box.add(a, pad * double(cap.r));
       box.add(b, pad * double(cap.r));
     }
-  }
   return box;
+}
+
+}  // namespace
+
+template <class T>
+ContactStage<T>::ContactStage(const TissueModel<T>& m)
+    : m_(m), bvh_(m, std::max(median_surface_edge(m), 1e-9)), skin_(0.5 * bvh_.margin()) {}
+
+template <class T>
+void ContactStage<T>::set_query_skin(double skin) {
+  if (!(skin >= 0) || !std::isfinite(skin))
+    throw std::invalid_argument("cpu backend: the contact query skin " + std::to_string(skin) + " m must be >= 0");
+  skin_ = skin;
+}
+
+template <class T>
+void ContactStage<T>::CapsuleTable::fill(const ContactTools<T>& tools, int k) {
+  caps_.clear();
+  for (int t = 0; t < tools.n_tools; ++t) {
+    first_[t] = caps_.size();
+    for (int j = 0; j <= tools.tool[t].substeps; ++j) caps_.push_back(tool_capsule(tools.tool[t], tools.steps, k, j));
+  }
 }
 
 template <class T>
@@ -53,8 +72,8 @@ Vec3<T> ContactStage<T>::corner_position(const TissueState<T>& s, const ContactT
 }
 
 template <class T>
-void ContactStage<T>::step(TissueState<T>& s, const ContactTools<T>& tools, int k) {
-  const index_t n = m_.n_nodes, nt = m_.n_tris;
+bool ContactStage<T>::begin_step(TissueState<T>& s, const ContactTools<T>& tools, int k, int parts) {
+  const index_t n = m_.n_nodes;
   // forget last step's contacts (grasps stay)
   for (index_t a : touched_)
     if (s.contact[a] != kGrasped) {
@@ -62,7 +81,7 @@ void ContactStage<T>::step(TissueState<T>& s, const ContactTools<T>& tools, int 
       s.contact_tool[a] = -1;
     }
   touched_.clear();
-  if (tools.n_tools == 0) return;
+  if (tools.n_tools == 0) return false;
   // grasped nodes follow their tool
   for (int t = 0; t < tools.n_tools; ++t) {
     if (!tools.tool[t].grasping) continue;
@@ -72,26 +91,57 @@ void ContactStage<T>::step(TissueState<T>& s, const ContactTools<T>& tools, int 
       touched_.push_back(a);
     }
   }
-  // the triangles near the tools, swept; only the region's nodes and the grasped ones have moved
+  // the triangles near the tools; only the region's nodes and the grasped ones have moved
   for (int t = 0; t < tools.n_tools; ++t)
     if (tools.tool[t].grasping) bvh_.update(s.u_next.data(), grasped_[t]);
   bvh_.update(s.u_next.data(), s.region.nodes);
-  bvh_.query(sweep_box(tools, k, 1.0), tris_);
-  entries_.clear();
-  for (index_t t : tris_) {
+  capsules_.fill(tools, k);
+  tris_now_ = &bvh_.query_within_skin(sweep_box(tools, capsules_, 1.0), skin_, query_);
+  n_parts_ = std::size_t(std::max(parts, 1));
+  if (parts_.size() < n_parts_) parts_.resize(n_parts_);
+  for (std::size_t p = 0; p < n_parts_; ++p) parts_[p].entries.clear();
+  if (tris_now_->empty()) {
+    finish_step(s, tools, k);
+    return false;
+  }
+  return true;
+}
+
+template <class T>
+void ContactStage<T>::sweep(const TissueState<T>& s, const ContactTools<T>& tools, int k, int part) {
+  const index_t nt = m_.n_tris;
+  const std::vector<index_t>& tris = *tris_now_;
+  // this part's share of the triangles (the same cut for every part count that begin_step was given)
+  const std::size_t first = tris.size() * part / n_parts_, last = tris.size() * (part + 1) / n_parts_;
+  std::vector<Entry>& entries = parts_[part].entries;
+  for (std::size_t q = first; q < last; ++q) {
+    const index_t t = tris[q];
     Vec3<T> x[3];
-    std::uint8_t block[3];
     index_t c[3];
     for (int i = 0; i < 3; ++i) {
-      const index_t a = c[i] = m_.tris[i * nt + t];
-      x[i] = corner_position(s, tools, k, s.u_next.data(), a);
+      c[i] = m_.tris[i * nt + t];
+      x[i] = corner_position(s, tools, k, s.u_next.data(), c[i]);
+    }
+    // sweep_triangle's test first: most triangles the query returns are out of reach
+    if (!triangle_may_touch(tools, capsules_, x)) continue;
+    std::uint8_t block[3];
+    for (int i = 0; i < 3; ++i) {
+      const index_t a = c[i];
       block[i] = corner_block(s.region.role[a] == kInner, s.held[a] == kAllAxes, s.contact[a] == kGrasped);
     }
     CornerContact<T> out[3];
-    sweep_triangle(tools, k, x, block, out);
+    sweep_touching_triangle(tools, capsules_, x, block, out);
     for (int i = 0; i < 3; ++i)
-      if (out[i].tool >= 0) entries_.push_back({c[i], 3 * t + i, out[i]});
+      if (out[i].tool >= 0) entries.push_back({c[i], 3 * t + i, out[i]});
   }
+}
+
+template <class T>
+void ContactStage<T>::finish_step(TissueState<T>& s, const ContactTools<T>& tools, int k) {
+  const index_t n = m_.n_nodes;
+  entries_.clear();
+  for (std::size_t p = 0; p < n_parts_; ++p)
+    entries_.insert(entries_.end(), parts_[p].entries.begin(), parts_[p].entries.end());
   // each node takes its triangles' largest proposal (ascending triangle order)
   std::sort(entries_.begin(), entries_.end(),
             [](const Entry& a, const Entry& b) { return a.node != b.node ? a.node < b.node : a.slot < b.slot; });
@@ -163,7 +213,7 @@ std::vector<index_t> ContactStage<T>::candidates(const TissueState<T>& s, const 
   const index_t nt = m_.n_tris;
   std::vector<index_t> out;
   bvh_.update(s.u.data(), s.region.nodes);
-  bvh_.query(sweep_box(sweep, 0, double(kCandidateReach<T>)), tris_);
+  bvh_.query(sweep_box(sweep, StepCapsules<T>{sweep, 0}, double(kCandidateReach<T>)), tris_);
   for (index_t t : tris_) {
     Vec3<T> x[3];
     index_t c[3];

@@ -1,9 +1,12 @@
 // The cpu backend's contact stage (core/contact.hpp's rule; docs/contact.md):
 // per TLED step, the surface BVH (cpu/surface_bvh.hpp) gives the triangles
-// near the tools' sub-check capsules, each is swept (core sweep_triangle),
-// and each touched node takes its triangles' largest proposal (core
-// merge_corner, in ascending triangle order as the cuda backend's gather
-// does). Only the candidates are visited: no loop over every node.
+// near the tools' sub-check capsules (a query padded by a skin serves the
+// next steps while the tools stay inside it), each is swept (core
+// sweep_triangle, over the step's capsules computed once; the team's
+// members sweep shares of the triangles), and each touched node takes its
+// triangles' largest proposal (core merge_proposals, in ascending triangle
+// order as the cuda backend's gather does). Only the candidates are
+// visited: no loop over every node.
 // Grasped nodes follow their tool (core grasped_position). Host functions of
 // (const model&, state&) plus the stage's own scratch; allocation-free
 // after the first steps (the scratch vectors keep their capacity).
@@ -29,7 +32,16 @@ class ContactStage {
   /// s.u_next, before the buffers rotate): moves grasped nodes to their
   /// tools and pushed nodes out of them in s.u_next, and records every
   /// surface node's contact (s.contact, contact_tool, contact_normal).
-  void step(TissueState<T>& s, const ContactTools<T>& tools, int k);
+  /// In three parts, for a team of `parts` members (the cpu backend's
+  /// advance): begin_step on one member; if it returns true, sweep(part) on
+  /// every member part < parts at once (each sweeps its share of the
+  /// triangles near the tools into its own list), then finish_step on one
+  /// member once all have swept (it merges the proposals). false: the step
+  /// is already complete (no tools, or no triangle near them). The results
+  /// do not depend on parts (proposals merge in (node, triangle) order).
+  bool begin_step(TissueState<T>& s, const ContactTools<T>& tools, int k, int parts);
+  void sweep(const TissueState<T>& s, const ContactTools<T>& tools, int k, int part);
+  void finish_step(TissueState<T>& s, const ContactTools<T>& tools, int k);
 
   /// Tool `tool` at pose (tip, axis) grasps its pushed nodes.
   void begin_grasp(TissueState<T>& s, int tool, Vec3<double> tip);
@@ -53,20 +65,48 @@ class ContactStage {
   /// The surface BVH (tests: builds only when the surface left the margin).
   const SurfaceBvh<T>& bvh() const { return bvh_; }
 
+  /// How far (m) beyond the tools' box each step's BVH query reaches, so
+  /// that the next steps can reuse its triangles (SurfaceBvh::query_within_skin);
+  /// 0: a query per step. Default: half the BVH margin. The results do not
+  /// depend on it (the extra triangles are out of the tools' reach).
+  void set_query_skin(double skin);
+  double query_skin() const { return skin_; }
+  /// BVH queries made by the steps so far (tests, benchmarks).
+  long step_queries() const { return query_.queries; }
+
  private:
-  /// Boxes of the capsules that step k of `tools` checks, padded by pad radii.
-  Box sweep_box(const ContactTools<T>& tools, int k, double pad) const;
   /// A corner's position: grasped nodes at their tool's pose for step k.
   Vec3<T> corner_position(const TissueState<T>& s, const ContactTools<T>& tools, int k, const T* u, index_t a) const;
 
+  /// The sub-check capsules of one step, computed once per step: the values
+  /// of core StepCapsules, read by the sweep of every triangle.
+  class CapsuleTable {
+   public:
+    void fill(const ContactTools<T>& tools, int k);
+    Capsule<T> operator()(int t, int j) const { return caps_[first_[t] + std::size_t(j)]; }
+
+   private:
+    std::vector<Capsule<T>> caps_;
+    std::size_t first_[kMaxTools] = {};
+  };
+
   const TissueModel<T>& m_;
   SurfaceBvh<T> bvh_;
-  std::vector<index_t> tris_;                 ///< candidate triangles of the current query
+  double skin_;                               ///< set_query_skin
+  SkinQuery query_;                           ///< the steps' last BVH query
+  CapsuleTable capsules_;                     ///< the current step's
+  std::vector<index_t> tris_;                 ///< the triangles of candidates()' query
   struct Entry {
     index_t node, slot;
     CornerContact<T> c;
   };
-  std::vector<Entry> entries_;                ///< the candidates' corner proposals
+  struct alignas(64) Part {                   ///< one sweep() member's proposals (own cache lines)
+    std::vector<Entry> entries;
+  };
+  const std::vector<index_t>* tris_now_ = nullptr;  ///< the current step's triangles (begin_step's query)
+  std::vector<Part> parts_;                   ///< the current step's sweeps (the first n_parts_)
+  std::size_t n_parts_ = 1;
+  std::vector<Entry> entries_;                ///< the candidates' corner proposals, all parts
   std::vector<index_t> touched_;              ///< nodes with a contact kind (pushed, rigid, outside, grasped)
   std::array<std::vector<index_t>, kMaxTools> grasped_;  ///< per tool, ascending
 };

@@ -178,8 +178,10 @@ void CpuBackend<T>::do_advance(int steps, const ContactTools<double>& tools) {
   const std::span<const index_t> elems = state_.region.elems, nodes = state_.region.nodes;
   const int members = team_slices().parts;
   ThreadTeam& team = *team_;
+  bool sweeping = false;  // written by one barrier's last(), read by every member after it
   // each pass reads what the others' slices wrote in the pass before: a barrier between passes;
-  // the contact stage and the rotation run once, on the last member to finish pass 4
+  // the contact stage starts on the last member to finish pass 4, every member sweeps its share of
+  // the triangles near the tools, and the last to finish its share merges them and rotates
   team.run(members, [&](int r) {
     const std::span<const index_t> my_elems = slices_.elems(elems, r), my_nodes = slices_.nodes(nodes, r);
     for (int k = 0; k < steps; ++k) {
@@ -193,7 +195,14 @@ void CpuBackend<T>::do_advance(int steps, const ContactTools<double>& tools) {
       team.barrier();
       cpu::node_update(model_, state_, my_nodes);
       if (!team.barrier([&] {
-            contact_->step(state_, t, k);
+            sweeping = contact_->begin_step(state_, t, k, members);
+            if (!sweeping) rotate(state_);
+          }))
+        return;
+      if (!sweeping) continue;
+      contact_->sweep(state_, t, k, r);
+      if (!team.barrier([&] {
+            contact_->finish_step(state_, t, k);
             rotate(state_);
           }))
         return;

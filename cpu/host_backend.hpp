@@ -38,6 +38,8 @@ class CpuBackend final : public Backend {
   const TissueState<T>& state() const { return state_; }
   /// Surface BVH builds so far (tests: rebuilt only when the surface left its margin).
   long surface_builds() const { return contact_ ? contact_->bvh().builds() : 0; }
+  /// The contact stage (tests: its query skin and query count); null before upload.
+  ContactStage<T>* contact_stage() { return contact_.get(); }
   /// Runs advance and reduce on a team of `size` members (1..255) instead
   /// of default_team_size() (0: the default again). Tests: results must not
   /// depend on it.

@@ -131,13 +131,18 @@ Reductions reduce_region(const TissueModel<T>& m, const TissueState<T>& s, const
     team.barrier();
     nodal_pressure(m, energy.elem_dv.data(), node_divisor, slices.nodes(nodes, r), energy.node_p.data());
     team.barrier();
-    // fixed chunks, whatever the team's size: the same batches and the same sums at any size
-    const auto [e0, e1] = chunk_share(elem_chunks, r, slices.parts);
-    for (std::size_t c = e0; c < e1; ++c)
-      sums.elems[c] = energy_sums(m, s, energy, elems, c * kReduceGrain, std::min(elems.size(), (c + 1) * kReduceGrain));
-    const auto [n0, n1] = chunk_share(node_chunks, r, slices.parts);
-    for (std::size_t c = n0; c < n1; ++c)
-      sums.nodes[c] = node_sums(m, s, nodes, c * kReduceGrain, std::min(nodes.size(), (c + 1) * kReduceGrain));
+    // fixed chunks, whatever the team's size: the same batches and the same sums at any size; the
+    // element chunks, then the node chunks, shared as one list (a region of one chunk of each sums
+    // its energies and its nodes on two members at once)
+    const auto [c0, c1] = chunk_share(elem_chunks + node_chunks, r, slices.parts);
+    for (std::size_t c = c0; c < c1; ++c) {
+      if (c < elem_chunks) {
+        sums.elems[c] = energy_sums(m, s, energy, elems, c * kReduceGrain, std::min(elems.size(), (c + 1) * kReduceGrain));
+      } else {
+        const std::size_t d = c - elem_chunks;
+        sums.nodes[d] = node_sums(m, s, nodes, d * kReduceGrain, std::min(nodes.size(), (d + 1) * kReduceGrain));
+      }
+    }
   });
   energy.fresh = true;
   NodeSums total;

@@ -173,6 +173,24 @@ void SurfaceBvh<T>::query(const Box& box, std::vector<index_t>& out) {
 }
 
 template <class T>
+const std::vector<index_t>& SurfaceBvh<T>::query_within_skin(const Box& box, double skin, SkinQuery& q) {
+  if (!(skin >= 0) || !std::isfinite(skin))
+    throw std::invalid_argument(fmt::format("cpu backend: query skin {} m must be >= 0", skin));
+  bool holds = !box.empty && !q.padded.empty && q.build == builds_ && built_;
+  for (int k = 0; k < 3 && holds; ++k) holds = q.padded.lo[k] <= box.lo[k] && box.hi[k] <= q.padded.hi[k];
+  if (holds) return q.tris;
+  q.padded = Box{};
+  q.build = builds_;
+  if (!box.empty) {
+    q.padded.add(box.lo, skin);
+    q.padded.add(box.hi, skin);
+  }
+  query(q.padded, q.tris);
+  ++q.queries;
+  return q.tris;
+}
+
+template <class T>
 double median_surface_edge(const TissueModel<T>& m) {
   const index_t n = m.n_nodes, nt = m.n_tris;
   std::vector<double> len;

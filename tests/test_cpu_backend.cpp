@@ -2,8 +2,8 @@
 // backend, is tests/test_backend_contract.cpp): its name and thread count,
 // determinism across thread counts, float against double, the halo rule on
 // its state, the reductions against their definitions on its state, host
-// positions, and the surface BVH that is rebuilt only when the surface has
-// left its margin.
+// positions, the surface BVH that is rebuilt only when the surface has
+// left its margin, and the contact query's skin.
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
@@ -13,9 +13,11 @@
 #include <cstddef>
 #include <cstring>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "core/box_mesh.hpp"
+#include "core/contact.hpp"
 #include "core/device.hpp"
 #include "core/scheduler.hpp"
 #include "core/tet.hpp"
@@ -354,6 +356,121 @@ TEST(SurfaceBvh, DisplacementsBeyondTheRegionAreSeenByTheNextQuery) {
   const Reductions r = b->reduce();
   EXPECT_GT(r.tools[0].outside, 0);
   EXPECT_EQ(r.tools[0].contact, 0);
+}
+
+/// The skin query returns every triangle the plain query returns (and those
+/// within the skin), walks the BVH again only when the box leaves the padded
+/// box or the BVH was rebuilt, and skin 0 walks it every time.
+TEST(SurfaceBvh, SkinQueriesHoldThePlainQueryAndAreReusedWithinTheSkin) {
+  const auto m = box_model(8, true);
+  cpu::SurfaceBvh<double> bvh(m, cpu::median_surface_edge(m));
+  const std::vector<double> u(3 * size_t(m.n_nodes), 0.0);
+  bvh.update(u.data());
+  const double skin = 0.5 * bvh.margin(), r = 0.003;
+  const auto box_at = [&](double x) {
+    cpu::Box b;
+    const double p[3] = {x, 0.5 * kL, kL};
+    b.add(p, r);
+    return b;
+  };
+  cpu::SkinQuery q, q0;
+  std::vector<index_t> plain, wide;
+  long reused = 0;
+  for (int k = 0; k <= 40; ++k) {
+    const double x = 0.3 * kL + 1e-4 * k;  // 4 mm in 0.1 mm steps
+    const cpu::Box b = box_at(x);
+    const long before = q.queries;
+    const std::vector<index_t> got = bvh.query_within_skin(b, skin, q);
+    reused += q.queries == before;
+    bvh.query(b, plain);
+    ASSERT_FALSE(plain.empty());
+    EXPECT_TRUE(std::includes(got.begin(), got.end(), plain.begin(), plain.end())) << "step " << k;
+    cpu::Box padded = b;
+    const double lo[3] = {b.lo[0], b.lo[1], b.lo[2]}, hi[3] = {b.hi[0], b.hi[1], b.hi[2]};
+    padded.add(lo, 2 * skin);  // no triangle beyond the skin of the box it was queried for
+    padded.add(hi, 2 * skin);
+    bvh.query(padded, wide);
+    EXPECT_TRUE(std::includes(wide.begin(), wide.end(), got.begin(), got.end())) << "step " << k;
+    EXPECT_EQ(bvh.query_within_skin(b, 0.0, q0), plain) << "step " << k;
+  }
+  EXPECT_EQ(q0.queries, 41);
+  EXPECT_GE(reused, 30);  // 1.25 mm of skin: a query per 12 steps or so of 0.1 mm
+  EXPECT_LE(q.queries, 11);
+  // a rebuild invalidates the kept triangles
+  std::vector<double> moved = u;
+  for (index_t a = 0; a < m.n_nodes; ++a) moved[2 * size_t(m.n_nodes) + a] = 2 * bvh.margin();
+  bvh.update(moved.data());
+  ASSERT_EQ(bvh.builds(), 2);
+  const long before = q.queries;
+  bvh.query_within_skin(box_at(0.3 * kL + 4e-3), skin, q);
+  EXPECT_EQ(q.queries, before + 1);
+  EXPECT_THROW(bvh.query_within_skin(box_at(0.3 * kL), -1.0, q), std::invalid_argument);
+}
+
+/// The contact stage's results do not depend on its query skin: a probe
+/// that presses into the top and slides across it, one step per advance,
+/// gives the same bits with a query per step (skin 0) as with the default
+/// skin, which queries far less often.
+TEST_P(CpuBackendTest, ContactQuerySkinChangesNoBit) {
+  const auto m = box_model(8, true);
+  struct Run {
+    Fields fields;
+    std::vector<Reductions> red;
+    std::vector<std::vector<ContactNode>> contacts;
+    long queries = 0;
+  };
+  const auto run = [&](std::optional<double> skin) {
+    Run out;
+    std::unique_ptr<Backend> b;
+    long queries = 0;
+    const auto go = [&](auto* cpu) {
+      cpu->upload(m);
+      if (skin) cpu->contact_stage()->set_query_skin(*skin);
+      const ToolShape tool{"probe", kProbeRadius, 0.01};
+      cpu->set_tools(std::span<const ToolShape>(&tool, 1));
+      Vec3<double> at{0.3 * kL, 0.45 * kL, kL + kProbeRadius};
+      for (int k = 0; k < 120; ++k) {
+        // press 3 mm over the first 30 steps, then slide 6 mm along x with a slight turn of the axis
+        const Vec3<double> next = at + (k < 30 ? Vec3<double>{0, 0, -1e-4} : Vec3<double>{5e-5, 1e-5, 0});
+        const ToolMotion mv{{at, {0, 0, 1}}, {next, unit_or(Vec3<double>{0.002 * (k - 30 > 0 ? k - 30 : 0) / 90.0, 0, 1}, Vec3<double>{0, 0, 1})}};
+        cpu->move_tools(std::span<const ToolMotion>(&mv, 1));
+        at = next;
+        cpu->advance(1);
+        out.red.push_back(cpu->reduce());
+        out.contacts.push_back(cpu->contacts());
+      }
+      out.fields = cpu->download();
+      queries = cpu->contact_stage()->step_queries();
+    };
+    if (GetParam() == Precision::Float) {
+      auto c = std::make_unique<cpu::CpuBackend<float>>();
+      go(c.get());
+    } else {
+      auto c = std::make_unique<cpu::CpuBackend<double>>();
+      go(c.get());
+    }
+    out.queries = queries;
+    return out;
+  };
+  const Run a = run(0.0), d = run(std::nullopt);
+  EXPECT_EQ(a.queries, 120);
+  EXPECT_LT(d.queries, 40);
+  EXPECT_GT(d.queries, 0);
+  EXPECT_TRUE(same_bits(a.fields.u, d.fields.u));
+  EXPECT_TRUE(same_bits(a.fields.f, d.fields.f));
+  ASSERT_EQ(a.red.size(), d.red.size());
+  int touching = 0;
+  for (size_t k = 0; k < a.red.size(); ++k) {
+    EXPECT_EQ(std::memcmp(&a.red[k], &d.red[k], offsetof(Reductions, bad_elem)), 0) << "step " << k;
+    ASSERT_EQ(a.contacts[k].size(), d.contacts[k].size()) << "step " << k;
+    for (size_t i = 0; i < a.contacts[k].size(); ++i) {
+      EXPECT_EQ(a.contacts[k][i].node, d.contacts[k][i].node);
+      EXPECT_EQ(a.contacts[k][i].kind, d.contacts[k][i].kind);
+      EXPECT_EQ(std::memcmp(&a.contacts[k][i].normal, &d.contacts[k][i].normal, sizeof(Vec3<double>)), 0);
+    }
+    touching += a.red[k].tools[0].contact > 0;
+  }
+  EXPECT_GT(touching, 80);  // in contact for most of the path
 }
 
 }  // namespace
