@@ -97,19 +97,20 @@ bool ContactStage<T>::begin_step(TissueState<T>& s, const ContactTools<T>& tools
   bvh_.update(s.u_next.data(), s.region.nodes);
   capsules_.fill(tools, k);
   tris_now_ = &bvh_.query_within_skin(sweep_box(tools, capsules_, 1.0), skin_, query_);
-  n_parts_ = std::size_t(std::max(parts, 1));
+  // at least kMinSweepShare triangles per part: a share smaller than that costs less than the barrier
+  n_parts_ = std::clamp<std::size_t>(tris_now_->size() / kMinSweepShare, 1, std::size_t(std::max(parts, 1)));
   if (parts_.size() < n_parts_) parts_.resize(n_parts_);
   for (std::size_t p = 0; p < n_parts_; ++p) parts_[p].entries.clear();
-  if (tris_now_->empty()) {
-    finish_step(s, tools, k);
-    return false;
-  }
-  return true;
+  if (n_parts_ > 1) return true;
+  sweep(s, tools, k, 0);  // one part: here, and the step is complete
+  finish_step(s, tools, k);
+  return false;
 }
 
 template <class T>
 void ContactStage<T>::sweep(const TissueState<T>& s, const ContactTools<T>& tools, int k, int part) {
   const index_t nt = m_.n_tris;
+  if (std::size_t(part) >= n_parts_) return;  // a member beyond the parts begin_step chose
   const std::vector<index_t>& tris = *tris_now_;
   // this part's share of the triangles (the same cut for every part count that begin_step was given)
   const std::size_t first = tris.size() * part / n_parts_, last = tris.size() * (part + 1) / n_parts_;

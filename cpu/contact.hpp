@@ -13,6 +13,7 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <vector>
 
 #include "core/backend.hpp"
@@ -20,6 +21,10 @@
 #include "cpu/surface_bvh.hpp"
 
 namespace tissue::cpu {
+
+/// The fewest triangles a team member sweeps in a step (ContactStage::sweep):
+/// fewer are swept by one member, without the barrier a shared sweep needs.
+inline constexpr std::size_t kMinSweepShare = 32;
 
 template <class T>
 class ContactStage {
@@ -35,9 +40,11 @@ class ContactStage {
   /// In three parts, for a team of `parts` members (the cpu backend's
   /// advance): begin_step on one member; if it returns true, sweep(part) on
   /// every member part < parts at once (each sweeps its share of the
-  /// triangles near the tools into its own list), then finish_step on one
-  /// member once all have swept (it merges the proposals). false: the step
-  /// is already complete (no tools, or no triangle near them). The results
+  /// triangles near the tools into its own list; members beyond the shares
+  /// begin_step chose, at least kMinSweepShare triangles each, return at
+  /// once), then finish_step on one member once all have swept (it merges
+  /// the proposals). false: the step is already complete (no tools, or too
+  /// few triangles near them to share: begin_step swept them). The results
   /// do not depend on parts (proposals merge in (node, triangle) order).
   bool begin_step(TissueState<T>& s, const ContactTools<T>& tools, int k, int parts);
   void sweep(const TissueState<T>& s, const ContactTools<T>& tools, int k, int part);

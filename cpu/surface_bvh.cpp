@@ -176,10 +176,15 @@ template <class T>
 const std::vector<index_t>& SurfaceBvh<T>::query_within_skin(const Box& box, double skin, SkinQuery& q) {
   if (!(skin >= 0) || !std::isfinite(skin))
     throw std::invalid_argument(fmt::format("cpu backend: query skin {} m must be >= 0", skin));
-  bool holds = !box.empty && !q.padded.empty && q.build == builds_ && built_;
-  for (int k = 0; k < 3 && holds; ++k) holds = q.padded.lo[k] <= box.lo[k] && box.hi[k] <= q.padded.hi[k];
+  // reused while the padded box holds `box` and is not much larger than it (after one large box --
+  // a fast tool's step -- the smaller boxes that follow would otherwise keep sweeping its triangles)
+  bool holds = skin > 0 && !box.empty && !q.padded.empty && q.bvh == this && q.build == builds_ && built_;
+  for (int k = 0; k < 3 && holds; ++k)
+    holds = q.padded.lo[k] <= box.lo[k] && box.hi[k] <= q.padded.hi[k] && box.lo[k] - q.padded.lo[k] <= 2 * skin &&
+            q.padded.hi[k] - box.hi[k] <= 2 * skin;
   if (holds) return q.tris;
   q.padded = Box{};
+  q.bvh = this;
   q.build = builds_;
   if (!box.empty) {
     q.padded.add(box.lo, skin);

@@ -35,7 +35,8 @@ struct Box {
 /// A box query kept for reuse by SurfaceBvh::query_within_skin.
 struct SkinQuery {
   Box padded;                 ///< the box last queried: a caller's box padded by the skin
-  long build = -1;            ///< the BVH build it was made on (-1: none)
+  const void* bvh = nullptr;  ///< the SurfaceBvh it was made on
+  long build = -1;            ///< that BVH's build it was made on (-1: none)
   std::vector<index_t> tris;  ///< its triangles, ascending
   long queries = 0;           ///< BVH queries made through this object (tests, benchmarks)
 };
@@ -69,12 +70,13 @@ class SurfaceBvh {
 
   /// A superset of query(box): the triangles whose fattened box overlaps
   /// `box` padded by `skin` (m, >= 0) on every side. They come from q, the
-  /// last such query, while its padded box still holds `box` and the BVH has
-  /// not been rebuilt since (a fattened box does not change between builds);
-  /// otherwise the padded box is queried into q. A tool that moves less than
-  /// the skin between steps thus walks the BVH once per skin's travel, not
-  /// per step (the Verlet skin of particle neighbour lists). skin 0 queries
-  /// every time. Call update() for the current u first.
+  /// last such query (on this BVH), while its padded box still holds `box`,
+  /// reaches at most 2 skins beyond it, and the BVH has not been rebuilt
+  /// since (a fattened box does not change between builds); otherwise the
+  /// padded box is queried into q. A tool that moves less than the skin
+  /// between steps thus walks the BVH once per skin's travel, not per step
+  /// (the Verlet skin of particle neighbour lists). skin 0: query(box) every
+  /// time. Call update() for the current u first.
   const std::vector<index_t>& query_within_skin(const Box& box, double skin, SkinQuery& q);
 
   double margin() const { return margin_; }

@@ -14,6 +14,8 @@
 #include <cstring>
 #include <memory>
 #include <optional>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "core/box_mesh.hpp"
@@ -396,22 +398,39 @@ TEST(SurfaceBvh, SkinQueriesHoldThePlainQueryAndAreReusedWithinTheSkin) {
   EXPECT_EQ(q0.queries, 41);
   EXPECT_GE(reused, 30);  // 1.25 mm of skin: a query per 12 steps or so of 0.1 mm
   EXPECT_LE(q.queries, 11);
-  // a rebuild invalidates the kept triangles
+  // a box far smaller than the kept one queries again (a fast step's large box is not kept sweeping)
+  cpu::Box large = box_at(0.5 * kL);
+  const double lo[3] = {large.lo[0], large.lo[1], large.lo[2]}, hi[3] = {large.hi[0], large.hi[1], large.hi[2]};
+  large.add(lo, 3 * skin);
+  large.add(hi, 3 * skin);
+  bvh.query_within_skin(large, skin, q);
+  long before = q.queries;
+  bvh.query_within_skin(box_at(0.5 * kL), skin, q);
+  EXPECT_EQ(q.queries, before + 1);
+  // a rebuild invalidates the kept triangles: the top raised by two margins is found where it is now
   std::vector<double> moved = u;
   for (index_t a = 0; a < m.n_nodes; ++a) moved[2 * size_t(m.n_nodes) + a] = 2 * bvh.margin();
   bvh.update(moved.data());
   ASSERT_EQ(bvh.builds(), 2);
-  const long before = q.queries;
-  bvh.query_within_skin(box_at(0.3 * kL + 4e-3), skin, q);
+  before = q.queries;
+  cpu::Box raised = box_at(0.5 * kL);
+  raised.lo[2] += 2 * bvh.margin();
+  raised.hi[2] += 2 * bvh.margin();
+  const std::vector<index_t> got = bvh.query_within_skin(raised, skin, q);
   EXPECT_EQ(q.queries, before + 1);
+  bvh.query(raised, plain);
+  ASSERT_FALSE(plain.empty());
+  EXPECT_TRUE(std::includes(got.begin(), got.end(), plain.begin(), plain.end()));
   EXPECT_THROW(bvh.query_within_skin(box_at(0.3 * kL), -1.0, q), std::invalid_argument);
 }
 
-/// The contact stage's results do not depend on its query skin: a probe
-/// that presses into the top and slides across it, one step per advance,
-/// gives the same bits with a query per step (skin 0) as with the default
-/// skin, which queries far less often.
-TEST_P(CpuBackendTest, ContactQuerySkinChangesNoBit) {
+/// The contact stage's results depend neither on its query skin nor on how
+/// many team members share the sweep: a probe that presses into the top and
+/// slides across it, one step per advance, gives the same bits with a query
+/// per step (skin 0) on one member as with the default skin (far fewer
+/// queries) and with a 1 m skin (every step sweeps the whole surface), on
+/// 1, 2, 3 and 16 members.
+TEST_P(CpuBackendTest, ContactQuerySkinAndSweepSharesChangeNoBit) {
   const auto m = box_model(8, true);
   struct Run {
     Fields fields;
@@ -419,11 +438,11 @@ TEST_P(CpuBackendTest, ContactQuerySkinChangesNoBit) {
     std::vector<std::vector<ContactNode>> contacts;
     long queries = 0;
   };
-  const auto run = [&](std::optional<double> skin) {
+  const auto run = [&](std::optional<double> skin, int members) {
     Run out;
-    std::unique_ptr<Backend> b;
     long queries = 0;
     const auto go = [&](auto* cpu) {
+      cpu->set_team_size(members);
       cpu->upload(m);
       if (skin) cpu->contact_stage()->set_query_skin(*skin);
       const ToolShape tool{"probe", kProbeRadius, 0.01};
@@ -452,25 +471,32 @@ TEST_P(CpuBackendTest, ContactQuerySkinChangesNoBit) {
     out.queries = queries;
     return out;
   };
-  const Run a = run(0.0), d = run(std::nullopt);
+  const Run a = run(0.0, 1);
   EXPECT_EQ(a.queries, 120);
-  EXPECT_LT(d.queries, 40);
-  EXPECT_GT(d.queries, 0);
-  EXPECT_TRUE(same_bits(a.fields.u, d.fields.u));
-  EXPECT_TRUE(same_bits(a.fields.f, d.fields.f));
-  ASSERT_EQ(a.red.size(), d.red.size());
   int touching = 0;
-  for (size_t k = 0; k < a.red.size(); ++k) {
-    EXPECT_EQ(std::memcmp(&a.red[k], &d.red[k], offsetof(Reductions, bad_elem)), 0) << "step " << k;
-    ASSERT_EQ(a.contacts[k].size(), d.contacts[k].size()) << "step " << k;
-    for (size_t i = 0; i < a.contacts[k].size(); ++i) {
-      EXPECT_EQ(a.contacts[k][i].node, d.contacts[k][i].node);
-      EXPECT_EQ(a.contacts[k][i].kind, d.contacts[k][i].kind);
-      EXPECT_EQ(std::memcmp(&a.contacts[k][i].normal, &d.contacts[k][i].normal, sizeof(Vec3<double>)), 0);
-    }
-    touching += a.red[k].tools[0].contact > 0;
-  }
+  for (const Reductions& r : a.red) touching += r.tools[0].contact > 0;
   EXPECT_GT(touching, 80);  // in contact for most of the path
+  for (const auto& [skin, members] : std::vector<std::pair<std::optional<double>, int>>{
+           {std::nullopt, 1}, {std::nullopt, 2}, {std::nullopt, 3}, {std::nullopt, 16}, {1.0, 1}, {1.0, 16}}) {
+    const std::string what = fmt::format("skin {}, {} members", skin ? fmt::format("{} m", *skin) : "default", members);
+    const Run d = run(skin, members);
+    if (!skin) {
+      EXPECT_LT(d.queries, 40) << what;
+      EXPECT_GT(d.queries, 0) << what;
+    }
+    EXPECT_TRUE(same_bits(a.fields.u, d.fields.u)) << what;
+    EXPECT_TRUE(same_bits(a.fields.f, d.fields.f)) << what;
+    ASSERT_EQ(a.red.size(), d.red.size());
+    for (size_t k = 0; k < a.red.size(); ++k) {
+      EXPECT_EQ(std::memcmp(&a.red[k], &d.red[k], offsetof(Reductions, bad_elem)), 0) << what << ", step " << k;
+      ASSERT_EQ(a.contacts[k].size(), d.contacts[k].size()) << what << ", step " << k;
+      for (size_t i = 0; i < a.contacts[k].size(); ++i) {
+        EXPECT_EQ(a.contacts[k][i].node, d.contacts[k][i].node);
+        EXPECT_EQ(a.contacts[k][i].kind, d.contacts[k][i].kind);
+        EXPECT_EQ(std::memcmp(&a.contacts[k][i].normal, &d.contacts[k][i].normal, sizeof(Vec3<double>)), 0);
+      }
+    }
+  }
 }
 
 }  // namespace
