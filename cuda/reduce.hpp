@@ -70,8 +70,8 @@ class Reducer {
   Reductions* result_host() { return result_host_.data(); }
 
  private:
-  DeviceArray<ReducePartial> partial_;  ///< one per block
-  DeviceArray<ContactPartial> contact_partial_;  ///< one per block
+  DeviceArray<int> partial_;            ///< one ReducePartial per block, as columns (reduce.cu store_columns)
+  DeviceArray<int> contact_partial_;    ///< one ContactPartial per block, likewise
   DeviceArray<unsigned> done_;          ///< blocks finished (the last one resets it to 0)
   DeviceArray<Reductions> result_;      ///< (1)
   PinnedArray<Reductions> result_host_;
