@@ -1,9 +1,6 @@
 #include "cpu/contact.hpp"
 
 #include <algorithm>
-#include <cmath>
-#include <stdexcept>
-#include <string>
 
 #include "core/node_rules.hpp"
 
@@ -39,14 +36,8 @@ Box sweep_box(const ContactTools<T>& tools, const Capsules& capsule, double pad)
 }  // namespace
 
 template <class T>
-ContactStage<T>::ContactStage(const TissueModel<T>& m)
-    : m_(m), bvh_(m, std::max(median_surface_edge(m), 1e-9)), skin_(0.5 * bvh_.margin()) {}
-
-template <class T>
-void ContactStage<T>::set_query_skin(double skin) {
-  if (!(skin >= 0) || !std::isfinite(skin))
-    throw std::invalid_argument("cpu backend: the contact query skin " + std::to_string(skin) + " m must be >= 0");
-  skin_ = skin;
+ContactStage<T>::ContactStage(const TissueModel<T>& m) : m_(m), bvh_(m, std::max(median_surface_edge(m), 1e-9)) {
+  bvh_.set_skin(0.5 * bvh_.margin());
 }
 
 template <class T>
@@ -96,7 +87,7 @@ bool ContactStage<T>::begin_step(TissueState<T>& s, const ContactTools<T>& tools
     if (tools.tool[t].grasping) bvh_.update(s.u_next.data(), grasped_[t]);
   bvh_.update(s.u_next.data(), s.region.nodes);
   capsules_.fill(tools, k);
-  tris_now_ = &bvh_.query_within_skin(sweep_box(tools, capsules_, 1.0), skin_, query_);
+  tris_now_ = &bvh_.query_within_skin(sweep_box(tools, capsules_, 1.0));
   // at least kMinSweepShare triangles per part: a share smaller than that costs less than the barrier
   n_parts_ = std::clamp<std::size_t>(tris_now_->size() / kMinSweepShare, 1, std::size_t(std::max(parts, 1)));
   if (parts_.size() < n_parts_) parts_.resize(n_parts_);

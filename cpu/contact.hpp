@@ -76,10 +76,7 @@ class ContactStage {
   /// that the next steps can reuse its triangles (SurfaceBvh::query_within_skin);
   /// 0: a query per step. Default: half the BVH margin. The results do not
   /// depend on it (the extra triangles are out of the tools' reach).
-  void set_query_skin(double skin);
-  double query_skin() const { return skin_; }
-  /// BVH queries made by the steps so far (tests, benchmarks).
-  long step_queries() const { return query_.queries; }
+  void set_query_skin(double skin) { bvh_.set_skin(skin); }
 
  private:
   /// A corner's position: grasped nodes at their tool's pose for step k.
@@ -99,8 +96,6 @@ class ContactStage {
 
   const TissueModel<T>& m_;
   SurfaceBvh<T> bvh_;
-  double skin_;                               ///< set_query_skin
-  SkinQuery query_;                           ///< the steps' last BVH query
   CapsuleTable capsules_;                     ///< the current step's
   std::vector<index_t> tris_;                 ///< the triangles of candidates()' query
   struct Entry {
@@ -110,7 +105,7 @@ class ContactStage {
   struct alignas(64) Part {                   ///< one sweep() member's proposals (own cache lines)
     std::vector<Entry> entries;
   };
-  const std::vector<index_t>* tris_now_ = nullptr;  ///< the current step's triangles (begin_step's query)
+  const std::vector<index_t>* tris_now_ = nullptr;  ///< the current step's triangles (the BVH's kept query)
   std::vector<Part> parts_;                   ///< the current step's sweeps (the first n_parts_)
   std::size_t n_parts_ = 1;
   std::vector<Entry> entries_;                ///< the candidates' corner proposals, all parts

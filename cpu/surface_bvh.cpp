@@ -120,6 +120,7 @@ void SurfaceBvh<T>::build(const T* u) {
   throw_if_error(rtc_->device, "building the surface BVH");
   ++builds_;
   built_ = true;
+  kept_box_ = Box{};  // query_within_skin's triangles were found in the old boxes
 }
 
 template <class T>
@@ -173,26 +174,31 @@ void SurfaceBvh<T>::query(const Box& box, std::vector<index_t>& out) {
 }
 
 template <class T>
-const std::vector<index_t>& SurfaceBvh<T>::query_within_skin(const Box& box, double skin, SkinQuery& q) {
+void SurfaceBvh<T>::set_skin(double skin) {
   if (!(skin >= 0) || !std::isfinite(skin))
-    throw std::invalid_argument(fmt::format("cpu backend: query skin {} m must be >= 0", skin));
+    throw std::invalid_argument(fmt::format("cpu backend: surface BVH query skin {} m must be >= 0", skin));
+  skin_ = skin;
+  kept_box_ = Box{};
+}
+
+template <class T>
+const std::vector<index_t>& SurfaceBvh<T>::query_within_skin(const Box& box) {
   // reused while the padded box holds `box` and is not much larger than it (after one large box --
   // a fast tool's step -- the smaller boxes that follow would otherwise keep sweeping its triangles)
-  bool holds = skin > 0 && !box.empty && !q.padded.empty && q.bvh == this && q.build == builds_ && built_;
+  bool holds = skin_ > 0 && !box.empty && !kept_box_.empty;
   for (int k = 0; k < 3 && holds; ++k)
-    holds = q.padded.lo[k] <= box.lo[k] && box.hi[k] <= q.padded.hi[k] && box.lo[k] - q.padded.lo[k] <= 2 * skin &&
-            q.padded.hi[k] - box.hi[k] <= 2 * skin;
-  if (holds) return q.tris;
-  q.padded = Box{};
-  q.bvh = this;
-  q.build = builds_;
+    holds = kept_box_.lo[k] <= box.lo[k] && box.hi[k] <= kept_box_.hi[k] && box.lo[k] - kept_box_.lo[k] <= 2 * skin_ &&
+            kept_box_.hi[k] - box.hi[k] <= 2 * skin_;
+  if (holds) return kept_;
+  kept_box_ = Box{};
   if (!box.empty) {
-    q.padded.add(box.lo, skin);
-    q.padded.add(box.hi, skin);
+    kept_box_.add(box.lo, skin_);
+    kept_box_.add(box.hi, skin_);
   }
-  query(q.padded, q.tris);
-  ++q.queries;
-  return q.tris;
+  query(kept_box_, kept_);
+  if (!built_) kept_box_ = Box{};  // nothing to keep before the first build
+  ++skin_queries_;
+  return kept_;
 }
 
 template <class T>

@@ -32,15 +32,6 @@ struct Box {
   void add(const double p[3], double pad);
 };
 
-/// A box query kept for reuse by SurfaceBvh::query_within_skin.
-struct SkinQuery {
-  Box padded;                 ///< the box last queried: a caller's box padded by the skin
-  const void* bvh = nullptr;  ///< the SurfaceBvh it was made on
-  long build = -1;            ///< that BVH's build it was made on (-1: none)
-  std::vector<index_t> tris;  ///< its triangles, ascending
-  long queries = 0;           ///< BVH queries made through this object (tests, benchmarks)
-};
-
 template <class T>
 class SurfaceBvh {
  public:
@@ -69,15 +60,19 @@ class SurfaceBvh {
   void query(const Box& box, std::vector<index_t>& out);
 
   /// A superset of query(box): the triangles whose fattened box overlaps
-  /// `box` padded by `skin` (m, >= 0) on every side. They come from q, the
-  /// last such query (on this BVH), while its padded box still holds `box`,
-  /// reaches at most 2 skins beyond it, and the BVH has not been rebuilt
-  /// since (a fattened box does not change between builds); otherwise the
-  /// padded box is queried into q. A tool that moves less than the skin
-  /// between steps thus walks the BVH once per skin's travel, not per step
-  /// (the Verlet skin of particle neighbour lists). skin 0: query(box) every
+  /// `box` padded by the skin (set_skin) on every side. They are those of
+  /// the last such query while its padded box still holds `box`, reaches at
+  /// most 2 skins beyond it, and the BVH has not been rebuilt since (a
+  /// fattened box does not change between builds); otherwise the padded box
+  /// is queried and kept. A tool that moves less than the skin between
+  /// steps thus walks the BVH once per skin's travel, not per step (the
+  /// Verlet skin of particle neighbour lists). Skin 0: query(box) every
   /// time. Call update() for the current u first.
-  const std::vector<index_t>& query_within_skin(const Box& box, double skin, SkinQuery& q);
+  const std::vector<index_t>& query_within_skin(const Box& box);
+  /// The skin (m, >= 0; default 0) of query_within_skin.
+  void set_skin(double skin);
+  /// BVH walks query_within_skin has made (tests, benchmarks).
+  long skin_queries() const { return skin_queries_; }
 
   double margin() const { return margin_; }
   /// BVH builds so far (tests: rebuilt only when the surface left the margin).
@@ -94,6 +89,10 @@ class SurfaceBvh {
   std::vector<float> boxes_;      ///< fattened triangle boxes (n_tris x 6: lo xyz, hi xyz)
   std::vector<index_t> surf_index_;  ///< node -> its surface index, -1 off the surface (n_nodes)
   long builds_ = 0;
+  double skin_ = 0;                  ///< set_skin
+  Box kept_box_;                     ///< the padded box of query_within_skin's last walk (empty after a build)
+  std::vector<index_t> kept_;        ///< its triangles, ascending
+  long skin_queries_ = 0;
   bool built_ = false;
   bool full_check_ = true;
 };

@@ -365,25 +365,26 @@ TEST(SurfaceBvh, DisplacementsBeyondTheRegionAreSeenByTheNextQuery) {
 /// box or the BVH was rebuilt, and skin 0 walks it every time.
 TEST(SurfaceBvh, SkinQueriesHoldThePlainQueryAndAreReusedWithinTheSkin) {
   const auto m = box_model(8, true);
-  cpu::SurfaceBvh<double> bvh(m, cpu::median_surface_edge(m));
+  cpu::SurfaceBvh<double> bvh(m, cpu::median_surface_edge(m)), bvh0(m, cpu::median_surface_edge(m));
   const std::vector<double> u(3 * size_t(m.n_nodes), 0.0);
   bvh.update(u.data());
+  bvh0.update(u.data());
   const double skin = 0.5 * bvh.margin(), r = 0.003;
+  bvh.set_skin(skin);  // bvh0 keeps the default, 0
   const auto box_at = [&](double x) {
     cpu::Box b;
     const double p[3] = {x, 0.5 * kL, kL};
     b.add(p, r);
     return b;
   };
-  cpu::SkinQuery q, q0;
   std::vector<index_t> plain, wide;
   long reused = 0;
   for (int k = 0; k <= 40; ++k) {
     const double x = 0.3 * kL + 1e-4 * k;  // 4 mm in 0.1 mm steps
     const cpu::Box b = box_at(x);
-    const long before = q.queries;
-    const std::vector<index_t> got = bvh.query_within_skin(b, skin, q);
-    reused += q.queries == before;
+    const long before = bvh.skin_queries();
+    const std::vector<index_t> got = bvh.query_within_skin(b);
+    reused += bvh.skin_queries() == before;
     bvh.query(b, plain);
     ASSERT_FALSE(plain.empty());
     EXPECT_TRUE(std::includes(got.begin(), got.end(), plain.begin(), plain.end())) << "step " << k;
@@ -393,35 +394,38 @@ TEST(SurfaceBvh, SkinQueriesHoldThePlainQueryAndAreReusedWithinTheSkin) {
     padded.add(hi, 2 * skin);
     bvh.query(padded, wide);
     EXPECT_TRUE(std::includes(wide.begin(), wide.end(), got.begin(), got.end())) << "step " << k;
-    EXPECT_EQ(bvh.query_within_skin(b, 0.0, q0), plain) << "step " << k;
+    EXPECT_EQ(bvh0.query_within_skin(b), plain) << "step " << k;
   }
-  EXPECT_EQ(q0.queries, 41);
+  EXPECT_EQ(bvh0.skin_queries(), 41);
   EXPECT_GE(reused, 30);  // 1.25 mm of skin: a query per 12 steps or so of 0.1 mm
-  EXPECT_LE(q.queries, 11);
+  EXPECT_LE(bvh.skin_queries(), 11);
   // a box far smaller than the kept one queries again (a fast step's large box is not kept sweeping)
   cpu::Box large = box_at(0.5 * kL);
   const double lo[3] = {large.lo[0], large.lo[1], large.lo[2]}, hi[3] = {large.hi[0], large.hi[1], large.hi[2]};
   large.add(lo, 3 * skin);
   large.add(hi, 3 * skin);
-  bvh.query_within_skin(large, skin, q);
-  long before = q.queries;
-  bvh.query_within_skin(box_at(0.5 * kL), skin, q);
-  EXPECT_EQ(q.queries, before + 1);
+  bvh.query_within_skin(large);
+  long before = bvh.skin_queries();
+  bvh.query_within_skin(box_at(0.5 * kL));
+  EXPECT_EQ(bvh.skin_queries(), before + 1);
   // a rebuild invalidates the kept triangles: the top raised by two margins is found where it is now
   std::vector<double> moved = u;
   for (index_t a = 0; a < m.n_nodes; ++a) moved[2 * size_t(m.n_nodes) + a] = 2 * bvh.margin();
   bvh.update(moved.data());
   ASSERT_EQ(bvh.builds(), 2);
-  before = q.queries;
+  before = bvh.skin_queries();
+  bvh.query_within_skin(box_at(0.5 * kL));  // the box kept before the rebuild: walked again
+  EXPECT_EQ(bvh.skin_queries(), before + 1);
+  before = bvh.skin_queries();
   cpu::Box raised = box_at(0.5 * kL);
   raised.lo[2] += 2 * bvh.margin();
   raised.hi[2] += 2 * bvh.margin();
-  const std::vector<index_t> got = bvh.query_within_skin(raised, skin, q);
-  EXPECT_EQ(q.queries, before + 1);
+  const std::vector<index_t> got = bvh.query_within_skin(raised);
+  EXPECT_EQ(bvh.skin_queries(), before + 1);
   bvh.query(raised, plain);
   ASSERT_FALSE(plain.empty());
   EXPECT_TRUE(std::includes(got.begin(), got.end(), plain.begin(), plain.end()));
-  EXPECT_THROW(bvh.query_within_skin(box_at(0.3 * kL), -1.0, q), std::invalid_argument);
+  EXPECT_THROW(bvh.set_skin(-1.0), std::invalid_argument);
 }
 
 /// The contact stage's results depend neither on its query skin nor on how
@@ -459,7 +463,7 @@ TEST_P(CpuBackendTest, ContactQuerySkinAndSweepSharesChangeNoBit) {
         out.contacts.push_back(cpu->contacts());
       }
       out.fields = cpu->download();
-      queries = cpu->contact_stage()->step_queries();
+      queries = cpu->contact_stage()->bvh().skin_queries();  // the steps' walks (candidates() uses query())
     };
     if (GetParam() == Precision::Float) {
       auto c = std::make_unique<cpu::CpuBackend<float>>();
