@@ -45,4 +45,12 @@ double measure_device_bandwidth(const std::string& name) {
   return 0;
 }
 
+std::string element_gradients(Backend& backend) {
+#ifdef TISSUE_HAVE_CUDA
+  if (backend.name() == "cuda") return to_string(cuda_gradients(backend));
+#endif
+  (void)backend;
+  return "stored";
+}
+
 }  // namespace tissue

@@ -28,4 +28,9 @@ std::unique_ptr<Backend> create_backend(const std::string& name, Precision preci
 /// read + write counted); 0 for host backends (measure the host instead).
 double measure_device_bandwidth(const std::string& name);
 
+/// Where the backend's element passes get the element gradients and
+/// volumes of its uploaded model: "stored" (loaded), or "recomputed" from
+/// the reference positions (the cuda backend's CudaGradients).
+std::string element_gradients(Backend& backend);
+
 }  // namespace tissue

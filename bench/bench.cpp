@@ -165,9 +165,11 @@ void bench_tled(Context& c, const std::string& mesh, Precision p, const std::str
   long steps = 0;
   const double sps = time_steps(*b, c.o.min_seconds, steps);
   const int s = p == Precision::Float ? 4 : 8;
-  const double bytes = bytes_per_step(nm.model.n_nodes, nm.model.n_elems, s);
+  const std::string gradients = element_gradients(*b);
+  const double bytes = bytes_per_step(nm.model.n_nodes, nm.model.n_elems, s, gradients == "recomputed");
   Row r = c.row("tled_whole_mesh", *b);
   r.add("mesh", nm.name);
+  r.add("gradients", gradients);
   r.add("law", law);
   r.add("nodes", long(nm.model.n_nodes));
   r.add("elements", long(nm.model.n_elems));
@@ -303,13 +305,17 @@ std::string today() {
 
 }  // namespace
 
-double bytes_per_step(long n, long ne, int s) {
-  // pass 1: corners 16, dN 12s, V s, K s, u 3s per node; writes p_e V_e and J
-  const double p1 = ne * (16.0 + 16 * s) + 3.0 * s * n;
+double bytes_per_step(long n, long ne, int s, bool recomputed) {
+  // the element gradients and volume (dN 12s, V s per element), or the
+  // corners' reference positions they are recomputed from (one 32-byte
+  // double x, y, z, pad per node), in passes 1 and 3
+  const double gradients = recomputed ? 32.0 * n : 13.0 * s * ne;
+  // pass 1: corners 16, K s, u 3s per node; writes p_e V_e and J
+  const double p1 = ne * (16.0 + 3 * s) + 3.0 * s * n + gradients;
   // pass 2: CSR offsets 4 per node, entries 16 per element, p V and V; writes p_a
   const double p2 = 4.0 * n + ne * (16.0 + 2 * s) + 1.0 * s * n;
-  // pass 3: corners, u, p_a, dN, V, mu, K; writes 12 force components
-  const double p3 = ne * (16.0 + 27 * s) + 4.0 * s * n;
+  // pass 3: corners, u, p_a, mu, K; writes 12 force components
+  const double p3 = ne * (16.0 + 14 * s) + 4.0 * s * n + gradients;
   // pass 4: CSR, element forces, u^n, u^{n-1}, A/B/C, held flag and target; writes u^{n+1}, f
   const double p4 = 5.0 * n + ne * (16.0 + 12 * s) + 18.0 * s * n;
   return p1 + p2 + p3 + p4;

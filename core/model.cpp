@@ -540,6 +540,25 @@ TissueModel<double> build_model(const ModelInput& in) {
   return m;
 }
 
+double worst_gradient_deviation(const TissueModel<double>& m, Precision p, double stop_above) {
+  const index_t n = m.n_nodes, ne = m.n_elems;
+  double worst = 0;
+  for (index_t e = 0; e < ne; ++e) {
+    Vec3<double> X[4];
+    double dN[12];
+    for (int a = 0; a < 4; ++a) {
+      const index_t c = m.elem_nodes[a * ne + e];
+      X[a] = {m.X[c], m.X[n + c], m.X[2 * size_t(n) + c]};
+    }
+    for (int k = 0; k < 12; ++k) dN[k] = m.dndx[k * size_t(ne) + e];
+    const double d = p == Precision::Float ? shape_gradient_deviation<float>(X, dN, m.volume[e])
+                                           : shape_gradient_deviation<double>(X, dN, m.volume[e]);
+    if (!(d <= worst)) worst = d;
+    if (!(worst <= stop_above)) break;
+  }
+  return worst;
+}
+
 template <class T>
 TissueModel<T> convert(const TissueModel<double>& m) {
   TissueModel<T> r;

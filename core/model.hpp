@@ -9,6 +9,7 @@
 //   shape gradients    dndx[k * n_elems + e]   (k = 3 * a + j, dN_a/dX_j)
 #pragma once
 
+#include <cmath>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -248,5 +249,13 @@ std::vector<T> nodal_pressure_divisors(const TissueModel<T>& m) {
 /// The same model in another scalar type.
 template <class T>
 TissueModel<T> convert(const TissueModel<double>& m);
+
+/// The largest shape_gradient_deviation (core/tet.hpp) over the model's
+/// elements: how far gradients and volumes recomputed at precision p from
+/// the double reference positions stray from the model's (the cuda
+/// backend's test before it recomputes them instead of loading them). Stops
+/// at the first element beyond `stop_above`; HUGE_VAL when an element's
+/// recomputation is not finite.
+double worst_gradient_deviation(const TissueModel<double>& m, Precision p, double stop_above = HUGE_VAL);
 
 }  // namespace tissue

@@ -33,6 +33,47 @@ TISSUE_HD T tet_shape_gradients(const Vec3<T> X[4], T dN[12]) {
   return d / T(6);
 }
 
+/// tet_shape_gradients at precision T from corners given in double: the
+/// edges from corner 0 are differenced in double and only then rounded to
+/// T. A float copy of the absolute coordinates would carry its rounding
+/// (half an ulp of 0.1 m is 3.7e-9 m, 3.7e-6 of a 1 mm edge) into every
+/// gradient; rounding the edges keeps a well-shaped tet's float gradients
+/// within a few ulps of its double ones (shape_gradient_deviation). The cuda
+/// backend recomputes an element's gradients with it at every pass instead
+/// of loading them (docs/cuda.md, "Element gradients"). dN is zero when the
+/// rounded tet has no volume.
+template <class T>
+TISSUE_HD T tet_shape_gradients_from(const Vec3<double> X[4], T dN[12]) {
+  Vec3<T> R[4];
+  R[0] = {T(0), T(0), T(0)};
+TISSUE_UNROLL
+  for (int a = 1; a < 4; ++a) R[a] = {T(X[a].x - X[0].x), T(X[a].y - X[0].y), T(X[a].z - X[0].z)};
+TISSUE_UNROLL
+  for (int k = 0; k < 12; ++k) dN[k] = T(0);
+  return tet_shape_gradients(R, dN);
+}
+
+/// How far tet_shape_gradients_from<T> strays from the tet's double
+/// gradients dN_ref and volume V_ref (tet_shape_gradients<double>): the
+/// largest gradient difference relative to the largest |dN_ref|, or the
+/// volume's relative difference, whichever is larger. A few 1e-7 for a
+/// well-shaped tet in float; it grows with the tet's condition (a sliver's
+/// can reach 1 and beyond).
+template <class T>
+double shape_gradient_deviation(const Vec3<double> X[4], const double dN_ref[12], double V_ref) {
+  T dN[12];
+  const double V = static_cast<double>(tet_shape_gradients_from<T>(X, dN));
+  double scale = 0, worst = 0;
+  for (int k = 0; k < 12; ++k) {
+    scale = std::fmax(scale, std::fabs(dN_ref[k]));
+    const double diff = std::fabs(static_cast<double>(dN[k]) - dN_ref[k]);
+    if (!(diff <= worst)) worst = diff;  // a NaN sticks
+  }
+  const double dV = std::fabs(V - V_ref) / std::fabs(V_ref);
+  const double d = worst / scale;
+  return std::isfinite(d) && std::isfinite(dV) ? std::fmax(d, dV) : HUGE_VAL;
+}
+
 /// Smallest altitude of the tet (m): 3 V / largest face area. The
 /// characteristic length L_e of the critical time step.
 template <class T>

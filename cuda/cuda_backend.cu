@@ -161,6 +161,13 @@ class CudaBackend final : public Backend {
   }
 
   Stepper<T>& stepper() { return stepper_; }
+  /// The selection for the next upload; once a model is uploaded, what the
+  /// element passes over the current region use (Stored or Recomputed).
+  void set_gradients(CudaGradients g) { gradients_ = g; }
+  CudaGradients gradients() const {
+    if (store_.n_elems() == 0) return gradients_;
+    return recomputes(store_.model(), region_view()) ? CudaGradients::Recomputed : CudaGradients::Stored;
+  }
   RegionView region_view() const { return region_.view(); }
 
  protected:
@@ -177,7 +184,7 @@ class CudaBackend final : public Backend {
 
   void upload_arrays(const TissueModel<double>& model) {
     const TissueModel<T> m = convert<T>(model);
-    store_.upload(m, log_, stream());
+    store_.upload(m, model, gradients_, log_, stream());
     const index_t n = m.n_nodes;
     region_.allocate(n, m.n_elems, stream());
     reducer_.allocate(n, m.n_elems, stream());
@@ -449,6 +456,7 @@ class CudaBackend final : public Backend {
   Reducer<T> reducer_;
   DeviceContact<T> contact_;
   Stepper<T> stepper_;
+  CudaGradients gradients_ = CudaGradients::Auto;  ///< set_cuda_gradients: for the next upload
   std::vector<index_t> seeds_;
   DeviceArray<index_t> driven_list_;      ///< current driven nodes (n_driven_)
   DeviceArray<unsigned char> drive_dev_;  ///< set_driven upload: values (3n T), ids (n), axis masks (n bytes)
@@ -498,6 +506,23 @@ void set_cuda_step_mode(Backend& backend, CudaStepMode mode) {
 
 CudaStepMode cuda_step_mode(Backend& backend) {
   return gpu::with_cuda_backend(backend, [](auto& b) { return b.stepper().choose(b.region_view()); });
+}
+
+const char* to_string(CudaGradients g) {
+  switch (g) {
+    case CudaGradients::Auto: return "auto";
+    case CudaGradients::Stored: return "stored";
+    case CudaGradients::Recomputed: return "recomputed";
+  }
+  return "?";
+}
+
+void set_cuda_gradients(Backend& backend, CudaGradients g) {
+  gpu::with_cuda_backend(backend, [&](auto& b) { b.set_gradients(g); });
+}
+
+CudaGradients cuda_gradients(Backend& backend) {
+  return gpu::with_cuda_backend(backend, [](auto& b) { return b.gradients(); });
 }
 
 }  // namespace tissue

@@ -34,17 +34,39 @@ __global__ void reset_elems_kernel(index_t ne, T* elem_J) {
 }  // namespace
 
 template <class T>
-void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_t stream) {
+void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& ref, CudaGradients gradients,
+                            Transfers& log, cudaStream_t stream) {
   const index_t n = m.n_nodes, ne = m.n_elems;
   std::vector<Packed3<T>> X(n);
   for (index_t i = 0; i < n; ++i) X[i] = {m.X[i], m.X[n + i], m.X[2 * size_t(n) + i], T(0)};
   upload_array(X_, X, log, stream);
+  // Stored: the gradients only; Recomputed: the reference positions only;
+  // Auto: both when the recomputation is accurate enough (the passes then
+  // choose by region size: cuda/tled.cuh recomputes), else the gradients
+  const Precision p = sizeof(T) == 4 ? Precision::Float : Precision::Double;
+  const bool keep_X_ref =
+      gradients == CudaGradients::Recomputed ||
+      (gradients == CudaGradients::Auto && worst_gradient_deviation(ref, p, kGradientTolerance) <= kGradientTolerance);
+  const bool keep_dndx = gradients != CudaGradients::Recomputed;
+  std::vector<Packed3<double>> X_ref;
+  if (keep_X_ref) {
+    X_ref.resize(n);
+    for (index_t i = 0; i < n; ++i) X_ref[i] = {ref.X[i], ref.X[n + i], ref.X[2 * size_t(n) + i], 0.0};
+    upload_array(X_ref_, X_ref, log, stream);
+  } else {
+    X_ref_.allocate(0);
+  }
+  if (keep_dndx) {
+    upload_array(dndx_, m.dndx, log, stream);
+    upload_array(volume_, m.volume, log, stream);
+  } else {
+    dndx_.allocate(0);
+    volume_.allocate(0);
+  }
   upload_array(elem_nodes_, m.elem_nodes, log, stream);
   upload_array(node_elem_start_, m.node_elem_start, log, stream);
   upload_array(node_elem_, m.node_elem, log, stream);
   upload_array(tris_, m.tris, log, stream);
-  upload_array(dndx_, m.dndx, log, stream);
-  upload_array(volume_, m.volume, log, stream);
   upload_array(mu_, m.mu, log, stream);
   upload_array(K_, m.K, log, stream);
   upload_array(mass_, m.mass, log, stream);
@@ -69,8 +91,9 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, Transfers& log, cudaStream_
   model_.n_tris = m.n_tris;
   model_.X = X_.data();
   model_.elem_nodes = elem_nodes_.data();
-  model_.dndx = dndx_.data();
-  model_.volume = volume_.data();
+  model_.dndx = keep_dndx ? dndx_.data() : nullptr;
+  model_.volume = keep_dndx ? volume_.data() : nullptr;
+  model_.X_ref = keep_X_ref ? X_ref_.data() : nullptr;
   model_.mu = mu_.data();
   model_.K = K_.data();
   model_.mass = mass_.data();

@@ -11,6 +11,7 @@
 #include <span>
 
 #include "core/model.hpp"
+#include "cuda/cuda_backend.hpp"
 #include "cuda/device_array.hpp"
 #include "cuda/views.hpp"
 
@@ -34,8 +35,12 @@ template <class T>
 class DeviceStore {
  public:
   /// Allocates every array for the model's sizes and uploads the model
-  /// (counted in `log`); the state is then reset (reset_state()).
-  void upload(const TissueModel<T>& m, Transfers& log, cudaStream_t stream);
+  /// (counted in `log`); the state is then reset (reset_state()). `ref` is
+  /// the model in double (m converted), whose positions and gradients
+  /// decide and serve `gradients` (CudaGradients).
+  void upload(const TissueModel<T>& m, const TissueModel<double>& ref, CudaGradients gradients, Transfers& log,
+              cudaStream_t stream);
+
 
   /// u = u_prev = u_next = 0, u_held = 0, f = f_slot = dv_slot = node_p = 0,
   /// elem_J = 1, held = the fixed axes, driven = 0, every node inner, no bad
@@ -64,6 +69,7 @@ class DeviceStore {
   LawView<T> law_;
   // model (read-only after upload)
   DeviceArray<Packed3<T>> X_;
+  DeviceArray<Packed3<double>> X_ref_;  // empty when the gradients are stored
   DeviceArray<index_t> elem_nodes_, node_elem_start_, node_elem_, slot_of_, tris_;
   DeviceArray<index_t> surf_nodes_, surf_slot_start_, surf_slot_;
   DeviceArray<T> dndx_, volume_, mu_, K_, mass_, cd_A_, cd_B_, cd_C_, node_divisor_;

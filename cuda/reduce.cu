@@ -159,9 +159,9 @@ __device__ void accumulate_node(const ModelView<T>& m, const StateView<T>& s, co
 /// element_prony_energy) at the current u, added to p; node_p: nodal
 /// pressures at the current u (IANP only).
 template <class T>
-__device__ void add_element_energy(const ModelView<T>& m, const T* node_p, const Packed3<T>* u, index_t e,
+__device__ void add_element_energy(const ModelView<T>& m, const RegionView& r, const T* node_p, const Packed3<T>* u, index_t e,
                                    const LawView<T>& w, ReducePartial& p) {
-  const ElementData<T> d = load_element(m, e);
+  const ElementData<T> d = load_element_any(m, r, e);
   Vec3<T> ue[4];
   corner_displacements(d, u, ue);
   const Mat3<T> F = deformation_gradient(ue, d.dN);
@@ -251,7 +251,7 @@ __global__ void __launch_bounds__(kReduceBlock)
   ReducePartial p = zero_partial();
   for (index_t i = thread_index(); i < r.n_nodes; i += thread_stride()) accumulate_node(m, s, b, front, r.node(i), p);
   for (index_t i = thread_index(); i < r.n_elems; i += thread_stride())
-    add_element_energy(m, energy_node_p, b.u, r.elem(i), w, p);
+    add_element_energy(m, r, energy_node_p, b.u, r.elem(i), w, p);
   ContactPartial c;
   empty_partial(c);
   bool touched = false;
@@ -320,7 +320,10 @@ void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const Reg
     e.dv_slot = dv_slot_.data();
     e.elem_J = elem_J_.data();
     e.node_p = node_p_.data();
-    launch(r.n_elems, stream, element_pressure_kernel<T>, m, e, r, static_cast<const Packed3<T>*>(b.u));
+    with_gradients(m, r, [&](auto recomputed) {
+      launch(r.n_elems, stream, element_pressure_kernel<T, decltype(recomputed)::value>, m, e, r,
+             static_cast<const Packed3<T>*>(b.u));
+    });
     launch(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, e, r);
   }
   const index_t items = std::max({r.n_nodes, r.n_elems, m.n_surf, index_t(1)});

@@ -15,11 +15,11 @@ int current_device_attribute(cudaDeviceAttr attr) {
   return v;
 }
 
-template <class T, bool kLaw>
+template <class T, bool kLaw, bool kRecomputed>
 int largest_cluster() {
+  const auto kernel = persistent_cluster_kernel<T, kLaw, kRecomputed>;
   if (current_device_attribute(cudaDevAttrComputeCapabilityMajor) < 9) return 0;
-  if (cudaFuncSetAttribute(persistent_cluster_kernel<T, kLaw>, cudaFuncAttributeNonPortableClusterSizeAllowed, 1) !=
-      cudaSuccess) {
+  if (cudaFuncSetAttribute(kernel, cudaFuncAttributeNonPortableClusterSizeAllowed, 1) != cudaSuccess) {
     cudaGetLastError();  // clear: clusters are then limited to the portable size
   }
   for (int size : {16, 8, 4, 2}) {
@@ -34,13 +34,25 @@ int largest_cluster() {
     cfg.attrs = &attr;
     cfg.numAttrs = 1;
     int clusters = 0;
-    if (cudaOccupancyMaxActiveClusters(&clusters, persistent_cluster_kernel<T, kLaw>, &cfg) != cudaSuccess) {
+    if (cudaOccupancyMaxActiveClusters(&clusters, kernel, &cfg) != cudaSuccess) {
       cudaGetLastError();
       continue;
     }
     if (clusters >= 1) return size;
   }
   return 0;
+}
+
+/// Co-resident blocks per SM of the grid kernel (its kRecomputed variants
+/// alike: the smaller).
+template <class T, bool kLaw>
+int grid_blocks_per_sm() {
+  int stored = 0, recomputed = 0;
+  CUDA_CHECK(
+      cudaOccupancyMaxActiveBlocksPerMultiprocessor(&stored, persistent_grid_kernel<T, kLaw, false>, kGridBlock, 0));
+  CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&recomputed, persistent_grid_kernel<T, kLaw, true>,
+                                                           kGridBlock, 0));
+  return std::min(stored, recomputed);
 }
 
 }  // namespace
@@ -51,16 +63,12 @@ void Stepper<T>::init() {
   limits_ = {};
   limits_.block = kClusterBlock<T>;
   if (current_device_attribute(cudaDevAttrCooperativeLaunch)) {
-    int per_sm = 0, law_per_sm = 0;
-    CUDA_CHECK(
-        cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, persistent_grid_kernel<T, false>, kGridBlock, 0));
-    CUDA_CHECK(
-        cudaOccupancyMaxActiveBlocksPerMultiprocessor(&law_per_sm, persistent_grid_kernel<T, true>, kGridBlock, 0));
-    limits_.grid_blocks = per_sm * current_device_attribute(cudaDevAttrMultiProcessorCount);
-    limits_.law_grid_blocks = law_per_sm * current_device_attribute(cudaDevAttrMultiProcessorCount);
+    const int sms = current_device_attribute(cudaDevAttrMultiProcessorCount);
+    limits_.grid_blocks = grid_blocks_per_sm<T, false>() * sms;
+    limits_.law_grid_blocks = grid_blocks_per_sm<T, true>() * sms;
   }
-  limits_.cluster_size = largest_cluster<T, false>();
-  limits_.law_cluster_size = largest_cluster<T, true>();
+  limits_.cluster_size = std::min(largest_cluster<T, false, false>(), largest_cluster<T, false, true>());
+  limits_.law_cluster_size = std::min(largest_cluster<T, true, false>(), largest_cluster<T, true, true>());
 }
 
 template <class T>
@@ -81,7 +89,9 @@ CudaStepMode Stepper<T>::choose(const RegionView& r) const {
 template <class T>
 void Stepper<T>::element_pressure(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                                   const Packed3<T>* u, cudaStream_t stream) {
-  launch_chained(r.n_elems, stream, element_pressure_kernel<T>, m, s, r, u);
+  with_gradients(m, r, [&](auto recomputed) {
+    launch_chained(r.n_elems, stream, element_pressure_kernel<T, decltype(recomputed)::value>, m, s, r, u);
+  });
 }
 
 template <class T>
@@ -93,10 +103,13 @@ void Stepper<T>::nodal_pressure(const ModelView<T>& m, const StateView<T>& s, co
 template <class T>
 void Stepper<T>::element_forces(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                                 const Packed3<T>* u, cudaStream_t stream) {
-  if (law_.neo_hookean())
-    launch_chained(r.n_elems, stream, element_forces_kernel<T>, m, s, r, u);
-  else
-    launch_chained(r.n_elems, stream, law_element_forces_kernel<T>, m, s, r, u, law_);
+  with_gradients(m, r, [&](auto recomputed) {
+    constexpr bool kRecomputed = decltype(recomputed)::value;
+    if (law_.neo_hookean())
+      launch_chained(r.n_elems, stream, element_forces_kernel<T, kRecomputed>, m, s, r, u);
+    else
+      launch_chained(r.n_elems, stream, law_element_forces_kernel<T, kRecomputed>, m, s, r, u, law_);
+  });
 }
 
 template <class T>
@@ -188,8 +201,11 @@ void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, const Reg
       const ContactTools<T>* ta = tools;
       LawView<T> wa = law_;
       void* args[] = {&ma, &sa, &ra, &b, &steps, &ta, &wa};
-      const void* kernel = law ? reinterpret_cast<const void*>(persistent_grid_kernel<T, true>)
-                               : reinterpret_cast<const void*>(persistent_grid_kernel<T, false>);
+      const void* kernel = with_gradients(m, r, [&](auto recomputed) {
+        constexpr bool kRecomputed = decltype(recomputed)::value;
+        return law ? reinterpret_cast<const void*>(persistent_grid_kernel<T, true, kRecomputed>)
+                   : reinterpret_cast<const void*>(persistent_grid_kernel<T, false, kRecomputed>);
+      });
       CUDA_CHECK(cudaLaunchCooperativeKernel(kernel, dim3(blocks), dim3(kGridBlock), args, 0, stream));
       ring.advance(steps);
       break;
@@ -210,13 +226,12 @@ void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, const Reg
       attr.val.clusterDim.z = 1;
       cfg.attrs = &attr;
       cfg.numAttrs = 1;
-      if (law) {
-        CUDA_CHECK(cudaLaunchKernelEx(&cfg, persistent_cluster_kernel<T, true>, m, s, r, ring.current(), steps, tools,
-                                      law_));
-      } else {
-        CUDA_CHECK(cudaLaunchKernelEx(&cfg, persistent_cluster_kernel<T, false>, m, s, r, ring.current(), steps,
-                                      tools, law_));
-      }
+      with_gradients(m, r, [&](auto recomputed) {
+        constexpr bool kRecomputed = decltype(recomputed)::value;
+        const auto kernel =
+            law ? persistent_cluster_kernel<T, true, kRecomputed> : persistent_cluster_kernel<T, false, kRecomputed>;
+        CUDA_CHECK(cudaLaunchKernelEx(&cfg, kernel, m, s, r, ring.current(), steps, tools, law_));
+      });
       ring.advance(steps);
       break;
     }

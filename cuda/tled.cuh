@@ -15,6 +15,8 @@
 
 #include <cooperative_groups.h>
 
+#include <type_traits>
+
 #include "core/node_rules.hpp"
 #include "core/tet.hpp"
 #include "cuda/contact.cuh"
@@ -29,7 +31,8 @@ __device__ __forceinline__ unsigned long long bad_key(index_t e, float J) {
   return (static_cast<unsigned long long>(static_cast<unsigned>(e)) << 32) | __float_as_uint(J);
 }
 
-/// The model data of one element that passes 1 and 3 use.
+/// The model data of one element that passes 1 and 3 use; its gradients
+/// and volume loaded or (kRecomputed) recomputed (ModelView::dndx).
 template <class T>
 struct ElementData {
   index_t e;
@@ -39,7 +42,7 @@ struct ElementData {
   T V, mu, K;       ///< m^3, Pa, Pa
 };
 
-template <class T>
+template <class T, bool kRecomputed>
 __device__ __forceinline__ ElementData<T> load_element(const ModelView<T>& m, index_t e) {
   ElementData<T> d;
   const index_t ne = m.n_elems;
@@ -49,12 +52,40 @@ __device__ __forceinline__ ElementData<T> load_element(const ModelView<T>& m, in
     d.c[a] = __ldg(m.elem_nodes + a * ne + e);
     d.slot[a] = __ldg(m.slot_of + a * ne + e);
   }
+  if constexpr (!kRecomputed) {
 #pragma unroll
-  for (int k = 0; k < 12; ++k) d.dN[k] = __ldg(m.dndx + k * ne + e);
-  d.V = __ldg(m.volume + e);
+    for (int k = 0; k < 12; ++k) d.dN[k] = __ldg(m.dndx + k * ne + e);
+    d.V = __ldg(m.volume + e);
+  } else {  // from the corners' reference positions: 4 gathered nodes instead of 13 element scalars
+    Vec3<double> X[4];
+#pragma unroll
+    for (int a = 0; a < 4; ++a) {
+      const double2 xy = __ldg(reinterpret_cast<const double2*>(m.X_ref + d.c[a]));
+      X[a] = {xy.x, xy.y, __ldg(&m.X_ref[d.c[a]].z)};
+    }
+    d.V = tet_shape_gradients_from<T>(X, d.dN);
+  }
   d.mu = __ldg(m.mu + e);
   d.K = __ldg(m.K + e);
   return d;
+}
+
+/// load_element with recomputes() decided at run time, for code outside
+/// the steps (the reductions' energies).
+template <class T>
+__device__ __forceinline__ ElementData<T> load_element_any(const ModelView<T>& m, const RegionView& r, index_t e) {
+  return recomputes(m, r) ? load_element<T, true>(m, e) : load_element<T, false>(m, e);
+}
+
+/// Calls f(std::true_type) when the element passes over region r
+/// recompute the gradients (recomputes()), else f(std::false_type): the
+/// host's choice of the kernels' kRecomputed. Two instantiations rather
+/// than a branch in the kernel: with the branch the kidney's latency-bound
+/// steps ran 7 % slower (float) and 17 % (double) even on the stored path.
+template <class T, class F>
+decltype(auto) with_gradients(const ModelView<T>& m, const RegionView& r, F&& f) {
+  if (recomputes(m, r)) return f(std::true_type{});
+  return f(std::false_type{});
 }
 
 template <class T>
@@ -243,13 +274,13 @@ __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, con
 // whose region must grow first (StateView::skip).
 
 
-template <class T>
+template <class T, bool kRecomputed>
 __global__ void element_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
   let_next_pass_launch();
   const index_t i = thread_index();
   const bool active = i < r.n_elems;
   ElementData<T> d;
-  if (active) d = load_element(m, r.elem(i));
+  if (active) d = load_element<T, kRecomputed>(m, r.elem(i));
   wait_for_previous_pass();
   if (skipped(s)) return;
   if (active) element_pressure_at(s, d, u);
@@ -269,27 +300,27 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
   if (active) nodal_pressure_at(m, s, d);
 }
 
-template <class T>
+template <class T, bool kRecomputed>
 __global__ void element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
   let_next_pass_launch();
   const index_t i = thread_index();
   const bool active = i < r.n_elems;
   ElementData<T> d;
-  if (active) d = load_element(m, r.elem(i));
+  if (active) d = load_element<T, kRecomputed>(m, r.elem(i));
   wait_for_previous_pass();
   if (skipped(s)) return;
   if (active) element_forces_at(s, d, u, m.ianp);
 }
 
 /// Pass 3 of a model with law terms (core/material.hpp).
-template <class T>
+template <class T, bool kRecomputed>
 __global__ void law_element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u,
                                           LawView<T> w) {
   let_next_pass_launch();
   const index_t i = thread_index();
   const bool active = i < r.n_elems;
   ElementData<T> d;
-  if (active) d = load_element(m, r.elem(i));
+  if (active) d = load_element<T, kRecomputed>(m, r.elem(i));
   wait_for_previous_pass();
   if (skipped(s)) return;
   if (active) law_element_forces_at(m, s, d, u, w);
@@ -325,7 +356,7 @@ struct ClusterBarrier {
 /// separates passes (and steps); with tools, each step ends with the
 /// contact stage (cuda/contact.cuh) over the surface. The buffers rotate per
 /// step.
-template <class T, bool kLaw, class Barrier>
+template <class T, bool kLaw, bool kRecomputed, class Barrier>
 __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
                           int steps, const ContactTools<T>* tools, const LawView<T>& w, Barrier barrier) {
   const index_t first = thread_index(), stride = thread_stride();
@@ -333,16 +364,16 @@ __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const Re
   const int lane = first % kNodeLanes;
   const unsigned mask = node_group_mask();
   for (int k = 0; k < steps; ++k) {
-    for (index_t i = first; i < r.n_elems; i += stride) element_pressure_at(s, load_element(m, r.elem(i)), b.u);
+    for (index_t i = first; i < r.n_elems; i += stride) element_pressure_at(s, load_element<T, kRecomputed>(m, r.elem(i)), b.u);
     barrier();
     for (index_t g = first; g < node_items; g += stride)
       nodal_pressure_at(m, s, load_node(m, r.node(g / kNodeLanes), lane, mask));
     barrier();
     for (index_t i = first; i < r.n_elems; i += stride) {
       if constexpr (kLaw)
-        law_element_forces_at(m, s, load_element(m, r.elem(i)), b.u, w);
+        law_element_forces_at(m, s, load_element<T, kRecomputed>(m, r.elem(i)), b.u, w);
       else
-        element_forces_at(s, load_element(m, r.elem(i)), b.u, m.ianp);
+        element_forces_at(s, load_element<T, kRecomputed>(m, r.elem(i)), b.u, m.ianp);
     }
     barrier();
     for (index_t g = first; g < node_items; g += stride) {
@@ -373,19 +404,19 @@ template <class T>
 inline constexpr int kClusterBlock = sizeof(T) == 4 ? 1024 : 512;
 
 /// kLaw: the instantiation for a model with law terms (core/material.hpp),
-/// chosen at launch like pass 3's kernels.
-template <class T, bool kLaw>
+/// chosen at launch like pass 3's kernels; kRecomputed as the pass kernels'.
+template <class T, bool kLaw, bool kRecomputed>
 __global__ void __launch_bounds__(kGridBlock)
     persistent_grid_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b, int steps,
                            const ContactTools<T>* tools, LawView<T> w) {
-  run_steps<T, kLaw>(m, s, r, b, steps, tools, w, GridBarrier{});
+  run_steps<T, kLaw, kRecomputed>(m, s, r, b, steps, tools, w, GridBarrier{});
 }
 
-template <class T, bool kLaw>
+template <class T, bool kLaw, bool kRecomputed>
 __global__ void __launch_bounds__(kClusterBlock<T>)
     persistent_cluster_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b, int steps,
                               const ContactTools<T>* tools, LawView<T> w) {
-  run_steps<T, kLaw>(m, s, r, b, steps, tools, w, ClusterBarrier{});
+  run_steps<T, kLaw, kRecomputed>(m, s, r, b, steps, tools, w, ClusterBarrier{});
 }
 
 }  // namespace tissue::gpu

@@ -20,6 +20,7 @@
 
 #include "core/hd.hpp"
 #include "core/vec.hpp"
+#include "cuda/cuda_backend.hpp"
 
 namespace tissue::gpu {
 
@@ -37,8 +38,14 @@ struct ModelView {
   index_t n_nodes = 0, n_elems = 0, n_tris = 0;
   const Packed3<T>* X = nullptr;          ///< reference positions (n_nodes) m
   const index_t* elem_nodes = nullptr;    ///< (4 x n_elems)
-  const T* dndx = nullptr;                ///< (12 x n_elems) 1/m
-  const T* volume = nullptr;              ///< (n_elems) m^3
+  /// Element shape gradients and volumes, stored: (12 x n_elems) 1/m and
+  /// (n_elems) m^3; both null when the passes always recompute them from
+  /// X_ref (docs/cuda.md, "Element gradients"; cuda/tled.cuh recomputes).
+  const T* dndx = nullptr;
+  const T* volume = nullptr;
+  /// Reference positions in double (n_nodes) m, kept when the passes may
+  /// recompute the gradients; null when they always load them.
+  const Packed3<double>* X_ref = nullptr;
   const T* mu = nullptr;                  ///< (n_elems) Pa
   const T* K = nullptr;                   ///< (n_elems) Pa
   const T* mass = nullptr;                ///< (n_nodes) kg
@@ -96,6 +103,15 @@ struct RegionView {
   TISSUE_HD index_t node(index_t i) const { return nodes ? nodes[i] : i; }
   TISSUE_HD index_t elem(index_t i) const { return elems ? elems[i] : i; }
 };
+
+/// Whether the element passes over region r recompute the gradients
+/// (ModelView::dndx): always when none are stored, never when no reference
+/// positions are kept, else for regions of at least
+/// kRecomputeMinElements elements.
+template <class T>
+TISSUE_HD bool recomputes(const ModelView<T>& m, const RegionView& r) {
+  return !m.dndx || (m.X_ref && r.n_elems >= kRecomputeMinElements);
+}
 
 /// Mutable per-step state on the device (shapes as core/state.hpp, layouts
 /// as described at the top of this file). Pointers are deliberately not

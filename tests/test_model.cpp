@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <functional>
 #include <limits>
 #include <string>
@@ -674,6 +675,69 @@ TEST(Model, ConvertFloatKeepsSizesAndValues) {
   const auto d = convert<double>(m);
   EXPECT_EQ(d.X, m.X);
   EXPECT_EQ(d.mass, m.mass);
+}
+
+/// The shape gradients recomputed at a precision from double reference
+/// positions (core tet_shape_gradients_from: the cuda backend's
+/// CudaGradients::Recomputed) on a box of 1 mm cells placed 0.1-0.12 m from
+/// the origin. Edges differenced in double and then rounded to float stay
+/// within a few 1e-7 of the double gradients; float copies of the absolute
+/// coordinates (the alternative not taken) carry their rounding of 0.1 m
+/// into every millimetre edge, ten times more. In double the recomputation
+/// is the model's own to rounding.
+TEST(Model, GradientsRecomputedFromDoubleEdgesStayNearTheModels) {
+  ModelInput in = box_input(6, 6, 6, 0.006, 0.006, 0.006);
+  for (size_t i = 0; i < in.nodes.size(); ++i) in.nodes[i] += 0.1 + 0.01 * double(i % 3);
+  const TissueModel<double> m = build_model(in);
+  const double dev_float = worst_gradient_deviation(m, Precision::Float);
+  const double dev_double = worst_gradient_deviation(m, Precision::Double);
+  const index_t ne = m.n_elems;
+  double naive = 0;  // float absolute coordinates
+  for (index_t e = 0; e < ne; ++e) {
+    Vec3<float> X[4];
+    for (int a = 0; a < 4; ++a) {
+      const Vec3<double> x = node_X(m, m.elem_nodes[a * ne + e]);
+      X[a] = {float(x.x), float(x.y), float(x.z)};
+    }
+    float dN[12];
+    tet_shape_gradients(X, dN);
+    double scale = 0, worst = 0;
+    for (int k = 0; k < 12; ++k) {
+      scale = std::max(scale, std::fabs(m.dndx[k * ne + e]));
+      worst = std::max(worst, std::fabs(double(dN[k]) - m.dndx[k * ne + e]));
+    }
+    naive = std::max(naive, worst / scale);
+  }
+  std::printf("[measured] worst gradient deviation: float %.3g (float absolute coordinates %.3g), double %.3g\n",
+              dev_float, naive, dev_double);
+  EXPECT_GT(dev_float, 0.0);
+  EXPECT_LT(dev_float, 1e-6);
+  EXPECT_GT(naive, 10 * dev_float);
+  EXPECT_LT(dev_double, 1e-13);
+}
+
+/// A sliver the model accepts (its volume 1e-5 of its longest edge cubed),
+/// apart from a box: recomputed in float, its gradients stray by far more
+/// than the cuda backend's kGradientTolerance (1e-5; Auto then keeps the
+/// stored gradients), in double they do not; stop_above stops at it.
+TEST(Model, SliverGradientsStrayWhenRecomputedInFloat) {
+  ModelInput in = box_input(2, 2, 2, 0.01, 0.01, 0.01);
+  const TissueModel<double> box = build_model(in);
+  const index_t first = index_t(in.nodes.size() / 3);
+  // corners a, b, c of a tilted face, d 1e-7 m off the middle of edge bc
+  const Vec3<double> a{0.03, 0.0, 0.0}, b{0.031, 0.001, 0.0}, c{0.03, 0.001, 0.001};
+  const Vec3<double> n = (1.0 / norm(cross(b - a, c - a))) * cross(b - a, c - a);
+  const Vec3<double> d = 0.5 * (b + c) + 1e-7 * n;
+  for (const Vec3<double>& x : {a, b, c, d}) in.nodes.insert(in.nodes.end(), {x.x, x.y, x.z});
+  in.tets.insert(in.tets.end(), {first, first + 1, first + 2, first + 3});
+  const TissueModel<double> m = build_model(in);
+  const double sliver = worst_gradient_deviation(m, Precision::Float);
+  std::printf("[measured] worst gradient deviation: box %.3g, box and sliver %.3g (float), %.3g (double)\n",
+              worst_gradient_deviation(box, Precision::Float), sliver, worst_gradient_deviation(m, Precision::Double));
+  EXPECT_LT(worst_gradient_deviation(box, Precision::Float), 1e-6);
+  EXPECT_GT(sliver, 1e-4);
+  EXPECT_LT(worst_gradient_deviation(m, Precision::Double), 1e-8);
+  EXPECT_GT(worst_gradient_deviation(m, Precision::Float, 1e-5), 1e-5);  // stopped at the sliver, still beyond
 }
 
 }  // namespace

@@ -4,7 +4,8 @@
 // 100k, 1M and 4M tets, plus the latency of one full Scheduler tick
 // (depth 5) along a press path with a 2 mm sphere. Not a test: a measurement to
 // run on a GPU machine (docs/cuda.md records the results).
-//   cuda_step_timing [--quick] [cases...]   cases: kidney 8k 100k 1m 4m
+//   cuda_step_timing [--quick] [--gradients auto|stored|recomputed] [cases...]
+//   cases: kidney 8k 100k 1m 4m
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -81,8 +82,13 @@ double steps_per_second(Backend& be, double min_seconds) {
 
 /// Fewest bytes one whole-mesh step moves through device memory in the
 /// device layouts (each array touched once per pass that touches it; s =
-/// scalar bytes): docs/cuda.md lists the terms.
-double step_bytes(double n, double ne, int s) { return ne * (64 + 70.0 * s) + n * (9 + 34.0 * s); }
+/// scalar bytes): docs/cuda.md lists the terms. Recomputed gradients
+/// replace 2 x 13 element scalars by 2 x 32 bytes per node.
+double step_bytes(double n, double ne, int s, bool recomputed) {
+  return recomputed ? ne * (64 + 44.0 * s) + n * (73 + 34.0 * s) : ne * (64 + 70.0 * s) + n * (9 + 34.0 * s);
+}
+
+CudaGradients g_gradients = CudaGradients::Auto;
 
 template <class T>
 T median(std::vector<T> v) {
@@ -98,7 +104,9 @@ void time_case(const Case& cs, double bw, double min_seconds, bool quick, std::v
   for (auto& v : u0) v = dist(rng);
   for (Precision p : {Precision::Float, Precision::Double}) {
     auto be = make_cuda_backend(p);
+    set_cuda_gradients(*be, g_gradients);
     be->upload(model);
+    const bool recomputed = cuda_gradients(*be) == CudaGradients::Recomputed;
     for (CudaStepMode mode : {CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Grid, CudaStepMode::Cluster,
                               CudaStepMode::Auto}) {
       try {
@@ -111,11 +119,13 @@ void time_case(const Case& cs, double bw, double min_seconds, bool quick, std::v
       be->set_displacements(u0);
       const double sps = steps_per_second(*be, min_seconds);
       const Reductions r = be->reduce();
-      const double frac = sps * step_bytes(model.n_nodes, model.n_elems, p == Precision::Float ? 4 : 8) / bw;
-      rows.push_back(fmt::format("{:>6} {:>8} {:>7} {:>6} {:>8}{} {:>12.0f} {:>10.3g} {:>6.3f} {}", cs.name,
+      const double frac =
+          sps * step_bytes(model.n_nodes, model.n_elems, p == Precision::Float ? 4 : 8, recomputed) / bw;
+      rows.push_back(fmt::format("{:>6} {:>8} {:>7} {:>6} {:>8}{} {:>12.0f} {:>10.3g} {:>6.3f} {} {}", cs.name,
                                  model.n_elems, model.n_nodes, to_string(p), to_string(cuda_step_mode(*be)),
                                  mode == CudaStepMode::Auto ? "*" : " ", sps, sps * model.n_elems, frac,
-                                 r.finite && r.bad_elem < 0 ? "ok" : "NONFINITE/BAD"));
+                                 r.finite && r.bad_elem < 0 ? "ok" : "NONFINITE/BAD",
+                                 to_string(cuda_gradients(*be))));
       fmt::print("{}\n", rows.back());
     }
     // full haptic ticks
@@ -157,8 +167,21 @@ int main(int argc, char** argv) {
   bool quick = false;
   std::vector<std::string> want;
   for (int k = 1; k < argc; ++k) {
-    if (std::string(argv[k]) == "--quick") quick = true;
-    else want.push_back(argv[k]);
+    const std::string a = argv[k];
+    if (a == "--quick") {
+      quick = true;
+    } else if (a == "--gradients" && k + 1 < argc) {
+      const std::string g = argv[++k];
+      if (g == "stored") g_gradients = CudaGradients::Stored;
+      else if (g == "recomputed") g_gradients = CudaGradients::Recomputed;
+      else if (g == "auto") g_gradients = CudaGradients::Auto;
+      else {
+        fmt::print(stderr, "--gradients {}: expected auto, stored or recomputed\n", g);
+        return 2;
+      }
+    } else {
+      want.push_back(a);
+    }
   }
   auto wanted = [&](const std::string& name) {
     return want.empty() || std::find(want.begin(), want.end(), name) != want.end();

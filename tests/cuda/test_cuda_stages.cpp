@@ -513,6 +513,107 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
   }
 }
 
+/// Element gradients recomputed from double reference positions at every
+/// pass (CudaGradients::Recomputed) against the stored ones and the cpu
+/// (which loads the model's gradients rounded to T): 60 steps from a rough
+/// random field, then the reductions. Sixty steps of that field amplify any
+/// rounding difference alike (measured on an H100 in float: recomputed
+/// against stored 3.0e-5 in u, 4.9e-5 in J - 1, 7.9e-5 in strain energy,
+/// against the cpu 3.3e-5; double 5e-14 to 7e-13), hence the looser float
+/// bound here than pass_tol's single pass. Auto: a small mesh loads them
+/// (identical bits to Stored), a whole mesh of kRecomputeMinElements or more
+/// recomputes them (identical bits to Recomputed) while a small region of it
+/// loads them, and a large mesh with a sliver keeps only the stored ones in
+/// float.
+TEST_P(Stages, RecomputedGradientsMatchStoredOnes) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  const double tol = p == Precision::Double ? 1e-11 : 3e-4;
+  auto step = [&](Backend& b, const TissueModel<double>& m, const std::vector<double>& u) {
+    b.upload(m);
+    b.set_displacements(u);
+    b.advance(60);
+    const Reductions r = b.reduce();
+    return std::pair{b.download(), r};
+  };
+  struct Run {
+    CudaGradients used;
+    Fields fields;
+    Reductions red;
+  };
+  auto run = [&](CudaGradients g, const TissueModel<double>& m, const std::vector<double>& u) {
+    auto gpu = make_cuda_backend(p);
+    set_cuda_gradients(*gpu, g);
+    EXPECT_EQ(cuda_gradients(*gpu), g);  // before an upload: the selection
+    auto [f, r] = step(*gpu, m, u);
+    return Run{cuda_gradients(*gpu), std::move(f), r};
+  };
+  const auto m = box_model(6, 5, 4, 0.06, 0.05, 0.04);
+  const auto u = random_field(m.n_nodes, 2e-4, 3);
+  const Run stored = run(CudaGradients::Stored, m, u), recomputed = run(CudaGradients::Recomputed, m, u),
+            automatic = run(CudaGradients::Auto, m, u);
+  EXPECT_EQ(stored.used, CudaGradients::Stored);
+  EXPECT_EQ(recomputed.used, CudaGradients::Recomputed);
+  EXPECT_EQ(automatic.used, CudaGradients::Stored);  // 720 elements
+  EXPECT_EQ(automatic.fields.u, stored.fields.u);
+  ASSERT_GT(*std::max_element(stored.fields.elem_J.begin(), stored.fields.elem_J.end()), 1.0);
+  const double du = rel_diff(recomputed.fields.u, stored.fields.u);
+  const double dJ = rel_diff(minus_one(recomputed.fields.elem_J), minus_one(stored.fields.elem_J));
+  const double dE = std::fabs(recomputed.red.strain_energy - stored.red.strain_energy) / stored.red.strain_energy;
+  report("recomputed against stored gradients, u after 60 steps", p, du);
+  report("recomputed against stored gradients, J - 1", p, dJ);
+  report("recomputed against stored gradients, strain energy", p, dE);
+  EXPECT_GT(du, 0.0);  // really another computation
+  EXPECT_LT(du, tol);
+  EXPECT_LT(dJ, tol);
+  EXPECT_LT(dE, tol);
+  EXPECT_TRUE(recomputed.red.finite);
+  auto cpu = make_cpu_backend(p);
+  const auto [fc, rc] = step(*cpu, m, u);
+  report("stored gradients against the cpu, u after 60 steps", p, rel_diff(stored.fields.u, fc.u));
+  const double dc = rel_diff(recomputed.fields.u, fc.u);
+  report("recomputed gradients against the cpu, u after 60 steps", p, dc);
+  EXPECT_LT(dc, tol);
+  EXPECT_THROW(set_cuda_gradients(*cpu, CudaGradients::Stored), std::invalid_argument);
+  EXPECT_THROW(cuda_gradients(*cpu), std::invalid_argument);
+
+  // a mesh of kRecomputeMinElements or more: Auto recomputes over the whole
+  // mesh, with Recomputed's bits, and loads over a small region
+  const auto big = box_model(21, 20, 20, 0.105, 0.1, 0.1);
+  ASSERT_GE(big.n_elems, kRecomputeMinElements);
+  const auto ub = random_field(big.n_nodes, 2e-4, 5);
+  const Run big_auto = run(CudaGradients::Auto, big, ub), big_recomputed = run(CudaGradients::Recomputed, big, ub);
+  EXPECT_EQ(big_auto.used, CudaGradients::Recomputed);
+  EXPECT_EQ(big_auto.fields.u, big_recomputed.fields.u);
+  {
+    auto gpu = make_cuda_backend(p);
+    gpu->upload(big);
+    EXPECT_EQ(cuda_gradients(*gpu), CudaGradients::Recomputed);
+    const index_t seeds[3] = {big.tris[0], big.tris[big.n_tris], big.tris[2 * big.n_tris]};
+    gpu->build_region(seeds, 2);
+    EXPECT_EQ(cuda_gradients(*gpu), CudaGradients::Stored);
+    gpu->build_region({}, kDepthAll);
+    EXPECT_EQ(cuda_gradients(*gpu), CudaGradients::Recomputed);
+  }
+
+  // the same mesh with a sliver beside it (its volume 1e-5 of its longest
+  // edge cubed): in float Auto keeps only the stored gradients
+  ModelInput in;
+  box_mesh(in, 21, 20, 20, 0.105, 0.1, 0.1);
+  in.materials = {{1000, 20000, 1000}};
+  const index_t first = index_t(in.nodes.size() / 3);
+  const Vec3<double> a{0.2, 0.0, 0.0}, b{0.201, 0.001, 0.0}, c{0.2, 0.001, 0.001};
+  const Vec3<double> n = (1.0 / norm(cross(b - a, c - a))) * cross(b - a, c - a);
+  const Vec3<double> d = 0.5 * (b + c) + 1e-7 * n;
+  for (const Vec3<double>& x : {a, b, c, d}) in.nodes.insert(in.nodes.end(), {x.x, x.y, x.z});
+  in.tets.insert(in.tets.end(), {first, first + 1, first + 2, first + 3});
+  auto gpu = make_cuda_backend(p);
+  gpu->upload(build_model(in));
+  EXPECT_EQ(cuda_gradients(*gpu), p == Precision::Float ? CudaGradients::Stored : CudaGradients::Recomputed);
+  gpu->advance(3);
+  EXPECT_TRUE(gpu->reduce().finite);
+}
+
 TEST_P(Stages, PerTickTrafficIsFixedAndIndependentOfMeshSize) {
   SKIP_WITHOUT_GPU();
   const Precision p = GetParam();
