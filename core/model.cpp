@@ -540,9 +540,9 @@ TissueModel<double> build_model(const ModelInput& in) {
   return m;
 }
 
-double worst_gradient_deviation(const TissueModel<double>& m, Precision p, double stop_above) {
+GradientDeviation worst_gradient_deviation(const TissueModel<double>& m, Precision p, double stop_above) {
   const index_t n = m.n_nodes, ne = m.n_elems;
-  double worst = 0;
+  GradientDeviation worst;
   for (index_t e = 0; e < ne; ++e) {
     Vec3<double> X[4];
     double dN[12];
@@ -553,8 +553,8 @@ double worst_gradient_deviation(const TissueModel<double>& m, Precision p, doubl
     for (int k = 0; k < 12; ++k) dN[k] = m.dndx[k * size_t(ne) + e];
     const double d = p == Precision::Float ? shape_gradient_deviation<float>(X, dN, m.volume[e])
                                            : shape_gradient_deviation<double>(X, dN, m.volume[e]);
-    if (!(d <= worst)) worst = d;
-    if (!(worst <= stop_above)) break;
+    if (!(d <= worst.deviation)) worst = {d, e};
+    if (!(worst.deviation <= stop_above)) break;
   }
   return worst;
 }

@@ -250,12 +250,17 @@ std::vector<T> nodal_pressure_divisors(const TissueModel<T>& m) {
 template <class T>
 TissueModel<T> convert(const TissueModel<double>& m);
 
-/// The largest shape_gradient_deviation (core/tet.hpp) over the model's
-/// elements: how far gradients and volumes recomputed at precision p from
-/// the double reference positions stray from the model's (the cuda
-/// backend's test before it recomputes them instead of loading them). Stops
-/// at the first element beyond `stop_above`; HUGE_VAL when an element's
-/// recomputation is not finite.
-double worst_gradient_deviation(const TissueModel<double>& m, Precision p, double stop_above = HUGE_VAL);
+/// The largest shape_gradient_deviation (core/tet.hpp) over a model's
+/// elements, and the (first) element that has it.
+struct GradientDeviation {
+  double deviation = 0;  ///< HUGE_VAL when an element's recomputation is not finite
+  index_t elem = -1;     ///< -1: no element
+};
+
+/// How far gradients and volumes recomputed at precision p from the double
+/// reference positions stray from the model's (the cuda backend's test
+/// before it recomputes them instead of loading them). Stops at the first
+/// element beyond `stop_above`.
+GradientDeviation worst_gradient_deviation(const TissueModel<double>& m, Precision p, double stop_above = HUGE_VAL);
 
 }  // namespace tissue

@@ -446,7 +446,8 @@ class CudaBackend final : public Backend {
   /// Pass 1 over every element (after a region build or new displacements).
   void pass1_all() {
     const RegionView all = {nullptr, nullptr, store_.n_nodes(), store_.n_elems()};
-    stepper_.element_pressure(store_.model(), store_.state(), all, store_.u.current().u, stream());
+    const RegionView region = region_view();  // its gradients: those of the steps to come
+    stepper_.element_pressure(store_.model(), store_.state(), all, store_.u.current().u, stream(), &region);
   }
 
   Stream stream_;

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "core/backend.hpp"
+#include "cuda/gradients.hpp"
 
 namespace tissue {
 
@@ -43,35 +44,13 @@ void set_cuda_step_mode(Backend& backend, CudaStepMode mode);
 /// The mode advance() uses for the backend's current region (Auto resolved).
 CudaStepMode cuda_step_mode(Backend& backend);
 
-/// Where the cuda backend's element passes (1 and 3, and the reductions'
-/// energies) get each element's shape gradients and volume (docs/cuda.md,
-/// "Element gradients"):
-///   Stored      loaded: 13 scalars per element and pass;
-///   Recomputed  from its corners' reference positions, kept in double on
-///               the device, at every pass (core tet_shape_gradients_from):
-///               a third fewer bytes per step;
-///   Auto        both kept when every element's recomputation at the
-///               backend's precision stays within kGradientTolerance of the
-///               model's double gradients (core worst_gradient_deviation):
-///               regions of at least 50,000 elements (bandwidth-bound)
-///               recompute, smaller ones (latency-bound: the haptic tick's)
-///               load; Stored alone otherwise (a mesh with slivers).
-enum class CudaGradients { Auto, Stored, Recomputed };
-
-/// Auto's bound on the relative deviation of recomputed gradients: a
-/// well-shaped tet's float recomputation deviates by a few 1e-7.
-inline constexpr double kGradientTolerance = 1e-5;
-
-/// Auto's smallest region whose element passes recompute the gradients.
-/// Measured on an H100: the 8.6k-element kidney's steps gain nothing in
-/// float and lose 19 % in double, its 4-step tick loses 4 %; 100k elements
-/// gain 5-6 %, 1M 7-11 %.
-inline constexpr index_t kRecomputeMinElements = 50'000;
-
+/// CudaGradients (cuda/gradients.hpp) by name: "auto", "stored", "recomputed".
 const char* to_string(CudaGradients g);
 
 /// Selects where the backend's next upload() puts the gradients. Throws
-/// std::invalid_argument when `backend` is not a cuda backend.
+/// std::invalid_argument when `backend` is not a cuda backend; upload()
+/// then throws std::invalid_argument under Recomputed when an element's
+/// recomputation strays beyond kGradientTolerance (naming it).
 void set_cuda_gradients(Backend& backend, CudaGradients g);
 
 /// What the element passes over the backend's current region use (Stored

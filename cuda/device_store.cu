@@ -1,9 +1,11 @@
 #include "cuda/device_store.hpp"
 
+#include <stdexcept>
 #include <vector>
 
 #include "core/region.hpp"
 #include "cuda/launch.cuh"
+#include "cuda/text.hpp"
 
 namespace tissue::gpu {
 namespace {
@@ -37,17 +39,25 @@ template <class T>
 void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& ref, CudaGradients gradients,
                             Transfers& log, cudaStream_t stream) {
   const index_t n = m.n_nodes, ne = m.n_elems;
+  // before anything is replaced: a refused model leaves the last one intact
+  const Precision p = sizeof(T) == 4 ? Precision::Float : Precision::Double;
+  const GradientDeviation dev = gradients == CudaGradients::Stored
+                                    ? GradientDeviation{}
+                                    : worst_gradient_deviation(ref, p, kGradientTolerance);
+  const bool accurate = dev.deviation <= kGradientTolerance;
+  if (gradients == CudaGradients::Recomputed && !accurate)
+    throw std::invalid_argument(str("cuda backend, gradients 'recomputed': element ", dev.elem,
+                                    "'s shape gradients recomputed in ", sizeof(T) == 4 ? "float" : "double",
+                                    " stray by ", dev.deviation, " from the model's (more than ", kGradientTolerance,
+                                    ": a sliver); use gradients 'auto' or 'stored'"));
+  // Stored: the gradients only; Recomputed: the reference positions only;
+  // Auto: both when the recomputation is accurate enough (the passes then
+  // choose by region size: cuda/views.hpp recomputes()), else the gradients
+  const bool keep_X_ref = gradients != CudaGradients::Stored && accurate;
+  const bool keep_dndx = gradients != CudaGradients::Recomputed;
   std::vector<Packed3<T>> X(n);
   for (index_t i = 0; i < n; ++i) X[i] = {m.X[i], m.X[n + i], m.X[2 * size_t(n) + i], T(0)};
   upload_array(X_, X, log, stream);
-  // Stored: the gradients only; Recomputed: the reference positions only;
-  // Auto: both when the recomputation is accurate enough (the passes then
-  // choose by region size: cuda/tled.cuh recomputes), else the gradients
-  const Precision p = sizeof(T) == 4 ? Precision::Float : Precision::Double;
-  const bool keep_X_ref =
-      gradients == CudaGradients::Recomputed ||
-      (gradients == CudaGradients::Auto && worst_gradient_deviation(ref, p, kGradientTolerance) <= kGradientTolerance);
-  const bool keep_dndx = gradients != CudaGradients::Recomputed;
   std::vector<Packed3<double>> X_ref;
   if (keep_X_ref) {
     X_ref.resize(n);

@@ -41,7 +41,6 @@ class DeviceStore {
   void upload(const TissueModel<T>& m, const TissueModel<double>& ref, CudaGradients gradients, Transfers& log,
               cudaStream_t stream);
 
-
   /// u = u_prev = u_next = 0, u_held = 0, f = f_slot = dv_slot = node_p = 0,
   /// elem_J = 1, held = the fixed axes, driven = 0, every node inner, no bad
   /// element, no contact.

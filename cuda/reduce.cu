@@ -158,10 +158,10 @@ __device__ void accumulate_node(const ModelView<T>& m, const StateView<T>& s, co
 /// viscoelastic element, its Prony power and stored energy (core/energy.hpp
 /// element_prony_energy) at the current u, added to p; node_p: nodal
 /// pressures at the current u (IANP only).
-template <class T>
-__device__ void add_element_energy(const ModelView<T>& m, const RegionView& r, const T* node_p, const Packed3<T>* u, index_t e,
+template <class T, bool kRecomputed>
+__device__ void add_element_energy(const ModelView<T>& m, const T* node_p, const Packed3<T>* u, index_t e,
                                    const LawView<T>& w, ReducePartial& p) {
-  const ElementData<T> d = load_element_any(m, r, e);
+  const ElementData<T> d = load_element<T, kRecomputed>(m, e);
   Vec3<T> ue[4];
   corner_displacements(d, u, ue);
   const Mat3<T> F = deformation_gradient(ue, d.dN);
@@ -242,7 +242,7 @@ __device__ void write_result(const ReducePartial& sum, const ContactPartial& c, 
 /// 14.3 us in this kernel with 256-thread blocks, its contact partial in
 /// local memory, every block summing it; 13.1 us as it is. On the 100k
 /// slab's 396 blocks, 28 us with the partials in rows, 19 us in columns.)
-template <class T>
+template <class T, bool kRecomputed>
 __global__ void __launch_bounds__(kReduceBlock)
     reduce_kernel(ModelView<T> m, StateView<T> s, RegionView r, FrontView front, StepBuffers<T> b,
                   const T* energy_node_p, LawView<T> w, int* partial, int* contact, unsigned* done,
@@ -251,7 +251,7 @@ __global__ void __launch_bounds__(kReduceBlock)
   ReducePartial p = zero_partial();
   for (index_t i = thread_index(); i < r.n_nodes; i += thread_stride()) accumulate_node(m, s, b, front, r.node(i), p);
   for (index_t i = thread_index(); i < r.n_elems; i += thread_stride())
-    add_element_energy(m, r, energy_node_p, b.u, r.elem(i), w, p);
+    add_element_energy<T, kRecomputed>(m, energy_node_p, b.u, r.elem(i), w, p);
   ContactPartial c;
   empty_partial(c);
   bool touched = false;
@@ -328,9 +328,11 @@ void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const Reg
   }
   const index_t items = std::max({r.n_nodes, r.n_elems, m.n_surf, index_t(1)});
   const int blocks = std::min(grid_for(items, kReduceBlock), kMaxReduceBlocks);
-  launch_blocks(blocks, kReduceBlock, stream, reduce_kernel<T>, m, s, r, front, b,
-                static_cast<const T*>(node_p_.data()), law_, partial_.data(), contact_partial_.data(), done_.data(),
-                result_.data());
+  with_gradients(m, r, [&](auto recomputed) {  // the energies with the gradients of the steps
+    launch_blocks(blocks, kReduceBlock, stream, reduce_kernel<T, decltype(recomputed)::value>, m, s, r, front, b,
+                  static_cast<const T*>(node_p_.data()), law_, partial_.data(), contact_partial_.data(), done_.data(),
+                  result_.data());
+  });
 }
 
 template class Reducer<float>;

@@ -88,8 +88,8 @@ CudaStepMode Stepper<T>::choose(const RegionView& r) const {
 
 template <class T>
 void Stepper<T>::element_pressure(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
-                                  const Packed3<T>* u, cudaStream_t stream) {
-  with_gradients(m, r, [&](auto recomputed) {
+                                  const Packed3<T>* u, cudaStream_t stream, const RegionView* gradients_of) {
+  with_gradients(m, gradients_of ? *gradients_of : r, [&](auto recomputed) {
     launch_chained(r.n_elems, stream, element_pressure_kernel<T, decltype(recomputed)::value>, m, s, r, u);
   });
 }

@@ -97,8 +97,11 @@ class Stepper {
   const PersistentLimits& limits() const { return limits_; }
 
   // Single passes over region r (pass 1 of a region build passes the whole mesh).
+  /// `gradients_of`: the region whose size picks the element gradients
+  /// (recomputes()) when it is not r: pass 1 over the whole mesh after a
+  /// region build uses the region's, as its steps will.
   void element_pressure(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, const Packed3<T>* u,
-                        cudaStream_t stream);
+                        cudaStream_t stream, const RegionView* gradients_of = nullptr);
   void nodal_pressure(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, cudaStream_t stream);
   void element_forces(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, const Packed3<T>* u,
                       cudaStream_t stream);

@@ -70,13 +70,6 @@ __device__ __forceinline__ ElementData<T> load_element(const ModelView<T>& m, in
   return d;
 }
 
-/// load_element with recomputes() decided at run time, for code outside
-/// the steps (the reductions' energies).
-template <class T>
-__device__ __forceinline__ ElementData<T> load_element_any(const ModelView<T>& m, const RegionView& r, index_t e) {
-  return recomputes(m, r) ? load_element<T, true>(m, e) : load_element<T, false>(m, e);
-}
-
 /// Calls f(std::true_type) when the element passes over region r
 /// recompute the gradients (recomputes()), else f(std::false_type): the
 /// host's choice of the kernels' kRecomputed. Two instantiations rather
@@ -364,7 +357,8 @@ __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const Re
   const int lane = first % kNodeLanes;
   const unsigned mask = node_group_mask();
   for (int k = 0; k < steps; ++k) {
-    for (index_t i = first; i < r.n_elems; i += stride) element_pressure_at(s, load_element<T, kRecomputed>(m, r.elem(i)), b.u);
+    for (index_t i = first; i < r.n_elems; i += stride)
+      element_pressure_at(s, load_element<T, kRecomputed>(m, r.elem(i)), b.u);
     barrier();
     for (index_t g = first; g < node_items; g += stride)
       nodal_pressure_at(m, s, load_node(m, r.node(g / kNodeLanes), lane, mask));

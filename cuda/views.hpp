@@ -20,7 +20,7 @@
 
 #include "core/hd.hpp"
 #include "core/vec.hpp"
-#include "cuda/cuda_backend.hpp"
+#include "cuda/gradients.hpp"
 
 namespace tissue::gpu {
 

@@ -17,6 +17,7 @@
 #include "core/box_mesh.hpp"
 #include "core/model.hpp"
 #include "core/tet.hpp"
+#include "tests/sliver.hpp"
 
 namespace tissue {
 namespace {
@@ -689,8 +690,8 @@ TEST(Model, GradientsRecomputedFromDoubleEdgesStayNearTheModels) {
   ModelInput in = box_input(6, 6, 6, 0.006, 0.006, 0.006);
   for (size_t i = 0; i < in.nodes.size(); ++i) in.nodes[i] += 0.1 + 0.01 * double(i % 3);
   const TissueModel<double> m = build_model(in);
-  const double dev_float = worst_gradient_deviation(m, Precision::Float);
-  const double dev_double = worst_gradient_deviation(m, Precision::Double);
+  const GradientDeviation dev_float = worst_gradient_deviation(m, Precision::Float);
+  const double dev_double = worst_gradient_deviation(m, Precision::Double).deviation;
   const index_t ne = m.n_elems;
   double naive = 0;  // float absolute coordinates
   for (index_t e = 0; e < ne; ++e) {
@@ -709,35 +710,54 @@ TEST(Model, GradientsRecomputedFromDoubleEdgesStayNearTheModels) {
     naive = std::max(naive, worst / scale);
   }
   std::printf("[measured] worst gradient deviation: float %.3g (float absolute coordinates %.3g), double %.3g\n",
-              dev_float, naive, dev_double);
-  EXPECT_GT(dev_float, 0.0);
-  EXPECT_LT(dev_float, 1e-6);
-  EXPECT_GT(naive, 10 * dev_float);
+              dev_float.deviation, naive, dev_double);
+  EXPECT_GT(dev_float.deviation, 0.0);
+  EXPECT_LT(dev_float.deviation, 1e-6);
+  EXPECT_GE(dev_float.elem, 0);
+  EXPECT_GT(naive, 10 * dev_float.deviation);
   EXPECT_LT(dev_double, 1e-13);
 }
 
-/// A sliver the model accepts (its volume 1e-5 of its longest edge cubed),
-/// apart from a box: recomputed in float, its gradients stray by far more
-/// than the cuda backend's kGradientTolerance (1e-5; Auto then keeps the
-/// stored gradients), in double they do not; stop_above stops at it.
+/// A sliver the model accepts (tests/sliver.hpp), apart from a box:
+/// recomputed in float, its gradients stray by far more than the cuda
+/// backend's kGradientTolerance (1e-5; Auto then keeps the stored
+/// gradients), in double they do not; the deviation names it, and
+/// stop_above stops at it.
 TEST(Model, SliverGradientsStrayWhenRecomputedInFloat) {
   ModelInput in = box_input(2, 2, 2, 0.01, 0.01, 0.01);
   const TissueModel<double> box = build_model(in);
-  const index_t first = index_t(in.nodes.size() / 3);
-  // corners a, b, c of a tilted face, d 1e-7 m off the middle of edge bc
-  const Vec3<double> a{0.03, 0.0, 0.0}, b{0.031, 0.001, 0.0}, c{0.03, 0.001, 0.001};
-  const Vec3<double> n = (1.0 / norm(cross(b - a, c - a))) * cross(b - a, c - a);
-  const Vec3<double> d = 0.5 * (b + c) + 1e-7 * n;
-  for (const Vec3<double>& x : {a, b, c, d}) in.nodes.insert(in.nodes.end(), {x.x, x.y, x.z});
-  in.tets.insert(in.tets.end(), {first, first + 1, first + 2, first + 3});
+  const index_t sliver = test::append_sliver(in, {0.03, 0.0, 0.0});
   const TissueModel<double> m = build_model(in);
-  const double sliver = worst_gradient_deviation(m, Precision::Float);
+  const GradientDeviation dev = worst_gradient_deviation(m, Precision::Float);
   std::printf("[measured] worst gradient deviation: box %.3g, box and sliver %.3g (float), %.3g (double)\n",
-              worst_gradient_deviation(box, Precision::Float), sliver, worst_gradient_deviation(m, Precision::Double));
-  EXPECT_LT(worst_gradient_deviation(box, Precision::Float), 1e-6);
-  EXPECT_GT(sliver, 1e-4);
-  EXPECT_LT(worst_gradient_deviation(m, Precision::Double), 1e-8);
-  EXPECT_GT(worst_gradient_deviation(m, Precision::Float, 1e-5), 1e-5);  // stopped at the sliver, still beyond
+              worst_gradient_deviation(box, Precision::Float).deviation, dev.deviation,
+              worst_gradient_deviation(m, Precision::Double).deviation);
+  EXPECT_LT(worst_gradient_deviation(box, Precision::Float).deviation, 1e-6);
+  EXPECT_GT(dev.deviation, 1e-4);
+  EXPECT_EQ(dev.elem, sliver);
+  EXPECT_LT(worst_gradient_deviation(m, Precision::Double).deviation, 1e-8);
+  const GradientDeviation stopped = worst_gradient_deviation(m, Precision::Float, 1e-5);
+  EXPECT_GT(stopped.deviation, 1e-5);
+  EXPECT_EQ(stopped.elem, sliver);
+}
+
+/// A tet with no volume at float precision (flat to 1e-50 m): its
+/// gradients from double positions come back zero, volume and all
+/// (whatever dN held), which deviates by 1 (all of it) from the double
+/// ones; against a zero reference volume the deviation is HUGE_VAL, not a
+/// NaN.
+TEST(TetGeometry, GradientsFromDoubleOfAFlatTetAreZeroAndItsDeviationHuge) {
+  // (at the origin, where a double holds the 1e-50 and a float does not)
+  const Vec3<double> X[4] = {{0.0, 0.0, 0.0}, {0.001, 0.0, 0.0}, {0.0, 0.001, 0.0}, {0.0, 0.0, 1e-50}};
+  float dN[12];
+  for (float& v : dN) v = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_EQ(tet_shape_gradients_from<float>(X, dN), 0.0f);
+  for (float v : dN) EXPECT_EQ(v, 0.0f);
+  double ref[12];
+  const double V = tet_shape_gradients(X, ref);
+  ASSERT_GT(V, 0.0);  // not flat in double
+  EXPECT_GE(shape_gradient_deviation<float>(X, ref, V), 1.0);
+  EXPECT_EQ(shape_gradient_deviation<double>(X, ref, 0.0), HUGE_VAL);
 }
 
 }  // namespace

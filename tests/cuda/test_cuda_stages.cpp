@@ -23,6 +23,7 @@
 #include "core/scheduler.hpp"
 #include "core/tet.hpp"
 #include "tests/cuda/cuda_test_support.hpp"
+#include "tests/sliver.hpp"
 
 namespace tissue::cuda_test {
 namespace {
@@ -235,14 +236,16 @@ TEST_P(Stages, LawTermsMatchCpuInEveryStepMode) {
   };
   auto cpu = make_cpu_backend(p);
   const std::vector<double> uc = run(*cpu);
-  for (CudaStepMode mode : {CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Grid, CudaStepMode::Cluster}) {
-    SCOPED_TRACE(to_string(mode));
-    auto gpu = make_cuda_backend(p);
-    set_cuda_step_mode(*gpu, mode);
-    const double d = rel_diff(run(*gpu), uc);
-    report((std::string("law terms, step mode ") + to_string(mode)).c_str(), p, d);
-    EXPECT_LT(d, p == Precision::Double ? 1e-9 : 1e-3);  // 90 dynamic steps
-  }
+  for (CudaGradients g : {CudaGradients::Stored, CudaGradients::Recomputed})
+    for (CudaStepMode mode : {CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Grid, CudaStepMode::Cluster}) {
+      SCOPED_TRACE(::testing::Message() << to_string(mode) << ", gradients " << to_string(g));
+      auto gpu = make_cuda_backend(p);
+      set_cuda_step_mode(*gpu, mode);
+      set_cuda_gradients(*gpu, g);
+      const double d = rel_diff(run(*gpu), uc);
+      report((std::string("law terms, step mode ") + to_string(mode) + ", gradients " + to_string(g)).c_str(), p, d);
+      EXPECT_LT(d, p == Precision::Double ? 1e-9 : 1e-3);  // 90 dynamic steps
+    }
 }
 
 /// Grasp on the device: the nodes in contact when the button goes down
@@ -470,47 +473,50 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
                             m.tris[d], m.tris[m.n_tris + d], m.tris[2 * m.n_tris + d]};
   const index_t driven[3] = {seeds[3], seeds[4], seeds[5]};
   const auto u = random_field(m.n_nodes, 1e-4, 29);
-  for (int depth : {kDepthAll, 2}) {
-    std::vector<double> ref_u, ref_f, ref_p, ref_J, ref_energy;
-    for (CudaStepMode mode : {CudaStepMode::Grid, CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Cluster,
-                              CudaStepMode::Auto}) {
-      SCOPED_TRACE(::testing::Message() << "depth " << depth << " mode " << to_string(mode));
-      auto gpu = make_cuda_backend(p);
-      set_cuda_step_mode(*gpu, mode);
-      gpu->upload(m);
-      gpu->set_displacements(u);
-      gpu->build_region(seeds, depth);
-      gpu->set_driven(driven, std::vector<double>(9, -5e-4));
-      const ToolShape tool[] = {{"probe", 0.004, 0.01}};
-      gpu->set_tools(tool);
-      const ToolMotion mv[] = {{{{0.031, 0.027, 0.0445}, {0, 0, 1}}, {{0.031, 0.027, 0.0425}, {0, 0, 1}}}};
-      gpu->move_tools(mv);
-      // a reduce between advances (its own passes 1-2 at the current u into scratch) changes nothing in
-      // the steps, in any mode
-      gpu->advance(7);   // graph: a 7-step graph from phase 0
-      std::vector<double> energies = {gpu->reduce().strain_energy};
-      gpu->advance(1);   // then phase 1
-      energies.push_back(gpu->reduce().strain_energy);
-      gpu->advance(33);  // a 30-step chunk and 3 more
-      const Reductions r = gpu->reduce();
-      energies.push_back(r.strain_energy);
-      EXPECT_GT(r.tools[0].contact, 0);
-      const Fields f = gpu->download();
-      if (ref_u.empty()) {
-        ref_u = f.u;
-        ref_f = f.f;
-        ref_p = f.node_p;
-        ref_J = f.elem_J;
-        ref_energy = energies;
-        continue;
+  for (CudaGradients g : {CudaGradients::Stored, CudaGradients::Recomputed})
+    for (int depth : {kDepthAll, 2}) {
+      std::vector<double> ref_u, ref_f, ref_p, ref_J, ref_energy;
+      for (CudaStepMode mode : {CudaStepMode::Grid, CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Cluster,
+                                CudaStepMode::Auto}) {
+        SCOPED_TRACE(::testing::Message() << "depth " << depth << " mode " << to_string(mode) << " gradients "
+                                          << to_string(g));
+        auto gpu = make_cuda_backend(p);
+        set_cuda_step_mode(*gpu, mode);
+        set_cuda_gradients(*gpu, g);
+        gpu->upload(m);
+        gpu->set_displacements(u);
+        gpu->build_region(seeds, depth);
+        gpu->set_driven(driven, std::vector<double>(9, -5e-4));
+        const ToolShape tool[] = {{"probe", 0.004, 0.01}};
+        gpu->set_tools(tool);
+        const ToolMotion mv[] = {{{{0.031, 0.027, 0.0445}, {0, 0, 1}}, {{0.031, 0.027, 0.0425}, {0, 0, 1}}}};
+        gpu->move_tools(mv);
+        // a reduce between advances (its own passes 1-2 at the current u into scratch) changes nothing in
+        // the steps, in any mode
+        gpu->advance(7);   // graph: a 7-step graph from phase 0
+        std::vector<double> energies = {gpu->reduce().strain_energy};
+        gpu->advance(1);   // then phase 1
+        energies.push_back(gpu->reduce().strain_energy);
+        gpu->advance(33);  // a 30-step chunk and 3 more
+        const Reductions r = gpu->reduce();
+        energies.push_back(r.strain_energy);
+        EXPECT_GT(r.tools[0].contact, 0);
+        const Fields f = gpu->download();
+        if (ref_u.empty()) {
+          ref_u = f.u;
+          ref_f = f.f;
+          ref_p = f.node_p;
+          ref_J = f.elem_J;
+          ref_energy = energies;
+          continue;
+        }
+        EXPECT_EQ(f.u, ref_u);
+        EXPECT_EQ(f.f, ref_f);
+        EXPECT_EQ(f.node_p, ref_p);  // the last step's passes, in every mode
+        EXPECT_EQ(f.elem_J, ref_J);
+        EXPECT_EQ(energies, ref_energy);
       }
-      EXPECT_EQ(f.u, ref_u);
-      EXPECT_EQ(f.f, ref_f);
-      EXPECT_EQ(f.node_p, ref_p);  // the last step's passes, in every mode
-      EXPECT_EQ(f.elem_J, ref_J);
-      EXPECT_EQ(energies, ref_energy);
     }
-  }
 }
 
 /// Element gradients recomputed from double reference positions at every
@@ -519,12 +525,15 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
 /// random field, then the reductions. Sixty steps of that field amplify any
 /// rounding difference alike (measured on an H100 in float: recomputed
 /// against stored 3.0e-5 in u, 4.9e-5 in J - 1, 7.9e-5 in strain energy,
-/// against the cpu 3.3e-5; double 5e-14 to 7e-13), hence the looser float
-/// bound here than pass_tol's single pass. Auto: a small mesh loads them
-/// (identical bits to Stored), a whole mesh of kRecomputeMinElements or more
-/// recomputes them (identical bits to Recomputed) while a small region of it
-/// loads them, and a large mesh with a sliver keeps only the stored ones in
-/// float.
+/// against the cpu 3.3e-5, where stored against the cpu is 3.5e-5; double
+/// 5e-14 to 7e-13), hence the looser float bound here than pass_tol's
+/// single pass; one pass 1 on a box 0.1 m from the origin is checked at
+/// 1e-5. Auto: a small mesh loads them (identical bits to Stored), a whole
+/// mesh of kRecomputeMinElements or more recomputes them (identical bits to
+/// Recomputed) while a small region of it loads them (identical bits to
+/// Stored, its whole-mesh pass 1 and energies included), and a large mesh
+/// with a sliver keeps only the stored ones in float, where Recomputed
+/// refuses it naming the sliver.
 TEST_P(Stages, RecomputedGradientsMatchStoredOnes) {
   SKIP_WITHOUT_GPU();
   const Precision p = GetParam();
@@ -586,32 +595,88 @@ TEST_P(Stages, RecomputedGradientsMatchStoredOnes) {
   EXPECT_EQ(big_auto.used, CudaGradients::Recomputed);
   EXPECT_EQ(big_auto.fields.u, big_recomputed.fields.u);
   {
-    auto gpu = make_cuda_backend(p);
-    gpu->upload(big);
-    EXPECT_EQ(cuda_gradients(*gpu), CudaGradients::Recomputed);
+    // a region of depth 2 loads them, and its pass 1 over the whole mesh (after the build, as after new
+    // displacements) too: Auto's bits are Stored's, the steps and the reductions alike
     const index_t seeds[3] = {big.tris[0], big.tris[big.n_tris], big.tris[2 * big.n_tris]};
-    gpu->build_region(seeds, 2);
-    EXPECT_EQ(cuda_gradients(*gpu), CudaGradients::Stored);
-    gpu->build_region({}, kDepthAll);
-    EXPECT_EQ(cuda_gradients(*gpu), CudaGradients::Recomputed);
+    std::vector<double> ref_u, ref_J, ref_energy;
+    for (CudaGradients g : {CudaGradients::Stored, CudaGradients::Auto}) {
+      SCOPED_TRACE(to_string(g));
+      auto gpu = make_cuda_backend(p);
+      set_cuda_gradients(*gpu, g);
+      gpu->upload(big);
+      EXPECT_EQ(cuda_gradients(*gpu), g == CudaGradients::Auto ? CudaGradients::Recomputed : CudaGradients::Stored);
+      gpu->build_region(seeds, 2);
+      EXPECT_EQ(cuda_gradients(*gpu), CudaGradients::Stored);
+      gpu->set_displacements(ub);
+      gpu->advance(20);
+      const double energy = gpu->reduce().strain_energy;
+      const Fields f = gpu->download();
+      if (ref_u.empty()) {
+        ref_u = f.u;
+        ref_J = f.elem_J;
+        ref_energy = {energy};
+        continue;
+      }
+      EXPECT_EQ(f.u, ref_u);
+      EXPECT_EQ(f.elem_J, ref_J);
+      EXPECT_EQ(std::vector<double>{energy}, ref_energy);
+      gpu->build_region({}, kDepthAll);
+      EXPECT_EQ(cuda_gradients(*gpu), CudaGradients::Recomputed);
+    }
   }
 
-  // the same mesh with a sliver beside it (its volume 1e-5 of its longest
-  // edge cubed): in float Auto keeps only the stored gradients
+  // one pass 1 on a box 0.1 m from the origin (1 mm cells): the gradients from edges differenced in double
+  // give the J of the stored ones to float rounding
+  {
+    ModelInput in;
+    box_mesh(in, 6, 6, 6, 0.006, 0.006, 0.006);
+    in.materials = {{1000, 20000, 1000}};
+    for (size_t i = 0; i < in.nodes.size(); ++i) in.nodes[i] += 0.1 + 0.01 * double(i % 3);
+    const TissueModel<double> off = build_model(in);
+    const auto uo = random_field(off.n_nodes, 2e-5, 9);  // strains of a few percent
+    std::vector<double> J[2];
+    int k = 0;
+    for (CudaGradients g : {CudaGradients::Stored, CudaGradients::Recomputed}) {
+      auto gpu = make_cuda_backend(p);
+      set_cuda_gradients(*gpu, g);
+      gpu->upload(off);
+      gpu->set_displacements(uo);  // pass 1 over every element
+      J[k++] = gpu->download().elem_J;
+    }
+    ASSERT_GT(*std::max_element(J[0].begin(), J[0].end()), 1.01);
+    const double dJ = rel_diff(minus_one(J[1]), minus_one(J[0]));
+    report("recomputed against stored gradients, one pass 1 at 0.1 m, J - 1", p, dJ);
+    EXPECT_LT(dJ, p == Precision::Double ? 1e-12 : 1e-5);
+  }
+
+  // the same large mesh with a sliver beside it (tests/sliver.hpp): in float Auto keeps only the stored
+  // gradients, and Recomputed is refused naming the sliver
   ModelInput in;
   box_mesh(in, 21, 20, 20, 0.105, 0.1, 0.1);
   in.materials = {{1000, 20000, 1000}};
-  const index_t first = index_t(in.nodes.size() / 3);
-  const Vec3<double> a{0.2, 0.0, 0.0}, b{0.201, 0.001, 0.0}, c{0.2, 0.001, 0.001};
-  const Vec3<double> n = (1.0 / norm(cross(b - a, c - a))) * cross(b - a, c - a);
-  const Vec3<double> d = 0.5 * (b + c) + 1e-7 * n;
-  for (const Vec3<double>& x : {a, b, c, d}) in.nodes.insert(in.nodes.end(), {x.x, x.y, x.z});
-  in.tets.insert(in.tets.end(), {first, first + 1, first + 2, first + 3});
+  const index_t sliver = test::append_sliver(in, {0.2, 0.0, 0.0});
+  const TissueModel<double> with_sliver = build_model(in);
   auto gpu = make_cuda_backend(p);
-  gpu->upload(build_model(in));
+  gpu->upload(with_sliver);
   EXPECT_EQ(cuda_gradients(*gpu), p == Precision::Float ? CudaGradients::Stored : CudaGradients::Recomputed);
   gpu->advance(3);
   EXPECT_TRUE(gpu->reduce().finite);
+  auto forced = make_cuda_backend(p);
+  set_cuda_gradients(*forced, CudaGradients::Recomputed);
+  if (p == Precision::Float) {
+    try {
+      forced->upload(with_sliver);
+      ADD_FAILURE() << "a sliver's recomputed gradients were accepted";
+    } catch (const std::invalid_argument& e) {
+      const std::string what = e.what();
+      for (const std::string part : {std::string("gradients 'recomputed'"), "element " + std::to_string(sliver),
+                                     std::string("sliver"), std::string("'stored'")})
+        EXPECT_NE(what.find(part), std::string::npos) << part << " not in: " << what;
+    }
+  } else {
+    forced->upload(with_sliver);
+    EXPECT_EQ(cuda_gradients(*forced), CudaGradients::Recomputed);
+  }
 }
 
 TEST_P(Stages, PerTickTrafficIsFixedAndIndependentOfMeshSize) {
