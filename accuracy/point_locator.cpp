@@ -7,20 +7,13 @@
 #include <stdexcept>
 
 namespace tissue::accuracy {
-namespace {
-
-Vec3<double> node(const TissueModel<double>& m, index_t i) {
-  return {m.X[i], m.X[m.n_nodes + i], m.X[2 * m.n_nodes + i]};
-}
-
-}  // namespace
 
 PointLocator::PointLocator(const TissueModel<double>& model) : m_(model) {
   const index_t ne = m_.n_elems;
-  Vec3<double> hi = node(m_, 0);
+  Vec3<double> hi = reference_position(m_, 0);
   lo_ = hi;
   for (index_t i = 1; i < m_.n_nodes; ++i) {
-    const Vec3<double> x = node(m_, i);
+    const Vec3<double> x = reference_position(m_, i);
     for (int c = 0; c < 3; ++c) {
       lo_[c] = std::min(lo_[c], x[c]);
       hi[c] = std::max(hi[c], x[c]);
@@ -39,9 +32,9 @@ PointLocator::PointLocator(const TissueModel<double>& model) : m_(model) {
   std::vector<std::array<int, 6>> box(ne);
   std::vector<index_t> count(cells + 1, 0);
   for (index_t e = 0; e < ne; ++e) {
-    Vec3<double> a = node(m_, m_.elem_nodes[e]), b = a;
+    Vec3<double> a = reference_position(m_, m_.elem_nodes[e]), b = a;
     for (int k = 1; k < 4; ++k) {
-      const Vec3<double> x = node(m_, m_.elem_nodes[k * ne + e]);
+      const Vec3<double> x = reference_position(m_, m_.elem_nodes[k * ne + e]);
       for (int c = 0; c < 3; ++c) {
         a[c] = std::min(a[c], x[c]);
         b[c] = std::max(b[c], x[c]);
@@ -73,7 +66,7 @@ std::array<int, 3> PointLocator::cell_of(Vec3<double> p) const {
 
 double PointLocator::raw_bary(index_t e, Vec3<double> p, std::array<double, 4>& b) const {
   const index_t ne = m_.n_elems;
-  const Vec3<double> d = p - node(m_, m_.elem_nodes[e]);
+  const Vec3<double> d = p - reference_position(m_, m_.elem_nodes[e]);
   double lowest = 1e300;
   for (int a = 0; a < 4; ++a) {
     b[a] = (a == 0 ? 1.0 : 0.0) + m_.dndx[(3 * a) * ne + e] * d.x + m_.dndx[(3 * a + 1) * ne + e] * d.y +

@@ -541,15 +541,12 @@ TissueModel<double> build_model(const ModelInput& in) {
 }
 
 GradientDeviation worst_gradient_deviation(const TissueModel<double>& m, Precision p, double stop_above) {
-  const index_t n = m.n_nodes, ne = m.n_elems;
+  const index_t ne = m.n_elems;
   GradientDeviation worst;
   for (index_t e = 0; e < ne; ++e) {
     Vec3<double> X[4];
     double dN[12];
-    for (int a = 0; a < 4; ++a) {
-      const index_t c = m.elem_nodes[a * ne + e];
-      X[a] = {m.X[c], m.X[n + c], m.X[2 * size_t(n) + c]};
-    }
+    for (int a = 0; a < 4; ++a) X[a] = reference_position(m, m.elem_nodes[a * ne + e]);
     for (int k = 0; k < 12; ++k) dN[k] = m.dndx[k * size_t(ne) + e];
     const double d = p == Precision::Float ? shape_gradient_deviation<float>(X, dN, m.volume[e])
                                            : shape_gradient_deviation<double>(X, dN, m.volume[e]);

@@ -143,6 +143,12 @@ struct TissueModel {
   bool has_visco() const { return n_visco > 0; }
 };
 
+/// Node a's reference position (m) from the component-major X.
+template <class T>
+Vec3<T> reference_position(const TissueModel<T>& m, index_t a) {
+  return {m.X[a], m.X[std::size_t(m.n_nodes) + a], m.X[2 * std::size_t(m.n_nodes) + a]};
+}
+
 /// Precomputes the model from the input; throws ModelError for zero-volume
 /// tets (relative to the tet's size; coordinates whose volumes overflow or
 /// underflow are named as such), two elements with the same four nodes,

@@ -10,14 +10,10 @@
 namespace tissue {
 namespace {
 
-Vec3<double> ref_position(const TissueModel<double>& m, index_t a) {
-  return {m.X[a], m.X[m.n_nodes + a], m.X[2 * size_t(m.n_nodes) + a]};
-}
-
 /// Distance from p to the nearest surface node of the reference configuration (m).
 double nearest_surface_node(const TissueModel<double>& m, Vec3<double> p) {
   double best = INFINITY;
-  for (index_t a : m.surf_nodes) best = std::min(best, norm(ref_position(m, a) - p));
+  for (index_t a : m.surf_nodes) best = std::min(best, norm(reference_position(m, a) - p));
   return best;
 }
 
@@ -65,8 +61,8 @@ bool inside_reference_surface(const TissueModel<double>& m, Vec3<double> p) {
   const index_t nt = m.n_tris;
   for (index_t t = 0; t < nt; ++t) {
     double bary[2];
-    const Vec3<double> P0 = ref_position(m, m.tris[t]), P1 = ref_position(m, m.tris[nt + t]),
-                       P2 = ref_position(m, m.tris[2 * nt + t]);
+    const Vec3<double> P0 = reference_position(m, m.tris[t]), P1 = reference_position(m, m.tris[nt + t]),
+                       P2 = reference_position(m, m.tris[2 * nt + t]);
     if (segment_triangle(p, far, P0, P1, P2, bary) > 0) ++crossings;
   }
   return crossings % 2 == 1;

@@ -17,6 +17,14 @@ void upload_array(DeviceArray<T>& dst, const std::vector<T>& v, Transfers& log, 
   log.to_device(dst.data(), v.data(), dst.bytes(), stream);
 }
 
+/// The model's reference positions, one Packed3 per node.
+template <class S>
+std::vector<Packed3<S>> packed_positions(const TissueModel<S>& m) {
+  std::vector<Packed3<S>> X(m.n_nodes);
+  for (index_t i = 0; i < m.n_nodes; ++i) X[i] = Packed3<S>::of(reference_position(m, i));
+  return X;
+}
+
 template <class T>
 __global__ void reset_nodes_kernel(index_t n, const std::uint8_t* flags, std::uint8_t* held, std::uint8_t* driven,
                                    std::uint8_t* role) {
@@ -39,11 +47,13 @@ template <class T>
 void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& ref, CudaGradients gradients,
                             Transfers& log, cudaStream_t stream) {
   const index_t n = m.n_nodes, ne = m.n_elems;
-  // before anything is replaced: a refused model leaves the last one intact
+  // the gradients' checks before anything is replaced (a refused model leaves the last one intact);
+  // Auto on a mesh too small for any region to recompute keeps the gradients alone, unchecked
+  const bool may_recompute = gradients == CudaGradients::Recomputed ||
+                             (gradients == CudaGradients::Auto && ne >= kRecomputeMinElements);
   const Precision p = sizeof(T) == 4 ? Precision::Float : Precision::Double;
-  const GradientDeviation dev = gradients == CudaGradients::Stored
-                                    ? GradientDeviation{}
-                                    : worst_gradient_deviation(ref, p, kGradientTolerance);
+  const GradientDeviation dev =
+      may_recompute ? worst_gradient_deviation(ref, p, kGradientTolerance) : GradientDeviation{};
   const bool accurate = dev.deviation <= kGradientTolerance;
   if (gradients == CudaGradients::Recomputed && !accurate)
     throw std::invalid_argument(str("cuda backend, gradients 'recomputed': element ", dev.elem,
@@ -51,17 +61,16 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
                                     " stray by ", dev.deviation, " from the model's (more than ", kGradientTolerance,
                                     ": a sliver); use gradients 'auto' or 'stored'"));
   // Stored: the gradients only; Recomputed: the reference positions only;
-  // Auto: both when the recomputation is accurate enough (the passes then
-  // choose by region size: cuda/views.hpp recomputes()), else the gradients
-  const bool keep_X_ref = gradients != CudaGradients::Stored && accurate;
+  // Auto: both on a large mesh whose recomputation is accurate enough (the
+  // passes then choose by region size: cuda/views.hpp recomputes()), else
+  // the gradients
+  const bool keep_X_ref = may_recompute && accurate;
   const bool keep_dndx = gradients != CudaGradients::Recomputed;
-  std::vector<Packed3<T>> X(n);
-  for (index_t i = 0; i < n; ++i) X[i] = {m.X[i], m.X[n + i], m.X[2 * size_t(n) + i], T(0)};
+  const std::vector<Packed3<T>> X = packed_positions(m);
   upload_array(X_, X, log, stream);
   std::vector<Packed3<double>> X_ref;
   if (keep_X_ref) {
-    X_ref.resize(n);
-    for (index_t i = 0; i < n; ++i) X_ref[i] = {ref.X[i], ref.X[n + i], ref.X[2 * size_t(n) + i], 0.0};
+    X_ref = packed_positions(ref);
     upload_array(X_ref_, X_ref, log, stream);
   } else {
     X_ref_.allocate(0);

@@ -15,9 +15,10 @@ namespace tissue {
 ///   Recomputed  from its corners' reference positions, kept in double on
 ///               the device, at every pass (core tet_shape_gradients_from):
 ///               a quarter fewer bytes per step at 1M tets;
-///   Auto        both kept when every element's recomputation at the
-///               backend's precision stays within kGradientTolerance of the
-///               model's double gradients (core worst_gradient_deviation):
+///   Auto        both kept on a mesh of kRecomputeMinElements or more when
+///               every element's recomputation at the backend's precision
+///               stays within kGradientTolerance of the model's double
+///               gradients (core worst_gradient_deviation):
 ///               regions of at least 50,000 elements (bandwidth-bound)
 ///               recompute, smaller ones (latency-bound: the haptic tick's)
 ///               load; Stored alone otherwise (a mesh with slivers).

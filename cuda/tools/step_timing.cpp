@@ -88,7 +88,6 @@ double step_bytes(double n, double ne, int s, bool recomputed) {
   return recomputed ? ne * (64 + 44.0 * s) + n * (73 + 34.0 * s) : ne * (64 + 70.0 * s) + n * (9 + 34.0 * s);
 }
 
-CudaGradients g_gradients = CudaGradients::Auto;
 
 template <class T>
 T median(std::vector<T> v) {
@@ -96,7 +95,8 @@ T median(std::vector<T> v) {
   return v[v.size() / 2];
 }
 
-void time_case(const Case& cs, double bw, double min_seconds, bool quick, std::vector<std::string>& rows) {
+void time_case(const Case& cs, double bw, double min_seconds, bool quick, CudaGradients gradients,
+               std::vector<std::string>& rows) {
   const TissueModel<double>& model = cs.model;
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> dist(-1e-5, 1e-5);  // a non-zero start: no timing on zeros
@@ -104,7 +104,7 @@ void time_case(const Case& cs, double bw, double min_seconds, bool quick, std::v
   for (auto& v : u0) v = dist(rng);
   for (Precision p : {Precision::Float, Precision::Double}) {
     auto be = make_cuda_backend(p);
-    set_cuda_gradients(*be, g_gradients);
+    set_cuda_gradients(*be, gradients);
     be->upload(model);
     const bool recomputed = cuda_gradients(*be) == CudaGradients::Recomputed;
     for (CudaStepMode mode : {CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Grid, CudaStepMode::Cluster,
@@ -165,6 +165,7 @@ int main(int argc, char** argv) {
     return 1;
   }
   bool quick = false;
+  CudaGradients gradients = CudaGradients::Auto;
   std::vector<std::string> want;
   for (int k = 1; k < argc; ++k) {
     const std::string a = argv[k];
@@ -172,9 +173,9 @@ int main(int argc, char** argv) {
       quick = true;
     } else if (a == "--gradients" && k + 1 < argc) {
       const std::string g = argv[++k];
-      if (g == "stored") g_gradients = CudaGradients::Stored;
-      else if (g == "recomputed") g_gradients = CudaGradients::Recomputed;
-      else if (g == "auto") g_gradients = CudaGradients::Auto;
+      if (g == "stored") gradients = CudaGradients::Stored;
+      else if (g == "recomputed") gradients = CudaGradients::Recomputed;
+      else if (g == "auto") gradients = CudaGradients::Auto;
       else {
         fmt::print(stderr, "--gradients {}: expected auto, stored or recomputed\n", g);
         return 2;
@@ -190,13 +191,13 @@ int main(int argc, char** argv) {
   fmt::print("device: {}\ncopy bandwidth: {:.1f} GB/s (read + write)\n", why, bw * 1e-9);
   const double min_seconds = quick ? 0.1 : 0.4;
   std::vector<std::string> rows;
-  if (wanted("kidney")) time_case(kidney_case(), bw, min_seconds, quick, rows);
+  if (wanted("kidney")) time_case(kidney_case(), bw, min_seconds, quick, gradients, rows);
   const struct {
     const char* name;
     int nx, ny, nz;
   } boxes[] = {{"8k", 12, 12, 10}, {"100k", 26, 26, 25}, {"1m", 55, 55, 55}, {"4m", 88, 88, 86}};
   for (const auto& b : boxes)
-    if (wanted(b.name)) time_case(box_case(b.name, b.nx, b.ny, b.nz), bw, min_seconds, quick, rows);
+    if (wanted(b.name)) time_case(box_case(b.name, b.nx, b.ny, b.nz), bw, min_seconds, quick, gradients, rows);
   fmt::print("\n{:>6} {:>8} {:>7} {:>6} {:>9} {:>12} {:>10} {:>6}\n", "mesh", "tets", "nodes", "prec", "mode",
              "steps/s", "elem-st/s", "bw-fr");
   for (const auto& r : rows) fmt::print("{}\n", r);
