@@ -71,7 +71,7 @@ __global__ void flag_candidates_kernel(ModelView<T> m, StateView<T> s, const Pac
 /// sweep_substeps: the same sweep as Backend::contact_candidates'.
 template <class T>
 __global__ void reach_outside_kernel(ModelView<T> m, StateView<T> s, const Packed3<T>* u, const ContactTools<T>* tools,
-                                     int* reach) {
+                                     int* reach, int* host_reach) {
   __shared__ alignas(ContactTools<T>) unsigned char raw[sizeof(ContactTools<T>)];
   ContactTools<T>& sweep = *reinterpret_cast<ContactTools<T>*>(raw);
   if (threadIdx.x == 0) {  // only the head and the tools in use were uploaded
@@ -86,7 +86,10 @@ __global__ void reach_outside_kernel(ModelView<T> m, StateView<T> s, const Packe
   __syncthreads();
   const index_t t = thread_index();
   index_t c[3];
-  if (t < m.n_tris && reaches_outside(m, s, u, sweep, t, c)) *reach = 1;  // any writer: no atomics
+  if (t < m.n_tris && reaches_outside(m, s, u, sweep, t, c)) {  // any writer: no atomics
+    *reach = 1;
+    if (host_reach) *host_reach = 1;  // over the bus, at most once per triangle in reach
+  }
 }
 
 template <class T>
@@ -190,7 +193,7 @@ void DeviceContact<T>::enqueue_reach_check(const ModelView<T>& m, const StateVie
                                            cudaStream_t stream) {
   CUDA_CHECK(cudaMemsetAsync(reach_.data(), 0, sizeof(int), stream));
   launch(m.n_tris, stream, reach_outside_kernel<T>, m, s, u, static_cast<const ContactTools<T>*>(tools_.data()),
-         reach_.data());
+         reach_.data(), reach_host_.device());
 }
 
 template <class T>

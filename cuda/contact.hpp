@@ -44,7 +44,8 @@ class DeviceContact {
   /// Queues the check whether the uploaded tools' candidate sweep (tools as
   /// one step, ContactTools::sweep_substeps) reaches a surface node that is
   /// not an inner region node, the test of candidates(), at u: reach() is
-  /// then non-zero (device memory); reach_host() is pinned memory for its download.
+  /// then non-zero (device memory), and so is reach_host() (pinned, mapped:
+  /// the kernel writes it too), which the caller zeroes before the check.
   void enqueue_reach_check(const ModelView<T>& m, const StateView<T>& s, const Packed3<T>* u, cudaStream_t stream);
   const int* reach() const { return reach_.data(); }
   int* reach_host() { return reach_host_.data(); }

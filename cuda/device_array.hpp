@@ -91,12 +91,20 @@ class PinnedArray {
   PinnedArray& operator=(const PinnedArray&) = delete;
   ~PinnedArray() { release(); }
 
+  /// n elements (0: none), mapped into the device's address space: a kernel
+  /// may write them (device()) and the host read them once the kernel is
+  /// known to have finished, with no copy.
   void allocate(std::size_t n) {
     release();
-    if (n > 0) CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&ptr_), n * sizeof(T)));
+    if (n > 0) {
+      CUDA_CHECK(cudaHostAlloc(reinterpret_cast<void**>(&ptr_), n * sizeof(T), cudaHostAllocMapped));
+      CUDA_CHECK(cudaHostGetDevicePointer(reinterpret_cast<void**>(&device_), ptr_, 0));
+    }
     n_ = n;
   }
   T* data() { return ptr_; }
+  /// The same memory as a device pointer (written over the bus).
+  T* device() { return device_; }
   T& operator[](std::size_t i) { return ptr_[i]; }
   std::size_t size() const { return n_; }
 
@@ -104,9 +112,11 @@ class PinnedArray {
   void release() noexcept {
     if (ptr_) cudaFreeHost(ptr_);
     ptr_ = nullptr;
+    device_ = nullptr;
     n_ = 0;
   }
   T* ptr_ = nullptr;
+  T* device_ = nullptr;
   std::size_t n_ = 0;
 };
 

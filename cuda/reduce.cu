@@ -195,9 +195,11 @@ __device__ void add_element_energy(const ModelView<T>& m, const T* node_p, const
 }
 
 /// Thread 0 of the block that finishes last: the result from the combined
-/// partials (region sums `sum`, contact sums `c`); reads and clears the bad flag.
+/// partials (region sums `sum`, contact sums `c`) into out and, unless null,
+/// into host_out (mapped host memory: the tick graph's download without a
+/// copy); reads and clears the bad flag.
 __device__ void write_result(const ReducePartial& sum, const ContactPartial& c, unsigned long long* bad,
-                             Reductions* out) {
+                             Reductions* out, Reductions* host_out) {
   Reductions r;
   r.reaction = {sum.reaction[0], sum.reaction[1], sum.reaction[2]};
   r.internal = {sum.internal[0], sum.internal[1], sum.internal[2]};
@@ -230,6 +232,10 @@ __device__ void write_result(const ReducePartial& sum, const ContactPartial& c, 
   }
   r.finite = finite;
   *out = r;
+  if (host_out) {
+    *host_out = r;
+    __threadfence_system();
+  }
 }
 
 /// Every reduction in one launch (before: a partial kernel, a final block
@@ -246,7 +252,7 @@ template <class T, bool kRecomputed>
 __global__ void __launch_bounds__(kReduceBlock)
     reduce_kernel(ModelView<T> m, StateView<T> s, RegionView r, FrontView front, StepBuffers<T> b,
                   const T* energy_node_p, LawView<T> w, int* partial, int* contact, unsigned* done,
-                  Reductions* out) {
+                  Reductions* out, Reductions* host_out) {
   if (skipped(s)) return;  // every block: the count stays at 0
   ReducePartial p = zero_partial();
   for (index_t i = thread_index(); i < r.n_nodes; i += thread_stride()) accumulate_node(m, s, b, front, r.node(i), p);
@@ -278,7 +284,7 @@ __global__ void __launch_bounds__(kReduceBlock)
   p = warp_sum(p, [](ReducePartial& a, const ReducePartial& q) { combine(a, q); });
   c = warp_sum(c, [](ContactPartial& a, const ContactPartial& q) { combine(a, q); });
   if (threadIdx.x != 0) return;
-  write_result(p, c, s.bad, out);
+  write_result(p, c, s.bad, out, host_out);
   *done = 0;  // for the next launch
 }
 
@@ -310,7 +316,7 @@ Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const R
 
 template <class T>
 void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
-                         StepBuffers<T> b, cudaStream_t stream) {
+                         StepBuffers<T> b, cudaStream_t stream, bool to_host) {
   if (m.ianp && r.n_elems > 0) {  // nodal pressures at the current u, into scratch
     // pass 1 below rewrites the region's elements' slots; the others must be the state's (a whole-mesh
     // region rewrites every slot, so the copy is only needed for a limited one)
@@ -331,7 +337,7 @@ void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const Reg
   with_gradients(m, r, [&](auto recomputed) {  // the energies with the gradients of the steps
     launch_blocks(blocks, kReduceBlock, stream, reduce_kernel<T, decltype(recomputed)::value>, m, s, r, front, b,
                   static_cast<const T*>(node_p_.data()), law_, partial_.data(), contact_partial_.data(), done_.data(),
-                  result_.data());
+                  result_.data(), to_host ? result_host_.device() : nullptr);
   });
 }
 

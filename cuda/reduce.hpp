@@ -62,11 +62,12 @@ class Reducer {
                  StepBuffers<T> b, Transfers& log, cudaStream_t stream);
 
   /// run()'s kernels without the download: the result stays in device
-  /// memory (result()), for a graph that downloads it itself.
+  /// memory (result()) and, with to_host, the kernel also writes it into
+  /// result_host() (mapped): no copy, readable once the stream has finished.
   void enqueue(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front, StepBuffers<T> b,
-               cudaStream_t stream);
+               cudaStream_t stream, bool to_host = false);
   const Reductions* result() const { return result_.data(); }
-  /// Pinned host memory for the result's download.
+  /// Pinned, mapped host memory for the result's download.
   Reductions* result_host() { return result_host_.data(); }
 
  private:
