@@ -107,6 +107,7 @@ VolumeMesh mesh3_surface(const SurfaceMesh& surface, const Mesh3Options& o, cons
     if (o.target_tets == 0 || std::fabs(n - o.target_tets) <= kTargetTolerance * o.target_tets) break;
     cell *= std::cbrt(n / o.target_tets);
   }
+  sort_for_locality(best);
   return best;
 }
 

@@ -406,10 +406,10 @@ VolumeMesh tetrahedralize_surface(const SurfaceMesh& surface, const MeshingOptio
       throw MeshError(fmt::format("{}: region attribute {} must be > 0 with a finite seed point", source, r.attribute));
   check_closed(surface, source);
   check_self_intersection(surface, source);
-  if (options.target_tets > 0) return mesh_to_target(surface, options, source);
-  VolumeMesh m = mesh_once(surface, options, source);
-  if (options.progress)
+  VolumeMesh m = options.target_tets > 0 ? mesh_to_target(surface, options, source) : mesh_once(surface, options, source);
+  if (options.progress && options.target_tets <= 0)
     options.progress(fmt::format("tetgen: {} tets, {:.0f} MB", m.n_tets(), m.peak_bytes / 1e6));
+  sort_for_locality(m);
   return m;
 }
 
@@ -430,6 +430,69 @@ double available_memory() {
   while (f >> key >> kb >> unit)
     if (key == "MemAvailable:") return 1024.0 * kb;
   return double(::sysconf(_SC_PHYS_PAGES)) * double(::sysconf(_SC_PAGESIZE));
+}
+
+namespace {
+
+/// x in [0, 1) quantised to 21 bits, spread to every third bit.
+std::uint64_t spread_bits(double x) {
+  std::uint64_t v = static_cast<std::uint64_t>(std::clamp(x, 0.0, 1.0) * double((1u << 21) - 1));
+  v = (v | v << 32) & 0x1f00000000ffffull;
+  v = (v | v << 16) & 0x1f0000ff0000ffull;
+  v = (v | v << 8) & 0x100f00f00f00f00full;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ull;
+  v = (v | v << 2) & 0x1249249249249249ull;
+  return v;
+}
+
+}  // namespace
+
+void sort_for_locality(VolumeMesh& m) {
+  const index_t n = m.n_nodes(), ne = m.n_tets();
+  if (n == 0) return;
+  Vec3<double> lo{m.nodes[0], m.nodes[1], m.nodes[2]}, hi = lo;
+  for (index_t i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) {
+      lo[c] = std::min(lo[c], m.nodes[3 * i + c]);
+      hi[c] = std::max(hi[c], m.nodes[3 * i + c]);
+    }
+  const double size = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z, 1e-300});
+  const auto key = [&](double x, double y, double z) {
+    return spread_bits((x - lo.x) / size) | spread_bits((y - lo.y) / size) << 1 | spread_bits((z - lo.z) / size) << 2;
+  };
+  std::vector<std::uint64_t> node_key(n);
+  for (index_t i = 0; i < n; ++i) node_key[i] = key(m.nodes[3 * i], m.nodes[3 * i + 1], m.nodes[3 * i + 2]);
+  std::vector<index_t> order(n);  // new -> old
+  for (index_t i = 0; i < n; ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](index_t a, index_t b) { return node_key[a] < node_key[b]; });
+  std::vector<index_t> new_id(n);
+  std::vector<double> nodes(m.nodes.size());
+  for (index_t k = 0; k < n; ++k) {
+    new_id[order[k]] = k;
+    for (int c = 0; c < 3; ++c) nodes[3 * k + c] = m.nodes[3 * order[k] + c];
+  }
+  m.nodes = std::move(nodes);
+  std::vector<std::uint64_t> tet_key(ne);
+  for (index_t e = 0; e < ne; ++e) {
+    Vec3<double> g{0, 0, 0};
+    for (int a = 0; a < 4; ++a) {
+      index_t& c = m.tets[4 * e + a];
+      c = new_id[c];
+      g = g + 0.25 * Vec3<double>{m.nodes[3 * c], m.nodes[3 * c + 1], m.nodes[3 * c + 2]};
+    }
+    tet_key[e] = key(g.x, g.y, g.z);
+  }
+  std::vector<index_t> tet_order(ne);
+  for (index_t e = 0; e < ne; ++e) tet_order[e] = e;
+  std::stable_sort(tet_order.begin(), tet_order.end(), [&](index_t a, index_t b) { return tet_key[a] < tet_key[b]; });
+  std::vector<index_t> tets(m.tets.size());
+  std::vector<int> region(m.tet_region.size());
+  for (index_t k = 0; k < ne; ++k) {
+    for (int a = 0; a < 4; ++a) tets[4 * k + a] = m.tets[4 * tet_order[k] + a];
+    if (!region.empty()) region[k] = m.tet_region[tet_order[k]];
+  }
+  m.tets = std::move(tets);
+  m.tet_region = std::move(region);
 }
 
 double total_volume(const VolumeMesh& m) {

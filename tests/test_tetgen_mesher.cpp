@@ -6,6 +6,11 @@
 
 #include <algorithm>
 #include <array>
+#include <cstdio>
+#include <numeric>
+#include <random>
+#include <utility>
+#include <vector>
 #include <string>
 
 #include "core/model.hpp"
@@ -177,4 +182,83 @@ TEST(TetgenMesher, DisjointBoxesMeshAsTwoBodies) {
   o.max_volume = 0.01;
   const VolumeMesh m = tetrahedralize_surface(s, o, "two boxes");
   EXPECT_NEAR(total_volume(m), 2.0, 1e-9);
+}
+
+namespace {
+
+/// The median over tets of (largest - smallest corner id) / node count:
+/// about 0.4 for a random numbering, small for one along a space-filling
+/// curve (whose few jumps, where a tet straddles two of its big cells,
+/// the median ignores).
+double median_tet_span(const VolumeMesh& m) {
+  std::vector<double> span;
+  for (index_t e = 0; e < m.n_tets(); ++e) {
+    const auto c = m.tets.begin() + 4 * e;
+    span.push_back(double(*std::max_element(c, c + 4) - *std::min_element(c, c + 4)) / m.n_nodes());
+  }
+  std::nth_element(span.begin(), span.begin() + span.size() / 2, span.end());
+  std::printf("[measured] median tet span %.4f of the nodes\n", span[span.size() / 2]);
+  return span[span.size() / 2];
+}
+
+/// Each tet as its four corner positions in corner order (the renumbering
+/// keeps positions, corner order and so orientation), with its region.
+std::vector<std::pair<std::array<double, 12>, int>> tets_by_position(const VolumeMesh& m) {
+  std::vector<std::pair<std::array<double, 12>, int>> out;
+  for (index_t e = 0; e < m.n_tets(); ++e) {
+    std::array<double, 12> x;
+    for (int a = 0; a < 4; ++a)
+      for (int c = 0; c < 3; ++c) x[3 * a + c] = m.nodes[3 * m.tets[4 * e + a] + c];
+    out.push_back({x, m.tet_region.empty() ? -1 : m.tet_region[e]});
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+}  // namespace
+
+/// sort_for_locality renumbers a shuffled mesh along the Morton curve: the
+/// same tets (corner positions in corner order, so orientation and volume)
+/// with their regions, every node used, and tets whose corners have nearby
+/// ids; sorting again changes nothing.
+TEST(TetgenMesher, SortForLocalityRenumbersWithoutChangingTheMesh) {
+  MeshingOptions o;
+  o.quality = 1.5;
+  o.max_volume = 1e-6;
+  VolumeMesh m = tetrahedralize_surface(cube(0.1), o, "cube");
+  ASSERT_GT(m.n_tets(), 2000);
+  m.tet_region.resize(m.n_tets());
+  for (index_t e = 0; e < m.n_tets(); ++e) m.tet_region[e] = int(e % 7);
+  EXPECT_LT(median_tet_span(m), 0.1);  // the mesher's output comes sorted (measured 0.047)
+  // shuffle nodes and tets
+  std::mt19937 rng(5);
+  std::vector<index_t> perm(m.n_nodes());
+  std::iota(perm.begin(), perm.end(), 0);
+  std::shuffle(perm.begin(), perm.end(), rng);
+  VolumeMesh shuffled = m;
+  for (index_t i = 0; i < m.n_nodes(); ++i)
+    for (int c = 0; c < 3; ++c) shuffled.nodes[3 * perm[i] + c] = m.nodes[3 * i + c];
+  for (index_t& c : shuffled.tets) c = perm[c];
+  std::vector<index_t> tet_perm(m.n_tets());
+  std::iota(tet_perm.begin(), tet_perm.end(), 0);
+  std::shuffle(tet_perm.begin(), tet_perm.end(), rng);
+  VolumeMesh random = shuffled;
+  for (index_t e = 0; e < m.n_tets(); ++e) {
+    for (int a = 0; a < 4; ++a) random.tets[4 * tet_perm[e] + a] = shuffled.tets[4 * e + a];
+    random.tet_region[tet_perm[e]] = shuffled.tet_region[e];
+  }
+  EXPECT_GT(median_tet_span(random), 0.25);  // measured 0.63
+  VolumeMesh sorted = random;
+  sort_for_locality(sorted);
+  EXPECT_LT(median_tet_span(sorted), 0.1);
+  EXPECT_EQ(tets_by_position(sorted), tets_by_position(m));
+  std::vector<int> used(sorted.n_nodes(), 0);
+  for (index_t c : sorted.tets) used[c] = 1;
+  EXPECT_EQ(std::count(used.begin(), used.end(), 0), 0);
+  for (index_t e = 0; e < sorted.n_tets(); ++e) ASSERT_GT(tet_volume(sorted, e), 0) << "tet " << e;
+  VolumeMesh again = sorted;
+  sort_for_locality(again);
+  EXPECT_EQ(again.nodes, sorted.nodes);
+  EXPECT_EQ(again.tets, sorted.tets);
+  EXPECT_EQ(again.tet_region, sorted.tet_region);
 }
