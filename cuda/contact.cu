@@ -86,10 +86,9 @@ __global__ void reach_outside_kernel(ModelView<T> m, StateView<T> s, const Packe
   __syncthreads();
   const index_t t = thread_index();
   index_t c[3];
-  if (t < m.n_tris && reaches_outside(m, s, u, sweep, t, c)) {  // any writer: no atomics
-    *reach = 1;
-    if (host_reach) *host_reach = 1;  // over the bus, at most once per triangle in reach
-  }
+  // the first triangle in reach also tells the host (one write over the bus)
+  if (t < m.n_tris && reaches_outside(m, s, u, sweep, t, c) && atomicExch(reach, 1) == 0 && host_reach)
+    *host_reach = 1;
 }
 
 template <class T>

@@ -418,11 +418,11 @@ class CudaBackend final : public Backend {
     CUDA_CHECK(cudaGraphLaunch(exec, stream()));
     stream_.sync();
     if (tool_bytes > 0) log_.count_to_device(tool_bytes);
-    log_.count_to_host(sizeof(Reductions));
     if (check) {
       log_.count_to_host(sizeof(int));
       if (contact_.reach_host()[0] != 0) return std::nullopt;  // nothing ran: the same phase, the same state
     }
+    log_.count_to_host(sizeof(Reductions));  // (a tick that did nothing wrote none)
     store_.u.advance(steps);
     return reducer_.result_host()[0];
   }

@@ -232,10 +232,7 @@ __device__ void write_result(const ReducePartial& sum, const ContactPartial& c, 
   }
   r.finite = finite;
   *out = r;
-  if (host_out) {
-    *host_out = r;
-    __threadfence_system();
-  }
+  if (host_out) *host_out = r;  // visible to the host once the stream has finished
 }
 
 /// Every reduction in one launch (before: a partial kernel, a final block

@@ -436,7 +436,7 @@ namespace {
 
 /// x in [0, 1) quantised to 21 bits, spread to every third bit.
 std::uint64_t spread_bits(double x) {
-  std::uint64_t v = static_cast<std::uint64_t>(std::clamp(x, 0.0, 1.0) * double((1u << 21) - 1));
+  std::uint64_t v = static_cast<std::uint64_t>((x > 0 ? std::min(x, 1.0) : 0.0) * double((1u << 21) - 1));
   v = (v | v << 32) & 0x1f00000000ffffull;
   v = (v | v << 16) & 0x1f0000ff0000ffull;
   v = (v | v << 8) & 0x100f00f00f00f00full;
@@ -449,7 +449,10 @@ std::uint64_t spread_bits(double x) {
 
 void sort_for_locality(VolumeMesh& m) {
   const index_t n = m.n_nodes(), ne = m.n_tets();
-  if (n == 0) return;
+  if (!m.tet_region.empty() && m.tet_region.size() != std::size_t(ne))
+    throw MeshError(fmt::format("sort_for_locality: {} region attributes for {} tets", m.tet_region.size(), ne));
+  if (n == 0 || !std::all_of(m.nodes.begin(), m.nodes.end(), [](double x) { return std::isfinite(x); }))
+    return;  // (nothing to order; a non-finite position is the caller's to report)
   Vec3<double> lo{m.nodes[0], m.nodes[1], m.nodes[2]}, hi = lo;
   for (index_t i = 0; i < n; ++i)
     for (int c = 0; c < 3; ++c) {

@@ -112,7 +112,9 @@ double total_volume(const VolumeMesh& mesh);
 /// order (its orientation kept). Neighbours in space get nearby numbers,
 /// so a contiguous range of tets touches a compact set of nodes: what a
 /// thread's slice of the cpu passes and a warp's gathers on the GPU read.
-/// The mesh is the same; only its numbering changes.
+/// The mesh is the same; only its numbering changes. A mesh with a
+/// non-finite position is left as it is; a region list of another length
+/// than the tets is refused (MeshError).
 void sort_for_locality(VolumeMesh& mesh);
 
 }  // namespace tissue::io

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <numeric>
 #include <random>
@@ -201,6 +202,20 @@ double median_tet_span(const VolumeMesh& m) {
   return span[span.size() / 2];
 }
 
+/// The median over consecutive tets of |lowest corner id of one - of the
+/// next| / node count: how far the tet order jumps (about 1/3 at random).
+double median_tet_step(const VolumeMesh& m) {
+  std::vector<double> step;
+  for (index_t e = 0; e + 1 < m.n_tets(); ++e) {
+    const auto c = m.tets.begin() + 4 * e;
+    step.push_back(std::fabs(double(*std::min_element(c + 4, c + 8)) - double(*std::min_element(c, c + 4))) /
+                   m.n_nodes());
+  }
+  std::nth_element(step.begin(), step.begin() + step.size() / 2, step.end());
+  std::printf("[measured] median step between consecutive tets %.4f of the nodes\n", step[step.size() / 2]);
+  return step[step.size() / 2];
+}
+
 /// Each tet as its four corner positions in corner order (the renumbering
 /// keeps positions, corner order and so orientation), with its region.
 std::vector<std::pair<std::array<double, 12>, int>> tets_by_position(const VolumeMesh& m) {
@@ -219,14 +234,21 @@ std::vector<std::pair<std::array<double, 12>, int>> tets_by_position(const Volum
 
 /// sort_for_locality renumbers a shuffled mesh along the Morton curve: the
 /// same tets (corner positions in corner order, so orientation and volume)
-/// with their regions, every node used, and tets whose corners have nearby
-/// ids; sorting again changes nothing.
+/// with their regions, every node used, tets whose corners have nearby ids
+/// and consecutive tets near each other; sorting again changes nothing, and
+/// the mesher's own output is already sorted.
 TEST(TetgenMesher, SortForLocalityRenumbersWithoutChangingTheMesh) {
   MeshingOptions o;
   o.quality = 1.5;
   o.max_volume = 1e-6;
   VolumeMesh m = tetrahedralize_surface(cube(0.1), o, "cube");
   ASSERT_GT(m.n_tets(), 2000);
+  {
+    VolumeMesh again = m;
+    sort_for_locality(again);
+    EXPECT_EQ(again.nodes, m.nodes);
+    EXPECT_EQ(again.tets, m.tets);
+  }
   m.tet_region.resize(m.n_tets());
   for (index_t e = 0; e < m.n_tets(); ++e) m.tet_region[e] = int(e % 7);
   EXPECT_LT(median_tet_span(m), 0.1);  // the mesher's output comes sorted (measured 0.047)
@@ -248,9 +270,11 @@ TEST(TetgenMesher, SortForLocalityRenumbersWithoutChangingTheMesh) {
     random.tet_region[tet_perm[e]] = shuffled.tet_region[e];
   }
   EXPECT_GT(median_tet_span(random), 0.25);  // measured 0.63
+  EXPECT_GT(median_tet_step(random), 0.07);  // measured 0.14
   VolumeMesh sorted = random;
   sort_for_locality(sorted);
   EXPECT_LT(median_tet_span(sorted), 0.1);
+  EXPECT_LT(median_tet_step(sorted), 0.02);  // measured 0.0026
   EXPECT_EQ(tets_by_position(sorted), tets_by_position(m));
   std::vector<int> used(sorted.n_nodes(), 0);
   for (index_t c : sorted.tets) used[c] = 1;
@@ -261,4 +285,26 @@ TEST(TetgenMesher, SortForLocalityRenumbersWithoutChangingTheMesh) {
   EXPECT_EQ(again.nodes, sorted.nodes);
   EXPECT_EQ(again.tets, sorted.tets);
   EXPECT_EQ(again.tet_region, sorted.tet_region);
+}
+
+/// The Morton order itself: the eight corners of a box, given in reverse,
+/// come out z-major, then y, then x (x the key's lowest bit); a region list
+/// of the wrong length is refused, and a non-finite position leaves the
+/// mesh as it is.
+TEST(TetgenMesher, SortForLocalityFollowsTheMortonCurve) {
+  VolumeMesh m;
+  for (int v = 7; v >= 0; --v)
+    for (int a = 0; a < 3; ++a) m.nodes.push_back(0.02 * ((v >> a) & 1));
+  m.tets = {7, 6, 5, 3};  // corners (0,0,0), (1,0,0), (0,1,0), (0,0,1)
+  sort_for_locality(m);
+  for (int v = 0; v < 8; ++v)
+    for (int a = 0; a < 3; ++a) EXPECT_EQ(m.nodes[3 * v + a], 0.02 * ((v >> a) & 1)) << "node " << v;
+  EXPECT_EQ(m.tets, (std::vector<index_t>{0, 1, 2, 4}));
+  m.tet_region = {1, 2};
+  EXPECT_THROW(sort_for_locality(m), MeshError);
+  m.tet_region.clear();
+  m.nodes[5] = std::nan("");
+  const VolumeMesh before = m;
+  sort_for_locality(m);
+  EXPECT_EQ(m.tets, before.tets);
 }

@@ -92,7 +92,7 @@ ConsistencyScene kidney_scene(int depth) {
   s.settings = scene::scheduler_settings(sc);
   s.settings.depth = depth;
   // The scene's path, moved 3 um back along the tool's axis. Unmoved, the tip sphere reaches
-  // surface node 490 (the kidney's pole, where the tool is aimed) exactly at the 0.1 s waypoint, a
+  // the surface node at the kidney's pole (node 490 before the meshes were numbered for locality; where the tool is aimed) exactly at the 0.1 s waypoint, a
   // step boundary: whether that node is in contact in that step is a tie that rounding decides, and
   // it decides it differently on the two backends. The first contact sets the node's velocity to the
   // tool's (the kinematic contact's impact rule), so a contact one step earlier moves it by v dt
