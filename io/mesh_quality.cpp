@@ -57,10 +57,7 @@ QualityReport mesh_quality(const VolumeMesh& mesh, const std::vector<MaterialPar
   r.dt_crit = std::numeric_limits<double>::infinity();
   for (index_t e = 0; e < r.n_tets; ++e) {
     Vec3<double> X[4];
-    for (int a = 0; a < 4; ++a) {
-      const index_t c = mesh.tets[4 * e + a];
-      X[a] = {mesh.nodes[3 * c], mesh.nodes[3 * c + 1], mesh.nodes[3 * c + 2]};
-    }
+    for (int a = 0; a < 4; ++a) X[a] = mesh.node(mesh.tets[4 * e + a]);
     double dN[12];
     const double V = std::fabs(tet_shape_gradients(X, dN));
     const MaterialParams& p = materials.at(tet_material.empty() ? 0 : size_t(tet_material[e]));

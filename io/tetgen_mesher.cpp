@@ -26,6 +26,7 @@
 #include <cerrno>
 #include <chrono>
 #include <fstream>
+#include <numeric>
 #include <cmath>
 #include <csignal>
 #include <cstdlib>
@@ -406,9 +407,13 @@ VolumeMesh tetrahedralize_surface(const SurfaceMesh& surface, const MeshingOptio
       throw MeshError(fmt::format("{}: region attribute {} must be > 0 with a finite seed point", source, r.attribute));
   check_closed(surface, source);
   check_self_intersection(surface, source);
-  VolumeMesh m = options.target_tets > 0 ? mesh_to_target(surface, options, source) : mesh_once(surface, options, source);
-  if (options.progress && options.target_tets <= 0)
-    options.progress(fmt::format("tetgen: {} tets, {:.0f} MB", m.n_tets(), m.peak_bytes / 1e6));
+  VolumeMesh m;
+  if (options.target_tets > 0) {
+    m = mesh_to_target(surface, options, source);  // (it reports each run)
+  } else {
+    m = mesh_once(surface, options, source);
+    if (options.progress) options.progress(fmt::format("tetgen: {} tets, {:.0f} MB", m.n_tets(), m.peak_bytes / 1e6));
+  }
   sort_for_locality(m);
   return m;
 }
@@ -434,7 +439,7 @@ double available_memory() {
 
 namespace {
 
-/// x in [0, 1) quantised to 21 bits, spread to every third bit.
+/// x in [0, 1] quantised to 21 bits, spread to every third bit.
 std::uint64_t spread_bits(double x) {
   std::uint64_t v = static_cast<std::uint64_t>((x > 0 ? std::min(x, 1.0) : 0.0) * double((1u << 21) - 1));
   v = (v | v << 32) & 0x1f00000000ffffull;
@@ -445,6 +450,14 @@ std::uint64_t spread_bits(double x) {
   return v;
 }
 
+/// The order (new -> old) that sorts items by key, ties kept in their old order.
+std::vector<index_t> order_by(const std::vector<std::uint64_t>& key) {
+  std::vector<index_t> order(key.size());
+  std::iota(order.begin(), order.end(), index_t(0));
+  std::stable_sort(order.begin(), order.end(), [&](index_t a, index_t b) { return key[a] < key[b]; });
+  return order;
+}
+
 }  // namespace
 
 void sort_for_locality(VolumeMesh& m) {
@@ -453,26 +466,25 @@ void sort_for_locality(VolumeMesh& m) {
     throw MeshError(fmt::format("sort_for_locality: {} region attributes for {} tets", m.tet_region.size(), ne));
   if (n == 0 || !std::all_of(m.nodes.begin(), m.nodes.end(), [](double x) { return std::isfinite(x); }))
     return;  // (nothing to order; a non-finite position is the caller's to report)
-  Vec3<double> lo{m.nodes[0], m.nodes[1], m.nodes[2]}, hi = lo;
-  for (index_t i = 0; i < n; ++i)
+  Vec3<double> lo = m.node(0), hi = lo;
+  for (index_t i = 1; i < n; ++i)
     for (int c = 0; c < 3; ++c) {
-      lo[c] = std::min(lo[c], m.nodes[3 * i + c]);
-      hi[c] = std::max(hi[c], m.nodes[3 * i + c]);
+      lo[c] = std::min(lo[c], m.node(i)[c]);
+      hi[c] = std::max(hi[c], m.node(i)[c]);
     }
   const double size = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z, 1e-300});
-  const auto key = [&](double x, double y, double z) {
-    return spread_bits((x - lo.x) / size) | spread_bits((y - lo.y) / size) << 1 | spread_bits((z - lo.z) / size) << 2;
+  const auto key = [&](Vec3<double> x) {  // Morton: x in the lowest bit of each triple
+    return spread_bits((x.x - lo.x) / size) | spread_bits((x.y - lo.y) / size) << 1 |
+           spread_bits((x.z - lo.z) / size) << 2;
   };
   std::vector<std::uint64_t> node_key(n);
-  for (index_t i = 0; i < n; ++i) node_key[i] = key(m.nodes[3 * i], m.nodes[3 * i + 1], m.nodes[3 * i + 2]);
-  std::vector<index_t> order(n);  // new -> old
-  for (index_t i = 0; i < n; ++i) order[i] = i;
-  std::stable_sort(order.begin(), order.end(), [&](index_t a, index_t b) { return node_key[a] < node_key[b]; });
+  for (index_t i = 0; i < n; ++i) node_key[i] = key(m.node(i));
+  const std::vector<index_t> node_order = order_by(node_key);
   std::vector<index_t> new_id(n);
   std::vector<double> nodes(m.nodes.size());
   for (index_t k = 0; k < n; ++k) {
-    new_id[order[k]] = k;
-    for (int c = 0; c < 3; ++c) nodes[3 * k + c] = m.nodes[3 * order[k] + c];
+    new_id[node_order[k]] = k;
+    std::copy_n(&m.nodes[3 * node_order[k]], 3, &nodes[3 * k]);
   }
   m.nodes = std::move(nodes);
   std::vector<std::uint64_t> tet_key(ne);
@@ -481,17 +493,15 @@ void sort_for_locality(VolumeMesh& m) {
     for (int a = 0; a < 4; ++a) {
       index_t& c = m.tets[4 * e + a];
       c = new_id[c];
-      g = g + 0.25 * Vec3<double>{m.nodes[3 * c], m.nodes[3 * c + 1], m.nodes[3 * c + 2]};
+      g = g + 0.25 * m.node(c);
     }
-    tet_key[e] = key(g.x, g.y, g.z);
+    tet_key[e] = key(g);
   }
-  std::vector<index_t> tet_order(ne);
-  for (index_t e = 0; e < ne; ++e) tet_order[e] = e;
-  std::stable_sort(tet_order.begin(), tet_order.end(), [&](index_t a, index_t b) { return tet_key[a] < tet_key[b]; });
+  const std::vector<index_t> tet_order = order_by(tet_key);
   std::vector<index_t> tets(m.tets.size());
   std::vector<int> region(m.tet_region.size());
   for (index_t k = 0; k < ne; ++k) {
-    for (int a = 0; a < 4; ++a) tets[4 * k + a] = m.tets[4 * tet_order[k] + a];
+    std::copy_n(&m.tets[4 * tet_order[k]], 4, &tets[4 * k]);
     if (!region.empty()) region[k] = m.tet_region[tet_order[k]];
   }
   m.tets = std::move(tets);
@@ -502,10 +512,7 @@ double total_volume(const VolumeMesh& m) {
   double v = 0;
   for (index_t e = 0; e < m.n_tets(); ++e) {
     Vec3<double> X[4];
-    for (int a = 0; a < 4; ++a) {
-      const index_t c = m.tets[4 * e + a];
-      X[a] = {m.nodes[3 * c], m.nodes[3 * c + 1], m.nodes[3 * c + 2]};
-    }
+    for (int a = 0; a < 4; ++a) X[a] = m.node(m.tets[4 * e + a]);
     double dN[12];
     v += tet_shape_gradients(X, dN);
   }

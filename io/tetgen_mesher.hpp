@@ -55,6 +55,7 @@ struct VolumeMesh {
 
   index_t n_nodes() const { return static_cast<index_t>(nodes.size() / 3); }
   index_t n_tets() const { return static_cast<index_t>(tets.size() / 4); }
+  Vec3<double> node(index_t i) const { return {nodes[3 * i], nodes[3 * i + 1], nodes[3 * i + 2]}; }
 };
 
 /// Relative tolerance of the target-count helper: the iteration stops as soon
