@@ -44,17 +44,31 @@ __device__ __forceinline__ Vec3<T> sweep_position(const ModelView<T>& m, const S
 }
 
 /// Sweeps surface triangle t in step k; writes its corner slots 3 t + i.
+/// Every corner's state is loaded before any is used (grasped or not), so
+/// the loads go out together: two round trips to memory (the corners, then
+/// their state) before the sweep's arithmetic instead of three.
 template <class T>
 __device__ void sweep_triangle_at(const ModelView<T>& m, const StateView<T>& s, const ContactTools<T>& tools, int k,
                                   const Packed3<T>* u_next, index_t t) {
-  Vec3<T> x[3];
-  std::uint8_t block[3];
   index_t c[3];
 #pragma unroll
+  for (int i = 0; i < 3; ++i) c[i] = m.tris[i * m.n_tris + t];
+  std::uint8_t contact[3], role[3], held[3];
+  Vec3<T> free[3];
+#pragma unroll
   for (int i = 0; i < 3; ++i) {
-    const index_t a = c[i] = m.tris[i * m.n_tris + t];
-    x[i] = sweep_position(m, s, tools, k, u_next, a);
-    block[i] = corner_block(s.role[a] == kInner, s.held[a] == kAllAxes, s.contact[a] == kGrasped);
+    const index_t a = c[i];
+    contact[i] = s.contact[a];
+    role[i] = s.role[a];
+    held[i] = s.held[a];
+    free[i] = m.X[a].vec() + u_next[a].vec();
+  }
+  Vec3<T> x[3];
+  std::uint8_t block[3];
+#pragma unroll
+  for (int i = 0; i < 3; ++i) {
+    x[i] = contact[i] == kGrasped ? grasped_target(tools, k, s, c[i]) : free[i];  // sweep_position's rule
+    block[i] = corner_block(role[i] == kInner, held[i] == kAllAxes, contact[i] == kGrasped);
   }
   CornerContact<T> out[3];
   sweep_triangle(tools, k, x, block, out);
@@ -83,12 +97,18 @@ inline constexpr int kHeldProposals = 12;
 template <class T>
 __device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, const ContactTools<T>& tools, int k,
                                   Packed3<T>* u, Packed3<T>* u_next, index_t i) {
+  // what depends only on i, then everything of node a, loaded before the first store: the chain is
+  // the node, its state, its slots, its proposals (four round trips to memory; loads after a store
+  // would wait for it, as the compiler cannot tell the arrays apart)
   const index_t a = m.surf_nodes[i];
+  const index_t first = m.surf_slot_start[i];
+  const int count = int(m.surf_slot_start[i + 1] - first);
   const bool proposed = s.proposed[a] != 0;
+  const std::uint8_t was = s.contact[a], held = s.held[a];
+  const Vec3<T> X = m.X[a].vec(), u_now = u[a].vec(), u_free = u_next[a].vec();
   if (proposed) s.proposed[a] = 0;  // for the next step's sweep
-  const std::uint8_t was = s.contact[a];
   if (was == kGrasped) {
-    u_next[a] = Packed3<T>::of(grasped_target(tools, k, s, a) - m.X[a].vec());
+    u_next[a] = Packed3<T>::of(grasped_target(tools, k, s, a) - X);
     return;
   }
   if (!proposed) {  // merging only zero proposals gives no contact
@@ -96,31 +116,29 @@ __device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, 
     s.contact_tool[a] = -1;
     return;
   }
-  const index_t first = m.surf_slot_start[i];
-  const int count = int(m.surf_slot_start[i + 1] - first);
   const auto proposal = [&](int j) {
     const index_t slot = m.surf_slot[first + j];
     return CornerContact<T>{s.corner_dx[slot].vec(), s.corner_tool[slot], s.corner_blocked[slot]};
   };
   NodeContact<T> acc;
   if (count <= kHeldProposals) {  // every proposal read once, the loads issued together
-    CornerContact<T> held[kHeldProposals];
+    CornerContact<T> held_proposals[kHeldProposals];
 #pragma unroll
     for (int j = 0; j < kHeldProposals; ++j)
-      if (j < count) held[j] = proposal(j);
-    acc = merge_proposals_unrolled<kHeldProposals, T>(count, [&](int j) { return held[j]; });
+      if (j < count) held_proposals[j] = proposal(j);
+    acc = merge_proposals_unrolled<kHeldProposals, T>(count, [&](int j) { return held_proposals[j]; });
   } else {
     acc = merge_proposals<T>(count, proposal);
   }
   s.contact[a] = acc.kind;
   s.contact_tool[a] = acc.tool;
   if (acc.kind != kPushed) return;
-  const Vec3<T> dx = free_part(s.held[a], acc.dx);  // a roller's held component does not move
-  const Vec3<T> u1 = u_next[a].vec() + dx, normal = unit_or(dx, Vec3<T>{T(0), T(0), T(0)});
+  const Vec3<T> dx = free_part(held, acc.dx);  // a roller's held component does not move
+  const Vec3<T> u1 = u_free + dx, normal = unit_or(dx, Vec3<T>{T(0), T(0), T(0)});
   u_next[a] = Packed3<T>::of(u1);
   s.contact_normal[a] = Packed3<T>::of(normal);
-  const Vec3<T> w = tool_motion_at(tools.tool[acc.tool], tools.steps, k, m.X[a].vec() + u1);
-  u[a] = Packed3<T>::of(contact_previous(s.held[a], u[a].vec(), u1, normal, w));
+  const Vec3<T> w = tool_motion_at(tools.tool[acc.tool], tools.steps, k, X + u1);
+  u[a] = Packed3<T>::of(contact_previous(held, u_now, u1, normal, w));
 }
 
 template <class T>
