@@ -43,31 +43,48 @@ __device__ __forceinline__ Vec3<T> sweep_position(const ModelView<T>& m, const S
   return m.X[a].vec() + u_next[a].vec();
 }
 
-/// Sweeps surface triangle t in step k; writes its corner slots 3 t + i.
-/// Every corner's state is loaded before any is used (grasped or not), so
-/// the loads go out together: two round trips to memory (the corners, then
-/// their state) before the sweep's arithmetic instead of three.
+/// What the sweep of a triangle reads from the model: its corners and their
+/// reference positions (the kernel loads them before it waits for the
+/// previous one, like the passes' model data).
 template <class T>
-__device__ void sweep_triangle_at(const ModelView<T>& m, const StateView<T>& s, const ContactTools<T>& tools, int k,
-                                  const Packed3<T>* u_next, index_t t) {
+struct TriangleModel {
   index_t c[3];
+  Vec3<T> X[3];
+};
+
+template <class T>
+__device__ __forceinline__ TriangleModel<T> load_triangle(const ModelView<T>& m, index_t t) {
+  TriangleModel<T> tm;
 #pragma unroll
-  for (int i = 0; i < 3; ++i) c[i] = m.tris[i * m.n_tris + t];
+  for (int i = 0; i < 3; ++i) tm.c[i] = __ldg(m.tris + i * m.n_tris + t);
+#pragma unroll
+  for (int i = 0; i < 3; ++i) tm.X[i] = m.X[tm.c[i]].vec();
+  return tm;
+}
+
+/// Sweeps surface triangle t (its model part tm) in step k; writes its
+/// corner slots 3 t + i. Every corner's state is loaded before any is used
+/// (grasped or not), so the loads go out together: one round trip to memory
+/// after the previous kernel before the sweep's arithmetic (three before
+/// 2026-11-26: the corners, their contact state, their positions).
+template <class T>
+__device__ void sweep_loaded_triangle(const StateView<T>& s, const ContactTools<T>& tools, int k,
+                                      const Packed3<T>* u_next, index_t t, const TriangleModel<T>& tm) {
   std::uint8_t contact[3], role[3], held[3];
   Vec3<T> free[3];
 #pragma unroll
   for (int i = 0; i < 3; ++i) {
-    const index_t a = c[i];
+    const index_t a = tm.c[i];
     contact[i] = s.contact[a];
     role[i] = s.role[a];
     held[i] = s.held[a];
-    free[i] = m.X[a].vec() + u_next[a].vec();
+    free[i] = tm.X[i] + u_next[a].vec();
   }
   Vec3<T> x[3];
   std::uint8_t block[3];
 #pragma unroll
   for (int i = 0; i < 3; ++i) {
-    x[i] = contact[i] == kGrasped ? grasped_target(tools, k, s, c[i]) : free[i];  // sweep_position's rule
+    x[i] = contact[i] == kGrasped ? grasped_target(tools, k, s, tm.c[i]) : free[i];  // sweep_position's rule
     block[i] = corner_block(role[i] == kInner, held[i] == kAllAxes, contact[i] == kGrasped);
   }
   CornerContact<T> out[3];
@@ -79,36 +96,64 @@ __device__ void sweep_triangle_at(const ModelView<T>& m, const StateView<T>& s, 
     s.corner_blocked[3 * t + i] = out[i].blocked;
     // any non-zero component (a superset of merge_corner's |dx|^2 > 0); several
     // triangles may store the same 1, so no atomics are needed
-    if (out[i].blocked || out[i].dx.x != T(0) || out[i].dx.y != T(0) || out[i].dx.z != T(0)) s.proposed[c[i]] = 1;
+    if (out[i].blocked || out[i].dx.x != T(0) || out[i].dx.y != T(0) || out[i].dx.z != T(0)) s.proposed[tm.c[i]] = 1;
   }
+}
+
+template <class T>
+__device__ void sweep_triangle_at(const ModelView<T>& m, const StateView<T>& s, const ContactTools<T>& tools, int k,
+                                  const Packed3<T>* u_next, index_t t) {
+  sweep_loaded_triangle(s, tools, k, u_next, t, load_triangle(m, t));
 }
 
 /// Proposals of one surface node (its surface triangles) that the gather
 /// holds in registers; a node with more merges them from memory.
 inline constexpr int kHeldProposals = 12;
 
-/// Merges surface node i's proposals (ascending slots) and applies them to
-/// u_next, and to u (u^n) the contact's velocity rule (core
-/// contact_previous); grasped nodes go to their tool. A node for which no
-/// triangle proposed anything (s.proposed; almost every node, every step)
-/// does not read its slots: merging only zero proposals gives no contact.
-/// (With a tool set and not touching the kidney, the contact stage went from
-/// 10.9 to 6.7 us per step on an H100.)
+/// What the merge of surface node i reads from the model: the node, its
+/// reference position and its proposal slots (the first kHeldProposals of
+/// them; loaded before the kernel waits for the previous one).
 template <class T>
-__device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, const ContactTools<T>& tools, int k,
-                                  Packed3<T>* u, Packed3<T>* u_next, index_t i) {
-  // what depends only on i, then everything of node a, loaded before the first store: the chain is
-  // the node, its state, its slots, its proposals (four round trips to memory; loads after a store
-  // would wait for it, as the compiler cannot tell the arrays apart)
-  const index_t a = m.surf_nodes[i];
-  const index_t first = m.surf_slot_start[i];
-  const int count = int(m.surf_slot_start[i + 1] - first);
+struct SurfaceNodeModel {
+  index_t a, first;
+  int count;
+  Vec3<T> X;
+  index_t slot[kHeldProposals];
+};
+
+template <class T>
+__device__ __forceinline__ SurfaceNodeModel<T> load_surface_node(const ModelView<T>& m, index_t i) {
+  SurfaceNodeModel<T> n;
+  n.a = __ldg(m.surf_nodes + i);
+  n.first = __ldg(m.surf_slot_start + i);
+  n.count = int(__ldg(m.surf_slot_start + i + 1) - n.first);
+  n.X = m.X[n.a].vec();
+#pragma unroll
+  for (int j = 0; j < kHeldProposals; ++j) n.slot[j] = j < n.count ? __ldg(m.surf_slot + n.first + j) : index_t(0);
+  return n;
+}
+
+/// Merges surface node i's proposals (ascending slots; its model part n)
+/// and applies them to u_next, and to u (u^n) the contact's velocity rule
+/// (core contact_previous); grasped nodes go to their tool. A node for which
+/// no triangle proposed anything (s.proposed; almost every node, every
+/// step) does not read its slots: merging only zero proposals gives no
+/// contact. (With a tool set and not touching the kidney, the contact stage
+/// went from 10.9 to 6.7 us per step on an H100.) The node's state is loaded
+/// before the first store (a load after a store waits for it: the compiler
+/// cannot tell the arrays apart), so after the previous kernel the chain is
+/// the state, then the proposals: two round trips to memory (about seven
+/// before 2026-11-26).
+template <class T>
+__device__ void merge_loaded_node(const StateView<T>& s, const ContactTools<T>& tools, int k, Packed3<T>* u,
+                                  Packed3<T>* u_next, const SurfaceNodeModel<T>& n, const index_t* surf_slot) {
+  const index_t a = n.a;
   const bool proposed = s.proposed[a] != 0;
   const std::uint8_t was = s.contact[a], held = s.held[a];
-  const Vec3<T> X = m.X[a].vec(), u_now = u[a].vec(), u_free = u_next[a].vec();
+  const Vec3<T> u_now = u[a].vec(), u_free = u_next[a].vec();
   if (proposed) s.proposed[a] = 0;  // for the next step's sweep
   if (was == kGrasped) {
-    u_next[a] = Packed3<T>::of(grasped_target(tools, k, s, a) - X);
+    u_next[a] = Packed3<T>::of(grasped_target(tools, k, s, a) - n.X);
     return;
   }
   if (!proposed) {  // merging only zero proposals gives no contact
@@ -116,19 +161,18 @@ __device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, 
     s.contact_tool[a] = -1;
     return;
   }
-  const auto proposal = [&](int j) {
-    const index_t slot = m.surf_slot[first + j];
+  const auto at = [&](index_t slot) {
     return CornerContact<T>{s.corner_dx[slot].vec(), s.corner_tool[slot], s.corner_blocked[slot]};
   };
   NodeContact<T> acc;
-  if (count <= kHeldProposals) {  // every proposal read once, the loads issued together
+  if (n.count <= kHeldProposals) {  // every proposal read once, the loads issued together
     CornerContact<T> held_proposals[kHeldProposals];
 #pragma unroll
     for (int j = 0; j < kHeldProposals; ++j)
-      if (j < count) held_proposals[j] = proposal(j);
-    acc = merge_proposals_unrolled<kHeldProposals, T>(count, [&](int j) { return held_proposals[j]; });
+      if (j < n.count) held_proposals[j] = at(n.slot[j]);
+    acc = merge_proposals_unrolled<kHeldProposals, T>(n.count, [&](int j) { return held_proposals[j]; });
   } else {
-    acc = merge_proposals<T>(count, proposal);
+    acc = merge_proposals<T>(n.count, [&](int j) { return at(surf_slot[n.first + j]); });
   }
   s.contact[a] = acc.kind;
   s.contact_tool[a] = acc.tool;
@@ -137,8 +181,14 @@ __device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, 
   const Vec3<T> u1 = u_free + dx, normal = unit_or(dx, Vec3<T>{T(0), T(0), T(0)});
   u_next[a] = Packed3<T>::of(u1);
   s.contact_normal[a] = Packed3<T>::of(normal);
-  const Vec3<T> w = tool_motion_at(tools.tool[acc.tool], tools.steps, k, X + u1);
+  const Vec3<T> w = tool_motion_at(tools.tool[acc.tool], tools.steps, k, n.X + u1);
   u[a] = Packed3<T>::of(contact_previous(held, u_now, u1, normal, w));
+}
+
+template <class T>
+__device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, const ContactTools<T>& tools, int k,
+                                  Packed3<T>* u, Packed3<T>* u_next, index_t i) {
+  merge_loaded_node(s, tools, k, u, u_next, load_surface_node(m, i), m.surf_slot);
 }
 
 template <class T>
@@ -146,8 +196,11 @@ __global__ void sweep_triangles_kernel(ModelView<T> m, StateView<T> s, const Con
                                        const Packed3<T>* u_next) {
   let_next_pass_launch();
   const index_t t = thread_index();
+  const bool active = t < m.n_tris;
+  TriangleModel<T> tm;
+  if (active) tm = load_triangle(m, t);
   wait_for_previous_pass();
-  if (t < m.n_tris && !skipped(s)) sweep_triangle_at(m, s, *tools, k, u_next, t);
+  if (active && !skipped(s)) sweep_loaded_triangle(s, *tools, k, u_next, t, tm);
 }
 
 template <class T>
@@ -155,8 +208,11 @@ __global__ void gather_contacts_kernel(ModelView<T> m, StateView<T> s, const Con
                                        Packed3<T>* u, Packed3<T>* u_next) {
   let_next_pass_launch();
   const index_t i = thread_index();
+  const bool active = i < m.n_surf;
+  SurfaceNodeModel<T> n;
+  if (active) n = load_surface_node(m, i);
   wait_for_previous_pass();
-  if (i < m.n_surf && !skipped(s)) gather_contact_at(m, s, *tools, k, u, u_next, i);
+  if (active && !skipped(s)) merge_loaded_node(s, *tools, k, u, u_next, n, m.surf_slot);
 }
 
 }  // namespace tissue::gpu
