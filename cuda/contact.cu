@@ -72,8 +72,27 @@ __global__ void flag_candidates_kernel(ModelView<T> m, StateView<T> s, const Pac
 template <class T>
 __global__ void reach_outside_kernel(ModelView<T> m, StateView<T> s, const Packed3<T>* u, const ContactTools<T>* tools,
                                      int* reach, int* host_reach) {
+  let_next_pass_launch();  // the steps' first pass may load its model meanwhile (it waits for this kernel)
   __shared__ alignas(ContactTools<T>) unsigned char raw[sizeof(ContactTools<T>)];
   ContactTools<T>& sweep = *reinterpret_cast<ContactTools<T>*>(raw);
+  // the triangle's corners and their state (reaches_outside's), loaded together while thread 0 copies
+  // the tools
+  const index_t t = thread_index();
+  const bool active = t < m.n_tris;
+  index_t c[3] = {0, 0, 0};
+  std::uint8_t contact[3] = {0, 0, 0};
+  Vec3<T> free[3];
+  bool all_inner = true;
+  if (active) {
+#pragma unroll
+    for (int i = 0; i < 3; ++i) c[i] = __ldg(m.tris + i * m.n_tris + t);
+#pragma unroll
+    for (int i = 0; i < 3; ++i) {
+      contact[i] = s.contact[c[i]];
+      all_inner = all_inner && s.role[c[i]] == kInner;
+      free[i] = m.X[c[i]].vec() + u[c[i]].vec();
+    }
+  }
   if (threadIdx.x == 0) {  // only the head and the tools in use were uploaded
     sweep.n_tools = tools->n_tools;
     sweep.steps = 1;
@@ -84,11 +103,13 @@ __global__ void reach_outside_kernel(ModelView<T> m, StateView<T> s, const Packe
     }
   }
   __syncthreads();
-  const index_t t = thread_index();
-  index_t c[3];
+  if (!active || all_inner) return;
+  Vec3<T> x[3];
+#pragma unroll
+  for (int i = 0; i < 3; ++i)  // sweep_position's rule
+    x[i] = contact[i] == kGrasped ? grasped_target(sweep, 0, s, c[i]) : free[i];
   // the first triangle in reach also tells the host (one write over the bus)
-  if (t < m.n_tris && reaches_outside(m, s, u, sweep, t, c) && atomicExch(reach, 1) == 0 && host_reach)
-    *host_reach = 1;
+  if (triangle_near_tools(sweep, x) && atomicExch(reach, 1) == 0 && host_reach) *host_reach = 1;
 }
 
 template <class T>
