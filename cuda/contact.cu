@@ -39,20 +39,17 @@ __global__ void reset_contacts_kernel(ModelView<T> m, StateView<T> s) {
   s.contact_tool[a] = -1;
 }
 
-/// Whether surface triangle t has a corner that is not an inner region node
-/// and comes within 1.5 radii of a sub-check capsule of the sweep (current
-/// u); c gets its corners.
+/// Whether a surface triangle (its model part tm, its corners' state cs at
+/// the current u) has a corner that is not an inner region node and comes
+/// within 1.5 radii of a sub-check capsule of the sweep.
 template <class T>
-__device__ bool reaches_outside(const ModelView<T>& m, const StateView<T>& s, const Packed3<T>* u,
-                                const ContactTools<T>& sweep, index_t t, index_t c[3]) {
+__device__ bool reaches_outside(const StateView<T>& s, const ContactTools<T>& sweep, const TriangleModel<T>& tm,
+                                const CornerState<T>& cs) {
+  if (cs.role[0] == kInner && cs.role[1] == kInner && cs.role[2] == kInner) return false;
   Vec3<T> x[3];
-  bool all_inner = true;
-  for (int i = 0; i < 3; ++i) {
-    c[i] = m.tris[i * m.n_tris + t];
-    x[i] = sweep_position(m, s, sweep, 0, u, c[i]);
-    all_inner = all_inner && s.role[c[i]] == kInner;
-  }
-  return !all_inner && triangle_near_tools(sweep, x);
+#pragma unroll
+  for (int i = 0; i < 3; ++i) x[i] = sweep_position(sweep, 0, s, tm, cs, i);
+  return triangle_near_tools(sweep, x);
 }
 
 /// Flags the non-inner corners of triangles within 1.5 radii of a sub-check capsule.
@@ -60,10 +57,12 @@ template <class T>
 __global__ void flag_candidates_kernel(ModelView<T> m, StateView<T> s, const Packed3<T>* u, ContactTools<T> sweep,
                                        std::uint8_t* flag) {
   const index_t t = thread_index();
-  index_t c[3];
-  if (t >= m.n_tris || !reaches_outside(m, s, u, sweep, t, c)) return;
+  if (t >= m.n_tris) return;
+  const TriangleModel<T> tm = load_triangle(m, t);
+  const CornerState<T> cs = load_corner_state(s, tm, u);
+  if (!reaches_outside(s, sweep, tm, cs)) return;
   for (int i = 0; i < 3; ++i)
-    if (s.role[c[i]] != kInner) flag[c[i]] = 1;
+    if (cs.role[i] != kInner) flag[tm.c[i]] = 1;
 }
 
 /// Sets *reach when any triangle has a candidate (flag_candidates_kernel's
@@ -75,23 +74,14 @@ __global__ void reach_outside_kernel(ModelView<T> m, StateView<T> s, const Packe
   let_next_pass_launch();  // the steps' first pass may load its model meanwhile (it waits for this kernel)
   __shared__ alignas(ContactTools<T>) unsigned char raw[sizeof(ContactTools<T>)];
   ContactTools<T>& sweep = *reinterpret_cast<ContactTools<T>*>(raw);
-  // the triangle's corners and their state (reaches_outside's), loaded together while thread 0 copies
-  // the tools
+  // the triangle's corners and their state, loaded while thread 0 copies the tools
   const index_t t = thread_index();
   const bool active = t < m.n_tris;
-  index_t c[3] = {0, 0, 0};
-  std::uint8_t contact[3] = {0, 0, 0};
-  Vec3<T> free[3];
-  bool all_inner = true;
+  TriangleModel<T> tm;
+  CornerState<T> cs;
   if (active) {
-#pragma unroll
-    for (int i = 0; i < 3; ++i) c[i] = __ldg(m.tris + i * m.n_tris + t);
-#pragma unroll
-    for (int i = 0; i < 3; ++i) {
-      contact[i] = s.contact[c[i]];
-      all_inner = all_inner && s.role[c[i]] == kInner;
-      free[i] = m.X[c[i]].vec() + u[c[i]].vec();
-    }
+    tm = load_triangle(m, t);
+    cs = load_corner_state(s, tm, u);
   }
   if (threadIdx.x == 0) {  // only the head and the tools in use were uploaded
     sweep.n_tools = tools->n_tools;
@@ -103,13 +93,8 @@ __global__ void reach_outside_kernel(ModelView<T> m, StateView<T> s, const Packe
     }
   }
   __syncthreads();
-  if (!active || all_inner) return;
-  Vec3<T> x[3];
-#pragma unroll
-  for (int i = 0; i < 3; ++i)  // sweep_position's rule
-    x[i] = contact[i] == kGrasped ? grasped_target(sweep, 0, s, c[i]) : free[i];
   // the first triangle in reach also tells the host (one write over the bus)
-  if (triangle_near_tools(sweep, x) && atomicExch(reach, 1) == 0 && host_reach) *host_reach = 1;
+  if (active && reaches_outside(s, sweep, tm, cs) && atomicExch(reach, 1) == 0 && host_reach) *host_reach = 1;
 }
 
 template <class T>

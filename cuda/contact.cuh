@@ -33,19 +33,9 @@ __device__ __forceinline__ Vec3<T> grasped_target(const ContactTools<T>& tools, 
   return grasped_position(tip, axis, tool.grasp_axis, s.grasp_offset[a].vec());
 }
 
-/// A corner's position for the sweep of step k: grasped nodes at their
-/// tool, the others at X + u_next.
-template <class T>
-__device__ __forceinline__ Vec3<T> sweep_position(const ModelView<T>& m, const StateView<T>& s,
-                                                  const ContactTools<T>& tools, int k, const Packed3<T>* u_next,
-                                                  index_t a) {
-  if (s.contact[a] == kGrasped) return grasped_target(tools, k, s, a);
-  return m.X[a].vec() + u_next[a].vec();
-}
-
-/// What the sweep of a triangle reads from the model: its corners and their
-/// reference positions (the kernel loads them before it waits for the
-/// previous one, like the passes' model data).
+/// What the sweep of a triangle (and the region's reach check) reads from
+/// the model: its corners and their reference positions (the kernels load
+/// them before they wait for the previous one, like the passes' model data).
 template <class T>
 struct TriangleModel {
   index_t c[3];
@@ -62,30 +52,51 @@ __device__ __forceinline__ TriangleModel<T> load_triangle(const ModelView<T>& m,
   return tm;
 }
 
+/// The state of a triangle's corners that a sweep reads, loaded together
+/// before any of it is used (grasped or not): one round trip to memory.
+template <class T>
+struct CornerState {
+  std::uint8_t contact[3], role[3], held[3];
+  Vec3<T> free[3];  ///< X + u: where a corner that is not grasped is
+};
+
+template <class T>
+__device__ __forceinline__ CornerState<T> load_corner_state(const StateView<T>& s, const TriangleModel<T>& tm,
+                                                            const Packed3<T>* u) {
+  CornerState<T> cs;
+#pragma unroll
+  for (int i = 0; i < 3; ++i) {
+    const index_t a = tm.c[i];
+    cs.contact[i] = s.contact[a];
+    cs.role[i] = s.role[a];
+    cs.held[i] = s.held[a];
+    cs.free[i] = tm.X[i] + u[a].vec();
+  }
+  return cs;
+}
+
+/// Corner i's position for the sweep of step k: a grasped corner at its
+/// tool, the others at X + u.
+template <class T>
+__device__ __forceinline__ Vec3<T> sweep_position(const ContactTools<T>& tools, int k, const StateView<T>& s,
+                                                  const TriangleModel<T>& tm, const CornerState<T>& cs, int i) {
+  return cs.contact[i] == kGrasped ? grasped_target(tools, k, s, tm.c[i]) : cs.free[i];
+}
+
 /// Sweeps surface triangle t (its model part tm) in step k; writes its
-/// corner slots 3 t + i. Every corner's state is loaded before any is used
-/// (grasped or not), so the loads go out together: one round trip to memory
-/// after the previous kernel before the sweep's arithmetic (three before
+/// corner slots 3 t + i. After the previous kernel, one round trip to
+/// memory (the corners' state) before the sweep's arithmetic (three before
 /// 2026-11-26: the corners, their contact state, their positions).
 template <class T>
 __device__ void sweep_loaded_triangle(const StateView<T>& s, const ContactTools<T>& tools, int k,
                                       const Packed3<T>* u_next, index_t t, const TriangleModel<T>& tm) {
-  std::uint8_t contact[3], role[3], held[3];
-  Vec3<T> free[3];
-#pragma unroll
-  for (int i = 0; i < 3; ++i) {
-    const index_t a = tm.c[i];
-    contact[i] = s.contact[a];
-    role[i] = s.role[a];
-    held[i] = s.held[a];
-    free[i] = tm.X[i] + u_next[a].vec();
-  }
+  const CornerState<T> cs = load_corner_state(s, tm, u_next);
   Vec3<T> x[3];
   std::uint8_t block[3];
 #pragma unroll
   for (int i = 0; i < 3; ++i) {
-    x[i] = contact[i] == kGrasped ? grasped_target(tools, k, s, tm.c[i]) : free[i];  // sweep_position's rule
-    block[i] = corner_block(role[i] == kInner, held[i] == kAllAxes, contact[i] == kGrasped);
+    x[i] = sweep_position(tools, k, s, tm, cs, i);
+    block[i] = corner_block(cs.role[i] == kInner, cs.held[i] == kAllAxes, cs.contact[i] == kGrasped);
   }
   CornerContact<T> out[3];
   sweep_triangle(tools, k, x, block, out);

@@ -467,11 +467,13 @@ void sort_for_locality(VolumeMesh& m) {
   if (n == 0 || !std::all_of(m.nodes.begin(), m.nodes.end(), [](double x) { return std::isfinite(x); }))
     return;  // (nothing to order; a non-finite position is the caller's to report)
   Vec3<double> lo = m.node(0), hi = lo;
-  for (index_t i = 1; i < n; ++i)
+  for (index_t i = 1; i < n; ++i) {
+    const Vec3<double> x = m.node(i);
     for (int c = 0; c < 3; ++c) {
-      lo[c] = std::min(lo[c], m.node(i)[c]);
-      hi[c] = std::max(hi[c], m.node(i)[c]);
+      lo[c] = std::min(lo[c], x[c]);
+      hi[c] = std::max(hi[c], x[c]);
     }
+  }
   const double size = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z, 1e-300});
   const auto key = [&](Vec3<double> x) {  // Morton: x in the lowest bit of each triple
     return spread_bits((x.x - lo.x) / size) | spread_bits((x.y - lo.y) / size) << 1 |
