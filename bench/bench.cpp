@@ -255,12 +255,19 @@ void bench_contact(Context& c, long want_tris, Precision p) {
       throw std::runtime_error(fmt::format("bench: the contact tool lost the slab ({} triangles, step {})", m.n_tris, k));
   }
   std::sort(lat.begin(), lat.end());
+  // the contact stage's own share of a step (no upload, reduction or download): the
+  // same region stepped in batches with the tool resting in the slab, then without it
+  long steps = 0;
+  const double sps_tool = time_steps(*b, c.o.min_seconds, steps);
+  b->set_tools({});
+  const double sps_bare = time_steps(*b, c.o.min_seconds, steps);
   Row r = c.row("contact_step", *b);
   r.add("surface_triangles", long(m.n_tris));
   r.add("region_elements", long(reg.n_elems));
   r.add("steps", long(lat.size()));
   r.add("latency_us_p50", 1e6 * lat[lat.size() / 2]);
   r.add("latency_us_p99", 1e6 * lat[lat.size() * 99 / 100]);
+  r.add("contact_stage_us_per_step", 1e6 * (1 / sps_tool - 1 / sps_bare));
   c.emit(r);
 }
 

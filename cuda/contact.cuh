@@ -1,12 +1,12 @@
 // The contact stage of a TLED step on the device (core/contact.hpp's rule,
 // docs/contact.md): one thread per surface triangle sweeps it along the
-// tools' motion in the step (core sweep_triangle) and writes its three
-// corner proposals; then one thread per surface node merges its triangles'
-// proposals in ascending slot order (core merge_corner, the cpu backend's
-// order), moves the node in u_next (and its velocity, in u) and records
-// its contact. Grasped nodes
-// follow their tool. Device functions for the per-step kernels and the
-// persistent kernels of cuda/tled.cuh; nvcc only.
+// tools' motion in the step (core sweep_triangle) and stores the corner
+// proposals it has (most triangles have none); then one thread per surface
+// node merges its triangles' proposals in ascending slot order (core
+// merge_corner, the cpu backend's order), moves the node in u_next (and its
+// velocity, in u), records its contact and clears the proposals it read.
+// Grasped nodes follow their tool. Device functions for the per-step
+// kernels and the persistent kernels of cuda/tled.cuh; nvcc only.
 #pragma once
 
 #include "core/contact.hpp"
@@ -83,10 +83,29 @@ __device__ __forceinline__ Vec3<T> sweep_position(const ContactTools<T>& tools, 
   return cs.contact[i] == kGrasped ? grasped_target(tools, k, s, tm.c[i]) : cs.free[i];
 }
 
-/// Sweeps surface triangle t (its model part tm) in step k; writes its
-/// corner slots 3 t + i. After the previous kernel, one round trip to
-/// memory (the corners' state) before the sweep's arithmetic (three before
-/// 2026-11-26: the corners, their contact state, their positions).
+/// Whether a corner's proposal can change its node's merge: a blocked
+/// penetration or any non-zero component (a superset of merge_corner's
+/// |dx|^2 > 0). A slot without one is a no-op for merge_corner whatever its
+/// tool, so every slot holds none between steps: the sweep stores only
+/// these, and the merge of a proposed node clears its slots (clear_slot).
+/// Storing every slot every step cost 54 bytes a triangle (5.5 MB a step
+/// on a surface of 100k triangles) for a handful of proposals.
+template <class T>
+__device__ __forceinline__ bool proposes(const CornerContact<T>& c) {
+  return c.blocked || c.dx.x != T(0) || c.dx.y != T(0) || c.dx.z != T(0);
+}
+
+template <class T>
+__device__ __forceinline__ void clear_slot(const StateView<T>& s, index_t slot) {
+  s.corner_dx[slot] = Packed3<T>::of(Vec3<T>{T(0), T(0), T(0)});
+  s.corner_blocked[slot] = 0;
+}
+
+/// Sweeps surface triangle t (its model part tm) in step k; stores the
+/// proposals of its corners (slots 3 t + i) that propose anything. After
+/// the previous kernel, one round trip to memory (the corners' state)
+/// before the sweep's arithmetic (three before 2026-11-26: the corners,
+/// their contact state, their positions).
 template <class T>
 __device__ void sweep_loaded_triangle(const StateView<T>& s, const ContactTools<T>& tools, int k,
                                       const Packed3<T>* u_next, index_t t, const TriangleModel<T>& tm) {
@@ -102,12 +121,11 @@ __device__ void sweep_loaded_triangle(const StateView<T>& s, const ContactTools<
   sweep_triangle(tools, k, x, block, out);
 #pragma unroll
   for (int i = 0; i < 3; ++i) {
+    if (!proposes(out[i])) continue;  // its slot already holds no proposal (see clear_slot)
     s.corner_dx[3 * t + i] = Packed3<T>::of(out[i].dx);
     s.corner_tool[3 * t + i] = out[i].tool;
     s.corner_blocked[3 * t + i] = out[i].blocked;
-    // any non-zero component (a superset of merge_corner's |dx|^2 > 0); several
-    // triangles may store the same 1, so no atomics are needed
-    if (out[i].blocked || out[i].dx.x != T(0) || out[i].dx.y != T(0) || out[i].dx.z != T(0)) s.proposed[tm.c[i]] = 1;
+    s.proposed[tm.c[i]] = 1;  // several triangles may store the same 1: no atomics needed
   }
 }
 
@@ -161,15 +179,18 @@ __device__ void merge_loaded_node(const StateView<T>& s, const ContactTools<T>& 
   const index_t a = n.a;
   const bool proposed = s.proposed[a] != 0;
   const std::uint8_t was = s.contact[a], held = s.held[a];
+  const signed char was_tool = s.contact_tool[a];
   const Vec3<T> u_now = u[a].vec(), u_free = u_next[a].vec();
   if (proposed) s.proposed[a] = 0;  // for the next step's sweep
   if (was == kGrasped) {
     u_next[a] = Packed3<T>::of(grasped_target(tools, k, s, a) - n.X);
+    if (proposed)  // a grasped corner's blocked penetration: never merged, but cleared
+      for (int j = 0; j < n.count; ++j) clear_slot(s, surf_slot[n.first + j]);
     return;
   }
-  if (!proposed) {  // merging only zero proposals gives no contact
-    s.contact[a] = kNoContact;
-    s.contact_tool[a] = -1;
+  if (!proposed) {  // merging only zero proposals gives no contact (stored only if it was in one)
+    if (was != kNoContact) s.contact[a] = kNoContact;
+    if (was_tool != -1) s.contact_tool[a] = -1;
     return;
   }
   const auto at = [&](index_t slot) {
@@ -181,9 +202,13 @@ __device__ void merge_loaded_node(const StateView<T>& s, const ContactTools<T>& 
 #pragma unroll
     for (int j = 0; j < kHeldProposals; ++j)
       if (j < n.count) held_proposals[j] = at(n.slot[j]);
+#pragma unroll
+    for (int j = 0; j < kHeldProposals; ++j)  // cleared at once: the stores need not wait for the loads
+      if (j < n.count) clear_slot(s, n.slot[j]);
     acc = merge_proposals_unrolled<kHeldProposals, T>(n.count, [&](int j) { return held_proposals[j]; });
   } else {
     acc = merge_proposals<T>(n.count, [&](int j) { return at(surf_slot[n.first + j]); });
+    for (int j = 0; j < n.count; ++j) clear_slot(s, surf_slot[n.first + j]);
   }
   s.contact[a] = acc.kind;
   s.contact_tool[a] = acc.tool;

@@ -397,7 +397,12 @@ TEST(Bench, ToolRowTimesTheContactStage) {
     return k == std::string::npos ? std::nan("") : std::stod(row.substr(k + key.size() + 4));
   };
   double whole = 0, with_tool = 0, stage = std::nan("");
+  int contact_rows = 0;
   for (const std::string& row : bench::run_bench(o)) {
+    if (row.find("\"contact_step\"") != std::string::npos) {  // the slab's stage share is timed too
+      ++contact_rows;
+      EXPECT_TRUE(std::isfinite(number(row, "contact_stage_us_per_step"))) << row;
+    }
     if (row.find("\"tled_whole_mesh\"") != std::string::npos) whole = number(row, "steps_per_s");
     if (row.find("\"tled_whole_mesh_tool\"") != std::string::npos) {
       with_tool = number(row, "steps_per_s");
@@ -405,6 +410,7 @@ TEST(Bench, ToolRowTimesTheContactStage) {
       EXPECT_EQ(number(row, "surface_triangles"), 3580.0) << row;
     }
   }
+  EXPECT_EQ(contact_rows, 2);
   ASSERT_GT(whole, 0.0);
   ASSERT_GT(with_tool, 0.0);
   // the rows print 6 significant digits
