@@ -13,7 +13,9 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
+#include <type_traits>
 
 #include "core/contact.hpp"
 #include "core/model.hpp"
@@ -129,18 +131,39 @@ TISSUE_HD void merge_corner(NodeContact<T>& acc, const CornerContact<T>& c) {
   }
 }
 
+/// Whether two merge states have the same bits (then a further pass over the
+/// same proposals computes exactly what the last one did: merge_corner is a
+/// function of the state and the proposal alone).
+template <class T>
+TISSUE_HD bool same_bits(const NodeContact<T>& a, const NodeContact<T>& b) {
+  using U = std::conditional_t<sizeof(T) == 8, std::uint64_t, std::uint32_t>;
+  static_assert(sizeof(U) == sizeof(T));
+  const T fa[4] = {a.dx.x, a.dx.y, a.dx.z, a.largest2}, fb[4] = {b.dx.x, b.dx.y, b.dx.z, b.largest2};
+  for (int i = 0; i < 4; ++i) {
+    U x, y;
+    std::memcpy(&x, &fa[i], sizeof(T));
+    std::memcpy(&y, &fb[i], sizeof(T));
+    if (x != y) return false;
+  }
+  return a.tool == b.tool && a.kind == b.kind;
+}
+
 /// A node's merged contact from its `count` proposals, get(j) giving the
 /// j-th in ascending triangle order: kMergePasses passes of merge_corner
 /// (one when nothing was proposed). Proposals within 90 degrees of each
 /// other are satisfied after the first pass; more obtuse ones (a node
 /// squeezed from two sides) approach theirs by a factor cos(angle - 90 deg)
-/// per pass, and the next step goes on.
+/// per pass, and the next step goes on. A pass that leaves the state's bits
+/// as they were ends the passes: the rest would repeat it (the same result
+/// as all kMergePasses, in two passes for most nodes; the GPU's merge of a
+/// touched node is one thread's chain of these passes).
 template <class T, class Get>
 TISSUE_HD NodeContact<T> merge_proposals(int count, Get get) {
   NodeContact<T> acc;
   for (int pass = 0; pass < kMergePasses; ++pass) {
+    const NodeContact<T> before = acc;
     for (int j = 0; j < count; ++j) merge_corner(acc, get(j));
-    if (acc.kind != kPushed) break;
+    if (acc.kind != kPushed || (pass > 0 && same_bits(acc, before))) break;
   }
   return acc;
 }
@@ -155,10 +178,11 @@ template <int N, class T, class Get>
 TISSUE_HD NodeContact<T> merge_proposals_unrolled(int count, Get get) {
   NodeContact<T> acc;
   for (int pass = 0; pass < kMergePasses; ++pass) {
+    const NodeContact<T> before = acc;
     TISSUE_UNROLL
     for (int j = 0; j < N; ++j)
       if (j < count) merge_corner(acc, get(j));
-    if (acc.kind != kPushed) break;
+    if (acc.kind != kPushed || (pass > 0 && same_bits(acc, before))) break;
   }
   return acc;
 }
