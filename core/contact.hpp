@@ -338,6 +338,15 @@ struct CornerContact {
                         ///< could not move (0 otherwise)
 };
 
+/// Whether a corner's proposal can change its node's merge (merge_corner):
+/// a blocked penetration or any non-zero component (a superset of
+/// merge_corner's |dx|^2 > 0). Any other is a no-op whatever its tool: the
+/// backends keep only these (the cpu's step entries, the cuda slots).
+template <class T>
+TISSUE_HD bool proposes(const CornerContact<T>& c) {
+  return c.blocked || c.dx.x != T(0) || c.dx.y != T(0) || c.dx.z != T(0);
+}
+
 /// Whether a corner may be moved by contact, and why not (ContactKind).
 /// movable = inner region node, not held in every component, not grasped.
 TISSUE_HD std::uint8_t corner_block(bool inner, bool held_all, bool grasped) {

@@ -11,13 +11,13 @@
 //   anything else in the region                       integrated (central difference)
 #pragma once
 
+#include <bit>
 #include <cmath>
 #include <cstdint>
-#include <cstring>
 #include <limits>
-#include <type_traits>
 
 #include "core/contact.hpp"
+#include "core/cube_root.hpp"
 #include "core/model.hpp"
 #include "core/tet.hpp"
 
@@ -136,16 +136,10 @@ TISSUE_HD void merge_corner(NodeContact<T>& acc, const CornerContact<T>& c) {
 /// function of the state and the proposal alone).
 template <class T>
 TISSUE_HD bool same_bits(const NodeContact<T>& a, const NodeContact<T>& b) {
-  using U = std::conditional_t<sizeof(T) == 8, std::uint64_t, std::uint32_t>;
-  static_assert(sizeof(U) == sizeof(T));
-  const T fa[4] = {a.dx.x, a.dx.y, a.dx.z, a.largest2}, fb[4] = {b.dx.x, b.dx.y, b.dx.z, b.largest2};
-  for (int i = 0; i < 4; ++i) {
-    U x, y;
-    std::memcpy(&x, &fa[i], sizeof(T));
-    std::memcpy(&y, &fb[i], sizeof(T));
-    if (x != y) return false;
-  }
-  return a.tool == b.tool && a.kind == b.kind;
+  using U = typename detail::FloatBits<T>::U;  // (core/cube_root.hpp)
+  const auto same = [](T x, T y) { return std::bit_cast<U>(x) == std::bit_cast<U>(y); };
+  return same(a.dx.x, b.dx.x) && same(a.dx.y, b.dx.y) && same(a.dx.z, b.dx.z) && same(a.largest2, b.largest2) &&
+         a.tool == b.tool && a.kind == b.kind;
 }
 
 /// A node's merged contact from its `count` proposals, get(j) giving the

@@ -124,7 +124,7 @@ void ContactStage<T>::sweep(const TissueState<T>& s, const ContactTools<T>& tool
     CornerContact<T> out[3];
     sweep_touching_triangle(tools, capsules_, x, block, out);
     for (int i = 0; i < 3; ++i)
-      if (out[i].tool >= 0) entries.push_back({c[i], 3 * t + i, out[i]});
+      if (proposes(out[i])) entries.push_back({c[i], 3 * t + i, out[i]});
   }
 }
 

@@ -83,22 +83,21 @@ __device__ __forceinline__ Vec3<T> sweep_position(const ContactTools<T>& tools, 
   return cs.contact[i] == kGrasped ? grasped_target(tools, k, s, tm.c[i]) : cs.free[i];
 }
 
-/// Whether a corner's proposal can change its node's merge: a blocked
-/// penetration or any non-zero component (a superset of merge_corner's
-/// |dx|^2 > 0). A slot without one is a no-op for merge_corner whatever its
-/// tool, so every slot holds none between steps: the sweep stores only
-/// these, and the merge of a proposed node clears its slots (clear_slot).
-/// Storing every slot every step cost 54 bytes a triangle (5.5 MB a step
-/// on a surface of 100k triangles) for a handful of proposals.
-template <class T>
-__device__ __forceinline__ bool proposes(const CornerContact<T>& c) {
-  return c.blocked || c.dx.x != T(0) || c.dx.y != T(0) || c.dx.z != T(0);
-}
-
+/// Every slot holds no proposal between steps (core proposes: anything
+/// else is a no-op for merge_corner): the sweep stores only the corners
+/// that propose something, and the merge of a proposed node clears its
+/// slots. Storing every slot every step cost 54 bytes a triangle (5.5 MB a
+/// step on a surface of 100k triangles) for a handful of proposals.
 template <class T>
 __device__ __forceinline__ void clear_slot(const StateView<T>& s, index_t slot) {
   s.corner_dx[slot] = Packed3<T>::of(Vec3<T>{T(0), T(0), T(0)});
   s.corner_blocked[slot] = 0;
+}
+
+/// clear_slot over `count` slots listed at `slot` (a surface node's).
+template <class T>
+__device__ __forceinline__ void clear_slots(const StateView<T>& s, const index_t* slot, int count) {
+  for (int j = 0; j < count; ++j) clear_slot(s, slot[j]);
 }
 
 /// Sweeps surface triangle t (its model part tm) in step k; stores the
@@ -121,7 +120,7 @@ __device__ void sweep_loaded_triangle(const StateView<T>& s, const ContactTools<
   sweep_triangle(tools, k, x, block, out);
 #pragma unroll
   for (int i = 0; i < 3; ++i) {
-    if (!proposes(out[i])) continue;  // its slot already holds no proposal (see clear_slot)
+    if (!proposes(out[i])) continue;  // its slot already holds none (see clear_slot)
     s.corner_dx[3 * t + i] = Packed3<T>::of(out[i].dx);
     s.corner_tool[3 * t + i] = out[i].tool;
     s.corner_blocked[3 * t + i] = out[i].blocked;
@@ -179,18 +178,18 @@ __device__ void merge_loaded_node(const StateView<T>& s, const ContactTools<T>& 
   const index_t a = n.a;
   const bool proposed = s.proposed[a] != 0;
   const std::uint8_t was = s.contact[a], held = s.held[a];
-  const signed char was_tool = s.contact_tool[a];
   const Vec3<T> u_now = u[a].vec(), u_free = u_next[a].vec();
   if (proposed) s.proposed[a] = 0;  // for the next step's sweep
   if (was == kGrasped) {
     u_next[a] = Packed3<T>::of(grasped_target(tools, k, s, a) - n.X);
-    if (proposed)  // a grasped corner's blocked penetration: never merged, but cleared
-      for (int j = 0; j < n.count; ++j) clear_slot(s, surf_slot[n.first + j]);
+    if (proposed) clear_slots(s, surf_slot + n.first, n.count);  // a grasped corner's block: never merged
     return;
   }
-  if (!proposed) {  // merging only zero proposals gives no contact (stored only if it was in one)
-    if (was != kNoContact) s.contact[a] = kNoContact;
-    if (was_tool != -1) s.contact_tool[a] = -1;
+  if (!proposed) {  // merging only zero proposals gives no contact (stored only if it was in one:
+    if (was != kNoContact) {  // a node in no contact has no tool, as every writer keeps it)
+      s.contact[a] = kNoContact;
+      s.contact_tool[a] = -1;
+    }
     return;
   }
   const auto at = [&](index_t slot) {
@@ -208,7 +207,7 @@ __device__ void merge_loaded_node(const StateView<T>& s, const ContactTools<T>& 
     acc = merge_proposals_unrolled<kHeldProposals, T>(n.count, [&](int j) { return held_proposals[j]; });
   } else {
     acc = merge_proposals<T>(n.count, [&](int j) { return at(surf_slot[n.first + j]); });
-    for (int j = 0; j < n.count; ++j) clear_slot(s, surf_slot[n.first + j]);
+    clear_slots(s, surf_slot + n.first, n.count);
   }
   s.contact[a] = acc.kind;
   s.contact_tool[a] = acc.tool;
