@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstring>
 
+#include <cuda/atomic>
+
 #include "core/contact.hpp"
 #include "core/energy.hpp"
 #include "core/node_rules.hpp"
@@ -51,61 +53,72 @@ __device__ ReducePartial block_reduce(const ReducePartial& mine) {
                                  [](ReducePartial& a, const ReducePartial& b) { combine(a, b); });
 }
 
+__device__ ToolPartial empty_tool() {
+  ToolPartial p;
+  p.reaction[0] = p.reaction[1] = p.reaction[2] = 0;
+  p.contact = p.grasped = p.rigid = p.outside = p.pad = 0;
+  p.rigid_first = -1;
+  return p;
+}
+
 __device__ void empty_partial(ContactPartial& p) {
-  for (int t = 0; t < kMaxTools; ++t) {
-    p.reaction[t][0] = p.reaction[t][1] = p.reaction[t][2] = 0;
-    p.contact[t] = p.grasped[t] = p.rigid[t] = p.outside[t] = 0;
-    p.rigid_first[t] = -1;
-  }
+  for (int t = 0; t < kMaxTools; ++t) p.tool[t] = empty_tool();
+}
+
+__device__ void combine(ToolPartial& a, const ToolPartial& b) {
+  for (int c = 0; c < 3; ++c) a.reaction[c] += b.reaction[c];
+  a.contact += b.contact;
+  a.grasped += b.grasped;
+  a.rigid += b.rigid;
+  a.outside += b.outside;
+  if (b.rigid_first >= 0 && (a.rigid_first < 0 || b.rigid_first < a.rigid_first)) a.rigid_first = b.rigid_first;
 }
 
 __device__ void combine(ContactPartial& a, const ContactPartial& b) {
-  for (int t = 0; t < kMaxTools; ++t) {
-    for (int c = 0; c < 3; ++c) a.reaction[t][c] += b.reaction[t][c];
-    a.contact[t] += b.contact[t];
-    a.grasped[t] += b.grasped[t];
-    a.rigid[t] += b.rigid[t];
-    a.outside[t] += b.outside[t];
-    if (b.rigid_first[t] >= 0 && (a.rigid_first[t] < 0 || b.rigid_first[t] < a.rigid_first[t]))
-      a.rigid_first[t] = b.rigid_first[t];
-  }
+  for (int t = 0; t < kMaxTools; ++t) combine(a.tool[t], b.tool[t]);
 }
 
-/// The block's sum of one contact partial per thread, in thread 0.
-__device__ ContactPartial block_reduce(const ContactPartial& mine) {
-  __shared__ ContactPartial sh[kReduceBlock / 32];
-  ContactPartial empty;
-  empty_partial(empty);
-  return block_sum<kReduceBlock>(mine, empty, sh, [](ContactPartial& a, const ContactPartial& b) { combine(a, b); });
+/// The block's sum of one contact partial per thread, in thread 0, over the
+/// tools in `used` (a bit per tool, the same in every thread): the others
+/// hold nothing in any thread, and their sum is their empty partial.
+__device__ ContactPartial block_reduce(ContactPartial c, unsigned used) {
+  __shared__ ToolPartial sh[kMaxTools][kReduceBlock / 32];
+#pragma unroll
+  for (int t = 0; t < kMaxTools; ++t)
+    if (used >> t & 1u)
+      c.tool[t] = block_sum<kReduceBlock>(c.tool[t], empty_tool(), sh[t],
+                                          [](ToolPartial& a, const ToolPartial& b) { combine(a, b); });
+  return c;
 }
 
 /// Surface node a's contact share (core contact_reaction) for its tool;
-/// false when it is in no contact (nothing added).
+/// returns the tool's bit (0 when the node is in no contact: nothing added).
 /// The tool index is data: each tool's entry is updated under a test of a
 /// constant index, so the partial stays in registers (indexing it by the
 /// tool put the whole struct in local memory: 176 bytes of stack, and the
 /// reduction kernel took 19 us on the kidney on an H100).
 template <class T>
-__device__ bool accumulate_contact(const ModelView<T>& m, const StateView<T>& s, index_t a, ContactPartial& p) {
+__device__ unsigned accumulate_contact(const ModelView<T>& m, const StateView<T>& s, index_t a, ContactPartial& p) {
   const int t = s.contact_tool[a];
   const std::uint8_t kind = s.contact[a];
-  if (t < 0 || t >= kMaxTools || kind == kNoContact) return false;
+  if (t < 0 || t >= kMaxTools || kind == kNoContact) return 0;
   const Vec3<T> r = contact_reaction(kind, s.f[a].vec(), s.contact_normal[a].vec(), fixed_axes(m.node_flags[a]));
 #pragma unroll
   for (int k = 0; k < kMaxTools; ++k) {
     if (k != t) continue;
-    p.reaction[k][0] += double(r.x);
-    p.reaction[k][1] += double(r.y);
-    p.reaction[k][2] += double(r.z);
-    p.contact[k] += (kind == kPushed || kind == kGrasped) ? 1 : 0;
-    p.grasped[k] += kind == kGrasped ? 1 : 0;
+    ToolPartial& q = p.tool[k];
+    q.reaction[0] += double(r.x);
+    q.reaction[1] += double(r.y);
+    q.reaction[2] += double(r.z);
+    q.contact += (kind == kPushed || kind == kGrasped) ? 1 : 0;
+    q.grasped += kind == kGrasped ? 1 : 0;
     if (kind == kRigidContact) {
-      if (p.rigid_first[k] < 0 || a < p.rigid_first[k]) p.rigid_first[k] = a;
-      ++p.rigid[k];
+      if (q.rigid_first < 0 || a < q.rigid_first) q.rigid_first = a;
+      ++q.rigid;
     }
-    p.outside[k] += kind == kOutsideRegion ? 1 : 0;
+    q.outside += kind == kOutsideRegion ? 1 : 0;
   }
-  return true;
+  return 1u << t;
 }
 
 /// Block partials are kept as columns: word k of block b's partial at
@@ -197,9 +210,10 @@ __device__ void add_element_energy(const ModelView<T>& m, const T* node_p, const
 /// Thread 0 of the block that finishes last: the result from the combined
 /// partials (region sums `sum`, contact sums `c`) into out and, unless null,
 /// into host_out (mapped host memory: the tick graph's download without a
-/// copy); reads and clears the bad flag.
-__device__ void write_result(const ReducePartial& sum, const ContactPartial& c, unsigned long long* bad,
-                             Reductions* out, Reductions* host_out) {
+/// copy); key: the bad flag's value (loaded at the kernel's start), which
+/// it clears.
+__device__ void write_result(const ReducePartial& sum, const ContactPartial& c, unsigned long long key,
+                             unsigned long long* bad, Reductions* out, Reductions* host_out) {
   Reductions r;
   r.reaction = {sum.reaction[0], sum.reaction[1], sum.reaction[2]};
   r.internal = {sum.internal[0], sum.internal[1], sum.internal[2]};
@@ -211,7 +225,6 @@ __device__ void write_result(const ReducePartial& sum, const ContactPartial& c, 
   r.strain_energy = sum.energy;
   r.visco_power = sum.visco_power;
   r.visco_stored = sum.visco_stored;
-  const unsigned long long key = *bad;
   if (key != ~0ull) {
     r.bad_elem = static_cast<index_t>(key >> 32);
     r.bad_J = __uint_as_float(static_cast<unsigned>(key & 0xffffffffu));
@@ -222,12 +235,13 @@ __device__ void write_result(const ReducePartial& sum, const ContactPartial& c, 
   bool finite = sum.nonfinite == 0 && isfinite(all);
   for (int t = 0; t < kMaxTools; ++t) {
     ToolReduction& tr = r.tools[t];
-    tr.reaction = {c.reaction[t][0], c.reaction[t][1], c.reaction[t][2]};
-    tr.contact = c.contact[t];
-    tr.grasped = c.grasped[t];
-    tr.rigid = c.rigid[t];
-    tr.rigid_first = c.rigid_first[t];
-    tr.outside = c.outside[t];
+    const ToolPartial& q = c.tool[t];
+    tr.reaction = {q.reaction[0], q.reaction[1], q.reaction[2]};
+    tr.contact = q.contact;
+    tr.grasped = q.grasped;
+    tr.rigid = q.rigid;
+    tr.rigid_first = q.rigid_first;
+    tr.outside = q.outside;
     finite = finite && isfinite(tr.reaction.x + tr.reaction.y + tr.reaction.z);
   }
   r.finite = finite;
@@ -235,53 +249,111 @@ __device__ void write_result(const ReducePartial& sum, const ContactPartial& c, 
   if (host_out) *host_out = r;  // visible to the host once the stream has finished
 }
 
+/// Block i's partials for lanes' blocks i, i + 32, ..., i + 32 (kAhead - 1)
+/// loaded together (one round trip to L2 for the kidney's blocks, not one
+/// per block), then combined into p in block order: the same sums as one at
+/// a time. `take(b)` says whether block b has a partial (the others add
+/// nothing).
+template <int kAhead, class P, class Take>
+__device__ void combine_columns(P& p, const int* words, int lane, int blocks, Take take) {
+  for (int i0 = lane; i0 < blocks; i0 += 32 * kAhead) {
+    P q[kAhead];
+    bool has[kAhead];
+#pragma unroll
+    for (int j = 0; j < kAhead; ++j) {
+      has[j] = i0 + 32 * j < blocks && take(i0 + 32 * j);
+      if (has[j]) q[j] = load_columns<P>(words, i0 + 32 * j);
+    }
+#pragma unroll
+    for (int j = 0; j < kAhead; ++j)
+      if (has[j]) combine(p, q[j]);
+  }
+}
+
 /// Every reduction in one launch (before: a partial kernel, a final block
-/// and the contact's kernel, 3 launches). Each block sums its share of the
-/// region's nodes and elements and of the surface nodes (the contact sums
-/// only where one of its threads met a node in contact: almost no block);
-/// the last block to finish combines every block's partials in block order,
-/// on its first warp. 128 threads a block, so that each block's shuffles
-/// are few. (On the kidney on an H100 the busiest multiprocessor spent
-/// 14.3 us in this kernel with 256-thread blocks, its contact partial in
-/// local memory, every block summing it; 13.1 us as it is. On the 100k
-/// slab's 396 blocks, 28 us with the partials in rows, 19 us in columns.)
+/// and the contact's kernel, 3 launches). The region's nodes, its elements
+/// and the surface nodes are one list of items, a thread each (before: each
+/// thread took a node, then an element, then a surface node, one after the
+/// other); each block sums its threads' partials (the contact sums only in
+/// the few blocks that met a node in contact, and only for the tools they
+/// met), and the last block to finish combines every block's partials in
+/// block order. 128 threads a block, so that each block's shuffles are few.
+///
+/// The last block's combine: its warp 0 combines the region partials and
+/// its warp 1 the contact partials at once, lane i the blocks i, i + 32, ...
+/// in that order, then five shuffle levels. A block that met no contact
+/// stores no contact partial (its touched word is 0) and is not read; nor
+/// are the tools no block met summed: they would add +0 and counts of 0
+/// (the sums start at +0, which adding +0 leaves as it is). The count of
+/// finished blocks is a release-acquire atomic (before: a sequentially
+/// consistent fence in every block's thread 0 and in the last block).
+///
+/// On the kidney on an H100 (globaltimer stamps in a scratch build, a tick
+/// in contact): 10.5-11.4 us before, of which the three item loops 2.9-4.6,
+/// the block sums 2.7 (1.6 of it the contact partial's four tools), the
+/// count's fence 0.8, the last block's loads and shuffles 2.3 and the
+/// result 0.7. (Earlier: 14.3 us with 256-thread blocks, the contact
+/// partial in local memory and summed by every block; on the 100k slab's
+/// 396 blocks, 28 us with the partials in rows, 19 us in columns.)
 template <class T, bool kRecomputed>
 __global__ void __launch_bounds__(kReduceBlock)
     reduce_kernel(ModelView<T> m, StateView<T> s, RegionView r, FrontView front, StepBuffers<T> b,
-                  const T* energy_node_p, LawView<T> w, int* partial, int* contact, unsigned* done,
-                  Reductions* out, Reductions* host_out) {
+                  const T* energy_node_p, LawView<T> w, int* partial, int* contact, unsigned* touched_tools,
+                  unsigned* done, Reductions* out, Reductions* host_out) {
   if (skipped(s)) return;  // every block: the count stays at 0
+  // the bad flag as the steps and the energy's pressure pass left it (only the last block's thread 0 uses
+  // it: loaded now, its round trip overlaps the sums)
+  const unsigned long long bad_key = threadIdx.x == 0 ? __ldcg(s.bad) : ~0ull;
+  const index_t nn = r.n_nodes, ne = r.n_elems, items = r.n_nodes + r.n_elems + m.n_surf;
   ReducePartial p = zero_partial();
-  for (index_t i = thread_index(); i < r.n_nodes; i += thread_stride()) accumulate_node(m, s, b, front, r.node(i), p);
-  for (index_t i = thread_index(); i < r.n_elems; i += thread_stride())
-    add_element_energy<T, kRecomputed>(m, energy_node_p, b.u, r.elem(i), w, p);
   ContactPartial c;
   empty_partial(c);
-  bool touched = false;
-  for (index_t i = thread_index(); i < m.n_surf; i += thread_stride())
-    touched = accumulate_contact(m, s, m.surf_nodes[i], c) || touched;
+  unsigned mine = 0;  // a bit per tool this thread met
+  for (index_t i = thread_index(); i < items; i += thread_stride()) {
+    if (i < nn)
+      accumulate_node(m, s, b, front, r.node(i), p);
+    else if (i < nn + ne)
+      add_element_energy<T, kRecomputed>(m, energy_node_p, b.u, r.elem(i - nn), w, p);
+    else
+      mine |= accumulate_contact(m, s, m.surf_nodes[i - nn - ne], c);
+  }
   p = block_reduce(p);
-  if (__syncthreads_or(touched)) c = block_reduce(c);  // the same answer for every thread: no divergence
+  unsigned used = 0;  // the tools any thread of the block met: the same in every thread
+#pragma unroll
+  for (int t = 0; t < kMaxTools; ++t) used |= __syncthreads_or(int(mine >> t & 1u)) ? 1u << t : 0u;
+  if (used) c = block_reduce(c, used);
   __shared__ bool last;
+  __shared__ ContactPartial contact_sum;
   if (threadIdx.x == 0) {
     store_columns(p, partial, int(blockIdx.x));
-    store_columns(c, contact, int(blockIdx.x));
-    __threadfence();  // the partials are visible before the count says so
-    last = atomicAdd(done, 1u) == gridDim.x - 1;
+    if (used) store_columns(c, contact, int(blockIdx.x));
+    touched_tools[blockIdx.x] = used;
+    // release: this thread's partials are visible to whoever sees the count; acquire: the last block
+    // sees every block's
+    last = cuda::atomic_ref<unsigned, cuda::thread_scope_device>(*done).fetch_add(1u, cuda::memory_order_acq_rel) ==
+           gridDim.x - 1;
   }
-  __syncthreads();
-  if (!last || threadIdx.x >= 32) return;
-  __threadfence();
-  p = zero_partial();
-  empty_partial(c);
-  for (int i = int(threadIdx.x); i < int(gridDim.x); i += 32) {
-    combine(p, load_columns<ReducePartial>(partial, i));
-    combine(c, load_columns<ContactPartial>(contact, i));
+  __syncthreads();  // the last block's other threads are ordered after thread 0's acquire
+  if (!last || threadIdx.x >= 64) return;
+  const int lane = int(threadIdx.x) % 32, blocks = int(gridDim.x);
+  if (threadIdx.x < 32) {
+    p = zero_partial();
+    combine_columns<4>(p, partial, lane, blocks, [](int) { return true; });
+    p = warp_sum(p, [](ReducePartial& a, const ReducePartial& q) { combine(a, q); });
+  } else {
+    empty_partial(c);
+    unsigned met = 0;
+    for (int i = lane; i < blocks; i += 32) met |= __ldcg(touched_tools + i);
+    combine_columns<2>(c, contact, lane, blocks, [&](int i) { return __ldcg(touched_tools + i) != 0; });
+    met = __reduce_or_sync(0xffffffffu, met);
+#pragma unroll
+    for (int t = 0; t < kMaxTools; ++t)
+      if (met >> t & 1u) c.tool[t] = warp_sum(c.tool[t], [](ToolPartial& a, const ToolPartial& q) { combine(a, q); });
+    if (lane == 0) contact_sum = c;
   }
-  p = warp_sum(p, [](ReducePartial& a, const ReducePartial& q) { combine(a, q); });
-  c = warp_sum(c, [](ContactPartial& a, const ContactPartial& q) { combine(a, q); });
+  asm volatile("bar.sync 1, 64;");  // warps 0 and 1 only: contact_sum is written
   if (threadIdx.x != 0) return;
-  write_result(p, c, s.bad, out, host_out);
+  write_result(p, contact_sum, bad_key, s.bad, out, host_out);
   *done = 0;  // for the next launch
 }
 
@@ -291,6 +363,7 @@ template <class T>
 void Reducer<T>::allocate(index_t n_nodes, index_t n_elems, cudaStream_t stream) {
   partial_.allocate(size_t(kWords<ReducePartial>) * kMaxReduceBlocks);
   contact_partial_.allocate(size_t(kWords<ContactPartial>) * kMaxReduceBlocks);
+  touched_.allocate(kMaxReduceBlocks);
   done_.allocate(1);
   done_.fill_bytes(0, stream);  // on the stream the kernel runs on: ordered before its first launch
   result_.allocate(1);
@@ -329,11 +402,11 @@ void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const Reg
     });
     launch(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, e, r);
   }
-  const index_t items = std::max({r.n_nodes, r.n_elems, m.n_surf, index_t(1)});
+  const index_t items = std::max(r.n_nodes + r.n_elems + m.n_surf, index_t(1));
   const int blocks = std::min(grid_for(items, kReduceBlock), kMaxReduceBlocks);
   with_gradients(m, r, [&](auto recomputed) {  // the energies with the gradients of the steps
     launch_blocks(blocks, kReduceBlock, stream, reduce_kernel<T, decltype(recomputed)::value>, m, s, r, front, b,
-                  static_cast<const T*>(node_p_.data()), law_, partial_.data(), contact_partial_.data(), done_.data(),
+                  static_cast<const T*>(node_p_.data()), law_, partial_.data(), contact_partial_.data(), touched_.data(), done_.data(),
                   result_.data(), to_host ? result_host_.device() : nullptr);
   });
 }

@@ -29,11 +29,17 @@ struct ReducePartial {
   int nonfinite;  ///< region nodes with a non-finite u, f or velocity
 };
 
-/// Per-tool partial sums of the contact reduction (double): one per thread,
-/// then one per block.
+/// One tool's partial sums of the contact reduction (double).
+struct ToolPartial {
+  double reaction[3];
+  int contact, grasped, rigid, rigid_first, outside;
+  int pad;  ///< (a whole number of 8-byte words)
+};
+
+/// Per-tool partial sums of the contact reduction: one per thread, then one
+/// per block.
 struct ContactPartial {
-  double reaction[kMaxTools][3];
-  int contact[kMaxTools], grasped[kMaxTools], rigid[kMaxTools], rigid_first[kMaxTools], outside[kMaxTools];
+  ToolPartial tool[kMaxTools];
 };
 
 /// The front ring of the region: nodes whose flood-fill ring equals depth
@@ -72,7 +78,8 @@ class Reducer {
 
  private:
   DeviceArray<int> partial_;            ///< one ReducePartial per block, as columns (reduce.cu store_columns)
-  DeviceArray<int> contact_partial_;    ///< one ContactPartial per block, likewise
+  DeviceArray<int> contact_partial_;    ///< one ContactPartial per block, likewise (only blocks that met a contact)
+  DeviceArray<unsigned> touched_;       ///< per block: a bit per tool it met (0: it stored no contact partial)
   DeviceArray<unsigned> done_;          ///< blocks finished (the last one resets it to 0)
   DeviceArray<Reductions> result_;      ///< (1)
   PinnedArray<Reductions> result_host_;

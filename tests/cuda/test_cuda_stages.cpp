@@ -197,6 +197,55 @@ TEST_P(Stages, ContactStageMatchesCpu) {
   }
 }
 
+/// The reductions on a mesh with more items than the reduction kernel has
+/// threads (134k tets, 25k nodes and 5.8k surface nodes: its grid-stride
+/// loop, its last block combining 1024 blocks' partials), with four tools
+/// pressing into the top at once, so that the contact partials of every
+/// tool come from blocks far apart: the same per-tool counts as the cpu, the
+/// same reactions, energies and norms to the pass tolerance.
+TEST_P(Stages, ReductionsOfManyBlocksAndFourToolsMatchCpu) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  const double top = 0.02, r = 0.003;
+  const auto m = box_model(40, 40, 14, 0.06, 0.06, top);
+  ASSERT_GT(m.n_nodes + m.n_elems, 1024 * 128);
+  const auto u = random_field(m.n_nodes, 1e-5, 43);
+  const ToolShape shapes[] = {{"a", r, 0}, {"b", r, 0}, {"c", r, 0.01}, {"d", r, 0}};
+  auto press = [&](double x, double y) {
+    return ToolMotion{{{x, y, top + r - 0.0004}, {0, 0, 1}}, {{x, y, top + r - 0.0008}, {0, 0, 1}}};
+  };
+  const ToolMotion motion[] = {press(0.011, 0.012), press(0.049, 0.013), press(0.012, 0.047), press(0.046, 0.05)};
+  auto run = [&](Backend& b) {
+    b.upload(m);
+    b.set_displacements(u);
+    b.set_tools(shapes);
+    b.move_tools(motion);
+    return b.advance_reduce(2);
+  };
+  auto cpu = make_cpu_backend(p);
+  const Reductions rc = run(*cpu);
+  auto gpu = make_cuda_backend(p);
+  const Reductions rg = run(*gpu);
+  const double tol = 1e3 * pass_tol(p);
+  for (int t = 0; t < 4; ++t) {
+    SCOPED_TRACE(t);
+    ASSERT_GT(rc.tools[t].contact, 3);
+    EXPECT_EQ(rg.tools[t].contact, rc.tools[t].contact);
+    EXPECT_EQ(rg.tools[t].grasped, 0);
+    EXPECT_EQ(rg.tools[t].rigid, rc.tools[t].rigid);
+    EXPECT_EQ(rg.tools[t].outside, rc.tools[t].outside);
+    EXPECT_LT(rc.tools[t].reaction.z, 0) << "the pressed nodes' reaction points down (the tool feels minus it)";
+    EXPECT_LT(norm(rg.tools[t].reaction - rc.tools[t].reaction), tol * norm(rc.tools[t].reaction));
+  }
+  EXPECT_TRUE(rg.finite);
+  EXPECT_LT(std::fabs(rg.strain_energy - rc.strain_energy), tol * rc.strain_energy);
+  EXPECT_LT(std::fabs(rg.kinetic - rc.kinetic), tol * rc.kinetic);
+  EXPECT_LT(std::fabs(rg.free_force2 - rc.free_force2), tol * rc.free_force2);
+  EXPECT_LT(std::fabs(rg.max_disp - rc.max_disp), tol * rc.max_disp);
+  EXPECT_LT(norm(rg.internal - rc.internal), tol * (norm(rc.internal) + std::sqrt(rc.free_force2)));
+  report("many-block reduction: strain energy", p, std::fabs(rg.strain_energy - rc.strain_energy) / rc.strain_energy);
+}
+
 /// A tool that keeps moving over many steps, against the cpu in every step
 /// mode: pressed into the top, slid two ways (its triangles stop proposing
 /// while their nodes are still pushed by others), grasping and lifting
@@ -752,7 +801,7 @@ TEST_P(Stages, RecomputedGradientsMatchStoredOnes) {
       ADD_FAILURE() << "a sliver's recomputed gradients were accepted";
     } catch (const std::invalid_argument& e) {
       const std::string what = e.what();
-      for (const std::string part : {std::string("gradients 'recomputed'"), "element " + std::to_string(sliver),
+      for (const std::string& part : {std::string("gradients 'recomputed'"), "element " + std::to_string(sliver),
                                      std::string("sliver"), std::string("'stored'")})
         EXPECT_NE(what.find(part), std::string::npos) << part << " not in: " << what;
     }
