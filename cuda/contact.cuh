@@ -242,7 +242,9 @@ template <class T>
 __global__ void gather_contacts_kernel(ModelView<T> m, StateView<T> s, const ContactTools<T>* tools, int k,
                                        Packed3<T>* u, Packed3<T>* u_next) {
   let_next_pass_launch();
-  const index_t i = thread_index();
+  // the nodes a tool pushes are neighbours: dealt to different warps in runs of 8, their merges run side
+  // by side, not one after another in one warp (docs/benchmarks/README.md, "The reduction's tail")
+  const index_t i = dealt_index<8>();
   const bool active = i < m.n_surf;
   SurfaceNodeModel<T> n;
   if (active) n = load_surface_node(m, i);

@@ -11,6 +11,7 @@
 
 #include "core/hd.hpp"
 #include "cuda/check.hpp"
+#include "cuda/dealt.hpp"
 
 namespace tissue::gpu {
 
@@ -77,5 +78,17 @@ __device__ __forceinline__ void wait_for_previous_pass() { cudaGridDependencySyn
 /// Grid-stride index of the calling thread and the stride.
 __device__ __forceinline__ index_t thread_index() { return static_cast<index_t>(blockIdx.x * blockDim.x + threadIdx.x); }
 __device__ __forceinline__ index_t thread_stride() { return static_cast<index_t>(gridDim.x * blockDim.x); }
+
+/// This thread's item when the launch's items are dealt to its warps in
+/// runs of kRun (cuda/dealt.hpp dealt_item; blocks of whole warps). For the
+/// contact stage's merge, whose few expensive items (the nodes a tool
+/// pushes) are neighbours along the meshes' Morton numbering: in one warp
+/// their different paths run one after the other. Runs keep loads of
+/// neighbouring items coalesced.
+template <int kRun>
+__device__ __forceinline__ index_t dealt_index() {
+  static_assert(32 % kRun == 0);
+  return dealt_item(thread_index(), thread_stride(), kRun);
+}
 
 }  // namespace tissue::gpu
