@@ -17,6 +17,7 @@ namespace tissue::gpu {
 namespace {
 
 constexpr int kReduceBlock = 128;
+static_assert(kReduceBlock % 32 == 0 && kReduceBlock >= 64, "the last block combines on two warps");
 constexpr int kMaxReduceBlocks = 1024;
 
 __device__ ReducePartial zero_partial() {
@@ -138,7 +139,8 @@ __device__ void store_columns(const P& p, int* words, int b) {
   for (int k = 0; k < kWords<P>; ++k) words[k * kMaxReduceBlocks + b] = w[k];
 }
 
-/// Block b's partial, written by another block (made visible by its fence),
+/// Block b's partial, written by another block (made visible by the release
+/// of its count),
 /// read from L2 (never a stale line of this SM's L1).
 template <class P>
 __device__ P load_columns(const int* words, int b) {
@@ -288,21 +290,23 @@ __device__ void combine_columns(P& p, const int* words, int lane, int blocks, Ta
 /// finished blocks is a release-acquire atomic (before: a sequentially
 /// consistent fence in every block's thread 0 and in the last block).
 ///
-/// On the kidney on an H100 (globaltimer stamps in a scratch build, a tick
-/// in contact): 10.5-11.4 us before, of which the three item loops 2.9-4.6,
-/// the block sums 2.7 (1.6 of it the contact partial's four tools), the
-/// count's fence 0.8, the last block's loads and shuffles 2.3 and the
-/// result 0.7. (Earlier: 14.3 us with 256-thread blocks, the contact
-/// partial in local memory and summed by every block; on the 100k slab's
-/// 396 blocks, 28 us with the partials in rows, 19 us in columns.)
+/// On the kidney on an H100, a tick in contact: 14.3 us alone on the GPU
+/// (ncu) before, 10.3 us now. Before, globaltimer stamps in a scratch build
+/// (not under the profiler) split its 10.5-11.4 us into the three item loops
+/// one after the other 2.9-4.6, the block sums 2.7 (1.6 of it the contact
+/// partial's four tools), the count's fence 0.8, the last block's loads and
+/// shuffles on one warp 2.3 and the result 0.7. (Earlier still: 19 us with
+/// the contact partial in local memory and summed by every block; on the
+/// 100k slab's 396 blocks, 28 us with the partials in rows, 19 us in
+/// columns.)
 template <class T, bool kRecomputed>
 __global__ void __launch_bounds__(kReduceBlock)
     reduce_kernel(ModelView<T> m, StateView<T> s, RegionView r, FrontView front, StepBuffers<T> b,
                   const T* energy_node_p, LawView<T> w, int* partial, int* contact, unsigned* touched_tools,
                   unsigned* done, Reductions* out, Reductions* host_out) {
   if (skipped(s)) return;  // every block: the count stays at 0
-  // the bad flag as the steps and the energy's pressure pass left it (only the last block's thread 0 uses
-  // it: loaded now, its round trip overlaps the sums)
+  // the bad flag as the steps' pass 3 left it (the kernels before this one have finished; only the last
+  // block's thread 0 uses it: loaded now, its round trip overlaps the sums)
   const unsigned long long bad_key = threadIdx.x == 0 ? __ldcg(s.bad) : ~0ull;
   const index_t nn = r.n_nodes, ne = r.n_elems, items = r.n_nodes + r.n_elems + m.n_surf;
   ReducePartial p = zero_partial();
@@ -345,13 +349,16 @@ __global__ void __launch_bounds__(kReduceBlock)
     unsigned met = 0;
     for (int i = lane; i < blocks; i += 32) met |= __ldcg(touched_tools + i);
     combine_columns<2>(c, contact, lane, blocks, [&](int i) { return __ldcg(touched_tools + i) != 0; });
-    met = __reduce_or_sync(0xffffffffu, met);
+#pragma unroll
+    for (int off = 16; off > 0; off /= 2) met |= __shfl_xor_sync(0xffffffffu, met, off);  // every lane's
 #pragma unroll
     for (int t = 0; t < kMaxTools; ++t)
       if (met >> t & 1u) c.tool[t] = warp_sum(c.tool[t], [](ToolPartial& a, const ToolPartial& q) { combine(a, q); });
     if (lane == 0) contact_sum = c;
   }
-  asm volatile("bar.sync 1, 64;");  // warps 0 and 1 only: contact_sum is written
+  // warps 0 and 1 only (the others have left): contact_sum is written before thread 0 reads it. Not
+  // .aligned: the two warps reach it from different branches.
+  asm volatile("barrier.sync 1, 64;" ::: "memory");
   if (threadIdx.x != 0) return;
   write_result(p, contact_sum, bad_key, s.bad, out, host_out);
   *done = 0;  // for the next launch
