@@ -346,9 +346,12 @@ __global__ void __launch_bounds__(kReduceBlock)
     p = warp_sum(p, [](ReducePartial& a, const ReducePartial& q) { combine(a, q); });
   } else {
     empty_partial(c);
-    unsigned met = 0;
-    for (int i = lane; i < blocks; i += 32) met |= __ldcg(touched_tools + i);
-    combine_columns<2>(c, contact, lane, blocks, [&](int i) { return __ldcg(touched_tools + i) != 0; });
+    unsigned met = 0;  // the tools this lane's blocks met (each block's word read once)
+    combine_columns<2>(c, contact, lane, blocks, [&](int i) {
+      const unsigned tools = __ldcg(touched_tools + i);
+      met |= tools;
+      return tools != 0;
+    });
 #pragma unroll
     for (int off = 16; off > 0; off /= 2) met |= __shfl_xor_sync(0xffffffffu, met, off);  // every lane's
 #pragma unroll

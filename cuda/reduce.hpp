@@ -29,7 +29,9 @@ struct ReducePartial {
   int nonfinite;  ///< region nodes with a non-finite u, f or velocity
 };
 
-/// One tool's partial sums of the contact reduction (double).
+/// One tool's partial sums of the contact reduction (double): the fields of
+/// core's ToolReduction without its default member initialisers, which a
+/// __shared__ array (the block sums) cannot have.
 struct ToolPartial {
   double reaction[3];
   int contact, grasped, rigid, rigid_first, outside;
