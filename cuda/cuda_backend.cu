@@ -187,7 +187,7 @@ class CudaBackend final : public Backend {
     store_.upload(m, model, gradients_, log_, stream());
     const index_t n = m.n_nodes;
     region_.allocate(n, m.n_elems, stream());
-    reducer_.allocate(n, m.n_elems, stream());
+    reducer_.allocate(stream());
     reducer_.set_law(store_.law());
     stepper_.set_law(store_.law());
     contact_.allocate(n, m.n_surf);
@@ -290,15 +290,18 @@ class CudaBackend final : public Backend {
   void do_reset_contacts() override { contact_.reset(store_.model(), store_.state(), stream()); }
 
   void do_element_pressure() override {
+    pressures_fresh_ = false;  // a caller running the passes one by one
     stepper_.element_pressure(store_.model(), store_.state(), region_.view(), store_.u.current().u, stream());
   }
   void do_nodal_pressure() override {
+    pressures_fresh_ = false;
     stepper_.nodal_pressure(store_.model(), store_.state(), region_.view(), stream());
   }
   void do_element_forces() override {
     stepper_.element_forces(store_.model(), store_.state(), region_.view(), store_.u.current().u, stream());
   }
   void do_node_update() override {
+    pressures_fresh_ = false;  // u moves
     stepper_.node_update(store_.model(), store_.state(), region_.view(), store_.u.current(), stream());
     store_.u.advance(1);
   }
@@ -307,11 +310,14 @@ class CudaBackend final : public Backend {
   /// slice of the tools' motion is one small upload.
   void do_advance(int steps, const ContactTools<double>& tools) override {
     const int chunk = Stepper<T>::kMaxGraphSteps;
+    StepStart start = take_pressures();
     for (int done = 0; done < steps;) {
       const int k = std::min(chunk, steps - done);
       const ContactTools<T>* dtools = nullptr;
       if (tools.n_tools > 0) dtools = contact_.upload(contact_tools_as<T>(slice(tools, done, k)), log_, stream());
-      stepper_.advance(store_.model(), store_.state(), region_.view(), store_.u, k, dtools, stream());
+      stepper_.advance(store_.model(), store_.state(), store_.pressure_set(), region_.view(), store_.u, k, dtools,
+                       start, stream());
+      start = StepStart::kPass1;
       done += k;
     }
   }
@@ -344,8 +350,12 @@ class CudaBackend final : public Backend {
   std::vector<ContactNode> do_contacts() override { return contact_.contacts(store_.model(), store_.state(), log_, stream()); }
 
   Reductions do_reduce() override {
-    return reducer_.run(store_.model(), store_.state(), region_.view(), region_.front(), store_.u.current(), log_,
-                        stream());
+    const bool passes = Reducer<T>::runs_passes(store_.model(), region_.view());
+    if (passes) sync_pressures();
+    const Reductions out = reducer_.run(store_.model(), store_.state(), store_.pressure_scratch(), region_.view(),
+                                        region_.front(), store_.u.current(), log_, stream());
+    pressures_fresh_ = passes;
+    return out;
   }
 
   Fields do_download() override {
@@ -396,8 +406,11 @@ class CudaBackend final : public Backend {
     const std::size_t tool_bytes = tools.n_tools > 0 ? contact_.stage(contact_tools_as<T>(tools)) : 0;
     const ContactTools<T>* dtools = tools.n_tools > 0 ? contact_.device_tools() : nullptr;
     check = check && dtools != nullptr;
+    const StepStart start = take_pressures();
+    const bool passes = Reducer<T>::runs_passes(store_.model(), r);
+    if (passes) sync_pressures();  // (before the graph, on its stream)
     const GraphKey key{store_.u.phase, steps, dtools != nullptr, check ? GraphKey::kCheckedTick : GraphKey::kTick,
-                       tool_bytes};
+                       tool_bytes, store_.pressure_set(), start == StepStart::kPass3};
     const cudaGraphExec_t exec = stepper_.cached_graph(
         key,
         [&](cudaStream_t st) {
@@ -407,11 +420,14 @@ class CudaBackend final : public Backend {
             contact_.enqueue_reach_check(store_.model(), s, store_.u.current().u, st);
             s.skip = contact_.reach();
           }
-          stepper_.enqueue_steps(store_.model(), s, r, store_.u.current(), steps, dtools, st);
+          StateView<T> scratch = store_.pressure_scratch();
+          scratch.skip = s.skip;
+          stepper_.enqueue_steps(store_.model(), s, r, store_.u.current(), steps, dtools, start, st);
           // the reduction and the check write their answers into mapped host memory themselves: no
           // copy nodes (on the kidney's tick on an H100: docs/benchmarks/README.md, "Answers written
           // into host memory")
-          reducer_.enqueue(store_.model(), s, r, region_.front(), store_.u.at(store_.u.phase + steps), st, true);
+          reducer_.enqueue(store_.model(), s, scratch, r, region_.front(), store_.u.at(store_.u.phase + steps), st,
+                           true);
         },
         stream());
     if (check) contact_.reach_host()[0] = 0;  // the check kernel writes 1 when the region must grow
@@ -420,8 +436,15 @@ class CudaBackend final : public Backend {
     if (tool_bytes > 0) log_.count_to_device(tool_bytes);
     if (check) {
       log_.count_to_host(sizeof(int));
-      if (contact_.reach_host()[0] != 0) return std::nullopt;  // nothing ran: the same phase, the same state
+      if (contact_.reach_host()[0] != 0) {  // nothing ran: the same phase, the same state
+        if (start == StepStart::kPass3) {   // and the same pass arrays (download() sees no change)
+          store_.swap_pressures();
+          pressures_fresh_ = true;
+        }
+        return std::nullopt;
+      }
     }
+    pressures_fresh_ = passes;
     log_.count_to_host(sizeof(Reductions));  // (a tick that did nothing wrote none)
     store_.u.advance(steps);
     return reducer_.result_host()[0];
@@ -443,8 +466,30 @@ class CudaBackend final : public Backend {
     return c;
   }
 
+  /// The reduction's passes 1-2 (in the scratch set) taken as the next
+  /// steps' own: swaps the sets when they are at the current u over the
+  /// current region (the cpu's take_passes; docs/cuda.md, "Passes 1-2 taken
+  /// from the reduction").
+  StepStart take_pressures() {
+    if (!pressures_fresh_) return StepStart::kPass1;
+    pressures_fresh_ = false;
+    store_.swap_pressures();
+    return StepStart::kPass3;
+  }
+
+  /// Makes the scratch set equal the state's outside the region, before the
+  /// reduction writes the region's entries: only after something wrote the
+  /// state's set outside the region (pass1_all), since steps and reductions
+  /// write the region's entries only.
+  void sync_pressures() {
+    if (pressures_synced_) return;
+    store_.copy_pressures_to_scratch(stream());
+    pressures_synced_ = true;
+  }
+
   /// Pass 1 over every element (after a region build or new displacements).
   void pass1_all() {
+    pressures_fresh_ = pressures_synced_ = false;
     const RegionView all = {nullptr, nullptr, store_.n_nodes(), store_.n_elems()};
     const RegionView region = region_view();  // its gradients: those of the steps to come
     stepper_.element_pressure(store_.model(), store_.state(), all, store_.u.current().u, stream(), &region);
@@ -465,6 +510,8 @@ class CudaBackend final : public Backend {
   Event drive_copied_;                    ///< the staging's last upload has been read
   bool drive_pending_ = false;
   index_t n_driven_ = 0;
+  bool pressures_fresh_ = false;   ///< the scratch set holds passes 1-2 at the current u (the last reduction's)
+  bool pressures_synced_ = false;  ///< the scratch set equals the state's outside the region
   DeviceArray<std::uint8_t> probe_dev_;   ///< roles of nodes to drive (n_nodes)
   PinnedArray<std::uint8_t> probe_host_;
   DeviceArray<double> scratch_;           ///< set_displacements / download / role-probe staging (7 n + ne)

@@ -1,6 +1,7 @@
 #include "cuda/device_store.hpp"
 
 #include <stdexcept>
+#include <utility>
 #include <vector>
 
 #include "core/region.hpp"
@@ -136,12 +137,12 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   u_held_.allocate(n);
   f_.allocate(n);
   f_slot_.allocate(4 * size_t(ne));
-  dv_slot_.allocate(4 * size_t(ne));
+  dv_slot_[0].allocate(4 * size_t(ne));
   held_.allocate(n);
   driven_.allocate(n);
   role_.allocate(n);
-  elem_J_.allocate(ne);
-  node_p_.allocate(n);
+  elem_J_[0].allocate(ne);
+  node_p_[0].allocate(n);
   bad_.allocate(1);
   load_.allocate(0);
   // the law arrays (core/material.hpp's lists): state sized from the model,
@@ -164,6 +165,9 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   corner_tool_.allocate(3 * size_t(m.n_tris));
   corner_blocked_.allocate(3 * size_t(m.n_tris));
   proposed_.allocate(n);
+  dv_slot_[1].allocate(4 * size_t(ne));  // (the second set last: set 0 where the state's one set was)
+  elem_J_[1].allocate(ne);
+  node_p_[1].allocate(n);
   reset_state(stream);
 }
 
@@ -174,8 +178,12 @@ void DeviceStore<T>::reset_state(cudaStream_t stream) {
   u_held_.fill_bytes(0, stream);
   f_.fill_bytes(0, stream);
   f_slot_.fill_bytes(0, stream);
-  dv_slot_.fill_bytes(0, stream);
-  node_p_.fill_bytes(0, stream);
+  pressures_ = 0;
+  for (int k = 0; k < 2; ++k) {
+    dv_slot_[k].fill_bytes(0, stream);
+    node_p_[k].fill_bytes(0, stream);
+    launch(model_.n_elems, stream, reset_elems_kernel<T>, model_.n_elems, elem_J_[k].data());
+  }
   bad_.fill_bytes(0xff, stream);
   clear_law_state(stream);
   contact_.fill_bytes(kNoContact, stream);
@@ -188,7 +196,6 @@ void DeviceStore<T>::reset_state(cudaStream_t stream) {
   proposed_.fill_bytes(0, stream);
   launch(model_.n_nodes, stream, reset_nodes_kernel<T>, model_.n_nodes, model_.node_flags, held_.data(),
          driven_.data(), role_.data());
-  launch(model_.n_elems, stream, reset_elems_kernel<T>, model_.n_elems, elem_J_.data());
 }
 
 template <class T>
@@ -220,9 +227,9 @@ StateView<T> DeviceStore<T>::state() {
   s.held = held_.data();
   s.driven = driven_.data();
   s.role = role_.data();
-  s.dv_slot = dv_slot_.data();
-  s.elem_J = elem_J_.data();
-  s.node_p = node_p_.data();
+  s.dv_slot = dv_slot_[pressures_].data();
+  s.elem_J = elem_J_[pressures_].data();
+  s.node_p = node_p_[pressures_].data();
   s.f_slot = f_slot_.data();
   s.f = f_.data();
   s.load = load_.size() ? load_.data() : nullptr;
@@ -236,6 +243,25 @@ StateView<T> DeviceStore<T>::state() {
   s.corner_blocked = corner_blocked_.data();
   s.proposed = proposed_.data();
   return s;
+}
+
+template <class T>
+StateView<T> DeviceStore<T>::pressure_scratch() {
+  StateView<T> s = state();
+  const int k = pressures_ ^ 1;
+  s.dv_slot = dv_slot_[k].data();
+  s.elem_J = elem_J_[k].data();
+  s.node_p = node_p_[k].data();
+  return s;
+}
+
+template <class T>
+void DeviceStore<T>::copy_pressures_to_scratch(cudaStream_t stream) {
+  const int from = pressures_, to = pressures_ ^ 1;
+  for (auto [dst, src] : {std::pair{&dv_slot_[to], &dv_slot_[from]}, std::pair{&elem_J_[to], &elem_J_[from]},
+                          std::pair{&node_p_[to], &node_p_[from]}})
+    if (src->bytes() > 0)
+      CUDA_CHECK(cudaMemcpyAsync(dst->data(), src->data(), src->bytes(), cudaMemcpyDeviceToDevice, stream));
 }
 
 template class DeviceStore<float>;

@@ -42,7 +42,7 @@ class DeviceStore {
               cudaStream_t stream);
 
   /// u = u_prev = u_next = 0, u_held = 0, f = f_slot = dv_slot = node_p = 0,
-  /// elem_J = 1, held = the fixed axes, driven = 0, every node inner, no bad
+  /// elem_J = 1 (both pass-array sets; set 0 the state's), held = the fixed axes, driven = 0, every node inner, no bad
   /// element, no contact.
   void reset_state(cudaStream_t stream);
 
@@ -56,6 +56,21 @@ class DeviceStore {
   ModelView<T> model() const { return model_; }
   LawView<T> law() const { return law_; }
   StateView<T> state();
+
+  /// The pass arrays (dv_slot, elem_J, node_p) come in two sets: the
+  /// state's, which the steps use, and a scratch set, into which the
+  /// reduction runs passes 1-2 at the current u (its strain energy). When
+  /// the steps go on from that u, the sets swap roles and the first step
+  /// starts at pass 3 (the cpu backend's take_passes). state() views the
+  /// state's set; this view is state() with the scratch set instead.
+  StateView<T> pressure_scratch();
+  /// The scratch set becomes the state's (and the state's the scratch).
+  void swap_pressures() { pressures_ ^= 1; }
+  /// Which set is the state's (0 or 1): a captured graph bakes its pointers.
+  int pressure_set() const { return pressures_; }
+  /// Copies the state's set whole into the scratch set (so that the two
+  /// agree outside any region the reduction runs over).
+  void copy_pressures_to_scratch(cudaStream_t stream);
 
   index_t n_nodes() const { return model_.n_nodes; }
   index_t n_elems() const { return model_.n_elems; }
@@ -77,7 +92,8 @@ class DeviceStore {
   DeviceArray<Packed3<T>> u_held_, f_slot_, f_, contact_normal_, grasp_offset_, corner_dx_;
   DeviceArray<std::uint8_t> held_, driven_, role_, contact_, corner_blocked_, proposed_;
   DeviceArray<signed char> contact_tool_, corner_tool_;
-  DeviceArray<T> dv_slot_, elem_J_, node_p_;
+  DeviceArray<T> dv_slot_[2], elem_J_[2], node_p_[2];  ///< the two pass-array sets (pressure_scratch())
+  int pressures_ = 0;                                   ///< the state's set
   /// The law terms' arrays, one per line of core/material.hpp's lists (empty when unused).
   struct LawArrays {
 #define TISSUE_LAW_DEVICE_ARRAY(kind, name, len) DeviceArray<typename LawFieldTypes<T>::kind> name;

@@ -370,7 +370,7 @@ __global__ void __launch_bounds__(kReduceBlock)
 }  // namespace
 
 template <class T>
-void Reducer<T>::allocate(index_t n_nodes, index_t n_elems, cudaStream_t stream) {
+void Reducer<T>::allocate(cudaStream_t stream) {
   partial_.allocate(size_t(kWords<ReducePartial>) * kMaxReduceBlocks);
   contact_partial_.allocate(size_t(kWords<ContactPartial>) * kMaxReduceBlocks);
   touched_.allocate(kMaxReduceBlocks);
@@ -381,42 +381,32 @@ void Reducer<T>::allocate(index_t n_nodes, index_t n_elems, cudaStream_t stream)
   // initcheck reads the whole struct when it comes back)
   result_.fill_bytes(0, stream);
   result_host_.allocate(1);
-  dv_slot_.allocate(4 * size_t(n_elems));
-  elem_J_.allocate(n_elems);
-  node_p_.allocate(n_nodes);
 }
 
 template <class T>
-Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
-                           StepBuffers<T> b, Transfers& log, cudaStream_t stream) {
-  enqueue(m, s, r, front, b, stream);
+Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const StateView<T>& scratch,
+                           const RegionView& r, FrontView front, StepBuffers<T> b, Transfers& log,
+                           cudaStream_t stream) {
+  enqueue(m, s, scratch, r, front, b, stream);
   log.to_host(result_host_.data(), result_.data(), sizeof(Reductions), stream);
   return result_host_[0];
 }
 
 template <class T>
-void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
-                         StepBuffers<T> b, cudaStream_t stream, bool to_host) {
-  if (m.ianp && r.n_elems > 0) {  // nodal pressures at the current u, into scratch
-    // pass 1 below rewrites the region's elements' slots; the others must be the state's (a whole-mesh
-    // region rewrites every slot, so the copy is only needed for a limited one)
-    if (r.n_elems < m.n_elems)
-      CUDA_CHECK(cudaMemcpyAsync(dv_slot_.data(), s.dv_slot, dv_slot_.bytes(), cudaMemcpyDeviceToDevice, stream));
-    StateView<T> e = s;
-    e.dv_slot = dv_slot_.data();
-    e.elem_J = elem_J_.data();
-    e.node_p = node_p_.data();
+void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const StateView<T>& scratch,
+                         const RegionView& r, FrontView front, StepBuffers<T> b, cudaStream_t stream, bool to_host) {
+  if (runs_passes(m, r)) {  // nodal pressures at the current u, into the scratch set
     with_gradients(m, r, [&](auto recomputed) {
-      launch(r.n_elems, stream, element_pressure_kernel<T, decltype(recomputed)::value>, m, e, r,
+      launch(r.n_elems, stream, element_pressure_kernel<T, decltype(recomputed)::value>, m, scratch, r,
              static_cast<const Packed3<T>*>(b.u));
     });
-    launch(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, e, r);
+    launch(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, scratch, r);
   }
   const index_t items = std::max(r.n_nodes + r.n_elems + m.n_surf, index_t(1));
   const int blocks = std::min(grid_for(items, kReduceBlock), kMaxReduceBlocks);
   with_gradients(m, r, [&](auto recomputed) {  // the energies with the gradients of the steps
     launch_blocks(blocks, kReduceBlock, stream, reduce_kernel<T, decltype(recomputed)::value>, m, s, r, front, b,
-                  static_cast<const T*>(node_p_.data()), law_, partial_.data(), contact_partial_.data(), touched_.data(), done_.data(),
+                  static_cast<const T*>(scratch.node_p), law_, partial_.data(), contact_partial_.data(), touched_.data(), done_.data(),
                   result_.data(), to_host ? result_host_.device() : nullptr);
   });
 }

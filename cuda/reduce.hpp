@@ -54,26 +54,31 @@ struct FrontView {
 template <class T>
 class Reducer {
  public:
-  /// Partials, result and the strain energy's scratch (passes 1-2 at the
-  /// current u: 4 n_elems + n_elems + n_nodes scalars).
-  void allocate(index_t n_nodes, index_t n_elems, cudaStream_t stream);
+  /// Partials and result.
+  void allocate(cudaStream_t stream);
   /// The model's law terms: the fibre term's energy (LawView::fibre; null:
   /// none) and the Prony terms' power and stored energy (null visco_slot: none).
   void set_law(const LawView<T>& law) { law_ = law; }
 
+  /// Whether the reduction runs passes 1-2 (IANP, a region with elements).
+  static bool runs_passes(const ModelView<T>& m, const RegionView& r) { return m.ianp && r.n_elems > 0; }
+
   /// Reduces over region r with the current buffers b, and the tools'
   /// contact over the surface; clears the bad flag; one download.
   /// For IANP the energy needs the nodal pressures at the current u: passes
-  /// 1 and 2 run again into scratch (the state's pass arrays stay as the last
-  /// step wrote them).
-  Reductions run(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front,
-                 StepBuffers<T> b, Transfers& log, cudaStream_t stream);
+  /// 1 and 2 run again over the region into `scratch` (the state view s
+  /// with the scratch set of pass arrays: DeviceStore::pressure_scratch;
+  /// the state's own stay as the last step wrote them). Its entries outside
+  /// the region must already be the state's (the caller's copy), so that
+  /// the next steps can take the set as theirs.
+  Reductions run(const ModelView<T>& m, const StateView<T>& s, const StateView<T>& scratch, const RegionView& r,
+                 FrontView front, StepBuffers<T> b, Transfers& log, cudaStream_t stream);
 
   /// run()'s kernels without the download: the result stays in device
   /// memory (result()) and, with to_host, the kernel also writes it into
   /// result_host() (mapped): no copy, readable once the stream has finished.
-  void enqueue(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, FrontView front, StepBuffers<T> b,
-               cudaStream_t stream, bool to_host = false);
+  void enqueue(const ModelView<T>& m, const StateView<T>& s, const StateView<T>& scratch, const RegionView& r,
+               FrontView front, StepBuffers<T> b, cudaStream_t stream, bool to_host = false);
   const Reductions* result() const { return result_.data(); }
   /// Pinned, mapped host memory for the result's download.
   Reductions* result_host() { return result_host_.data(); }
@@ -85,7 +90,6 @@ class Reducer {
   DeviceArray<unsigned> done_;          ///< blocks finished (the last one resets it to 0)
   DeviceArray<Reductions> result_;      ///< (1)
   PinnedArray<Reductions> result_host_;
-  DeviceArray<T> dv_slot_, elem_J_, node_p_;  ///< energy scratch
   LawView<T> law_;
 };
 

@@ -123,10 +123,12 @@ void Stepper<T>::node_update(const ModelView<T>& m, const StateView<T>& s, const
 
 template <class T>
 void Stepper<T>::launch_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
-                              int steps, const ContactTools<T>* tools, cudaStream_t stream) {
+                              int steps, const ContactTools<T>* tools, StepStart start, cudaStream_t stream) {
   for (int k = 0; k < steps; ++k) {
-    element_pressure(m, s, r, b.u, stream);
-    nodal_pressure(m, s, r, stream);
+    if (k > 0 || start == StepStart::kPass1) {
+      element_pressure(m, s, r, b.u, stream);
+      nodal_pressure(m, s, r, stream);
+    }
     element_forces(m, s, r, b.u, stream);
     node_update(m, s, r, b, stream);
     if (tools) {  // the contact stage over the surface (cuda/contact.cuh)
@@ -160,16 +162,18 @@ cudaGraphExec_t Stepper<T>::cached_graph(const GraphKey& key, const std::functio
 }
 
 template <class T>
-cudaGraphExec_t Stepper<T>::graph(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
-                                  BufferRing<T>& ring, int steps, const ContactTools<T>* tools, cudaStream_t stream) {
+cudaGraphExec_t Stepper<T>::graph(const ModelView<T>& m, const StateView<T>& s, int pressure_set,
+                                  const RegionView& r, BufferRing<T>& ring, int steps, const ContactTools<T>* tools,
+                                  StepStart start, cudaStream_t stream) {
   return cached_graph(
-      {ring.phase, steps, tools != nullptr, GraphKey::kSteps, 0},
-      [&](cudaStream_t st) { launch_steps(m, s, r, ring.current(), steps, tools, st); }, stream);
+      {ring.phase, steps, tools != nullptr, GraphKey::kSteps, 0, pressure_set, start == StepStart::kPass3},
+      [&](cudaStream_t st) { launch_steps(m, s, r, ring.current(), steps, tools, start, st); }, stream);
 }
 
 template <class T>
-void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, BufferRing<T>& ring,
-                         int steps, const ContactTools<T>* tools, cudaStream_t stream) {
+void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, int pressure_set, const RegionView& r,
+                         BufferRing<T>& ring, int steps, const ContactTools<T>* tools, StepStart start,
+                         cudaStream_t stream) {
   if (steps <= 0) return;
   if (r.n_elems == 0 && r.n_nodes == 0 && !tools) {  // nothing moves; every buffer holds the same (frozen) values
     ring.advance(steps);
@@ -178,15 +182,16 @@ void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, const Reg
   switch (choose(r)) {
     case CudaStepMode::Auto:  // resolved by choose()
     case CudaStepMode::Launch:
-      launch_steps(m, s, r, ring.current(), steps, tools, stream);
+      launch_steps(m, s, r, ring.current(), steps, tools, start, stream);
       ring.advance(steps);
       break;
     case CudaStepMode::Graph:
       while (steps > 0) {
         const int k = std::min(steps, kMaxGraphSteps);
-        CUDA_CHECK(cudaGraphLaunch(graph(m, s, r, ring, k, tools, stream), stream));
+        CUDA_CHECK(cudaGraphLaunch(graph(m, s, pressure_set, r, ring, k, tools, start, stream), stream));
         ring.advance(k);
         steps -= k;
+        start = StepStart::kPass1;
       }
       break;
     case CudaStepMode::Grid: {
@@ -200,7 +205,8 @@ void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, const Reg
       StepBuffers<T> b = ring.current();
       const ContactTools<T>* ta = tools;
       LawView<T> wa = law_;
-      void* args[] = {&ma, &sa, &ra, &b, &steps, &ta, &wa};
+      int from_pass3 = start == StepStart::kPass3;
+      void* args[] = {&ma, &sa, &ra, &b, &steps, &ta, &wa, &from_pass3};
       const void* kernel = with_gradients(m, r, [&](auto recomputed) {
         constexpr bool kRecomputed = decltype(recomputed)::value;
         return law ? reinterpret_cast<const void*>(persistent_grid_kernel<T, true, kRecomputed>)
@@ -230,7 +236,8 @@ void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, const Reg
         constexpr bool kRecomputed = decltype(recomputed)::value;
         const auto kernel =
             law ? persistent_cluster_kernel<T, true, kRecomputed> : persistent_cluster_kernel<T, false, kRecomputed>;
-        CUDA_CHECK(cudaLaunchKernelEx(&cfg, kernel, m, s, r, ring.current(), steps, tools, law_));
+        CUDA_CHECK(cudaLaunchKernelEx(&cfg, kernel, m, s, r, ring.current(), steps, tools, law_,
+                                      int(start == StepStart::kPass3)));
       });
       ring.advance(steps);
       break;

@@ -62,8 +62,15 @@ struct GraphKey {
   bool contact = false;
   Frame frame = kSteps;
   std::size_t upload_bytes = 0;
+  int pressure_set = 0;  ///< which pass-array set is the state's (DeviceStore::pressure_set)
+  bool from_pass3 = false;  ///< the first step starts at pass 3 (its passes 1-2 are done: StepStart)
   auto operator<=>(const GraphKey&) const = default;
 };
+
+/// Where the first of n steps starts: at pass 1, or at pass 3 when passes
+/// 1-2 at the current u are already in the state's pass arrays (the
+/// reduction's, taken over by DeviceStore::swap_pressures).
+enum class StepStart { kPass1, kPass3 };
 
 /// What the device allows for the persistent modes.
 struct PersistentLimits {
@@ -111,15 +118,16 @@ class Stepper {
   /// `steps` whole steps from ring's current phase; advances the phase.
   /// With `tools` (device memory: the tools' motion over these steps), each
   /// step ends with the contact stage (cuda/contact.cuh); null: none.
-  void advance(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, BufferRing<T>& ring, int steps,
-               const ContactTools<T>* tools, cudaStream_t stream);
+  /// `pressure_set`: DeviceStore::pressure_set() of s (graphs are cached per set).
+  void advance(const ModelView<T>& m, const StateView<T>& s, int pressure_set, const RegionView& r,
+               BufferRing<T>& ring, int steps, const ContactTools<T>* tools, StepStart start, cudaStream_t stream);
 
   /// Queues the kernels of `steps` whole steps from buffers b (the Graph
   /// mode's launches), for a caller's own graph; the ring's phase is the
   /// caller's to advance.
   void enqueue_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b, int steps,
-                     const ContactTools<T>* tools, cudaStream_t stream) {
-    launch_steps(m, s, r, b, steps, tools, stream);
+                     const ContactTools<T>* tools, StepStart start, cudaStream_t stream) {
+    launch_steps(m, s, r, b, steps, tools, start, stream);
   }
 
   /// The graph cached under `key`, captured on first use from what
@@ -129,9 +137,10 @@ class Stepper {
 
  private:
   void launch_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b, int steps,
-                    const ContactTools<T>* tools, cudaStream_t stream);
-  cudaGraphExec_t graph(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, BufferRing<T>& ring,
-                        int steps, const ContactTools<T>* tools, cudaStream_t stream);
+                    const ContactTools<T>* tools, StepStart start, cudaStream_t stream);
+  cudaGraphExec_t graph(const ModelView<T>& m, const StateView<T>& s, int pressure_set, const RegionView& r,
+                        BufferRing<T>& ring, int steps, const ContactTools<T>* tools, StepStart start,
+                        cudaStream_t stream);
 
   CudaStepMode mode_ = CudaStepMode::Auto;
   PersistentLimits limits_;

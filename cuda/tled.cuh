@@ -348,21 +348,24 @@ struct ClusterBarrier {
 /// kNodeLanes, so a group's lanes always iterate together) and the barrier
 /// separates passes (and steps); with tools, each step ends with the
 /// contact stage (cuda/contact.cuh) over the surface. The buffers rotate per
-/// step.
+/// step. from_pass3: the first step starts at pass 3 (Stepper's StepStart).
 template <class T, bool kLaw, bool kRecomputed, class Barrier>
 __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
-                          int steps, const ContactTools<T>* tools, const LawView<T>& w, Barrier barrier) {
+                          int steps, const ContactTools<T>* tools, const LawView<T>& w, bool from_pass3,
+                          Barrier barrier) {
   const index_t first = thread_index(), stride = thread_stride();
   const index_t node_items = kNodeLanes * r.n_nodes;
   const int lane = first % kNodeLanes;
   const unsigned mask = node_group_mask();
   for (int k = 0; k < steps; ++k) {
-    for (index_t i = first; i < r.n_elems; i += stride)
-      element_pressure_at(s, load_element<T, kRecomputed>(m, r.elem(i)), b.u);
-    barrier();
-    for (index_t g = first; g < node_items; g += stride)
-      nodal_pressure_at(m, s, load_node(m, r.node(g / kNodeLanes), lane, mask));
-    barrier();
+    if (k > 0 || !from_pass3) {  // (uniform over the grid)
+      for (index_t i = first; i < r.n_elems; i += stride)
+        element_pressure_at(s, load_element<T, kRecomputed>(m, r.elem(i)), b.u);
+      barrier();
+      for (index_t g = first; g < node_items; g += stride)
+        nodal_pressure_at(m, s, load_node(m, r.node(g / kNodeLanes), lane, mask));
+      barrier();
+    }
     for (index_t i = first; i < r.n_elems; i += stride) {
       if constexpr (kLaw)
         law_element_forces_at(m, s, load_element<T, kRecomputed>(m, r.elem(i)), b.u, w);
@@ -402,15 +405,15 @@ inline constexpr int kClusterBlock = sizeof(T) == 4 ? 1024 : 512;
 template <class T, bool kLaw, bool kRecomputed>
 __global__ void __launch_bounds__(kGridBlock)
     persistent_grid_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b, int steps,
-                           const ContactTools<T>* tools, LawView<T> w) {
-  run_steps<T, kLaw, kRecomputed>(m, s, r, b, steps, tools, w, GridBarrier{});
+                           const ContactTools<T>* tools, LawView<T> w, int from_pass3) {
+  run_steps<T, kLaw, kRecomputed>(m, s, r, b, steps, tools, w, from_pass3 != 0, GridBarrier{});
 }
 
 template <class T, bool kLaw, bool kRecomputed>
 __global__ void __launch_bounds__(kClusterBlock<T>)
     persistent_cluster_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b, int steps,
-                              const ContactTools<T>* tools, LawView<T> w) {
-  run_steps<T, kLaw, kRecomputed>(m, s, r, b, steps, tools, w, ClusterBarrier{});
+                              const ContactTools<T>* tools, LawView<T> w, int from_pass3) {
+  run_steps<T, kLaw, kRecomputed>(m, s, r, b, steps, tools, w, from_pass3 != 0, ClusterBarrier{});
 }
 
 }  // namespace tissue::gpu

@@ -658,6 +658,107 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
     }
 }
 
+/// The steps after a reduction take its passes 1-2 (run at the current u
+/// into the scratch set of pass arrays) as their first step's, and start
+/// at pass 3 (docs/cuda.md, "Passes 1-2 taken from the reduction"). Against
+/// the same calls with a per-pass element_pressure() after every reduction,
+/// which makes the next steps compute passes 1-2 themselves: the same bits
+/// in every step mode, over the whole mesh and a region of depth 2 (whose
+/// scratch set must hold the state's entries outside the region), through
+/// advance, advance_reduce (one graph per tick) and the checked tick, with
+/// one step and with more than a graph holds. A step that started at pass 3
+/// without the reduction's arrays, or with arrays left from before the last
+/// step, would move every node of the region differently.
+TEST_P(Stages, StepsTakingTheReductionsPassesGiveTheSameBits) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  const auto m = box_model(6, 6, 4, 0.06, 0.06, 0.04);
+  const auto u = random_field(m.n_nodes, 1e-4, 31);
+  const ToolShape tool[] = {{"probe", 0.004, 0.01}};
+  const Vec3<double> z{0, 0, 1};
+  struct Run {
+    std::vector<double> energy, kinetic, free2, reaction_z;
+    std::vector<Fields> fields;
+  };
+  auto run = [&](CudaStepMode mode, int depth, bool own_passes) {
+    auto b = make_cuda_backend(p);
+    set_cuda_step_mode(*b, mode);
+    b->upload(m);
+    b->set_displacements(u);
+    b->set_tools(tool);
+    ToolPose at{{0.031, 0.027, 0.0445}, z};
+    auto move = [&](double dz) {
+      const ToolMotion mv{at, {{at.tip.x, at.tip.y, at.tip.z + dz}, z}};
+      b->move_tools(std::span<const ToolMotion>(&mv, 1));
+      at = mv.to;
+    };
+    move(0);
+    if (depth != kDepthAll) {  // the region: depth 2 around the surface under the tool
+      b->build_region({}, depth);
+      b->build_region(b->contact_candidates(), depth);
+    }
+    Run out;
+    auto record = [&](const Reductions& r) {
+      out.energy.push_back(r.strain_energy);
+      out.kinetic.push_back(r.kinetic);
+      out.free2.push_back(r.free_force2);
+      out.reaction_z.push_back(r.tools[0].reaction.z);
+      out.fields.push_back(b->download());
+    };
+    // before steps: with own_passes, pass 1 run alone, so that the steps run passes 1-2 themselves (its
+    // J_e, at this u, are the ones their first pass 1 writes again)
+    auto steps_follow = [&] {
+      if (own_passes) b->element_pressure();
+    };
+    move(-5e-4);
+    b->advance(3);
+    record(b->reduce());
+    move(-2e-4);
+    steps_follow();
+    b->advance(1);  // one step: its pass arrays are the reduction's, and download() shows them
+    out.fields.push_back(b->download());
+    record(b->reduce());
+    record(b->reduce());  // twice at one u
+    move(-5e-4);
+    steps_follow();
+    b->advance(31);  // more than one graph holds: only the first starts at pass 3
+    record(b->reduce());
+    for (int tick = 0; tick < 3; ++tick) {
+      move(-2e-4);
+      steps_follow();
+      record(b->advance_reduce(tick == 1 ? 1 : 4));
+    }
+    move(-1e-4);
+    steps_follow();
+    const std::optional<Reductions> checked = b->advance_reduce_in_region(4);
+    EXPECT_TRUE(checked.has_value()) << "the tool stays inside its region";
+    if (checked) record(*checked);
+    steps_follow();
+    b->advance(2);
+    out.fields.push_back(b->download());
+    EXPECT_GT(out.reaction_z.size(), 6u);
+    EXPECT_NE(out.reaction_z.back(), 0.0) << "the tool presses the top";
+    return out;
+  };
+  for (int depth : {kDepthAll, 2})
+    for (CudaStepMode mode : {CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Grid, CudaStepMode::Cluster}) {
+      SCOPED_TRACE(::testing::Message() << "depth " << depth << " mode " << to_string(mode));
+      const Run taken = run(mode, depth, false), own = run(mode, depth, true);
+      EXPECT_EQ(taken.energy, own.energy);
+      EXPECT_EQ(taken.kinetic, own.kinetic);
+      EXPECT_EQ(taken.free2, own.free2);
+      EXPECT_EQ(taken.reaction_z, own.reaction_z);
+      ASSERT_EQ(taken.fields.size(), own.fields.size());
+      for (size_t k = 0; k < own.fields.size(); ++k) {
+        SCOPED_TRACE(k);
+        EXPECT_EQ(taken.fields[k].u, own.fields[k].u);
+        EXPECT_EQ(taken.fields[k].f, own.fields[k].f);
+        EXPECT_EQ(taken.fields[k].node_p, own.fields[k].node_p);  // download() sees the last step's passes
+        EXPECT_EQ(taken.fields[k].elem_J, own.fields[k].elem_J);
+      }
+    }
+}
+
 /// Element gradients recomputed from double reference positions at every
 /// pass (CudaGradients::Recomputed) against the stored ones and the cpu
 /// (which loads the model's gradients rounded to T): 60 steps from a rough
