@@ -71,7 +71,9 @@ __global__ void flag_candidates_kernel(ModelView<T> m, StateView<T> s, const Pac
 template <class T>
 __global__ void reach_outside_kernel(ModelView<T> m, StateView<T> s, const Packed3<T>* u, const ContactTools<T>* tools,
                                      int* reach, int* host_reach) {
-  let_next_pass_launch();  // the steps' first pass may load its model meanwhile (it waits for this kernel)
+  // the steps' first pass may load its model meanwhile (it waits for this kernel), or run beside it
+  // (element_forces_beside_check_kernel: stores nothing before this kernel has finished)
+  let_next_pass_launch();
   __shared__ alignas(ContactTools<T>) unsigned char raw[sizeof(ContactTools<T>)];
   ContactTools<T>& sweep = *reinterpret_cast<ContactTools<T>*>(raw);
   // the triangle's corners and their state, loaded while thread 0 copies the tools

@@ -398,7 +398,8 @@ class CudaBackend final : public Backend {
   }
 
   /// One tick graph of `steps` (<= kMaxGraphSteps) steps over `tools`,
-  /// cached per buffer phase, step count, upload size and check; with
+  /// cached per buffer phase, step count, upload size, check, pass-array set
+  /// and start (GraphKey); with
   /// `check`, led by the region's reach check: empty when the region must
   /// grow first (nothing ran).
   std::optional<Reductions> tick_graph(int steps, const ContactTools<double>& tools, bool check) {
@@ -422,7 +423,8 @@ class CudaBackend final : public Backend {
           }
           StateView<T> scratch = store_.pressure_scratch();
           scratch.skip = s.skip;
-          stepper_.enqueue_steps(store_.model(), s, r, store_.u.current(), steps, dtools, start, st);
+          stepper_.enqueue_steps(store_.model(), s, r, store_.u.current(), steps, dtools,
+                                 check && start == StepStart::kPass3 ? StepStart::kPass3BesideCheck : start, st);
           // the reduction and the check write their answers into mapped host memory themselves: no
           // copy nodes (on the kidney's tick on an H100: docs/benchmarks/README.md, "Answers written
           // into host memory")

@@ -102,10 +102,12 @@ void Stepper<T>::nodal_pressure(const ModelView<T>& m, const StateView<T>& s, co
 
 template <class T>
 void Stepper<T>::element_forces(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
-                                const Packed3<T>* u, cudaStream_t stream) {
+                                const Packed3<T>* u, cudaStream_t stream, bool beside_check) {
   with_gradients(m, r, [&](auto recomputed) {
     constexpr bool kRecomputed = decltype(recomputed)::value;
-    if (law_.neo_hookean())
+    if (beside_check && law_.neo_hookean())  // (a law kernel's Prony state must not move before the check)
+      launch_chained(r.n_elems, stream, element_forces_beside_check_kernel<T, kRecomputed>, m, s, r, u);
+    else if (law_.neo_hookean())
       launch_chained(r.n_elems, stream, element_forces_kernel<T, kRecomputed>, m, s, r, u);
     else
       launch_chained(r.n_elems, stream, law_element_forces_kernel<T, kRecomputed>, m, s, r, u, law_);
@@ -129,7 +131,7 @@ void Stepper<T>::launch_steps(const ModelView<T>& m, const StateView<T>& s, cons
       element_pressure(m, s, r, b.u, stream);
       nodal_pressure(m, s, r, stream);
     }
-    element_forces(m, s, r, b.u, stream);
+    element_forces(m, s, r, b.u, stream, k == 0 && start == StepStart::kPass3BesideCheck);
     node_update(m, s, r, b, stream);
     if (tools) {  // the contact stage over the surface (cuda/contact.cuh)
       launch_chained(m.n_tris, stream, sweep_triangles_kernel<T>, m, s, tools, k,
@@ -166,7 +168,7 @@ cudaGraphExec_t Stepper<T>::graph(const ModelView<T>& m, const StateView<T>& s, 
                                   const RegionView& r, BufferRing<T>& ring, int steps, const ContactTools<T>* tools,
                                   StepStart start, cudaStream_t stream) {
   return cached_graph(
-      {ring.phase, steps, tools != nullptr, GraphKey::kSteps, 0, pressure_set, start == StepStart::kPass3},
+      {ring.phase, steps, tools != nullptr, GraphKey::kSteps, 0, pressure_set, start != StepStart::kPass1},
       [&](cudaStream_t st) { launch_steps(m, s, r, ring.current(), steps, tools, start, st); }, stream);
 }
 
@@ -205,7 +207,7 @@ void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, int press
       StepBuffers<T> b = ring.current();
       const ContactTools<T>* ta = tools;
       LawView<T> wa = law_;
-      int from_pass3 = start == StepStart::kPass3;
+      int from_pass3 = start != StepStart::kPass1;
       void* args[] = {&ma, &sa, &ra, &b, &steps, &ta, &wa, &from_pass3};
       const void* kernel = with_gradients(m, r, [&](auto recomputed) {
         constexpr bool kRecomputed = decltype(recomputed)::value;
@@ -237,7 +239,7 @@ void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, int press
         const auto kernel =
             law ? persistent_cluster_kernel<T, true, kRecomputed> : persistent_cluster_kernel<T, false, kRecomputed>;
         CUDA_CHECK(cudaLaunchKernelEx(&cfg, kernel, m, s, r, ring.current(), steps, tools, law_,
-                                      int(start == StepStart::kPass3)));
+                                      int(start != StepStart::kPass1)));
       });
       ring.advance(steps);
       break;

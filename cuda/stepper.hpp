@@ -69,8 +69,12 @@ struct GraphKey {
 
 /// Where the first of n steps starts: at pass 1, or at pass 3 when passes
 /// 1-2 at the current u are already in the state's pass arrays (the
-/// reduction's, taken over by DeviceStore::swap_pressures).
-enum class StepStart { kPass1, kPass3 };
+/// reduction's, taken over by DeviceStore::swap_pressures). In a checked
+/// tick (the region's reach check queued just before the steps), pass 3
+/// may then run beside the check (kPass3BesideCheck: a model without law
+/// terms computes its forces while the check runs; cuda/tled.cuh
+/// element_forces_beside_check_kernel).
+enum class StepStart { kPass1, kPass3, kPass3BesideCheck };
 
 /// What the device allows for the persistent modes.
 struct PersistentLimits {
@@ -110,8 +114,9 @@ class Stepper {
   void element_pressure(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, const Packed3<T>* u,
                         cudaStream_t stream, const RegionView* gradients_of = nullptr);
   void nodal_pressure(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, cudaStream_t stream);
+  /// beside_check: the first pass 3 of a checked tick (StepStart::kPass3BesideCheck).
   void element_forces(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, const Packed3<T>* u,
-                      cudaStream_t stream);
+                      cudaStream_t stream, bool beside_check = false);
   void node_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
                    cudaStream_t stream);
 

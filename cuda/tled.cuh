@@ -159,21 +159,40 @@ __device__ __forceinline__ T law_element_forces(const ModelView<T>& m, const Law
 /// corners. An element with J <= 0, Jbar <= 0 or a non-finite J is recorded
 /// in s.bad (lowest wins; its forces are zero, as core's functions return).
 /// Neo-Hookean: the kernels of a model without law terms run exactly this.
+/// What pass 3 computes for an element (element_forces_of) before it
+/// stores it (store_element_forces).
 template <class T>
-__device__ void element_forces_at(const StateView<T>& s, const ElementData<T>& d, const Packed3<T>* u, bool ianp) {
-  Vec3<T> ue[4];
-  corner_displacements(d, u, ue);
+struct ElementForces {
   Vec3<T> f[4];
   T J;
+};
+
+template <class T>
+__device__ __forceinline__ ElementForces<T> element_forces_of(const StateView<T>& s, const ElementData<T>& d,
+                                                              const Packed3<T>* u, bool ianp) {
+  Vec3<T> ue[4];
+  corner_displacements(d, u, ue);
+  ElementForces<T> out;
   if (ianp) {
     const T pbar = (s.node_p[d.c[0]] + s.node_p[d.c[1]] + s.node_p[d.c[2]] + s.node_p[d.c[3]]) / T(4);
-    J = ianp_element_forces(ue, d.dN, d.V, d.mu, d.K, pbar, f);
+    out.J = ianp_element_forces(ue, d.dN, d.V, d.mu, d.K, pbar, out.f);
   } else {
-    J = plain_element_forces(ue, d.dN, d.V, d.mu, d.K, f);
+    out.J = plain_element_forces(ue, d.dN, d.V, d.mu, d.K, out.f);
   }
-  if (!(J > T(0)) || !isfinite(J)) atomicMin(s.bad, bad_key(d.e, static_cast<float>(J)));
+  return out;
+}
+
+template <class T>
+__device__ __forceinline__ void store_element_forces(const StateView<T>& s, const ElementData<T>& d,
+                                                     const ElementForces<T>& out) {
+  if (!(out.J > T(0)) || !isfinite(out.J)) atomicMin(s.bad, bad_key(d.e, static_cast<float>(out.J)));
 #pragma unroll
-  for (int a = 0; a < 4; ++a) s.f_slot[d.slot[a]] = Packed3<T>::of(f[a]);
+  for (int a = 0; a < 4; ++a) s.f_slot[d.slot[a]] = Packed3<T>::of(out.f[a]);
+}
+
+template <class T>
+__device__ void element_forces_at(const StateView<T>& s, const ElementData<T>& d, const Packed3<T>* u, bool ianp) {
+  store_element_forces(s, d, element_forces_of(s, d, u, ianp));
 }
 
 /// The same with the law terms of core/material.hpp (a model that has any).
@@ -303,6 +322,31 @@ __global__ void element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView
   wait_for_previous_pass();
   if (skipped(s)) return;
   if (active) element_forces_at(s, d, u, m.ianp);
+}
+
+/// Pass 3 of a checked tick's first step when that step starts at pass 3
+/// (Stepper's StepStart::kPass3BesideCheck; a model without law terms): the
+/// previous kernel is the region's reach check, which writes nothing pass 3
+/// reads (u, the nodal pressures and the model are the previous tick's, as
+/// the reduction left them), so the forces are computed while the check
+/// runs, and the kernel waits for it only before it stores them: a tick the
+/// check refuses stores nothing. Pass 4 waits for this kernel, and so for
+/// the check. The same arithmetic as element_forces_kernel.
+template <class T, bool kRecomputed>
+__global__ void element_forces_beside_check_kernel(ModelView<T> m, StateView<T> s, RegionView r,
+                                                   const Packed3<T>* u) {
+  let_next_pass_launch();
+  const index_t i = thread_index();
+  const bool active = i < r.n_elems;
+  ElementData<T> d;
+  ElementForces<T> out;
+  if (active) {
+    d = load_element<T, kRecomputed>(m, r.elem(i));
+    out = element_forces_of(s, d, u, m.ianp);
+  }
+  wait_for_previous_pass();
+  if (skipped(s)) return;
+  if (active) store_element_forces(s, d, out);
 }
 
 /// Pass 3 of a model with law terms (core/material.hpp).

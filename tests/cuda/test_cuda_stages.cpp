@@ -370,7 +370,10 @@ TEST_P(Stages, LawTermsMatchCpuInEveryStepMode) {
   auto run = [&](Backend& b) {
     b.upload(m);
     b.set_driven(top, target);
-    b.advance(90);
+    for (int k = 0; k < 3; ++k) {
+      b.advance(30);
+      b.reduce();  // the next steps start at pass 3 with the reduction's passes 1-2 (law kernels included)
+    }
     return b.download().u;
   };
   auto cpu = make_cpu_backend(p);
@@ -661,14 +664,17 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
 /// The steps after a reduction take its passes 1-2 (run at the current u
 /// into the scratch set of pass arrays) as their first step's, and start
 /// at pass 3 (docs/cuda.md, "Passes 1-2 taken from the reduction"). Against
-/// the same calls with a per-pass element_pressure() after every reduction,
-/// which makes the next steps compute passes 1-2 themselves: the same bits
-/// in every step mode, over the whole mesh and a region of depth 2 (whose
+/// the same calls with a per-pass element_pressure() before every advance,
+/// which makes the steps compute passes 1-2 themselves: the same bits in
+/// every step mode, over the whole mesh and a region of depth 2 (whose
 /// scratch set must hold the state's entries outside the region), through
-/// advance, advance_reduce (one graph per tick) and the checked tick, with
-/// one step and with more than a graph holds. A step that started at pass 3
-/// without the reduction's arrays, or with arrays left from before the last
-/// step, would move every node of the region differently.
+/// advance, advance_reduce (one graph per tick) and the checked tick (whose
+/// first pass 3 runs beside the region's check), with one step and with
+/// more than a graph holds, after a tick the check refuses and after the
+/// region is built again. In double the graph mode's run is also compared
+/// with the cpu's (its take_passes), downloads included. A step that started
+/// at pass 3 without the reduction's arrays, or with arrays left from before
+/// the last step, would move every node of the region differently.
 TEST_P(Stages, StepsTakingTheReductionsPassesGiveTheSameBits) {
   SKIP_WITHOUT_GPU();
   const Precision p = GetParam();
@@ -680,22 +686,23 @@ TEST_P(Stages, StepsTakingTheReductionsPassesGiveTheSameBits) {
     std::vector<double> energy, kinetic, free2, reaction_z;
     std::vector<Fields> fields;
   };
-  auto run = [&](CudaStepMode mode, int depth, bool own_passes) {
-    auto b = make_cuda_backend(p);
-    set_cuda_step_mode(*b, mode);
-    b->upload(m);
-    b->set_displacements(u);
-    b->set_tools(tool);
+  auto run = [&](Backend& b, int depth, bool own_passes) {
+    b.upload(m);
+    b.set_displacements(u);
+    b.set_tools(tool);
     ToolPose at{{0.031, 0.027, 0.0445}, z};
-    auto move = [&](double dz) {
-      const ToolMotion mv{at, {{at.tip.x, at.tip.y, at.tip.z + dz}, z}};
-      b->move_tools(std::span<const ToolMotion>(&mv, 1));
+    auto move = [&](Vec3<double> d) {
+      const ToolMotion mv{at, {at.tip + d, z}};
+      b.move_tools(std::span<const ToolMotion>(&mv, 1));
       at = mv.to;
     };
-    move(0);
+    const auto down = [](double dz) { return Vec3<double>{0, 0, dz}; };
+    move(down(0));
     if (depth != kDepthAll) {  // the region: depth 2 around the surface under the tool
-      b->build_region({}, depth);
-      b->build_region(b->contact_candidates(), depth);
+      b.build_region({}, depth);
+      b.build_region(b.contact_candidates(), depth);
+      EXPECT_LT(b.region().elems.size(), size_t(m.n_elems));
+      EXPECT_GT(b.region().n_halo, 0);
     }
     Run out;
     auto record = [&](const Reductions& r) {
@@ -703,60 +710,102 @@ TEST_P(Stages, StepsTakingTheReductionsPassesGiveTheSameBits) {
       out.kinetic.push_back(r.kinetic);
       out.free2.push_back(r.free_force2);
       out.reaction_z.push_back(r.tools[0].reaction.z);
-      out.fields.push_back(b->download());
+      out.fields.push_back(b.download());
     };
     // before steps: with own_passes, pass 1 run alone, so that the steps run passes 1-2 themselves (its
     // J_e, at this u, are the ones their first pass 1 writes again)
     auto steps_follow = [&] {
-      if (own_passes) b->element_pressure();
+      if (own_passes) b.element_pressure();
     };
-    move(-5e-4);
-    b->advance(3);
-    record(b->reduce());
-    move(-2e-4);
+    move(down(-5e-4));
+    b.advance(3);
+    record(b.reduce());
+    move(down(-2e-4));
     steps_follow();
-    b->advance(1);  // one step: its pass arrays are the reduction's, and download() shows them
-    out.fields.push_back(b->download());
-    record(b->reduce());
-    record(b->reduce());  // twice at one u
-    move(-5e-4);
+    b.advance(1);  // one step: its pass arrays are the reduction's, and download() shows them
+    out.fields.push_back(b.download());
+    record(b.reduce());
+    record(b.reduce());  // twice at one u
+    move(down(-5e-4));
     steps_follow();
-    b->advance(31);  // more than one graph holds: only the first starts at pass 3
-    record(b->reduce());
+    b.advance(31);  // more than one graph holds: only the first starts at pass 3
+    record(b.reduce());
     for (int tick = 0; tick < 3; ++tick) {
-      move(-2e-4);
+      move(down(-2e-4));
       steps_follow();
-      record(b->advance_reduce(tick == 1 ? 1 : 4));
+      record(b.advance_reduce(tick == 1 ? 1 : 4));
     }
-    move(-1e-4);
+    move(down(-1e-4));
     steps_follow();
-    const std::optional<Reductions> checked = b->advance_reduce_in_region(4);
+    const std::optional<Reductions> checked = b.advance_reduce_in_region(4);
     EXPECT_TRUE(checked.has_value()) << "the tool stays inside its region";
     if (checked) record(*checked);
+    if (depth != kDepthAll) {  // a slide out of the region: refused, nothing runs, the tool stays
+      const ToolPose stay = at;
+      move({0.02, 0, 0});
+      const Fields before = b.download();
+      EXPECT_FALSE(b.advance_reduce_in_region(4).has_value());
+      const Fields after = b.download();
+      EXPECT_EQ(after.u, before.u);
+      EXPECT_EQ(after.node_p, before.node_p);  // the sets swapped back
+      EXPECT_EQ(after.elem_J, before.elem_J);
+      out.fields.push_back(after);
+      at = stay;
+      move(down(-1e-4));
+      steps_follow();
+      b.advance(2);  // the checked tick's reduction still holds: these steps start at pass 3
+      out.fields.push_back(b.download());
+      record(b.reduce());
+    }
+    b.build_region(b.region().seeds, depth);  // the state's arrays rewritten whole: the next reduction copies them
+    record(b.reduce());
     steps_follow();
-    b->advance(2);
-    out.fields.push_back(b->download());
+    b.advance(2);
+    out.fields.push_back(b.download());
     EXPECT_GT(out.reaction_z.size(), 6u);
     EXPECT_NE(out.reaction_z.back(), 0.0) << "the tool presses the top";
     return out;
   };
-  for (int depth : {kDepthAll, 2})
+  auto expect_same = [](const Run& a, const Run& b) {
+    EXPECT_EQ(a.energy, b.energy);
+    EXPECT_EQ(a.kinetic, b.kinetic);
+    EXPECT_EQ(a.free2, b.free2);
+    EXPECT_EQ(a.reaction_z, b.reaction_z);
+    ASSERT_EQ(a.fields.size(), b.fields.size());
+    for (size_t k = 0; k < b.fields.size(); ++k) {
+      SCOPED_TRACE(k);
+      EXPECT_EQ(a.fields[k].u, b.fields[k].u);
+      EXPECT_EQ(a.fields[k].f, b.fields[k].f);
+      EXPECT_EQ(a.fields[k].node_p, b.fields[k].node_p);  // download() sees the last step's passes
+      EXPECT_EQ(a.fields[k].elem_J, b.fields[k].elem_J);
+    }
+  };
+  for (int depth : {kDepthAll, 2}) {
+    Run cpu;
+    if (p == Precision::Double) cpu = run(*make_cpu_backend(p), depth, false);
     for (CudaStepMode mode : {CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Grid, CudaStepMode::Cluster}) {
       SCOPED_TRACE(::testing::Message() << "depth " << depth << " mode " << to_string(mode));
-      const Run taken = run(mode, depth, false), own = run(mode, depth, true);
-      EXPECT_EQ(taken.energy, own.energy);
-      EXPECT_EQ(taken.kinetic, own.kinetic);
-      EXPECT_EQ(taken.free2, own.free2);
-      EXPECT_EQ(taken.reaction_z, own.reaction_z);
-      ASSERT_EQ(taken.fields.size(), own.fields.size());
-      for (size_t k = 0; k < own.fields.size(); ++k) {
+      auto taken_b = make_cuda_backend(p), own_b = make_cuda_backend(p);
+      set_cuda_step_mode(*taken_b, mode);
+      set_cuda_step_mode(*own_b, mode);
+      const Run taken = run(*taken_b, depth, false), own = run(*own_b, depth, true);
+      expect_same(taken, own);
+      if (p != Precision::Double || mode != CudaStepMode::Graph) continue;
+      ASSERT_EQ(cpu.fields.size(), taken.fields.size());
+      double worst = 0;
+      for (size_t k = 0; k < cpu.fields.size(); ++k) {
         SCOPED_TRACE(k);
-        EXPECT_EQ(taken.fields[k].u, own.fields[k].u);
-        EXPECT_EQ(taken.fields[k].f, own.fields[k].f);
-        EXPECT_EQ(taken.fields[k].node_p, own.fields[k].node_p);  // download() sees the last step's passes
-        EXPECT_EQ(taken.fields[k].elem_J, own.fields[k].elem_J);
+        for (auto [g, c] : {std::pair{&taken.fields[k].u, &cpu.fields[k].u}, std::pair{&taken.fields[k].f, &cpu.fields[k].f},
+                            std::pair{&taken.fields[k].node_p, &cpu.fields[k].node_p}}) {
+          const double d = rel_diff(*g, *c);
+          worst = std::max(worst, d);
+          EXPECT_LT(d, 1e-9);
+        }
+        EXPECT_LT(rel_diff(minus_one(taken.fields[k].elem_J), minus_one(cpu.fields[k].elem_J)), 1e-9);
       }
+      report("passes taken from the reduction, graph against the cpu", p, worst);
     }
+  }
 }
 
 /// Element gradients recomputed from double reference positions at every
