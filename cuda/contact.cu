@@ -199,6 +199,9 @@ template <class T>
 void DeviceContact<T>::enqueue_reach_check(const ModelView<T>& m, const StateView<T>& s, const Packed3<T>* u,
                                            cudaStream_t stream) {
   CUDA_CHECK(cudaMemsetAsync(reach_.data(), 0, sizeof(int), stream));
+  // a plain launch, not a chained one: the first pass 3 of a checked tick reads u and the pressures
+  // before it waits for this kernel (element_forces_beside_check_kernel), which is safe only while
+  // everything queued before the check has finished when the check starts
   launch(m.n_tris, stream, reach_outside_kernel<T>, m, s, u, static_cast<const ContactTools<T>*>(tools_.data()),
          reach_.data(), reach_host_.device());
 }

@@ -408,10 +408,12 @@ class CudaBackend final : public Backend {
     const ContactTools<T>* dtools = tools.n_tools > 0 ? contact_.device_tools() : nullptr;
     check = check && dtools != nullptr;
     const StepStart start = take_pressures();
+    // a checked tick's first pass 3 runs beside the check (cuda/tled.cuh element_forces_beside_check_kernel)
+    const StepStart steps_start = check && start == StepStart::kPass3 ? StepStart::kPass3BesideCheck : start;
     const bool passes = Reducer<T>::runs_passes(store_.model(), r);
     if (passes) sync_pressures();  // (before the graph, on its stream)
     const GraphKey key{store_.u.phase, steps, dtools != nullptr, check ? GraphKey::kCheckedTick : GraphKey::kTick,
-                       tool_bytes, store_.pressure_set(), start == StepStart::kPass3};
+                       tool_bytes, store_.pressure_set(), static_cast<int>(steps_start)};
     const cudaGraphExec_t exec = stepper_.cached_graph(
         key,
         [&](cudaStream_t st) {
@@ -423,8 +425,7 @@ class CudaBackend final : public Backend {
           }
           StateView<T> scratch = store_.pressure_scratch();
           scratch.skip = s.skip;
-          stepper_.enqueue_steps(store_.model(), s, r, store_.u.current(), steps, dtools,
-                                 check && start == StepStart::kPass3 ? StepStart::kPass3BesideCheck : start, st);
+          stepper_.enqueue_steps(store_.model(), s, r, store_.u.current(), steps, dtools, steps_start, st);
           // the reduction and the check write their answers into mapped host memory themselves: no
           // copy nodes (on the kidney's tick on an H100: docs/benchmarks/README.md, "Answers written
           // into host memory")

@@ -168,7 +168,7 @@ cudaGraphExec_t Stepper<T>::graph(const ModelView<T>& m, const StateView<T>& s, 
                                   const RegionView& r, BufferRing<T>& ring, int steps, const ContactTools<T>* tools,
                                   StepStart start, cudaStream_t stream) {
   return cached_graph(
-      {ring.phase, steps, tools != nullptr, GraphKey::kSteps, 0, pressure_set, start != StepStart::kPass1},
+      {ring.phase, steps, tools != nullptr, GraphKey::kSteps, 0, pressure_set, static_cast<int>(start)},
       [&](cudaStream_t st) { launch_steps(m, s, r, ring.current(), steps, tools, start, st); }, stream);
 }
 

@@ -52,6 +52,15 @@ class GraphExec {
   cudaGraphExec_t e_ = nullptr;
 };
 
+/// Where the first of n steps starts: at pass 1, or at pass 3 when passes
+/// 1-2 at the current u are already in the state's pass arrays (the
+/// reduction's, taken over by DeviceStore::swap_pressures). In a checked
+/// tick (the region's reach check queued just before the steps), pass 3
+/// may then run beside the check (kPass3BesideCheck: a model without law
+/// terms computes its forces while the check runs; cuda/tled.cuh
+/// element_forces_beside_check_kernel).
+enum class StepStart { kPass1, kPass3, kPass3BesideCheck };
+
 /// What a cached graph holds: `steps` steps from buffer phase `phase`, with
 /// or without the contact stage, alone or as a haptic tick (the backend's
 /// tick graph: the tools' upload of `upload_bytes` first, the reductions and
@@ -63,18 +72,9 @@ struct GraphKey {
   Frame frame = kSteps;
   std::size_t upload_bytes = 0;
   int pressure_set = 0;  ///< which pass-array set is the state's (DeviceStore::pressure_set)
-  bool from_pass3 = false;  ///< the first step starts at pass 3 (its passes 1-2 are done: StepStart)
+  int start = 0;         ///< where the first step starts (StepStart, as an int)
   auto operator<=>(const GraphKey&) const = default;
 };
-
-/// Where the first of n steps starts: at pass 1, or at pass 3 when passes
-/// 1-2 at the current u are already in the state's pass arrays (the
-/// reduction's, taken over by DeviceStore::swap_pressures). In a checked
-/// tick (the region's reach check queued just before the steps), pass 3
-/// may then run beside the check (kPass3BesideCheck: a model without law
-/// terms computes its forces while the check runs; cuda/tled.cuh
-/// element_forces_beside_check_kernel).
-enum class StepStart { kPass1, kPass3, kPass3BesideCheck };
 
 /// What the device allows for the persistent modes.
 struct PersistentLimits {

@@ -154,11 +154,6 @@ __device__ __forceinline__ T law_element_forces(const ModelView<T>& m, const Law
   return J;
 }
 
-/// Pass 3 for an element: pbar = (1/4) sum_a p_a, then IANP forces (or plain
-/// tet forces when the model has ianp off) into the node_elem slots of its
-/// corners. An element with J <= 0, Jbar <= 0 or a non-finite J is recorded
-/// in s.bad (lowest wins; its forces are zero, as core's functions return).
-/// Neo-Hookean: the kernels of a model without law terms run exactly this.
 /// What pass 3 computes for an element (element_forces_of) before it
 /// stores it (store_element_forces).
 template <class T>
@@ -190,6 +185,11 @@ __device__ __forceinline__ void store_element_forces(const StateView<T>& s, cons
   for (int a = 0; a < 4; ++a) s.f_slot[d.slot[a]] = Packed3<T>::of(out.f[a]);
 }
 
+/// Pass 3 for an element: pbar = (1/4) sum_a p_a, then IANP forces (or plain
+/// tet forces when the model has ianp off) into the node_elem slots of its
+/// corners. An element with J <= 0, Jbar <= 0 or a non-finite J is recorded
+/// in s.bad (lowest wins; its forces are zero, as core's functions return).
+/// Neo-Hookean: the kernels of a model without law terms run exactly this.
 template <class T>
 __device__ void element_forces_at(const StateView<T>& s, const ElementData<T>& d, const Packed3<T>* u, bool ianp) {
   store_element_forces(s, d, element_forces_of(s, d, u, ianp));
@@ -327,11 +327,13 @@ __global__ void element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView
 /// Pass 3 of a checked tick's first step when that step starts at pass 3
 /// (Stepper's StepStart::kPass3BesideCheck; a model without law terms): the
 /// previous kernel is the region's reach check, which writes nothing pass 3
-/// reads (u, the nodal pressures and the model are the previous tick's, as
-/// the reduction left them), so the forces are computed while the check
-/// runs, and the kernel waits for it only before it stores them: a tick the
-/// check refuses stores nothing. Pass 4 waits for this kernel, and so for
-/// the check. The same arithmetic as element_forces_kernel.
+/// reads (u and the nodal pressures are those the previous graph left), so
+/// the forces are computed while the check runs, and the kernel waits for
+/// it only before it stores them: a tick the check refuses stores nothing.
+/// Pass 4 waits for this kernel, and so for the check. Reading before the
+/// wait is safe because the check is a plain launch (everything queued
+/// before it has finished when it starts; DeviceContact::enqueue_reach_check).
+/// The same arithmetic as element_forces_kernel.
 template <class T, bool kRecomputed>
 __global__ void element_forces_beside_check_kernel(ModelView<T> m, StateView<T> s, RegionView r,
                                                    const Packed3<T>* u) {
