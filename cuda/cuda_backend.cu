@@ -315,8 +315,7 @@ class CudaBackend final : public Backend {
       const int k = std::min(chunk, steps - done);
       const ContactTools<T>* dtools = nullptr;
       if (tools.n_tools > 0) dtools = contact_.upload(contact_tools_as<T>(slice(tools, done, k)), log_, stream());
-      stepper_.advance(store_.model(), store_.state(), store_.pressure_set(), region_.view(), store_.u, k, dtools,
-                       start, stream());
+      stepper_.advance(store_.model(), store_.state(), region_.view(), store_.u, k, dtools, start, stream());
       start = StepStart::kPass1;
       done += k;
     }
@@ -350,8 +349,7 @@ class CudaBackend final : public Backend {
   std::vector<ContactNode> do_contacts() override { return contact_.contacts(store_.model(), store_.state(), log_, stream()); }
 
   Reductions do_reduce() override {
-    const bool passes = Reducer<T>::runs_passes(store_.model(), region_.view());
-    if (passes) sync_pressures();
+    const bool passes = prepare_reduction(region_.view());
     const Reductions out = reducer_.run(store_.model(), store_.state(), store_.pressure_scratch(), region_.view(),
                                         region_.front(), store_.u.current(), log_, stream());
     pressures_fresh_ = passes;
@@ -410,10 +408,9 @@ class CudaBackend final : public Backend {
     const StepStart start = take_pressures();
     // a checked tick's first pass 3 runs beside the check (cuda/tled.cuh element_forces_beside_check_kernel)
     const StepStart steps_start = check && start == StepStart::kPass3 ? StepStart::kPass3BesideCheck : start;
-    const bool passes = Reducer<T>::runs_passes(store_.model(), r);
-    if (passes) sync_pressures();  // (before the graph, on its stream)
+    const bool passes = prepare_reduction(r);  // (its copy before the graph, on its stream)
     const GraphKey key{store_.u.phase, steps, dtools != nullptr, check ? GraphKey::kCheckedTick : GraphKey::kTick,
-                       tool_bytes, store_.pressure_set(), static_cast<int>(steps_start)};
+                       tool_bytes, Stepper<T>::pressures_of(store_.state()), static_cast<int>(steps_start)};
     const cudaGraphExec_t exec = stepper_.cached_graph(
         key,
         [&](cudaStream_t st) {
@@ -480,14 +477,16 @@ class CudaBackend final : public Backend {
     return StepStart::kPass3;
   }
 
-  /// Makes the scratch set equal the state's outside the region, before the
-  /// reduction writes the region's entries: only after something wrote the
-  /// state's set outside the region (pass1_all), since steps and reductions
-  /// write the region's entries only.
-  void sync_pressures() {
-    if (pressures_synced_) return;
-    store_.copy_pressures_to_scratch(stream());
+  /// Whether a reduction over region r runs passes 1-2 (into the scratch
+  /// set); if so, first makes the scratch set equal the state's outside the
+  /// region, which the reduction leaves as it finds: a copy only after
+  /// something wrote the state's set outside the region (pass1_all), since
+  /// steps and reductions write the region's entries only.
+  bool prepare_reduction(const RegionView& r) {
+    if (!Reducer<T>::runs_passes(store_.model(), r)) return false;
+    if (!pressures_synced_) store_.copy_pressures_to_scratch(stream());
     pressures_synced_ = true;
+    return true;
   }
 
   /// Pass 1 over every element (after a region build or new displacements).

@@ -42,8 +42,8 @@ class DeviceStore {
               cudaStream_t stream);
 
   /// u = u_prev = u_next = 0, u_held = 0, f = f_slot = dv_slot = node_p = 0,
-  /// elem_J = 1 (both pass-array sets; set 0 the state's), held = the fixed axes, driven = 0, every node inner, no bad
-  /// element, no contact.
+  /// elem_J = 1 (both pass-array sets; set 0 the state's), held = the
+  /// fixed axes, driven = 0, every node inner, no bad element, no contact.
   void reset_state(cudaStream_t stream);
 
   /// Zeroes the law terms' state (the Prony q_i): no history.
@@ -66,8 +66,6 @@ class DeviceStore {
   StateView<T> pressure_scratch();
   /// The scratch set becomes the state's (and the state's the scratch).
   void swap_pressures() { pressures_ ^= 1; }
-  /// Which set is the state's (0 or 1): a captured graph bakes its pointers.
-  int pressure_set() const { return pressures_; }
   /// Copies the state's set whole into the scratch set (so that the two
   /// agree outside any region the reduction runs over).
   void copy_pressures_to_scratch(cudaStream_t stream);

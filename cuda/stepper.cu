@@ -164,18 +164,17 @@ cudaGraphExec_t Stepper<T>::cached_graph(const GraphKey& key, const std::functio
 }
 
 template <class T>
-cudaGraphExec_t Stepper<T>::graph(const ModelView<T>& m, const StateView<T>& s, int pressure_set,
-                                  const RegionView& r, BufferRing<T>& ring, int steps, const ContactTools<T>* tools,
-                                  StepStart start, cudaStream_t stream) {
+cudaGraphExec_t Stepper<T>::graph(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
+                                  BufferRing<T>& ring, int steps, const ContactTools<T>* tools, StepStart start,
+                                  cudaStream_t stream) {
   return cached_graph(
-      {ring.phase, steps, tools != nullptr, GraphKey::kSteps, 0, pressure_set, static_cast<int>(start)},
+      {ring.phase, steps, tools != nullptr, GraphKey::kSteps, 0, pressures_of(s), static_cast<int>(start)},
       [&](cudaStream_t st) { launch_steps(m, s, r, ring.current(), steps, tools, start, st); }, stream);
 }
 
 template <class T>
-void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, int pressure_set, const RegionView& r,
-                         BufferRing<T>& ring, int steps, const ContactTools<T>* tools, StepStart start,
-                         cudaStream_t stream) {
+void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, BufferRing<T>& ring,
+                         int steps, const ContactTools<T>* tools, StepStart start, cudaStream_t stream) {
   if (steps <= 0) return;
   if (r.n_elems == 0 && r.n_nodes == 0 && !tools) {  // nothing moves; every buffer holds the same (frozen) values
     ring.advance(steps);
@@ -190,7 +189,7 @@ void Stepper<T>::advance(const ModelView<T>& m, const StateView<T>& s, int press
     case CudaStepMode::Graph:
       while (steps > 0) {
         const int k = std::min(steps, kMaxGraphSteps);
-        CUDA_CHECK(cudaGraphLaunch(graph(m, s, pressure_set, r, ring, k, tools, start, stream), stream));
+        CUDA_CHECK(cudaGraphLaunch(graph(m, s, r, ring, k, tools, start, stream), stream));
         ring.advance(k);
         steps -= k;
         start = StepStart::kPass1;

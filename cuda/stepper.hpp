@@ -21,6 +21,7 @@
 
 #include <compare>
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <map>
 #include <utility>
@@ -71,8 +72,8 @@ struct GraphKey {
   bool contact = false;
   Frame frame = kSteps;
   std::size_t upload_bytes = 0;
-  int pressure_set = 0;  ///< which pass-array set is the state's (DeviceStore::pressure_set)
-  int start = 0;         ///< where the first step starts (StepStart, as an int)
+  std::uintptr_t pressures = 0;  ///< the state's pass arrays (its node_p: the set a graph bakes)
+  int start = 0;                 ///< where the first step starts (StepStart, as an int)
   auto operator<=>(const GraphKey&) const = default;
 };
 
@@ -123,9 +124,8 @@ class Stepper {
   /// `steps` whole steps from ring's current phase; advances the phase.
   /// With `tools` (device memory: the tools' motion over these steps), each
   /// step ends with the contact stage (cuda/contact.cuh); null: none.
-  /// `pressure_set`: DeviceStore::pressure_set() of s (graphs are cached per set).
-  void advance(const ModelView<T>& m, const StateView<T>& s, int pressure_set, const RegionView& r,
-               BufferRing<T>& ring, int steps, const ContactTools<T>* tools, StepStart start, cudaStream_t stream);
+  void advance(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, BufferRing<T>& ring, int steps,
+               const ContactTools<T>* tools, StepStart start, cudaStream_t stream);
 
   /// Queues the kernels of `steps` whole steps from buffers b (the Graph
   /// mode's launches), for a caller's own graph; the ring's phase is the
@@ -135,6 +135,9 @@ class Stepper {
     launch_steps(m, s, r, b, steps, tools, start, stream);
   }
 
+  /// GraphKey::pressures of state view s.
+  static std::uintptr_t pressures_of(const StateView<T>& s) { return reinterpret_cast<std::uintptr_t>(s.node_p); }
+
   /// The graph cached under `key`, captured on first use from what
   /// `enqueue` queues on the stream; dropped with the others (invalidate).
   cudaGraphExec_t cached_graph(const GraphKey& key, const std::function<void(cudaStream_t)>& enqueue,
@@ -143,9 +146,8 @@ class Stepper {
  private:
   void launch_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b, int steps,
                     const ContactTools<T>* tools, StepStart start, cudaStream_t stream);
-  cudaGraphExec_t graph(const ModelView<T>& m, const StateView<T>& s, int pressure_set, const RegionView& r,
-                        BufferRing<T>& ring, int steps, const ContactTools<T>* tools, StepStart start,
-                        cudaStream_t stream);
+  cudaGraphExec_t graph(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, BufferRing<T>& ring,
+                        int steps, const ContactTools<T>* tools, StepStart start, cudaStream_t stream);
 
   CudaStepMode mode_ = CudaStepMode::Auto;
   PersistentLimits limits_;
