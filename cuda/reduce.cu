@@ -396,11 +396,8 @@ template <class T>
 void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const StateView<T>& scratch,
                          const RegionView& r, FrontView front, StepBuffers<T> b, cudaStream_t stream, bool to_host) {
   if (runs_passes(m, r)) {  // nodal pressures at the current u, into the scratch set
-    with_gradients(m, r, [&](auto recomputed) {
-      launch(r.n_elems, stream, element_pressure_kernel<T, decltype(recomputed)::value>, m, scratch, r,
-             static_cast<const Packed3<T>*>(b.u));
-    });
-    launch(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, scratch, r);
+    // as the steps run them (the same bits either way)
+    enqueue_pressures(m, scratch, r, static_cast<const Packed3<T>*>(b.u), false, stream);
   }
   const index_t items = std::max(r.n_nodes + r.n_elems + m.n_surf, index_t(1));
   const int blocks = std::min(grid_for(items, kReduceBlock), kMaxReduceBlocks);

@@ -128,8 +128,7 @@ void Stepper<T>::launch_steps(const ModelView<T>& m, const StateView<T>& s, cons
                               int steps, const ContactTools<T>* tools, StepStart start, cudaStream_t stream) {
   for (int k = 0; k < steps; ++k) {
     if (k > 0 || start == StepStart::kPass1) {
-      element_pressure(m, s, r, b.u, stream);
-      nodal_pressure(m, s, r, stream);
+      enqueue_pressures(m, s, r, b.u, true, stream);
     }
     element_forces(m, s, r, b.u, stream, k == 0 && start == StepStart::kPass3BesideCheck);
     node_update(m, s, r, b, stream);

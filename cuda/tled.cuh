@@ -42,16 +42,16 @@ struct ElementData {
   T V, mu, K;       ///< m^3, Pa, Pa
 };
 
+/// An element's corners, gradients and volume; its slots, mu and K left
+/// unset. Each pass loads only what it uses: the compiler keeps loads
+/// through the read-only path even when their values go unused.
 template <class T, bool kRecomputed>
-__device__ __forceinline__ ElementData<T> load_element(const ModelView<T>& m, index_t e) {
+__device__ __forceinline__ ElementData<T> load_element_shape(const ModelView<T>& m, index_t e) {
   ElementData<T> d;
   const index_t ne = m.n_elems;
   d.e = e;
 #pragma unroll
-  for (int a = 0; a < 4; ++a) {
-    d.c[a] = __ldg(m.elem_nodes + a * ne + e);
-    d.slot[a] = __ldg(m.slot_of + a * ne + e);
-  }
+  for (int a = 0; a < 4; ++a) d.c[a] = __ldg(m.elem_nodes + a * ne + e);
   if constexpr (!kRecomputed) {
 #pragma unroll
     for (int k = 0; k < 12; ++k) d.dN[k] = __ldg(m.dndx + k * ne + e);
@@ -65,6 +65,23 @@ __device__ __forceinline__ ElementData<T> load_element(const ModelView<T>& m, in
     }
     d.V = tet_shape_gradients_from<T>(X, d.dN);
   }
+  return d;
+}
+
+/// The same and its corners' slots: pass 1's (mu and K left unset).
+template <class T, bool kRecomputed>
+__device__ __forceinline__ ElementData<T> load_element_slots(const ModelView<T>& m, index_t e) {
+  ElementData<T> d = load_element_shape<T, kRecomputed>(m, e);
+  const index_t ne = m.n_elems;
+#pragma unroll
+  for (int a = 0; a < 4; ++a) d.slot[a] = __ldg(m.slot_of + a * ne + e);
+  return d;
+}
+
+/// All of it: pass 3's.
+template <class T, bool kRecomputed>
+__device__ __forceinline__ ElementData<T> load_element(const ModelView<T>& m, index_t e) {
+  ElementData<T> d = load_element_slots<T, kRecomputed>(m, e);
   d.mu = __ldg(m.mu + e);
   d.K = __ldg(m.K + e);
   return d;
@@ -90,11 +107,17 @@ __device__ __forceinline__ void corner_displacements(const ElementData<T>& d, co
 /// Pass 1 for an element: J_e = det F, and its volume change (J_e - 1) V_e
 /// into the node_elem slots of its four corners.
 template <class T>
-__device__ void element_pressure_at(const StateView<T>& s, const ElementData<T>& d, const Packed3<T>* u) {
+__device__ __forceinline__ T element_volume_change(const ElementData<T>& d, const Packed3<T>* u, T& J) {
   Vec3<T> ue[4];
   corner_displacements(d, u, ue);
-  const T J = det(deformation_gradient(ue, d.dN));
-  const T dv = (J - T(1)) * d.V;
+  J = det(deformation_gradient(ue, d.dN));
+  return (J - T(1)) * d.V;
+}
+
+template <class T>
+__device__ void element_pressure_at(const StateView<T>& s, const ElementData<T>& d, const Packed3<T>* u) {
+  T J;
+  const T dv = element_volume_change(d, u, J);
   s.elem_J[d.e] = J;
 #pragma unroll
   for (int a = 0; a < 4; ++a) s.dv_slot[d.slot[a]] = dv;
@@ -257,6 +280,91 @@ __device__ void nodal_pressure_at(const ModelView<T>& m, const StateView<T>& s, 
   if (d.lane == 0) s.node_p[d.a] = dv / __ldg(m.node_divisor + d.a);
 }
 
+/// Passes 1 and 2 as one (pressures_kernel) on regions of fewer than this
+/// many elements: each node's warp computes the volume changes of its
+/// elements itself, every element once per corner, instead of reading the
+/// slots pass 1 wrote. It saves a dependent kernel per step where the steps
+/// are bound by their kernels' latency and costs four times pass 1's
+/// scattered loads. Measured on the kidney (H100): the haptic ticks 2-3 %
+/// shorter at depth 5 (3.6k elements) and over the whole mesh (8.6k), the
+/// depth-5 steps 5 % faster, the whole mesh's bare steps 3 % slower; larger
+/// regions keep the two passes (docs/cuda.md, "Passes 1 and 2 as one kernel").
+inline constexpr index_t kFusedPressuresMaxElements = 10000;
+
+/// Whether the steps over region r run passes 1 and 2 as one kernel.
+__host__ __device__ inline bool fuses_pressures(const RegionView& r) {
+  return r.n_elems < kFusedPressuresMaxElements;
+}
+
+/// One slot of a node in the fused pressure pass: its element's model data,
+/// whether the region computes that element (pass 1 would write the slot
+/// now; else the slot keeps what it holds), and whether the node is the
+/// element's corner 0 (whose visit writes J_e, which pass 1 writes once).
+template <class T>
+struct SlotElement {
+  ElementData<T> d;
+  bool computed, corner0;
+};
+
+/// Model and region data only (the region's roles are written by its build,
+/// before any pass runs): loaded before the wait for the first slot.
+template <class T, bool kRecomputed>
+__device__ __forceinline__ SlotElement<T> load_slot_element(const ModelView<T>& m, const StateView<T>& s,
+                                                            const RegionView& r, index_t k) {
+  const index_t ec = __ldg(m.node_elem + k);  // element * 4 + corner
+  SlotElement<T> x;
+  x.d = load_element_shape<T, kRecomputed>(m, ec / 4);
+  x.corner0 = ec % 4 == 0;
+  x.computed = r.nodes == nullptr;  // the whole mesh computes every element
+  if (!x.computed) {  // the region's elements: those with an inner corner (core/region.hpp)
+#pragma unroll
+    for (int a = 0; a < 4; ++a) x.computed |= __ldg(s.role + x.d.c[a]) == kInner;
+  }
+  return x;
+}
+
+/// Lanes per node of the fused pressure pass: a warp, so that a node's
+/// elements (up to ~60 on the kidney) take one or two rounds.
+inline constexpr int kFusedLanes = 32;
+
+/// Passes 1 and 2 for a node (one lane of its warp), the same arithmetic
+/// in the same order: lane l's slots l, l + 32, ... each get the volume
+/// change pass 1 computes (stored into the slot, and J_e by corner 0's
+/// visit, so that the pass arrays end as the two passes leave them) or, for
+/// an element outside the region, the slot's own value; lane j < 8 then
+/// adds slots j, j + 8, j + 16, ... in pass 2's order (read from the lanes
+/// that hold them) and the eight add as pass 2's groups do. `next` holds
+/// the lane's first slot, loaded by the caller.
+template <class T, bool kRecomputed>
+__device__ void pressures_at(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, index_t a,
+                             index_t begin, index_t end, int lane, SlotElement<T> next, const Packed3<T>* u) {
+  T dv = T(0);
+  for (index_t base = begin; base < end; base += kFusedLanes) {  // (uniform over the warp)
+    const index_t k = base + lane;
+    T v = T(0);
+    if (k < end) {
+      const SlotElement<T> x = next;
+      if (k + kFusedLanes < end) next = load_slot_element<T, kRecomputed>(m, s, r, k + kFusedLanes);
+      if (x.computed) {
+        T J;
+        v = element_volume_change(x.d, u, J);
+        s.dv_slot[k] = v;
+        if (x.corner0) s.elem_J[x.d.e] = J;
+      } else {
+        v = s.dv_slot[k];
+      }
+    }
+#pragma unroll
+    for (int q = 0; q < kFusedLanes / kNodeLanes; ++q) {
+      const int from = (lane & (kNodeLanes - 1)) + q * kNodeLanes;
+      const T w = __shfl_sync(0xffffffffu, v, from);
+      if (base + from < end) dv += w;
+    }
+  }
+  dv = node_group_sum(dv, node_group_mask());
+  if (lane == 0) s.node_p[a] = dv / __ldg(m.node_divisor + a);
+}
+
 /// Pass 4 for a node (one lane of its group): f_a = sum of its corners'
 /// element forces (a gather: no atomics) minus the applied load R (none
 /// when s.load is null), then lane 0 sets u_next: u_held for the held
@@ -292,7 +400,7 @@ __global__ void element_pressure_kernel(ModelView<T> m, StateView<T> s, RegionVi
   const index_t i = thread_index();
   const bool active = i < r.n_elems;
   ElementData<T> d;
-  if (active) d = load_element<T, kRecomputed>(m, r.elem(i));
+  if (active) d = load_element_slots<T, kRecomputed>(m, r.elem(i));
   wait_for_previous_pass();
   if (skipped(s)) return;
   if (active) element_pressure_at(s, d, u);
@@ -310,6 +418,45 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
   wait_for_previous_pass();
   if (skipped(s)) return;
   if (active) nodal_pressure_at(m, s, d);
+}
+
+/// Passes 1 and 2 as one kernel (fuses_pressures), a warp per node.
+template <class T, bool kRecomputed>
+__global__ void pressures_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
+  let_next_pass_launch();
+  const index_t g = thread_index(), i = g / kFusedLanes;
+  if (i >= r.n_nodes) return;  // (whole warps)
+  const int lane = g % kFusedLanes;
+  const index_t a = r.node(i), begin = __ldg(m.node_elem_start + a), end = __ldg(m.node_elem_start + a + 1);
+  SlotElement<T> first{};
+  if (begin + lane < end) first = load_slot_element<T, kRecomputed>(m, s, r, begin + lane);
+  wait_for_previous_pass();
+  if (skipped(s)) return;
+  pressures_at<T, kRecomputed>(m, s, r, a, begin, end, lane, first, u);
+}
+
+/// Queues passes 1 and 2 over region r at displacements u as the steps run
+/// them: one kernel on a small region (fuses_pressures), else the two.
+/// chained: with programmatic dependent launch (the steps); else plain
+/// launches (the reduction's).
+template <class T>
+void enqueue_pressures(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, const Packed3<T>* u,
+                       bool chained, cudaStream_t stream) {
+  const auto go = [&](index_t n, auto kernel, auto... args) {
+    if (chained)
+      launch_chained(n, stream, kernel, args...);
+    else
+      launch(n, stream, kernel, args...);
+  };
+  with_gradients(m, r, [&](auto recomputed) {
+    constexpr bool kRecomputed = decltype(recomputed)::value;
+    if (fuses_pressures(r)) {
+      go(kFusedLanes * r.n_nodes, pressures_kernel<T, kRecomputed>, m, s, r, u);
+    } else {
+      go(r.n_elems, element_pressure_kernel<T, kRecomputed>, m, s, r, u);
+      go(kNodeLanes * r.n_nodes, nodal_pressure_kernel<T>, m, s, r);
+    }
+  });
 }
 
 template <class T, bool kRecomputed>
@@ -406,7 +553,7 @@ __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const Re
   for (int k = 0; k < steps; ++k) {
     if (k > 0 || !from_pass3) {  // (uniform over the grid)
       for (index_t i = first; i < r.n_elems; i += stride)
-        element_pressure_at(s, load_element<T, kRecomputed>(m, r.elem(i)), b.u);
+        element_pressure_at(s, load_element_slots<T, kRecomputed>(m, r.elem(i)), b.u);
       barrier();
       for (index_t g = first; g < node_items; g += stride)
         nodal_pressure_at(m, s, load_node(m, r.node(g / kNodeLanes), lane, mask));
