@@ -285,10 +285,12 @@ __device__ void nodal_pressure_at(const ModelView<T>& m, const StateView<T>& s, 
 /// elements itself, every element once per corner, instead of reading the
 /// slots pass 1 wrote. It saves a dependent kernel per step where the steps
 /// are bound by their kernels' latency and costs four times pass 1's
-/// scattered loads. Measured on the kidney (H100): the haptic ticks 2-3 %
-/// shorter at depth 5 (3.6k elements) and over the whole mesh (8.6k), the
-/// depth-5 steps 5 % faster, the whole mesh's bare steps 3 % slower; larger
-/// regions keep the two passes (docs/cuda.md, "Passes 1 and 2 as one kernel").
+/// scattered loads. Measured on the kidney (H100, float): the haptic ticks
+/// 2-3 % shorter at depth 5 (3.6k elements) and over the whole mesh (8.6k),
+/// the depth-5 steps 5 % faster, the whole mesh's bare steps 3 % slower (in
+/// double: the whole-mesh tick 3 % shorter, the depth-5 tick unchanged, the
+/// bare steps 3-4 % slower); 100k and 1M tets lose 26-52 % fused and keep
+/// the two passes (docs/cuda.md, "Passes 1 and 2 as one kernel").
 inline constexpr index_t kFusedPressuresMaxElements = 10000;
 
 /// Whether the steps over region r run passes 1 and 2 as one kernel.

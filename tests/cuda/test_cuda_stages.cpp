@@ -22,6 +22,8 @@
 #include "core/region.hpp"
 #include "core/scheduler.hpp"
 #include "core/tet.hpp"
+#include "io/kidney.hpp"
+#include "scene/validate.hpp"
 #include "tests/cuda/cuda_test_support.hpp"
 #include "tests/sliver.hpp"
 
@@ -659,6 +661,94 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
         EXPECT_EQ(energies, ref_energy);
       }
     }
+}
+
+/// Passes 1 and 2 as one kernel (the Launch and Graph modes and the
+/// reduction on regions under 10,000 elements; docs/cuda.md, "Passes 1 and
+/// 2 as one kernel") against the two passes of the Grid mode, bit for bit.
+/// On the kidney, whose busiest nodes touch more than 32 elements (the
+/// fused kernel's second round of slots, and its prefetch), over the whole
+/// mesh and over a region of depth 2 in which a driven halo node moves: its
+/// elements outside the region (no inner corner) are computed by neither
+/// kernel, so their slots keep the values of the region's build while the
+/// node moves, and the fused kernel must read them, not compute them at the
+/// new position. On a box of 12,288 elements the chained steps and the
+/// reduction run the two passes (above the limit) and must agree with the
+/// Grid mode too.
+TEST_P(Stages, FusedPressurePassGivesTheTwoPassesBits) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  struct Case {
+    std::string name;
+    TissueModel<double> m;
+    int depth;
+  };
+  std::vector<Case> cases;
+  cases.push_back({"kidney, whole mesh", scene::load_model(io::default_kidney_scene()), kDepthAll});
+  cases.push_back({"kidney, depth 2 with a driven halo node", cases[0].m, 2});
+  cases.push_back({"box of 12,288 elements, whole mesh", box_model(16, 16, 8, 0.16, 0.16, 0.08), kDepthAll});
+  ASSERT_EQ(cases[2].m.n_elems, 12288);
+  index_t busiest = 0;
+  for (index_t a = 0; a < cases[0].m.n_nodes; ++a)
+    busiest = std::max(busiest, cases[0].m.node_elem_start[a + 1] - cases[0].m.node_elem_start[a]);
+  EXPECT_GT(busiest, 32) << "the kidney no longer exercises the fused kernel's second round";
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const TissueModel<double>& m = c.m;
+    const index_t seeds[3] = {m.tris[0], m.tris[m.n_tris], m.tris[2 * m.n_tris]};
+    std::vector<index_t> driven;
+    std::vector<double> drive;
+    if (c.depth != kDepthAll) {  // a halo node with an element outside the region
+      const Region region = flood_fill(m, seeds, c.depth);
+      for (index_t a : region.nodes) {
+        if (region.role[a] != kHalo) continue;
+        bool outside = false;
+        for (index_t k = m.node_elem_start[a]; k < m.node_elem_start[a + 1]; ++k) {
+          const index_t e = m.node_elem[k] / 4;
+          bool inner = false;
+          for (int q = 0; q < 4; ++q) inner = inner || region.role[m.elem_nodes[q * m.n_elems + e]] == kInner;
+          outside = outside || !inner;
+        }
+        if (outside) {
+          driven = {a};
+          drive = {2e-4, -1e-4, 1e-4};
+          break;
+        }
+      }
+      ASSERT_FALSE(driven.empty());
+    }
+    const auto u = random_field(m.n_nodes, 1e-5, 37);
+    std::vector<double> ref_u, ref_f, ref_p, ref_J, ref_energy;
+    for (CudaStepMode mode : {CudaStepMode::Grid, CudaStepMode::Graph, CudaStepMode::Launch}) {
+      SCOPED_TRACE(to_string(mode));
+      auto gpu = make_cuda_backend(p);
+      set_cuda_step_mode(*gpu, mode);
+      gpu->upload(m);
+      gpu->set_displacements(u);
+      gpu->build_region(seeds, c.depth);
+      if (!driven.empty()) gpu->set_driven(driven, drive);
+      gpu->advance(5);
+      std::vector<double> energies = {gpu->reduce().strain_energy};
+      gpu->advance(4);
+      energies.push_back(gpu->reduce().strain_energy);
+      gpu->advance(1);
+      const Fields f = gpu->download();
+      ASSERT_TRUE(std::isfinite(energies.back()));
+      if (ref_u.empty()) {
+        ref_u = f.u, ref_f = f.f, ref_p = f.node_p, ref_J = f.elem_J, ref_energy = energies;
+        if (!driven.empty()) {  // the driven node moved: the test has its stale slots
+          const index_t a = driven[0];
+          EXPECT_NE(f.u[a], u[a]);
+        }
+        continue;
+      }
+      EXPECT_EQ(f.u, ref_u);
+      EXPECT_EQ(f.f, ref_f);
+      EXPECT_EQ(f.node_p, ref_p);
+      EXPECT_EQ(f.elem_J, ref_J);
+      EXPECT_EQ(energies, ref_energy);
+    }
+  }
 }
 
 /// The steps after a reduction take its passes 1-2 (run at the current u
