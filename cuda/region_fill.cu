@@ -148,7 +148,7 @@ RegionSizes RegionFill::build(const Topology& t, std::span<const index_t> seeds,
                                         elem_sel_.data(), elems_.data(), counts_.data() + 3, t.n_elems, stream));
   log.to_host(counts_host_.data(), counts_.data(), 4 * sizeof(int), stream);
   sizes_ = {depth, counts_host_[0], counts_host_[1], counts_host_[3]};
-  view_ = {nodes_.data(), elems_.data(), counts_host_[2], counts_host_[3]};
+  view_ = {nodes_.data(), elems_.data(), counts_host_[2], counts_host_[3], elem_sel_.data()};
   return sizes_;
 }
 

@@ -308,21 +308,13 @@ struct SlotElement {
   bool computed, corner0;
 };
 
-/// Model and region data only (the region's roles are written by its build,
-/// before any pass runs): loaded before the wait for the first slot.
+/// Model and region data only (the region's element mask is written by its
+/// build, before any pass runs): loaded before the wait for the first slot.
 template <class T, bool kRecomputed>
-__device__ __forceinline__ SlotElement<T> load_slot_element(const ModelView<T>& m, const StateView<T>& s,
-                                                            const RegionView& r, index_t k) {
+__device__ __forceinline__ SlotElement<T> load_slot_element(const ModelView<T>& m, const RegionView& r, index_t k) {
   const index_t ec = __ldg(m.node_elem + k);  // element * 4 + corner
-  SlotElement<T> x;
-  x.d = load_element_shape<T, kRecomputed>(m, ec / 4);
-  x.corner0 = ec % 4 == 0;
-  x.computed = r.nodes == nullptr;  // the whole mesh computes every element
-  if (!x.computed) {  // the region's elements: those with an inner corner (core/region.hpp)
-#pragma unroll
-    for (int a = 0; a < 4; ++a) x.computed |= __ldg(s.role + x.d.c[a]) == kInner;
-  }
-  return x;
+  const index_t e = ec / 4;
+  return {load_element_shape<T, kRecomputed>(m, e), !r.elem_sel || __ldg(r.elem_sel + e) != 0, ec % 4 == 0};
 }
 
 /// Lanes per node of the fused pressure pass: a warp, so that a node's
@@ -346,7 +338,7 @@ __device__ void pressures_at(const ModelView<T>& m, const StateView<T>& s, const
     T v = T(0);
     if (k < end) {
       const SlotElement<T> x = next;
-      if (k + kFusedLanes < end) next = load_slot_element<T, kRecomputed>(m, s, r, k + kFusedLanes);
+      if (k + kFusedLanes < end) next = load_slot_element<T, kRecomputed>(m, r, k + kFusedLanes);
       if (x.computed) {
         T J;
         v = element_volume_change(x.d, u, J);
@@ -431,7 +423,7 @@ __global__ void pressures_kernel(ModelView<T> m, StateView<T> s, RegionView r, c
   const int lane = g % kFusedLanes;
   const index_t a = r.node(i), begin = __ldg(m.node_elem_start + a), end = __ldg(m.node_elem_start + a + 1);
   SlotElement<T> first{};
-  if (begin + lane < end) first = load_slot_element<T, kRecomputed>(m, s, r, begin + lane);
+  if (begin + lane < end) first = load_slot_element<T, kRecomputed>(m, r, begin + lane);
   wait_for_previous_pass();
   if (skipped(s)) return;
   pressures_at<T, kRecomputed>(m, s, r, a, begin, end, lane, first, u);

@@ -100,6 +100,7 @@ struct RegionView {
   const index_t* nodes = nullptr;  ///< inner and halo nodes, ascending (n_nodes)
   const index_t* elems = nullptr;  ///< computed elements, ascending (n_elems)
   index_t n_nodes = 0, n_elems = 0;
+  const std::uint8_t* elem_sel = nullptr;  ///< 1 for a computed element (the mesh's n_elems); null: every one
   TISSUE_HD index_t node(index_t i) const { return nodes ? nodes[i] : i; }
   TISSUE_HD index_t elem(index_t i) const { return elems ? elems[i] : i; }
 };
