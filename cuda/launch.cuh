@@ -46,17 +46,13 @@ inline bool pdl_enabled() {
   return on;
 }
 
-/// Like launch(), with programmatic dependent launch: the grid may be
-/// scheduled while the previous kernel in the stream still runs; the kernel
-/// must wait (cudaGridDependencySynchronize) before touching anything that
-/// kernel writes. Captured into graphs as programmatic edges. The four pass
-/// kernels (cuda/tled.cuh) are launched this way.
+/// launch_chained() below, in blocks of `block` threads.
 template <class... Params, class... Args>
-void launch_chained(index_t n, cudaStream_t stream, void (*kernel)(Params...), Args... args) {
+void launch_chained_in(int block, index_t n, cudaStream_t stream, void (*kernel)(Params...), Args... args) {
   if (n <= 0) return;
   cudaLaunchConfig_t cfg = {};
-  cfg.gridDim = dim3(grid_for(n));
-  cfg.blockDim = dim3(kBlock);
+  cfg.gridDim = dim3(grid_for(n, block));
+  cfg.blockDim = dim3(block);
   cfg.stream = stream;
   cudaLaunchAttribute attr;
   attr.id = cudaLaunchAttributeProgrammaticStreamSerialization;
@@ -67,6 +63,16 @@ void launch_chained(index_t n, cudaStream_t stream, void (*kernel)(Params...), A
 #ifdef TISSUE_CUDA_SYNC_CHECK
   CUDA_CHECK(cudaStreamSynchronize(stream));
 #endif
+}
+
+/// Like launch(), with programmatic dependent launch: the grid may be
+/// scheduled while the previous kernel in the stream still runs; the kernel
+/// must wait (cudaGridDependencySynchronize) before touching anything that
+/// kernel writes. Captured into graphs as programmatic edges. The four pass
+/// kernels (cuda/tled.cuh) are launched this way.
+template <class... Params, class... Args>
+void launch_chained(index_t n, cudaStream_t stream, void (*kernel)(Params...), Args... args) {
+  launch_chained_in(kBlock, n, stream, kernel, args...);
 }
 
 /// Programmatic dependent launch, inside a chained kernel: let the next

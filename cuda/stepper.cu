@@ -55,6 +55,23 @@ int grid_blocks_per_sm() {
   return std::min(stored, recomputed);
 }
 
+/// Node warps of the fused force kernel the device holds at once (its
+/// instantiations alike: the fewest).
+template <class T>
+index_t fused_force_nodes() {
+  int fewest = 0;
+  bool first = true;
+  for (auto kernel : {forces_kernel<T, false, false>, forces_kernel<T, false, true>, forces_kernel<T, true, false>,
+                      forces_kernel<T, true, true>}) {
+    int blocks = 0;
+    CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, kernel, kFusedForceBlock, 0));
+    fewest = first ? blocks : std::min(fewest, blocks);
+    first = false;
+  }
+  const int sms = current_device_attribute(cudaDevAttrMultiProcessorCount);
+  return index_t(fewest) * (kFusedForceBlock / kFusedLanes) * sms;
+}
+
 }  // namespace
 
 template <class T>
@@ -69,6 +86,7 @@ void Stepper<T>::init() {
   }
   limits_.cluster_size = std::min(largest_cluster<T, false, false>(), largest_cluster<T, false, true>());
   limits_.law_cluster_size = std::min(largest_cluster<T, true, false>(), largest_cluster<T, true, true>());
+  limits_.fused_force_nodes = fused_force_nodes<T>();
 }
 
 template <class T>
@@ -124,14 +142,33 @@ void Stepper<T>::node_update(const ModelView<T>& m, const StateView<T>& s, const
 }
 
 template <class T>
+void Stepper<T>::forces_and_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
+                                   StepBuffers<T> b, cudaStream_t stream) {
+  with_gradients(m, r, [&](auto recomputed) {
+    constexpr bool kRecomputed = decltype(recomputed)::value;
+    if (s.load)
+      launch_chained_in(kFusedForceBlock, kFusedLanes * r.n_nodes, stream, forces_kernel<T, kRecomputed, true>, m, s,
+                        r, b);
+    else
+      launch_chained_in(kFusedForceBlock, kFusedLanes * r.n_nodes, stream, forces_kernel<T, kRecomputed, false>, m,
+                        s, r, b);
+  });
+}
+
+template <class T>
 void Stepper<T>::launch_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
                               int steps, const ContactTools<T>* tools, StepStart start, cudaStream_t stream) {
   for (int k = 0; k < steps; ++k) {
     if (k > 0 || start == StepStart::kPass1) {
       enqueue_pressures(m, s, r, b.u, true, stream);
     }
-    element_forces(m, s, r, b.u, stream, k == 0 && start == StepStart::kPass3BesideCheck);
-    node_update(m, s, r, b, stream);
+    const bool beside_check = k == 0 && start == StepStart::kPass3BesideCheck;
+    if (!beside_check && fuses_forces(r)) {
+      forces_and_update(m, s, r, b, stream);
+    } else {
+      element_forces(m, s, r, b.u, stream, beside_check);
+      node_update(m, s, r, b, stream);
+    }
     if (tools) {  // the contact stage over the surface (cuda/contact.cuh)
       launch_chained(m.n_tris, stream, sweep_triangles_kernel<T>, m, s, tools, k,
                      static_cast<const Packed3<T>*>(b.u_next));

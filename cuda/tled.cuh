@@ -87,6 +87,15 @@ __device__ __forceinline__ ElementData<T> load_element(const ModelView<T>& m, in
   return d;
 }
 
+/// The shape and the moduli, no slots: the fused force pass's (forces_at).
+template <class T, bool kRecomputed>
+__device__ __forceinline__ ElementData<T> load_element_moduli(const ModelView<T>& m, index_t e) {
+  ElementData<T> d = load_element_shape<T, kRecomputed>(m, e);
+  d.mu = __ldg(m.mu + e);
+  d.K = __ldg(m.K + e);
+  return d;
+}
+
 /// Calls f(std::true_type) when the element passes over region r
 /// recompute the gradients (recomputes()), else f(std::false_type): the
 /// host's choice of the kernels' kRecomputed. Two instantiations rather
@@ -298,28 +307,58 @@ __host__ __device__ inline bool fuses_pressures(const RegionView& r) {
   return r.n_elems < kFusedPressuresMaxElements;
 }
 
-/// One slot of a node in the fused pressure pass: its element's model data,
-/// whether the region computes that element (pass 1 would write the slot
-/// now; else the slot keeps what it holds), and whether the node is the
-/// element's corner 0 (whose visit writes J_e, which pass 1 writes once).
+/// One slot of a node in a fused pass (pressures_at, forces_at): its
+/// element's model data, whether the region computes that element (the
+/// element pass would write the slot now; else the slot keeps what it
+/// holds), and which of the element's corners the node is (corner 0's
+/// visit does what the element pass does once: J_e, the bad-element flag).
 template <class T>
 struct SlotElement {
   ElementData<T> d;
-  bool computed, corner0;
+  bool computed;
+  int corner;
 };
 
 /// Model and region data only (the region's element mask is written by its
 /// build, before any pass runs): loaded before the wait for the first slot.
-template <class T, bool kRecomputed>
+/// kModuli: with mu and K (the force pass's), else the shape only.
+template <class T, bool kRecomputed, bool kModuli = false>
 __device__ __forceinline__ SlotElement<T> load_slot_element(const ModelView<T>& m, const RegionView& r, index_t k) {
   const index_t ec = __ldg(m.node_elem + k);  // element * 4 + corner
   const index_t e = ec / 4;
-  return {load_element_shape<T, kRecomputed>(m, e), !r.elem_sel || __ldg(r.elem_sel + e) != 0, ec % 4 == 0};
+  ElementData<T> d;
+  if constexpr (kModuli)
+    d = load_element_moduli<T, kRecomputed>(m, e);
+  else
+    d = load_element_shape<T, kRecomputed>(m, e);
+  return {d, !r.elem_sel || __ldg(r.elem_sel + e) != 0, static_cast<int>(ec % 4)};
 }
 
-/// Lanes per node of the fused pressure pass: a warp, so that a node's
-/// elements (up to ~60 on the kidney) take one or two rounds.
+/// Lanes per node of the fused passes: a warp, so that a node's elements
+/// (up to ~60 on the kidney) take one or two rounds.
 inline constexpr int kFusedLanes = 32;
+
+__device__ __forceinline__ float lane_value(float x, int from) { return __shfl_sync(0xffffffffu, x, from); }
+__device__ __forceinline__ double lane_value(double x, int from) { return __shfl_sync(0xffffffffu, x, from); }
+template <class T>
+__device__ __forceinline__ Vec3<T> lane_value(Vec3<T> x, int from) {
+  return {lane_value(x.x, from), lane_value(x.y, from), lane_value(x.z, from)};
+}
+
+/// One round of a fused pass's sum in the node passes' order: the warp's
+/// lanes hold the values v of slots base + lane (those below end), and
+/// lane j < kNodeLanes adds slots j, j + 8, j + 16, j + 24 of the round to
+/// its running sum acc, as lane j of a node's group adds slots j, j + 8,
+/// ... in passes 2 and 4 (a round of 32 continues the group's sequence).
+template <class V>
+__device__ __forceinline__ void add_in_node_order(V& acc, const V& v, index_t base, index_t end, int lane) {
+#pragma unroll
+  for (int q = 0; q < kFusedLanes / kNodeLanes; ++q) {
+    const int from = (lane & (kNodeLanes - 1)) + q * kNodeLanes;
+    const V w = lane_value(v, from);
+    if (base + from < end) acc = acc + w;
+  }
+}
 
 /// Passes 1 and 2 for a node (one lane of its warp), the same arithmetic
 /// in the same order: lane l's slots l, l + 32, ... each get the volume
@@ -343,20 +382,26 @@ __device__ void pressures_at(const ModelView<T>& m, const StateView<T>& s, const
         T J;
         v = element_volume_change(x.d, u, J);
         s.dv_slot[k] = v;
-        if (x.corner0) s.elem_J[x.d.e] = J;
+        if (x.corner == 0) s.elem_J[x.d.e] = J;
       } else {
         v = s.dv_slot[k];
       }
     }
-#pragma unroll
-    for (int q = 0; q < kFusedLanes / kNodeLanes; ++q) {
-      const int from = (lane & (kNodeLanes - 1)) + q * kNodeLanes;
-      const T w = __shfl_sync(0xffffffffu, v, from);
-      if (base + from < end) dv += w;
-    }
+    add_in_node_order(dv, v, base, end, lane);
   }
   dv = node_group_sum(dv, node_group_mask());
   if (lane == 0) s.node_p[a] = dv / __ldg(m.node_divisor + a);
+}
+
+/// The end of pass 4 for node a, on one lane, once its element forces are
+/// summed into f: the applied load subtracted, f stored, u_next set.
+template <class T, bool kLoad>
+__device__ __forceinline__ void node_update_from(const ModelView<T>& m, const StateView<T>& s,
+                                                 const StepBuffers<T>& b, index_t a, Vec3<T> f) {
+  if constexpr (kLoad) f = f - s.load[a].vec();
+  s.f[a] = Packed3<T>::of(f);
+  const CentralDifference<T> k = {__ldg(m.cd_A + a), __ldg(m.cd_B + a), __ldg(m.cd_C + a)};
+  b.u_next[a] = Packed3<T>::of(node_next(s.held[a], s.u_held[a].vec(), k, f, b.u[a].vec(), b.u_prev[a].vec()));
 }
 
 /// Pass 4 for a node (one lane of its group): f_a = sum of its corners'
@@ -372,12 +417,56 @@ __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, con
 #pragma unroll 4
   for (index_t k = d.first; k < d.end; k += kNodeLanes) f = f + s.f_slot[k].vec();
   f = {node_group_sum(f.x, d.mask), node_group_sum(f.y, d.mask), node_group_sum(f.z, d.mask)};
-  if (d.lane != 0) return;
-  const index_t a = d.a;
-  if constexpr (kLoad) f = f - s.load[a].vec();
-  s.f[a] = Packed3<T>::of(f);
-  const CentralDifference<T> k = {__ldg(m.cd_A + a), __ldg(m.cd_B + a), __ldg(m.cd_C + a)};
-  b.u_next[a] = Packed3<T>::of(node_next(s.held[a], s.u_held[a].vec(), k, f, b.u[a].vec(), b.u_prev[a].vec()));
+  if (d.lane == 0) node_update_from<T, kLoad>(m, s, b, d.a, f);
+}
+
+/// Threads per block of the fused force kernel (forces_kernel): blocks of
+/// four node warps, so that the registers of the SM hold as many warps as
+/// its ~90 registers a thread allow (blocks of 256 would leave a quarter of
+/// them unused in float).
+inline constexpr int kFusedForceBlock = 128;
+
+/// Corner a's force of an element (a select, not an index: no local memory).
+template <class T>
+__device__ __forceinline__ Vec3<T> corner_force(const ElementForces<T>& out, int a) {
+  return a == 0 ? out.f[0] : (a == 1 ? out.f[1] : (a == 2 ? out.f[2] : out.f[3]));
+}
+
+/// Passes 3 and 4 for a node (one lane of its warp), the same arithmetic
+/// in the same order: lane l's slots l, l + 32, ... each get the force pass
+/// 3 computes for that corner (the element's four, as pass 3 computes them;
+/// the one kept is stored into the slot, and corner 0's visit records a bad
+/// element as pass 3 does) or, for an element outside the region, the
+/// slot's own value (zero since the region's build); lane j < 8 then adds
+/// them in pass 4's order and lane 0 ends pass 4. `next` holds the lane's
+/// first slot, loaded by the caller.
+template <class T, bool kRecomputed, bool kLoad>
+__device__ void forces_at(const ModelView<T>& m, const StateView<T>& s, const StepBuffers<T>& b,
+                          const RegionView& r, index_t a, index_t begin, index_t end, int lane,
+                          SlotElement<T> next) {
+  Vec3<T> f = {T(0), T(0), T(0)};
+  for (index_t base = begin; base < end; base += kFusedLanes) {  // (uniform over the warp)
+    const index_t k = base + lane;
+    Vec3<T> v = {T(0), T(0), T(0)};
+    if (k < end) {
+      const SlotElement<T> x = next;
+      if (k + kFusedLanes < end) next = load_slot_element<T, kRecomputed, true>(m, r, k + kFusedLanes);
+      if (x.computed) {
+        const ElementForces<T> out = element_forces_of(s, x.d, b.u, m.ianp);
+        if (x.corner == 0 && (!(out.J > T(0)) || !isfinite(out.J)))
+          atomicMin(s.bad, bad_key(x.d.e, static_cast<float>(out.J)));
+        const Packed3<T> fa = Packed3<T>::of(corner_force(out, x.corner));
+        s.f_slot[k] = fa;
+        v = fa.vec();
+      } else {
+        v = s.f_slot[k].vec();
+      }
+    }
+    add_in_node_order(f, v, base, end, lane);
+  }
+  const unsigned mask = node_group_mask();
+  f = {node_group_sum(f.x, mask), node_group_sum(f.y, mask), node_group_sum(f.z, mask)};
+  if (lane == 0) node_update_from<T, kLoad>(m, s, b, a, f);
 }
 
 // ---- one kernel per pass ------------------------------------------------------
@@ -516,6 +605,21 @@ __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r,
   wait_for_previous_pass();
   if (skipped(s)) return;
   if (active) node_update_at<T, kLoad>(m, s, b, d);
+}
+
+/// Passes 3 and 4 as one kernel (fuses_forces), a warp per node.
+template <class T, bool kRecomputed, bool kLoad>
+__global__ void forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
+  let_next_pass_launch();
+  const index_t g = thread_index(), i = g / kFusedLanes;
+  if (i >= r.n_nodes) return;  // (whole warps)
+  const int lane = g % kFusedLanes;
+  const index_t a = r.node(i), begin = __ldg(m.node_elem_start + a), end = __ldg(m.node_elem_start + a + 1);
+  SlotElement<T> first{};
+  if (begin + lane < end) first = load_slot_element<T, kRecomputed, true>(m, r, begin + lane);
+  wait_for_previous_pass();
+  if (skipped(s)) return;
+  forces_at<T, kRecomputed, kLoad>(m, s, b, r, a, begin, end, lane, first);
 }
 
 // ---- persistent kernels: whole steps, a barrier between passes ----------------

@@ -663,19 +663,24 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
     }
 }
 
-/// Passes 1 and 2 as one kernel (the Launch and Graph modes and the
-/// reduction on regions under 10,000 elements; docs/cuda.md, "Passes 1 and
-/// 2 as one kernel") against the two passes of the Grid mode, bit for bit.
+/// Passes 1 and 2 as one kernel, and passes 3 and 4 as one (the Launch and
+/// Graph modes: passes 1-2 on regions under 10,000 elements, the
+/// reduction's too, passes 3-4 on regions whose node warps the device holds
+/// at once; docs/cuda.md, "Passes 1 and 2 as one kernel", "Passes 3 and 4
+/// as one kernel") against the four passes of the Grid mode, bit for bit.
 /// On the kidney, whose busiest nodes touch more than 32 elements (the
-/// fused kernel's second round of slots, and its prefetch), over the whole
-/// mesh and over a region of depth 2 in which a driven halo node moves: its
-/// elements outside the region (no inner corner) are computed by neither
-/// kernel, so their slots keep the values of the region's build while the
-/// node moves, and the fused kernel must read them, not compute them at the
-/// new position. On a box of 12,288 elements the chained steps and the
-/// reduction run the two passes (above the limit) and must agree with the
-/// Grid mode too.
-TEST_P(Stages, FusedPressurePassGivesTheTwoPassesBits) {
+/// fused kernels' second round of slots, and their prefetch), with loads
+/// on three nodes (the force kernel's load instantiation), over the whole
+/// mesh (passes 3-4 fused in float on an H100, not in double: its warps
+/// take more registers) and over a region of depth 2 in which a driven
+/// halo node moves: its elements
+/// outside the region (no inner corner) are computed by no kernel, so their
+/// slots keep the values of the region's build (the volume change at the
+/// build's u, zero force) while the node moves, and the fused kernels must
+/// read them, not compute them at the new position. On a box of 12,288
+/// elements the chained steps and the reduction run the four passes (above
+/// the limit) and must agree with the Grid mode too.
+TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
   SKIP_WITHOUT_GPU();
   const Precision p = GetParam();
   struct Case {
@@ -691,7 +696,7 @@ TEST_P(Stages, FusedPressurePassGivesTheTwoPassesBits) {
   index_t busiest = 0;
   for (index_t a = 0; a < cases[0].m.n_nodes; ++a)
     busiest = std::max(busiest, cases[0].m.node_elem_start[a + 1] - cases[0].m.node_elem_start[a]);
-  EXPECT_GT(busiest, 32) << "the kidney no longer exercises the fused kernel's second round";
+  EXPECT_GT(busiest, 32) << "the kidney no longer exercises the fused kernels' second round";
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
     const TissueModel<double>& m = c.m;
@@ -723,6 +728,10 @@ TEST_P(Stages, FusedPressurePassGivesTheTwoPassesBits) {
       gpu->set_displacements(u);
       gpu->build_region(seeds, c.depth);
       if (!driven.empty()) gpu->set_driven(driven, drive);
+      if (m.n_elems < 10000) {  // the kidney: loads on the seeds (region nodes at any depth)
+        const double force[9] = {0.02, -0.01, 0.03, -0.02, 0.0, 0.01, 0.0, 0.04, -0.03};
+        gpu->set_loads(seeds, force);
+      }
       gpu->advance(5);
       std::vector<double> energies = {gpu->reduce().strain_energy};
       gpu->advance(4);
@@ -744,6 +753,58 @@ TEST_P(Stages, FusedPressurePassGivesTheTwoPassesBits) {
       EXPECT_EQ(f.elem_J, ref_J);
       EXPECT_EQ(energies, ref_energy);
     }
+  }
+}
+
+/// The fused force pass records a bad element as pass 3 does (corner 0's
+/// visit of each element; the lowest element wins): a kidney node pushed
+/// through its neighbours, one step over a region of depth 2 around it (a
+/// region the force kernel fuses in either precision) in each mode, the
+/// same element and J from the reduction as the Grid mode's four passes,
+/// and the same bits; the same element as the cpu's step.
+TEST_P(Stages, FusedForcePassRecordsTheLowestBadElement) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  const auto m = scene::load_model(io::default_kidney_scene());
+  ASSERT_LT(m.n_elems, 10000);  // the fused kernels' size
+  // the node with the most elements, pushed 3 cm: several of its elements invert
+  index_t node = 0;
+  for (index_t a = 0; a < m.n_nodes; ++a)
+    if (m.node_elem_start[a + 1] - m.node_elem_start[a] > m.node_elem_start[node + 1] - m.node_elem_start[node])
+      node = a;
+  const index_t seeds[1] = {node};
+  std::vector<double> u(3 * size_t(m.n_nodes), 0.0);
+  u[node] = 0.03;
+  u[2 * size_t(m.n_nodes) + node] = -0.02;
+  index_t ref_bad = -2;
+  double ref_J = 0;
+  std::vector<double> ref_u;
+  for (CudaStepMode mode : {CudaStepMode::Grid, CudaStepMode::Graph, CudaStepMode::Launch}) {
+    SCOPED_TRACE(to_string(mode));
+    auto gpu = make_cuda_backend(p);
+    set_cuda_step_mode(*gpu, mode);
+    gpu->upload(m);
+    gpu->set_displacements(u);
+    gpu->build_region(seeds, 2);
+    gpu->advance(1);
+    const Reductions r = gpu->reduce();
+    const Fields f = gpu->download();
+    if (ref_bad == -2) {
+      ASSERT_GE(r.bad_elem, 0) << "no element inverted: the test pushes too little";
+      auto cpu = make_cpu_backend(p);
+      cpu->upload(m);
+      cpu->set_displacements(u);
+      cpu->build_region(seeds, 2);
+      cpu->advance(1);
+      const Reductions rc = cpu->reduce();
+      EXPECT_EQ(r.bad_elem, rc.bad_elem);
+      EXPECT_NEAR(r.bad_J, rc.bad_J, 1e-4 * std::fabs(rc.bad_J) + 1e-6);
+      ref_bad = r.bad_elem, ref_J = r.bad_J, ref_u = f.u;
+      continue;
+    }
+    EXPECT_EQ(r.bad_elem, ref_bad);
+    EXPECT_EQ(r.bad_J, ref_J);
+    EXPECT_EQ(f.u, ref_u);
   }
 }
 
