@@ -558,6 +558,18 @@ CudaStepMode cuda_step_mode(Backend& backend) {
   return gpu::with_cuda_backend(backend, [](auto& b) { return b.stepper().choose(b.region_view()); });
 }
 
+bool cuda_fuses_forces(Backend& backend) {
+  return gpu::with_cuda_backend(backend, [](auto& b) { return b.stepper().fuses_forces(b.region_view()); });
+}
+
+index_t cuda_fused_force_nodes(Backend& backend) {
+  return gpu::with_cuda_backend(backend, [](auto& b) { return b.stepper().limits().fused_force_nodes; });
+}
+
+void set_cuda_fused_force_nodes(Backend& backend, index_t nodes) {
+  gpu::with_cuda_backend(backend, [&](auto& b) { b.stepper().set_fused_force_nodes(nodes); });
+}
+
 const char* to_string(CudaGradients g) {
   switch (g) {
     case CudaGradients::Auto: return "auto";

@@ -44,6 +44,17 @@ void set_cuda_step_mode(Backend& backend, CudaStepMode mode);
 /// The mode advance() uses for the backend's current region (Auto resolved).
 CudaStepMode cuda_step_mode(Backend& backend);
 
+/// Whether the chained steps (Launch and Graph modes) over the backend's
+/// current region run passes 3 and 4 as one kernel: a model without law
+/// terms and a region of at most cuda_fused_force_nodes() nodes, the most
+/// the device holds the fused kernel's node warps for at once (docs/cuda.md,
+/// "Passes 3 and 4 as one kernel").
+bool cuda_fuses_forces(Backend& backend);
+index_t cuda_fused_force_nodes(Backend& backend);
+/// Overrides that limit (tests: 0 runs passes 3 and 4 apart on every
+/// region, the same bits); negative restores the device's.
+void set_cuda_fused_force_nodes(Backend& backend, index_t nodes);
+
 /// CudaGradients (cuda/gradients.hpp) by name: "auto", "stored", "recomputed".
 const char* to_string(CudaGradients g);
 

@@ -86,7 +86,7 @@ void Stepper<T>::init() {
   }
   limits_.cluster_size = std::min(largest_cluster<T, false, false>(), largest_cluster<T, false, true>());
   limits_.law_cluster_size = std::min(largest_cluster<T, true, false>(), largest_cluster<T, true, true>());
-  limits_.fused_force_nodes = fused_force_nodes<T>();
+  device_fused_force_nodes_ = limits_.fused_force_nodes = fused_force_nodes<T>();
 }
 
 template <class T>

@@ -426,6 +426,13 @@ __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, con
 /// them unused in float).
 inline constexpr int kFusedForceBlock = 128;
 
+/// Blocks of the fused force kernel an SM must hold: five in float (96
+/// registers a thread; at 97 the allocation rounds up to 104 and an H100
+/// holds four blocks, 2,112 node warps, fewer than the kidney's 2,349
+/// nodes), three in double (up to 168 registers).
+template <class T>
+inline constexpr int kFusedForceMinBlocks = sizeof(T) == 4 ? 5 : 3;
+
 /// Corner a's force of an element (a select, not an index: no local memory).
 template <class T>
 __device__ __forceinline__ Vec3<T> corner_force(const ElementForces<T>& out, int a) {
@@ -609,7 +616,7 @@ __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r,
 
 /// Passes 3 and 4 as one kernel (fuses_forces), a warp per node.
 template <class T, bool kRecomputed, bool kLoad>
-__global__ void forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
+__global__ void __launch_bounds__(kFusedForceBlock, kFusedForceMinBlocks<T>) forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
   let_next_pass_launch();
   const index_t g = thread_index(), i = g / kFusedLanes;
   if (i >= r.n_nodes) return;  // (whole warps)

@@ -667,19 +667,22 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
 /// Graph modes: passes 1-2 on regions under 10,000 elements, the
 /// reduction's too, passes 3-4 on regions whose node warps the device holds
 /// at once; docs/cuda.md, "Passes 1 and 2 as one kernel", "Passes 3 and 4
-/// as one kernel") against the four passes of the Grid mode, bit for bit.
-/// On the kidney, whose busiest nodes touch more than 32 elements (the
-/// fused kernels' second round of slots, and their prefetch), with loads
-/// on three nodes (the force kernel's load instantiation), over the whole
-/// mesh (passes 3-4 fused in float on an H100, not in double: its warps
-/// take more registers) and over a region of depth 2 in which a driven
-/// halo node moves: its elements
-/// outside the region (no inner corner) are computed by no kernel, so their
-/// slots keep the values of the region's build (the volume change at the
-/// build's u, zero force) while the node moves, and the fused kernels must
-/// read them, not compute them at the new position. On a box of 12,288
-/// elements the chained steps and the reduction run the four passes (above
-/// the limit) and must agree with the Grid mode too.
+/// as one kernel") against the four passes of the Grid mode and of the
+/// Graph mode with passes 3-4 held apart (set_cuda_fused_force_nodes(0)),
+/// bit for bit. On the kidney, whose busiest nodes touch more than 32
+/// elements (the fused kernels' second round of slots, and their
+/// prefetch), with loads on the seeds (the force kernel's load
+/// instantiation): over the whole mesh (passes 3-4 fused in float on an
+/// H100, not in double: its warps take more registers) and over a region of
+/// depth 2 around the busiest node (fused on any GPU: a few hundred nodes),
+/// in which a driven halo node moves: its elements outside the region (no
+/// inner corner) are computed by no kernel, so their slots keep the values
+/// of the region's build (the volume change at the build's u, zero force)
+/// while the node moves, and the fused kernels must read them, not compute
+/// them at the new position. On a box of 15,360 elements and 3,179 nodes the
+/// chained steps and the reduction run passes 1-2 apart (above the size
+/// limit), and passes 3-4 too where the device holds fewer node warps (an
+/// H100: 2,640 in float).
 TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
   SKIP_WITHOUT_GPU();
   const Precision p = GetParam();
@@ -690,21 +693,27 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
   };
   std::vector<Case> cases;
   cases.push_back({"kidney, whole mesh", scene::load_model(io::default_kidney_scene()), kDepthAll});
-  cases.push_back({"kidney, depth 2 with a driven halo node", cases[0].m, 2});
-  cases.push_back({"box of 12,288 elements, whole mesh", box_model(16, 16, 8, 0.16, 0.16, 0.08), kDepthAll});
-  ASSERT_EQ(cases[2].m.n_elems, 12288);
+  cases.push_back({"kidney, depth 2 around its busiest node, with a driven halo node", cases[0].m, 2});
+  cases.push_back({"box of 15,360 elements, whole mesh", box_model(16, 16, 10, 0.16, 0.16, 0.1), kDepthAll});
+  ASSERT_EQ(cases[2].m.n_elems, 15360);
+  const TissueModel<double>& kidney = cases[0].m;
+  const auto elements_of = [](const TissueModel<double>& m, index_t a) {
+    return m.node_elem_start[a + 1] - m.node_elem_start[a];
+  };
   index_t busiest = 0;
-  for (index_t a = 0; a < cases[0].m.n_nodes; ++a)
-    busiest = std::max(busiest, cases[0].m.node_elem_start[a + 1] - cases[0].m.node_elem_start[a]);
-  EXPECT_GT(busiest, 32) << "the kidney no longer exercises the fused kernels' second round";
+  for (index_t a = 0; a < kidney.n_nodes; ++a)
+    if (elements_of(kidney, a) > elements_of(kidney, busiest)) busiest = a;
+  EXPECT_GT(elements_of(kidney, busiest), 32) << "the kidney no longer exercises the fused kernels' second round";
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
     const TissueModel<double>& m = c.m;
-    const index_t seeds[3] = {m.tris[0], m.tris[m.n_tris], m.tris[2 * m.n_tris]};
+    std::vector<index_t> seeds = {m.tris[0], m.tris[m.n_tris], m.tris[2 * m.n_tris]};
     std::vector<index_t> driven;
     std::vector<double> drive;
-    if (c.depth != kDepthAll) {  // a halo node with an element outside the region
+    if (c.depth != kDepthAll) {  // around the busiest node; a halo node with an element outside the region
+      seeds = {busiest};
       const Region region = flood_fill(m, seeds, c.depth);
+      ASSERT_EQ(region.role[busiest], kInner);
       for (index_t a : region.nodes) {
         if (region.role[a] != kHalo) continue;
         bool outside = false;
@@ -720,17 +729,32 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
     }
     const auto u = random_field(m.n_nodes, 1e-5, 37);
     std::vector<double> ref_u, ref_f, ref_p, ref_J, ref_energy;
-    for (CudaStepMode mode : {CudaStepMode::Grid, CudaStepMode::Graph, CudaStepMode::Launch}) {
-      SCOPED_TRACE(to_string(mode));
+    struct Run {
+      CudaStepMode mode;
+      bool apart;  // passes 3-4 held apart
+    };
+    for (const Run run : {Run{CudaStepMode::Grid, false}, Run{CudaStepMode::Graph, false},
+                          Run{CudaStepMode::Launch, false}, Run{CudaStepMode::Graph, true}}) {
+      SCOPED_TRACE(::testing::Message() << to_string(run.mode) << (run.apart ? ", passes 3-4 apart" : ""));
       auto gpu = make_cuda_backend(p);
-      set_cuda_step_mode(*gpu, mode);
+      set_cuda_step_mode(*gpu, run.mode);
+      if (run.apart) set_cuda_fused_force_nodes(*gpu, 0);
       gpu->upload(m);
       gpu->set_displacements(u);
       gpu->build_region(seeds, c.depth);
+      if (run.mode == CudaStepMode::Graph) {
+        const bool fused = cuda_fuses_forces(*gpu);
+        if (run.apart) EXPECT_FALSE(fused);
+        if (!run.apart && c.depth != kDepthAll) EXPECT_TRUE(fused) << "the fused force kernel did not run";
+        if (!run.apart)
+          std::printf("[measured] %s (%s): passes 3-4 %s (the device holds %d node warps)\n", c.name.c_str(),
+                      p == Precision::Float ? "float" : "double", fused ? "fused" : "apart",
+                      int(cuda_fused_force_nodes(*gpu)));
+      }
       if (!driven.empty()) gpu->set_driven(driven, drive);
       if (m.n_elems < 10000) {  // the kidney: loads on the seeds (region nodes at any depth)
         const double force[9] = {0.02, -0.01, 0.03, -0.02, 0.0, 0.01, 0.0, 0.04, -0.03};
-        gpu->set_loads(seeds, force);
+        gpu->set_loads(seeds, std::span<const double>(force, 3 * seeds.size()));
       }
       gpu->advance(5);
       std::vector<double> energies = {gpu->reduce().strain_energy};
@@ -759,9 +783,10 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
 /// The fused force pass records a bad element as pass 3 does (corner 0's
 /// visit of each element; the lowest element wins): a kidney node pushed
 /// through its neighbours, one step over a region of depth 2 around it (a
-/// region the force kernel fuses in either precision) in each mode, the
-/// same element and J from the reduction as the Grid mode's four passes,
-/// and the same bits; the same element as the cpu's step.
+/// region the force kernel fuses in either precision) in each mode, with
+/// several elements inverted: the same element and J from the reduction as
+/// the Grid mode's four passes, and the same bits; the same element as the
+/// cpu's step.
 TEST_P(Stages, FusedForcePassRecordsTheLowestBadElement) {
   SKIP_WITHOUT_GPU();
   const Precision p = GetParam();
@@ -786,11 +811,15 @@ TEST_P(Stages, FusedForcePassRecordsTheLowestBadElement) {
     gpu->upload(m);
     gpu->set_displacements(u);
     gpu->build_region(seeds, 2);
+    if (mode == CudaStepMode::Graph) EXPECT_TRUE(cuda_fuses_forces(*gpu));
     gpu->advance(1);
     const Reductions r = gpu->reduce();
     const Fields f = gpu->download();
     if (ref_bad == -2) {
       ASSERT_GE(r.bad_elem, 0) << "no element inverted: the test pushes too little";
+      int inverted = 0;  // several: the lowest must win
+      for (double J : f.elem_J) inverted += J <= 0 ? 1 : 0;
+      EXPECT_GT(inverted, 1);
       auto cpu = make_cpu_backend(p);
       cpu->upload(m);
       cpu->set_displacements(u);
