@@ -52,7 +52,7 @@ CudaStepMode cuda_step_mode(Backend& backend);
 bool cuda_fuses_forces(Backend& backend);
 index_t cuda_fused_force_nodes(Backend& backend);
 /// Overrides that limit (tests: 0 runs passes 3 and 4 apart on every
-/// region, the same bits); negative restores the device's.
+/// region, the same bits).
 void set_cuda_fused_force_nodes(Backend& backend, index_t nodes);
 
 /// CudaGradients (cuda/gradients.hpp) by name: "auto", "stored", "recomputed".

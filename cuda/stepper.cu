@@ -1,6 +1,7 @@
 #include "cuda/stepper.hpp"
 
 #include <algorithm>
+#include <limits>
 #include <stdexcept>
 
 #include "cuda/tled.cuh"
@@ -59,14 +60,12 @@ int grid_blocks_per_sm() {
 /// instantiations alike: the fewest).
 template <class T>
 index_t fused_force_nodes() {
-  int fewest = 0;
-  bool first = true;
+  int fewest = std::numeric_limits<int>::max();
   for (auto kernel : {forces_kernel<T, false, false>, forces_kernel<T, false, true>, forces_kernel<T, true, false>,
                       forces_kernel<T, true, true>}) {
     int blocks = 0;
     CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, kernel, kFusedForceBlock, 0));
-    fewest = first ? blocks : std::min(fewest, blocks);
-    first = false;
+    fewest = std::min(fewest, blocks);
   }
   const int sms = current_device_attribute(cudaDevAttrMultiProcessorCount);
   return index_t(fewest) * (kFusedForceBlock / kFusedLanes) * sms;
@@ -86,7 +85,7 @@ void Stepper<T>::init() {
   }
   limits_.cluster_size = std::min(largest_cluster<T, false, false>(), largest_cluster<T, false, true>());
   limits_.law_cluster_size = std::min(largest_cluster<T, true, false>(), largest_cluster<T, true, true>());
-  device_fused_force_nodes_ = limits_.fused_force_nodes = fused_force_nodes<T>();
+  limits_.fused_force_nodes = fused_force_nodes<T>();
 }
 
 template <class T>
@@ -144,14 +143,15 @@ void Stepper<T>::node_update(const ModelView<T>& m, const StateView<T>& s, const
 template <class T>
 void Stepper<T>::forces_and_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                                    StepBuffers<T> b, cudaStream_t stream) {
+  const auto go = [&](auto kernel) {
+    launch_chained_in(kFusedForceBlock, kFusedLanes * r.n_nodes, stream, kernel, m, s, r, b);
+  };
   with_gradients(m, r, [&](auto recomputed) {
     constexpr bool kRecomputed = decltype(recomputed)::value;
     if (s.load)
-      launch_chained_in(kFusedForceBlock, kFusedLanes * r.n_nodes, stream, forces_kernel<T, kRecomputed, true>, m, s,
-                        r, b);
+      go(forces_kernel<T, kRecomputed, true>);
     else
-      launch_chained_in(kFusedForceBlock, kFusedLanes * r.n_nodes, stream, forces_kernel<T, kRecomputed, false>, m,
-                        s, r, b);
+      go(forces_kernel<T, kRecomputed, false>);
   });
 }
 

@@ -136,9 +136,9 @@ class Stepper {
     return law_.neo_hookean() && r.n_nodes <= limits_.fused_force_nodes;
   }
   /// Sets PersistentLimits::fused_force_nodes (tests: 0 runs passes 3 and
-  /// 4 apart on every region); negative: the device's, as init() found it.
+  /// 4 apart on every region, until the next init()).
   void set_fused_force_nodes(index_t nodes) {
-    limits_.fused_force_nodes = nodes < 0 ? device_fused_force_nodes_ : nodes;
+    limits_.fused_force_nodes = nodes;
     graphs_.clear();
   }
   /// Passes 3 and 4 as one kernel (fuses_forces).
@@ -175,7 +175,6 @@ class Stepper {
 
   CudaStepMode mode_ = CudaStepMode::Auto;
   PersistentLimits limits_;
-  index_t device_fused_force_nodes_ = 0;  ///< fused_force_nodes as init() found it
   LawView<T> law_;
   /// the tools' buffer is the backend's one device array
   std::map<GraphKey, GraphExec> graphs_;

@@ -31,6 +31,13 @@ __device__ __forceinline__ unsigned long long bad_key(index_t e, float J) {
   return (static_cast<unsigned long long>(static_cast<unsigned>(e)) << 32) | __float_as_uint(J);
 }
 
+/// Records element e in *bad when its pass-3 J is not positive or not
+/// finite (once per element; the lowest element wins).
+template <class T>
+__device__ __forceinline__ void record_if_bad(unsigned long long* bad, index_t e, T J) {
+  if (!(J > T(0)) || !isfinite(J)) atomicMin(bad, bad_key(e, static_cast<float>(J)));
+}
+
 /// The model data of one element that passes 1 and 3 use; its gradients
 /// and volume loaded or (kRecomputed) recomputed (ModelView::dndx).
 template <class T>
@@ -68,22 +75,18 @@ __device__ __forceinline__ ElementData<T> load_element_shape(const ModelView<T>&
   return d;
 }
 
-/// The same and its corners' slots: pass 1's (mu and K left unset).
+/// Loads element d.e's corners' slots into d.
+template <class T>
+__device__ __forceinline__ void load_slots(const ModelView<T>& m, ElementData<T>& d) {
+#pragma unroll
+  for (int a = 0; a < 4; ++a) d.slot[a] = __ldg(m.slot_of + a * m.n_elems + d.e);
+}
+
+/// The shape and its corners' slots: pass 1's (mu and K left unset).
 template <class T, bool kRecomputed>
 __device__ __forceinline__ ElementData<T> load_element_slots(const ModelView<T>& m, index_t e) {
   ElementData<T> d = load_element_shape<T, kRecomputed>(m, e);
-  const index_t ne = m.n_elems;
-#pragma unroll
-  for (int a = 0; a < 4; ++a) d.slot[a] = __ldg(m.slot_of + a * ne + e);
-  return d;
-}
-
-/// All of it: pass 3's.
-template <class T, bool kRecomputed>
-__device__ __forceinline__ ElementData<T> load_element(const ModelView<T>& m, index_t e) {
-  ElementData<T> d = load_element_slots<T, kRecomputed>(m, e);
-  d.mu = __ldg(m.mu + e);
-  d.K = __ldg(m.K + e);
+  load_slots(m, d);
   return d;
 }
 
@@ -93,6 +96,14 @@ __device__ __forceinline__ ElementData<T> load_element_moduli(const ModelView<T>
   ElementData<T> d = load_element_shape<T, kRecomputed>(m, e);
   d.mu = __ldg(m.mu + e);
   d.K = __ldg(m.K + e);
+  return d;
+}
+
+/// All of it: pass 3's.
+template <class T, bool kRecomputed>
+__device__ __forceinline__ ElementData<T> load_element(const ModelView<T>& m, index_t e) {
+  ElementData<T> d = load_element_moduli<T, kRecomputed>(m, e);
+  load_slots(m, d);
   return d;
 }
 
@@ -212,7 +223,7 @@ __device__ __forceinline__ ElementForces<T> element_forces_of(const StateView<T>
 template <class T>
 __device__ __forceinline__ void store_element_forces(const StateView<T>& s, const ElementData<T>& d,
                                                      const ElementForces<T>& out) {
-  if (!(out.J > T(0)) || !isfinite(out.J)) atomicMin(s.bad, bad_key(d.e, static_cast<float>(out.J)));
+  record_if_bad(s.bad, d.e, out.J);
 #pragma unroll
   for (int a = 0; a < 4; ++a) s.f_slot[d.slot[a]] = Packed3<T>::of(out.f[a]);
 }
@@ -237,7 +248,7 @@ __device__ void law_element_forces_at(const ModelView<T>& m, const StateView<T>&
   const T pbar =
       m.ianp ? (s.node_p[d.c[0]] + s.node_p[d.c[1]] + s.node_p[d.c[2]] + s.node_p[d.c[3]]) / T(4) : T(0);
   const T J = law_element_forces(m, w, d, ue, m.ianp, pbar, f);
-  if (!(J > T(0)) || !isfinite(J)) atomicMin(s.bad, bad_key(d.e, static_cast<float>(J)));
+  record_if_bad(s.bad, d.e, J);
 #pragma unroll
   for (int a = 0; a < 4; ++a) s.f_slot[d.slot[a]] = Packed3<T>::of(f[a]);
 }
@@ -360,35 +371,47 @@ __device__ __forceinline__ void add_in_node_order(V& acc, const V& v, index_t ba
   }
 }
 
-/// Passes 1 and 2 for a node (one lane of its warp), the same arithmetic
-/// in the same order: lane l's slots l, l + 32, ... each get the volume
-/// change pass 1 computes (stored into the slot, and J_e by corner 0's
-/// visit, so that the pass arrays end as the two passes leave them) or, for
-/// an element outside the region, the slot's own value; lane j < 8 then
-/// adds slots j, j + 8, j + 16, ... in pass 2's order (read from the lanes
-/// that hold them) and the eight add as pass 2's groups do. `next` holds
-/// the lane's first slot, loaded by the caller.
-template <class T, bool kRecomputed>
-__device__ void pressures_at(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, index_t a,
-                             index_t begin, index_t end, int lane, SlotElement<T> next, const Packed3<T>* u) {
-  T dv = T(0);
+/// The sum over node a's slots begin..end in a fused pass, by the calling
+/// warp: lane l visits slots l, l + 32, ..., value(k, x) gives slot k's
+/// value (x: its element; `next` holds the lane's first, loaded by the
+/// caller, and the next round's is loaded before value() runs), and lane
+/// j < kNodeLanes returns the values summed in the node passes' order
+/// (add_in_node_order); the other lanes' sums are not used.
+template <class T, bool kRecomputed, bool kModuli, class V, class Value>
+__device__ __forceinline__ V sum_node_slots(const ModelView<T>& m, const RegionView& r, index_t begin, index_t end,
+                                            int lane, SlotElement<T> next, Value value) {
+  V acc{};
   for (index_t base = begin; base < end; base += kFusedLanes) {  // (uniform over the warp)
     const index_t k = base + lane;
-    T v = T(0);
+    V v{};
     if (k < end) {
       const SlotElement<T> x = next;
-      if (k + kFusedLanes < end) next = load_slot_element<T, kRecomputed>(m, r, k + kFusedLanes);
-      if (x.computed) {
-        T J;
-        v = element_volume_change(x.d, u, J);
-        s.dv_slot[k] = v;
-        if (x.corner == 0) s.elem_J[x.d.e] = J;
-      } else {
-        v = s.dv_slot[k];
-      }
+      if (k + kFusedLanes < end) next = load_slot_element<T, kRecomputed, kModuli>(m, r, k + kFusedLanes);
+      v = value(k, x);
     }
-    add_in_node_order(dv, v, base, end, lane);
+    add_in_node_order(acc, v, base, end, lane);
   }
+  return acc;
+}
+
+/// Passes 1 and 2 for a node (one lane of its warp), the same arithmetic
+/// in the same order: each slot gets the volume change pass 1 computes
+/// (stored into the slot, and J_e by corner 0's visit, so that the pass
+/// arrays end as the two passes leave them) or, for an element outside the
+/// region, the slot's own value; the warp sums them in pass 2's order
+/// (sum_node_slots) and the eight partial sums meet as pass 2's groups do.
+template <class T, bool kRecomputed>
+__device__ void pressures_at(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, index_t a,
+                             index_t begin, index_t end, int lane, SlotElement<T> first, const Packed3<T>* u) {
+  T dv = sum_node_slots<T, kRecomputed, false, T>(m, r, begin, end, lane, first,
+                                                  [&](index_t k, const SlotElement<T>& x) {
+                                                    if (!x.computed) return s.dv_slot[k];
+                                                    T J;
+                                                    const T v = element_volume_change(x.d, u, J);
+                                                    s.dv_slot[k] = v;
+                                                    if (x.corner == 0) s.elem_J[x.d.e] = J;
+                                                    return v;
+                                                  });
   dv = node_group_sum(dv, node_group_mask());
   if (lane == 0) s.node_p[a] = dv / __ldg(m.node_divisor + a);
 }
@@ -440,37 +463,27 @@ __device__ __forceinline__ Vec3<T> corner_force(const ElementForces<T>& out, int
 }
 
 /// Passes 3 and 4 for a node (one lane of its warp), the same arithmetic
-/// in the same order: lane l's slots l, l + 32, ... each get the force pass
-/// 3 computes for that corner (the element's four, as pass 3 computes them;
-/// the one kept is stored into the slot, and corner 0's visit records a bad
-/// element as pass 3 does) or, for an element outside the region, the
-/// slot's own value (zero since the region's build); lane j < 8 then adds
-/// them in pass 4's order and lane 0 ends pass 4. `next` holds the lane's
-/// first slot, loaded by the caller.
+/// in the same order: each slot gets the force pass 3 computes for that
+/// corner (the element's four, as pass 3 computes them; the one kept is
+/// stored into the slot, and corner 0's visit records a bad element as pass
+/// 3 does) or, for an element outside the region, the slot's own value
+/// (zero since the region's build); the warp sums them in pass 4's order
+/// (sum_node_slots) and lane 0 ends pass 4.
 template <class T, bool kRecomputed, bool kLoad>
 __device__ void forces_at(const ModelView<T>& m, const StateView<T>& s, const StepBuffers<T>& b,
                           const RegionView& r, index_t a, index_t begin, index_t end, int lane,
-                          SlotElement<T> next) {
-  Vec3<T> f = {T(0), T(0), T(0)};
-  for (index_t base = begin; base < end; base += kFusedLanes) {  // (uniform over the warp)
-    const index_t k = base + lane;
-    Vec3<T> v = {T(0), T(0), T(0)};
-    if (k < end) {
-      const SlotElement<T> x = next;
-      if (k + kFusedLanes < end) next = load_slot_element<T, kRecomputed, true>(m, r, k + kFusedLanes);
-      if (x.computed) {
-        const ElementForces<T> out = element_forces_of(s, x.d, b.u, m.ianp);
-        if (x.corner == 0 && (!(out.J > T(0)) || !isfinite(out.J)))
-          atomicMin(s.bad, bad_key(x.d.e, static_cast<float>(out.J)));
-        const Packed3<T> fa = Packed3<T>::of(corner_force(out, x.corner));
-        s.f_slot[k] = fa;
-        v = fa.vec();
-      } else {
-        v = s.f_slot[k].vec();
-      }
-    }
-    add_in_node_order(f, v, base, end, lane);
-  }
+                          SlotElement<T> first) {
+  Vec3<T> f = sum_node_slots<T, kRecomputed, true, Vec3<T>>(m, r, begin, end, lane, first,
+                                                           [&](index_t k, const SlotElement<T>& x) {
+                                                             if (!x.computed) return s.f_slot[k].vec();
+                                                             const ElementForces<T> out =
+                                                                 element_forces_of(s, x.d, b.u, m.ianp);
+                                                             if (x.corner == 0) record_if_bad(s.bad, x.d.e, out.J);
+                                                             const Packed3<T> fa =
+                                                                 Packed3<T>::of(corner_force(out, x.corner));
+                                                             s.f_slot[k] = fa;
+                                                             return fa.vec();
+                                                           });
   const unsigned mask = node_group_mask();
   f = {node_group_sum(f.x, mask), node_group_sum(f.y, mask), node_group_sum(f.z, mask)};
   if (lane == 0) node_update_from<T, kLoad>(m, s, b, a, f);
@@ -510,19 +523,32 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
   if (active) nodal_pressure_at(m, s, d);
 }
 
-/// Passes 1 and 2 as one kernel (fuses_pressures), a warp per node.
-template <class T, bool kRecomputed>
-__global__ void pressures_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
+/// The body of a fused kernel (a warp per node of region r): lets the next
+/// pass launch, loads the warp's node, its slot range and the lane's first
+/// slot before the wait for the previous pass, then runs
+/// body(a, begin, end, lane, first) unless the tick is skipped.
+template <class T, bool kRecomputed, bool kModuli, class Body>
+__device__ __forceinline__ void run_fused_node(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
+                                               Body body) {
   let_next_pass_launch();
   const index_t g = thread_index(), i = g / kFusedLanes;
   if (i >= r.n_nodes) return;  // (whole warps)
   const int lane = g % kFusedLanes;
   const index_t a = r.node(i), begin = __ldg(m.node_elem_start + a), end = __ldg(m.node_elem_start + a + 1);
   SlotElement<T> first{};
-  if (begin + lane < end) first = load_slot_element<T, kRecomputed>(m, r, begin + lane);
+  if (begin + lane < end) first = load_slot_element<T, kRecomputed, kModuli>(m, r, begin + lane);
   wait_for_previous_pass();
   if (skipped(s)) return;
-  pressures_at<T, kRecomputed>(m, s, r, a, begin, end, lane, first, u);
+  body(a, begin, end, lane, first);
+}
+
+/// Passes 1 and 2 as one kernel (fuses_pressures), a warp per node.
+template <class T, bool kRecomputed>
+__global__ void pressures_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
+  run_fused_node<T, kRecomputed, false>(m, s, r, [&](index_t a, index_t begin, index_t end, int lane,
+                                                     const SlotElement<T>& first) {
+    pressures_at<T, kRecomputed>(m, s, r, a, begin, end, lane, first, u);
+  });
 }
 
 /// Queues passes 1 and 2 over region r at displacements u as the steps run
@@ -616,17 +642,12 @@ __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r,
 
 /// Passes 3 and 4 as one kernel (fuses_forces), a warp per node.
 template <class T, bool kRecomputed, bool kLoad>
-__global__ void __launch_bounds__(kFusedForceBlock, kFusedForceMinBlocks<T>) forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
-  let_next_pass_launch();
-  const index_t g = thread_index(), i = g / kFusedLanes;
-  if (i >= r.n_nodes) return;  // (whole warps)
-  const int lane = g % kFusedLanes;
-  const index_t a = r.node(i), begin = __ldg(m.node_elem_start + a), end = __ldg(m.node_elem_start + a + 1);
-  SlotElement<T> first{};
-  if (begin + lane < end) first = load_slot_element<T, kRecomputed, true>(m, r, begin + lane);
-  wait_for_previous_pass();
-  if (skipped(s)) return;
-  forces_at<T, kRecomputed, kLoad>(m, s, b, r, a, begin, end, lane, first);
+__global__ void __launch_bounds__(kFusedForceBlock, kFusedForceMinBlocks<T>)
+    forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
+  run_fused_node<T, kRecomputed, true>(m, s, r, [&](index_t a, index_t begin, index_t end, int lane,
+                                                    const SlotElement<T>& first) {
+    forces_at<T, kRecomputed, kLoad>(m, s, b, r, a, begin, end, lane, first);
+  });
 }
 
 // ---- persistent kernels: whole steps, a barrier between passes ----------------

@@ -663,6 +663,16 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
     }
 }
 
+/// Elements of node a of m, and the node with the most (the fused kernels'
+/// second round of slots where it has more than 32).
+index_t elements_of(const TissueModel<double>& m, index_t a) { return m.node_elem_start[a + 1] - m.node_elem_start[a]; }
+index_t busiest_node(const TissueModel<double>& m) {
+  index_t busiest = 0;
+  for (index_t a = 0; a < m.n_nodes; ++a)
+    if (elements_of(m, a) > elements_of(m, busiest)) busiest = a;
+  return busiest;
+}
+
 /// Passes 1 and 2 as one kernel, and passes 3 and 4 as one (the Launch and
 /// Graph modes: passes 1-2 on regions under 10,000 elements, the
 /// reduction's too, passes 3-4 on regions whose node warps the device holds
@@ -697,12 +707,7 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
   cases.push_back({"box of 15,360 elements, whole mesh", box_model(16, 16, 10, 0.16, 0.16, 0.1), kDepthAll});
   ASSERT_EQ(cases[2].m.n_elems, 15360);
   const TissueModel<double>& kidney = cases[0].m;
-  const auto elements_of = [](const TissueModel<double>& m, index_t a) {
-    return m.node_elem_start[a + 1] - m.node_elem_start[a];
-  };
-  index_t busiest = 0;
-  for (index_t a = 0; a < kidney.n_nodes; ++a)
-    if (elements_of(kidney, a) > elements_of(kidney, busiest)) busiest = a;
+  const index_t busiest = busiest_node(kidney);
   EXPECT_GT(elements_of(kidney, busiest), 32) << "the kidney no longer exercises the fused kernels' second round";
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
@@ -744,12 +749,16 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
       gpu->build_region(seeds, c.depth);
       if (run.mode == CudaStepMode::Graph) {
         const bool fused = cuda_fuses_forces(*gpu);
-        if (run.apart) EXPECT_FALSE(fused);
-        if (!run.apart && c.depth != kDepthAll) EXPECT_TRUE(fused) << "the fused force kernel did not run";
-        if (!run.apart)
+        if (run.apart) {
+          EXPECT_FALSE(fused);
+        } else {
+          if (c.depth != kDepthAll) {
+            EXPECT_TRUE(fused) << "the fused force kernel did not run";
+          }
           std::printf("[measured] %s (%s): passes 3-4 %s (the device holds %d node warps)\n", c.name.c_str(),
                       p == Precision::Float ? "float" : "double", fused ? "fused" : "apart",
                       int(cuda_fused_force_nodes(*gpu)));
+        }
       }
       if (!driven.empty()) gpu->set_driven(driven, drive);
       if (m.n_elems < 10000) {  // the kidney: loads on the seeds (region nodes at any depth)
@@ -793,10 +802,7 @@ TEST_P(Stages, FusedForcePassRecordsTheLowestBadElement) {
   const auto m = scene::load_model(io::default_kidney_scene());
   ASSERT_LT(m.n_elems, 10000);  // the fused kernels' size
   // the node with the most elements, pushed 3 cm: several of its elements invert
-  index_t node = 0;
-  for (index_t a = 0; a < m.n_nodes; ++a)
-    if (m.node_elem_start[a + 1] - m.node_elem_start[a] > m.node_elem_start[node + 1] - m.node_elem_start[node])
-      node = a;
+  const index_t node = busiest_node(m);
   const index_t seeds[1] = {node};
   std::vector<double> u(3 * size_t(m.n_nodes), 0.0);
   u[node] = 0.03;
@@ -811,7 +817,9 @@ TEST_P(Stages, FusedForcePassRecordsTheLowestBadElement) {
     gpu->upload(m);
     gpu->set_displacements(u);
     gpu->build_region(seeds, 2);
-    if (mode == CudaStepMode::Graph) EXPECT_TRUE(cuda_fuses_forces(*gpu));
+    if (mode == CudaStepMode::Graph) {
+      EXPECT_TRUE(cuda_fuses_forces(*gpu));
+    }
     gpu->advance(1);
     const Reductions r = gpu->reduce();
     const Fields f = gpu->download();
