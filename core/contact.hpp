@@ -266,55 +266,83 @@ TISSUE_HD void closest_segment_segment(Vec3<T> p1, Vec3<T> q1, Vec3<T> p2, Vec3<
   else if (t > T(1)) { t = T(1); s = clamp01((b - c) / a); }
 }
 
+/// One candidate for a triangle's point closest to a capsule's axis
+/// (triangle_deepest_point), k = 0..kDeepestCandidates - 1: 0 and 1 the axis
+/// ends a and b against the face, 2-4 the axis against edge k - 2 (its
+/// corners k - 2 and the next), 5 the axis piercing the face's plane
+/// (`found` false where it does not: parallel to it, or meeting it beyond
+/// an end). q is the triangle point, w its barycentric weights, c the axis
+/// point and d2 = |q - c|^2. The candidates are independent: a backend may
+/// compute them side by side (the cuda sweep gives each its own lane).
+template <class T>
+struct DeepestCandidate {
+  Vec3<T> q, c;
+  T w[3];
+  T d2;
+  bool found;
+};
+
+inline constexpr int kDeepestCandidates = 6;
+
+/// a[i] of three, by selects: an index that differs between a warp's lanes
+/// would put a register array in memory.
+template <class V>
+TISSUE_HD V one_of_three(const V a[3], int i) {
+  return i == 0 ? a[0] : (i == 1 ? a[1] : a[2]);
+}
+
+template <class T>
+TISSUE_HD DeepestCandidate<T> deepest_candidate(const Capsule<T>& cap, const Vec3<T> P[3], int k) {
+  DeepestCandidate<T> r{{T(0), T(0), T(0)}, {T(0), T(0), T(0)}, {T(0), T(0), T(0)}, T(0), true};
+  if (k >= 2 && k <= 4) {  // an edge against the axis
+    const int i = k - 2, j = i == 2 ? 0 : i + 1;
+    const Vec3<T> Pi = one_of_three(P, i), Pj = one_of_three(P, j);
+    T s, t;
+    closest_segment_segment(cap.a, cap.b, Pi, Pj, s, t);
+    r.c = cap.a + s * (cap.b - cap.a);
+    r.q = Pi + t * (Pj - Pi);
+    for (int m = 0; m < 3; ++m) r.w[m] = m == i ? T(1) - t : (m == j ? t : T(0));
+  } else {  // an axis point against the face: an end, or where the axis pierces the face's plane
+    if (k == 0) {
+      r.c = cap.a;
+    } else if (k == 1) {
+      r.c = cap.b;
+    } else {
+      const Vec3<T> d = cap.b - cap.a, e1 = P[1] - P[0], e2 = P[2] - P[0], nrm = cross(e1, e2);
+      const T den = dot(nrm, d);
+      const T s = den != T(0) ? dot(nrm, P[0] - cap.a) / den : T(-1);
+      r.found = s >= T(0) && s <= T(1);
+      if (r.found) r.c = cap.a + s * d;
+    }
+    if (r.found) r.q = closest_on_triangle(r.c, P[0], P[1], P[2], r.w);  // one call: lanes 0, 1 and 5 share it
+  }
+  if (r.found) r.d2 = dot(r.q - r.c, r.q - r.c);
+  return r;
+}
+
+/// Whether candidate e replaces the deepest so far (squared distance best):
+/// the first of equal ones stays.
+template <class T>
+TISSUE_HD bool deeper(bool found, T d2, T best) {
+  return found && d2 < best;
+}
+
 /// The triangle's point closest to the capsule's axis: writes its
 /// barycentric weights w, the axis point c closest to it, and returns the
 /// triangle point q. When the axis pierces the triangle the distance is zero
-/// and q = c is the piercing point.
+/// and q = c is the piercing point. The candidates in order k = 0..5, the
+/// first closest kept.
 template <class T>
 TISSUE_HD Vec3<T> triangle_deepest_point(const Capsule<T>& cap, const Vec3<T> P[3], T w[3], Vec3<T>& c) {
-  // the axis end points against the face, then the three edges against the axis
-  T wa[3];
-  Vec3<T> q = closest_on_triangle(cap.a, P[0], P[1], P[2], w);
-  c = cap.a;
-  T best = dot(q - c, q - c);
-  const Vec3<T> qb = closest_on_triangle(cap.b, P[0], P[1], P[2], wa);
-  if (dot(qb - cap.b, qb - cap.b) < best) {
-    best = dot(qb - cap.b, qb - cap.b);
-    q = qb;
-    c = cap.b;
-    w[0] = wa[0]; w[1] = wa[1]; w[2] = wa[2];
+  DeepestCandidate<T> best = deepest_candidate(cap, P, 0);
+  TISSUE_UNROLL
+  for (int k = 1; k < kDeepestCandidates; ++k) {
+    const DeepestCandidate<T> e = deepest_candidate(cap, P, k);
+    if (deeper(e.found, e.d2, best.d2)) best = e;
   }
-  for (int e = 0; e < 3; ++e) {
-    const int i = e, j = e == 2 ? 0 : e + 1;
-    T s, t;
-    closest_segment_segment(cap.a, cap.b, P[i], P[j], s, t);
-    const Vec3<T> ce = cap.a + s * (cap.b - cap.a), qe = P[i] + t * (P[j] - P[i]);
-    if (dot(qe - ce, qe - ce) < best) {
-      best = dot(qe - ce, qe - ce);
-      q = qe;
-      c = ce;
-      w[0] = w[1] = w[2] = T(0);
-      w[i] = T(1) - t;
-      w[j] = t;
-    }
-  }
-  // the axis piercing the face
-  const Vec3<T> d = cap.b - cap.a, e1 = P[1] - P[0], e2 = P[2] - P[0], nrm = cross(e1, e2);
-  const T den = dot(nrm, d);
-  if (den != T(0)) {
-    const T s = dot(nrm, P[0] - cap.a) / den;
-    if (s >= T(0) && s <= T(1)) {
-      const Vec3<T> x = cap.a + s * d;
-      T wx[3];
-      const Vec3<T> qx = closest_on_triangle(x, P[0], P[1], P[2], wx);
-      if (dot(qx - x, qx - x) < best) {
-        q = qx;
-        c = x;
-        w[0] = wx[0]; w[1] = wx[1]; w[2] = wx[2];
-      }
-    }
-  }
-  return q;
+  w[0] = best.w[0]; w[1] = best.w[1]; w[2] = best.w[2];
+  c = best.c;
+  return best.q;
 }
 
 /// How far a point x inside the tool's tip sphere must move along the unit
@@ -418,12 +446,50 @@ TISSUE_HD bool triangle_may_touch(const ContactTools<T>& tools, const Capsules& 
   return false;
 }
 
+/// Node contact (a) for one corner at x: whether it lies inside the capsule,
+/// and where it goes -- radially to the capsule's surface, or, where the
+/// tip has passed through the face (`through`, outward normal N), to the
+/// face's far side of the tip.
+template <class T>
+struct CornerPush {
+  Vec3<T> x;
+  bool inside;
+};
+
+template <class T>
+TISSUE_HD CornerPush<T> corner_push(const Capsule<T>& cap, Vec3<T> x, bool through, Vec3<T> N) {
+  CornerPush<T> p{x, false};
+  Vec3<T> n;
+  if (!push_out_of_capsule(cap, p.x, n)) return p;
+  p.inside = true;
+  const T exit = through ? tip_exit(cap, x, T(-1) * N) : T(0);
+  if (exit > T(0)) p.x = x + exit * (T(-1) * N);  // to the face's far side, not out through the tool
+  return p;
+}
+
+/// How sweep_touching_triangle computes its independent parts: the deepest
+/// point's candidates and the three corners' pushes, one after another on
+/// the calling thread. (The cuda sweep passes its own, computing them on
+/// several lanes with the same arithmetic and the same choice.)
+struct SweepInOrder {
+  template <class T>
+  TISSUE_HD Vec3<T> deepest(const Capsule<T>& cap, const Vec3<T> P[3], T w[3], Vec3<T>& c) const {
+    return triangle_deepest_point(cap, P, w, c);
+  }
+  template <class T>
+  TISSUE_HD void push_corners(const Capsule<T>& cap, const Vec3<T> x[3], bool through, Vec3<T> N,
+                              CornerPush<T> push[3]) const {
+    for (int i = 0; i < 3; ++i) push[i] = corner_push(cap, x[i], through, N);
+  }
+};
+
 /// sweep_triangle for a triangle that triangle_may_touch(tools, capsule, x)
 /// accepted, over the step's capsules (StepCapsules or a table of
-/// the same values).
-template <class T, class Capsules>
+/// the same values); `parts` computes its independent parts (SweepInOrder).
+template <class T, class Capsules, class Parts = SweepInOrder>
 TISSUE_HD void sweep_touching_triangle(const ContactTools<T>& tools, const Capsules& capsule, const Vec3<T> x_in[3],
-                                       const std::uint8_t block[3], CornerContact<T> out[3]) {
+                                       const std::uint8_t block[3], CornerContact<T> out[3],
+                                       const Parts& parts = {}) {
   Vec3<T> x[3] = {x_in[0], x_in[1], x_in[2]};
   for (int i = 0; i < 3; ++i) out[i] = {{T(0), T(0), T(0)}, -1, 0};
   for (int t = 0; t < tools.n_tools; ++t) {
@@ -434,7 +500,7 @@ TISSUE_HD void sweep_touching_triangle(const ContactTools<T>& tools, const Capsu
       T w[3];
       Vec3<T> c;
       const Vec3<T> N = unit_or(cross(x[1] - x[0], x[2] - x[0]), axis_escape(cap, T(0)));  // outward
-      Vec3<T> q = triangle_deepest_point(cap, x, w, c);
+      Vec3<T> q = parts.deepest(cap, x, w, c);
       // only the tip passes through a face: the axis meets the face at the tip, or the tip is
       // behind the face's plane having crossed it since the last check, or behind it and over the
       // face (its nearest point inside the face: the face cuts the tip sphere beyond its centre).
@@ -447,25 +513,21 @@ TISSUE_HD void sweep_touching_triangle(const ContactTools<T>& tools, const Capsu
       const bool under = behind && w[0] > T(0) && w[1] > T(0) && w[2] > T(0);
       const bool through = at_tip && (!(norm(q - c) > kPierced<T> * cap.r) || crossed || under);
       bool moved = false;  // by (a): else (b) starts from the deepest point found above
+      CornerPush<T> push[3];
+      parts.push_corners(cap, x, through, N, push);
       for (int i = 0; i < 3; ++i) {  // (a) node contact
-        Vec3<T> xi = x[i], n;
-        if (!push_out_of_capsule(cap, xi, n)) continue;
-        const T exit = through ? tip_exit(cap, x[i], T(-1) * N) : T(0);
-        if (exit > T(0)) {  // to the face's far side, not out through the tool
-          n = T(-1) * N;
-          xi = x[i] + exit * n;
-        }
+        if (!push[i].inside) continue;
         if (block[i]) {
           out[i].blocked = block[i];
           out[i].tool = out[i].tool < 0 ? static_cast<signed char>(t) : out[i].tool;
           continue;
         }
-        x[i] = xi;
+        x[i] = push[i].x;
         moved = true;
         out[i].tool = static_cast<signed char>(t);
       }
       if (!tools.face) continue;
-      if (moved) q = triangle_deepest_point(cap, x, w, c);  // (b) face contact, after (a)
+      if (moved) q = parts.deepest(cap, x, w, c);  // (b) face contact, after (a)
       const Vec3<T> d = q - c;
       const T dist = norm(d);
       const T reach = cap.r - face_allowance(x, cap.r);  // how close the face may come to the axis

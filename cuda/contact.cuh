@@ -1,8 +1,10 @@
 // The contact stage of a TLED step on the device (core/contact.hpp's rule,
-// docs/contact.md): one thread per surface triangle sweeps it along the
-// tools' motion in the step (core sweep_triangle) and stores the corner
-// proposals it has (most triangles have none); then one thread per surface
-// node merges its triangles' proposals in ascending slot order (core
+// docs/contact.md): each thread tests one surface triangle against the
+// tools (core triangle_may_touch: most are clear), then groups of lanes
+// sweep the triangles that may touch along the tools' motion in the step
+// (core sweep_touching_triangle, its independent parts one a lane) and
+// store the corner proposals they have; then one thread per surface node
+// merges its triangles' proposals in ascending slot order (core
 // merge_corner, the cpu backend's order), moves the node in u_next (and its
 // velocity, in u), records its contact and clears the proposals it read.
 // Grasped nodes follow their tool. Device functions for the per-step
@@ -10,7 +12,9 @@
 #pragma once
 
 #include "core/contact.hpp"
+#include "core/model.hpp"
 #include "core/node_rules.hpp"
+#include "core/region.hpp"
 #include "cuda/launch.cuh"
 #include "cuda/views.hpp"
 
@@ -100,38 +104,154 @@ __device__ __forceinline__ void clear_slots(const StateView<T>& s, const index_t
   for (int j = 0; j < count; ++j) clear_slot(s, slot[j]);
 }
 
-/// Sweeps surface triangle t (its model part tm) in step k; stores the
-/// proposals of its corners (slots 3 t + i) that propose anything. After
-/// the previous kernel, one round trip to memory (the corners' state)
-/// before the sweep's arithmetic (three before 2026-11-26: the corners,
-/// their contact state, their positions).
+/// Stores the proposals of surface triangle t's corners (slots 3 t + i,
+/// corner nodes c) that propose anything.
 template <class T>
-__device__ void sweep_loaded_triangle(const StateView<T>& s, const ContactTools<T>& tools, int k,
-                                      const Packed3<T>* u_next, index_t t, const TriangleModel<T>& tm) {
-  const CornerState<T> cs = load_corner_state(s, tm, u_next);
-  Vec3<T> x[3];
-  std::uint8_t block[3];
-#pragma unroll
-  for (int i = 0; i < 3; ++i) {
-    x[i] = sweep_position(tools, k, s, tm, cs, i);
-    block[i] = corner_block(cs.role[i] == kInner, cs.held[i] == kAllAxes, cs.contact[i] == kGrasped);
-  }
-  CornerContact<T> out[3];
-  sweep_triangle(tools, k, x, block, out);
+__device__ __forceinline__ void store_proposals(const StateView<T>& s, index_t t, const index_t c[3],
+                                                const CornerContact<T> out[3]) {
 #pragma unroll
   for (int i = 0; i < 3; ++i) {
     if (!proposes(out[i])) continue;  // its slot already holds none (see clear_slot)
     s.corner_dx[3 * t + i] = Packed3<T>::of(out[i].dx);
     s.corner_tool[3 * t + i] = out[i].tool;
     s.corner_blocked[3 * t + i] = out[i].blocked;
-    s.proposed[tm.c[i]] = 1;  // several triangles may store the same 1: no atomics needed
+    s.proposed[c[i]] = 1;  // several triangles may store the same 1: no atomics needed
   }
 }
 
+/// A triangle's sweep input: its corners' positions x and blocks
+/// (corner_block) for step k, from the corners' state loaded together.
 template <class T>
-__device__ void sweep_triangle_at(const ModelView<T>& m, const StateView<T>& s, const ContactTools<T>& tools, int k,
-                                  const Packed3<T>* u_next, index_t t) {
-  sweep_loaded_triangle(s, tools, k, u_next, t, load_triangle(m, t));
+__device__ __forceinline__ void sweep_input(const StateView<T>& s, const ContactTools<T>& tools, int k,
+                                            const TriangleModel<T>& tm, const CornerState<T>& cs, Vec3<T> x[3],
+                                            std::uint8_t block[3]) {
+#pragma unroll
+  for (int i = 0; i < 3; ++i) {
+    x[i] = sweep_position(tools, k, s, tm, cs, i);
+    block[i] = corner_block(cs.role[i] == kInner, cs.held[i] == kAllAxes, cs.contact[i] == kGrasped);
+  }
+}
+
+/// Lanes of a warp that sweep one touching triangle together: its deepest
+/// point's six candidates (core deepest_candidate) one a lane, its three
+/// corners' pushes (core corner_push) one a lane, each lane then taking
+/// every lane's result in core's order. Every lane of the group runs the
+/// rest of the sweep alike, with the same values, so its branches are the
+/// group's. The same arithmetic as one thread's sweep (SweepInOrder), and
+/// the same choices: the same bits (cuda_tests, Sweep.LanesGiveOneThreadsBits).
+inline constexpr int kSweepLanes = 8;
+static_assert(kSweepLanes >= kDeepestCandidates && 32 % kSweepLanes == 0);
+
+template <class T>
+struct SweepLanes {
+  unsigned mask;  ///< the group's lanes in the warp
+  int lane;       ///< this lane's number in the group
+
+  template <class V>
+  __device__ __forceinline__ V from(V v, int src) const {
+    return __shfl_sync(mask, v, src, kSweepLanes);
+  }
+  __device__ __forceinline__ Vec3<T> from(Vec3<T> v, int src) const {
+    return {from(v.x, src), from(v.y, src), from(v.z, src)};
+  }
+
+  __device__ Vec3<T> deepest(const Capsule<T>& cap, const Vec3<T> P[3], T w[3], Vec3<T>& c) const {
+    const DeepestCandidate<T> mine = deepest_candidate(cap, P, lane < kDeepestCandidates ? lane : 0);
+    int pick = 0;  // triangle_deepest_point's choice, made alike on every lane
+    T best = from(mine.d2, 0);
+#pragma unroll
+    for (int k = 1; k < kDeepestCandidates; ++k) {
+      const T d2 = from(mine.d2, k);
+      if (deeper(from(int(mine.found), k) != 0, d2, best)) {
+        best = d2;
+        pick = k;
+      }
+    }
+#pragma unroll
+    for (int i = 0; i < 3; ++i) w[i] = from(mine.w[i], pick);
+    c = from(mine.c, pick);
+    return from(mine.q, pick);
+  }
+
+  __device__ void push_corners(const Capsule<T>& cap, const Vec3<T> x[3], bool through, Vec3<T> N,
+                               CornerPush<T> push[3]) const {
+    const CornerPush<T> mine = corner_push(cap, one_of_three(x, lane < 3 ? lane : 0), through, N);
+#pragma unroll
+    for (int j = 0; j < 3; ++j) push[j] = {from(mine.x, j), from(int(mine.inside), j) != 0};
+  }
+};
+
+/// Lane `lane` (0..31) of a warp as a member of its group.
+template <class T>
+__device__ __forceinline__ SweepLanes<T> sweep_lanes_of(int lane) {
+  return {((1u << kSweepLanes) - 1) << (lane / kSweepLanes * kSweepLanes), lane % kSweepLanes};
+}
+
+/// What a thread hands a lane group about a triangle that may touch a tool
+/// (core triangle_may_touch): the triangle, its corners and sweep input.
+template <class T>
+struct TouchingTriangle {
+  index_t t, c[3];
+  Vec3<T> x[3];
+  std::uint8_t block[3];
+};
+
+/// Surface triangle t's sweep input in step k (its model part tm) into tri;
+/// whether it may touch a tool.
+template <class T>
+__device__ __forceinline__ bool may_touch(const StateView<T>& s, const ContactTools<T>& tools,
+                                          const StepCapsules<T>& capsule, const Packed3<T>* u_next, index_t t,
+                                          const TriangleModel<T>& tm, TouchingTriangle<T>& tri) {
+  const CornerState<T> cs = load_corner_state(s, tm, u_next);
+  tri.t = t;
+#pragma unroll
+  for (int i = 0; i < 3; ++i) tri.c[i] = tm.c[i];
+  sweep_input(s, tools, capsule.k, tm, cs, tri.x, tri.block);
+  return triangle_may_touch(tools, capsule, tri.x);
+}
+
+/// A lane group's sweep of a touching triangle; its lane 0 stores the
+/// proposals. Every sweep of the cuda backend's step modes runs here, so
+/// that they give the same bits.
+template <class T>
+__device__ __forceinline__ void sweep_in_lanes(const StateView<T>& s, const ContactTools<T>& tools,
+                                               const StepCapsules<T>& capsule, const TouchingTriangle<T>& tri,
+                                               const SweepLanes<T>& lanes) {
+  CornerContact<T> out[3];
+  sweep_touching_triangle(tools, capsule, tri.x, tri.block, out, lanes);
+  if (lanes.lane == 0) store_proposals(s, tri.t, tri.c, out);
+}
+
+/// The sweep of triangles t = base + lane in step k by the 32 lanes of a
+/// warp, which all call it (t past the surface: none): each lane tests its
+/// triangle, then the warp's groups take its touching triangles in turn,
+/// 32 / kSweepLanes at a time, handed over by shuffles. For the persistent
+/// kernels, whose grid-stride loops give each warp 32 consecutive triangles.
+template <class T>
+__device__ void sweep_warp_triangles(const ModelView<T>& m, const StateView<T>& s, const ContactTools<T>& tools,
+                                     int k, const Packed3<T>* u_next, index_t t) {
+  const StepCapsules<T> capsule{tools, k};
+  TouchingTriangle<T> mine{};
+  const bool touching = t < m.n_tris && may_touch(s, tools, capsule, u_next, t, load_triangle(m, t), mine);
+  unsigned left = __ballot_sync(~0u, touching);
+  const int lane = int(threadIdx.x % 32), group = lane / kSweepLanes;
+  const SweepLanes<T> lanes = sweep_lanes_of<T>(lane);
+  while (left != 0) {  // (uniform over the warp)
+    unsigned rest = left;
+    for (int j = 0; j < group; ++j) rest &= rest - 1;  // the earlier groups' triangles
+    const int from = rest != 0 ? __ffs(int(rest)) - 1 : lane;
+    TouchingTriangle<T> tri;
+    tri.t = __shfl_sync(~0u, mine.t, from);
+#pragma unroll
+    for (int i = 0; i < 3; ++i) {
+      tri.c[i] = __shfl_sync(~0u, mine.c[i], from);
+      tri.x[i] = {__shfl_sync(~0u, mine.x[i].x, from), __shfl_sync(~0u, mine.x[i].y, from),
+                  __shfl_sync(~0u, mine.x[i].z, from)};
+      tri.block[i] = std::uint8_t(__shfl_sync(~0u, int(mine.block[i]), from));
+    }
+    if (rest != 0) sweep_in_lanes(s, tools, capsule, tri, lanes);
+    for (int j = 0; j < 32 / kSweepLanes; ++j) left &= left - 1;
+  }
 }
 
 /// Proposals of one surface node (its surface triangles) that the gather
@@ -226,16 +346,35 @@ __device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, 
   merge_loaded_node(s, tools, k, u, u_next, load_surface_node(m, i), m.surf_slot);
 }
 
+/// The sweep of step k over the surface, in blocks of kBlock threads: each
+/// thread tests its triangle (core triangle_may_touch: most are clear of
+/// every tool), then the block's triangles that may touch are swept by
+/// groups of kSweepLanes lanes (SweepLanes), the groups dealt to the
+/// block's warps in turn. One thread's sweep of a touching triangle was the
+/// longest chain of the contact stage (2026-11-27, docs/cuda.md).
 template <class T>
 __global__ void sweep_triangles_kernel(ModelView<T> m, StateView<T> s, const ContactTools<T>* tools, int k,
                                        const Packed3<T>* u_next) {
+  __shared__ alignas(TouchingTriangle<T>) unsigned char raw[kBlock * sizeof(TouchingTriangle<T>)];
+  __shared__ int n_touching;
+  TouchingTriangle<T>* touching = reinterpret_cast<TouchingTriangle<T>*>(raw);
   let_next_pass_launch();
   const index_t t = thread_index();
   const bool active = t < m.n_tris;
   TriangleModel<T> tm;
   if (active) tm = load_triangle(m, t);
+  if (threadIdx.x == 0) n_touching = 0;
   wait_for_previous_pass();
-  if (active && !skipped(s)) sweep_loaded_triangle(s, *tools, k, u_next, t, tm);
+  __syncthreads();
+  const StepCapsules<T> capsule{*tools, k};
+  TouchingTriangle<T> tri;
+  if (active && !skipped(s) && may_touch(s, *tools, capsule, u_next, t, tm, tri))
+    touching[atomicAdd(&n_touching, 1)] = tri;  // in any order: each triangle's sweep is its own
+  __syncthreads();
+  const int warps = kBlock / 32, group = int(threadIdx.x % 32) / kSweepLanes;
+  const SweepLanes<T> lanes = sweep_lanes_of<T>(int(threadIdx.x % 32));
+  for (int j = group * warps + int(threadIdx.x / 32); j < n_touching; j += kBlock / kSweepLanes)
+    sweep_in_lanes(s, *tools, capsule, touching[j], lanes);
 }
 
 template <class T>

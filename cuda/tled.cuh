@@ -700,7 +700,8 @@ __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const Re
     }
     if (tools) {  // the contact stage
       barrier();
-      for (index_t t = first; t < m.n_tris; t += stride) sweep_triangle_at(m, s, *tools, k, b.u_next, t);
+      for (index_t t = first - first % 32; t < m.n_tris; t += stride)  // a warp's 32 triangles together
+        sweep_warp_triangles(m, s, *tools, k, b.u_next, t + first % 32);
       barrier();
       for (index_t i = first; i < m.n_surf; i += stride) gather_contact_at(m, s, *tools, k, b.u, b.u_next, i);
     }
