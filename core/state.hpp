@@ -27,8 +27,8 @@ struct TissueState {
   std::vector<T> elem_F;   ///< pass 1: deformation gradient F (9 x n_elems, k = 3 i + j); host backends'
                            ///< pass 3 reads it instead of recomputing F
   std::vector<T> node_p;   ///< pass 2: nodal pressure p_a (n_nodes) Pa
-  std::vector<T> f_slot;   ///< pass 3: element nodal forces in node order: slot k = model.elem_slot of
-                           ///< (corner, element), xyz interleaved (4 n_elems x 3) N
+  std::vector<T> f_slot;   ///< pass 3: element nodal forces in element order: slot 4 e + corner (the
+                           ///< entries of model.node_elem), xyz interleaved (4 n_elems x 3) N
   std::vector<T> f;        ///< pass 4: internal nodal force minus the applied load (3 x n_nodes) N
   std::vector<T> load;     ///< applied load R (Backend::set_loads; 3 x n_nodes) N; empty = none
   std::vector<std::uint8_t> contact;      ///< ContactKind of each node after the last step (n_nodes)

@@ -74,8 +74,7 @@ void install_region(const TissueModel<T>& m, TissueState<T>& s, Region region) {
   for (index_t e : region.elems) in_region[e] = 1;
   for (index_t e = 0; e < ne; ++e)
     if (!in_region[e])
-      for (int a = 0; a < 4; ++a)
-        for (int c = 0; c < 3; ++c) s.f_slot[3 * size_t(m.elem_slot[a * ne + e]) + c] = T(0);
+      for (int k = 0; k < 12; ++k) s.f_slot[12 * size_t(e) + k] = T(0);
   s.region = std::move(region);
 }
 

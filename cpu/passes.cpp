@@ -57,9 +57,7 @@ template <class T, bool kIanp, class Terms, class Run>
 void element_forces_impl(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems,
                          BadElementFlag& bad, const Run& run) {
   constexpr bool kLaw = Terms::fibre || Terms::visco;
-  const index_t ne = m.n_elems;
   const T* p = kIanp ? s.node_p.data() : nullptr;
-  const index_t* slot = m.elem_slot.data();
   T* fs = s.f_slot.data();
   T* q = s.visco_q.data();
   for_each_batch(run, elems, kForceGrain, [&](const index_t* e, int count) {
@@ -76,12 +74,8 @@ void element_forces_impl(const TissueModel<T>& m, TissueState<T>& s, std::span<c
     for (int l = 0; l < count; ++l) {
       const T J = b.ret[l];
       if (!(J > T(0)) || !std::isfinite(J)) bad.record(e[l], double(J));
-      for (int a = 0; a < 4; ++a) {
-        T* f = fs + 3 * size_t(slot[a * ne + e[l]]);
-        f[0] = b.f[3 * a][l];
-        f[1] = b.f[3 * a + 1][l];
-        f[2] = b.f[3 * a + 2][l];
-      }
+      T* f = fs + 12 * size_t(e[l]);  // the element's 12 slots, each thread's own cache lines
+      for (int k = 0; k < 12; ++k) f[k] = b.f[k][l];
     }
   });
 }
@@ -136,6 +130,7 @@ template <class T, class Run>
 void node_update_run(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> nodes, const Run& run) {
   const index_t n = m.n_nodes;
   const index_t* start = m.node_elem_start.data();
+  const index_t* list = m.node_elem.data();
   const T* fs = s.f_slot.data();
   const T* u = s.u.data();
   const T* u_prev = s.u_prev.data();
@@ -146,7 +141,10 @@ void node_update_run(const TissueModel<T>& m, TissueState<T>& s, std::span<const
   T* u_next = s.u_next.data();
   for_each_index(run, nodes, kNodeGrain, [&](index_t a) {
     Vec3<T> f = {0, 0, 0};
-    for (index_t k = start[a]; k < start[a + 1]; ++k) f = f + Vec3<T>{fs[3 * size_t(k)], fs[3 * size_t(k) + 1], fs[3 * size_t(k) + 2]};
+    for (index_t k = start[a]; k < start[a + 1]; ++k) {  // in the node's list order: slot 4 e + corner
+      const T* fk = fs + 3 * size_t(list[k]);
+      f = f + Vec3<T>{fk[0], fk[1], fk[2]};
+    }
     const auto load = [&](const T* v) { return Vec3<T>{v[a], v[n + a], v[2 * size_t(n) + a]}; };
     if (applied) f = f - load(applied);  // the out-of-balance force f - R
     const Vec3<T> next = node_next(held[a], load(u_held), CentralDifference<T>{m.cd_A[a], m.cd_B[a], m.cd_C[a]}, f,

@@ -62,15 +62,17 @@ void nodal_pressure(const TissueModel<T>& m, const T* dv, const std::vector<T>& 
 
 /// Pass 3 over `elems`, from pass 1's elem_F (u has not moved since): pbar =
 /// (1/4) sum of the element's four nodal pressures, then ianp_element_forces (or plain_element_forces when
-/// model.ianp is false) into f_slot (each corner's force at its node_elem
-/// slot, model.elem_slot). An element whose returned J is <= 0 or
-/// not finite is recorded in `bad` (its forces are zero).
+/// model.ianp is false) into f_slot (an element's four corner forces at
+/// slots 4 e + corner: one contiguous store per element, into the cache
+/// lines of the thread that owns the element). An element whose returned J
+/// is <= 0 or not finite is recorded in `bad` (its forces are zero).
 template <class T>
 void element_forces(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems, BadElementFlag& bad,
                     tbb::affinity_partitioner& part);
 
-/// Pass 4 over `nodes`: f_a = sum of the node's contiguous f_slot entries
-/// (its node_elem list, in stored order; no atomics), stored in state.f,
+/// Pass 4 over `nodes`: f_a = sum of the node's f_slot entries (slot 4 e +
+/// corner for each entry of its node_elem list, in stored order: the same
+/// sum as the cuda backend's node-order slots; no atomics), stored in state.f,
 /// and u_next by core node_next (held components at u_held, the others the
 /// central difference with R = 0). The contact stage may then correct
 /// u_next before rotate().
