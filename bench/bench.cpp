@@ -221,17 +221,17 @@ void bench_tled(Context& c, const std::string& mesh, Precision p, const std::str
   c.emit(w);
 }
 
-void bench_contact(Context& c, long want_tris, Precision p) {
-  // a flat slab of N x N x 1 cells (4 (N^2 + 2N) surface triangles), a 2 mm
-  // sphere pressed 0.5 mm (at most a quarter of the slab) into its top and sliding slowly; the region is one
-  // ring around the contact so that a step's time is mostly the contact
-  // stage's: the query of the surface and the sweep of the triangles it finds
+void bench_contact(Context& c, long want_tris, Precision p, double radius = 0.002) {
+  // a flat slab of N x N x 1 cells (4 (N^2 + 2N) surface triangles), a sphere (2 mm; 10 mm: a large
+  // instrument, hundreds of triangles in reach) pressed 0.5 mm (at most a quarter of the slab) into its
+  // top and sliding slowly; the region is one ring around the contact so that a step's time is mostly
+  // the contact stage's: the query of the surface and the sweep of the triangles it finds
   int N = static_cast<int>(std::lround(std::sqrt(want_tris / 4.0)));
   if (c.o.quick) N = std::min(N, 10);
   const TissueModel<double> m = box_model(N, N, 1, 0.1, 0.1, 0.1 / N, true);
   auto b = create_backend(c.o.backend, p);
   b->upload(m);
-  const ToolShape tool{"probe", 0.002, 0};
+  const ToolShape tool{"probe", radius, 0};
   b->set_tools(std::span<const ToolShape>(&tool, 1));
   const double top = 0.1 / N;
   const double press = std::min(5e-4, 0.25 * top);  // the 100k slab is 0.63 mm thick: a quarter of it
@@ -263,6 +263,7 @@ void bench_contact(Context& c, long want_tris, Precision p) {
   const double sps_bare = time_steps(*b, c.o.min_seconds, steps);
   Row r = c.row("contact_step", *b);
   r.add("surface_triangles", long(m.n_tris));
+  r.add("tool_radius_mm", 1e3 * radius);
   r.add("region_elements", long(reg.n_elems));
   r.add("steps", long(lat.size()));
   r.add("latency_us_p50", 1e6 * lat[lat.size() / 2]);
@@ -364,6 +365,7 @@ std::vector<std::string> run_bench(const BenchOptions& o) {
         if (!stopped()) bench_tled(c, mesh, p, law);
     for (long tris : {10'000L, 100'000L})
       if (!stopped()) bench_contact(c, tris, p);
+    if (!stopped() && !c.o.quick) bench_contact(c, 100'000L, p, 0.010);  // a large instrument
     std::vector<std::optional<double>> safeties(o.tick_dt_safety.begin(), o.tick_dt_safety.end());
     if (safeties.empty()) safeties.emplace_back();  // the scene's own
     for (int depth : {5, kDepthAll})

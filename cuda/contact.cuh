@@ -137,8 +137,10 @@ __device__ __forceinline__ void sweep_input(const StateView<T>& s, const Contact
 /// corners' pushes (core corner_push) one a lane, each lane then taking
 /// every lane's result in core's order. Every lane of the group runs the
 /// rest of the sweep alike, with the same values, so its branches are the
-/// group's. The same arithmetic as one thread's sweep (SweepInOrder), and
-/// the same choices: the same bits (cuda_tests, Sweep.LanesGiveOneThreadsBits).
+/// group's. The same arithmetic and choices as one thread's sweep
+/// (SweepInOrder): the same proposals to the rounding of a fused
+/// multiply-add (cuda_tests, Sweep.LanesGiveOneThreadsProposals); every step
+/// mode sweeps this way, so the modes give the same bits.
 inline constexpr int kSweepLanes = 8;
 static_assert(kSweepLanes >= kDeepestCandidates && 32 % kSweepLanes == 0);
 
@@ -346,15 +348,17 @@ __device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, 
   merge_loaded_node(s, tools, k, u, u_next, load_surface_node(m, i), m.surf_slot);
 }
 
-/// The sweep of step k over the surface, in blocks of kBlock threads: each
+/// The sweep of step k over the surface, in blocks of kBlock threads (at
+/// most: the shared list's size; whole warps): each
 /// thread tests its triangle (core triangle_may_touch: most are clear of
 /// every tool), then the block's triangles that may touch are swept by
 /// groups of kSweepLanes lanes (SweepLanes), the groups dealt to the
 /// block's warps in turn. One thread's sweep of a touching triangle was the
 /// longest chain of the contact stage (2026-11-27, docs/cuda.md).
 template <class T>
-__global__ void sweep_triangles_kernel(ModelView<T> m, StateView<T> s, const ContactTools<T>* tools, int k,
-                                       const Packed3<T>* u_next) {
+__global__ void __launch_bounds__(kBlock)
+    sweep_triangles_kernel(ModelView<T> m, StateView<T> s, const ContactTools<T>* tools, int k,
+                           const Packed3<T>* u_next) {
   __shared__ alignas(TouchingTriangle<T>) unsigned char raw[kBlock * sizeof(TouchingTriangle<T>)];
   __shared__ int n_touching;
   TouchingTriangle<T>* touching = reinterpret_cast<TouchingTriangle<T>*>(raw);
@@ -371,9 +375,9 @@ __global__ void sweep_triangles_kernel(ModelView<T> m, StateView<T> s, const Con
   if (active && !skipped(s) && may_touch(s, *tools, capsule, u_next, t, tm, tri))
     touching[atomicAdd(&n_touching, 1)] = tri;  // in any order: each triangle's sweep is its own
   __syncthreads();
-  const int warps = kBlock / 32, group = int(threadIdx.x % 32) / kSweepLanes;
+  const int warps = int(blockDim.x) / 32, group = int(threadIdx.x % 32) / kSweepLanes;
   const SweepLanes<T> lanes = sweep_lanes_of<T>(int(threadIdx.x % 32));
-  for (int j = group * warps + int(threadIdx.x / 32); j < n_touching; j += kBlock / kSweepLanes)
+  for (int j = group * warps + int(threadIdx.x / 32); j < n_touching; j += int(blockDim.x) / kSweepLanes)
     sweep_in_lanes(s, *tools, capsule, touching[j], lanes);
 }
 

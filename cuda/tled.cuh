@@ -720,6 +720,9 @@ inline constexpr int kGridBlock = 256;
 template <class T>
 inline constexpr int kClusterBlock = sizeof(T) == 4 ? 1024 : 512;
 
+// whole warps: the contact sweep hands a warp's 32 triangles to its lane groups (sweep_warp_triangles)
+static_assert(kGridBlock % 32 == 0 && kClusterBlock<float> % 32 == 0 && kClusterBlock<double> % 32 == 0);
+
 /// kLaw: the instantiation for a model with law terms (core/material.hpp),
 /// chosen at launch like pass 3's kernels; kRecomputed as the pass kernels'.
 template <class T, bool kLaw, bool kRecomputed>

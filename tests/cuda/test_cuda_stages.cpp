@@ -199,6 +199,73 @@ TEST_P(Stages, ContactStageMatchesCpu) {
   }
 }
 
+/// A tool much larger than the triangles (a 15 mm sphere on a surface of
+/// 1.25 mm cells, a few hundred triangles that may touch): the sweep's lane
+/// groups take several triangles each, a block's 32 groups more than one
+/// round of its compacted list (Launch, Graph) and a warp's 4 groups more
+/// than one round of its ballot (Grid, Cluster; the test checks both on the
+/// host first). Every mode against the cpu, and bit for bit against the
+/// Grid mode.
+TEST_P(Stages, DenseContactMatchesCpuInEveryStepMode) {
+  const Precision p = GetParam();
+  const auto m = box_model(32, 32, 2, 0.04, 0.04, 0.0025);
+  const double r = 0.015, top = 0.0025;
+  const ToolShape shape[] = {{"sphere", r, 0}};
+  const ToolMotion motion[] = {{{{0.0203, 0.0198, top + r - 0.0008}, {0, 0, 1}}, {{0.0205, 0.0199, top + r - 0.001}, {0, 0, 1}}}};
+  // the triangles that may touch at the first step's check, per block of 256 and per warp of 32
+  ContactTools<double> tools;
+  tools.n_tools = 1;
+  tools.steps = 3;
+  tools.tool[0] = {motion[0].from.tip, motion[0].from.axis, motion[0].to.tip, motion[0].to.axis, r, 0.0, 1, 0, {}, {}};
+  std::vector<int> per_block(m.n_tris / 256 + 1, 0), per_warp(m.n_tris / 32 + 1, 0);
+  for (index_t t = 0; t < m.n_tris; ++t) {
+    Vec3<double> x[3];
+    for (int v = 0; v < 3; ++v) {
+      const index_t i = m.tris[v * m.n_tris + t];
+      x[v] = {m.X[i], m.X[m.n_nodes + i], m.X[2 * m.n_nodes + i]};
+    }
+    if (!triangle_may_touch(tools, StepCapsules<double>{tools, 0}, x)) continue;
+    ++per_block[t / 256];
+    ++per_warp[t / 32];
+  }
+  ASSERT_GT(*std::max_element(per_block.begin(), per_block.end()), 32) << "more than a block's 32 groups";
+  ASSERT_GT(*std::max_element(per_warp.begin(), per_warp.end()), 4) << "more than a warp's 4 groups";
+  std::printf("  [%s] most triangles that may touch in a block of 256: %d, in a warp: %d\n",
+              p == Precision::Double ? "double" : "float", *std::max_element(per_block.begin(), per_block.end()),
+              *std::max_element(per_warp.begin(), per_warp.end()));
+  SKIP_WITHOUT_GPU();  // (the counts above are the host's)
+  auto run = [&](Backend& b) {
+    b.upload(m);
+    b.set_tools(shape);
+    b.move_tools(motion);
+    b.advance(3);
+    return std::pair{b.contacts(), b.reduce()};
+  };
+  auto cpu = make_cpu_backend(p);
+  const auto [cc, rc] = run(*cpu);
+  const Fields fc = cpu->download();
+  ASSERT_GT(rc.tools[0].contact, 30);
+  std::vector<double> grid_u;
+  for (CudaStepMode mode : {CudaStepMode::Grid, CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Cluster}) {
+    SCOPED_TRACE(to_string(mode));
+    auto gpu = make_cuda_backend(p);
+    set_cuda_step_mode(*gpu, mode);
+    const auto [cg, rg] = run(*gpu);
+    const Fields fg = gpu->download();
+    if (p == Precision::Double)
+      EXPECT_EQ(rg.tools[0].contact, rc.tools[0].contact);
+    else  // float's rounding may put a node on the contact's rim either way
+      EXPECT_NEAR(rg.tools[0].contact, rc.tools[0].contact, 1 + rc.tools[0].contact / 10);
+    const double d = rel_diff(fg.u, fc.u);
+    report("dense contact displacements", p, d);
+    EXPECT_LT(d, p == Precision::Double ? 1e-9 : 1e-3);
+    if (grid_u.empty())
+      grid_u = fg.u;
+    else
+      EXPECT_EQ(fg.u, grid_u) << "the same bits as the Grid mode";
+  }
+}
+
 /// The reductions on a mesh with more items than the reduction kernel has
 /// threads (134k tets, 25k nodes and 5.4k surface nodes: its grid-stride
 /// loop, its last block combining 1024 blocks' partials), with four tools

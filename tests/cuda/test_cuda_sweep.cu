@@ -18,7 +18,7 @@
 
 #include "cuda/check.hpp"
 #include "cuda/contact.cuh"
-#include "cuda_test_support.hpp"
+#include "tests/cuda/cuda_test_support.hpp"
 
 namespace tissue::cuda_test {
 namespace {
