@@ -119,19 +119,6 @@ __device__ __forceinline__ void store_proposals(const StateView<T>& s, index_t t
   }
 }
 
-/// A triangle's sweep input: its corners' positions x and blocks
-/// (corner_block) for step k, from the corners' state loaded together.
-template <class T>
-__device__ __forceinline__ void sweep_input(const StateView<T>& s, const ContactTools<T>& tools, int k,
-                                            const TriangleModel<T>& tm, const CornerState<T>& cs, Vec3<T> x[3],
-                                            std::uint8_t block[3]) {
-#pragma unroll
-  for (int i = 0; i < 3; ++i) {
-    x[i] = sweep_position(tools, k, s, tm, cs, i);
-    block[i] = corner_block(cs.role[i] == kInner, cs.held[i] == kAllAxes, cs.contact[i] == kGrasped);
-  }
-}
-
 /// Lanes of a warp that sweep one touching triangle together: its deepest
 /// point's six candidates (core deepest_candidate) one a lane, its three
 /// corners' pushes (core corner_push) one a lane, each lane then taking
@@ -198,8 +185,9 @@ struct TouchingTriangle {
   std::uint8_t block[3];
 };
 
-/// Surface triangle t's sweep input in step k (its model part tm) into tri;
-/// whether it may touch a tool.
+/// Surface triangle t's sweep input in step k (its model part tm) into tri:
+/// its corners' positions and blocks (corner_block), from their state loaded
+/// together; whether it may touch a tool.
 template <class T>
 __device__ __forceinline__ bool may_touch(const StateView<T>& s, const ContactTools<T>& tools,
                                           const StepCapsules<T>& capsule, const Packed3<T>* u_next, index_t t,
@@ -207,8 +195,11 @@ __device__ __forceinline__ bool may_touch(const StateView<T>& s, const ContactTo
   const CornerState<T> cs = load_corner_state(s, tm, u_next);
   tri.t = t;
 #pragma unroll
-  for (int i = 0; i < 3; ++i) tri.c[i] = tm.c[i];
-  sweep_input(s, tools, capsule.k, tm, cs, tri.x, tri.block);
+  for (int i = 0; i < 3; ++i) {
+    tri.c[i] = tm.c[i];
+    tri.x[i] = sweep_position(tools, capsule.k, s, tm, cs, i);
+    tri.block[i] = corner_block(cs.role[i] == kInner, cs.held[i] == kAllAxes, cs.contact[i] == kGrasped);
+  }
   return triangle_may_touch(tools, capsule, tri.x);
 }
 

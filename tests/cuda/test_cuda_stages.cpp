@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <limits>
 #include <numeric>
+#include <span>
 #include <stdexcept>
 #include <string>
 
@@ -149,8 +150,22 @@ TEST_P(Stages, FloodFillMatchesCoreForEveryDepth) {
   EXPECT_EQ(e.n_elems, 0);
 }
 
+/// m on b (from displacements u, where given) with tools of `shapes` moving
+/// by `motion` over three steps: the contacts and the reductions after them.
+std::pair<std::vector<ContactNode>, Reductions> press(Backend& b, const TissueModel<double>& m,
+                                                      std::span<const ToolShape> shapes,
+                                                      std::span<const ToolMotion> motion,
+                                                      const std::vector<double>* u = nullptr) {
+  b.upload(m);
+  if (u) b.set_displacements(*u);
+  b.set_tools(shapes);
+  b.move_tools(motion);
+  b.advance(3);
+  return {b.contacts(), b.reduce()};
+}
+
 /// The contact stage on a randomly displaced surface: two tools (a sphere
-/// and a capsule lying across the top) swept over one step against the cpu
+/// and a capsule lying across the top) swept over three steps against the cpu
 /// backend: the same nodes in contact, of the same kind and tool, the same
 /// corrected displacements and normals, the same per-tool reductions (to
 /// the pass tolerance), in every step mode.
@@ -162,14 +177,7 @@ TEST_P(Stages, ContactStageMatchesCpu) {
   const ToolShape shapes[] = {{"sphere", 0.004, 0}, {"capsule", 0.002, 0.02}};
   const ToolMotion motion[] = {{{{0.0131, 0.0162, 0.0235}, {0, 0, 1}}, {{0.0131, 0.0162, 0.0215}, {0, 0, 1}}},
                                {{{0.025, 0.01, 0.0215}, {0, 1, 0}}, {{0.025, 0.011, 0.0205}, {0.1, 1, 0}}}};
-  auto run = [&](Backend& b) {
-    b.upload(m);
-    b.set_displacements(u);
-    b.set_tools(shapes);
-    b.move_tools(motion);
-    b.advance(3);
-    return std::pair{b.contacts(), b.reduce()};
-  };
+  auto run = [&](Backend& b) { return press(b, m, shapes, motion, &u); };
   auto cpu = make_cpu_backend(p);
   const auto [cc, rc] = run(*cpu);
   const Fields fc = cpu->download();
@@ -216,7 +224,8 @@ TEST_P(Stages, DenseContactMatchesCpuInEveryStepMode) {
   ContactTools<double> tools;
   tools.n_tools = 1;
   tools.steps = 3;
-  tools.tool[0] = {motion[0].from.tip, motion[0].from.axis, motion[0].to.tip, motion[0].to.axis, r, 0.0, 1, 0, {}, {}};
+  tools.tool[0] = {motion[0].from.tip, motion[0].from.axis, motion[0].to.tip, motion[0].to.axis, r, 0.0,
+                   contact_substeps(motion[0].from, motion[0].to, r, 0.0, tools.steps), 0, {}, {}};
   std::vector<int> per_block(m.n_tris / 256 + 1, 0), per_warp(m.n_tris / 32 + 1, 0);
   for (index_t t = 0; t < m.n_tris; ++t) {
     Vec3<double> x[3];
@@ -234,13 +243,7 @@ TEST_P(Stages, DenseContactMatchesCpuInEveryStepMode) {
               p == Precision::Double ? "double" : "float", *std::max_element(per_block.begin(), per_block.end()),
               *std::max_element(per_warp.begin(), per_warp.end()));
   SKIP_WITHOUT_GPU();  // (the counts above are the host's)
-  auto run = [&](Backend& b) {
-    b.upload(m);
-    b.set_tools(shape);
-    b.move_tools(motion);
-    b.advance(3);
-    return std::pair{b.contacts(), b.reduce()};
-  };
+  auto run = [&](Backend& b) { return press(b, m, shape, motion); };
   auto cpu = make_cpu_backend(p);
   const auto [cc, rc] = run(*cpu);
   const Fields fc = cpu->download();
