@@ -86,6 +86,7 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   upload_array(elem_nodes_, m.elem_nodes, log, stream);
   upload_array(node_elem_start_, m.node_elem_start, log, stream);
   upload_array(node_elem_, m.node_elem, log, stream);
+  upload_array(slot_of_, m.elem_slot, log, stream);
   upload_array(tris_, m.tris, log, stream);
   upload_array(mu_, m.mu, log, stream);
   upload_array(K_, m.K, log, stream);
@@ -95,7 +96,6 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   upload_array(cd_C_, m.cd_C, log, stream);
   upload_array(node_flags_, m.node_flags, log, stream);
   const std::vector<T> node_divisor = nodal_pressure_divisors(m);
-  upload_array(slot_of_, m.elem_slot, log, stream);
   upload_array(node_divisor_, node_divisor, log, stream);
   upload_array(surf_nodes_, m.surf_nodes, log, stream);
   upload_array(surf_slot_start_, m.surf_slot_start, log, stream);
@@ -137,7 +137,7 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   u_held_.allocate(n);
   f_.allocate(n);
   f_slot_.allocate(4 * size_t(ne));
-  dv_slot_[0].allocate(4 * size_t(ne));
+  elem_dv_[0].allocate(ne);
   held_.allocate(n);
   driven_.allocate(n);
   role_.allocate(n);
@@ -165,7 +165,7 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   corner_tool_.allocate(3 * size_t(m.n_tris));
   corner_blocked_.allocate(3 * size_t(m.n_tris));
   proposed_.allocate(n);
-  dv_slot_[1].allocate(4 * size_t(ne));  // (the second set last: set 0 where the state's one set was)
+  elem_dv_[1].allocate(ne);  // (the second set last: set 0 where the state's one set was)
   elem_J_[1].allocate(ne);
   node_p_[1].allocate(n);
   reset_state(stream);
@@ -180,7 +180,7 @@ void DeviceStore<T>::reset_state(cudaStream_t stream) {
   f_slot_.fill_bytes(0, stream);
   pressures_ = 0;
   for (int k = 0; k < 2; ++k) {
-    dv_slot_[k].fill_bytes(0, stream);
+    elem_dv_[k].fill_bytes(0, stream);
     node_p_[k].fill_bytes(0, stream);
     launch(model_.n_elems, stream, reset_elems_kernel<T>, model_.n_elems, elem_J_[k].data());
   }
@@ -227,7 +227,7 @@ StateView<T> DeviceStore<T>::state() {
   s.held = held_.data();
   s.driven = driven_.data();
   s.role = role_.data();
-  s.dv_slot = dv_slot_[pressures_].data();
+  s.elem_dv = elem_dv_[pressures_].data();
   s.elem_J = elem_J_[pressures_].data();
   s.node_p = node_p_[pressures_].data();
   s.f_slot = f_slot_.data();
@@ -249,7 +249,7 @@ template <class T>
 StateView<T> DeviceStore<T>::pressure_scratch() {
   StateView<T> s = state();
   const int k = pressures_ ^ 1;
-  s.dv_slot = dv_slot_[k].data();
+  s.elem_dv = elem_dv_[k].data();
   s.elem_J = elem_J_[k].data();
   s.node_p = node_p_[k].data();
   return s;
@@ -258,7 +258,7 @@ StateView<T> DeviceStore<T>::pressure_scratch() {
 template <class T>
 void DeviceStore<T>::copy_pressures_to_scratch(cudaStream_t stream) {
   const int from = pressures_, to = pressures_ ^ 1;
-  for (auto [dst, src] : {std::pair{&dv_slot_[to], &dv_slot_[from]}, std::pair{&elem_J_[to], &elem_J_[from]},
+  for (auto [dst, src] : {std::pair{&elem_dv_[to], &elem_dv_[from]}, std::pair{&elem_J_[to], &elem_J_[from]},
                           std::pair{&node_p_[to], &node_p_[from]}})
     if (src->bytes() > 0)
       CUDA_CHECK(cudaMemcpyAsync(dst->data(), src->data(), src->bytes(), cudaMemcpyDeviceToDevice, stream));

@@ -41,7 +41,7 @@ class DeviceStore {
   void upload(const TissueModel<T>& m, const TissueModel<double>& ref, CudaGradients gradients, Transfers& log,
               cudaStream_t stream);
 
-  /// u = u_prev = u_next = 0, u_held = 0, f = f_slot = dv_slot = node_p = 0,
+  /// u = u_prev = u_next = 0, u_held = 0, f = f_slot = elem_dv = node_p = 0,
   /// elem_J = 1 (both pass-array sets; set 0 the state's), held = the
   /// fixed axes, driven = 0, every node inner, no bad element, no contact.
   void reset_state(cudaStream_t stream);
@@ -57,7 +57,7 @@ class DeviceStore {
   LawView<T> law() const { return law_; }
   StateView<T> state();
 
-  /// The pass arrays (dv_slot, elem_J, node_p) come in two sets: the
+  /// The pass arrays (elem_dv, elem_J, node_p) come in two sets: the
   /// state's, which the steps use, and a scratch set, into which the
   /// reduction runs passes 1-2 at the current u (its strain energy). When
   /// the steps go on from that u, the sets swap roles and the first step
@@ -90,7 +90,7 @@ class DeviceStore {
   DeviceArray<Packed3<T>> u_held_, f_slot_, f_, contact_normal_, grasp_offset_, corner_dx_;
   DeviceArray<std::uint8_t> held_, driven_, role_, contact_, corner_blocked_, proposed_;
   DeviceArray<signed char> contact_tool_, corner_tool_;
-  DeviceArray<T> dv_slot_[2], elem_J_[2], node_p_[2];  ///< the two pass-array sets (pressure_scratch())
+  DeviceArray<T> elem_dv_[2], elem_J_[2], node_p_[2];  ///< the two pass-array sets (pressure_scratch())
   int pressures_ = 0;                                   ///< the state's set
   /// The law terms' arrays, one per line of core/material.hpp's lists (empty when unused).
   struct LawArrays {

@@ -176,7 +176,7 @@ __device__ void accumulate_node(const ModelView<T>& m, const StateView<T>& s, co
 template <class T, bool kRecomputed>
 __device__ void add_element_energy(const ModelView<T>& m, const T* node_p, const Packed3<T>* u, index_t e,
                                    const LawView<T>& w, ReducePartial& p) {
-  const ElementData<T> d = load_element<T, kRecomputed>(m, e);
+  const ElementData<T> d = load_element_moduli<T, kRecomputed>(m, e);
   Vec3<T> ue[4];
   corner_displacements(d, u, ue);
   const Mat3<T> F = deformation_gradient(ue, d.dN);

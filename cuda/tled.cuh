@@ -44,7 +44,7 @@ template <class T>
 struct ElementData {
   index_t e;
   index_t c[4];     ///< corner nodes
-  index_t slot[4];  ///< node_elem slots of its corners
+  index_t slot[4];  ///< node_elem slots of its corners (pass 3's: its forces go to its nodes' slots)
   T dN[12];         ///< shape gradients (1/m)
   T V, mu, K;       ///< m^3, Pa, Pa
 };
@@ -82,15 +82,8 @@ __device__ __forceinline__ void load_slots(const ModelView<T>& m, ElementData<T>
   for (int a = 0; a < 4; ++a) d.slot[a] = __ldg(m.slot_of + a * m.n_elems + d.e);
 }
 
-/// The shape and its corners' slots: pass 1's (mu and K left unset).
-template <class T, bool kRecomputed>
-__device__ __forceinline__ ElementData<T> load_element_slots(const ModelView<T>& m, index_t e) {
-  ElementData<T> d = load_element_shape<T, kRecomputed>(m, e);
-  load_slots(m, d);
-  return d;
-}
-
-/// The shape and the moduli, no slots: the fused force pass's (forces_at).
+/// The shape and the moduli, no slots: the fused force pass's (forces_at)
+/// and the reduction's (pass 1 needs the shape only: load_element_shape).
 template <class T, bool kRecomputed>
 __device__ __forceinline__ ElementData<T> load_element_moduli(const ModelView<T>& m, index_t e) {
   ElementData<T> d = load_element_shape<T, kRecomputed>(m, e);
@@ -139,8 +132,7 @@ __device__ void element_pressure_at(const StateView<T>& s, const ElementData<T>&
   T J;
   const T dv = element_volume_change(d, u, J);
   s.elem_J[d.e] = J;
-#pragma unroll
-  for (int a = 0; a < 4; ++a) s.dv_slot[d.slot[a]] = dv;
+  s.elem_dv[d.e] = dv;
 }
 
 /// An element's optional law terms (core/material.hpp): its fibre and, for a
@@ -295,7 +287,7 @@ template <class T>
 __device__ void nodal_pressure_at(const ModelView<T>& m, const StateView<T>& s, const NodeData<T>& d) {
   T dv = T(0);
 #pragma unroll 4
-  for (index_t k = d.first; k < d.end; k += kNodeLanes) dv += s.dv_slot[k];
+  for (index_t k = d.first; k < d.end; k += kNodeLanes) dv += s.elem_dv[__ldg(m.node_elem + k) / 4];
   dv = node_group_sum(dv, d.mask);
   if (d.lane == 0) s.node_p[d.a] = dv / __ldg(m.node_divisor + d.a);
 }
@@ -373,7 +365,7 @@ __device__ __forceinline__ void add_in_node_order(V& acc, const V& v, index_t ba
 
 /// The sum over node a's slots begin..end in a fused pass, by the calling
 /// warp: lane l visits slots l, l + 32, ..., value(k, x) gives slot k's
-/// value (x: its element; `next` holds the lane's first, loaded by the
+/// value (x: its element and corner; `next` holds the lane's first, loaded by the
 /// caller, and the next round's is loaded before value() runs), and lane
 /// j < kNodeLanes returns the values summed in the node passes' order
 /// (add_in_node_order); the other lanes' sums are not used.
@@ -396,20 +388,22 @@ __device__ __forceinline__ V sum_node_slots(const ModelView<T>& m, const RegionV
 
 /// Passes 1 and 2 for a node (one lane of its warp), the same arithmetic
 /// in the same order: each slot gets the volume change pass 1 computes
-/// (stored into the slot, and J_e by corner 0's visit, so that the pass
-/// arrays end as the two passes leave them) or, for an element outside the
-/// region, the slot's own value; the warp sums them in pass 2's order
+/// (stored with J_e by corner 0's visit, so that the pass arrays end as the
+/// two passes leave them) or, for an element outside the region, the
+/// element's stored value; the warp sums them in pass 2's order
 /// (sum_node_slots) and the eight partial sums meet as pass 2's groups do.
 template <class T, bool kRecomputed>
 __device__ void pressures_at(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, index_t a,
                              index_t begin, index_t end, int lane, SlotElement<T> first, const Packed3<T>* u) {
   T dv = sum_node_slots<T, kRecomputed, false, T>(m, r, begin, end, lane, first,
-                                                  [&](index_t k, const SlotElement<T>& x) {
-                                                    if (!x.computed) return s.dv_slot[k];
+                                                  [&](index_t, const SlotElement<T>& x) {
+                                                    if (!x.computed) return s.elem_dv[x.d.e];
                                                     T J;
                                                     const T v = element_volume_change(x.d, u, J);
-                                                    s.dv_slot[k] = v;
-                                                    if (x.corner == 0) s.elem_J[x.d.e] = J;
+                                                    if (x.corner == 0) {
+                                                      s.elem_dv[x.d.e] = v;
+                                                      s.elem_J[x.d.e] = J;
+                                                    }
                                                     return v;
                                                   });
   dv = node_group_sum(dv, node_group_mask());
@@ -503,7 +497,7 @@ __global__ void element_pressure_kernel(ModelView<T> m, StateView<T> s, RegionVi
   const index_t i = thread_index();
   const bool active = i < r.n_elems;
   ElementData<T> d;
-  if (active) d = load_element_slots<T, kRecomputed>(m, r.elem(i));
+  if (active) d = load_element_shape<T, kRecomputed>(m, r.elem(i));
   wait_for_previous_pass();
   if (skipped(s)) return;
   if (active) element_pressure_at(s, d, u);
@@ -679,7 +673,7 @@ __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const Re
   for (int k = 0; k < steps; ++k) {
     if (k > 0 || !from_pass3) {  // (uniform over the grid)
       for (index_t i = first; i < r.n_elems; i += stride)
-        element_pressure_at(s, load_element_slots<T, kRecomputed>(m, r.elem(i)), b.u);
+        element_pressure_at(s, load_element_shape<T, kRecomputed>(m, r.elem(i)), b.u);
       barrier();
       for (index_t g = first; g < node_items; g += stride)
         nodal_pressure_at(m, s, load_node(m, r.node(g / kNodeLanes), lane, mask));

@@ -6,14 +6,20 @@
 //   X, u, u_prev, u_next, u_held, f   one Packed3 per node (x, y, z, pad):
 //                                     one 16-byte (float) or two (double)
 //                                     loads per gathered corner
-//   dv_slot, f_slot                   per (element, corner) values stored in
-//                                     node order: slot k holds the value of
-//                                     node_elem[k], so passes 2 and 4 read a
-//                                     node's values contiguously, in the
-//                                     stored order (the cpu backend's
-//                                     summation order), with no index
-//                                     indirection. Passes 1 and 3 write them
-//                                     through slot_of (the inverse of node_elem).
+//   elem_dv                           pass 1's (J_e - 1) V_e, once per element
+//                                     (the same for its four corners), stored
+//                                     coalesced; pass 2 gathers a node's through
+//                                     node_elem (4 e + a) in its stored order
+//                                     (the cpu backend's layout and order).
+//   f_slot                            pass 3's per (element, corner) forces in
+//                                     node order: slot k holds the force of
+//                                     node_elem[k], so pass 4 reads a node's
+//                                     forces contiguously, in the stored order,
+//                                     with no index indirection. Pass 3 writes
+//                                     them through slot_of (the inverse of
+//                                     node_elem). (Element order, pass 4
+//                                     gathering as pass 2 does, was measured
+//                                     slower: docs/cuda.md.)
 #pragma once
 
 #include <cstdint>
@@ -123,7 +129,7 @@ struct StateView {
   std::uint8_t* held = nullptr;        ///< axis mask: bit c = component c set from u_held, not integrated (n_nodes)
   std::uint8_t* driven = nullptr;      ///< axis mask of the tool-driven components; 0 = not driven (n_nodes)
   std::uint8_t* role = nullptr;        ///< NodeRole (n_nodes)
-  T* dv_slot = nullptr;                ///< pass 1: (J_e - 1) V_e per node_elem slot (4 n_elems) m^3
+  T* elem_dv = nullptr;                ///< pass 1: (J_e - 1) V_e per element (n_elems) m^3
   T* elem_J = nullptr;                 ///< pass 1: J_e (n_elems)
   T* node_p = nullptr;                 ///< pass 2: p_a (n_nodes) Pa
   Packed3<T>* f_slot = nullptr;        ///< pass 3: f_a^e per node_elem slot (4 n_elems) N
