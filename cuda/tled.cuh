@@ -281,13 +281,43 @@ __device__ __forceinline__ NodeData<T> load_node(const ModelView<T>& m, index_t 
   return {a, __ldg(m.node_elem_start + a) + lane, __ldg(m.node_elem_start + a + 1), lane, mask};
 }
 
-/// Pass 2 for a node (one lane of its group): p_a = K_a sum_e (J_e - 1) V_e /
-/// sum_e V_e over its elements (node_divisor = V_a / K_a); lane 0 writes it.
+/// How many of a lane's elements pass 2 loads with its node, before the
+/// wait for pass 1 (a box's nodes touch up to 24 elements: three a lane);
+/// a lane's further elements are loaded after it.
+inline constexpr int kPressureElements = 4;
+
+/// The model data of one node that pass 2 uses (one lane's view): the
+/// node's, and the elements of the lane's first kPressureElements slots.
 template <class T>
-__device__ void nodal_pressure_at(const ModelView<T>& m, const StateView<T>& s, const NodeData<T>& d) {
+struct PressureNode {
+  NodeData<T> d;
+  index_t e[kPressureElements];  ///< element of slot d.first + j kNodeLanes (0 past the node's end)
+};
+
+template <class T>
+__device__ __forceinline__ PressureNode<T> load_pressure_node(const ModelView<T>& m, index_t a, int lane,
+                                                              unsigned mask) {
+  PressureNode<T> n{load_node(m, a, lane, mask), {}};
+#pragma unroll
+  for (int j = 0; j < kPressureElements; ++j) {
+    const index_t k = n.d.first + j * kNodeLanes;
+    n.e[j] = k < n.d.end ? __ldg(m.node_elem + k) / 4 : index_t(0);
+  }
+  return n;
+}
+
+/// Pass 2 for a node (one lane of its group): p_a = K_a sum_e (J_e - 1) V_e /
+/// sum_e V_e over its elements (node_divisor = V_a / K_a), gathered from
+/// pass 1's per-element values; lane 0 writes it.
+template <class T>
+__device__ void nodal_pressure_at(const ModelView<T>& m, const StateView<T>& s, const PressureNode<T>& n) {
+  const NodeData<T>& d = n.d;
   T dv = T(0);
-#pragma unroll 4
-  for (index_t k = d.first; k < d.end; k += kNodeLanes) dv += s.elem_dv[__ldg(m.node_elem + k) / 4];
+#pragma unroll
+  for (int j = 0; j < kPressureElements; ++j)
+    if (d.first + j * kNodeLanes < d.end) dv += s.elem_dv[n.e[j]];
+  for (index_t k = d.first + kPressureElements * kNodeLanes; k < d.end; k += kNodeLanes)
+    dv += s.elem_dv[__ldg(m.node_elem + k) / 4];
   dv = node_group_sum(dv, d.mask);
   if (d.lane == 0) s.node_p[d.a] = dv / __ldg(m.node_divisor + d.a);
 }
@@ -510,8 +540,8 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
   let_next_pass_launch();
   const index_t g = thread_index(), i = g / kNodeLanes;
   const bool active = i < r.n_nodes;
-  NodeData<T> d;
-  if (active) d = load_node(m, r.node(i), g % kNodeLanes, node_group_mask());
+  PressureNode<T> d;
+  if (active) d = load_pressure_node(m, r.node(i), g % kNodeLanes, node_group_mask());
   wait_for_previous_pass();
   if (skipped(s)) return;
   if (active) nodal_pressure_at(m, s, d);
@@ -676,7 +706,7 @@ __device__ void run_steps(const ModelView<T>& m, const StateView<T>& s, const Re
         element_pressure_at(s, load_element_shape<T, kRecomputed>(m, r.elem(i)), b.u);
       barrier();
       for (index_t g = first; g < node_items; g += stride)
-        nodal_pressure_at(m, s, load_node(m, r.node(g / kNodeLanes), lane, mask));
+        nodal_pressure_at(m, s, load_pressure_node(m, r.node(g / kNodeLanes), lane, mask));
       barrier();
     }
     for (index_t i = first; i < r.n_elems; i += stride) {
