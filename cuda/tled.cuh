@@ -118,7 +118,7 @@ __device__ __forceinline__ void corner_displacements(const ElementData<T>& d, co
 }
 
 /// Pass 1 for an element: J_e = det F, and its volume change (J_e - 1) V_e
-/// into the node_elem slots of its four corners.
+/// (stored once per element, elem_dv: element_pressure_at).
 template <class T>
 __device__ __forceinline__ T element_volume_change(const ElementData<T>& d, const Packed3<T>* u, T& J) {
   Vec3<T> ue[4];
@@ -247,7 +247,8 @@ __device__ void law_element_forces_at(const ModelView<T>& m, const StateView<T>&
 
 /// Lanes that share one node in passes 2 and 4: lane j of a node's group
 /// sums the node's slots begin + j, begin + j + kNodeLanes, ... (adjacent
-/// lanes read adjacent slots), then the group adds its partial sums
+/// lanes read adjacent force slots in pass 4, adjacent node_elem entries
+/// in pass 2, which then gathers elem_dv), then the group adds its partial sums
 /// pairwise. A node of the kidney touches up to ~60 elements: one thread per
 /// node would wait on ~60 / 8 rounds of dependent loads, eight lanes on one.
 inline constexpr int kNodeLanes = 8;
@@ -325,7 +326,7 @@ __device__ void nodal_pressure_at(const ModelView<T>& m, const StateView<T>& s, 
 /// Passes 1 and 2 as one (pressures_kernel) on regions of fewer than this
 /// many elements: each node's warp computes the volume changes of its
 /// elements itself, every element once per corner, instead of reading the
-/// slots pass 1 wrote. It saves a dependent kernel per step where the steps
+/// values pass 1 wrote (elem_dv). It saves a dependent kernel per step where the steps
 /// are bound by their kernels' latency and costs four times pass 1's
 /// scattered loads. Measured on the kidney (H100, float): the haptic ticks
 /// 2-3 % shorter at depth 5 (3.6k elements) and over the whole mesh (8.6k),
@@ -342,9 +343,10 @@ __host__ __device__ inline bool fuses_pressures(const RegionView& r) {
 
 /// One slot of a node in a fused pass (pressures_at, forces_at): its
 /// element's model data, whether the region computes that element (the
-/// element pass would write the slot now; else the slot keeps what it
-/// holds), and which of the element's corners the node is (corner 0's
-/// visit does what the element pass does once: J_e, the bad-element flag).
+/// element pass would write its value now: its force slot, its elem_dv;
+/// else the stored value stays), and which of the element's corners the
+/// node is (corner 0's visit does what the element pass does once: elem_dv
+/// and J_e, the bad-element flag).
 template <class T>
 struct SlotElement {
   ElementData<T> d;
@@ -607,7 +609,9 @@ void enqueue_pressures(const ModelView<T>& m, const StateView<T>& s, const Regio
 /// first. On 1M tets, whose 64 MB of force slots exceed an H100's 50 MB of
 /// L2, a step is 5 % shorter (docs/cuda.md, "Passes in the order the L2
 /// holds"); no result changes (each element's forces are its own, and the
-/// lowest bad element wins in any order).
+/// lowest bad element wins in any order). The chained kernels of pass 3 use
+/// it; the pass 3 beside a region check (small regions) and the persistent
+/// kernels' pass 3 (run_steps) keep the forward order.
 __device__ __forceinline__ index_t pass3_elem(const RegionView& r, index_t i) { return r.elem(r.n_elems - 1 - i); }
 
 template <class T, bool kRecomputed>
