@@ -173,6 +173,11 @@ class Backend {
   /// turns off releases them. After the advance the tools rest at `to`.
   void move_tools(std::span<const ToolMotion> motion);
 
+  /// The pending tool motion as the steps of an advance of `steps` steps
+  /// see it (core/contact.hpp ContactTools: poses, substeps, grasps): what
+  /// the backends' contact stages get.
+  ContactTools<double> contact_tools(int steps) const;
+
   /// Surface nodes that are not inner region nodes and that the pending
   /// tool motion comes within a radius of (ascending): the Scheduler seeds
   /// the region with them before the advance. Empty when there are no tools.
@@ -263,9 +268,6 @@ class Backend {
   virtual std::optional<Reductions> do_advance_reduce_in_region(int steps, const ContactTools<double>& tools);
   virtual Fields do_download() = 0;
   virtual void do_write_positions(float* dst) = 0;
-
-  /// The tools' motion over an advance of `steps` steps (what do_advance gets).
-  ContactTools<double> contact_tools(int steps) const;
 
  private:
   void require_upload(const char* what) const;

@@ -220,12 +220,13 @@ TEST_P(Stages, DenseContactMatchesCpuInEveryStepMode) {
   const double r = 0.015, top = 0.0025;
   const ToolShape shape[] = {{"sphere", r, 0}};
   const ToolMotion motion[] = {{{{0.0203, 0.0198, top + r - 0.0008}, {0, 0, 1}}, {{0.0205, 0.0199, top + r - 0.001}, {0, 0, 1}}}};
-  // the triangles that may touch at the first step's check, per block of 256 and per warp of 32
-  ContactTools<double> tools;
-  tools.n_tools = 1;
-  tools.steps = 3;
-  tools.tool[0] = {motion[0].from.tip, motion[0].from.axis, motion[0].to.tip, motion[0].to.axis, r, 0.0,
-                   contact_substeps(motion[0].from, motion[0].to, r, 0.0, tools.steps), 0, {}, {}};
+  // the triangles that may touch at the first step's check, per block of 256 and per warp of 32, for the
+  // tools as press() gives them to a backend
+  auto host = make_cpu_backend(p);
+  host->upload(m);
+  host->set_tools(shape);
+  host->move_tools(motion);
+  const ContactTools<double> tools = host->contact_tools(3);
   std::vector<int> per_block(m.n_tris / 256 + 1, 0), per_warp(m.n_tris / 32 + 1, 0);
   for (index_t t = 0; t < m.n_tris; ++t) {
     Vec3<double> x[3];
