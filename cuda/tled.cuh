@@ -453,6 +453,20 @@ __device__ __forceinline__ void node_update_from(const ModelView<T>& m, const St
   b.u_next[a] = Packed3<T>::of(node_next(s.held[a], s.u_held[a].vec(), k, f, b.u[a].vec(), b.u_prev[a].vec()));
 }
 
+/// A force slot as pass 4 reads it, its last use in the step: evict-first
+/// (`__ldcs`), so that the slots pass 4 has read leave the L2 before those
+/// pass 3 wrote last, which pass 4 has yet to read (on 1M tets the 64 MB
+/// of slots exceed an H100's 50 MB of L2: 1M float +1.6 %, docs/cuda.md,
+/// "Passes in the order the L2 holds").
+__device__ __forceinline__ Vec3<float> last_read(const Packed3<float>* p) {
+  const float4 v = __ldcs(reinterpret_cast<const float4*>(p));
+  return {v.x, v.y, v.z};
+}
+__device__ __forceinline__ Vec3<double> last_read(const Packed3<double>* p) {
+  const double2 xy = __ldcs(reinterpret_cast<const double2*>(p));
+  return {xy.x, xy.y, __ldcs(&p->z)};
+}
+
 /// Pass 4 for a node (one lane of its group): f_a = sum of its corners'
 /// element forces (a gather: no atomics) minus the applied load R (none
 /// when s.load is null), then lane 0 sets u_next: u_held for the held
@@ -464,7 +478,7 @@ __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, con
                                const NodeData<T>& d) {
   Vec3<T> f = {T(0), T(0), T(0)};
 #pragma unroll 4
-  for (index_t k = d.first; k < d.end; k += kNodeLanes) f = f + s.f_slot[k].vec();
+  for (index_t k = d.first; k < d.end; k += kNodeLanes) f = f + last_read(s.f_slot + k);
   f = {node_group_sum(f.x, d.mask), node_group_sum(f.y, d.mask), node_group_sum(f.z, d.mask)};
   if (d.lane == 0) node_update_from<T, kLoad>(m, s, b, d.a, f);
 }

@@ -732,6 +732,7 @@ TEST_P(Contract, AdvanceReduceInRegionRunsOnlyWhileTheRegionHolds) {
     for (Backend* b : {checked.get(), plain.get()}) b->move_tools(std::span<const ToolMotion>(&mv, 1));
     const bool reaches = !plain->contact_candidates().empty();
     const Fields before = checked->download();
+    const std::vector<ContactNode> contacts_before = checked->contacts();
     const std::optional<Reductions> got = checked->advance_reduce_in_region(steps);
     EXPECT_EQ(got.has_value(), !reaches);
     if (!got) {
@@ -741,6 +742,14 @@ TEST_P(Contract, AdvanceReduceInRegionRunsOnlyWhileTheRegionHolds) {
       EXPECT_EQ(after.f, before.f);
       EXPECT_EQ(after.node_p, before.node_p);  // passes 1-2 did nothing either
       EXPECT_EQ(after.elem_J, before.elem_J);
+      // nor the contact stage (the sweep and the merge of a refused tick store nothing)
+      const std::vector<ContactNode> contacts_after = checked->contacts();
+      ASSERT_EQ(contacts_after.size(), contacts_before.size());
+      for (std::size_t i = 0; i < contacts_after.size(); ++i) {
+        EXPECT_EQ(contacts_after[i].node, contacts_before[i].node);
+        EXPECT_EQ(contacts_after[i].tool, contacts_before[i].tool);
+        EXPECT_EQ(contacts_after[i].kind, contacts_before[i].kind);
+      }
       // the caller grows the region with the same candidates, then runs the tick
       for (Backend* b : {checked.get(), plain.get()}) {
         const std::vector<index_t> cand = b->contact_candidates();
