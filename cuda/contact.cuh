@@ -339,6 +339,28 @@ __device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, 
   merge_loaded_node(s, tools, k, u, u_next, load_surface_node(m, i), m.surf_slot);
 }
 
+/// Copies the advance's tools into the block's shared `sh` (its head and the
+/// tools in use: only those are uploaded), by the block's threads, before
+/// the kernel waits for the previous one; read after a __syncthreads(). The
+/// tools are uploaded by a copy in the stream before the steps' first
+/// kernel and do not change while they run, so the sweep and the merge
+/// need not wait for the previous kernel to load them: their loads, and
+/// the arithmetic on them, leave the chain that runs after the wait.
+template <class T>
+__device__ __forceinline__ void copy_tools(const ContactTools<T>* tools, ContactTools<T>& sh) {
+  static_assert(sizeof(ToolStep<T>) % sizeof(int) == 0);
+  const int n = __ldg(&tools->n_tools);
+  if (threadIdx.x == 0) {
+    sh.n_tools = n;
+    sh.steps = __ldg(&tools->steps);
+    sh.face = __ldg(&tools->face);
+  }
+  constexpr int kWords = int(sizeof(ToolStep<T>) / sizeof(int));
+  const int* from = reinterpret_cast<const int*>(tools->tool);
+  int* to = reinterpret_cast<int*>(sh.tool);
+  for (int w = int(threadIdx.x); w < n * kWords; w += int(blockDim.x)) to[w] = __ldg(from + w);
+}
+
 /// The sweep of step k over the surface, in blocks of kBlock threads (at
 /// most: the shared list's size; whole warps): each
 /// thread tests its triangle (core triangle_may_touch: most are clear of
@@ -351,30 +373,35 @@ __global__ void __launch_bounds__(kBlock)
     sweep_triangles_kernel(ModelView<T> m, StateView<T> s, const ContactTools<T>* tools, int k,
                            const Packed3<T>* u_next) {
   __shared__ alignas(TouchingTriangle<T>) unsigned char raw[kBlock * sizeof(TouchingTriangle<T>)];
+  __shared__ alignas(ContactTools<T>) unsigned char tools_raw[sizeof(ContactTools<T>)];
   __shared__ int n_touching;
   TouchingTriangle<T>* touching = reinterpret_cast<TouchingTriangle<T>*>(raw);
+  ContactTools<T>& sh_tools = *reinterpret_cast<ContactTools<T>*>(tools_raw);
   let_next_pass_launch();
   const index_t t = thread_index();
   const bool active = t < m.n_tris;
   TriangleModel<T> tm;
   if (active) tm = load_triangle(m, t);
   if (threadIdx.x == 0) n_touching = 0;
+  copy_tools(tools, sh_tools);
   wait_for_previous_pass();
   __syncthreads();
-  const StepCapsules<T> capsule{*tools, k};
+  const StepCapsules<T> capsule{sh_tools, k};
   TouchingTriangle<T> tri;
-  if (active && !skipped(s) && may_touch(s, *tools, capsule, u_next, t, tm, tri))
+  if (active && !skipped(s) && may_touch(s, sh_tools, capsule, u_next, t, tm, tri))
     touching[atomicAdd(&n_touching, 1)] = tri;  // in any order: each triangle's sweep is its own
   __syncthreads();
   const int warps = int(blockDim.x) / 32, group = int(threadIdx.x % 32) / kSweepLanes;
   const SweepLanes<T> lanes = sweep_lanes_of<T>(int(threadIdx.x % 32));
   for (int j = group * warps + int(threadIdx.x / 32); j < n_touching; j += int(blockDim.x) / kSweepLanes)
-    sweep_in_lanes(s, *tools, capsule, touching[j], lanes);
+    sweep_in_lanes(s, sh_tools, capsule, touching[j], lanes);
 }
 
 template <class T>
 __global__ void gather_contacts_kernel(ModelView<T> m, StateView<T> s, const ContactTools<T>* tools, int k,
                                        Packed3<T>* u, Packed3<T>* u_next) {
+  __shared__ alignas(ContactTools<T>) unsigned char tools_raw[sizeof(ContactTools<T>)];
+  const ContactTools<T>& sh_tools = *reinterpret_cast<const ContactTools<T>*>(tools_raw);
   let_next_pass_launch();
   // the nodes a tool pushes are neighbours: dealt to different warps in runs of 8, their merges run side
   // by side, not one after another in one warp (docs/benchmarks/README.md, "The reduction's tail")
@@ -382,8 +409,10 @@ __global__ void gather_contacts_kernel(ModelView<T> m, StateView<T> s, const Con
   const bool active = i < m.n_surf;
   SurfaceNodeModel<T> n;
   if (active) n = load_surface_node(m, i);
+  copy_tools(tools, *reinterpret_cast<ContactTools<T>*>(tools_raw));
   wait_for_previous_pass();
-  if (active && !skipped(s)) merge_loaded_node(s, *tools, k, u, u_next, n, m.surf_slot);
+  __syncthreads();
+  if (active && !skipped(s)) merge_loaded_node(s, sh_tools, k, u, u_next, n, m.surf_slot);
 }
 
 }  // namespace tissue::gpu
