@@ -343,9 +343,13 @@ __device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, 
 /// tools in use: only those are uploaded), by the block's threads, before
 /// the kernel waits for the previous one; read after a __syncthreads(). The
 /// tools are uploaded by a copy in the stream before the steps' first
-/// kernel and do not change while they run, so the sweep and the merge
-/// need not wait for the previous kernel to load them: their loads, and
-/// the arithmetic on them, leave the chain that runs after the wait.
+/// kernel and do not change while they run, so the sweep need not wait for
+/// the previous kernel to load them: their loads leave the chain that runs
+/// after the wait (the kidney's contact stage with a tool set, not
+/// touching: 3.9 -> 3.4 us a step on an H100). The merge does not copy
+/// them: only a touched node reads them, and a copy in every block cost
+/// the 100k slab's merge more than it saved (docs/cuda.md, "The tick
+/// traced").
 template <class T>
 __device__ __forceinline__ void copy_tools(const ContactTools<T>* tools, ContactTools<T>& sh) {
   static_assert(sizeof(ToolStep<T>) % sizeof(int) == 0);
@@ -400,8 +404,6 @@ __global__ void __launch_bounds__(kBlock)
 template <class T>
 __global__ void gather_contacts_kernel(ModelView<T> m, StateView<T> s, const ContactTools<T>* tools, int k,
                                        Packed3<T>* u, Packed3<T>* u_next) {
-  __shared__ alignas(ContactTools<T>) unsigned char tools_raw[sizeof(ContactTools<T>)];
-  const ContactTools<T>& sh_tools = *reinterpret_cast<const ContactTools<T>*>(tools_raw);
   let_next_pass_launch();
   // the nodes a tool pushes are neighbours: dealt to different warps in runs of 8, their merges run side
   // by side, not one after another in one warp (docs/benchmarks/README.md, "The reduction's tail")
@@ -409,10 +411,8 @@ __global__ void gather_contacts_kernel(ModelView<T> m, StateView<T> s, const Con
   const bool active = i < m.n_surf;
   SurfaceNodeModel<T> n;
   if (active) n = load_surface_node(m, i);
-  copy_tools(tools, *reinterpret_cast<ContactTools<T>*>(tools_raw));
   wait_for_previous_pass();
-  __syncthreads();
-  if (active && !skipped(s)) merge_loaded_node(s, sh_tools, k, u, u_next, n, m.surf_slot);
+  if (active && !skipped(s)) merge_loaded_node(s, *tools, k, u, u_next, n, m.surf_slot);
 }
 
 }  // namespace tissue::gpu
