@@ -339,8 +339,9 @@ __device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, 
   merge_loaded_node(s, tools, k, u, u_next, load_surface_node(m, i), m.surf_slot);
 }
 
-/// Copies the advance's tools into the block's shared `sh` (its head and the
-/// tools in use: only those are uploaded), by the block's threads, before
+/// Copies the advance's tools into the block's shared `sh` (n_tools, steps,
+/// face and the tools in use, which is all the sweep reads; not
+/// sweep_substeps, which only the reach check reads), by the block's threads, before
 /// the kernel waits for the previous one; read after a __syncthreads(). The
 /// tools are uploaded by a copy in the stream before the steps' first
 /// kernel and do not change while they run, so the sweep need not wait for
@@ -353,7 +354,7 @@ __device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, 
 template <class T>
 __device__ __forceinline__ void copy_tools(const ContactTools<T>* tools, ContactTools<T>& sh) {
   static_assert(sizeof(ToolStep<T>) % sizeof(int) == 0);
-  const int n = __ldg(&tools->n_tools);
+  const int n = min(__ldg(&tools->n_tools), kMaxTools);  // (set_tools refuses more)
   if (threadIdx.x == 0) {
     sh.n_tools = n;
     sh.steps = __ldg(&tools->steps);

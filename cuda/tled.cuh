@@ -9,7 +9,8 @@
 // changes while kernels run: read through the read-only path, __ldg) and
 // what it does with the state. A chained pass kernel loads its model part
 // before waiting for the previous pass, so that round trip overlaps the
-// previous kernel's tail. State arrays are read with plain loads (the
+// previous kernel's tail. State arrays are read with coherent loads, plain
+// or evict-first (`__ldcs`), never through the read-only path (the
 // persistent kernels read what other blocks wrote before the barrier).
 #pragma once
 

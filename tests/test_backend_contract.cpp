@@ -722,7 +722,7 @@ TEST_P(Contract, AdvanceReduceInRegionRunsOnlyWhileTheRegionHolds) {
     b->build_region(b->contact_candidates(), 2);
   }
   double z = kTop + r - 5e-4;
-  int ran = 0, refused = 0;
+  int ran = 0, refused = 0, refused_in_contact = 0;
   // pressing in place (the region holds), then a slide that leaves the region; steps 4 then 7 (two graphs)
   for (int tick = 0; tick < 10; ++tick) {
     SCOPED_TRACE(::testing::Message() << "tick " << tick);
@@ -744,11 +744,15 @@ TEST_P(Contract, AdvanceReduceInRegionRunsOnlyWhileTheRegionHolds) {
       EXPECT_EQ(after.elem_J, before.elem_J);
       // nor the contact stage (the sweep and the merge of a refused tick store nothing)
       const std::vector<ContactNode> contacts_after = checked->contacts();
+      if (!contacts_before.empty()) ++refused_in_contact;
       ASSERT_EQ(contacts_after.size(), contacts_before.size());
       for (std::size_t i = 0; i < contacts_after.size(); ++i) {
         EXPECT_EQ(contacts_after[i].node, contacts_before[i].node);
         EXPECT_EQ(contacts_after[i].tool, contacts_before[i].tool);
         EXPECT_EQ(contacts_after[i].kind, contacts_before[i].kind);
+        EXPECT_EQ(contacts_after[i].normal.x, contacts_before[i].normal.x);
+        EXPECT_EQ(contacts_after[i].normal.y, contacts_before[i].normal.y);
+        EXPECT_EQ(contacts_after[i].normal.z, contacts_before[i].normal.z);
       }
       // the caller grows the region with the same candidates, then runs the tick
       for (Backend* b : {checked.get(), plain.get()}) {
@@ -770,6 +774,7 @@ TEST_P(Contract, AdvanceReduceInRegionRunsOnlyWhileTheRegionHolds) {
   }
   EXPECT_GT(ran, 3);
   EXPECT_GT(refused, 0);
+  EXPECT_GT(refused_in_contact, 0) << "a tick refused while the tool pressed";
   EXPECT_THROW(checked->advance_reduce_in_region(-1), std::invalid_argument);
 }
 
