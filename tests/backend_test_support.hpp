@@ -8,6 +8,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
+#include <cstring>
 #include <ostream>
 #include <string>
 #include <vector>
@@ -91,6 +93,19 @@ inline double max_diff(const std::vector<double>& a, const std::vector<double>& 
   double r = 0;
   for (size_t k = 0; k < a.size(); ++k) r = std::max(r, std::fabs(a[k] - b[k]));
   return r;
+}
+
+/// The same contact records (Backend::contacts), bit for bit: nodes, tools,
+/// kinds and normals; `what` names the comparison in a failure.
+inline void expect_same_contacts(const std::vector<ContactNode>& a, const std::vector<ContactNode>& b,
+                                 const std::string& what) {
+  ASSERT_EQ(a.size(), b.size()) << what;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].node, b[i].node) << what;
+    EXPECT_EQ(a[i].tool, b[i].tool) << what << ", node " << a[i].node;
+    EXPECT_EQ(a[i].kind, b[i].kind) << what << ", node " << a[i].node;
+    EXPECT_EQ(std::memcmp(&a[i].normal, &b[i].normal, sizeof(Vec3<double>)), 0) << what << ", node " << a[i].node;
+  }
 }
 
 inline Vec3<double> node_u(const std::vector<double>& u, index_t n, index_t a) {

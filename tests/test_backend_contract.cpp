@@ -743,17 +743,8 @@ TEST_P(Contract, AdvanceReduceInRegionRunsOnlyWhileTheRegionHolds) {
       EXPECT_EQ(after.node_p, before.node_p);  // passes 1-2 did nothing either
       EXPECT_EQ(after.elem_J, before.elem_J);
       // nor the contact stage (the sweep and the merge of a refused tick store nothing)
-      const std::vector<ContactNode> contacts_after = checked->contacts();
       if (!contacts_before.empty()) ++refused_in_contact;
-      ASSERT_EQ(contacts_after.size(), contacts_before.size());
-      for (std::size_t i = 0; i < contacts_after.size(); ++i) {
-        EXPECT_EQ(contacts_after[i].node, contacts_before[i].node);
-        EXPECT_EQ(contacts_after[i].tool, contacts_before[i].tool);
-        EXPECT_EQ(contacts_after[i].kind, contacts_before[i].kind);
-        EXPECT_EQ(contacts_after[i].normal.x, contacts_before[i].normal.x);
-        EXPECT_EQ(contacts_after[i].normal.y, contacts_before[i].normal.y);
-        EXPECT_EQ(contacts_after[i].normal.z, contacts_before[i].normal.z);
-      }
+      expect_same_contacts(checked->contacts(), contacts_before, "the contacts of a refused tick");
       // the caller grows the region with the same candidates, then runs the tick
       for (Backend* b : {checked.get(), plain.get()}) {
         const std::vector<index_t> cand = b->contact_candidates();

@@ -493,12 +493,7 @@ TEST_P(CpuBackendTest, ContactQuerySkinAndSweepSharesChangeNoBit) {
     ASSERT_EQ(a.red.size(), d.red.size());
     for (size_t k = 0; k < a.red.size(); ++k) {
       EXPECT_EQ(std::memcmp(&a.red[k], &d.red[k], offsetof(Reductions, bad_elem)), 0) << what << ", step " << k;
-      ASSERT_EQ(a.contacts[k].size(), d.contacts[k].size()) << what << ", step " << k;
-      for (size_t i = 0; i < a.contacts[k].size(); ++i) {
-        EXPECT_EQ(a.contacts[k][i].node, d.contacts[k][i].node);
-        EXPECT_EQ(a.contacts[k][i].kind, d.contacts[k][i].kind);
-        EXPECT_EQ(std::memcmp(&a.contacts[k][i].normal, &d.contacts[k][i].normal, sizeof(Vec3<double>)), 0);
-      }
+      expect_same_contacts(a.contacts[k], d.contacts[k], fmt::format("{}, step {}", what, k));
     }
   }
 }
