@@ -465,10 +465,10 @@ TissueModel<double> build_model(const ModelInput& in) {
   m.node_elem.resize(4 * ne);
   std::vector<index_t> fill(m.node_elem_start.begin(), m.node_elem_start.end() - 1);
   for (index_t e = 0; e < ne; ++e)
-    for (int a = 0; a < 4; ++a) m.node_elem[fill[m.elem_nodes[a * ne + e]]++] = 4 * e + a;
+    for (int a = 0; a < 4; ++a) m.node_elem[fill[m.elem_nodes[a * ne + e]]++] = incident_entry(e, a);
   m.elem_slot.resize(4 * size_t(ne));
   for (size_t k = 0; k < m.node_elem.size(); ++k)
-    m.elem_slot[size_t(m.node_elem[k] & 3) * ne + (m.node_elem[k] >> 2)] = static_cast<index_t>(k);
+    m.elem_slot[size_t(incident_corner(m.node_elem[k])) * ne + incident_element(m.node_elem[k])] = static_cast<index_t>(k);
 
   // IANP where materials of different K meet: an element's pressure comes from its corners' K_a
   // (node_bulk_moduli), so its stable step is that of the stiffest corner's K

@@ -91,6 +91,12 @@ TISSUE_HD std::uint8_t fixed_axes(std::uint8_t flags) {
   return (flags & kFixed) ? kAllAxes : std::uint8_t((flags >> 2) & kAllAxes);
 }
 
+/// A node_elem entry (TissueModel::node_elem) packs an incident element and
+/// the node's corner in it as element * 4 + corner: these take them apart.
+TISSUE_HD constexpr index_t incident_element(index_t entry) { return entry / 4; }
+TISSUE_HD constexpr int incident_corner(index_t entry) { return static_cast<int>(entry % 4); }
+TISSUE_HD constexpr index_t incident_entry(index_t element, int corner) { return 4 * element + corner; }
+
 template <class T>
 struct TissueModel {
   index_t n_nodes = 0, n_elems = 0, n_tris = 0;
@@ -114,7 +120,7 @@ struct TissueModel {
   std::vector<T> mass;               ///< lumped nodal mass (n_nodes) kg
   std::vector<T> cd_A, cd_B, cd_C;   ///< central-difference constants (n_nodes each)
   std::vector<index_t> node_elem_start;  ///< CSR offsets into node_elem (n_nodes + 1)
-  std::vector<index_t> node_elem;        ///< incident (element * 4 + corner), sorted (nnz)
+  std::vector<index_t> node_elem;        ///< incident (element * 4 + corner: incident_entry), sorted (nnz)
   std::vector<index_t> elem_slot;        ///< position in node_elem of each (corner, element):
                                          ///< node_elem[elem_slot[a * n_elems + e]] == 4 e + a (4 x n_elems).
                                          ///< Pass 3 writes a corner's force to its node's slot, so that
@@ -227,12 +233,12 @@ std::vector<double> node_bulk_moduli(const TissueModel<T>& m) {
     bool one = true;
     const index_t first = m.node_elem_start[a], end = m.node_elem_start[a + 1];
     for (index_t j = first; j < end; ++j) {
-      const index_t e = m.node_elem[j] / 4;
+      const index_t e = incident_element(m.node_elem[j]);
       kv += double(m.K[e]) * double(m.volume[e]);
       v += double(m.volume[e]);
-      one = one && m.K[e] == m.K[m.node_elem[first] / 4];
+      one = one && m.K[e] == m.K[incident_element(m.node_elem[first])];
     }
-    k[a] = end == first ? 0.0 : one ? double(m.K[m.node_elem[first] / 4]) : kv / v;
+    k[a] = end == first ? 0.0 : one ? double(m.K[incident_element(m.node_elem[first])]) : kv / v;
   }
   return k;
 }
@@ -246,7 +252,7 @@ std::vector<T> nodal_pressure_divisors(const TissueModel<T>& m) {
   const std::vector<double> k = node_bulk_moduli(m);
   std::vector<T> v(m.n_nodes, T(0));
   for (index_t a = 0; a < m.n_nodes; ++a) {
-    for (index_t j = m.node_elem_start[a]; j < m.node_elem_start[a + 1]; ++j) v[a] += m.volume[m.node_elem[j] / 4];
+    for (index_t j = m.node_elem_start[a]; j < m.node_elem_start[a + 1]; ++j) v[a] += m.volume[incident_element(m.node_elem[j])];
     v[a] = v[a] / T(k[a]);
   }
   return v;

@@ -38,7 +38,7 @@ Region flood_fill(const TissueModel<T>& m, std::span<const index_t> seeds, int d
     next.clear();
     for (index_t a : frontier)
       for (index_t k = m.node_elem_start[a]; k < m.node_elem_start[a + 1]; ++k) {
-        const index_t e = m.node_elem[k] / 4;
+        const index_t e = incident_element(m.node_elem[k]);
         for (int c = 0; c < 4; ++c) {
           const index_t b = m.elem_nodes[c * ne + e];
           if (r.role[b] == kOutside) {
@@ -56,7 +56,7 @@ Region flood_fill(const TissueModel<T>& m, std::span<const index_t> seeds, int d
   std::vector<std::uint8_t> elem_on(ne, 0);
   for (index_t a = 0; a < n; ++a)
     if (r.role[a] == kInner)
-      for (index_t k = m.node_elem_start[a]; k < m.node_elem_start[a + 1]; ++k) elem_on[m.node_elem[k] / 4] = 1;
+      for (index_t k = m.node_elem_start[a]; k < m.node_elem_start[a + 1]; ++k) elem_on[incident_element(m.node_elem[k])] = 1;
   for (index_t e = 0; e < ne; ++e) {
     if (!elem_on[e]) continue;
     r.elems.push_back(e);

@@ -112,7 +112,7 @@ void nodal_pressure_run(const TissueModel<T>& m, const T* dv, const std::vector<
   const T* divisor = node_divisor.data();
   for_each_index(run, nodes, kNodeGrain, [&](index_t a) {
     T sum = 0;
-    for (index_t k = start[a]; k < start[a + 1]; ++k) sum += dv[list[k] >> 2];
+    for (index_t k = start[a]; k < start[a + 1]; ++k) sum += dv[incident_element(list[k])];
     p[a] = sum / divisor[a];
   });
 }

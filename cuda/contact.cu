@@ -76,7 +76,7 @@ __global__ void reach_outside_kernel(ModelView<T> m, StateView<T> s, const Packe
   let_next_pass_launch();
   __shared__ alignas(ContactTools<T>) unsigned char raw[sizeof(ContactTools<T>)];
   ContactTools<T>& sweep = *reinterpret_cast<ContactTools<T>*>(raw);
-  // the triangle's corners and their state, loaded while thread 0 copies the tools
+  // the triangle's corners and their state, loaded while the block copies the tools
   const index_t t = thread_index();
   const bool active = t < m.n_tris;
   TriangleModel<T> tm;
@@ -85,15 +85,11 @@ __global__ void reach_outside_kernel(ModelView<T> m, StateView<T> s, const Packe
     tm = load_triangle(m, t);
     cs = load_corner_state(s, tm, u);
   }
-  if (threadIdx.x == 0) {  // only the head and the tools in use were uploaded
-    sweep.n_tools = tools->n_tools;
-    sweep.steps = 1;
-    sweep.face = tools->face;
-    for (int k = 0; k < sweep.n_tools; ++k) {
-      sweep.tool[k] = tools->tool[k];
-      sweep.tool[k].substeps = tools->sweep_substeps[k];
-    }
-  }
+  copy_tools(tools, sweep);  // by every thread (one thread's copy was a chain of loads)
+  __syncthreads();
+  // then the check's own: one step, each tool's sweep_substeps
+  if (threadIdx.x == 0) sweep.steps = 1;
+  if (int(threadIdx.x) < sweep.n_tools) sweep.tool[threadIdx.x].substeps = __ldg(tools->sweep_substeps + threadIdx.x);
   __syncthreads();
   // the first triangle in reach also tells the host (one write over the bus)
   if (active && reaches_outside(s, sweep, tm, cs) && atomicExch(reach, 1) == 0 && host_reach) *host_reach = 1;

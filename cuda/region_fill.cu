@@ -24,7 +24,7 @@ __global__ void expand_kernel(Topology t, int r, int* ring) {
   const index_t a = thread_index();
   if (a >= t.n_nodes || ring[a] != r) return;
   for (index_t k = t.node_elem_start[a]; k < t.node_elem_start[a + 1]; ++k) {
-    const index_t e = t.node_elem[k] >> 2;
+    const index_t e = incident_element(t.node_elem[k]);
     for (int c = 0; c < 4; ++c) {
       const index_t b = t.elem_nodes[c * t.n_elems + e];
       if (ring[b] < 0) atomicCAS(&ring[b], -1, r + 1);

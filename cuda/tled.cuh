@@ -303,7 +303,7 @@ __device__ __forceinline__ PressureNode<T> load_pressure_node(const ModelView<T>
 #pragma unroll
   for (int j = 0; j < kPressureElements; ++j) {
     const index_t k = n.d.first + j * kNodeLanes;
-    n.e[j] = k < n.d.end ? __ldg(m.node_elem + k) / 4 : index_t(0);
+    n.e[j] = k < n.d.end ? incident_element(__ldg(m.node_elem + k)) : index_t(0);
   }
   return n;
 }
@@ -319,7 +319,7 @@ __device__ void nodal_pressure_at(const ModelView<T>& m, const StateView<T>& s, 
   for (int j = 0; j < kPressureElements; ++j)
     if (d.first + j * kNodeLanes < d.end) dv += s.elem_dv[n.e[j]];
   for (index_t k = d.first + kPressureElements * kNodeLanes; k < d.end; k += kNodeLanes)
-    dv += s.elem_dv[__ldg(m.node_elem + k) / 4];
+    dv += s.elem_dv[incident_element(__ldg(m.node_elem + k))];
   dv = node_group_sum(dv, d.mask);
   if (d.lane == 0) s.node_p[d.a] = dv / __ldg(m.node_divisor + d.a);
 }
@@ -360,14 +360,14 @@ struct SlotElement {
 /// kModuli: with mu and K (the force pass's), else the shape only.
 template <class T, bool kRecomputed, bool kModuli = false>
 __device__ __forceinline__ SlotElement<T> load_slot_element(const ModelView<T>& m, const RegionView& r, index_t k) {
-  const index_t ec = __ldg(m.node_elem + k);  // element * 4 + corner
-  const index_t e = ec / 4;
+  const index_t ec = __ldg(m.node_elem + k);
+  const index_t e = incident_element(ec);
   ElementData<T> d;
   if constexpr (kModuli)
     d = load_element_moduli<T, kRecomputed>(m, e);
   else
     d = load_element_shape<T, kRecomputed>(m, e);
-  return {d, !r.elem_sel || __ldg(r.elem_sel + e) != 0, static_cast<int>(ec % 4)};
+  return {d, !r.elem_sel || __ldg(r.elem_sel + e) != 0, incident_corner(ec)};
 }
 
 /// Lanes per node of the fused passes: a warp, so that a node's elements

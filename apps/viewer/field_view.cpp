@@ -47,7 +47,7 @@ NodeField node_field(FieldKind kind, const Fields& f, index_t n_nodes, const std
       for (std::size_t i = 0; i < n; ++i) {
         double sum = 0;
         const index_t b = node_elem_start[i], e = node_elem_start[i + 1];
-        for (index_t k = b; k < e; ++k) sum += f.elem_J[std::size_t(node_elem[k] / 4)];
+        for (index_t k = b; k < e; ++k) sum += f.elem_J[std::size_t(incident_element(node_elem[k]))];
         out.value[i] = e > b ? sum / (e - b) : 1.0;
       }
       out.label = "J = det F";
