@@ -397,10 +397,12 @@ void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const Sta
                          const RegionView& r, FrontView front, StepBuffers<T> b, cudaStream_t stream, bool to_host) {
   if (runs_passes(m, r)) {  // nodal pressures at the current u, into the scratch set
     // as the steps run them (the same bits either way)
-    enqueue_pressures(m, scratch, r, static_cast<const Packed3<T>*>(b.u), false, stream);
+    enqueue_pressures(m, scratch, r, static_cast<const Packed3<T>*>(b.u), stream);
   }
   const index_t items = std::max(r.n_nodes + r.n_elems + m.n_surf, index_t(1));
   const int blocks = std::min(grid_for(items, kReduceBlock), kMaxReduceBlocks);
+  // a plain launch: chained (its blocks resident and waiting while the passes before it run), the
+  // kidney's ticks were 1-2 % longer on an H100 (docs/cuda.md, "The reduction's passes chained")
   with_gradients(m, r, [&](auto recomputed) {  // the energies with the gradients of the steps
     launch_blocks(blocks, kReduceBlock, stream, reduce_kernel<T, decltype(recomputed)::value>, m, s, r, front, b,
                   static_cast<const T*>(scratch.node_p), law_, partial_.data(), contact_partial_.data(), touched_.data(), done_.data(),

@@ -160,7 +160,7 @@ void Stepper<T>::launch_steps(const ModelView<T>& m, const StateView<T>& s, cons
                               int steps, const ContactTools<T>* tools, StepStart start, cudaStream_t stream) {
   for (int k = 0; k < steps; ++k) {
     if (k > 0 || start == StepStart::kPass1) {
-      enqueue_pressures(m, s, r, b.u, true, stream);
+      enqueue_pressures(m, s, r, b.u, stream);
     }
     const bool beside_check = k == 0 && start == StepStart::kPass3BesideCheck;
     if (!beside_check && fuses_forces(r)) {

@@ -593,18 +593,16 @@ __global__ void pressures_kernel(ModelView<T> m, StateView<T> s, RegionView r, c
 }
 
 /// Queues passes 1 and 2 over region r at displacements u as the steps run
-/// them: one kernel on a small region (fuses_pressures), else the two.
-/// chained: with programmatic dependent launch (the steps); else plain
-/// launches (the reduction's).
+/// them: one kernel on a small region (fuses_pressures), else the two; with
+/// programmatic dependent launch, for the steps and for the reduction alike
+/// (the reduction's were plain launches until 2026-11-27: chained, a
+/// one-step advance_reduce on the slabs of `tissue bench`'s contact_step is
+/// 1-2 us shorter on an H100; docs/cuda.md, "The reduction's passes
+/// chained").
 template <class T>
 void enqueue_pressures(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, const Packed3<T>* u,
-                       bool chained, cudaStream_t stream) {
-  const auto go = [&](index_t n, auto kernel, auto... args) {
-    if (chained)
-      launch_chained(n, stream, kernel, args...);
-    else
-      launch(n, stream, kernel, args...);
-  };
+                       cudaStream_t stream) {
+  const auto go = [&](index_t n, auto kernel, auto... args) { launch_chained(n, stream, kernel, args...); };
   with_gradients(m, r, [&](auto recomputed) {
     constexpr bool kRecomputed = decltype(recomputed)::value;
     if (fuses_pressures(r)) {
