@@ -92,9 +92,12 @@ TISSUE_HD std::uint8_t fixed_axes(std::uint8_t flags) {
 }
 
 /// A node_elem entry (TissueModel::node_elem) packs an incident element and
-/// the node's corner in it as element * 4 + corner: these take them apart.
-TISSUE_HD constexpr index_t incident_element(index_t entry) { return entry / 4; }
-TISSUE_HD constexpr int incident_corner(index_t entry) { return static_cast<int>(entry % 4); }
+/// the node's corner in it as element * 4 + corner: these take them apart
+/// (entries are never negative: a shift and a mask, not a signed division).
+/// The entry is also the (element, corner)'s force slot: the cpu's pass 4
+/// reads slot `entry` of f_slot (4 per element) directly.
+TISSUE_HD constexpr index_t incident_element(index_t entry) { return entry >> 2; }
+TISSUE_HD constexpr int incident_corner(index_t entry) { return static_cast<int>(entry & 3); }
 TISSUE_HD constexpr index_t incident_entry(index_t element, int corner) { return 4 * element + corner; }
 
 template <class T>

@@ -85,6 +85,7 @@ __global__ void reach_outside_kernel(ModelView<T> m, StateView<T> s, const Packe
     tm = load_triangle(m, t);
     cs = load_corner_state(s, tm, u);
   }
+  static_assert(kBlock >= kMaxTools, "a thread per tool sets its substeps below");  // (launched in blocks of kBlock)
   copy_tools(tools, sweep);  // by every thread (one thread's copy was a chain of loads)
   __syncthreads();
   // then the check's own: one step, each tool's sweep_substeps

@@ -341,8 +341,8 @@ __device__ void gather_contact_at(const ModelView<T>& m, const StateView<T>& s, 
 
 /// Copies the advance's tools into the block's shared `sh` (n_tools, steps,
 /// face and the tools in use, which is all the sweep reads; not
-/// sweep_substeps: the reach check, which reads them, sets them in its copy
-/// after this one), by the block's threads, before
+/// sweep_substeps, which the reach check reads into each tool's substeps in
+/// its copy after this one), by the block's threads, before
 /// the kernel waits for the previous one; read after a __syncthreads(). The
 /// tools are uploaded by a copy in the stream before the steps' first
 /// kernel and do not change while they run, so the sweep need not wait for

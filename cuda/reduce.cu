@@ -401,8 +401,9 @@ void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const Sta
   }
   const index_t items = std::max(r.n_nodes + r.n_elems + m.n_surf, index_t(1));
   const int blocks = std::min(grid_for(items, kReduceBlock), kMaxReduceBlocks);
-  // a plain launch: chained (its blocks resident and waiting while the passes before it run), the
-  // kidney's ticks were 1-2 % longer on an H100 (docs/cuda.md, "The reduction's passes chained")
+  // a plain launch: chained, the kidney's ticks were 1-2 % longer on an H100 (likely, not profiled:
+  // its blocks resident and waiting while the passes before it run; docs/cuda.md, "The reduction's
+  // passes chained")
   with_gradients(m, r, [&](auto recomputed) {  // the energies with the gradients of the steps
     launch_blocks(blocks, kReduceBlock, stream, reduce_kernel<T, decltype(recomputed)::value>, m, s, r, front, b,
                   static_cast<const T*>(scratch.node_p), law_, partial_.data(), contact_partial_.data(), touched_.data(), done_.data(),

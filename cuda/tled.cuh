@@ -597,7 +597,7 @@ __global__ void pressures_kernel(ModelView<T> m, StateView<T> s, RegionView r, c
 /// programmatic dependent launch, for the steps and for the reduction alike
 /// (the reduction's were plain launches until 2026-11-27: chained, a
 /// one-step advance_reduce on the slabs of `tissue bench`'s contact_step is
-/// 1-2 us shorter on an H100; docs/cuda.md, "The reduction's passes
+/// 0.7-2 us shorter on an H100; docs/cuda.md, "The reduction's passes
 /// chained").
 template <class T>
 void enqueue_pressures(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, const Packed3<T>* u,

@@ -44,7 +44,7 @@ std::vector<int> rings(const TissueModel<double>& m, const std::vector<index_t>&
     for (index_t a : frontier)
       for (index_t k = m.node_elem_start[a]; k < m.node_elem_start[a + 1]; ++k)
         for (int c = 0; c < 4; ++c) {
-          const index_t b = m.elem_nodes[c * m.n_elems + m.node_elem[k] / 4];
+          const index_t b = m.elem_nodes[c * m.n_elems + incident_element(m.node_elem[k])];
           if (ring[b] < 0) {
             ring[b] = r;
             next.push_back(b);

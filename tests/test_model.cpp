@@ -143,6 +143,9 @@ TEST(Model, NodeElementListsSortedAndComplete) {
     EXPECT_LT(m.node_elem_start[i], m.node_elem_start[i + 1]) << "node " << i << " has no element";
     for (index_t k = m.node_elem_start[i]; k < m.node_elem_start[i + 1]; ++k) {
       const index_t entry = m.node_elem[k], e = entry / 4, a = entry % 4;
+      ASSERT_EQ(incident_element(entry), e);
+      ASSERT_EQ(incident_corner(entry), a);
+      ASSERT_EQ(incident_entry(e, int(a)), entry);
       ASSERT_GE(e, 0);
       ASSERT_LT(e, ne);
       EXPECT_EQ(m.elem_nodes[a * ne + e], i) << "entry (" << e << ", " << a << ") listed under node " << i;

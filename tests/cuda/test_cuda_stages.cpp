@@ -798,7 +798,7 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
         if (region.role[a] != kHalo) continue;
         bool outside = false;
         for (index_t k = m.node_elem_start[a]; k < m.node_elem_start[a + 1]; ++k)
-          outside = outside || !std::binary_search(region.elems.begin(), region.elems.end(), m.node_elem[k] / 4);
+          outside = outside || !std::binary_search(region.elems.begin(), region.elems.end(), incident_element(m.node_elem[k]));
         if (outside) {
           driven = {a};
           drive = {2e-4, -1e-4, 1e-4};
