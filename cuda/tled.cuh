@@ -602,14 +602,13 @@ __global__ void pressures_kernel(ModelView<T> m, StateView<T> s, RegionView r, c
 template <class T>
 void enqueue_pressures(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, const Packed3<T>* u,
                        cudaStream_t stream) {
-  const auto go = [&](index_t n, auto kernel, auto... args) { launch_chained(n, stream, kernel, args...); };
   with_gradients(m, r, [&](auto recomputed) {
     constexpr bool kRecomputed = decltype(recomputed)::value;
     if (fuses_pressures(r)) {
-      go(kFusedLanes * r.n_nodes, pressures_kernel<T, kRecomputed>, m, s, r, u);
+      launch_chained(kFusedLanes * r.n_nodes, stream, pressures_kernel<T, kRecomputed>, m, s, r, u);
     } else {
-      go(r.n_elems, element_pressure_kernel<T, kRecomputed>, m, s, r, u);
-      go(kNodeLanes * r.n_nodes, nodal_pressure_kernel<T>, m, s, r);
+      launch_chained(r.n_elems, stream, element_pressure_kernel<T, kRecomputed>, m, s, r, u);
+      launch_chained(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, s, r);
     }
   });
 }
