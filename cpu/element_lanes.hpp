@@ -13,6 +13,13 @@
 // are deterministic. Where target_clones is unavailable (not GCC/x86-64,
 // or under ThreadSanitizer, whose runtime starts after the ifunc resolvers
 // run), the kernels are compiled once for the build's target.
+//
+// A full run's gathers (the corners' displacements of pass 1, the nodal
+// pressures of pass 3) are cloned too, so that the AVX-512 and AVX2 clones
+// load a lane per element with vector gathers. The file is tuned for a
+// recent Xeon (cpu/CMakeLists.txt): with GCC 12's generic tuning the
+// vectoriser emulates gathers with scalar loads and inserts. Tuning picks
+// instructions and their order, not the arithmetic: the same bits.
 #pragma once
 
 #include <cstddef>
@@ -103,6 +110,18 @@ void begin_lanes(const TissueModel<T>& m, const index_t* elems, int count, Eleme
   b.K = {b.K_buf, kLanes};
 }
 
+/// The corner displacements of a full run of kLanes elements whose corner
+/// rows start at en (row a at en[a * ne]): out[3 a + c][l] = u[c n +
+/// en[a ne + l]]. In the cloned file (element_lanes.cpp), so that the
+/// AVX-512 and AVX2 clones gather a lane per element.
+template <class T>
+void lanes_corner_u(const T* u, index_t n, const index_t* en, index_t ne, T (&out)[12][kLanes]);
+
+/// pbar of a full run (corner rows at en, as above): the mean of its four
+/// corners' nodal pressures, summed in corner order.
+template <class T>
+void lanes_pbar(const T* node_p, const index_t* en, index_t ne, T (&pbar)[kLanes]);
+
 /// A batch for pass 1: begin_lanes, the corner displacements from u (3 x
 /// n_nodes, component-major), and the output views: elem_J, elem_dv
 /// (n_elems) and elem_F (9 x n_elems) themselves for a full run, else the
@@ -113,16 +132,17 @@ void gather_pressure_lanes(const TissueModel<T>& m, const T* u, const index_t* e
   begin_lanes(m, elems, count, b);
   const index_t n = m.n_nodes, ne = m.n_elems;
   const index_t* en = m.elem_nodes.data();
-  for (int l = 0; l < count; ++l)
-    for (int a = 0; a < 4; ++a) {
-      const index_t i = en[a * ne + elems[l]];
-      for (int c = 0; c < 3; ++c) b.u[3 * a + c][l] = u[c * n + i];
-    }
   if (b.direct) {
+    lanes_corner_u(u, n, en + elems[0], ne, b.u);
     b.F = {elem_F + elems[0], std::size_t(ne)};
     b.J = {elem_J + elems[0], std::size_t(ne)};
     b.dv = {elem_dv + elems[0], std::size_t(ne)};
   } else {
+    for (int l = 0; l < count; ++l)
+      for (int a = 0; a < 4; ++a) {
+        const index_t i = en[a * ne + elems[l]];
+        for (int c = 0; c < 3; ++c) b.u[3 * a + c][l] = u[c * n + i];
+      }
     b.F = {&b.F_buf[0][0], kLanes};
     b.J = {b.J_buf, kLanes};
     b.dv = {b.dv_buf, kLanes};
@@ -157,6 +177,10 @@ void gather_force_lanes(const TissueModel<T>& m, T* elem_F, const T* node_p, con
   }
   if (!node_p) return;
   const index_t* en = m.elem_nodes.data();
+  if (b.direct) {
+    lanes_pbar(node_p, en + elems[0], ne, b.pbar);
+    return;
+  }
   for (int l = 0; l < count; ++l) {
     const index_t e = elems[l];
     b.pbar[l] = T(0.25) * (((node_p[en[e]] + node_p[en[ne + e]]) + node_p[en[2 * ne + e]]) + node_p[en[3 * ne + e]]);

@@ -24,6 +24,7 @@
 #include "core/scheduler.hpp"
 #include "core/tet.hpp"
 #include "cpu/cpu_backend.hpp"
+#include "cpu/element_lanes.hpp"
 #include "cpu/host_backend.hpp"
 #include "tests/backend_test_support.hpp"
 
@@ -313,6 +314,41 @@ std::unique_ptr<cpu::CpuBackend<double>> probed(const TissueModel<double>& m, Ve
   b->set_tools(std::span<const ToolShape>(&tool, 1));
   move_probe(*b, at, at);
   return b;
+}
+
+/// The full-run gathers of the lane kernels (lanes_corner_u, lanes_pbar:
+/// vector gathers in the AVX-512 and AVX2 clones) read what the element's
+/// own corner list names, bit for bit, at runs starting anywhere in the
+/// element list (not only at multiples of the lane count).
+template <class T>
+void expect_lane_gathers_read_each_elements_corners() {
+  const TissueModel<double> m = box_model(4);
+  const index_t n = m.n_nodes, ne = m.n_elems;
+  ASSERT_GE(ne, 3 * cpu::kLanes);
+  std::vector<T> u(3 * size_t(n)), p(n);
+  for (size_t i = 0; i < u.size(); ++i) u[i] = T(std::sin(0.37 * double(i) + 0.1));  // distinct values
+  for (index_t a = 0; a < n; ++a) p[a] = T(1000 * std::cos(0.91 * double(a)));
+  for (const index_t e0 : {index_t(0), index_t(5), index_t(cpu::kLanes), ne - cpu::kLanes}) {
+    alignas(64) T out[12][cpu::kLanes], pbar[cpu::kLanes];
+    cpu::lanes_corner_u(u.data(), n, m.elem_nodes.data() + e0, ne, out);
+    cpu::lanes_pbar(p.data(), m.elem_nodes.data() + e0, ne, pbar);
+    for (int l = 0; l < cpu::kLanes; ++l) {
+      const index_t e = e0 + l;
+      T sum = T(0);
+      for (int a = 0; a < 4; ++a) {
+        const index_t node = m.elem_nodes[a * size_t(ne) + e];
+        for (int c = 0; c < 3; ++c)
+          EXPECT_EQ(out[3 * a + c][l], u[c * size_t(n) + node]) << "element " << e << " corner " << a << " axis " << c;
+        sum = a == 0 ? p[node] : sum + p[node];
+      }
+      EXPECT_EQ(pbar[l], T(0.25) * sum) << "element " << e;
+    }
+  }
+}
+
+TEST(CpuLanes, FullRunGathersReadEachElementsCorners) {
+  expect_lane_gathers_read_each_elements_corners<float>();
+  expect_lane_gathers_read_each_elements_corners<double>();
 }
 
 /// A slab whose top the tool presses: the BVH is built once, then rebuilt
