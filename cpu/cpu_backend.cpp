@@ -169,6 +169,8 @@ const Slices& CpuBackend<T>::team_slices() {
   return slices_;
 }
 
+static_assert(kMaxParts >= ThreadTeam::kMaxSize, "a contact part per team member");
+
 template <class T>
 void CpuBackend<T>::do_advance(int steps, const ContactTools<double>& tools) {
   const ContactTools<T> t = contact_tools_as<T>(tools);
@@ -194,8 +196,9 @@ void CpuBackend<T>::do_advance(int steps, const ContactTools<double>& tools) {
       cpu::element_forces(model_, state_, my_elems, bad_);
       team.barrier();
       cpu::node_update(model_, state_, my_nodes);
+      if (t.n_tools > 0) contact_->check_region(state_, my_nodes, r);  // its nodes' u_next in this core's cache
       if (!team.barrier([&] {
-            sweeping = contact_->begin_step(state_, t, k, members);
+            sweeping = contact_->begin_step(state_, t, k, members, true);
             if (!sweeping) rotate(state_);
           }))
         return;

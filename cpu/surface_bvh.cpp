@@ -141,16 +141,29 @@ void SurfaceBvh<T>::update(const T* u) {
 template <class T>
 void SurfaceBvh<T>::update(const T* u, std::span<const index_t> moved) {
   if (m_.n_tris == 0) return;
-  if (full_check_ || !built_) return update(u);
+  update_checked(u, !full_check_ && built_ && left_margin(u, moved));
+}
+
+template <class T>
+bool SurfaceBvh<T>::left_margin(const T* u, std::span<const index_t> nodes) const {
+  if (m_.n_tris == 0 || !built_) return false;
   const index_t n = m_.n_nodes;
-  for (index_t a : moved) {
+  for (index_t a : nodes) {
     const index_t i = surf_index_[a];
     if (i < 0) continue;
     for (int c = 0; c < 3; ++c) {
       const double x = double(m_.X[c * n + a]) + double(u[c * n + a]);
-      if (!(std::fabs(x - at_build_[3 * std::size_t(i) + c]) <= margin_)) return build(u);
+      if (!(std::fabs(x - at_build_[3 * std::size_t(i) + c]) <= margin_)) return true;
     }
   }
+  return false;
+}
+
+template <class T>
+void SurfaceBvh<T>::update_checked(const T* u, bool left) {
+  if (m_.n_tris == 0) return;
+  if (full_check_ || !built_) return update(u);
+  if (left) build(u);
 }
 
 template <class T>

@@ -51,6 +51,14 @@ class SurfaceBvh {
   /// moved since the last update -- unless invalidate() was called since,
   /// when every surface node is checked.
   void update(const T* u, std::span<const index_t> moved);
+  /// Whether a surface node of `nodes` has left its margin in u since the
+  /// last build (update's test; false before the first build). Const, so
+  /// that the members of a team can check their shares of the moved nodes
+  /// at once.
+  bool left_margin(const T* u, std::span<const index_t> nodes) const;
+  /// update(u, moved) for a caller that has checked every node of `moved`
+  /// with left_margin: `left` is whether any had left.
+  void update_checked(const T* u, bool left);
   /// The next update() checks every surface node (after a change of u that
   /// is not confined to the nodes it will be given).
   void invalidate() { full_check_ = true; }

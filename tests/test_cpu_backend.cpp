@@ -13,7 +13,9 @@
 #include <cstddef>
 #include <cstring>
 #include <memory>
+#include <numeric>
 #include <optional>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -26,6 +28,7 @@
 #include "cpu/cpu_backend.hpp"
 #include "cpu/element_lanes.hpp"
 #include "cpu/host_backend.hpp"
+#include "cpu/surface_bvh.hpp"
 #include "tests/backend_test_support.hpp"
 
 namespace tissue {
@@ -368,6 +371,53 @@ TEST(SurfaceBvh, RebuiltOnlyWhenTheSurfaceLeavesItsMargin) {
   EXPECT_GE(after_press, 2);
   EXPECT_LE(after_press, 6);  // a few rebuilds for 4 mm of travel, not one per step (80 steps)
   EXPECT_GT(b->reduce().tools[0].contact, 0);
+}
+
+/// The members of a team check shares of the region's nodes against the
+/// margin (left_margin) and one of them updates with the result
+/// (update_checked): the same rebuilds as one check of every node, and a
+/// full check after invalidate() whatever the shares found.
+TEST(SurfaceBvh, SharedMarginChecksRebuildAsOneCheckDoes) {
+  const auto m = box_model(6);
+  const double margin = cpu::median_surface_edge(m);
+  cpu::SurfaceBvh<double> one(m, margin), shared(m, margin);
+  std::vector<double> u(3 * size_t(m.n_nodes), 0.0);
+  one.update(u.data());
+  shared.update(u.data());
+  std::vector<index_t> all(m.n_nodes);
+  std::iota(all.begin(), all.end(), index_t(0));
+  const std::span<const index_t> nodes(all);
+  const std::size_t third = all.size() / 3;
+  const std::span<const index_t> slices[3] = {nodes.first(third), nodes.subspan(third, third), nodes.subspan(2 * third)};
+  const auto shared_update = [&] {
+    int found = 0;
+    for (const auto& slice : slices) found += shared.left_margin(u.data(), slice) ? 1 : 0;
+    shared.update_checked(u.data(), found > 0);
+    return found;
+  };
+  const index_t a = m.surf_nodes[m.n_surf / 2];
+  const size_t z = 2 * size_t(m.n_nodes) + a;
+  u[z] = 0.6 * margin;  // within the margin
+  one.update(u.data(), nodes);
+  EXPECT_EQ(shared_update(), 0);
+  EXPECT_EQ(one.builds(), 1);
+  EXPECT_EQ(shared.builds(), 1);
+  u[z] = 1.5 * margin;  // beyond it: exactly one share finds it
+  one.update(u.data(), nodes);
+  EXPECT_EQ(shared_update(), 1);
+  EXPECT_EQ(one.builds(), 2);
+  EXPECT_EQ(shared.builds(), 2);
+  u[z] = 1.6 * margin;  // within the new build's margin
+  EXPECT_EQ(shared_update(), 0);
+  EXPECT_EQ(shared.builds(), 2);
+  // a node no share holds moves beyond the margin: only a full check sees it
+  const index_t b = m.surf_nodes[0];
+  u[b] = 2 * margin;
+  shared.update_checked(u.data(), false);
+  EXPECT_EQ(shared.builds(), 2);
+  shared.invalidate();
+  shared.update_checked(u.data(), false);
+  EXPECT_EQ(shared.builds(), 3);
 }
 
 /// The margin check looks only at the region's nodes (nodes outside it are
