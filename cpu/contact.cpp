@@ -68,8 +68,7 @@ void ContactStage<T>::check_region(const TissueState<T>& s, std::span<const inde
 }
 
 template <class T>
-bool ContactStage<T>::begin_step(TissueState<T>& s, const ContactTools<T>& tools, int k, int parts,
-                                 bool region_checked) {
+bool ContactStage<T>::begin_step(TissueState<T>& s, const ContactTools<T>& tools, int k, int parts) {
   const index_t n = m_.n_nodes;
   // forget last step's contacts (grasps stay)
   for (index_t a : touched_)
@@ -92,15 +91,11 @@ bool ContactStage<T>::begin_step(TissueState<T>& s, const ContactTools<T>& tools
   const long builds = bvh_.builds();
   for (int t = 0; t < tools.n_tools; ++t)
     if (tools.tool[t].grasping) bvh_.update(s.u_next.data(), grasped_[t]);
-  if (region_checked) {
-    // the members' checks were against the build before the grasped nodes' update: one since is at
-    // this u, which every region node is within
-    bool left = false;
-    for (int p = 0; p < std::max(parts, 1); ++p) left = left || left_[std::size_t(p)].left;
-    bvh_.update_checked(s.u_next.data(), left && bvh_.builds() == builds);
-  } else {
-    bvh_.update(s.u_next.data(), s.region.nodes);
-  }
+  // the region's nodes, as the members' check_region found them against the build before the grasped
+  // nodes' update (a build since is at this u, which every region node is within)
+  bool left = false;
+  for (int p = 0; p < parts; ++p) left = left || left_[std::size_t(p)].left;
+  bvh_.update_checked(s.u_next.data(), left && bvh_.builds() == builds);
   capsules_.fill(tools, k);
   tris_now_ = &bvh_.query_within_skin(sweep_box(tools, capsules_, 1.0));
   // at least kMinSweepShare triangles per part: a share smaller than that costs less than the barrier

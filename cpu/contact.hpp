@@ -51,14 +51,14 @@ class ContactStage {
   /// few triangles near them to share: begin_step swept them). The results
   /// do not depend on parts (proposals merge in (node, triangle) order).
   ///
-  /// begin_step first brings the surface BVH up to date with the region's
-  /// nodes in s.u_next. On a team, the members can share that check
-  /// instead: each calls check_region with its slice of the region's nodes
-  /// after its pass 4, then begin_step is called with region_checked (the
-  /// same result; one thread checking every region node was ~18 us of each
-  /// 16-thread step on the kidney).
-  bool begin_step(TissueState<T>& s, const ContactTools<T>& tools, int k, int parts, bool region_checked = false);
+  /// Before begin_step, every member part < parts calls check_region with
+  /// its slice of the region's nodes (after its pass 4, while their u_next
+  /// is in its core's cache): the members share the check of the region's
+  /// nodes against the surface BVH's margin, and begin_step rebuilds the
+  /// BVH if any found one beyond it (one member checking every region node
+  /// was ~18 us of each 16-thread step on the kidney).
   void check_region(const TissueState<T>& s, std::span<const index_t> nodes, int part);
+  bool begin_step(TissueState<T>& s, const ContactTools<T>& tools, int k, int parts);
   void sweep(const TissueState<T>& s, const ContactTools<T>& tools, int k, int part);
   void finish_step(TissueState<T>& s, const ContactTools<T>& tools, int k);
 

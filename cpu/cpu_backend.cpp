@@ -198,7 +198,7 @@ void CpuBackend<T>::do_advance(int steps, const ContactTools<double>& tools) {
       cpu::node_update(model_, state_, my_nodes);
       if (t.n_tools > 0) contact_->check_region(state_, my_nodes, r);  // its nodes' u_next in this core's cache
       if (!team.barrier([&] {
-            sweeping = contact_->begin_step(state_, t, k, members, true);
+            sweeping = contact_->begin_step(state_, t, k, members);
             if (!sweeping) rotate(state_);
           }))
         return;

@@ -61,24 +61,14 @@ inline void store_forces(ElementLanes<T>& b, int l, const Vec3<T> f[4]) {
 
 template <class T>
 TISSUE_SIMD_CLONES void lanes_corner_u(const T* u, index_t n, const index_t* en, index_t ne, T (&out)[12][kLanes]) {
-  const std::size_t sn = std::size_t(n), sne = std::size_t(ne);
 #pragma GCC ivdep
-  for (int l = 0; l < kLanes; ++l) {
-    TISSUE_UNROLL
-    for (int a = 0; a < 4; ++a) {
-      const std::size_t i = std::size_t(en[a * sne + l]);
-      TISSUE_UNROLL
-      for (int c = 0; c < 3; ++c) out[3 * a + c][l] = u[c * sn + i];
-    }
-  }
+  for (int l = 0; l < kLanes; ++l) load_corner_u(u, std::size_t(n), en, std::size_t(ne), std::size_t(l), out, l);
 }
 
 template <class T>
 TISSUE_SIMD_CLONES void lanes_pbar(const T* node_p, const index_t* en, index_t ne, T (&pbar)[kLanes]) {
-  const std::size_t sne = std::size_t(ne);
 #pragma GCC ivdep
-  for (int l = 0; l < kLanes; ++l)
-    pbar[l] = T(0.25) * (((node_p[en[l]] + node_p[en[sne + l]]) + node_p[en[2 * sne + l]]) + node_p[en[3 * sne + l]]);
+  for (int l = 0; l < kLanes; ++l) pbar[l] = corner_pressure_mean(node_p, en, std::size_t(ne), std::size_t(l));
 }
 
 template <class T>

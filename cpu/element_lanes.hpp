@@ -110,6 +110,27 @@ void begin_lanes(const TissueModel<T>& m, const index_t* elems, int count, Eleme
   b.K = {b.K_buf, kLanes};
 }
 
+/// Element e's corner displacements from u (3 x n_nodes, component-major)
+/// into lane l of out (row 3 corner + axis); en: the corner rows
+/// (TissueModel::elem_nodes, row a at en[a ne]).
+template <class T>
+inline void load_corner_u(const T* u, std::size_t n, const index_t* en, std::size_t ne, std::size_t e,
+                          T (&out)[12][kLanes], int l) {
+  TISSUE_UNROLL
+  for (int a = 0; a < 4; ++a) {
+    const std::size_t i = std::size_t(en[a * ne + e]);
+    TISSUE_UNROLL
+    for (int c = 0; c < 3; ++c) out[3 * a + c][l] = u[c * n + i];
+  }
+}
+
+/// Element e's pbar: the mean of its four corners' nodal pressures, summed
+/// in corner order (en as above).
+template <class T>
+inline T corner_pressure_mean(const T* node_p, const index_t* en, std::size_t ne, std::size_t e) {
+  return T(0.25) * (((node_p[en[e]] + node_p[en[ne + e]]) + node_p[en[2 * ne + e]]) + node_p[en[3 * ne + e]]);
+}
+
 /// The corner displacements of a full run of kLanes elements whose corner
 /// rows start at en (row a at en[a * ne]): out[3 a + c][l] = u[c n +
 /// en[a ne + l]]. In the cloned file (element_lanes.cpp), so that the
@@ -138,11 +159,7 @@ void gather_pressure_lanes(const TissueModel<T>& m, const T* u, const index_t* e
     b.J = {elem_J + elems[0], std::size_t(ne)};
     b.dv = {elem_dv + elems[0], std::size_t(ne)};
   } else {
-    for (int l = 0; l < count; ++l)
-      for (int a = 0; a < 4; ++a) {
-        const index_t i = en[a * ne + elems[l]];
-        for (int c = 0; c < 3; ++c) b.u[3 * a + c][l] = u[c * n + i];
-      }
+    for (int l = 0; l < count; ++l) load_corner_u(u, n, en, ne, elems[l], b.u, l);
     b.F = {&b.F_buf[0][0], kLanes};
     b.J = {b.J_buf, kLanes};
     b.dv = {b.dv_buf, kLanes};
@@ -181,10 +198,7 @@ void gather_force_lanes(const TissueModel<T>& m, T* elem_F, const T* node_p, con
     lanes_pbar(node_p, en + elems[0], ne, b.pbar);
     return;
   }
-  for (int l = 0; l < count; ++l) {
-    const index_t e = elems[l];
-    b.pbar[l] = T(0.25) * (((node_p[en[e]] + node_p[en[ne + e]]) + node_p[en[2 * ne + e]]) + node_p[en[3 * ne + e]]);
-  }
+  for (int l = 0; l < count; ++l) b.pbar[l] = corner_pressure_mean(node_p, en, ne, elems[l]);
 }
 
 /// The optional law terms of a batch (core/material.hpp), gathered only by

@@ -141,7 +141,7 @@ void SurfaceBvh<T>::update(const T* u) {
 template <class T>
 void SurfaceBvh<T>::update(const T* u, std::span<const index_t> moved) {
   if (m_.n_tris == 0) return;
-  update_checked(u, !full_check_ && built_ && left_margin(u, moved));
+  update_checked(u, !full_check_ && left_margin(u, moved));  // (a full check needs no partial one)
 }
 
 template <class T>
