@@ -186,7 +186,7 @@ class CudaBackend final : public Backend {
     const TissueModel<T> m = convert<T>(model);
     store_.upload(m, model, gradients_, log_, stream());
     const index_t n = m.n_nodes;
-    region_.allocate(n, m.n_elems, stream());
+    region_.allocate(n, m.n_elems, store_.model().n_windows, stream());
     reducer_.allocate(stream());
     reducer_.set_law(store_.law());
     stepper_.set_law(store_.law());
@@ -562,12 +562,12 @@ bool cuda_fuses_forces(Backend& backend) {
   return gpu::with_cuda_backend(backend, [](auto& b) { return b.stepper().fuses_forces(b.region_view()); });
 }
 
-index_t cuda_fused_force_nodes(Backend& backend) {
-  return gpu::with_cuda_backend(backend, [](auto& b) { return b.stepper().limits().fused_force_nodes; });
+index_t cuda_fused_force_blocks(Backend& backend) {
+  return gpu::with_cuda_backend(backend, [](auto& b) { return b.stepper().limits().fused_force_blocks; });
 }
 
-void set_cuda_fused_force_nodes(Backend& backend, index_t nodes) {
-  gpu::with_cuda_backend(backend, [&](auto& b) { b.stepper().set_fused_force_nodes(nodes); });
+void set_cuda_fused_force_blocks(Backend& backend, index_t blocks) {
+  gpu::with_cuda_backend(backend, [&](auto& b) { b.stepper().set_fused_force_blocks(blocks); });
 }
 
 const char* to_string(CudaGradients g) {

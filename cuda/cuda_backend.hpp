@@ -46,14 +46,14 @@ CudaStepMode cuda_step_mode(Backend& backend);
 
 /// Whether the chained steps (Launch and Graph modes) over the backend's
 /// current region run passes 3 and 4 as one kernel: a model without law
-/// terms and a region of at most cuda_fused_force_nodes() nodes, the most
-/// the device holds the fused kernel's node warps for at once (docs/cuda.md,
-/// "Passes 3 and 4 as one kernel").
+/// terms and a region of at most cuda_fused_force_blocks() windows of
+/// nodes, the most blocks of the fused kernel the device holds at once
+/// (docs/cuda.md, "Passes 3 and 4 as one kernel").
 bool cuda_fuses_forces(Backend& backend);
-index_t cuda_fused_force_nodes(Backend& backend);
+index_t cuda_fused_force_blocks(Backend& backend);
 /// Overrides that limit (tests: 0 runs passes 3 and 4 apart on every
 /// region, the same bits).
-void set_cuda_fused_force_nodes(Backend& backend, index_t nodes);
+void set_cuda_fused_force_blocks(Backend& backend, index_t blocks);
 
 /// CudaGradients (cuda/gradients.hpp) by name: "auto", "stored", "recomputed".
 const char* to_string(CudaGradients g);

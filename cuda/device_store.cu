@@ -1,5 +1,6 @@
 #include "cuda/device_store.hpp"
 
+#include <algorithm>
 #include <stdexcept>
 #include <utility>
 #include <vector>
@@ -16,6 +17,36 @@ template <class T>
 void upload_array(DeviceArray<T>& dst, const std::vector<T>& v, Transfers& log, cudaStream_t stream) {
   dst.allocate(v.size());
   log.to_device(dst.data(), v.data(), dst.bytes(), stream);
+}
+
+/// The fused passes' windows over the slots (ModelView::pack_first): window
+/// w holds the nodes whose first slot lies in [w S, (w + 1) S), S =
+/// kPackedBlock - (most slots of a node) + 1, so that its nodes' slots span
+/// at most kPackedBlock; its first node is the first whose first slot is
+/// at least w S. None (span 0) when a node has more than kPackedBlock slots.
+struct PackedWindows {
+  std::vector<index_t> first;
+  index_t span = 0;
+};
+PackedWindows packed_windows(const std::vector<index_t>& start) {
+  PackedWindows p;
+  const auto n = static_cast<index_t>(start.size()) - 1;
+  index_t most = 0;
+  for (index_t a = 0; a < n; ++a) most = std::max(most, start[a + 1] - start[a]);
+  if (most > kPackedBlock) {
+    p.first = {0};
+    return p;
+  }
+  p.span = kPackedBlock - most + 1;
+  const index_t windows = start[n] / p.span + 1;
+  p.first.resize(windows + 1);
+  index_t a = 0;
+  for (index_t w = 0; w <= windows; ++w) {
+    while (a < n && start[a] < w * p.span) ++a;
+    p.first[w] = a;
+  }
+  p.first[windows] = n;
+  return p;
 }
 
 /// The model's reference positions, one Packed3 per node.
@@ -86,6 +117,8 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   upload_array(elem_nodes_, m.elem_nodes, log, stream);
   upload_array(node_elem_start_, m.node_elem_start, log, stream);
   upload_array(node_elem_, m.node_elem, log, stream);
+  const PackedWindows packs = packed_windows(m.node_elem_start);
+  upload_array(pack_first_, packs.first, log, stream);
   upload_array(slot_of_, m.elem_slot, log, stream);
   upload_array(tris_, m.tris, log, stream);
   upload_array(mu_, m.mu, log, stream);
@@ -122,6 +155,9 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   model_.cd_C = cd_C_.data();
   model_.node_elem_start = node_elem_start_.data();
   model_.node_elem = node_elem_.data();
+  model_.pack_first = pack_first_.data();
+  model_.n_windows = static_cast<index_t>(packs.first.size()) - 1;
+  model_.pack_span = packs.span;
   model_.slot_of = slot_of_.data();
   model_.node_divisor = node_divisor_.data();
   model_.tris = tris_.data();

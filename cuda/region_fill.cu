@@ -94,6 +94,22 @@ __global__ void clear_outside_forces_kernel(index_t ne, const std::uint8_t* elem
   for (int a = 0; a < 4; ++a) f_slot[slot_of[a * ne + e]] = {T(0), T(0), T(0), T(0)};
 }
 
+/// The region's windows (RegionView::pack_first, packs): node i of the
+/// region (ascending ids, so ascending first slots) is the first of every
+/// window after node i - 1's up to its own, and the last node's successor
+/// (n) the first of every window after its own; node i's window is used.
+__global__ void windows_kernel(Topology t, const index_t* nodes, const int* counts, index_t* first,
+                               std::uint8_t* used) {
+  const index_t i = thread_index(), n = counts[2];
+  if (i >= n) return;
+  const index_t w = t.node_elem_start[nodes[i]] / t.pack_span;
+  const index_t from = i > 0 ? t.node_elem_start[nodes[i - 1]] / t.pack_span + 1 : 0;
+  for (index_t v = from; v <= w; ++v) first[v] = i;
+  used[w] = 1;
+  if (i == n - 1)
+    for (index_t v = w + 1; v <= t.n_windows; ++v) first[v] = n;
+}
+
 size_t select_temp_bytes(index_t n) {
   size_t bytes = 0;
   // the same argument types as the calls in build(), so the same instantiation
@@ -105,24 +121,28 @@ size_t select_temp_bytes(index_t n) {
 
 }  // namespace
 
-void RegionFill::allocate(index_t n_nodes, index_t n_elems, cudaStream_t) {
+void RegionFill::allocate(index_t n_nodes, index_t n_elems, index_t n_windows, cudaStream_t) {
   nodes_.allocate(n_nodes);
   elems_.allocate(n_elems);
+  pack_first_.allocate(n_windows + 1);
+  packs_.allocate(std::max<index_t>(n_windows, 1));
+  pack_used_.allocate(std::max<index_t>(n_windows, 1));
   seeds_.allocate(std::max<index_t>(n_nodes, 3));
   ring_.allocate(n_nodes);
   node_sel_.allocate(n_nodes);
   elem_sel_.allocate(n_elems);
   halo_.allocate(n_nodes);
-  counts_.allocate(4);
-  counts_host_.allocate(4);
-  cub_temp_.allocate(std::max({select_temp_bytes(n_nodes), select_temp_bytes(n_elems), size_t(1)}));
+  counts_.allocate(5);
+  counts_host_.allocate(5);
+  cub_temp_.allocate(std::max(
+      {select_temp_bytes(n_nodes), select_temp_bytes(n_elems), select_temp_bytes(n_windows), size_t(1)}));
   view_ = {};
   sizes_ = {};
 }
 
 RegionSizes RegionFill::whole(const Topology& t, std::uint8_t* role, cudaStream_t stream) {
   CUDA_CHECK(cudaMemsetAsync(role, kInner, t.n_nodes, stream));
-  view_ = {nullptr, nullptr, t.n_nodes, t.n_elems};
+  view_ = {nullptr, nullptr, t.n_nodes, t.n_elems, nullptr, t.pack_first, nullptr, t.n_windows};
   sizes_ = {kDepthAll, t.n_nodes, 0, t.n_elems};
   return sizes_;
 }
@@ -146,9 +166,18 @@ RegionSizes RegionFill::build(const Topology& t, std::span<const index_t> seeds,
   bytes = cub_temp_.bytes();
   CUDA_CHECK(cub::DeviceSelect::Flagged(cub_temp_.data(), bytes, thrust::counting_iterator<index_t>(0),
                                         elem_sel_.data(), elems_.data(), counts_.data() + 3, t.n_elems, stream));
-  log.to_host(counts_host_.data(), counts_.data(), 4 * sizeof(int), stream);
+  if (t.n_windows > 0) {
+    pack_used_.fill_bytes(0, stream);
+    launch(t.n_nodes, stream, windows_kernel, t, nodes_.data(), counts_.data(), pack_first_.data(), pack_used_.data());
+    bytes = cub_temp_.bytes();
+    CUDA_CHECK(cub::DeviceSelect::Flagged(cub_temp_.data(), bytes, thrust::counting_iterator<index_t>(0),
+                                          pack_used_.data(), packs_.data(), counts_.data() + 4, t.n_windows,
+                                          stream));
+  }
+  log.to_host(counts_host_.data(), counts_.data(), 5 * sizeof(int), stream);
   sizes_ = {depth, counts_host_[0], counts_host_[1], counts_host_[3]};
-  view_ = {nodes_.data(), elems_.data(), counts_host_[2], counts_host_[3], elem_sel_.data()};
+  view_ = {nodes_.data(), elems_.data(), counts_host_[2], counts_host_[3], elem_sel_.data(),
+           pack_first_.data(), packs_.data(), counts_host_[4]};
   return sizes_;
 }
 

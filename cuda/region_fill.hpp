@@ -24,24 +24,28 @@ struct Topology {
   const index_t* elem_nodes = nullptr;       ///< (4 x n_elems)
   const index_t* node_elem_start = nullptr;  ///< (n_nodes + 1)
   const index_t* node_elem = nullptr;        ///< element * 4 + corner
+  const index_t* pack_first = nullptr;       ///< the whole mesh's windows (ModelView::pack_first)
+  index_t n_windows = 0, pack_span = 0;
 };
 
 template <class T>
 Topology topology(const ModelView<T>& m) {
-  return {m.n_nodes, m.n_elems, m.elem_nodes, m.node_elem_start, m.node_elem};
+  return {m.n_nodes, m.n_elems, m.elem_nodes, m.node_elem_start, m.node_elem, m.pack_first, m.n_windows, m.pack_span};
 }
 
 class RegionFill {
  public:
-  /// Allocates the lists, flags and CUB scratch for a mesh of this size.
-  void allocate(index_t n_nodes, index_t n_elems, cudaStream_t stream);
+  /// Allocates the lists, flags and CUB scratch for a mesh of this size
+  /// (n_windows: ModelView::n_windows).
+  void allocate(index_t n_nodes, index_t n_elems, index_t n_windows, cudaStream_t stream);
 
   /// Whole mesh: every node inner, identity lists (no copies).
   RegionSizes whole(const Topology& t, std::uint8_t* role, cudaStream_t stream);
 
   /// Flood fill from `seeds` (validated on the host: ids in range) for
-  /// depth >= 0 rings; writes NodeRole into role (n_nodes) and the lists.
-  /// One upload (the seeds) and one download (the four counts).
+  /// depth >= 0 rings; writes NodeRole into role (n_nodes), the lists and
+  /// the fused passes' windows (RegionView::pack_first, packs). One upload
+  /// (the seeds) and one download (the five counts).
   RegionSizes build(const Topology& t, std::span<const index_t> seeds, int depth, std::uint8_t* role,
                     Transfers& log, cudaStream_t stream);
 
@@ -68,9 +72,11 @@ class RegionFill {
 
  private:
   DeviceArray<index_t> nodes_, elems_, seeds_;
+  DeviceArray<index_t> pack_first_, packs_;  ///< the region's windows (RegionView; n_windows + 1 and n_windows)
+  DeviceArray<std::uint8_t> pack_used_;     ///< 1 for a window holding one of the region's nodes
   DeviceArray<int> ring_;                 ///< ring at which a node was reached, -1 none (n_nodes)
   DeviceArray<std::uint8_t> node_sel_, elem_sel_, halo_;
-  DeviceArray<int> counts_;               ///< n_inner, n_halo, n_nodes, n_elems
+  DeviceArray<int> counts_;               ///< n_inner, n_halo, n_nodes, n_elems, n_packs
   DeviceArray<unsigned char> cub_temp_;
   PinnedArray<int> counts_host_;
   RegionView view_;

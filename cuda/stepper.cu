@@ -56,19 +56,18 @@ int grid_blocks_per_sm() {
   return std::min(stored, recomputed);
 }
 
-/// Node warps of the fused force kernel the device holds at once (its
+/// Blocks of the fused force kernel the device holds at once (its
 /// instantiations alike: the fewest).
 template <class T>
-index_t fused_force_nodes() {
+index_t fused_force_blocks() {
   int fewest = std::numeric_limits<int>::max();
-  for (auto kernel : {forces_kernel<T, false, false>, forces_kernel<T, false, true>, forces_kernel<T, true, false>,
-                      forces_kernel<T, true, true>}) {
+  for (auto kernel : {packed_forces_kernel<T, false, false>, packed_forces_kernel<T, false, true>,
+                      packed_forces_kernel<T, true, false>, packed_forces_kernel<T, true, true>}) {
     int blocks = 0;
-    CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, kernel, kFusedForceBlock, 0));
+    CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, kernel, kPackedBlock, 0));
     fewest = std::min(fewest, blocks);
   }
-  const int sms = current_device_attribute(cudaDevAttrMultiProcessorCount);
-  return index_t(fewest) * (kFusedForceBlock / kFusedLanes) * sms;
+  return index_t(fewest) * current_device_attribute(cudaDevAttrMultiProcessorCount);
 }
 
 }  // namespace
@@ -85,7 +84,7 @@ void Stepper<T>::init() {
   }
   limits_.cluster_size = std::min(largest_cluster<T, false, false>(), largest_cluster<T, false, true>());
   limits_.law_cluster_size = std::min(largest_cluster<T, true, false>(), largest_cluster<T, true, true>());
-  limits_.fused_force_nodes = fused_force_nodes<T>();
+  limits_.fused_force_blocks = fused_force_blocks<T>();
 }
 
 template <class T>
@@ -144,14 +143,14 @@ template <class T>
 void Stepper<T>::forces_and_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                                    StepBuffers<T> b, cudaStream_t stream) {
   const auto go = [&](auto kernel) {
-    launch_chained_in(kFusedForceBlock, kFusedLanes * r.n_nodes, stream, kernel, m, s, r, b);
+    launch_chained_in(kPackedBlock, index_t(kPackedBlock) * r.n_packs, stream, kernel, m, s, r, b);
   };
   with_gradients(m, r, [&](auto recomputed) {
     constexpr bool kRecomputed = decltype(recomputed)::value;
     if (s.load)
-      go(forces_kernel<T, kRecomputed, true>);
+      go(packed_forces_kernel<T, kRecomputed, true>);
     else
-      go(forces_kernel<T, kRecomputed, false>);
+      go(packed_forces_kernel<T, kRecomputed, false>);
   });
 }
 

@@ -83,10 +83,10 @@ struct PersistentLimits {
   int cluster_size = 0;  ///< blocks of the largest schedulable cluster (0: no clusters)
   int block = 0;         ///< threads per block of the cluster kernel
   int law_grid_blocks = 0, law_cluster_size = 0;  ///< the same for the law-term kernels (core/material.hpp)
-  /// The most nodes whose warps the fused force kernel (forces_kernel) holds
-  /// on the device at once: the chained steps fuse passes 3 and 4 on a
-  /// region of at most this many nodes (Stepper::fuses_forces).
-  index_t fused_force_nodes = 0;
+  /// The most blocks of the fused force kernel (packed_forces_kernel) the
+  /// device holds at once: the chained steps fuse passes 3 and 4 on a region
+  /// of at most this many windows (Stepper::fuses_forces).
+  index_t fused_force_blocks = 0;
 };
 
 template <class T>
@@ -126,19 +126,19 @@ class Stepper {
                    cudaStream_t stream);
   /// Whether the chained steps over region r run passes 3 and 4 as one
   /// kernel: a model without law terms (whose Prony state pass 3 moves once
-  /// per element), and a region whose node warps the device holds at once
-  /// (PersistentLimits::fused_force_nodes). Each node's warp computes its
-  /// elements' forces itself, every element once per corner: four times
-  /// pass 3's arithmetic for one dependent kernel less a step, which pays
-  /// only while every warp runs in the first wave (docs/cuda.md, "Passes 3
-  /// and 4 as one kernel").
+  /// per element), and a region whose windows' blocks the device holds at
+  /// once (PersistentLimits::fused_force_blocks). Each slot's thread
+  /// computes its element's forces itself, every element once per corner:
+  /// four times pass 3's arithmetic for one dependent kernel less a step,
+  /// which pays only while every block runs in the first wave (docs/cuda.md,
+  /// "Passes 3 and 4 as one kernel").
   bool fuses_forces(const RegionView& r) const {
-    return law_.neo_hookean() && r.n_nodes <= limits_.fused_force_nodes;
+    return law_.neo_hookean() && r.n_packs > 0 && r.n_packs <= limits_.fused_force_blocks;
   }
-  /// Sets PersistentLimits::fused_force_nodes (tests: 0 runs passes 3 and
+  /// Sets PersistentLimits::fused_force_blocks (tests: 0 runs passes 3 and
   /// 4 apart on every region, until the next init()).
-  void set_fused_force_nodes(index_t nodes) {
-    limits_.fused_force_nodes = nodes;
+  void set_fused_force_blocks(index_t blocks) {
+    limits_.fused_force_blocks = blocks;
     graphs_.clear();
   }
   /// Passes 3 and 4 as one kernel (fuses_forces).

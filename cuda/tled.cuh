@@ -83,7 +83,7 @@ __device__ __forceinline__ void load_slots(const ModelView<T>& m, ElementData<T>
   for (int a = 0; a < 4; ++a) d.slot[a] = __ldg(m.slot_of + a * m.n_elems + d.e);
 }
 
-/// The shape and the moduli, no slots: the fused force pass's (forces_at)
+/// The shape and the moduli, no slots: the fused force pass's (packed_forces_kernel)
 /// and the reduction's (pass 1 needs the shape only: load_element_shape).
 template <class T, bool kRecomputed>
 __device__ __forceinline__ ElementData<T> load_element_moduli(const ModelView<T>& m, index_t e) {
@@ -324,30 +324,27 @@ __device__ void nodal_pressure_at(const ModelView<T>& m, const StateView<T>& s, 
   if (d.lane == 0) s.node_p[d.a] = dv / __ldg(m.node_divisor + d.a);
 }
 
-/// Passes 1 and 2 as one (pressures_kernel) on regions of fewer than this
-/// many elements: each node's warp computes the volume changes of its
-/// elements itself, every element once per corner, instead of reading the
-/// values pass 1 wrote (elem_dv). It saves a dependent kernel per step where the steps
-/// are bound by their kernels' latency and costs four times pass 1's
-/// scattered loads. Measured on the kidney (H100, float): the haptic ticks
-/// 2-3 % shorter at depth 5 (3.6k elements) and over the whole mesh (8.6k),
-/// the depth-5 steps 5 % faster, the whole mesh's bare steps 3 % slower (in
-/// double: the whole-mesh tick 3 % shorter, the depth-5 tick unchanged, the
-/// bare steps 3-4 % slower); 100k and 1M tets lose 26-52 % fused and keep
-/// the two passes (docs/cuda.md, "Passes 1 and 2 as one kernel").
+/// Passes 1 and 2 as one kernel (packed_pressures_kernel) on regions of
+/// fewer than this many elements: each slot's thread computes the volume
+/// change of its element itself, every element once per corner, instead of
+/// reading the values pass 1 wrote (elem_dv). It saves a dependent kernel
+/// per step where the steps are bound by their kernels' latency and costs
+/// four times pass 1's scattered loads: 100k and 1M tets lost 26-52 % fused
+/// and keep the two passes (docs/cuda.md, "Passes 1 and 2 as one kernel").
 inline constexpr index_t kFusedPressuresMaxElements = 10000;
 
-/// Whether the steps over region r run passes 1 and 2 as one kernel.
+/// Whether the steps over region r run passes 1 and 2 as one kernel: a
+/// small region whose nodes the packed windows hold (RegionView::n_packs).
 __host__ __device__ inline bool fuses_pressures(const RegionView& r) {
-  return r.n_elems < kFusedPressuresMaxElements;
+  return r.n_packs > 0 && r.n_elems < kFusedPressuresMaxElements;
 }
 
-/// One slot of a node in a fused pass (pressures_at, forces_at): its
-/// element's model data, whether the region computes that element (the
-/// element pass would write its value now: its force slot, its elem_dv;
-/// else the stored value stays), and which of the element's corners the
-/// node is (corner 0's visit does what the element pass does once: elem_dv
-/// and J_e, the bad-element flag).
+/// One slot of a node in a fused pass (run_packed): its element's model
+/// data, whether the region computes that element (the element pass would
+/// write its value now: its force slot, its elem_dv; else the stored value
+/// stays), and which of the element's corners the node is (corner 0's
+/// visit does what the element pass does once: elem_dv and J_e, the
+/// bad-element flag).
 template <class T>
 struct SlotElement {
   ElementData<T> d;
@@ -356,7 +353,7 @@ struct SlotElement {
 };
 
 /// Model and region data only (the region's element mask is written by its
-/// build, before any pass runs): loaded before the wait for the first slot.
+/// build, before any pass runs): loaded before the wait.
 /// kModuli: with mu and K (the force pass's), else the shape only.
 template <class T, bool kRecomputed, bool kModuli = false>
 __device__ __forceinline__ SlotElement<T> load_slot_element(const ModelView<T>& m, const RegionView& r, index_t k) {
@@ -368,79 +365,6 @@ __device__ __forceinline__ SlotElement<T> load_slot_element(const ModelView<T>& 
   else
     d = load_element_shape<T, kRecomputed>(m, e);
   return {d, !r.elem_sel || __ldg(r.elem_sel + e) != 0, incident_corner(ec)};
-}
-
-/// Lanes per node of the fused passes: a warp, so that a node's elements
-/// (up to ~60 on the kidney) take one or two rounds.
-inline constexpr int kFusedLanes = 32;
-
-__device__ __forceinline__ float lane_value(float x, int from) { return __shfl_sync(0xffffffffu, x, from); }
-__device__ __forceinline__ double lane_value(double x, int from) { return __shfl_sync(0xffffffffu, x, from); }
-template <class T>
-__device__ __forceinline__ Vec3<T> lane_value(Vec3<T> x, int from) {
-  return {lane_value(x.x, from), lane_value(x.y, from), lane_value(x.z, from)};
-}
-
-/// One round of a fused pass's sum in the node passes' order: the warp's
-/// lanes hold the values v of slots base + lane (those below end), and
-/// lane j < kNodeLanes adds slots j, j + 8, j + 16, j + 24 of the round to
-/// its running sum acc, as lane j of a node's group adds slots j, j + 8,
-/// ... in passes 2 and 4 (a round of 32 continues the group's sequence).
-template <class V>
-__device__ __forceinline__ void add_in_node_order(V& acc, const V& v, index_t base, index_t end, int lane) {
-#pragma unroll
-  for (int q = 0; q < kFusedLanes / kNodeLanes; ++q) {
-    const int from = (lane & (kNodeLanes - 1)) + q * kNodeLanes;
-    const V w = lane_value(v, from);
-    if (base + from < end) acc = acc + w;
-  }
-}
-
-/// The sum over node a's slots begin..end in a fused pass, by the calling
-/// warp: lane l visits slots l, l + 32, ..., value(k, x) gives slot k's
-/// value (x: its element and corner; `next` holds the lane's first, loaded by the
-/// caller, and the next round's is loaded before value() runs), and lane
-/// j < kNodeLanes returns the values summed in the node passes' order
-/// (add_in_node_order); the other lanes' sums are not used.
-template <class T, bool kRecomputed, bool kModuli, class V, class Value>
-__device__ __forceinline__ V sum_node_slots(const ModelView<T>& m, const RegionView& r, index_t begin, index_t end,
-                                            int lane, SlotElement<T> next, Value value) {
-  V acc{};
-  for (index_t base = begin; base < end; base += kFusedLanes) {  // (uniform over the warp)
-    const index_t k = base + lane;
-    V v{};
-    if (k < end) {
-      const SlotElement<T> x = next;
-      if (k + kFusedLanes < end) next = load_slot_element<T, kRecomputed, kModuli>(m, r, k + kFusedLanes);
-      v = value(k, x);
-    }
-    add_in_node_order(acc, v, base, end, lane);
-  }
-  return acc;
-}
-
-/// Passes 1 and 2 for a node (one lane of its warp), the same arithmetic
-/// in the same order: each slot gets the volume change pass 1 computes
-/// (stored with J_e by corner 0's visit, so that the pass arrays end as the
-/// two passes leave them) or, for an element outside the region, the
-/// element's stored value; the warp sums them in pass 2's order
-/// (sum_node_slots) and the eight partial sums meet as pass 2's groups do.
-template <class T, bool kRecomputed>
-__device__ void pressures_at(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, index_t a,
-                             index_t begin, index_t end, int lane, SlotElement<T> first, const Packed3<T>* u) {
-  T dv = sum_node_slots<T, kRecomputed, false, T>(m, r, begin, end, lane, first,
-                                                  [&](index_t, const SlotElement<T>& x) {
-                                                    if (!x.computed) return s.elem_dv[x.d.e];
-                                                    T J;
-                                                    const T v = element_volume_change(x.d, u, J);
-                                                    if (x.corner == 0) {
-                                                      s.elem_dv[x.d.e] = v;
-                                                      s.elem_J[x.d.e] = J;
-                                                    }
-                                                    return v;
-                                                  });
-  dv = node_group_sum(dv, node_group_mask());
-  if (lane == 0) s.node_p[a] = dv / __ldg(m.node_divisor + a);
 }
 
 /// The end of pass 4 for node a, on one lane, once its element forces are
@@ -484,50 +408,17 @@ __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, con
   if (d.lane == 0) node_update_from<T, kLoad>(m, s, b, d.a, f);
 }
 
-/// Threads per block of the fused force kernel (forces_kernel): blocks of
-/// four node warps, so that the registers of the SM hold as many warps as
-/// its ~90 registers a thread allow (blocks of 256 would leave a quarter of
-/// them unused in float).
-inline constexpr int kFusedForceBlock = 128;
-
-/// Blocks of the fused force kernel an SM must hold: five in float (96
-/// registers a thread; at 97 the allocation rounds up to 104 and an H100
-/// holds four blocks, 2,112 node warps, fewer than the kidney's 2,349
-/// nodes), three in double (up to 168 registers).
+/// Blocks of the packed force kernel an SM must hold: eight in float (at
+/// most 64 registers a thread; 56-64 compiled), four in double (at most 128;
+/// 100 compiled): on the kidney's whole mesh (512 windows) every block runs
+/// in the first wave on an H100's or H200's 132 SMs.
 template <class T>
-inline constexpr int kFusedForceMinBlocks = sizeof(T) == 4 ? 5 : 3;
+inline constexpr int kPackedForceMinBlocks = sizeof(T) == 4 ? 8 : 4;
 
 /// Corner a's force of an element (a select, not an index: no local memory).
 template <class T>
 __device__ __forceinline__ Vec3<T> corner_force(const ElementForces<T>& out, int a) {
   return a == 0 ? out.f[0] : (a == 1 ? out.f[1] : (a == 2 ? out.f[2] : out.f[3]));
-}
-
-/// Passes 3 and 4 for a node (one lane of its warp), the same arithmetic
-/// in the same order: each slot gets the force pass 3 computes for that
-/// corner (the element's four, as pass 3 computes them; the one kept is
-/// stored into the slot, and corner 0's visit records a bad element as pass
-/// 3 does) or, for an element outside the region, the slot's own value
-/// (zero since the region's build); the warp sums them in pass 4's order
-/// (sum_node_slots) and lane 0 ends pass 4.
-template <class T, bool kRecomputed, bool kLoad>
-__device__ void forces_at(const ModelView<T>& m, const StateView<T>& s, const StepBuffers<T>& b,
-                          const RegionView& r, index_t a, index_t begin, index_t end, int lane,
-                          SlotElement<T> first) {
-  Vec3<T> f = sum_node_slots<T, kRecomputed, true, Vec3<T>>(m, r, begin, end, lane, first,
-                                                           [&](index_t k, const SlotElement<T>& x) {
-                                                             if (!x.computed) return s.f_slot[k].vec();
-                                                             const ElementForces<T> out =
-                                                                 element_forces_of(s, x.d, b.u, m.ianp);
-                                                             if (x.corner == 0) record_if_bad(s.bad, x.d.e, out.J);
-                                                             const Packed3<T> fa =
-                                                                 Packed3<T>::of(corner_force(out, x.corner));
-                                                             s.f_slot[k] = fa;
-                                                             return fa.vec();
-                                                           });
-  const unsigned mask = node_group_mask();
-  f = {node_group_sum(f.x, mask), node_group_sum(f.y, mask), node_group_sum(f.z, mask)};
-  if (lane == 0) node_update_from<T, kLoad>(m, s, b, a, f);
 }
 
 // ---- one kernel per pass ------------------------------------------------------
@@ -564,32 +455,116 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
   if (active) nodal_pressure_at(m, s, d);
 }
 
-/// The body of a fused kernel (a warp per node of region r): lets the next
-/// pass launch, loads the warp's node, its slot range and the lane's first
-/// slot before the wait for the previous pass, then runs
-/// body(a, begin, end, lane, first) unless the tick is skipped.
-template <class T, bool kRecomputed, bool kModuli, class Body>
-__device__ __forceinline__ void run_fused_node(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
-                                               Body body) {
-  let_next_pass_launch();
-  const index_t g = thread_index(), i = g / kFusedLanes;
-  if (i >= r.n_nodes) return;  // (whole warps)
-  const int lane = g % kFusedLanes;
-  const index_t a = r.node(i), begin = __ldg(m.node_elem_start + a), end = __ldg(m.node_elem_start + a + 1);
-  SlotElement<T> first{};
-  if (begin + lane < end) first = load_slot_element<T, kRecomputed, kModuli>(m, r, begin + lane);
-  wait_for_previous_pass();
-  if (skipped(s)) return;
-  body(a, begin, end, lane, first);
+// ---- fused passes: a block per window of nodes, a thread per slot -------------
+
+/// node_group_sum of a value or of each component of a vector.
+template <class T>
+__device__ __forceinline__ T group_total(T x, unsigned mask) {
+  return node_group_sum(x, mask);
+}
+template <class T>
+__device__ __forceinline__ Vec3<T> group_total(Vec3<T> x, unsigned mask) {
+  return {node_group_sum(x.x, mask), node_group_sum(x.y, mask), node_group_sum(x.z, mask)};
 }
 
-/// Passes 1 and 2 as one kernel (fuses_pressures), a warp per node.
+/// The body of a fused kernel (passes 1-2 or 3-4 in one) over region r:
+/// block w takes the region's nodes of window r.packs[w] (RegionView:
+/// nodes whose first slot lies in one window of ModelView::pack_span
+/// slots, so that their slots span at most kPackedBlock), and thread t
+/// computes slot base + t (base: the block's first node's first slot; a
+/// slot of a node outside the region, between two of the block's, is
+/// skipped) with value(k, x), which it leaves in shared memory. Then the
+/// kNodeLanes lanes of group g add node g's values in the node passes'
+/// order (lane j: slots j, j + 8, ..., from 0; then node_group_sum), and
+/// its lane 0 runs finish(a, sum). Each slot takes one thread, so a node of
+/// 62 elements (the kidney's busiest) takes one round like a node of 4;
+/// a warp per node ran 33 or more slots in two rounds (docs/cuda.md,
+/// "Fused passes packed by windows"). Everything before the wait is model
+/// and region data; the slot's element is loaded there too.
+template <class T, bool kRecomputed, bool kModuli, class V, class Value, class Finish>
+__device__ __forceinline__ void run_packed(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
+                                           Value value, Finish finish) {
+  __shared__ index_t node[kPackedBlock], begin[kPackedBlock], end[kPackedBlock];
+  __shared__ V vals[kPackedBlock];
+  let_next_pass_launch();
+  const int t = threadIdx.x;
+  const index_t w = r.packs ? __ldg(r.packs + blockIdx.x) : index_t(blockIdx.x);
+  const index_t first = __ldg(r.pack_first + w), n = __ldg(r.pack_first + w + 1) - first;  // n <= pack_span
+  if (n == 0) return;  // (the whole block: a window of the whole mesh inside a node's slots)
+  if (t < n) {
+    const index_t a = r.node(first + t);
+    node[t] = a;
+    begin[t] = __ldg(m.node_elem_start + a);
+    end[t] = __ldg(m.node_elem_start + a + 1);
+  }
+  __syncthreads();
+  const index_t base = begin[0], k = base + t;
+  int j = 0;  // the last of the block's nodes to start at or before slot k
+  for (int step = kPackedBlock / 2; step > 0; step /= 2)
+    if (j + step < n && begin[j + step] <= k) j += step;
+  const bool active = k < end[j];
+  SlotElement<T> x{};
+  if (active) x = load_slot_element<T, kRecomputed, kModuli>(m, r, k);
+  wait_for_previous_pass();
+  if (skipped(s)) return;  // (the whole grid)
+  V v{};
+  if (active) v = value(k, x);
+  vals[t] = v;
+  __syncthreads();
+  const int lane = t % kNodeLanes;
+  const unsigned mask = node_group_mask();
+  for (index_t g = t / kNodeLanes; g < n; g += kPackedBlock / kNodeLanes) {  // (uniform over a group)
+    V acc{};
+    for (index_t q = begin[g] + lane; q < end[g]; q += kNodeLanes) acc = acc + vals[q - base];
+    acc = group_total(acc, mask);
+    if (lane == 0) finish(node[g], acc);
+  }
+}
+
+/// Passes 1 and 2 as one kernel (fuses_pressures; run_packed), the same
+/// arithmetic in the same order: each slot gets the volume change pass 1
+/// computes (stored with J_e by corner 0's visit, so that the pass arrays
+/// end as the two passes leave them) or, for an element outside the
+/// region, the element's stored value, read as pass 2 reads it.
 template <class T, bool kRecomputed>
-__global__ void pressures_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
-  run_fused_node<T, kRecomputed, false>(m, s, r, [&](index_t a, index_t begin, index_t end, int lane,
-                                                     const SlotElement<T>& first) {
-    pressures_at<T, kRecomputed>(m, s, r, a, begin, end, lane, first, u);
-  });
+__global__ void __launch_bounds__(kPackedBlock)
+    packed_pressures_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
+  run_packed<T, kRecomputed, false, T>(
+      m, s, r,
+      [&](index_t, const SlotElement<T>& x) {
+        if (!x.computed) return s.elem_dv[x.d.e];
+        T J;
+        const T v = element_volume_change(x.d, u, J);
+        if (x.corner == 0) {
+          s.elem_dv[x.d.e] = v;
+          s.elem_J[x.d.e] = J;
+        }
+        return v;
+      },
+      [&](index_t a, T dv) { s.node_p[a] = dv / __ldg(m.node_divisor + a); });
+}
+
+/// Passes 3 and 4 as one kernel (Stepper::fuses_forces; run_packed), the
+/// same arithmetic in the same order: each slot gets the force pass 3
+/// computes for that corner (the element's four, as pass 3 computes them;
+/// the one kept is stored into the slot, and corner 0's visit records a
+/// bad element as pass 3 does) or, for an element outside the region, the
+/// slot's own value (zero since the region's build); lane 0 of the node's
+/// group ends pass 4.
+template <class T, bool kRecomputed, bool kLoad>
+__global__ void __launch_bounds__(kPackedBlock, kPackedForceMinBlocks<T>)
+    packed_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
+  run_packed<T, kRecomputed, true, Vec3<T>>(
+      m, s, r,
+      [&](index_t k, const SlotElement<T>& x) {
+        if (!x.computed) return s.f_slot[k].vec();
+        const ElementForces<T> out = element_forces_of(s, x.d, b.u, m.ianp);
+        if (x.corner == 0) record_if_bad(s.bad, x.d.e, out.J);
+        const Packed3<T> fa = Packed3<T>::of(corner_force(out, x.corner));
+        s.f_slot[k] = fa;
+        return fa.vec();
+      },
+      [&](index_t a, Vec3<T> f) { node_update_from<T, kLoad>(m, s, b, a, f); });
 }
 
 /// Queues passes 1 and 2 over region r at displacements u as the steps run
@@ -605,7 +580,8 @@ void enqueue_pressures(const ModelView<T>& m, const StateView<T>& s, const Regio
   with_gradients(m, r, [&](auto recomputed) {
     constexpr bool kRecomputed = decltype(recomputed)::value;
     if (fuses_pressures(r)) {
-      launch_chained(kFusedLanes * r.n_nodes, stream, pressures_kernel<T, kRecomputed>, m, s, r, u);
+      launch_chained_in(kPackedBlock, index_t(kPackedBlock) * r.n_packs, stream,
+                        packed_pressures_kernel<T, kRecomputed>, m, s, r, u);
     } else {
       launch_chained(r.n_elems, stream, element_pressure_kernel<T, kRecomputed>, m, s, r, u);
       launch_chained(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, s, r);
@@ -689,16 +665,6 @@ __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r,
   wait_for_previous_pass();
   if (skipped(s)) return;
   if (active) node_update_at<T, kLoad>(m, s, b, d);
-}
-
-/// Passes 3 and 4 as one kernel (fuses_forces), a warp per node.
-template <class T, bool kRecomputed, bool kLoad>
-__global__ void __launch_bounds__(kFusedForceBlock, kFusedForceMinBlocks<T>)
-    forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
-  run_fused_node<T, kRecomputed, true>(m, s, r, [&](index_t a, index_t begin, index_t end, int lane,
-                                                    const SlotElement<T>& first) {
-    forces_at<T, kRecomputed, kLoad>(m, s, b, r, a, begin, end, lane, first);
-  });
 }
 
 // ---- persistent kernels: whole steps, a barrier between passes ----------------

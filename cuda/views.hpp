@@ -39,6 +39,10 @@ struct alignas(4 * sizeof(T)) Packed3 {
 };
 
 /// Read-only model on the device (shapes as core/model.hpp unless noted).
+/// Threads per block of the packed fused passes (cuda/tled.cuh): a block
+/// computes the slots of a window of nodes, one slot a thread.
+inline constexpr int kPackedBlock = 128;
+
 template <class T>
 struct ModelView {
   index_t n_nodes = 0, n_elems = 0, n_tris = 0;
@@ -60,6 +64,14 @@ struct ModelView {
   const T* cd_C = nullptr;
   const index_t* node_elem_start = nullptr;  ///< (n_nodes + 1)
   const index_t* node_elem = nullptr;        ///< element * 4 + corner (nnz)
+  /// The fused passes' windows over the slots (cuda/tled.cuh run_packed):
+  /// window w holds the nodes whose first slot lies in [w S, (w + 1) S),
+  /// S = pack_span = kPackedBlock - (most slots of a node) + 1, so that
+  /// their slots span at most kPackedBlock; pack_first[w] is its first node
+  /// (n_windows + 1 entries, the last n_nodes). n_windows 0 and pack_span 0
+  /// when a node has more than kPackedBlock slots.
+  const index_t* pack_first = nullptr;
+  index_t n_windows = 0, pack_span = 0;
   const index_t* slot_of = nullptr;       ///< position of (e, a) in node_elem (4 x n_elems, [a * n_elems + e])
   const T* node_divisor = nullptr;        ///< V_a / K_a (core nodal_pressure_divisors) (n_nodes) m^3/Pa
   const index_t* tris = nullptr;          ///< (3 x n_tris)
@@ -107,6 +119,15 @@ struct RegionView {
   const index_t* elems = nullptr;  ///< computed elements, ascending (n_elems)
   index_t n_nodes = 0, n_elems = 0;
   const std::uint8_t* elem_sel = nullptr;  ///< 1 for a computed element (the mesh's n_elems); null: every one
+  /// The fused passes' windows (cuda/tled.cuh run_packed; ModelView::pack_first):
+  /// pack_first[w] is the first of the region's nodes (an index into its
+  /// list) whose first slot lies in window w or later (n_windows + 1
+  /// entries); packs lists the n_packs windows holding any of its nodes
+  /// (null: every window, the whole mesh). n_packs 0: no windows (a node
+  /// has more than kPackedBlock slots), the passes run apart.
+  const index_t* pack_first = nullptr;
+  const index_t* packs = nullptr;
+  index_t n_packs = 0;
   TISSUE_HD index_t node(index_t i) const { return nodes ? nodes[i] : i; }
   TISSUE_HD index_t elem(index_t i) const { return elems ? elems[i] : i; }
 };

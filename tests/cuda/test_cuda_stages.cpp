@@ -738,8 +738,8 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
     }
 }
 
-/// Elements of node a of m, and the node with the most (the fused kernels'
-/// second round of slots where it has more than 32).
+/// Elements of node a of m, and the node with the most (the most slots of
+/// a node sets the fused kernels' windows: cuda/tled.cuh run_packed).
 index_t elements_of(const TissueModel<double>& m, index_t a) { return m.node_elem_start[a + 1] - m.node_elem_start[a]; }
 index_t busiest_node(const TissueModel<double>& m) {
   index_t busiest = 0;
@@ -748,42 +748,75 @@ index_t busiest_node(const TissueModel<double>& m) {
   return busiest;
 }
 
+/// A fan of 2 n tets around one centre node, numbered last: a ring of n
+/// nodes in the plane z = 0 around it and an apex above and below, each
+/// ring segment making a tet with the centre and either apex. The centre
+/// touches 2 n elements, the apexes n, the ring nodes 4.
+TissueModel<double> fan_model(int n) {
+  ModelInput in;
+  const double kPi = 3.14159265358979323846;
+  for (int i = 0; i < n; ++i) {
+    const double a = 2 * kPi * i / n;
+    in.nodes.insert(in.nodes.end(), {0.01 * std::cos(a), 0.01 * std::sin(a), 0.0});
+  }
+  in.nodes.insert(in.nodes.end(), {0, 0, 0.01, 0, 0, -0.01, 0, 0, 0});
+  const auto top = index_t(n), bottom = index_t(n + 1), centre = index_t(n + 2);
+  for (int i = 0; i < n; ++i) {
+    const auto a = index_t(i), b = index_t((i + 1) % n);
+    in.tets.insert(in.tets.end(), {centre, a, b, top});
+    in.tets.insert(in.tets.end(), {centre, b, a, bottom});
+  }
+  const double E = 3000, nu = 0.45;
+  in.materials = {{E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu)), 1000}};
+  in.source = "test fan";
+  return build_model(in);
+}
+
 /// Passes 1 and 2 as one kernel, and passes 3 and 4 as one (the Launch and
 /// Graph modes: passes 1-2 on regions under 10,000 elements, the
-/// reduction's too, passes 3-4 on regions whose node warps the device holds
-/// at once; docs/cuda.md, "Passes 1 and 2 as one kernel", "Passes 3 and 4
-/// as one kernel") against the four passes of the Grid mode and of the
-/// Graph mode with passes 3-4 held apart (set_cuda_fused_force_nodes(0)),
+/// reduction's too, passes 3-4 on regions whose windows' blocks the device
+/// holds at once; docs/cuda.md, "Passes 1 and 2 as one kernel", "Passes 3
+/// and 4 as one kernel") against the four passes of the Grid mode and of
+/// the Graph mode with passes 3-4 held apart (set_cuda_fused_force_blocks(0)),
 /// bit for bit. On the kidney, whose busiest nodes touch more than 32
-/// elements (the fused kernels' second round of slots, and their
-/// prefetch), with loads on the seeds (the force kernel's load
-/// instantiation): over the whole mesh (passes 3-4 fused in float on an
-/// H100, not in double: its warps take more registers) and over a region of
-/// depth 2 around the busiest node (fused on any GPU: a few hundred nodes),
-/// in which a driven halo node moves: its elements outside the region (no
-/// inner corner) are computed by no kernel, so their slots keep the values
-/// of the region's build (the volume change at the build's u, zero force)
-/// while the node moves, and the fused kernels must read them, not compute
-/// them at the new position. On a box of 15,360 elements and 3,179 nodes the
-/// chained steps and the reduction run passes 1-2 apart (above the size
-/// limit), and passes 3-4 too where the device holds fewer node warps (an
-/// H100: 2,640 in float).
+/// elements (8 lanes sum each node's slots in turns: up to 8 each), with
+/// loads on the seeds (the force kernel's load instantiation): over the
+/// whole mesh and over a region of depth 2 around the busiest node, whose
+/// windows hold nodes outside the region between the region's (slots no
+/// thread computes), and in which a driven halo node moves: its elements
+/// outside the region (no inner corner) are computed by no kernel, so
+/// their slots keep the values of the region's build (the volume change at
+/// the build's u, zero force) while the node moves, and the fused kernels
+/// must read them, not compute them at the new position. On a box of 15,360
+/// elements and 3,179 nodes the chained steps and the reduction run passes
+/// 1-2 apart (above the size limit), passes 3-4 fused where the device
+/// holds its windows' blocks. On a fan whose last node touches 80 elements
+/// (windows of 49 slots: one lies inside that node's slots and holds no
+/// node, its block returns at once) both fuse; on a fan whose centre
+/// touches 140 (more than a block's 128 threads: no windows) the passes
+/// run apart.
 TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
   SKIP_WITHOUT_GPU();
   const Precision p = GetParam();
+  enum Fuses { kMay, kMust, kNever };  // passes 3-4 in the Graph mode
   struct Case {
     std::string name;
     TissueModel<double> m;
     int depth;
+    Fuses fuses;
   };
   std::vector<Case> cases;
-  cases.push_back({"kidney, whole mesh", scene::load_model(io::default_kidney_scene()), kDepthAll});
-  cases.push_back({"kidney, depth 2 around its busiest node, with a driven halo node", cases[0].m, 2});
-  cases.push_back({"box of 15,360 elements, whole mesh", box_model(16, 16, 10, 0.16, 0.16, 0.1), kDepthAll});
+  cases.push_back({"kidney, whole mesh", scene::load_model(io::default_kidney_scene()), kDepthAll, kMay});
+  cases.push_back({"kidney, depth 2 around its busiest node, with a driven halo node", cases[0].m, 2, kMust});
+  cases.push_back({"box of 15,360 elements, whole mesh", box_model(16, 16, 10, 0.16, 0.16, 0.1), kDepthAll, kMay});
+  cases.push_back({"fan of 80 elements around its last node", fan_model(40), kDepthAll, kMust});
+  cases.push_back({"fan of 140 elements around its last node", fan_model(70), kDepthAll, kNever});
   ASSERT_EQ(cases[2].m.n_elems, 15360);
+  ASSERT_EQ(elements_of(cases[3].m, cases[3].m.n_nodes - 1), 80);
+  ASSERT_EQ(elements_of(cases[4].m, cases[4].m.n_nodes - 1), 140);
   const TissueModel<double>& kidney = cases[0].m;
   const index_t busiest = busiest_node(kidney);
-  EXPECT_GT(elements_of(kidney, busiest), 32) << "the kidney no longer exercises the fused kernels' second round";
+  EXPECT_GT(elements_of(kidney, busiest), 32) << "the kidney no longer has a node of more than 32 elements";
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
     const TissueModel<double>& m = c.m;
@@ -818,21 +851,21 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
       SCOPED_TRACE(::testing::Message() << to_string(run.mode) << (run.apart ? ", passes 3-4 apart" : ""));
       auto gpu = make_cuda_backend(p);
       set_cuda_step_mode(*gpu, run.mode);
-      if (run.apart) set_cuda_fused_force_nodes(*gpu, 0);
+      if (run.apart) set_cuda_fused_force_blocks(*gpu, 0);
       gpu->upload(m);
       gpu->set_displacements(u);
       gpu->build_region(seeds, c.depth);
       if (run.mode == CudaStepMode::Graph) {
         const bool fused = cuda_fuses_forces(*gpu);
-        if (run.apart) {
+        if (run.apart || c.fuses == kNever) {
           EXPECT_FALSE(fused);
         } else {
-          if (c.depth != kDepthAll) {
+          if (c.fuses == kMust) {
             EXPECT_TRUE(fused) << "the fused force kernel did not run";
           }
-          std::printf("[measured] %s (%s): passes 3-4 %s (the device holds %d node warps)\n", c.name.c_str(),
+          std::printf("[measured] %s (%s): passes 3-4 %s (the device holds %d of its blocks)\n", c.name.c_str(),
                       p == Precision::Float ? "float" : "double", fused ? "fused" : "apart",
-                      int(cuda_fused_force_nodes(*gpu)));
+                      int(cuda_fused_force_blocks(*gpu)));
         }
       }
       if (!driven.empty()) gpu->set_driven(driven, drive);
