@@ -406,7 +406,6 @@ __global__ void __launch_bounds__(kBlock)
 template <class T>
 __global__ void gather_contacts_kernel(ModelView<T> m, StateView<T> s, const ContactTools<T>* tools, int k,
                                        Packed3<T>* u, Packed3<T>* u_next) {
-  let_next_pass_launch();
   // the nodes a tool pushes are neighbours: dealt to different warps in runs of 8, their merges run side
   // by side, not one after another in one warp (docs/benchmarks/README.md, "The reduction's tail")
   const index_t i = dealt_index<8>();
@@ -414,6 +413,10 @@ __global__ void gather_contacts_kernel(ModelView<T> m, StateView<T> s, const Con
   SurfaceNodeModel<T> n;
   if (active) n = load_surface_node(m, i);
   wait_for_previous_pass();
+  // the next kernel (the next step's pressure pass, or the reduction's) launches only now: launched as the
+  // merge starts, its blocks and those of the kernels it lets launch waited on the multiprocessors through
+  // the sweep (docs/cuda.md, "Fused passes packed by windows")
+  let_next_pass_launch();
   if (active && !skipped(s)) merge_loaded_node(s, *tools, k, u, u_next, n, m.surf_slot);
 }
 

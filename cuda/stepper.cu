@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <limits>
 #include <stdexcept>
+#include <type_traits>
 
 #include "cuda/tled.cuh"
 
@@ -61,8 +62,10 @@ int grid_blocks_per_sm() {
 template <class T>
 index_t fused_force_blocks() {
   int fewest = std::numeric_limits<int>::max();
-  for (auto kernel : {packed_forces_kernel<T, false, false>, packed_forces_kernel<T, false, true>,
-                      packed_forces_kernel<T, true, false>, packed_forces_kernel<T, true, true>}) {
+  for (auto kernel : {packed_forces_kernel<T, false, false, true>, packed_forces_kernel<T, false, true, true>,
+                      packed_forces_kernel<T, true, false, true>, packed_forces_kernel<T, true, true, true>,
+                      packed_forces_kernel<T, false, false, false>, packed_forces_kernel<T, false, true, false>,
+                      packed_forces_kernel<T, true, false, false>, packed_forces_kernel<T, true, true, false>}) {
     int blocks = 0;
     CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, kernel, kPackedBlock, 0));
     fewest = std::min(fewest, blocks);
@@ -141,16 +144,23 @@ void Stepper<T>::node_update(const ModelView<T>& m, const StateView<T>& s, const
 
 template <class T>
 void Stepper<T>::forces_and_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
-                                   StepBuffers<T> b, cudaStream_t stream) {
+                                   StepBuffers<T> b, cudaStream_t stream, bool early) {
   const auto go = [&](auto kernel) {
     launch_chained_in(kPackedBlock, index_t(kPackedBlock) * r.n_packs, stream, kernel, m, s, r, b);
   };
   with_gradients(m, r, [&](auto recomputed) {
     constexpr bool kRecomputed = decltype(recomputed)::value;
+    const auto with_load = [&](auto load) {
+      constexpr bool kLoad = decltype(load)::value;
+      if (early)
+        go(packed_forces_kernel<T, kRecomputed, kLoad, true>);
+      else
+        go(packed_forces_kernel<T, kRecomputed, kLoad, false>);
+    };
     if (s.load)
-      go(packed_forces_kernel<T, kRecomputed, true>);
+      with_load(std::true_type{});
     else
-      go(packed_forces_kernel<T, kRecomputed, false>);
+      with_load(std::false_type{});
   });
 }
 
@@ -163,7 +173,7 @@ void Stepper<T>::launch_steps(const ModelView<T>& m, const StateView<T>& s, cons
     }
     const bool beside_check = k == 0 && start == StepStart::kPass3BesideCheck;
     if (!beside_check && fuses_forces(r)) {
-      forces_and_update(m, s, r, b, stream);
+      forces_and_update(m, s, r, b, stream, /*early=*/!tools);
     } else {
       element_forces(m, s, r, b.u, stream, beside_check);
       node_update(m, s, r, b, stream);

@@ -141,9 +141,12 @@ class Stepper {
     limits_.fused_force_blocks = blocks;
     graphs_.clear();
   }
-  /// Passes 3 and 4 as one kernel (fuses_forces).
+  /// Passes 3 and 4 as one kernel (fuses_forces). early: the kernel lets
+  /// the next one launch as it starts; else only once its wait is over,
+  /// which the steps with a contact stage ask for (the sweep follows;
+  /// docs/cuda.md, "Fused passes packed by windows").
   void forces_and_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
-                         cudaStream_t stream);
+                         cudaStream_t stream, bool early = true);
 
   /// `steps` whole steps from ring's current phase; advances the phase.
   /// With `tools` (device memory: the tools' motion over these steps), each

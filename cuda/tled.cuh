@@ -480,13 +480,17 @@ __device__ __forceinline__ Vec3<T> group_total(Vec3<T> x, unsigned mask) {
 /// 62 elements (the kidney's busiest) takes one round like a node of 4;
 /// a warp per node ran 33 or more slots in two rounds (docs/cuda.md,
 /// "Fused passes packed by windows"). Everything before the wait is model
-/// and region data; the slot's element is loaded there too.
-template <class T, bool kRecomputed, bool kModuli, class V, class Value, class Finish>
+/// and region data; the slot's element is loaded there too. kEarly: the
+/// next kernel may launch as the block starts (programmatic dependent
+/// launch); else only once the wait is over, so that its blocks, and the
+/// kernels they let launch in turn, do not wait on the multiprocessors
+/// while this one runs (the force pass before a contact stage's sweep).
+template <class T, bool kRecomputed, bool kModuli, bool kEarly, class V, class Value, class Finish>
 __device__ __forceinline__ void run_packed(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                                            Value value, Finish finish) {
   __shared__ index_t node[kPackedBlock], begin[kPackedBlock], end[kPackedBlock];
   __shared__ V vals[kPackedBlock];
-  let_next_pass_launch();
+  if constexpr (kEarly) let_next_pass_launch();
   const int t = threadIdx.x;
   const index_t w = r.packs ? __ldg(r.packs + blockIdx.x) : index_t(blockIdx.x);
   const index_t first = __ldg(r.pack_first + w), n = __ldg(r.pack_first + w + 1) - first;  // n <= pack_span
@@ -506,6 +510,7 @@ __device__ __forceinline__ void run_packed(const ModelView<T>& m, const StateVie
   SlotElement<T> x{};
   if (active) x = load_slot_element<T, kRecomputed, kModuli>(m, r, k);
   wait_for_previous_pass();
+  if constexpr (!kEarly) let_next_pass_launch();
   if (skipped(s)) return;  // (the whole grid)
   V v{};
   if (active) v = value(k, x);
@@ -529,7 +534,7 @@ __device__ __forceinline__ void run_packed(const ModelView<T>& m, const StateVie
 template <class T, bool kRecomputed>
 __global__ void __launch_bounds__(kPackedBlock)
     packed_pressures_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
-  run_packed<T, kRecomputed, false, T>(
+  run_packed<T, kRecomputed, false, true, T>(
       m, s, r,
       [&](index_t, const SlotElement<T>& x) {
         if (!x.computed) return s.elem_dv[x.d.e];
@@ -551,10 +556,10 @@ __global__ void __launch_bounds__(kPackedBlock)
 /// bad element as pass 3 does) or, for an element outside the region, the
 /// slot's own value (zero since the region's build); lane 0 of the node's
 /// group ends pass 4.
-template <class T, bool kRecomputed, bool kLoad>
+template <class T, bool kRecomputed, bool kLoad, bool kEarly>
 __global__ void __launch_bounds__(kPackedBlock, kPackedForceMinBlocks<T>)
     packed_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
-  run_packed<T, kRecomputed, true, Vec3<T>>(
+  run_packed<T, kRecomputed, true, kEarly, Vec3<T>>(
       m, s, r,
       [&](index_t k, const SlotElement<T>& x) {
         if (!x.computed) return s.f_slot[k].vec();
