@@ -41,11 +41,10 @@ PackedWindows packed_windows(const std::vector<index_t>& start) {
   const index_t windows = start[n] / p.span + 1;
   p.first.resize(windows + 1);
   index_t a = 0;
-  for (index_t w = 0; w <= windows; ++w) {
+  for (index_t w = 0; w <= windows; ++w) {  // (the last entry: n, since windows * span > start[n - 1])
     while (a < n && start[a] < w * p.span) ++a;
     p.first[w] = a;
   }
-  p.first[windows] = n;
   return p;
 }
 

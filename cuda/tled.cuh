@@ -268,6 +268,11 @@ __device__ __forceinline__ T node_group_sum(T x, unsigned mask) {
   for (int o = 1; o < kNodeLanes; o <<= 1) x += __shfl_xor_sync(mask, x, o);
   return x;
 }
+/// node_group_sum of each component.
+template <class T>
+__device__ __forceinline__ Vec3<T> node_group_sum(Vec3<T> x, unsigned mask) {
+  return {node_group_sum(x.x, mask), node_group_sum(x.y, mask), node_group_sum(x.z, mask)};
+}
 
 /// The model data of one node that passes 2 and 4 use (one lane's view).
 template <class T>
@@ -404,7 +409,7 @@ __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, con
   Vec3<T> f = {T(0), T(0), T(0)};
 #pragma unroll 4
   for (index_t k = d.first; k < d.end; k += kNodeLanes) f = f + last_read(s.f_slot + k);
-  f = {node_group_sum(f.x, d.mask), node_group_sum(f.y, d.mask), node_group_sum(f.z, d.mask)};
+  f = node_group_sum(f, d.mask);
   if (d.lane == 0) node_update_from<T, kLoad>(m, s, b, d.a, f);
 }
 
@@ -456,16 +461,6 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
 }
 
 // ---- fused passes: a block per window of nodes, a thread per slot -------------
-
-/// node_group_sum of a value or of each component of a vector.
-template <class T>
-__device__ __forceinline__ T group_total(T x, unsigned mask) {
-  return node_group_sum(x, mask);
-}
-template <class T>
-__device__ __forceinline__ Vec3<T> group_total(Vec3<T> x, unsigned mask) {
-  return {node_group_sum(x.x, mask), node_group_sum(x.y, mask), node_group_sum(x.z, mask)};
-}
 
 /// The body of a fused kernel (passes 1-2 or 3-4 in one) over region r:
 /// block w takes the region's nodes of window r.packs[w] (RegionView:
@@ -521,7 +516,7 @@ __device__ __forceinline__ void run_packed(const ModelView<T>& m, const StateVie
   for (index_t g = t / kNodeLanes; g < n; g += kPackedBlock / kNodeLanes) {  // (uniform over a group)
     V acc{};
     for (index_t q = begin[g] + lane; q < end[g]; q += kNodeLanes) acc = acc + vals[q - base];
-    acc = group_total(acc, mask);
+    acc = node_group_sum(acc, mask);
     if (lane == 0) finish(node[g], acc);
   }
 }
