@@ -372,15 +372,45 @@ __device__ __forceinline__ SlotElement<T> load_slot_element(const ModelView<T>& 
   return {d, !r.elem_sel || __ldg(r.elem_sel + e) != 0, incident_corner(ec)};
 }
 
+/// What the end of pass 4 reads of node a besides its forces: the applied
+/// load (kLoad), the held mask and targets, the central difference's
+/// constants and displacements. Pass 4 loads them with the node; the fused
+/// force pass right after its wait, so that their round trip overlaps the
+/// slots' arithmetic instead of following the node's sum.
+template <class T>
+struct NodeTail {
+  Vec3<T> load, u_held, u, u_prev;
+  CentralDifference<T> cd;
+  std::uint8_t held;
+};
+
+template <class T, bool kLoad>
+__device__ __forceinline__ NodeTail<T> load_node_tail(const ModelView<T>& m, const StateView<T>& s,
+                                                      const StepBuffers<T>& b, index_t a) {
+  NodeTail<T> t;
+  if constexpr (kLoad) t.load = s.load[a].vec();
+  t.held = s.held[a];
+  t.u_held = s.u_held[a].vec();
+  t.cd = {__ldg(m.cd_A + a), __ldg(m.cd_B + a), __ldg(m.cd_C + a)};
+  t.u = b.u[a].vec();
+  t.u_prev = b.u_prev[a].vec();
+  return t;
+}
+
 /// The end of pass 4 for node a, on one lane, once its element forces are
 /// summed into f: the applied load subtracted, f stored, u_next set.
 template <class T, bool kLoad>
+__device__ __forceinline__ void node_update_with(const StateView<T>& s, const StepBuffers<T>& b, index_t a,
+                                                 Vec3<T> f, const NodeTail<T>& t) {
+  if constexpr (kLoad) f = f - t.load;
+  s.f[a] = Packed3<T>::of(f);
+  b.u_next[a] = Packed3<T>::of(node_next(t.held, t.u_held, t.cd, f, t.u, t.u_prev));
+}
+
+template <class T, bool kLoad>
 __device__ __forceinline__ void node_update_from(const ModelView<T>& m, const StateView<T>& s,
                                                  const StepBuffers<T>& b, index_t a, Vec3<T> f) {
-  if constexpr (kLoad) f = f - s.load[a].vec();
-  s.f[a] = Packed3<T>::of(f);
-  const CentralDifference<T> k = {__ldg(m.cd_A + a), __ldg(m.cd_B + a), __ldg(m.cd_C + a)};
-  b.u_next[a] = Packed3<T>::of(node_next(s.held[a], s.u_held[a].vec(), k, f, b.u[a].vec(), b.u_prev[a].vec()));
+  node_update_with<T, kLoad>(s, b, a, f, load_node_tail<T, kLoad>(m, s, b, a));
 }
 
 /// A force slot as pass 4 reads it, its last use in the step: evict-first
@@ -413,12 +443,15 @@ __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, con
   if (d.lane == 0) node_update_from<T, kLoad>(m, s, b, d.a, f);
 }
 
-/// Blocks of the packed force kernel an SM must hold: eight in float (at
-/// most 64 registers a thread; 56-64 compiled), four in double (at most 128;
-/// 100 compiled): on the kidney's whole mesh (512 windows) every block runs
-/// in the first wave on an H100's or H200's 132 SMs.
+/// Blocks of the packed force kernel an SM must hold: six in float (at
+/// most 80 registers a thread; 74-78 compiled, with the node's tail held
+/// through the slots' arithmetic), four in double (at most 128; 124-128
+/// compiled): on the kidney's whole mesh (512 windows) every block runs in
+/// the first wave on an H100's or H200's 132 SMs. Eight in float (64
+/// registers) spilled the tail: kidney whole mesh 182.6k steps/s against
+/// 198.3k at six (docs/cuda.md, "The node's tail loaded beside the slots").
 template <class T>
-inline constexpr int kPackedForceMinBlocks = sizeof(T) == 4 ? 8 : 4;
+inline constexpr int kPackedForceMinBlocks = sizeof(T) == 4 ? 6 : 4;
 
 /// Corner a's force of an element (a select, not an index: no local memory).
 template <class T>
@@ -480,9 +513,9 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
 /// launch); else only once the wait is over, so that its blocks, and the
 /// kernels they let launch in turn, do not wait on the multiprocessors
 /// while this one runs (the force pass before a contact stage's sweep).
-template <class T, bool kRecomputed, bool kModuli, bool kEarly, class V, class Value, class Finish>
+template <class T, bool kRecomputed, bool kModuli, bool kEarly, class V, class Value, class Prepare, class Finish>
 __device__ __forceinline__ void run_packed(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
-                                           Value value, Finish finish) {
+                                           Value value, Prepare prepare, Finish finish) {
   __shared__ index_t node[kPackedBlock], begin[kPackedBlock], end[kPackedBlock];
   __shared__ V vals[kPackedBlock];
   if constexpr (kEarly) let_next_pass_launch();
@@ -507,17 +540,21 @@ __device__ __forceinline__ void run_packed(const ModelView<T>& m, const StateVie
   wait_for_previous_pass();
   if constexpr (!kEarly) let_next_pass_launch();
   if (skipped(s)) return;  // (the whole grid)
+  const int lane = t % kNodeLanes;
+  const index_t g0 = t / kNodeLanes;
+  using P = decltype(prepare(index_t(0)));
+  P tail{};  // what finish reads of the group's first node: loaded now, its round trip beside the slots'
+  if (lane == 0 && g0 < n) tail = prepare(node[g0]);  // arithmetic, not after the sum
   V v{};
   if (active) v = value(k, x);
   vals[t] = v;
   __syncthreads();
-  const int lane = t % kNodeLanes;
   const unsigned mask = node_group_mask();
-  for (index_t g = t / kNodeLanes; g < n; g += kPackedBlock / kNodeLanes) {  // (uniform over a group)
+  for (index_t g = g0; g < n; g += kPackedBlock / kNodeLanes) {  // (uniform over a group)
     V acc{};
     for (index_t q = begin[g] + lane; q < end[g]; q += kNodeLanes) acc = acc + vals[q - base];
     acc = node_group_sum(acc, mask);
-    if (lane == 0) finish(node[g], acc);
+    if (lane == 0) finish(node[g], acc, g == g0 ? tail : prepare(node[g]));
   }
 }
 
@@ -541,7 +578,8 @@ __global__ void __launch_bounds__(kPackedBlock)
         }
         return v;
       },
-      [&](index_t a, T dv) { s.node_p[a] = dv / __ldg(m.node_divisor + a); });
+      [&](index_t a) { return __ldg(m.node_divisor + a); },
+      [&](index_t a, T dv, T divisor) { s.node_p[a] = dv / divisor; });
 }
 
 /// Passes 3 and 4 as one kernel (Stepper::fuses_forces; run_packed), the
@@ -564,7 +602,8 @@ __global__ void __launch_bounds__(kPackedBlock, kPackedForceMinBlocks<T>)
         s.f_slot[k] = fa;
         return fa.vec();
       },
-      [&](index_t a, Vec3<T> f) { node_update_from<T, kLoad>(m, s, b, a, f); });
+      [&](index_t a) { return load_node_tail<T, kLoad>(m, s, b, a); },
+      [&](index_t a, Vec3<T> f, const NodeTail<T>& tail) { node_update_with<T, kLoad>(s, b, a, f, tail); });
 }
 
 /// Queues passes 1 and 2 over region r at displacements u as the steps run
