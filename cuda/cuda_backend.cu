@@ -570,6 +570,14 @@ void set_cuda_fused_force_blocks(Backend& backend, index_t blocks) {
   gpu::with_cuda_backend(backend, [&](auto& b) { b.stepper().set_fused_force_blocks(blocks); });
 }
 
+index_t cuda_merge_wave_nodes(Backend& backend) {
+  return gpu::with_cuda_backend(backend, [](auto& b) { return b.stepper().limits().merge_wave_nodes; });
+}
+
+void set_cuda_merge_wave_nodes(Backend& backend, index_t nodes) {
+  gpu::with_cuda_backend(backend, [&](auto& b) { b.stepper().set_merge_wave_nodes(nodes); });
+}
+
 const char* to_string(CudaGradients g) {
   switch (g) {
     case CudaGradients::Auto: return "auto";

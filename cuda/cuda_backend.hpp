@@ -55,6 +55,13 @@ index_t cuda_fused_force_blocks(Backend& backend);
 /// region, the same bits).
 void set_cuda_fused_force_blocks(Backend& backend, index_t blocks);
 
+/// The most surface nodes the contact stage's merge takes in blocks of 256
+/// threads (one wave of them on the device); a larger surface is merged in
+/// blocks of 64 (docs/cuda.md, "The merge in smaller blocks").
+index_t cuda_merge_wave_nodes(Backend& backend);
+/// Overrides it (tests: 0 merges every surface in blocks of 64, the same bits).
+void set_cuda_merge_wave_nodes(Backend& backend, index_t nodes);
+
 /// CudaGradients (cuda/gradients.hpp) by name: "auto", "stored", "recomputed".
 const char* to_string(CudaGradients g);
 

@@ -73,6 +73,14 @@ index_t fused_force_blocks() {
   return index_t(fewest) * current_device_attribute(cudaDevAttrMultiProcessorCount);
 }
 
+/// Surface nodes one wave of the merge's blocks of kBlock holds.
+template <class T>
+index_t merge_wave_nodes() {
+  int blocks = 0;
+  CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, gather_contacts_kernel<T>, kBlock, 0));
+  return index_t(blocks) * kBlock * current_device_attribute(cudaDevAttrMultiProcessorCount);
+}
+
 }  // namespace
 
 template <class T>
@@ -88,6 +96,12 @@ void Stepper<T>::init() {
   limits_.cluster_size = std::min(largest_cluster<T, false, false>(), largest_cluster<T, false, true>());
   limits_.law_cluster_size = std::min(largest_cluster<T, true, false>(), largest_cluster<T, true, true>());
   limits_.fused_force_blocks = fused_force_blocks<T>();
+  limits_.merge_wave_nodes = merge_wave_nodes<T>();
+}
+
+template <class T>
+int Stepper<T>::merge_block(index_t n_surf) const {
+  return n_surf <= limits_.merge_wave_nodes ? kBlock : kSmallMergeBlock;
 }
 
 template <class T>
@@ -181,7 +195,8 @@ void Stepper<T>::launch_steps(const ModelView<T>& m, const StateView<T>& s, cons
     if (tools) {  // the contact stage over the surface (cuda/contact.cuh)
       launch_chained(m.n_tris, stream, sweep_triangles_kernel<T>, m, s, tools, k,
                      static_cast<const Packed3<T>*>(b.u_next));
-      launch_chained(m.n_surf, stream, gather_contacts_kernel<T>, m, s, tools, k, b.u, b.u_next);
+      launch_chained_in(merge_block(m.n_surf), m.n_surf, stream, gather_contacts_kernel<T>, m, s, tools, k, b.u,
+                        b.u_next);
     }
     b = b.rotated();
   }

@@ -87,7 +87,17 @@ struct PersistentLimits {
   /// device holds at once: the chained steps fuse passes 3 and 4 on a region
   /// of at most this many windows (Stepper::fuses_forces).
   index_t fused_force_blocks = 0;
+  /// Surface nodes the contact stage's merge (gather_contacts_kernel) takes
+  /// in one wave of blocks of kBlock threads; a surface of more is merged in
+  /// blocks of kSmallMergeBlock (Stepper::merge_block).
+  index_t merge_wave_nodes = 0;
 };
+
+/// Threads per block of the merge on a surface larger than one wave of
+/// blocks of kBlock: its 148 registers a thread in float (216 in double)
+/// let an SM hold one block of 256, so the 100k slab's 50k surface nodes
+/// took two waves (docs/cuda.md, "The merge in smaller blocks").
+inline constexpr int kSmallMergeBlock = 64;
 
 template <class T>
 class Stepper {
@@ -141,6 +151,16 @@ class Stepper {
     limits_.fused_force_blocks = blocks;
     graphs_.clear();
   }
+  /// Sets PersistentLimits::merge_wave_nodes (tests: 0 merges every surface
+  /// in blocks of kSmallMergeBlock, the same bits).
+  void set_merge_wave_nodes(index_t nodes) {
+    limits_.merge_wave_nodes = nodes;
+    graphs_.clear();
+  }
+  /// Threads per block of the contact stage's merge over n_surf surface
+  /// nodes: kBlock while one wave of such blocks holds them all, else
+  /// kSmallMergeBlock.
+  int merge_block(index_t n_surf) const;
   /// Passes 3 and 4 as one kernel (fuses_forces). early: the kernel lets
   /// the next one launch as it starts; else only once its wait is over,
   /// which the steps with a contact stage ask for (the sweep follows;

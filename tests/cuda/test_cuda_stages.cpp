@@ -691,12 +691,20 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
   for (CudaGradients g : {CudaGradients::Stored, CudaGradients::Recomputed})
     for (int depth : {kDepthAll, 2}) {
       std::vector<double> ref_u, ref_f, ref_p, ref_J, ref_energy;
-      for (CudaStepMode mode : {CudaStepMode::Grid, CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Cluster,
-                                CudaStepMode::Auto}) {
+      struct Run {
+        CudaStepMode mode;
+        bool small_merge;  // the merge in blocks of 64, as on a surface larger than one wave of 256
+      };
+      for (const Run run : {Run{CudaStepMode::Grid, false}, Run{CudaStepMode::Launch, false},
+                            Run{CudaStepMode::Graph, false}, Run{CudaStepMode::Cluster, false},
+                            Run{CudaStepMode::Auto, false}, Run{CudaStepMode::Graph, true}}) {
+        const CudaStepMode mode = run.mode;
         SCOPED_TRACE(::testing::Message() << "depth " << depth << " mode " << to_string(mode) << " gradients "
-                                          << to_string(g));
+                                          << to_string(g) << (run.small_merge ? ", merge in blocks of 64" : ""));
         auto gpu = make_cuda_backend(p);
         set_cuda_step_mode(*gpu, mode);
+        EXPECT_GT(cuda_merge_wave_nodes(*gpu), m.n_nodes);  // this box's surface: blocks of 256 unless told
+        if (run.small_merge) set_cuda_merge_wave_nodes(*gpu, 0);
         set_cuda_gradients(*gpu, g);
         gpu->upload(m);
         gpu->set_displacements(u);
