@@ -69,6 +69,7 @@ void Backend::upload(const TissueModel<double>& m) {
   n_nodes_ = m.n_nodes;
   n_elems_ = m.n_elems;
   uploaded_ = true;
+  pass3_forces_ = false;
   shapes_.clear();
   motion_.clear();
   grasp_pose_.clear();
@@ -280,16 +281,23 @@ void Backend::nodal_pressure() {
 void Backend::element_forces() {
   require_upload("element_forces");
   do_element_forces();
+  pass3_forces_ = true;
 }
 
 void Backend::node_update() {
   require_upload("node_update");
+  if (!pass3_forces_)
+    throw std::logic_error(fmt::format("{} backend: node_update() (pass 4) needs the element forces of a pass 3: call "
+                                       "element_forces() first (after upload, a step or the previous node_update)",
+                                       name()));
   do_node_update();
+  pass3_forces_ = false;
 }
 
-void Backend::check_steps(const char* what, int steps) const {
+void Backend::check_steps(const char* what, int steps) {
   require_upload(what);
   if (steps < 0) throw std::invalid_argument(fmt::format("{}: step count {} must be >= 0", what, steps));
+  pass3_forces_ = false;  // the steps' own passes 3 need not leave their forces for a later pass 4
 }
 
 void Backend::tools_arrived() {

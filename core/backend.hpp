@@ -191,7 +191,11 @@ class Backend {
   void element_pressure();  ///< pass 1: J_e, (J_e - 1) V_e
   void nodal_pressure();    ///< pass 2: p_a
   void element_forces();    ///< pass 3: Fbar, S, f_a^e
-  void node_update();       ///< pass 4: gather f_a, central difference, rotate u
+  /// Pass 4: gather f_a, central difference, rotate u. It needs the forces
+  /// of a pass 3 called since the last pass 4, upload or step (a backend's
+  /// steps need not leave their forces where pass 4 reads them: the cuda
+  /// backend's fused passes keep them on chip); std::logic_error otherwise.
+  void node_update();
 
   /// n TLED steps, each the four passes then the contact stage of the
   /// tools' motion (core/contact.hpp). Backends may fuse passes or replay a
@@ -272,11 +276,12 @@ class Backend {
  private:
   void require_upload(const char* what) const;
   /// require_upload, and steps >= 0 (invalid_argument naming `what`).
-  void check_steps(const char* what, int steps) const;
+  void check_steps(const char* what, int steps);
   /// After an advance: the tools rest where their motion ended.
   void tools_arrived();
 
   bool uploaded_ = false;
+  bool pass3_forces_ = false;  ///< element_forces() ran since the last node_update(), upload or step
   index_t n_nodes_ = 0, n_elems_ = 0;
   std::vector<ToolShape> shapes_;
   ContactOptions contact_options_;

@@ -584,11 +584,14 @@ __global__ void __launch_bounds__(kPackedBlock)
 
 /// Passes 3 and 4 as one kernel (Stepper::fuses_forces; run_packed), the
 /// same arithmetic in the same order: each slot gets the force pass 3
-/// computes for that corner (the element's four, as pass 3 computes them;
-/// the one kept is stored into the slot, and corner 0's visit records a
-/// bad element as pass 3 does) or, for an element outside the region, the
-/// slot's own value (zero since the region's build); lane 0 of the node's
-/// group ends pass 4.
+/// computes for that corner (the element's four, as pass 3 computes them,
+/// and corner 0's visit records a bad element as pass 3 does) or, for an
+/// element outside the region, the slot's own value (zero since the
+/// region's build); lane 0 of the node's group ends pass 4. The computed
+/// forces stay in shared memory: no pass reads them from the slots (a
+/// separate pass 4 reads the slots its own pass 3 wrote; Backend::node_update
+/// refuses to run without one), and not storing them made the kidney's
+/// steps 2.5 % faster (docs/cuda.md, "The fused force pass stores no slots").
 template <class T, bool kRecomputed, bool kLoad, bool kEarly>
 __global__ void __launch_bounds__(kPackedBlock, kPackedForceMinBlocks<T>)
     packed_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
@@ -598,9 +601,7 @@ __global__ void __launch_bounds__(kPackedBlock, kPackedForceMinBlocks<T>)
         if (!x.computed) return s.f_slot[k].vec();
         const ElementForces<T> out = element_forces_of(s, x.d, b.u, m.ianp);
         if (x.corner == 0) record_if_bad(s.bad, x.d.e, out.J);
-        const Packed3<T> fa = Packed3<T>::of(corner_force(out, x.corner));
-        s.f_slot[k] = fa;
-        return fa.vec();
+        return corner_force(out, x.corner);
       },
       [&](index_t a) { return load_node_tail<T, kLoad>(m, s, b, a); },
       [&](index_t a, Vec3<T> f, const NodeTail<T>& tail) { node_update_with<T, kLoad>(s, b, a, f, tail); });

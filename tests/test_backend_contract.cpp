@@ -122,6 +122,42 @@ TEST_P(Contract, PassesMatchASerialReference) {
   }
 }
 
+/// Pass 4 gathers the forces of the pass 3 called before it; a step's own
+/// passes 3 need not leave theirs (the cuda backend's fused passes keep them
+/// on chip), so a pass 4 without its pass 3 is refused on every backend,
+/// with the same message, instead of reading forces of some earlier pass.
+TEST_P(Contract, APass4WithoutItsPass3IsRefused) {
+  const auto m = box_model(3, true);
+  auto b = make(m);
+  b->set_displacements(field(m, [](Vec3<double> X) { return Vec3<double>{0.02 * X.x, 0, -0.01 * X.z}; }));
+  const auto refused = [&](const char* after) {
+    SCOPED_TRACE(after);
+    try {
+      b->node_update();
+      ADD_FAILURE() << "node_update() without element_forces() was not refused";
+    } catch (const std::logic_error& e) {
+      EXPECT_NE(std::string(e.what()).find("node_update() (pass 4) needs the element forces of a pass 3"),
+                std::string::npos)
+          << e.what();
+    }
+  };
+  refused("upload");
+  const std::vector<double> u0 = b->download().u;
+  EXPECT_EQ(b->download().u, u0);  // the refused call moved nothing
+  b->element_pressure();
+  b->nodal_pressure();
+  b->element_forces();
+  EXPECT_NO_THROW(b->node_update());
+  EXPECT_NE(b->download().u, u0);
+  refused("a pass 4");
+  b->element_forces();
+  b->advance(2);
+  refused("a step");
+  b->element_forces();
+  b->advance_reduce(1);
+  refused("a step and its reductions");
+}
+
 TEST_P(Contract, RegionRunMovesOnlyRegionNodes) {
   const auto m = box_model(6, true);
   auto b = make(m);
