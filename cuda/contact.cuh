@@ -373,7 +373,11 @@ __device__ __forceinline__ void copy_tools(const ContactTools<T>* tools, Contact
 /// every tool), then the block's triangles that may touch are swept by
 /// groups of kSweepLanes lanes (SweepLanes), the groups dealt to the
 /// block's warps in turn. One thread's sweep of a touching triangle was the
-/// longest chain of the contact stage (2026-11-27, docs/cuda.md).
+/// longest chain of the contact stage (2026-11-27, docs/cuda.md). The merge
+/// may launch only once this kernel's wait is over: launched as the sweep
+/// started, its blocks waited on the multiprocessors beside the force
+/// pass's (the kidney's ticks 2.7-3.9 % shorter; docs/cuda.md, "The sweep
+/// lets the merge launch after its wait").
 template <class T>
 __global__ void __launch_bounds__(kBlock)
     sweep_triangles_kernel(ModelView<T> m, StateView<T> s, const ContactTools<T>* tools, int k,
@@ -383,7 +387,6 @@ __global__ void __launch_bounds__(kBlock)
   __shared__ int n_touching;
   TouchingTriangle<T>* touching = reinterpret_cast<TouchingTriangle<T>*>(raw);
   ContactTools<T>& sh_tools = *reinterpret_cast<ContactTools<T>*>(tools_raw);
-  let_next_pass_launch();
   const index_t t = thread_index();
   const bool active = t < m.n_tris;
   TriangleModel<T> tm;
@@ -391,6 +394,7 @@ __global__ void __launch_bounds__(kBlock)
   if (threadIdx.x == 0) n_touching = 0;
   copy_tools(tools, sh_tools);
   wait_for_previous_pass();
+  let_next_pass_launch();
   __syncthreads();
   const StepCapsules<T> capsule{sh_tools, k};
   TouchingTriangle<T> tri;
