@@ -504,7 +504,10 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
 /// skipped) with value(k, x), which it leaves in shared memory. Then the
 /// kNodeLanes lanes of group g add node g's values in the node passes'
 /// order (lane j: slots j, j + 8, ..., from 0; then node_group_sum), and
-/// its lane 0 runs finish(a, sum). Each slot takes one thread, so a node of
+/// its lane 0 runs finish(a, sum, prepare(a)): prepare loads what ends the
+/// node's pass, for the group's first node right after the wait, beside
+/// the slots' arithmetic (docs/cuda.md, "The node's tail loaded beside the
+/// slots"). Each slot takes one thread, so a node of
 /// 62 elements (the kidney's busiest) takes one round like a node of 4;
 /// a warp per node ran 33 or more slots in two rounds (docs/cuda.md,
 /// "Fused passes packed by windows"). Everything before the wait is model
