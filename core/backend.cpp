@@ -297,7 +297,7 @@ void Backend::node_update() {
 void Backend::check_steps(const char* what, int steps) {
   require_upload(what);
   if (steps < 0) throw std::invalid_argument(fmt::format("{}: step count {} must be >= 0", what, steps));
-  pass3_forces_ = false;  // the steps' own passes 3 need not leave their forces for a later pass 4
+  if (steps > 0) pass3_forces_ = false;  // the steps' own passes 3 need not leave their forces for a pass 4
 }
 
 void Backend::tools_arrived() {

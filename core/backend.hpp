@@ -281,7 +281,7 @@ class Backend {
   void tools_arrived();
 
   bool uploaded_ = false;
-  bool pass3_forces_ = false;  ///< element_forces() ran since the last node_update(), upload or step
+  bool pass3_forces_ = false;  ///< element_forces() ran since the last node_update(), upload or step taken
   index_t n_nodes_ = 0, n_elems_ = 0;
   std::vector<ToolShape> shapes_;
   ContactOptions contact_options_;
