@@ -38,11 +38,11 @@ struct alignas(4 * sizeof(T)) Packed3 {
   TISSUE_HD static Packed3 of(Vec3<T> v) { return {v.x, v.y, v.z, T(0)}; }
 };
 
-/// Read-only model on the device (shapes as core/model.hpp unless noted).
 /// Threads per block of the packed fused passes (cuda/tled.cuh): a block
 /// computes the slots of a window of nodes, one slot a thread.
 inline constexpr int kPackedBlock = 128;
 
+/// Read-only model on the device (shapes as core/model.hpp unless noted).
 template <class T>
 struct ModelView {
   index_t n_nodes = 0, n_elems = 0, n_tris = 0;
