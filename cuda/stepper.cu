@@ -150,31 +150,23 @@ void Stepper<T>::element_forces(const ModelView<T>& m, const StateView<T>& s, co
 template <class T>
 void Stepper<T>::node_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
                              cudaStream_t stream) {
-  if (s.load)
-    launch_chained(kNodeLanes * r.n_nodes, stream, node_update_kernel<T, true>, m, s, r, b);
-  else
-    launch_chained(kNodeLanes * r.n_nodes, stream, node_update_kernel<T, false>, m, s, r, b);
+  with_flag(s.load != nullptr, [&](auto load) {
+    launch_chained(kNodeLanes * r.n_nodes, stream, node_update_kernel<T, decltype(load)::value>, m, s, r, b);
+  });
 }
 
 template <class T>
 void Stepper<T>::forces_and_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                                    StepBuffers<T> b, cudaStream_t stream, bool early) {
-  const auto go = [&](auto kernel) {
-    launch_chained_in(kPackedBlock, index_t(kPackedBlock) * r.n_packs, stream, kernel, m, s, r, b);
-  };
   with_gradients(m, r, [&](auto recomputed) {
-    constexpr bool kRecomputed = decltype(recomputed)::value;
-    const auto with_load = [&](auto load) {
-      constexpr bool kLoad = decltype(load)::value;
-      if (early)
-        go(packed_forces_kernel<T, kRecomputed, kLoad, true>);
-      else
-        go(packed_forces_kernel<T, kRecomputed, kLoad, false>);
-    };
-    if (s.load)
-      with_load(std::true_type{});
-    else
-      with_load(std::false_type{});
+    with_flag(s.load != nullptr, [&](auto load) {
+      with_flag(early, [&](auto is_early) {
+        launch_chained_in(kPackedBlock, index_t(kPackedBlock) * r.n_packs, stream,
+                          packed_forces_kernel<T, decltype(recomputed)::value, decltype(load)::value,
+                                               decltype(is_early)::value>,
+                          m, s, r, b);
+      });
+    });
   });
 }
 

@@ -112,6 +112,14 @@ decltype(auto) with_gradients(const ModelView<T>& m, const RegionView& r, F&& f)
   return f(std::false_type{});
 }
 
+/// Calls f(std::true_type) when flag holds, else f(std::false_type): a
+/// run-time choice made a kernel's template argument.
+template <class F>
+decltype(auto) with_flag(bool flag, F&& f) {
+  if (flag) return f(std::true_type{});
+  return f(std::false_type{});
+}
+
 template <class T>
 __device__ __forceinline__ void corner_displacements(const ElementData<T>& d, const Packed3<T>* u, Vec3<T> ue[4]) {
 #pragma unroll
@@ -589,8 +597,9 @@ __global__ void __launch_bounds__(kPackedBlock)
 /// same arithmetic in the same order: each slot gets the force pass 3
 /// computes for that corner (the element's four, as pass 3 computes them,
 /// and corner 0's visit records a bad element as pass 3 does) or, for an
-/// element outside the region, the slot's own value (zero since the
-/// region's build); lane 0 of the node's group ends pass 4. The computed
+/// element outside the region, zero (what its slot holds since the
+/// region's build, clear_outside_forces_kernel: not loaded); lane 0 of the
+/// node's group ends pass 4. The computed
 /// forces stay in shared memory: no pass reads them from the slots (a
 /// separate pass 4 reads the slots its own pass 3 wrote; Backend::node_update
 /// refuses to run without one), and not storing them made the kidney's
@@ -600,8 +609,8 @@ __global__ void __launch_bounds__(kPackedBlock, kPackedForceMinBlocks<T>)
     packed_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
   run_packed<T, kRecomputed, true, kEarly, Vec3<T>>(
       m, s, r,
-      [&](index_t k, const SlotElement<T>& x) {
-        if (!x.computed) return s.f_slot[k].vec();
+      [&](index_t, const SlotElement<T>& x) {
+        if (!x.computed) return Vec3<T>{T(0), T(0), T(0)};  // the region build's zeros, unread
         const ElementForces<T> out = element_forces_of(s, x.d, b.u, m.ianp);
         if (x.corner == 0) record_if_bad(s.bad, x.d.e, out.J);
         return corner_force(out, x.corner);
