@@ -597,9 +597,10 @@ __global__ void __launch_bounds__(kPackedBlock)
 /// same arithmetic in the same order: each slot gets the force pass 3
 /// computes for that corner (the element's four, as pass 3 computes them,
 /// and corner 0's visit records a bad element as pass 3 does) or, for an
-/// element outside the region, zero (what its slot holds since the
-/// region's build, clear_outside_forces_kernel: not loaded); lane 0 of the
-/// node's group ends pass 4. The computed
+/// element outside the region, the slot's own value (zero since the
+/// region's build, clear_outside_forces_kernel; returning the zero without
+/// the load made the kidney's whole-mesh steps 1.5 % slower on an H100,
+/// docs/cuda.md, "Review mends"); lane 0 of the node's group ends pass 4. The computed
 /// forces stay in shared memory: no pass reads them from the slots (a
 /// separate pass 4 reads the slots its own pass 3 wrote; Backend::node_update
 /// refuses to run without one), and not storing them made the kidney's
@@ -609,8 +610,8 @@ __global__ void __launch_bounds__(kPackedBlock, kPackedForceMinBlocks<T>)
     packed_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
   run_packed<T, kRecomputed, true, kEarly, Vec3<T>>(
       m, s, r,
-      [&](index_t, const SlotElement<T>& x) {
-        if (!x.computed) return Vec3<T>{T(0), T(0), T(0)};  // the region build's zeros, unread
+      [&](index_t k, const SlotElement<T>& x) {
+        if (!x.computed) return s.f_slot[k].vec();
         const ElementForces<T> out = element_forces_of(s, x.d, b.u, m.ianp);
         if (x.corner == 0) record_if_bad(s.bad, x.d.e, out.J);
         return corner_force(out, x.corner);
