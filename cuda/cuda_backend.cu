@@ -169,6 +169,12 @@ class CudaBackend final : public Backend {
     return recomputes(store_.model(), region_view()) ? CudaGradients::Recomputed : CudaGradients::Stored;
   }
   RegionView region_view() const { return region_.view(); }
+  /// ModelView::lanes_node_min of the uploaded model, and its override.
+  index_t lanes_node_min() const { return store_.model().lanes_node_min; }
+  void set_lanes_node_min(index_t nodes) {
+    store_.set_lanes_node_min(nodes);
+    stepper_.invalidate();  // the graphs bake the node kernels
+  }
 
  protected:
   void do_upload(const TissueModel<double>& model) override {
@@ -568,6 +574,14 @@ index_t cuda_fused_force_blocks(Backend& backend) {
 
 void set_cuda_fused_force_blocks(Backend& backend, index_t blocks) {
   gpu::with_cuda_backend(backend, [&](auto& b) { b.stepper().set_fused_force_blocks(blocks); });
+}
+
+index_t cuda_lanes_node_min(Backend& backend) {
+  return gpu::with_cuda_backend(backend, [](auto& b) { return b.lanes_node_min(); });
+}
+
+void set_cuda_lanes_node_min(Backend& backend, index_t nodes) {
+  gpu::with_cuda_backend(backend, [&](auto& b) { b.set_lanes_node_min(nodes); });
 }
 
 index_t cuda_merge_wave_nodes(Backend& backend) {

@@ -55,6 +55,15 @@ index_t cuda_fused_force_blocks(Backend& backend);
 /// region, the same bits).
 void set_cuda_fused_force_blocks(Backend& backend, index_t blocks);
 
+/// The fewest nodes of a region whose chained node passes (2 and 4) take
+/// two of a node's eight lanes a thread (docs/cuda.md, "Node passes with
+/// two lanes a thread"): two waves of the device's resident threads at
+/// eight threads a node (67,584 nodes on an H100). Needs an uploaded model.
+index_t cuda_lanes_node_min(Backend& backend);
+/// Overrides it until the next upload (tests: 0 runs every region's node
+/// passes two lanes a thread, the same bits).
+void set_cuda_lanes_node_min(Backend& backend, index_t nodes);
+
 /// The most surface nodes the contact stage's merge takes in blocks of 256
 /// threads (one wave of them on the device); a larger surface is merged in
 /// blocks of 64 (docs/cuda.md, "The merge in smaller blocks").

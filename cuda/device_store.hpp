@@ -54,6 +54,10 @@ class DeviceStore {
   void set_load(std::span<const double> load, Transfers& log, cudaStream_t stream);
 
   ModelView<T> model() const { return model_; }
+  /// Overrides ModelView::lanes_node_min until the next upload (tests: 0
+  /// runs every region's chained node passes two lanes a thread; the same
+  /// bits).
+  void set_lanes_node_min(index_t nodes) { model_.lanes_node_min = nodes; }
   LawView<T> law() const { return law_; }
   StateView<T> state();
 

@@ -130,7 +130,7 @@ void Stepper<T>::element_pressure(const ModelView<T>& m, const StateView<T>& s, 
 template <class T>
 void Stepper<T>::nodal_pressure(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                                 cudaStream_t stream) {
-  launch_chained(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, s, r);
+  enqueue_nodal_pressures(m, s, r, stream);
 }
 
 template <class T>
@@ -151,7 +151,11 @@ template <class T>
 void Stepper<T>::node_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
                              cudaStream_t stream) {
   with_flag(s.load != nullptr, [&](auto load) {
-    launch_chained(kNodeLanes * r.n_nodes, stream, node_update_kernel<T, decltype(load)::value>, m, s, r, b);
+    if (runs_node_lanes(m, r))
+      launch_chained(kNodeLanes / 2 * r.n_nodes, stream, node_update_lanes_kernel<T, decltype(load)::value, 2>, m, s,
+                     r, b);
+    else
+      launch_chained(kNodeLanes * r.n_nodes, stream, node_update_kernel<T, decltype(load)::value>, m, s, r, b);
   });
 }
 

@@ -254,13 +254,7 @@ __device__ void law_element_forces_at(const ModelView<T>& m, const StateView<T>&
   for (int a = 0; a < 4; ++a) s.f_slot[d.slot[a]] = Packed3<T>::of(f[a]);
 }
 
-/// Lanes that share one node in passes 2 and 4: lane j of a node's group
-/// sums the node's slots begin + j, begin + j + kNodeLanes, ... (adjacent
-/// lanes read adjacent force slots in pass 4, adjacent node_elem entries
-/// in pass 2, which then gathers elem_dv), then the group adds its partial sums
-/// pairwise. A node of the kidney touches up to ~60 elements: one thread per
-/// node would wait on ~60 / 8 rounds of dependent loads, eight lanes on one.
-inline constexpr int kNodeLanes = 8;
+// kNodeLanes (the lanes that share one node in passes 2 and 4): cuda/views.hpp
 
 /// Mask of the calling lane's node group within its warp.
 __device__ __forceinline__ unsigned node_group_mask() {
@@ -501,6 +495,125 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
   if (active) nodal_pressure_at(m, s, d);
 }
 
+// ---- node passes, several of a node's lanes a thread ------------------------------
+
+/// The chained node kernels of a large region (nodal_pressure_lanes_kernel,
+/// node_update_lanes_kernel) run kNodeLanes / L threads per node, each
+/// taking L of the node's kNodeLanes lanes (lanes p, p + P, p + 2P, ... for
+/// P = kNodeLanes / L threads): a thread has L times the loads in flight
+/// and the pass needs L times fewer threads. Each lane's sum runs in its
+/// own order and the lanes' sums are added in node_group_sum's pairs
+/// (lane_group_sums), so the bits are those of kNodeLanes threads a node.
+/// The steps run L = 2 on regions of several waves (runs_node_lanes): on an
+/// H100, 1M tets +3-4 % and 4M +2.5 % against eight threads a node; four
+/// lanes a thread gained less, and 100k tets (under one wave) lost 4 % with
+/// two (docs/cuda.md, "Node passes with two lanes a thread").
+
+/// Mask of the calling thread's node group (kNodeLanes / L threads) in its warp.
+template <int L>
+__device__ __forceinline__ unsigned lanes_group_mask() {
+  constexpr int P = kNodeLanes / L;
+  return ((1u << P) - 1) << ((threadIdx.x & 31) & ~(P - 1));
+}
+
+/// node_group_sum of the lanes' partial sums, acc[i] being lane p + i P's
+/// (thread p of P = kNodeLanes / L): the pairs (v, v^1), (v, v^2), ... of
+/// node_group_sum, by shuffles while the partner is another thread's lane
+/// (o < P), then within the thread (the partner of acc[i] is acc[i ^ o / P]).
+template <int L, class T>
+__device__ __forceinline__ T lane_group_sums(T (&acc)[L], unsigned mask) {
+  constexpr int P = kNodeLanes / L;
+#pragma unroll
+  for (int o = 1; o < P; o <<= 1)
+#pragma unroll
+    for (int i = 0; i < L; ++i) acc[i] += __shfl_xor_sync(mask, acc[i], o);
+#pragma unroll
+  for (int h = 1; h < L; h <<= 1)
+#pragma unroll
+    for (int i = 0; i < L; i += 2 * h) acc[i] += acc[i + h];
+  return acc[0];
+}
+
+/// Pass 2 with L lanes a thread: the elements of each lane's first
+/// kPressureElements slots are loaded before the wait for pass 1; the same
+/// sums as nodal_pressure_at.
+template <class T, int L>
+__global__ void nodal_pressure_lanes_kernel(ModelView<T> m, StateView<T> s, RegionView r) {
+  constexpr int P = kNodeLanes / L;
+  let_next_pass_launch();
+  const index_t g = thread_index(), i = g / P;
+  const bool active = i < r.n_nodes;
+  const unsigned mask = lanes_group_mask<L>();
+  PressureNode<T> n[L];
+  if (active) {
+    const index_t a = r.node(i);
+#pragma unroll
+    for (int l = 0; l < L; ++l) n[l] = load_pressure_node(m, a, g % P + l * P, mask);
+  }
+  wait_for_previous_pass();
+  if (skipped(s) || !active) return;  // (whole groups)
+  T dv[L];
+#pragma unroll
+  for (int l = 0; l < L; ++l) {
+    dv[l] = T(0);
+#pragma unroll
+    for (int j = 0; j < kPressureElements; ++j)
+      if (n[l].d.first + j * kNodeLanes < n[l].d.end) dv[l] += s.elem_dv[n[l].e[j]];
+  }
+  const index_t end = n[0].d.end;
+  for (index_t k = n[0].d.first + kPressureElements * kNodeLanes; k < end; k += kNodeLanes)
+#pragma unroll
+    for (int l = 0; l < L; ++l)
+      if (k + l * P < end) dv[l] += s.elem_dv[incident_element(__ldg(m.node_elem + k + l * P))];
+  const T sum = lane_group_sums<L>(dv, mask);
+  if (g % P == 0) s.node_p[n[0].d.a] = sum / __ldg(m.node_divisor + n[0].d.a);
+}
+
+/// Pass 4 with L lanes a thread: the same sums as node_update_at.
+template <class T, bool kLoad, int L>
+__global__ void node_update_lanes_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
+  constexpr int P = kNodeLanes / L;
+  let_next_pass_launch();
+  const index_t g = thread_index(), i = g / P;
+  const bool active = i < r.n_nodes;
+  const unsigned mask = lanes_group_mask<L>();
+  NodeData<T> d;
+  if (active) d = load_node(m, r.node(i), g % P, mask);
+  wait_for_previous_pass();
+  if (skipped(s) || !active) return;  // (whole groups)
+  T f[3][L];
+#pragma unroll
+  for (int l = 0; l < L; ++l) f[0][l] = f[1][l] = f[2][l] = T(0);
+  for (index_t k = d.first; k < d.end; k += kNodeLanes)
+#pragma unroll
+    for (int l = 0; l < L; ++l)
+      if (k + l * P < d.end) {
+        const Vec3<T> v = last_read(s.f_slot + k + l * P);
+        f[0][l] += v.x, f[1][l] += v.y, f[2][l] += v.z;
+      }
+  const Vec3<T> sum = {lane_group_sums<L>(f[0], mask), lane_group_sums<L>(f[1], mask),
+                       lane_group_sums<L>(f[2], mask)};
+  if (g % P == 0) node_update_from<T, kLoad>(m, s, b, d.a, sum);
+}
+
+/// Whether the chained node passes over region r take two of a node's
+/// lanes a thread (ModelView::lanes_node_min).
+template <class T>
+bool runs_node_lanes(const ModelView<T>& m, const RegionView& r) {
+  return r.n_nodes >= m.lanes_node_min;
+}
+
+/// Queues pass 2 over region r: kNodeLanes threads a node, or two lanes a
+/// thread on a large region (runs_node_lanes); the same bits.
+template <class T>
+void enqueue_nodal_pressures(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
+                             cudaStream_t stream) {
+  if (runs_node_lanes(m, r))
+    launch_chained(kNodeLanes / 2 * r.n_nodes, stream, nodal_pressure_lanes_kernel<T, 2>, m, s, r);
+  else
+    launch_chained(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, s, r);
+}
+
 // ---- fused passes: a block per window of nodes, a thread per slot -------------
 
 /// The body of a fused kernel (passes 1-2 or 3-4 in one) over region r:
@@ -637,7 +750,7 @@ void enqueue_pressures(const ModelView<T>& m, const StateView<T>& s, const Regio
                         packed_pressures_kernel<T, kRecomputed>, m, s, r, u);
     } else {
       launch_chained(r.n_elems, stream, element_pressure_kernel<T, kRecomputed>, m, s, r, u);
-      launch_chained(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, s, r);
+      enqueue_nodal_pressures(m, s, r, stream);
     }
   });
 }

@@ -72,6 +72,13 @@ struct ModelView {
   /// when a node has more than kPackedBlock slots.
   const index_t* pack_first = nullptr;
   index_t n_windows = 0, pack_span = 0;
+  /// Regions of at least this many nodes run the chained node passes (2
+  /// and 4) with two of a node's lanes a thread (cuda/tled.cuh
+  /// nodal_pressure_lanes_kernel, node_update_lanes_kernel): where the
+  /// kNodeLanes threads a node take more than two waves of the device's
+  /// resident threads (DeviceStore::upload; docs/cuda.md, "Node passes with
+  /// two lanes a thread").
+  index_t lanes_node_min = 0;
   const index_t* slot_of = nullptr;       ///< position of (e, a) in node_elem (4 x n_elems, [a * n_elems + e])
   const T* node_divisor = nullptr;        ///< V_a / K_a (core nodal_pressure_divisors) (n_nodes) m^3/Pa
   const index_t* tris = nullptr;          ///< (3 x n_tris)
@@ -131,6 +138,14 @@ struct RegionView {
   TISSUE_HD index_t node(index_t i) const { return nodes ? nodes[i] : i; }
   TISSUE_HD index_t elem(index_t i) const { return elems ? elems[i] : i; }
 };
+
+/// Lanes that share one node in passes 2 and 4: lane j of a node's group
+/// sums the node's slots begin + j, begin + j + kNodeLanes, ... (adjacent
+/// lanes read adjacent force slots in pass 4, adjacent node_elem entries
+/// in pass 2, which then gathers elem_dv), then the group adds its partial sums
+/// pairwise. A node of the kidney touches up to ~60 elements: one thread per
+/// node would wait on ~60 / 8 rounds of dependent loads, eight lanes on one.
+inline constexpr int kNodeLanes = 8;
 
 /// Whether the element passes over region r recompute the gradients
 /// (ModelView::dndx): always when none are stored, never when no reference

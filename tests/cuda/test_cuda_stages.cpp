@@ -694,19 +694,27 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
       struct Run {
         CudaStepMode mode;
         bool small_merge;  // the merge in blocks of 64, as on a surface larger than one wave of 256
+        bool node_lanes;   // passes 2 and 4 apart, two lanes a thread, as on a region of several waves
       };
-      for (const Run run : {Run{CudaStepMode::Grid, false}, Run{CudaStepMode::Launch, false},
-                            Run{CudaStepMode::Graph, false}, Run{CudaStepMode::Cluster, false},
-                            Run{CudaStepMode::Auto, false}, Run{CudaStepMode::Graph, true}}) {
+      for (const Run run : {Run{CudaStepMode::Grid, false, false}, Run{CudaStepMode::Launch, false, false},
+                            Run{CudaStepMode::Graph, false, false}, Run{CudaStepMode::Cluster, false, false},
+                            Run{CudaStepMode::Auto, false, false}, Run{CudaStepMode::Graph, true, false},
+                            Run{CudaStepMode::Graph, false, true}, Run{CudaStepMode::Launch, false, true}}) {
         const CudaStepMode mode = run.mode;
         SCOPED_TRACE(::testing::Message() << "depth " << depth << " mode " << to_string(mode) << " gradients "
-                                          << to_string(g) << (run.small_merge ? ", merge in blocks of 64" : ""));
+                                          << to_string(g) << (run.small_merge ? ", merge in blocks of 64" : "")
+                                          << (run.node_lanes ? ", node passes two lanes a thread" : ""));
         auto gpu = make_cuda_backend(p);
         set_cuda_step_mode(*gpu, mode);
         EXPECT_GT(cuda_merge_wave_nodes(*gpu), m.n_nodes);  // this box's surface: blocks of 256 unless told
         if (run.small_merge) set_cuda_merge_wave_nodes(*gpu, 0);
         set_cuda_gradients(*gpu, g);
         gpu->upload(m);
+        EXPECT_GT(cuda_lanes_node_min(*gpu), m.n_nodes);  // a box this small: eight threads a node unless told
+        if (run.node_lanes) {
+          set_cuda_fused_force_blocks(*gpu, 0);
+          set_cuda_lanes_node_min(*gpu, 0);
+        }
         gpu->set_displacements(u);
         gpu->build_region(seeds, depth);
         gpu->set_driven(driven, std::vector<double>(9, -5e-4));
@@ -852,15 +860,19 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
     std::vector<double> ref_u, ref_f, ref_p, ref_J, ref_energy;
     struct Run {
       CudaStepMode mode;
-      bool apart;  // passes 3-4 held apart
+      bool apart;       // passes 3-4 held apart
+      bool node_lanes;  // and the node passes two lanes a thread
     };
-    for (const Run run : {Run{CudaStepMode::Grid, false}, Run{CudaStepMode::Graph, false},
-                          Run{CudaStepMode::Launch, false}, Run{CudaStepMode::Graph, true}}) {
-      SCOPED_TRACE(::testing::Message() << to_string(run.mode) << (run.apart ? ", passes 3-4 apart" : ""));
+    for (const Run run : {Run{CudaStepMode::Grid, false, false}, Run{CudaStepMode::Graph, false, false},
+                          Run{CudaStepMode::Launch, false, false}, Run{CudaStepMode::Graph, true, false},
+                          Run{CudaStepMode::Graph, true, true}, Run{CudaStepMode::Launch, true, true}}) {
+      SCOPED_TRACE(::testing::Message() << to_string(run.mode) << (run.apart ? ", passes 3-4 apart" : "")
+                                        << (run.node_lanes ? ", node passes two lanes a thread" : ""));
       auto gpu = make_cuda_backend(p);
       set_cuda_step_mode(*gpu, run.mode);
       if (run.apart) set_cuda_fused_force_blocks(*gpu, 0);
       gpu->upload(m);
+      if (run.node_lanes) set_cuda_lanes_node_min(*gpu, 0);
       gpu->set_displacements(u);
       gpu->build_region(seeds, c.depth);
       if (run.mode == CudaStepMode::Graph) {
@@ -1374,6 +1386,23 @@ TEST_P(Stages, BadInputGivesClearErrors) {
   EXPECT_THROW(gpu->advance(-1), std::invalid_argument);
   auto cpu = make_cpu_backend(GetParam());
   EXPECT_THROW(set_cuda_step_mode(*cpu, CudaStepMode::Graph), std::invalid_argument);
+}
+
+/// The node passes take two lanes a thread from two waves of the device's
+/// resident threads at eight threads a node (ModelView::lanes_node_min).
+TEST_P(Stages, NodePassesTakeTwoLanesAThreadFromTwoWaves) {
+  SKIP_WITHOUT_GPU();
+  int dev = 0, sms = 0, threads = 0;
+  ASSERT_EQ(cudaGetDevice(&dev), cudaSuccess);
+  ASSERT_EQ(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, dev), cudaSuccess);
+  ASSERT_EQ(cudaDeviceGetAttribute(&threads, cudaDevAttrMaxThreadsPerMultiProcessor, dev), cudaSuccess);
+  auto gpu = make_cuda_backend(GetParam());
+  gpu->upload(box_model(4, 4, 4, 0.04, 0.04, 0.04));
+  EXPECT_EQ(cuda_lanes_node_min(*gpu), index_t(2 * sms * threads / 8));
+  set_cuda_lanes_node_min(*gpu, 7);
+  EXPECT_EQ(cuda_lanes_node_min(*gpu), 7);
+  gpu->upload(box_model(4, 4, 4, 0.04, 0.04, 0.04));  // the override lasts until the next upload
+  EXPECT_EQ(cuda_lanes_node_min(*gpu), index_t(2 * sms * threads / 8));
 }
 
 TEST(NoGpu, BackendRefusesWithReason) {
