@@ -58,7 +58,7 @@ void set_cuda_fused_force_blocks(Backend& backend, index_t blocks);
 /// The fewest nodes of a region whose chained node passes (2 and 4) take
 /// two of a node's eight lanes a thread (docs/cuda.md, "Node passes with
 /// two lanes a thread"): two waves of the device's resident threads at
-/// eight threads a node (67,584 nodes on an H100). Needs an uploaded model.
+/// eight threads a node (67,584 nodes on an H100); 0 before an upload.
 index_t cuda_lanes_node_min(Backend& backend);
 /// Overrides it until the next upload (tests: 0 runs every region's node
 /// passes two lanes a thread, the same bits).

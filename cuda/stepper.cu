@@ -150,13 +150,7 @@ void Stepper<T>::element_forces(const ModelView<T>& m, const StateView<T>& s, co
 template <class T>
 void Stepper<T>::node_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
                              cudaStream_t stream) {
-  with_flag(s.load != nullptr, [&](auto load) {
-    if (runs_node_lanes(m, r))
-      launch_chained(kNodeLanes / 2 * r.n_nodes, stream, node_update_lanes_kernel<T, decltype(load)::value, 2>, m, s,
-                     r, b);
-    else
-      launch_chained(kNodeLanes * r.n_nodes, stream, node_update_kernel<T, decltype(load)::value>, m, s, r, b);
-  });
+  with_flag(s.load != nullptr, [&](auto load) { enqueue_node_update<T, decltype(load)::value>(m, s, r, b, stream); });
 }
 
 template <class T>

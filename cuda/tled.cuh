@@ -596,23 +596,29 @@ __global__ void node_update_lanes_kernel(ModelView<T> m, StateView<T> s, RegionV
   if (g % P == 0) node_update_from<T, kLoad>(m, s, b, d.a, sum);
 }
 
-/// Whether the chained node passes over region r take two of a node's
-/// lanes a thread (ModelView::lanes_node_min).
+/// Lanes a thread of the chained node passes on a large region
+/// (runs_node_lanes).
+inline constexpr int kThreadLanes = 2;
+
+/// Whether the chained node passes over region r take kThreadLanes of a
+/// node's lanes a thread (ModelView::lanes_node_min).
 template <class T>
 bool runs_node_lanes(const ModelView<T>& m, const RegionView& r) {
   return r.n_nodes >= m.lanes_node_min;
 }
 
-/// Queues pass 2 over region r: kNodeLanes threads a node, or two lanes a
-/// thread on a large region (runs_node_lanes); the same bits.
+/// Queues pass 2 over region r: kNodeLanes threads a node, or kThreadLanes
+/// lanes a thread on a large region (runs_node_lanes); the same bits.
 template <class T>
 void enqueue_nodal_pressures(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                              cudaStream_t stream) {
   if (runs_node_lanes(m, r))
-    launch_chained(kNodeLanes / 2 * r.n_nodes, stream, nodal_pressure_lanes_kernel<T, 2>, m, s, r);
+    launch_chained(kNodeLanes / kThreadLanes * r.n_nodes, stream, nodal_pressure_lanes_kernel<T, kThreadLanes>, m, s,
+                   r);
   else
     launch_chained(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, s, r);
 }
+
 
 // ---- fused passes: a block per window of nodes, a thread per slot -------------
 
@@ -831,6 +837,18 @@ __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r,
   wait_for_previous_pass();
   if (skipped(s)) return;
   if (active) node_update_at<T, kLoad>(m, s, b, d);
+}
+
+/// Queues pass 4 over region r from buffers b, as enqueue_nodal_pressures
+/// chooses its threads; kLoad: the state has an applied load.
+template <class T, bool kLoad>
+void enqueue_node_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
+                         cudaStream_t stream) {
+  if (runs_node_lanes(m, r))
+    launch_chained(kNodeLanes / kThreadLanes * r.n_nodes, stream, node_update_lanes_kernel<T, kLoad, kThreadLanes>, m,
+                   s, r, b);
+  else
+    launch_chained(kNodeLanes * r.n_nodes, stream, node_update_kernel<T, kLoad>, m, s, r, b);
 }
 
 // ---- persistent kernels: whole steps, a barrier between passes ----------------

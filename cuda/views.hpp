@@ -75,7 +75,7 @@ struct ModelView {
   /// Regions of at least this many nodes run the chained node passes (2
   /// and 4) with two of a node's lanes a thread (cuda/tled.cuh
   /// nodal_pressure_lanes_kernel, node_update_lanes_kernel): where the
-  /// kNodeLanes threads a node take more than two waves of the device's
+  /// kNodeLanes threads a node take two waves or more of the device's
   /// resident threads (DeviceStore::upload; docs/cuda.md, "Node passes with
   /// two lanes a thread").
   index_t lanes_node_min = 0;
