@@ -294,21 +294,21 @@ void Backend::node_update() {
   pass3_forces_ = false;
 }
 
-void Backend::check_steps(const char* what, int steps) {
+void Backend::check_steps(const char* what, int steps) const {
   require_upload(what);
   if (steps < 0) throw std::invalid_argument(fmt::format("{}: step count {} must be >= 0", what, steps));
-  if (steps > 0) pass3_forces_ = false;  // the steps' own passes 3 need not leave their forces for a pass 4
 }
 
-void Backend::tools_arrived() {
+void Backend::steps_taken() {
   for (ToolMotion& m : motion_) m.from = m.to;
+  pass3_forces_ = false;  // the steps' own passes 3 need not leave their forces for a pass 4
 }
 
 void Backend::advance(int steps) {
   check_steps("advance", steps);
   if (steps == 0) return;
   do_advance(steps, contact_tools(steps));
-  tools_arrived();
+  steps_taken();
 }
 
 Reductions Backend::reduce() {
@@ -320,7 +320,7 @@ Reductions Backend::advance_reduce(int steps) {
   check_steps("advance_reduce", steps);
   if (steps == 0) return do_reduce();
   const Reductions r = do_advance_reduce(steps, contact_tools(steps));
-  tools_arrived();
+  steps_taken();
   return r;
 }
 
@@ -333,7 +333,7 @@ std::optional<Reductions> Backend::advance_reduce_in_region(int steps) {
   check_steps("advance_reduce_in_region", steps);
   if (shapes_.empty() || steps == 0) return advance_reduce(steps);
   std::optional<Reductions> r = do_advance_reduce_in_region(steps, contact_tools(steps));
-  if (r) tools_arrived();
+  if (r) steps_taken();
   return r;
 }
 

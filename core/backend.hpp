@@ -276,9 +276,10 @@ class Backend {
  private:
   void require_upload(const char* what) const;
   /// require_upload, and steps >= 0 (invalid_argument naming `what`).
-  void check_steps(const char* what, int steps);
-  /// After an advance: the tools rest where their motion ended.
-  void tools_arrived();
+  void check_steps(const char* what, int steps) const;
+  /// After an advance that took steps: the tools rest where their motion
+  /// ended, and no pass 3's forces remain for a pass 4.
+  void steps_taken();
 
   bool uploaded_ = false;
   bool pass3_forces_ = false;  ///< element_forces() ran since the last node_update(), upload or step taken

@@ -53,11 +53,9 @@ PackedWindows packed_windows(const std::vector<index_t>& start) {
 /// 2,048 threads) 67,584 nodes: 1M tets (175,616 nodes) and 4M take two
 /// lanes a thread, 100k tets (19,683) eight threads a node.
 index_t lanes_node_min() {
-  int dev = 0, sms = 0, threads = 0;
-  CUDA_CHECK(cudaGetDevice(&dev));
-  CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, dev));
-  CUDA_CHECK(cudaDeviceGetAttribute(&threads, cudaDevAttrMaxThreadsPerMultiProcessor, dev));
-  return static_cast<index_t>(2 * std::int64_t(sms) * threads / kNodeLanes);
+  const std::int64_t resident = std::int64_t(current_device_attribute(cudaDevAttrMultiProcessorCount)) *
+                                current_device_attribute(cudaDevAttrMaxThreadsPerMultiProcessor);
+  return static_cast<index_t>(2 * resident / kNodeLanes);
 }
 
 /// The model's reference positions, one Packed3 per node.

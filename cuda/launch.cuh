@@ -18,6 +18,14 @@ namespace tissue::gpu {
 /// Threads per block of the per-item kernels.
 inline constexpr int kBlock = 256;
 
+/// An attribute of the current device (cudaDeviceGetAttribute).
+inline int current_device_attribute(cudaDeviceAttr attr) {
+  int dev = 0, v = 0;
+  CUDA_CHECK(cudaGetDevice(&dev));
+  CUDA_CHECK(cudaDeviceGetAttribute(&v, attr, dev));
+  return v;
+}
+
 /// Blocks needed for n items at `block` threads each.
 inline int grid_for(index_t n, int block = kBlock) { return static_cast<int>((n + block - 1) / block); }
 

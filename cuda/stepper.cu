@@ -10,13 +10,6 @@
 namespace tissue::gpu {
 namespace {
 
-int current_device_attribute(cudaDeviceAttr attr) {
-  int dev = 0, v = 0;
-  CUDA_CHECK(cudaGetDevice(&dev));
-  CUDA_CHECK(cudaDeviceGetAttribute(&v, attr, dev));
-  return v;
-}
-
 template <class T, bool kLaw, bool kRecomputed>
 int largest_cluster() {
   const auto kernel = persistent_cluster_kernel<T, kLaw, kRecomputed>;

@@ -256,10 +256,15 @@ __device__ void law_element_forces_at(const ModelView<T>& m, const StateView<T>&
 
 // kNodeLanes (the lanes that share one node in passes 2 and 4): cuda/views.hpp
 
-/// Mask of the calling lane's node group within its warp.
-__device__ __forceinline__ unsigned node_group_mask() {
-  return ((1u << kNodeLanes) - 1) << ((threadIdx.x & 31) & ~(kNodeLanes - 1));
+/// Mask of the calling thread's node group (kNodeLanes / L threads) in its warp.
+template <int L>
+__device__ __forceinline__ unsigned lanes_group_mask() {
+  constexpr int P = kNodeLanes / L;
+  return ((1u << P) - 1) << ((threadIdx.x & 31) & ~(P - 1));
 }
+
+/// Mask of the calling lane's node group within its warp (one lane a thread).
+__device__ __forceinline__ unsigned node_group_mask() { return lanes_group_mask<1>(); }
 
 /// Total of the group's partial sums x, in a fixed pairwise order (lanes
 /// j, j^1, then pairs j, j^2, ...): every lane gets the same, deterministic
@@ -274,6 +279,25 @@ __device__ __forceinline__ T node_group_sum(T x, unsigned mask) {
 template <class T>
 __device__ __forceinline__ Vec3<T> node_group_sum(Vec3<T> x, unsigned mask) {
   return {node_group_sum(x.x, mask), node_group_sum(x.y, mask), node_group_sum(x.z, mask)};
+}
+
+
+/// node_group_sum of the lanes' partial sums, acc[i] being lane p + i P's
+/// (thread p of P = kNodeLanes / L): the pairs (v, v^1), (v, v^2), ... of
+/// node_group_sum, by shuffles while the partner is another thread's lane
+/// (o < P), then within the thread (the partner of acc[i] is acc[i ^ o / P]).
+template <int L, class T>
+__device__ __forceinline__ T lane_group_sums(T (&acc)[L], unsigned mask) {
+  constexpr int P = kNodeLanes / L;
+#pragma unroll
+  for (int o = 1; o < P; o <<= 1)
+#pragma unroll
+    for (int i = 0; i < L; ++i) acc[i] += __shfl_xor_sync(mask, acc[i], o);
+#pragma unroll
+  for (int h = 1; h < L; h <<= 1)
+#pragma unroll
+    for (int i = 0; i < L; i += 2 * h) acc[i] += acc[i + h];
+  return acc[0];
 }
 
 /// The model data of one node that passes 2 and 4 use (one lane's view).
@@ -429,20 +453,40 @@ __device__ __forceinline__ Vec3<double> last_read(const Packed3<double>* p) {
   return {xy.x, xy.y, __ldcs(&p->z)};
 }
 
-/// Pass 4 for a node (one lane of its group): f_a = sum of its corners'
-/// element forces (a gather: no atomics) minus the applied load R (none
-/// when s.load is null), then lane 0 sets u_next: u_held for the held
-/// components (axis mask), the damped central difference for the others.
-/// kLoad: the instantiation for a scene with loads (chosen at launch, so that
-/// a scene without pays nothing).
+/// Pass 4 for a node, L of its lanes on the calling thread (d: its first,
+/// lane p; the others p + l P, P = kNodeLanes / L; L = 1: one lane,
+/// kNodeLanes threads a node): f_a = sum of its corners' element forces (a
+/// gather: no atomics) minus the applied load R (none when s.load is null),
+/// then lane 0 sets u_next: u_held for the held components (axis mask), the
+/// damped central difference for the others. Each lane sums its slots in
+/// order, then lane_group_sums: the same bits for every L. kLoad: the
+/// instantiation for a scene with loads (chosen at launch, so that a scene
+/// without pays nothing).
+template <class T, bool kLoad, int L>
+__device__ void node_update_lanes_at(const ModelView<T>& m, const StateView<T>& s, const StepBuffers<T>& b,
+                                     const NodeData<T>& d) {
+  constexpr int P = kNodeLanes / L;
+  T f[3][L];
+#pragma unroll
+  for (int l = 0; l < L; ++l) f[0][l] = f[1][l] = f[2][l] = T(0);
+#pragma unroll 4
+  for (index_t k = d.first; k < d.end; k += kNodeLanes)
+#pragma unroll
+    for (int l = 0; l < L; ++l)
+      if (k + l * P < d.end) {
+        const Vec3<T> v = last_read(s.f_slot + k + l * P);
+        f[0][l] += v.x, f[1][l] += v.y, f[2][l] += v.z;
+      }
+  const Vec3<T> sum = {lane_group_sums<L>(f[0], d.mask), lane_group_sums<L>(f[1], d.mask),
+                       lane_group_sums<L>(f[2], d.mask)};
+  if (d.lane == 0) node_update_from<T, kLoad>(m, s, b, d.a, sum);
+}
+
+/// Pass 4 for a node on one lane of its group (node_update_lanes_at, L = 1).
 template <class T, bool kLoad>
 __device__ void node_update_at(const ModelView<T>& m, const StateView<T>& s, const StepBuffers<T>& b,
                                const NodeData<T>& d) {
-  Vec3<T> f = {T(0), T(0), T(0)};
-#pragma unroll 4
-  for (index_t k = d.first; k < d.end; k += kNodeLanes) f = f + last_read(s.f_slot + k);
-  f = node_group_sum(f, d.mask);
-  if (d.lane == 0) node_update_from<T, kLoad>(m, s, b, d.a, f);
+  node_update_lanes_at<T, kLoad, 1>(m, s, b, d);
 }
 
 /// Blocks of the packed force kernel an SM must hold: six in float (at
@@ -498,7 +542,7 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
 // ---- node passes, several of a node's lanes a thread ------------------------------
 
 /// The chained node kernels of a large region (nodal_pressure_lanes_kernel,
-/// node_update_lanes_kernel) run kNodeLanes / L threads per node, each
+/// node_update_kernel with L = kThreadLanes) run kNodeLanes / L threads per node, each
 /// taking L of the node's kNodeLanes lanes (lanes p, p + P, p + 2P, ... for
 /// P = kNodeLanes / L threads): a thread has L times the loads in flight
 /// and the pass needs L times fewer threads. Each lane's sum runs in its
@@ -509,30 +553,7 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
 /// lanes a thread gained less, and 100k tets (under one wave) lost 4 % with
 /// two (docs/cuda.md, "Node passes with two lanes a thread").
 
-/// Mask of the calling thread's node group (kNodeLanes / L threads) in its warp.
-template <int L>
-__device__ __forceinline__ unsigned lanes_group_mask() {
-  constexpr int P = kNodeLanes / L;
-  return ((1u << P) - 1) << ((threadIdx.x & 31) & ~(P - 1));
-}
 
-/// node_group_sum of the lanes' partial sums, acc[i] being lane p + i P's
-/// (thread p of P = kNodeLanes / L): the pairs (v, v^1), (v, v^2), ... of
-/// node_group_sum, by shuffles while the partner is another thread's lane
-/// (o < P), then within the thread (the partner of acc[i] is acc[i ^ o / P]).
-template <int L, class T>
-__device__ __forceinline__ T lane_group_sums(T (&acc)[L], unsigned mask) {
-  constexpr int P = kNodeLanes / L;
-#pragma unroll
-  for (int o = 1; o < P; o <<= 1)
-#pragma unroll
-    for (int i = 0; i < L; ++i) acc[i] += __shfl_xor_sync(mask, acc[i], o);
-#pragma unroll
-  for (int h = 1; h < L; h <<= 1)
-#pragma unroll
-    for (int i = 0; i < L; i += 2 * h) acc[i] += acc[i + h];
-  return acc[0];
-}
 
 /// Pass 2 with L lanes a thread: the elements of each lane's first
 /// kPressureElements slots are loaded before the wait for pass 1; the same
@@ -569,32 +590,6 @@ __global__ void nodal_pressure_lanes_kernel(ModelView<T> m, StateView<T> s, Regi
   if (g % P == 0) s.node_p[n[0].d.a] = sum / __ldg(m.node_divisor + n[0].d.a);
 }
 
-/// Pass 4 with L lanes a thread: the same sums as node_update_at.
-template <class T, bool kLoad, int L>
-__global__ void node_update_lanes_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
-  constexpr int P = kNodeLanes / L;
-  let_next_pass_launch();
-  const index_t g = thread_index(), i = g / P;
-  const bool active = i < r.n_nodes;
-  const unsigned mask = lanes_group_mask<L>();
-  NodeData<T> d;
-  if (active) d = load_node(m, r.node(i), g % P, mask);
-  wait_for_previous_pass();
-  if (skipped(s) || !active) return;  // (whole groups)
-  T f[3][L];
-#pragma unroll
-  for (int l = 0; l < L; ++l) f[0][l] = f[1][l] = f[2][l] = T(0);
-  for (index_t k = d.first; k < d.end; k += kNodeLanes)
-#pragma unroll
-    for (int l = 0; l < L; ++l)
-      if (k + l * P < d.end) {
-        const Vec3<T> v = last_read(s.f_slot + k + l * P);
-        f[0][l] += v.x, f[1][l] += v.y, f[2][l] += v.z;
-      }
-  const Vec3<T> sum = {lane_group_sums<L>(f[0], mask), lane_group_sums<L>(f[1], mask),
-                       lane_group_sums<L>(f[2], mask)};
-  if (g % P == 0) node_update_from<T, kLoad>(m, s, b, d.a, sum);
-}
 
 /// Lanes a thread of the chained node passes on a large region
 /// (runs_node_lanes).
@@ -827,16 +822,19 @@ __global__ void law_element_forces_kernel(ModelView<T> m, StateView<T> s, Region
   if (active) law_element_forces_at(m, s, d, u, w);
 }
 
-template <class T, bool kLoad>
+/// Pass 4 with L of a node's lanes a thread (kNodeLanes / L threads a node;
+/// launch kNodeLanes / L * n); whole groups are active or not.
+template <class T, bool kLoad, int L>
 __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
+  constexpr int P = kNodeLanes / L;
   let_next_pass_launch();
-  const index_t g = thread_index(), i = g / kNodeLanes;
+  const index_t g = thread_index(), i = g / P;
   const bool active = i < r.n_nodes;
   NodeData<T> d;
-  if (active) d = load_node(m, r.node(i), g % kNodeLanes, node_group_mask());
+  if (active) d = load_node(m, r.node(i), g % P, lanes_group_mask<L>());
   wait_for_previous_pass();
   if (skipped(s)) return;
-  if (active) node_update_at<T, kLoad>(m, s, b, d);
+  if (active) node_update_lanes_at<T, kLoad, L>(m, s, b, d);
 }
 
 /// Queues pass 4 over region r from buffers b, as enqueue_nodal_pressures
@@ -845,10 +843,10 @@ template <class T, bool kLoad>
 void enqueue_node_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
                          cudaStream_t stream) {
   if (runs_node_lanes(m, r))
-    launch_chained(kNodeLanes / kThreadLanes * r.n_nodes, stream, node_update_lanes_kernel<T, kLoad, kThreadLanes>, m,
-                   s, r, b);
+    launch_chained(kNodeLanes / kThreadLanes * r.n_nodes, stream, node_update_kernel<T, kLoad, kThreadLanes>, m, s, r,
+                   b);
   else
-    launch_chained(kNodeLanes * r.n_nodes, stream, node_update_kernel<T, kLoad>, m, s, r, b);
+    launch_chained(kNodeLanes * r.n_nodes, stream, node_update_kernel<T, kLoad, 1>, m, s, r, b);
 }
 
 // ---- persistent kernels: whole steps, a barrier between passes ----------------

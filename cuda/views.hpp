@@ -74,7 +74,7 @@ struct ModelView {
   index_t n_windows = 0, pack_span = 0;
   /// Regions of at least this many nodes run the chained node passes (2
   /// and 4) with two of a node's lanes a thread (cuda/tled.cuh
-  /// nodal_pressure_lanes_kernel, node_update_lanes_kernel): where the
+  /// nodal_pressure_lanes_kernel, node_update_kernel with L = 2): where the
   /// kNodeLanes threads a node take two waves or more of the device's
   /// resident threads (DeviceStore::upload; docs/cuda.md, "Node passes with
   /// two lanes a thread").
