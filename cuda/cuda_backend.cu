@@ -584,6 +584,11 @@ void set_cuda_lanes_node_min(Backend& backend, index_t nodes) {
   gpu::with_cuda_backend(backend, [&](auto& b) { b.set_lanes_node_min(nodes); });
 }
 
+CudaNodePassLaunches cuda_node_pass_launches() {
+  const auto& c = gpu::node_pass_launches;
+  return {c.pressures.load(), c.pressures_lanes.load(), c.updates.load(), c.updates_lanes.load()};
+}
+
 index_t cuda_merge_wave_nodes(Backend& backend) {
   return gpu::with_cuda_backend(backend, [](auto& b) { return b.stepper().limits().merge_wave_nodes; });
 }

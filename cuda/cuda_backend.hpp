@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <string>
 
@@ -63,6 +64,18 @@ index_t cuda_lanes_node_min(Backend& backend);
 /// Overrides it until the next upload (tests: 0 runs every region's node
 /// passes two lanes a thread, the same bits).
 void set_cuda_lanes_node_min(Backend& backend, index_t nodes);
+
+/// Launches of the chained node passes' kernels this process has queued
+/// (pass 2: pressures, pass 4: updates), eight threads a node or two lanes
+/// a thread (lanes), counted on the host as they are launched or captured
+/// into a graph (a graph's replays add nothing): the tests' evidence of
+/// which kernels a region ran, and that a graph is captured again after
+/// set_cuda_lanes_node_min. The fused kernels, which run passes 1-2 or 3-4
+/// in one, are not counted.
+struct CudaNodePassLaunches {
+  std::int64_t pressures = 0, pressures_lanes = 0, updates = 0, updates_lanes = 0;
+};
+CudaNodePassLaunches cuda_node_pass_launches();
 
 /// The most surface nodes the contact stage's merge takes in blocks of 256
 /// threads (one wave of them on the device); a larger surface is merged in

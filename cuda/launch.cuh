@@ -7,6 +7,8 @@
 
 #include <cuda_runtime.h>
 
+#include <atomic>
+#include <cstdint>
 #include <cstdlib>
 
 #include "core/hd.hpp"
@@ -104,5 +106,19 @@ __device__ __forceinline__ index_t dealt_index() {
   static_assert(32 % kRun == 0);
   return dealt_item(thread_index(), thread_stride(), kRun);
 }
+
+/// The chained node passes' launches this process has queued (pass 2:
+/// pressures, pass 4: updates; eight threads a node, or two lanes a thread:
+/// lanes), counted on the host as they are launched or captured into a
+/// graph: the tests' evidence of which kernels a region ran
+/// (cuda_node_pass_launches, cuda/cuda_backend.hpp).
+struct NodePassLaunches {
+  std::atomic<std::int64_t> pressures{0}, pressures_lanes{0}, updates{0}, updates_lanes{0};
+  void count(bool pressure_pass, bool lanes) {
+    auto& c = pressure_pass ? (lanes ? pressures_lanes : pressures) : (lanes ? updates_lanes : updates);
+    c.fetch_add(1, std::memory_order_relaxed);
+  }
+};
+inline NodePassLaunches node_pass_launches;
 
 }  // namespace tissue::gpu

@@ -607,6 +607,7 @@ bool runs_node_lanes(const ModelView<T>& m, const RegionView& r) {
 template <class T>
 void enqueue_nodal_pressures(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                              cudaStream_t stream) {
+  node_pass_launches.count(true, runs_node_lanes(m, r));
   if (runs_node_lanes(m, r))
     launch_chained(kNodeLanes / kThreadLanes * r.n_nodes, stream, nodal_pressure_lanes_kernel<T, kThreadLanes>, m, s,
                    r);
@@ -842,6 +843,7 @@ __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r,
 template <class T, bool kLoad>
 void enqueue_node_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
                          cudaStream_t stream) {
+  node_pass_launches.count(false, runs_node_lanes(m, r));
   if (runs_node_lanes(m, r))
     launch_chained(kNodeLanes / kThreadLanes * r.n_nodes, stream, node_update_kernel<T, kLoad, kThreadLanes>, m, s, r,
                    b);

@@ -725,6 +725,7 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
         const ToolMotion mv[] = {{{{0.031, 0.027, 0.0445}, {0, 0, 1}}, {{0.031, 0.027, 0.0425}, {0, 0, 1}}},
                                  {{{0.008, 0.04, 0.0428}, {0.94, 0.34, 0}}, {{0.009, 0.041, 0.0412}, {0.93, 0.36, 0.05}}}};
         gpu->move_tools(mv);
+        const CudaNodePassLaunches before = cuda_node_pass_launches();
         // a reduce between advances (its own passes 1-2 at the current u into scratch) changes nothing in
         // the steps, in any mode
         gpu->advance(7);   // graph: a 7-step graph from phase 0
@@ -736,6 +737,11 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
         energies.push_back(r.strain_energy);
         EXPECT_GT(r.tools[0].contact, 0);
         EXPECT_GT(r.tools[1].contact + r.tools[1].outside, 3);
+        // which node kernels ran: pass 4 apart two lanes a thread exactly where told (passes 1-2 stay
+        // fused on this box; the persistent modes launch neither)
+        const CudaNodePassLaunches after = cuda_node_pass_launches();
+        EXPECT_EQ(after.updates_lanes > before.updates_lanes, run.node_lanes);
+        EXPECT_EQ(after.pressures_lanes, before.pressures_lanes);
         const Fields f = gpu->download();
         if (ref_u.empty()) {
           ref_u = f.u;
@@ -893,6 +899,7 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
         const double force[9] = {0.02, -0.01, 0.03, -0.02, 0.0, 0.01, 0.0, 0.04, -0.03};
         gpu->set_loads(seeds, std::span<const double>(force, 3 * seeds.size()));
       }
+      const CudaNodePassLaunches before = cuda_node_pass_launches();
       gpu->advance(5);
       std::vector<double> energies = {gpu->reduce().strain_energy};
       gpu->advance(4);
@@ -900,6 +907,14 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
       gpu->advance(1);
       const Fields f = gpu->download();
       ASSERT_TRUE(std::isfinite(energies.back()));
+      // which node kernels ran: pass 4 two lanes a thread exactly where told, and pass 2 where it runs
+      // apart (the box of 15,360 elements: the steps' and the reduction's)
+      const CudaNodePassLaunches after = cuda_node_pass_launches();
+      const bool chained = run.mode != CudaStepMode::Grid;
+      EXPECT_EQ(after.updates_lanes > before.updates_lanes, run.node_lanes);
+      EXPECT_EQ(after.updates > before.updates, chained && !run.node_lanes && !cuda_fuses_forces(*gpu));
+      EXPECT_EQ(after.pressures_lanes > before.pressures_lanes, run.node_lanes && m.n_elems >= 10000);
+      EXPECT_EQ(after.pressures > before.pressures, chained && !run.node_lanes && m.n_elems >= 10000);
       if (ref_u.empty()) {
         ref_u = f.u, ref_f = f.f, ref_p = f.node_p, ref_J = f.elem_J, ref_energy = energies;
         if (!driven.empty()) {  // the driven node moved: the test has its stale slots
@@ -1403,6 +1418,80 @@ TEST_P(Stages, NodePassesTakeTwoLanesAThreadFromTwoWaves) {
   EXPECT_EQ(cuda_lanes_node_min(*gpu), 7);
   gpu->upload(box_model(4, 4, 4, 0.04, 0.04, 0.04));  // the override lasts until the next upload
   EXPECT_EQ(cuda_lanes_node_min(*gpu), index_t(2 * sms * threads / 8));
+}
+
+/// Pass 2's and pass 4's two-lanes-a-thread kernels on the per-pass path
+/// (Backend::nodal_pressure, node_update) over the whole box and regions of
+/// depth 1 and 0: launched once a call where told (set_cuda_lanes_node_min
+/// 0), never otherwise, with the eight-lane kernels' bits. Then the graphs:
+/// a replay launches nothing, and an override drops them, so the next
+/// advance captures the two-lane kernels; the steps keep their bits.
+TEST_P(Stages, NodeLanesKernelsRunWhereToldWithTheEightLaneBits) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  const auto m = box_model(5, 4, 3, 0.05, 0.04, 0.03);
+  const index_t seeds[3] = {m.tris[7], m.tris[m.n_tris + 7], m.tris[2 * m.n_tris + 7]};
+  auto eight = make_cuda_backend(p), lanes = make_cuda_backend(p);
+  eight->upload(m);
+  lanes->upload(m);
+  ASSERT_GT(cuda_lanes_node_min(*eight), m.n_nodes);
+  set_cuda_lanes_node_min(*lanes, 0);
+  unsigned seed = 3;
+  for (int depth : {kDepthAll, 1, 0}) {
+    SCOPED_TRACE(::testing::Message() << "depth " << depth);
+    if (depth != kDepthAll) {
+      EXPECT_EQ(lanes->build_region(seeds, depth).nodes(), eight->build_region(seeds, depth).nodes());
+    }
+    const auto u = random_field(m.n_nodes, 2e-4, seed++);
+    std::vector<Fields> f;
+    for (Backend* b : {eight.get(), lanes.get()}) {
+      const bool told = b == lanes.get();
+      b->set_displacements(u);
+      b->element_pressure();
+      const CudaNodePassLaunches c0 = cuda_node_pass_launches();
+      b->nodal_pressure();
+      const CudaNodePassLaunches c1 = cuda_node_pass_launches();
+      b->element_forces();
+      b->node_update();
+      const CudaNodePassLaunches c2 = cuda_node_pass_launches();
+      EXPECT_EQ(c1.pressures_lanes - c0.pressures_lanes, told ? 1 : 0);
+      EXPECT_EQ(c1.pressures - c0.pressures, told ? 0 : 1);
+      EXPECT_EQ(c2.updates_lanes - c1.updates_lanes, told ? 1 : 0);
+      EXPECT_EQ(c2.updates - c1.updates, told ? 0 : 1);
+      f.push_back(b->download());
+    }
+    EXPECT_GT(*std::max_element(f[0].node_p.begin(), f[0].node_p.end()), 0.0);  // really pressed
+    EXPECT_EQ(f[1].node_p, f[0].node_p);
+    EXPECT_EQ(f[1].f, f[0].f);
+    EXPECT_EQ(f[1].u, f[0].u);
+  }
+
+  // the graphs: passes 3-4 apart, so that pass 4 is its own kernel
+  const auto u = random_field(m.n_nodes, 1e-4, 11);
+  lanes->upload(m);  // back to eight threads a node on this small box
+  for (Backend* b : {eight.get(), lanes.get()}) {
+    set_cuda_step_mode(*b, CudaStepMode::Graph);
+    set_cuda_fused_force_blocks(*b, 0);
+    b->build_region(seeds, kDepthAll);
+    b->set_displacements(u);
+  }
+  ASSERT_FALSE(cuda_fuses_forces(*lanes));
+  const CudaNodePassLaunches c0 = cuda_node_pass_launches();
+  lanes->advance(3);  // captures a 3-step graph
+  const CudaNodePassLaunches c1 = cuda_node_pass_launches();
+  lanes->advance(3);  // the same phase: replays it
+  const CudaNodePassLaunches c2 = cuda_node_pass_launches();
+  set_cuda_lanes_node_min(*lanes, 0);
+  lanes->advance(3);  // the override dropped the graph: captures the two-lane kernels
+  const CudaNodePassLaunches c3 = cuda_node_pass_launches();
+  EXPECT_EQ(c1.updates - c0.updates, 3);
+  EXPECT_EQ(c1.updates_lanes, c0.updates_lanes);
+  EXPECT_EQ(c2.updates, c1.updates);
+  EXPECT_EQ(c2.updates_lanes, c1.updates_lanes);
+  EXPECT_EQ(c3.updates_lanes - c2.updates_lanes, 3);
+  EXPECT_EQ(c3.updates, c2.updates);
+  eight->advance(9);
+  EXPECT_EQ(lanes->download().u, eight->download().u);
 }
 
 TEST(NoGpu, BackendRefusesWithReason) {
