@@ -171,6 +171,11 @@ class CudaBackend final : public Backend {
   RegionView region_view() const { return region_.view(); }
   /// ModelView::lanes_node_min of the uploaded model, and its override.
   index_t lanes_node_min() const { return store_.model().lanes_node_min; }
+  bool discard_slots() const { return store_.model().discard_slots; }
+  void set_discard_slots(bool discard) {
+    store_.set_discard_slots(discard);
+    stepper_.invalidate();  // the graphs bake the model view
+  }
   void set_lanes_node_min(index_t nodes) {
     store_.set_lanes_node_min(nodes);
     stepper_.invalidate();  // the graphs bake the node kernels
@@ -582,6 +587,14 @@ index_t cuda_lanes_node_min(Backend& backend) {
 
 void set_cuda_lanes_node_min(Backend& backend, index_t nodes) {
   gpu::with_cuda_backend(backend, [&](auto& b) { b.set_lanes_node_min(nodes); });
+}
+
+bool cuda_discards_slots(Backend& backend) {
+  return gpu::with_cuda_backend(backend, [](auto& b) { return b.discard_slots(); });
+}
+
+void set_cuda_discards_slots(Backend& backend, bool discard) {
+  gpu::with_cuda_backend(backend, [&](auto& b) { b.set_discard_slots(discard); });
 }
 
 CudaNodePassLaunches cuda_node_pass_launches() {

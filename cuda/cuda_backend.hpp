@@ -65,6 +65,15 @@ index_t cuda_lanes_node_min(Backend& backend);
 /// passes two lanes a thread, the same bits).
 void set_cuda_lanes_node_min(Backend& backend, index_t nodes);
 
+/// Whether pass 4's chained kernel over the whole mesh drops the force
+/// slots' lines it has read from the L2 (PTX `discard.global.L2`: a dirty
+/// line read for the last time is not written back to memory): set at
+/// upload where the slots exceed half the device's L2 (docs/cuda.md, "Pass
+/// 4 drops the slots it has read"); false before an upload.
+bool cuda_discards_slots(Backend& backend);
+/// Overrides it until the next upload (tests: the same bits either way).
+void set_cuda_discards_slots(Backend& backend, bool discard);
+
 /// Launches of the chained node passes' kernels this process has queued
 /// (pass 2: pressures, pass 4: updates), eight threads a node or two lanes
 /// a thread (lanes), counted on the host as they are launched or captured

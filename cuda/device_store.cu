@@ -168,6 +168,8 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   model_.n_windows = static_cast<index_t>(packs.first.size()) - 1;
   model_.pack_span = packs.span;
   model_.lanes_node_min = lanes_node_min();
+  model_.discard_slots = 2 * 4 * std::size_t(ne) * sizeof(Packed3<T>) >
+                        std::size_t(current_device_attribute(cudaDevAttrL2CacheSize));
   model_.slot_of = slot_of_.data();
   model_.node_divisor = node_divisor_.data();
   model_.tris = tris_.data();

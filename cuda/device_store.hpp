@@ -58,6 +58,9 @@ class DeviceStore {
   /// runs every region's chained node passes two lanes a thread; the same
   /// bits).
   void set_lanes_node_min(index_t nodes) { model_.lanes_node_min = nodes; }
+  /// Overrides ModelView::discard_slots until the next upload (tests: the
+  /// same bits either way).
+  void set_discard_slots(bool discard) { model_.discard_slots = discard; }
   LawView<T> law() const { return law_; }
   StateView<T> state();
 

@@ -16,6 +16,7 @@
 
 #include <cooperative_groups.h>
 
+#include <cstdint>
 #include <type_traits>
 
 #include "core/node_rules.hpp"
@@ -823,8 +824,28 @@ __global__ void law_element_forces_kernel(ModelView<T> m, StateView<T> s, Region
   if (active) law_element_forces_at(m, s, d, u, w);
 }
 
+/// Drops from the L2, without writing them back to memory, the 128-byte
+/// lines that lie wholly inside the force slots [lo, hi) (PTX
+/// `discard.global.L2`), the warp's lanes a line each. For slots read for
+/// the last time in the step: over the whole mesh the next step's pass 3
+/// writes every slot before any pass reads one, and a region's build clears
+/// the slots of the elements it leaves out.
+template <class T>
+__device__ __forceinline__ void discard_slots(const Packed3<T>* f_slot, index_t lo, index_t hi) {
+  constexpr std::uintptr_t kLine = 128;
+  const auto base = reinterpret_cast<std::uintptr_t>(f_slot);
+  const std::uintptr_t from = (base + std::uintptr_t(lo) * sizeof(Packed3<T>) + kLine - 1) & ~(kLine - 1);
+  const std::uintptr_t to = (base + std::uintptr_t(hi) * sizeof(Packed3<T>)) & ~(kLine - 1);
+  for (std::uintptr_t p = from + kLine * (threadIdx.x & 31); p < to; p += kLine * 32)
+    asm volatile("discard.global.L2 [%0], 128;" ::"l"(p) : "memory");
+}
+
 /// Pass 4 with L of a node's lanes a thread (kNodeLanes / L threads a node;
-/// launch kNodeLanes / L * n); whole groups are active or not.
+/// launch kNodeLanes / L * n); whole groups are active or not. Over the
+/// whole mesh of a model whose slots exceed half the L2
+/// (ModelView::discard_slots) each warp then drops its nodes' slot lines
+/// from the L2 (discard_slots): pass 3 left them dirty there, and a dirty
+/// line read for the last time need not go back to memory.
 template <class T, bool kLoad, int L>
 __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
   constexpr int P = kNodeLanes / L;
@@ -836,6 +857,12 @@ __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r,
   wait_for_previous_pass();
   if (skipped(s)) return;
   if (active) node_update_lanes_at<T, kLoad, L>(m, s, b, d);
+  if (m.discard_slots && !r.nodes) {  // the whole mesh: the warp's nodes, and so their slots, are consecutive
+    __syncwarp();  // every lane's slots are summed
+    const index_t lo = __reduce_min_sync(~0u, active ? unsigned(d.first - d.lane) : ~0u);
+    const index_t hi = __reduce_max_sync(~0u, active ? unsigned(d.end) : 0u);
+    if (lo < hi) discard_slots(s.f_slot, lo, hi);
+  }
 }
 
 /// Queues pass 4 over region r from buffers b, as enqueue_nodal_pressures

@@ -79,6 +79,11 @@ struct ModelView {
   /// resident threads (DeviceStore::upload; docs/cuda.md, "Node passes with
   /// two lanes a thread").
   index_t lanes_node_min = 0;
+  /// Pass 4 over the whole mesh (the chained node kernel) drops the force
+  /// slots' lines it has read from the L2 (cuda/tled.cuh discard_slots): set
+  /// at upload where the slots exceed half the device's L2 (1M tets in
+  /// float on an H100; docs/cuda.md, "Pass 4 drops the slots it has read").
+  bool discard_slots = false;
   const index_t* slot_of = nullptr;       ///< position of (e, a) in node_elem (4 x n_elems, [a * n_elems + e])
   const T* node_divisor = nullptr;        ///< V_a / K_a (core nodal_pressure_divisors) (n_nodes) m^3/Pa
   const index_t* tris = nullptr;          ///< (3 x n_tris)

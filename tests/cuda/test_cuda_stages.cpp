@@ -711,9 +711,11 @@ TEST_P(Stages, EveryStepModeGivesIdenticalBits) {
         set_cuda_gradients(*gpu, g);
         gpu->upload(m);
         EXPECT_GT(cuda_lanes_node_min(*gpu), m.n_nodes);  // a box this small: eight threads a node unless told
-        if (run.node_lanes) {
+        EXPECT_FALSE(cuda_discards_slots(*gpu));  // nor do its slots fill half an L2
+        if (run.node_lanes) {  // and pass 4 over the whole mesh drops the slots it has read from the L2
           set_cuda_fused_force_blocks(*gpu, 0);
           set_cuda_lanes_node_min(*gpu, 0);
+          set_cuda_discards_slots(*gpu, true);
         }
         gpu->set_displacements(u);
         gpu->build_region(seeds, depth);
@@ -880,7 +882,10 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
       set_cuda_step_mode(*gpu, run.mode);
       if (run.apart) set_cuda_fused_force_blocks(*gpu, 0);
       gpu->upload(m);
-      if (run.node_lanes) set_cuda_lanes_node_min(*gpu, 0);
+      if (run.node_lanes) {  // and pass 4 over the whole mesh drops the slots it has read from the L2
+        set_cuda_lanes_node_min(*gpu, 0);
+        set_cuda_discards_slots(*gpu, true);
+      }
       gpu->set_displacements(u);
       gpu->build_region(seeds, c.depth);
       if (run.mode == CudaStepMode::Graph) {
@@ -1495,6 +1500,62 @@ TEST_P(Stages, NodeLanesKernelsRunWhereToldWithTheEightLaneBits) {
   EXPECT_EQ(c3.updates, c2.updates);
   eight->advance(9);
   EXPECT_EQ(lanes->download().u, eight->download().u);
+}
+
+/// Pass 4 over the whole mesh drops the force slots' lines it has read
+/// from the L2 (ModelView::discard_slots) where the slots exceed half the
+/// device's L2: a box just past that size in float (on an H100, 413k
+/// elements and 79k nodes, whose node passes take two lanes a thread),
+/// stepped with and without the drop, bit for bit, in every step mode that
+/// runs pass 4 apart; then at depth 2 (no drop on a region). The steps
+/// after a drop read no dropped slot: pass 3 writes every slot of the
+/// whole mesh before pass 4 reads it.
+TEST_P(Stages, PassFourDropsTheSlotsItReadWhereTheyExceedHalfTheL2) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  int dev = 0, l2 = 0;
+  ASSERT_EQ(cudaGetDevice(&dev), cudaSuccess);
+  ASSERT_EQ(cudaDeviceGetAttribute(&l2, cudaDevAttrL2CacheSize, dev), cudaSuccess);
+  // 2 x 4 slots x 16 bytes (float) an element > L2: 6 n^3 elements > L2 / 128
+  const int n = static_cast<int>(std::cbrt(double(l2) / 128 / 6)) + 1;
+  const auto m = box_model(n, n, n, 0.1, 0.1, 0.1);
+  const auto u = random_field(m.n_nodes, 2e-5, 43);
+  const index_t seeds[1] = {m.tris[0]};
+  std::vector<double> ref_u, ref_f, ref_p, ref_energy;
+  struct Run {
+    CudaStepMode mode;
+    bool discard;
+  };
+  for (const Run run : {Run{CudaStepMode::Graph, false}, Run{CudaStepMode::Graph, true},
+                        Run{CudaStepMode::Launch, true}, Run{CudaStepMode::Grid, true}}) {
+    SCOPED_TRACE(::testing::Message() << to_string(run.mode) << (run.discard ? ", slots dropped" : ""));
+    auto gpu = make_cuda_backend(p);
+    set_cuda_step_mode(*gpu, run.mode);
+    gpu->upload(m);
+    EXPECT_TRUE(cuda_discards_slots(*gpu)) << m.n_elems << " elements, L2 " << l2 << " bytes";
+    if (!run.discard) set_cuda_discards_slots(*gpu, false);
+    gpu->set_displacements(u);
+    const CudaNodePassLaunches before = cuda_node_pass_launches();
+    gpu->advance(4);
+    std::vector<double> energies = {gpu->reduce().strain_energy};
+    gpu->advance(3);
+    const CudaNodePassLaunches after = cuda_node_pass_launches();
+    EXPECT_EQ(after.updates + after.updates_lanes > before.updates + before.updates_lanes,
+              run.mode != CudaStepMode::Grid);  // pass 4 apart: the region is too large to fuse
+    gpu->build_region(seeds, 2);
+    gpu->advance(2);
+    energies.push_back(gpu->reduce().strain_energy);
+    const Fields f = gpu->download();
+    ASSERT_TRUE(std::isfinite(energies.back()));
+    if (ref_u.empty()) {
+      ref_u = f.u, ref_f = f.f, ref_p = f.node_p, ref_energy = energies;
+      continue;
+    }
+    EXPECT_EQ(energies, ref_energy);
+    EXPECT_EQ(f.u, ref_u);
+    EXPECT_EQ(f.f, ref_f);
+    EXPECT_EQ(f.node_p, ref_p);
+  }
 }
 
 TEST(NoGpu, BackendRefusesWithReason) {
