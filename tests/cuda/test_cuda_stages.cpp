@@ -1558,6 +1558,55 @@ TEST_P(Stages, PassFourDropsTheSlotsItReadWhereTheyExceedHalfTheL2) {
   }
 }
 
+/// Writes twice the device's L2 of scratch memory: every dirty line the L2
+/// held is written back to memory.
+void flush_l2() {
+  int dev = 0, l2 = 0;
+  ASSERT_EQ(cudaGetDevice(&dev), cudaSuccess);
+  ASSERT_EQ(cudaDeviceGetAttribute(&l2, cudaDevAttrL2CacheSize, dev), cudaSuccess);
+  void* scratch = nullptr;
+  ASSERT_EQ(cudaMalloc(&scratch, 2 * std::size_t(l2)), cudaSuccess);
+  EXPECT_EQ(cudaMemset(scratch, 0x5a, 2 * std::size_t(l2)), cudaSuccess);
+  EXPECT_EQ(cudaDeviceSynchronize(), cudaSuccess);
+  EXPECT_EQ(cudaFree(scratch), cudaSuccess);
+}
+
+/// The slots pass 4 drops from the L2 are never those of a region: a
+/// region's build writes zero into the slots of the elements it leaves
+/// out, which its steps read but never write, and which memory may not hold
+/// yet. On a small box: whole-mesh steps leave forces in every slot, the L2
+/// is flushed (memory holds those forces), a region of depth 1 is built
+/// (its zeros are in the L2 only), and it steps with the drop on, against
+/// a backend that never drops: the same bits. Dropping a region's lines
+/// would read the old forces back from memory.
+TEST_P(Stages, DroppedSlotsAreNeverARegions) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  const auto m = box_model(8, 8, 6, 0.08, 0.08, 0.06);
+  const auto u = random_field(m.n_nodes, 1e-4, 47);
+  const index_t seeds[3] = {m.tris[3], m.tris[m.n_tris + 3], m.tris[2 * m.n_tris + 3]};
+  std::vector<Fields> f;
+  for (bool drop : {false, true}) {
+    SCOPED_TRACE(drop ? "dropping" : "never dropping");
+    auto gpu = make_cuda_backend(p);
+    set_cuda_step_mode(*gpu, CudaStepMode::Graph);
+    gpu->upload(m);
+    set_cuda_fused_force_blocks(*gpu, 0);  // pass 4 its own kernel
+    gpu->set_displacements(u);
+    gpu->advance(4);
+    const Fields whole = gpu->download();
+    ASSERT_GT(*std::max_element(whole.f.begin(), whole.f.end()), 0.0);
+    flush_l2();
+    const RegionSizes r = gpu->build_region(seeds, 1);
+    ASSERT_LT(r.n_elems, m.n_elems);
+    set_cuda_discards_slots(*gpu, drop);
+    gpu->advance(3);
+    f.push_back(gpu->download());
+  }
+  EXPECT_EQ(f[1].u, f[0].u);
+  EXPECT_EQ(f[1].f, f[0].f);
+}
+
 TEST(NoGpu, BackendRefusesWithReason) {
   std::string why;
   if (cuda_available(&why)) GTEST_SKIP() << "a GPU is present: " << why;
