@@ -1505,9 +1505,10 @@ TEST_P(Stages, NodeLanesKernelsRunWhereToldWithTheEightLaneBits) {
 /// Pass 4 over the whole mesh drops the force slots' lines it has read
 /// from the L2 (ModelView::discard_slots) where the slots exceed half the
 /// device's L2: a box just past that size in float (on an H100, 413k
-/// elements and 79k nodes, whose node passes take two lanes a thread),
-/// stepped with and without the drop, bit for bit, in every step mode that
-/// runs pass 4 apart; then at depth 2 (no drop on a region). The steps
+/// elements and 74k nodes, whose node passes take two lanes a thread),
+/// stepped with and without the drop in the Graph and Launch modes (pass 4
+/// apart: the region is too large to fuse) and in the Grid mode (no drop),
+/// bit for bit; then at depth 2 (no drop on a region). The steps
 /// after a drop read no dropped slot: pass 3 writes every slot of the
 /// whole mesh before pass 4 reads it.
 TEST_P(Stages, PassFourDropsTheSlotsItReadWhereTheyExceedHalfTheL2) {
