@@ -110,8 +110,9 @@ __device__ __forceinline__ index_t dealt_index() {
 /// The chained node passes' launches this process has queued (pass 2:
 /// pressures, pass 4: updates; eight threads a node, or two lanes a thread:
 /// lanes), counted on the host as they are launched or captured into a
-/// graph: the tests' evidence of which kernels a region ran
-/// (cuda_node_pass_launches, cuda/cuda_backend.hpp).
+/// graph (a region of no nodes launches nothing and counts nothing): the
+/// tests' evidence of which kernels a region ran (cuda_node_pass_launches,
+/// cuda/cuda_backend.hpp).
 struct NodePassLaunches {
   std::atomic<std::int64_t> pressures{0}, pressures_lanes{0}, updates{0}, updates_lanes{0};
   void count(bool pressure_pass, bool lanes) {

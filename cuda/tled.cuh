@@ -608,7 +608,7 @@ bool runs_node_lanes(const ModelView<T>& m, const RegionView& r) {
 template <class T>
 void enqueue_nodal_pressures(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                              cudaStream_t stream) {
-  node_pass_launches.count(true, runs_node_lanes(m, r));
+  if (r.n_nodes > 0) node_pass_launches.count(true, runs_node_lanes(m, r));  // (launch_chained: none for 0)
   if (runs_node_lanes(m, r))
     launch_chained(kNodeLanes / kThreadLanes * r.n_nodes, stream, nodal_pressure_lanes_kernel<T, kThreadLanes>, m, s,
                    r);
@@ -859,9 +859,9 @@ __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r,
   if (active) node_update_lanes_at<T, kLoad, L>(m, s, b, d);
   if (m.discard_slots && !r.nodes) {  // the whole mesh: the warp's nodes, and so their slots, are consecutive
     __syncwarp();  // every lane's slots are summed
-    const index_t lo = __reduce_min_sync(~0u, active ? unsigned(d.first - d.lane) : ~0u);
-    const index_t hi = __reduce_max_sync(~0u, active ? unsigned(d.end) : 0u);
-    if (lo < hi) discard_slots(s.f_slot, lo, hi);
+    const unsigned lo = __reduce_min_sync(~0u, active ? unsigned(d.first - d.lane) : ~0u);
+    const unsigned hi = __reduce_max_sync(~0u, active ? unsigned(d.end) : 0u);
+    if (lo < hi) discard_slots(s.f_slot, index_t(lo), index_t(hi));  // (a warp past the region: none)
   }
 }
 
@@ -870,7 +870,7 @@ __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r,
 template <class T, bool kLoad>
 void enqueue_node_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
                          cudaStream_t stream) {
-  node_pass_launches.count(false, runs_node_lanes(m, r));
+  if (r.n_nodes > 0) node_pass_launches.count(false, runs_node_lanes(m, r));
   if (runs_node_lanes(m, r))
     launch_chained(kNodeLanes / kThreadLanes * r.n_nodes, stream, node_update_kernel<T, kLoad, kThreadLanes>, m, s, r,
                    b);
