@@ -168,8 +168,6 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   model_.n_windows = static_cast<index_t>(packs.first.size()) - 1;
   model_.pack_span = packs.span;
   model_.lanes_node_min = lanes_node_min();
-  model_.discard_slots = 2 * 4 * std::size_t(ne) * sizeof(Packed3<T>) >
-                        std::size_t(current_device_attribute(cudaDevAttrL2CacheSize));
   model_.slot_of = slot_of_.data();
   model_.node_divisor = node_divisor_.data();
   model_.tris = tris_.data();
@@ -185,6 +183,7 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   u_held_.allocate(n);
   f_.allocate(n);
   f_slot_.allocate(4 * size_t(ne));
+  model_.discard_slots = 2 * f_slot_.bytes() > std::size_t(current_device_attribute(cudaDevAttrL2CacheSize));
   elem_dv_[0].allocate(ne);
   held_.allocate(n);
   driven_.allocate(n);

@@ -282,7 +282,6 @@ __device__ __forceinline__ Vec3<T> node_group_sum(Vec3<T> x, unsigned mask) {
   return {node_group_sum(x.x, mask), node_group_sum(x.y, mask), node_group_sum(x.z, mask)};
 }
 
-
 /// node_group_sum of the lanes' partial sums, acc[i] being lane p + i P's
 /// (thread p of P = kNodeLanes / L): the pairs (v, v^1), (v, v^2), ... of
 /// node_group_sum, by shuffles while the partner is another thread's lane
@@ -513,7 +512,6 @@ __device__ __forceinline__ Vec3<T> corner_force(const ElementForces<T>& out, int
 // plain launch) before it touches the state, and does nothing in a tick
 // whose region must grow first (StateView::skip).
 
-
 template <class T, bool kRecomputed>
 __global__ void element_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
   let_next_pass_launch();
@@ -543,22 +541,22 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
 // ---- node passes, several of a node's lanes a thread ------------------------------
 
 /// The chained node kernels of a large region (nodal_pressure_lanes_kernel,
-/// node_update_kernel with L = kThreadLanes) run kNodeLanes / L threads per node, each
-/// taking L of the node's kNodeLanes lanes (lanes p, p + P, p + 2P, ... for
-/// P = kNodeLanes / L threads): a thread has L times the loads in flight
-/// and the pass needs L times fewer threads. Each lane's sum runs in its
-/// own order and the lanes' sums are added in node_group_sum's pairs
+/// node_update_kernel with L = kThreadLanes) run kNodeLanes / L threads per
+/// node, each taking L of the node's kNodeLanes lanes (lanes p, p + P, p +
+/// 2P, ... for P = kNodeLanes / L threads): a thread has L times the loads
+/// in flight and the pass needs L times fewer threads. Each lane's sum runs
+/// in its own order and the lanes' sums are added in node_group_sum's pairs
 /// (lane_group_sums), so the bits are those of kNodeLanes threads a node.
 /// The steps run L = 2 on regions of several waves (runs_node_lanes): on an
 /// H100, 1M tets +3-4 % and 4M +2.5 % against eight threads a node; four
 /// lanes a thread gained less, and 100k tets (under one wave) lost 4 % with
 /// two (docs/cuda.md, "Node passes with two lanes a thread").
 
-
-
 /// Pass 2 with L lanes a thread: the elements of each lane's first
 /// kPressureElements slots are loaded before the wait for pass 1; the same
-/// sums as nodal_pressure_at.
+/// sums as nodal_pressure_at. (Written once with nodal_pressure_kernel as
+/// the L = 1 case, both compiled to different code and the float and
+/// double steps ran 0.3-2 % slower on an H100, 2026-11-28; kept apart.)
 template <class T, int L>
 __global__ void nodal_pressure_lanes_kernel(ModelView<T> m, StateView<T> s, RegionView r) {
   constexpr int P = kNodeLanes / L;
@@ -591,7 +589,6 @@ __global__ void nodal_pressure_lanes_kernel(ModelView<T> m, StateView<T> s, Regi
   if (g % P == 0) s.node_p[n[0].d.a] = sum / __ldg(m.node_divisor + n[0].d.a);
 }
 
-
 /// Lanes a thread of the chained node passes on a large region
 /// (runs_node_lanes).
 inline constexpr int kThreadLanes = 2;
@@ -603,19 +600,29 @@ bool runs_node_lanes(const ModelView<T>& m, const RegionView& r) {
   return r.n_nodes >= m.lanes_node_min;
 }
 
-/// Queues pass 2 over region r: kNodeLanes threads a node, or kThreadLanes
-/// lanes a thread on a large region (runs_node_lanes); the same bits.
+/// Queues a node pass over region r (pressures: pass 2, else pass 4):
+/// `eight`, kNodeLanes threads a node, or `lanes`, kThreadLanes lanes a
+/// thread on a large region (runs_node_lanes; the same bits), counted in
+/// node_pass_launches.
+template <class T, class... Params, class... Args>
+void enqueue_node_pass(bool pressures, const ModelView<T>& m, const RegionView& r, cudaStream_t stream,
+                       void (*eight)(Params...), void (*lanes)(Params...), Args... args) {
+  if (r.n_nodes == 0) return;
+  const bool by_lanes = runs_node_lanes(m, r);
+  node_pass_launches.count(pressures, by_lanes);
+  if (by_lanes)
+    launch_chained(kNodeLanes / kThreadLanes * r.n_nodes, stream, lanes, args...);
+  else
+    launch_chained(kNodeLanes * r.n_nodes, stream, eight, args...);
+}
+
+/// Queues pass 2 over region r (enqueue_node_pass).
 template <class T>
 void enqueue_nodal_pressures(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                              cudaStream_t stream) {
-  if (r.n_nodes > 0) node_pass_launches.count(true, runs_node_lanes(m, r));  // (launch_chained: none for 0)
-  if (runs_node_lanes(m, r))
-    launch_chained(kNodeLanes / kThreadLanes * r.n_nodes, stream, nodal_pressure_lanes_kernel<T, kThreadLanes>, m, s,
-                   r);
-  else
-    launch_chained(kNodeLanes * r.n_nodes, stream, nodal_pressure_kernel<T>, m, s, r);
+  enqueue_node_pass(true, m, r, stream, nodal_pressure_kernel<T>, nodal_pressure_lanes_kernel<T, kThreadLanes>, m, s,
+                    r);
 }
-
 
 // ---- fused passes: a block per window of nodes, a thread per slot -------------
 
@@ -865,17 +872,13 @@ __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r,
   }
 }
 
-/// Queues pass 4 over region r from buffers b, as enqueue_nodal_pressures
-/// chooses its threads; kLoad: the state has an applied load.
+/// Queues pass 4 over region r from buffers b (enqueue_node_pass); kLoad:
+/// the state has an applied load.
 template <class T, bool kLoad>
 void enqueue_node_update(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b,
                          cudaStream_t stream) {
-  if (r.n_nodes > 0) node_pass_launches.count(false, runs_node_lanes(m, r));
-  if (runs_node_lanes(m, r))
-    launch_chained(kNodeLanes / kThreadLanes * r.n_nodes, stream, node_update_kernel<T, kLoad, kThreadLanes>, m, s, r,
-                   b);
-  else
-    launch_chained(kNodeLanes * r.n_nodes, stream, node_update_kernel<T, kLoad, 1>, m, s, r, b);
+  enqueue_node_pass(false, m, r, stream, node_update_kernel<T, kLoad, 1>, node_update_kernel<T, kLoad, kThreadLanes>, m,
+                    s, r, b);
 }
 
 // ---- persistent kernels: whole steps, a barrier between passes ----------------

@@ -1411,14 +1411,23 @@ TEST_P(Stages, BadInputGivesClearErrors) {
   EXPECT_THROW(set_cuda_step_mode(*cpu, CudaStepMode::Graph), std::invalid_argument);
 }
 
+/// An attribute of the current device (the queries' failures recorded; 0
+/// then).
+int device_attribute(cudaDeviceAttr attr) {
+  int dev = 0, v = 0;
+  EXPECT_EQ(cudaGetDevice(&dev), cudaSuccess);
+  EXPECT_EQ(cudaDeviceGetAttribute(&v, attr, dev), cudaSuccess);
+  return v;
+}
+
 /// The node passes take two lanes a thread from two waves of the device's
 /// resident threads at eight threads a node (ModelView::lanes_node_min).
 TEST_P(Stages, NodePassesTakeTwoLanesAThreadFromTwoWaves) {
   SKIP_WITHOUT_GPU();
-  int dev = 0, sms = 0, threads = 0;
-  ASSERT_EQ(cudaGetDevice(&dev), cudaSuccess);
-  ASSERT_EQ(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, dev), cudaSuccess);
-  ASSERT_EQ(cudaDeviceGetAttribute(&threads, cudaDevAttrMaxThreadsPerMultiProcessor, dev), cudaSuccess);
+  const int sms = device_attribute(cudaDevAttrMultiProcessorCount),
+            threads = device_attribute(cudaDevAttrMaxThreadsPerMultiProcessor);
+  ASSERT_GT(sms, 0);
+  ASSERT_GT(threads, 0);
   auto gpu = make_cuda_backend(GetParam());
   gpu->upload(box_model(4, 4, 4, 0.04, 0.04, 0.04));
   EXPECT_EQ(cuda_lanes_node_min(*gpu), index_t(2 * sms * threads / 8));
@@ -1515,9 +1524,8 @@ TEST_P(Stages, NodeLanesKernelsRunWhereToldWithTheEightLaneBits) {
 TEST_P(Stages, PassFourDropsTheSlotsItReadWhereTheyExceedHalfTheL2) {
   SKIP_WITHOUT_GPU();
   const Precision p = GetParam();
-  int dev = 0, l2 = 0;
-  ASSERT_EQ(cudaGetDevice(&dev), cudaSuccess);
-  ASSERT_EQ(cudaDeviceGetAttribute(&l2, cudaDevAttrL2CacheSize, dev), cudaSuccess);
+  const int l2 = device_attribute(cudaDevAttrL2CacheSize);
+  ASSERT_GT(l2, 0);
   // 2 x 4 slots x 16 bytes (float) an element > L2: 6 n^3 elements > L2 / 128
   const int n = static_cast<int>(std::cbrt(double(l2) / 128 / 6)) + 1;
   const auto m = box_model(n, n, n, 0.1, 0.1, 0.1);
@@ -1569,9 +1577,8 @@ TEST_P(Stages, PassFourDropsTheSlotsItReadWhereTheyExceedHalfTheL2) {
 /// Writes twice the device's L2 of scratch memory: every dirty line the L2
 /// held is written back to memory.
 void flush_l2() {
-  int dev = 0, l2 = 0;
-  ASSERT_EQ(cudaGetDevice(&dev), cudaSuccess);
-  ASSERT_EQ(cudaDeviceGetAttribute(&l2, cudaDevAttrL2CacheSize, dev), cudaSuccess);
+  const int l2 = device_attribute(cudaDevAttrL2CacheSize);
+  ASSERT_GT(l2, 0);
   void* scratch = nullptr;
   ASSERT_EQ(cudaMalloc(&scratch, 2 * std::size_t(l2)), cudaSuccess);
   EXPECT_EQ(cudaMemset(scratch, 0x5a, 2 * std::size_t(l2)), cudaSuccess);
