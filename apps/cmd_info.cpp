@@ -9,9 +9,13 @@ namespace tissue::app {
 void add_info_command(CLI::App& app, int& rc) {
   auto* cmd = app.add_subcommand("info", "List the backends, whether they were built and can run here");
   cmd->callback([&rc] {
-    for (const BackendInfo& b : list_backends())
+    for (const BackendInfo& b : list_backends()) {
       fmt::print("{:6} {:10} {}\n", b.name, b.available ? "available" : (b.built ? "no device" : "not built"),
                  b.detail);
+      if (b.built && b.float_math != "ieee")  // docs/cuda.md, "Float division and square root"
+        fmt::print("{:6} {:10} float division and square root: {} (TISSUE_CUDA_FAST_FLOAT_MATH; double: ieee)\n",
+                   "", "", b.float_math);
+    }
     rc = 0;
   });
 }

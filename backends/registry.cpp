@@ -15,7 +15,7 @@ std::vector<BackendInfo> list_backends() {
 #ifdef TISSUE_HAVE_CUDA
   std::string why;
   const bool gpu = cuda_available(&why);
-  out.push_back({"cuda", true, gpu, why});
+  out.push_back({"cuda", true, gpu, why, cuda_fast_float_math() ? "approximate" : "ieee"});
 #else
   out.push_back({"cuda", false, false, "not built: configure with -DTISSUE_WITH_CUDA=ON on a machine with the CUDA toolkit"});
 #endif
@@ -51,6 +51,15 @@ std::string element_gradients(Backend& backend) {
 #endif
   (void)backend;
   return "stored";
+}
+
+std::string float_math(const Backend& backend) {
+#ifdef TISSUE_HAVE_CUDA
+  if (backend.name() == "cuda" && backend.precision() == Precision::Float && cuda_fast_float_math())
+    return "approximate";
+#endif
+  (void)backend;
+  return "ieee";
 }
 
 }  // namespace tissue

@@ -15,6 +15,10 @@ struct BackendInfo {
   bool built = false;      ///< compiled into this binary
   bool available = false;  ///< built and usable on this machine (a GPU is present, ...)
   std::string detail;      ///< device name, or why it is unavailable
+  /// How its float kernels divide and take square roots: "ieee" (IEEE
+  /// round-to-nearest) or "approximate" (the cuda build's
+  /// TISSUE_CUDA_FAST_FLOAT_MATH; docs/cuda.md). Double is IEEE on both.
+  std::string float_math = "ieee";
 };
 
 /// Every known backend, built or not.
@@ -32,5 +36,9 @@ double measure_device_bandwidth(const std::string& name);
 /// volumes of its uploaded model: "stored" (loaded), or "recomputed" from
 /// the reference positions (the cuda backend's CudaGradients).
 std::string element_gradients(Backend& backend);
+
+/// BackendInfo::float_math of the backend at its precision: "approximate"
+/// for the cuda backend in float where the build chose it, else "ieee".
+std::string float_math(const Backend& backend);
 
 }  // namespace tissue

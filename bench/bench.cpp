@@ -111,6 +111,7 @@ struct Context {
     r.add("bench", bench);
     r.add("backend", b.name());
     r.add("precision", std::string(to_string(b.precision())));
+    r.add("float_math", float_math(b));
     r.add("device", device);
     r.add("date", date);
     r.add("measured_bandwidth_GBps", bandwidth * 1e-9);

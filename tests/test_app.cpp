@@ -372,6 +372,8 @@ TEST(Bench, LawRowsNameTheirLaw) {
   o.laws = {"neo-hookean", "visco", "fibre-visco"};
   std::vector<std::string> whole, tick;
   for (const std::string& row : bench::run_bench(o)) {
+    // every row says how its kernels divide: the cpu backend in IEEE arithmetic
+    EXPECT_NE(row.find("\"float_math\": \"ieee\""), std::string::npos) << row;
     const size_t k = row.find("\"law\": \"");
     if (k == std::string::npos) continue;
     const std::string law = row.substr(k + 8, row.find('"', k + 8) - (k + 8));
