@@ -14,7 +14,8 @@
 //       u = (g Y, 0, 0); the reaction on the face y = L is P e_y L^2 =
 //       (mu g, -mu g^2 / 3, 0) L^2.
 //
-// Each case runs on a coarse (2^3 cells) and a fine (6^3 cells, interior
+// Each case runs on the cpu backend and, where a GPU is present, on the cuda
+// backend (skipped elsewhere), in double and in float, on a coarse (2^3 cells) and a fine (6^3 cells, interior
 // nodes moved randomly by up to 20% of a cell) mesh. Linear tets reproduce a
 // homogeneous deformation exactly (the patch test) and IANP's averaged
 // pressure equals the element pressure when J is uniform, so the FE answer
@@ -115,12 +116,23 @@ struct Outcome {
   long steps = 0;
 };
 
+/// Which backend and precision a case runs on: every case runs on the cpu,
+/// and on the cuda backend where a GPU is present (its float kernels with the
+/// build's float division and square root: docs/cuda.md).
+struct Setup {
+  std::string backend;
+  Precision precision;
+};
+
+std::string to_string(const Setup& c) { return c.backend + " " + tissue::to_string(c.precision); }
+
 /// Relaxes `in` under `drive` and compares with the homogeneous field
 /// u = (F - I) X and the expected reaction `want` (N) measured by `reaction`.
-Outcome run(const ModelInput& in, const accuracy::Drive& drive, const double F[9], Precision p,
+Outcome run(const ModelInput& in, const accuracy::Drive& drive, const double F[9], const Setup& setup,
             const std::function<Vec3<double>(const Fields&, const Reductions&)>& reaction, Vec3<double> want) {
   const TissueModel<double> m = build_model(in);
-  auto backend = create_backend("cpu", p);
+  const Precision p = setup.precision;
+  auto backend = create_backend(setup.backend, p);
   accuracy::RelaxOptions o;
   if (p == Precision::Float) {
     o.residual_tol = 2e-4;  // above float's rounding floor (6e-5 at nu = 0.49 on the fine mesh)
@@ -183,15 +195,15 @@ void report(const std::string& what, const Mesh& mesh, const Outcome& o) {
                                               o.lateral_err));
 }
 
-void expect_close(const Outcome& o, Precision p) {
-  const double tight = p == Precision::Double ? 1e-5 : 5e-3;  // exact up to the relaxation tolerance
+void expect_close(const Outcome& o, const Setup& c) {
+  const double tight = c.precision == Precision::Double ? 1e-5 : 5e-3;  // exact up to the relaxation tolerance
   EXPECT_LT(o.disp_err, tight);
   EXPECT_LT(o.force_err, tight);
   EXPECT_LT(o.lateral_err, tight);
 }
 
 /// Uniaxial stretch s along z with free lateral faces.
-Outcome uniaxial(const Mesh& mesh, double s, double nu, Precision p) {
+Outcome uniaxial(const Mesh& mesh, double s, double nu, const Setup& p) {
   ModelInput in = cube(mesh.cells, mesh.jitter, nu);
   symmetry_planes(in);
   const Material mat = material(nu);
@@ -217,7 +229,7 @@ Outcome uniaxial(const Mesh& mesh, double s, double nu, Precision p) {
 }
 
 /// Equibiaxial stretch s in x and y, free in z.
-Outcome equibiaxial(const Mesh& mesh, double s, double nu, Precision p) {
+Outcome equibiaxial(const Mesh& mesh, double s, double nu, const Setup& p) {
   ModelInput in = cube(mesh.cells, mesh.jitter, nu);
   symmetry_planes(in);
   const Material mat = material(nu);
@@ -247,7 +259,7 @@ Outcome equibiaxial(const Mesh& mesh, double s, double nu, Precision p) {
 }
 
 /// Simple shear u = (g Y, 0, 0) on every boundary node.
-Outcome simple_shear(const Mesh& mesh, double g, double nu, Precision p) {
+Outcome simple_shear(const Mesh& mesh, double g, double nu, const Setup& p) {
   ModelInput in = cube(mesh.cells, mesh.jitter, nu);
   const Material mat = material(nu);
   accuracy::Drive d;
@@ -271,9 +283,19 @@ Outcome simple_shear(const Mesh& mesh, double g, double nu, Precision p) {
       {mat.mu * g * kL * kL, -mat.mu * g * g / 3 * kL * kL, 0});
 }
 
-class ClosedForm : public ::testing::TestWithParam<Precision> {};
-INSTANTIATE_TEST_SUITE_P(Precisions, ClosedForm, ::testing::Values(Precision::Double, Precision::Float),
-                         [](const auto& info) { return std::string(to_string(info.param)); });
+class ClosedForm : public ::testing::TestWithParam<Setup> {
+ protected:
+  void SetUp() override {
+    for (const BackendInfo& b : list_backends())
+      if (b.name == GetParam().backend && !b.available) GTEST_SKIP() << b.name << ": " << b.detail;
+  }
+};
+INSTANTIATE_TEST_SUITE_P(Backends, ClosedForm,
+                         ::testing::Values(Setup{"cpu", Precision::Double}, Setup{"cpu", Precision::Float},
+                                           Setup{"cuda", Precision::Double}, Setup{"cuda", Precision::Float}),
+                         [](const auto& info) {
+                           return info.param.backend + "_" + std::string(tissue::to_string(info.param.precision));
+                         });
 
 TEST_P(ClosedForm, UniaxialTension) {
   for (const Mesh& mesh : {kCoarse, kFine}) {
