@@ -13,7 +13,8 @@ void add_info_command(CLI::App& app, int& rc) {
       fmt::print("{:6} {:10} {}\n", b.name, b.available ? "available" : (b.built ? "no device" : "not built"),
                  b.detail);
       if (b.built && b.float_math != "ieee")  // docs/cuda.md, "Float division and square root"
-        fmt::print("{:6} {:10} float division and square root: {} (TISSUE_CUDA_FAST_FLOAT_MATH; double: ieee)\n",
+        fmt::print("{:6} {:10} float division and square root: {}, denormals flushed "
+                   "(TISSUE_CUDA_FAST_FLOAT_MATH; double: ieee)\n",
                    "", "", b.float_math);
     }
     rc = 0;

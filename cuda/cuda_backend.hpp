@@ -31,21 +31,24 @@ void set_cuda_memory_limit(std::size_t bytes);
 double cuda_copy_bandwidth();
 
 /// Whether this build's kernels divide and take square roots in float with
-/// nvcc's approximate forms (CMake option TISSUE_CUDA_FAST_FLOAT_MATH, on by
-/// default: -prec-div=false -prec-sqrt=false) rather than IEEE
-/// round-to-nearest. Double precision is IEEE either way (docs/cuda.md,
-/// "Float division and square root").
+/// nvcc's approximate forms and flush float denormals to zero (CMake option
+/// TISSUE_CUDA_FAST_FLOAT_MATH, on by default: -prec-div=false
+/// -prec-sqrt=false -ftz=true) rather than IEEE round-to-nearest with
+/// denormals. Double precision is IEEE either way (docs/cuda.md, "Float
+/// division and square root").
 bool cuda_fast_float_math();
 
 /// The float division and square root of this build's kernels, measured on
 /// the device against the host's IEEE operations over `samples` fixed
 /// pseudo-random operands (mantissas at random, exponents in [-20, 20]):
-/// how many results differ and by how many ulps at most. Throws
+/// how many results differ and by how many ulps at most; and whether a
+/// product below the smallest normal float comes out as 0. Throws
 /// std::runtime_error without a GPU.
 struct CudaFloatMathProbe {
   index_t samples = 0;
   long div_differ = 0, sqrt_differ = 0;
   long div_ulps_max = 0, sqrt_ulps_max = 0;
+  bool flushes_denormals = false;
 };
 CudaFloatMathProbe cuda_probe_float_math(index_t samples = index_t(1) << 20);
 

@@ -25,6 +25,9 @@ __global__ void float_math_kernel(index_t n, const float* a, const float* b, flo
   root[i] = std::sqrt(a[i]);
 }
 
+// a * b for a product below the smallest normal float (denormal, or 0 where flushed)
+__global__ void denormal_kernel(const float* a, const float* b, float* product) { *product = *a * *b; }
+
 /// Distance in ulps of two finite floats of the same sign.
 long ulps_apart(float x, float y) {
   if (std::signbit(x) != std::signbit(y)) return -1;
@@ -68,6 +71,13 @@ CudaFloatMathProbe cuda_probe_float_math(index_t samples) {
   CUDA_CHECK(cudaMemcpy(r.data(), dr.data(), bytes, cudaMemcpyDeviceToHost));
   CudaFloatMathProbe p;
   p.samples = samples;
+  const float tiny[2] = {1e-20f, 1e-20f};  // 1e-40: a denormal
+  float product = -1;
+  CUDA_CHECK(cudaMemcpy(da.data(), tiny, sizeof(tiny), cudaMemcpyHostToDevice));
+  gpu::denormal_kernel<<<1, 1>>>(da.data(), da.data() + 1, dq.data() + samples - 1);
+  CUDA_CHECK(cudaGetLastError());
+  CUDA_CHECK(cudaMemcpy(&product, dq.data() + samples - 1, sizeof(float), cudaMemcpyDeviceToHost));
+  p.flushes_denormals = product == 0.0f;
   for (index_t i = 0; i < samples; ++i) {
     const long dq_ulps = gpu::ulps_apart(q[i], a[i] / b[i]), dr_ulps = gpu::ulps_apart(r[i], std::sqrt(a[i]));
     if (dq_ulps < 0 || dr_ulps < 0 || !std::isfinite(q[i]) || !std::isfinite(r[i]))

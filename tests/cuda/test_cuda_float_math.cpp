@@ -17,10 +17,11 @@ TEST(FloatMath, KernelsDivideAndTakeRootsAsTheBuildSays) {
   SKIP_WITHOUT_GPU();
   const CudaFloatMathProbe p = cuda_probe_float_math();
   std::printf("[measured] %s build, %ld operands: x/y differs from IEEE in %ld (at most %ld ulp), sqrt in %ld "
-              "(at most %ld ulp)\n",
+              "(at most %ld ulp); denormals %s\n",
               cuda_fast_float_math() ? "approximate" : "ieee", long(p.samples), p.div_differ, p.div_ulps_max,
-              p.sqrt_differ, p.sqrt_ulps_max);
+              p.sqrt_differ, p.sqrt_ulps_max, p.flushes_denormals ? "flushed" : "kept");
   ASSERT_EQ(p.samples, index_t(1) << 20);
+  EXPECT_EQ(p.flushes_denormals, cuda_fast_float_math());  // -ftz=true comes with the approximate forms
   if (cuda_fast_float_math()) {
     // the approximate forms were asked for: some results must show it, else the flags never reached the kernels
     EXPECT_GT(p.div_differ, 0);
