@@ -71,12 +71,13 @@ CudaFloatMathProbe cuda_probe_float_math(index_t samples) {
   CUDA_CHECK(cudaMemcpy(r.data(), dr.data(), bytes, cudaMemcpyDeviceToHost));
   CudaFloatMathProbe p;
   p.samples = samples;
-  const float tiny[2] = {1e-20f, 1e-20f};  // 1e-40: a denormal
+  const float tiny[3] = {1e-20f, 1e-20f, -1.0f};  // their product, 1e-40, is a denormal
   float product = -1;
-  CUDA_CHECK(cudaMemcpy(da.data(), tiny, sizeof(tiny), cudaMemcpyHostToDevice));
-  gpu::denormal_kernel<<<1, 1>>>(da.data(), da.data() + 1, dq.data() + samples - 1);
+  gpu::DeviceArray<float> dt(3);
+  CUDA_CHECK(cudaMemcpy(dt.data(), tiny, sizeof(tiny), cudaMemcpyHostToDevice));
+  gpu::denormal_kernel<<<1, 1>>>(dt.data(), dt.data() + 1, dt.data() + 2);
   CUDA_CHECK(cudaGetLastError());
-  CUDA_CHECK(cudaMemcpy(&product, dq.data() + samples - 1, sizeof(float), cudaMemcpyDeviceToHost));
+  CUDA_CHECK(cudaMemcpy(&product, dt.data() + 2, sizeof(float), cudaMemcpyDeviceToHost));
   p.flushes_denormals = product == 0.0f;
   for (index_t i = 0; i < samples; ++i) {
     const long dq_ulps = gpu::ulps_apart(q[i], a[i] / b[i]), dr_ulps = gpu::ulps_apart(r[i], std::sqrt(a[i]));

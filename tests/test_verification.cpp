@@ -119,16 +119,17 @@ struct Outcome {
 /// Which backend and precision a case runs on: every case runs on the cpu,
 /// and on the cuda backend where a GPU is present (its float kernels with the
 /// build's float division and square root: docs/cuda.md).
-struct Setup {
+struct BackendCase {
   std::string backend;
   Precision precision;
 };
 
-std::string to_string(const Setup& c) { return c.backend + " " + tissue::to_string(c.precision); }
+std::string to_string(const BackendCase& c) { return c.backend + " " + tissue::to_string(c.precision); }
+void PrintTo(const BackendCase& c, std::ostream* os) { *os << to_string(c); }  // gtest's failure messages
 
 /// Relaxes `in` under `drive` and compares with the homogeneous field
 /// u = (F - I) X and the expected reaction `want` (N) measured by `reaction`.
-Outcome run(const ModelInput& in, const accuracy::Drive& drive, const double F[9], const Setup& setup,
+Outcome run(const ModelInput& in, const accuracy::Drive& drive, const double F[9], const BackendCase& setup,
             const std::function<Vec3<double>(const Fields&, const Reductions&)>& reaction, Vec3<double> want) {
   const TissueModel<double> m = build_model(in);
   const Precision p = setup.precision;
@@ -195,7 +196,7 @@ void report(const std::string& what, const Mesh& mesh, const Outcome& o) {
                                               o.lateral_err));
 }
 
-void expect_close(const Outcome& o, const Setup& c) {
+void expect_close(const Outcome& o, const BackendCase& c) {
   const double tight = c.precision == Precision::Double ? 1e-5 : 5e-3;  // exact up to the relaxation tolerance
   EXPECT_LT(o.disp_err, tight);
   EXPECT_LT(o.force_err, tight);
@@ -203,7 +204,7 @@ void expect_close(const Outcome& o, const Setup& c) {
 }
 
 /// Uniaxial stretch s along z with free lateral faces.
-Outcome uniaxial(const Mesh& mesh, double s, double nu, const Setup& p) {
+Outcome uniaxial(const Mesh& mesh, double s, double nu, const BackendCase& p) {
   ModelInput in = cube(mesh.cells, mesh.jitter, nu);
   symmetry_planes(in);
   const Material mat = material(nu);
@@ -229,7 +230,7 @@ Outcome uniaxial(const Mesh& mesh, double s, double nu, const Setup& p) {
 }
 
 /// Equibiaxial stretch s in x and y, free in z.
-Outcome equibiaxial(const Mesh& mesh, double s, double nu, const Setup& p) {
+Outcome equibiaxial(const Mesh& mesh, double s, double nu, const BackendCase& p) {
   ModelInput in = cube(mesh.cells, mesh.jitter, nu);
   symmetry_planes(in);
   const Material mat = material(nu);
@@ -259,7 +260,7 @@ Outcome equibiaxial(const Mesh& mesh, double s, double nu, const Setup& p) {
 }
 
 /// Simple shear u = (g Y, 0, 0) on every boundary node.
-Outcome simple_shear(const Mesh& mesh, double g, double nu, const Setup& p) {
+Outcome simple_shear(const Mesh& mesh, double g, double nu, const BackendCase& p) {
   ModelInput in = cube(mesh.cells, mesh.jitter, nu);
   const Material mat = material(nu);
   accuracy::Drive d;
@@ -283,7 +284,7 @@ Outcome simple_shear(const Mesh& mesh, double g, double nu, const Setup& p) {
       {mat.mu * g * kL * kL, -mat.mu * g * g / 3 * kL * kL, 0});
 }
 
-class ClosedForm : public ::testing::TestWithParam<Setup> {
+class ClosedForm : public ::testing::TestWithParam<BackendCase> {
  protected:
   void SetUp() override {
     for (const BackendInfo& b : list_backends())
@@ -291,8 +292,10 @@ class ClosedForm : public ::testing::TestWithParam<Setup> {
   }
 };
 INSTANTIATE_TEST_SUITE_P(Backends, ClosedForm,
-                         ::testing::Values(Setup{"cpu", Precision::Double}, Setup{"cpu", Precision::Float},
-                                           Setup{"cuda", Precision::Double}, Setup{"cuda", Precision::Float}),
+                         ::testing::Values(BackendCase{"cpu", Precision::Double},
+                                           BackendCase{"cpu", Precision::Float},
+                                           BackendCase{"cuda", Precision::Double},
+                                           BackendCase{"cuda", Precision::Float}),
                          [](const auto& info) {
                            return info.param.backend + "_" + std::string(tissue::to_string(info.param.precision));
                          });
