@@ -9,13 +9,20 @@
 
 namespace tissue {
 
+#ifdef TISSUE_HAVE_CUDA
+namespace {
+/// BackendInfo::float_math of this build's cuda float kernels.
+std::string cuda_float_math() { return cuda_fast_float_math() ? "approximate" : "ieee"; }
+}  // namespace
+#endif
+
 std::vector<BackendInfo> list_backends() {
   std::vector<BackendInfo> out;
   out.push_back({"cpu", true, true, cpu_device_name()});
 #ifdef TISSUE_HAVE_CUDA
   std::string why;
   const bool gpu = cuda_available(&why);
-  out.push_back({"cuda", true, gpu, why, cuda_fast_float_math() ? "approximate" : "ieee"});
+  out.push_back({"cuda", true, gpu, why, cuda_float_math()});
 #else
   out.push_back({"cuda", false, false, "not built: configure with -DTISSUE_WITH_CUDA=ON on a machine with the CUDA toolkit"});
 #endif
@@ -55,8 +62,7 @@ std::string element_gradients(Backend& backend) {
 
 std::string float_math(const Backend& backend) {
 #ifdef TISSUE_HAVE_CUDA
-  if (backend.name() == "cuda" && backend.precision() == Precision::Float && cuda_fast_float_math())
-    return "approximate";
+  if (backend.name() == "cuda" && backend.precision() == Precision::Float) return cuda_float_math();
 #endif
   (void)backend;
   return "ieee";

@@ -75,8 +75,7 @@ CudaFloatMathProbe cuda_probe_float_math(index_t samples) {
   float product = -1;
   gpu::DeviceArray<float> dt(3);
   CUDA_CHECK(cudaMemcpy(dt.data(), tiny, sizeof(tiny), cudaMemcpyHostToDevice));
-  gpu::denormal_kernel<<<1, 1>>>(dt.data(), dt.data() + 1, dt.data() + 2);
-  CUDA_CHECK(cudaGetLastError());
+  gpu::launch_blocks(1, 1, nullptr, gpu::denormal_kernel, dt.data(), dt.data() + 1, dt.data() + 2);
   CUDA_CHECK(cudaMemcpy(&product, dt.data() + 2, sizeof(float), cudaMemcpyDeviceToHost));
   p.flushes_denormals = product == 0.0f;
   for (index_t i = 0; i < samples; ++i) {

@@ -38,6 +38,7 @@
 #include "backends/registry.hpp"
 #include "core/box_mesh.hpp"
 #include "core/model.hpp"
+#include "tests/backend_test_support.hpp"
 
 namespace tissue {
 namespace {
@@ -119,13 +120,9 @@ struct Outcome {
 /// Which backend and precision a case runs on: every case runs on the cpu,
 /// and on the cuda backend where a GPU is present (its float kernels with the
 /// build's float division and square root: docs/cuda.md).
-struct BackendCase {
-  std::string backend;
-  Precision precision;
-};
+using BackendCase = test::BackendKind;
 
 std::string to_string(const BackendCase& c) { return c.backend + " " + tissue::to_string(c.precision); }
-void PrintTo(const BackendCase& c, std::ostream* os) { *os << to_string(c); }  // gtest's failure messages
 
 /// Relaxes `in` under `drive` and compares with the homogeneous field
 /// u = (F - I) X and the expected reaction `want` (N) measured by `reaction`.
@@ -286,19 +283,9 @@ Outcome simple_shear(const Mesh& mesh, double g, double nu, const BackendCase& p
 
 class ClosedForm : public ::testing::TestWithParam<BackendCase> {
  protected:
-  void SetUp() override {
-    for (const BackendInfo& b : list_backends())
-      if (b.name == GetParam().backend && !b.available) GTEST_SKIP() << b.name << ": " << b.detail;
-  }
+  void SetUp() override { SKIP_UNLESS_USABLE(GetParam().backend); }
 };
-INSTANTIATE_TEST_SUITE_P(Backends, ClosedForm,
-                         ::testing::Values(BackendCase{"cpu", Precision::Double},
-                                           BackendCase{"cpu", Precision::Float},
-                                           BackendCase{"cuda", Precision::Double},
-                                           BackendCase{"cuda", Precision::Float}),
-                         [](const auto& info) {
-                           return info.param.backend + "_" + std::string(tissue::to_string(info.param.precision));
-                         });
+INSTANTIATE_TEST_SUITE_P(Backends, ClosedForm, ::testing::ValuesIn(test::all_backend_kinds()), test::backend_kind_name);
 
 TEST_P(ClosedForm, UniaxialTension) {
   for (const Mesh& mesh : {kCoarse, kFine}) {
