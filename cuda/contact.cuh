@@ -11,6 +11,8 @@
 // kernels and the persistent kernels of cuda/tled.cuh; nvcc only.
 #pragma once
 
+#include <type_traits>
+
 #include "core/contact.hpp"
 #include "core/model.hpp"
 #include "core/node_rules.hpp"
@@ -58,6 +60,9 @@ __device__ __forceinline__ TriangleModel<T> load_triangle(const ModelView<T>& m,
 
 /// The state of a triangle's corners that a sweep reads, loaded together
 /// before any of it is used (grasped or not): one round trip to memory.
+/// Their role and held mask are set between advances (the region build, the
+/// constraints), never by a step's kernels, so the sweep kernel loads them
+/// before its wait (load_corner_roles), the rest after (load_corner_motion).
 template <class T>
 struct CornerState {
   std::uint8_t contact[3], role[3], held[3];
@@ -65,17 +70,31 @@ struct CornerState {
 };
 
 template <class T>
+__device__ __forceinline__ void load_corner_roles(const StateView<T>& s, const TriangleModel<T>& tm,
+                                                  CornerState<T>& cs) {
+#pragma unroll
+  for (int i = 0; i < 3; ++i) {
+    cs.role[i] = s.role[tm.c[i]];
+    cs.held[i] = s.held[tm.c[i]];
+  }
+}
+
+template <class T>
+__device__ __forceinline__ void load_corner_motion(const StateView<T>& s, const TriangleModel<T>& tm,
+                                                   const Packed3<T>* u, CornerState<T>& cs) {
+#pragma unroll
+  for (int i = 0; i < 3; ++i) {
+    cs.contact[i] = s.contact[tm.c[i]];
+    cs.free[i] = tm.X[i] + u[tm.c[i]].vec();
+  }
+}
+
+template <class T>
 __device__ __forceinline__ CornerState<T> load_corner_state(const StateView<T>& s, const TriangleModel<T>& tm,
                                                             const Packed3<T>* u) {
   CornerState<T> cs;
-#pragma unroll
-  for (int i = 0; i < 3; ++i) {
-    const index_t a = tm.c[i];
-    cs.contact[i] = s.contact[a];
-    cs.role[i] = s.role[a];
-    cs.held[i] = s.held[a];
-    cs.free[i] = tm.X[i] + u[a].vec();
-  }
+  load_corner_roles(s, tm, cs);
+  load_corner_motion(s, tm, u, cs);
   return cs;
 }
 
@@ -185,14 +204,15 @@ struct TouchingTriangle {
   std::uint8_t block[3];
 };
 
-/// Surface triangle t's sweep input in step k (its model part tm) into tri:
-/// its corners' positions and blocks (corner_block), from their state loaded
-/// together; whether it may touch a tool.
+/// Surface triangle t's sweep input in step k (its model part tm, its
+/// corners' roles in cs) into tri: its corners' positions and blocks
+/// (corner_block), from the rest of their state loaded together; whether it
+/// may touch a tool.
 template <class T>
 __device__ __forceinline__ bool may_touch(const StateView<T>& s, const ContactTools<T>& tools,
                                           const StepCapsules<T>& capsule, const Packed3<T>* u_next, index_t t,
-                                          const TriangleModel<T>& tm, TouchingTriangle<T>& tri) {
-  const CornerState<T> cs = load_corner_state(s, tm, u_next);
+                                          const TriangleModel<T>& tm, CornerState<T> cs, TouchingTriangle<T>& tri) {
+  load_corner_motion(s, tm, u_next, cs);
   tri.t = t;
 #pragma unroll
   for (int i = 0; i < 3; ++i) {
@@ -225,7 +245,13 @@ __device__ void sweep_warp_triangles(const ModelView<T>& m, const StateView<T>& 
                                      int k, const Packed3<T>* u_next, index_t t) {
   const StepCapsules<T> capsule{tools, k};
   TouchingTriangle<T> mine{};
-  const bool touching = t < m.n_tris && may_touch(s, tools, capsule, u_next, t, load_triangle(m, t), mine);
+  bool touching = false;
+  if (t < m.n_tris) {
+    const TriangleModel<T> tm = load_triangle(m, t);
+    CornerState<T> roles;
+    load_corner_roles(s, tm, roles);
+    touching = may_touch(s, tools, capsule, u_next, t, tm, roles, mine);
+  }
   unsigned left = __ballot_sync(~0u, touching);
   const int lane = int(threadIdx.x % 32), group = lane / kSweepLanes;
   const SweepLanes<T> lanes = sweep_lanes_of<T>(lane);
@@ -377,9 +403,20 @@ __device__ __forceinline__ void copy_tools(const ContactTools<T>* tools, Contact
 /// may launch only once this kernel's wait is over: launched as the sweep
 /// started, its blocks waited on the multiprocessors beside the force
 /// pass's (the kidney's ticks 2.7-3.9 % shorter; docs/cuda.md, "The sweep
-/// lets the merge launch after its wait").
+/// lets the merge launch after its wait"). The triangle's corners' roles load
+/// before the wait with its model part (load_corner_roles).
+///
+/// Its blocks of 256 are compiled to fit three an SM in float (80
+/// registers, was 92: two an SM), so that a surface of 100k triangles (395
+/// blocks) is tested in one wave on 132 SMs, not two (the 100k slab's
+/// contact stage 10.3-10.4 -> 8.9-9.1 us a step on an H200; docs/cuda.md, "The sweep
+/// in one wave"). In double (154 registers) three would spill hundreds of
+/// bytes: it keeps one block an SM.
 template <class T>
-__global__ void __launch_bounds__(kBlock)
+inline constexpr int kSweepBlocksPerSM = std::is_same_v<T, float> ? 3 : 1;
+
+template <class T>
+__global__ void __launch_bounds__(kBlock, kSweepBlocksPerSM<T>)
     sweep_triangles_kernel(ModelView<T> m, StateView<T> s, const ContactTools<T>* tools, int k,
                            const Packed3<T>* u_next) {
   __shared__ alignas(TouchingTriangle<T>) unsigned char raw[kBlock * sizeof(TouchingTriangle<T>)];
@@ -390,7 +427,11 @@ __global__ void __launch_bounds__(kBlock)
   const index_t t = thread_index();
   const bool active = t < m.n_tris;
   TriangleModel<T> tm;
-  if (active) tm = load_triangle(m, t);
+  CornerState<T> roles;
+  if (active) {
+    tm = load_triangle(m, t);
+    load_corner_roles(s, tm, roles);
+  }
   if (threadIdx.x == 0) n_touching = 0;
   copy_tools(tools, sh_tools);
   wait_for_previous_pass();
@@ -398,7 +439,7 @@ __global__ void __launch_bounds__(kBlock)
   __syncthreads();
   const StepCapsules<T> capsule{sh_tools, k};
   TouchingTriangle<T> tri;
-  if (active && !skipped(s) && may_touch(s, sh_tools, capsule, u_next, t, tm, tri))
+  if (active && !skipped(s) && may_touch(s, sh_tools, capsule, u_next, t, tm, roles, tri))
     touching[atomicAdd(&n_touching, 1)] = tri;  // in any order: each triangle's sweep is its own
   __syncthreads();
   const int warps = int(blockDim.x) / 32, group = int(threadIdx.x % 32) / kSweepLanes;
