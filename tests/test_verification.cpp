@@ -122,15 +122,13 @@ struct Outcome {
 /// build's float division and square root: docs/cuda.md).
 using BackendCase = test::BackendKind;
 
-std::string to_string(const BackendCase& c) { return c.backend + " " + tissue::to_string(c.precision); }
-
 /// Relaxes `in` under `drive` and compares with the homogeneous field
 /// u = (F - I) X and the expected reaction `want` (N) measured by `reaction`.
-Outcome run(const ModelInput& in, const accuracy::Drive& drive, const double F[9], const BackendCase& setup,
+Outcome run(const ModelInput& in, const accuracy::Drive& drive, const double F[9], const BackendCase& kind,
             const std::function<Vec3<double>(const Fields&, const Reductions&)>& reaction, Vec3<double> want) {
   const TissueModel<double> m = build_model(in);
-  const Precision p = setup.precision;
-  auto backend = create_backend(setup.backend, p);
+  const Precision p = kind.precision;
+  auto backend = create_backend(kind.backend, p);
   accuracy::RelaxOptions o;
   if (p == Precision::Float) {
     o.residual_tol = 2e-4;  // above float's rounding floor (6e-5 at nu = 0.49 on the fine mesh)
@@ -193,15 +191,15 @@ void report(const std::string& what, const Mesh& mesh, const Outcome& o) {
                                               o.lateral_err));
 }
 
-void expect_close(const Outcome& o, const BackendCase& c) {
-  const double tight = c.precision == Precision::Double ? 1e-5 : 5e-3;  // exact up to the relaxation tolerance
+void expect_close(const Outcome& o, const BackendCase& kind) {
+  const double tight = kind.precision == Precision::Double ? 1e-5 : 5e-3;  // exact up to the relaxation tolerance
   EXPECT_LT(o.disp_err, tight);
   EXPECT_LT(o.force_err, tight);
   EXPECT_LT(o.lateral_err, tight);
 }
 
 /// Uniaxial stretch s along z with free lateral faces.
-Outcome uniaxial(const Mesh& mesh, double s, double nu, const BackendCase& p) {
+Outcome uniaxial(const Mesh& mesh, double s, double nu, const BackendCase& kind) {
   ModelInput in = cube(mesh.cells, mesh.jitter, nu);
   symmetry_planes(in);
   const Material mat = material(nu);
@@ -216,7 +214,7 @@ Outcome uniaxial(const Mesh& mesh, double s, double nu, const BackendCase& p) {
   const double F[9] = {a, 0, 0, 0, a, 0, 0, 0, s};
   Fields last;
   Outcome o = run(
-      in, d, F, p,
+      in, d, F, kind,
       [&](const Fields& f, const Reductions& r) {
         last = f;
         return r.reaction;
@@ -227,7 +225,7 @@ Outcome uniaxial(const Mesh& mesh, double s, double nu, const BackendCase& p) {
 }
 
 /// Equibiaxial stretch s in x and y, free in z.
-Outcome equibiaxial(const Mesh& mesh, double s, double nu, const BackendCase& p) {
+Outcome equibiaxial(const Mesh& mesh, double s, double nu, const BackendCase& kind) {
   ModelInput in = cube(mesh.cells, mesh.jitter, nu);
   symmetry_planes(in);
   const Material mat = material(nu);
@@ -246,7 +244,7 @@ Outcome equibiaxial(const Mesh& mesh, double s, double nu, const BackendCase& p)
   const double F[9] = {s, 0, 0, 0, s, 0, 0, 0, c};
   Fields last;
   Outcome o = run(
-      in, d, F, p,
+      in, d, F, kind,
       [&](const Fields& f, const Reductions& r) {
         last = f;
         return Vec3<double>{r.reaction.x, r.reaction.y, 0};
@@ -257,7 +255,7 @@ Outcome equibiaxial(const Mesh& mesh, double s, double nu, const BackendCase& p)
 }
 
 /// Simple shear u = (g Y, 0, 0) on every boundary node.
-Outcome simple_shear(const Mesh& mesh, double g, double nu, const BackendCase& p) {
+Outcome simple_shear(const Mesh& mesh, double g, double nu, const BackendCase& kind) {
   ModelInput in = cube(mesh.cells, mesh.jitter, nu);
   const Material mat = material(nu);
   accuracy::Drive d;
@@ -272,7 +270,7 @@ Outcome simple_shear(const Mesh& mesh, double g, double nu, const BackendCase& p
   const std::vector<index_t> top = face(in, 1, kL);
   const double F[9] = {1, g, 0, 0, 1, 0, 0, 0, 1};
   return run(
-      in, d, F, p,
+      in, d, F, kind,
       [&](const Fields& f, const Reductions&) {
         Vec3<double> sum{0, 0, 0};
         for (index_t a : top) sum = sum + Vec3<double>{f.f[a], f.f[n + a], f.f[2 * n + a]};
@@ -290,7 +288,7 @@ INSTANTIATE_TEST_SUITE_P(Backends, ClosedForm, ::testing::ValuesIn(test::all_bac
 TEST_P(ClosedForm, UniaxialTension) {
   for (const Mesh& mesh : {kCoarse, kFine}) {
     const Outcome o = uniaxial(mesh, 1.25, 0.45, GetParam());
-    report(fmt::format("uniaxial tension 1.25, {}", to_string(GetParam())), mesh, o);
+    report(fmt::format("uniaxial tension 1.25, {}", ::testing::PrintToString(GetParam())), mesh, o);
     EXPECT_LT(o.force_err, 0.005);
     EXPECT_LT(o.lateral_err, 0.005);
     expect_close(o, GetParam());
@@ -300,7 +298,7 @@ TEST_P(ClosedForm, UniaxialTension) {
 TEST_P(ClosedForm, UniaxialCompression) {
   for (const Mesh& mesh : {kCoarse, kFine}) {
     const Outcome o = uniaxial(mesh, 0.8, 0.45, GetParam());
-    report(fmt::format("uniaxial compression 0.8, {}", to_string(GetParam())), mesh, o);
+    report(fmt::format("uniaxial compression 0.8, {}", ::testing::PrintToString(GetParam())), mesh, o);
     EXPECT_LT(o.force_err, 0.005);
     EXPECT_LT(o.lateral_err, 0.005);
     expect_close(o, GetParam());
@@ -310,7 +308,7 @@ TEST_P(ClosedForm, UniaxialCompression) {
 TEST_P(ClosedForm, UniaxialNearlyIncompressible) {
   for (const Mesh& mesh : {kCoarse, kFine}) {
     const Outcome o = uniaxial(mesh, 1.2, 0.49, GetParam());
-    report(fmt::format("uniaxial tension 1.2 at nu 0.49, {}", to_string(GetParam())), mesh, o);
+    report(fmt::format("uniaxial tension 1.2 at nu 0.49, {}", ::testing::PrintToString(GetParam())), mesh, o);
     EXPECT_LT(o.force_err, 0.005);
     EXPECT_LT(o.lateral_err, 0.005);
     expect_close(o, GetParam());
@@ -320,7 +318,7 @@ TEST_P(ClosedForm, UniaxialNearlyIncompressible) {
 TEST_P(ClosedForm, EquibiaxialStretch) {
   for (const Mesh& mesh : {kCoarse, kFine}) {
     const Outcome o = equibiaxial(mesh, 1.15, 0.45, GetParam());
-    report(fmt::format("equibiaxial 1.15, {}", to_string(GetParam())), mesh, o);
+    report(fmt::format("equibiaxial 1.15, {}", ::testing::PrintToString(GetParam())), mesh, o);
     EXPECT_LT(o.force_err, 0.005);
     EXPECT_LT(o.lateral_err, 0.005);
     expect_close(o, GetParam());
@@ -330,7 +328,7 @@ TEST_P(ClosedForm, EquibiaxialStretch) {
 TEST_P(ClosedForm, SimpleShear) {
   for (const Mesh& mesh : {kCoarse, kFine}) {
     const Outcome o = simple_shear(mesh, 0.4, 0.45, GetParam());
-    report(fmt::format("simple shear 0.4, {}", to_string(GetParam())), mesh, o);
+    report(fmt::format("simple shear 0.4, {}", ::testing::PrintToString(GetParam())), mesh, o);
     EXPECT_LT(o.force_err, 0.005);
     EXPECT_LT(o.disp_err, 0.005);
     expect_close(o, GetParam());
