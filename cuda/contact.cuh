@@ -58,44 +58,51 @@ __device__ __forceinline__ TriangleModel<T> load_triangle(const ModelView<T>& m,
   return tm;
 }
 
-/// The state of a triangle's corners that a sweep reads, loaded together
-/// before any of it is used (grasped or not): one round trip to memory.
-/// Their role and held mask are set between advances (the region build, the
-/// constraints), never by a step's kernels, so the sweep kernel loads them
-/// before its wait (load_corner_roles), the rest after (load_corner_motion).
+/// The role and held mask of a triangle's corners. The region build and the
+/// constraints set them between advances, never a step's kernels, so the
+/// sweep kernel loads them before its wait (load_corner_roles).
+struct CornerRoles {
+  std::uint8_t role[3], held[3];
+};
+
+/// The state of a triangle's corners that a sweep reads: their roles, and
+/// what the steps change, loaded together before any of it is used
+/// (grasped or not): one round trip to memory.
 template <class T>
-struct CornerState {
-  std::uint8_t contact[3], role[3], held[3];
+struct CornerState : CornerRoles {
+  std::uint8_t contact[3];
   Vec3<T> free[3];  ///< X + u: where a corner that is not grasped is
 };
 
 template <class T>
-__device__ __forceinline__ void load_corner_roles(const StateView<T>& s, const TriangleModel<T>& tm,
-                                                  CornerState<T>& cs) {
+__device__ __forceinline__ CornerRoles load_corner_roles(const StateView<T>& s, const TriangleModel<T>& tm) {
+  CornerRoles r;
 #pragma unroll
   for (int i = 0; i < 3; ++i) {
-    cs.role[i] = s.role[tm.c[i]];
-    cs.held[i] = s.held[tm.c[i]];
+    r.role[i] = s.role[tm.c[i]];
+    r.held[i] = s.held[tm.c[i]];
   }
+  return r;
 }
 
+/// The corners' state at u, their roles already loaded.
 template <class T>
-__device__ __forceinline__ void load_corner_motion(const StateView<T>& s, const TriangleModel<T>& tm,
-                                                   const Packed3<T>* u, CornerState<T>& cs) {
+__device__ __forceinline__ CornerState<T> load_corner_state(const StateView<T>& s, const TriangleModel<T>& tm,
+                                                            const Packed3<T>* u, const CornerRoles& roles) {
+  CornerState<T> cs;
+  static_cast<CornerRoles&>(cs) = roles;
 #pragma unroll
   for (int i = 0; i < 3; ++i) {
     cs.contact[i] = s.contact[tm.c[i]];
     cs.free[i] = tm.X[i] + u[tm.c[i]].vec();
   }
+  return cs;
 }
 
 template <class T>
 __device__ __forceinline__ CornerState<T> load_corner_state(const StateView<T>& s, const TriangleModel<T>& tm,
                                                             const Packed3<T>* u) {
-  CornerState<T> cs;
-  load_corner_roles(s, tm, cs);
-  load_corner_motion(s, tm, u, cs);
-  return cs;
+  return load_corner_state(s, tm, u, load_corner_roles(s, tm));
 }
 
 /// Corner i's position for the sweep of step k: a grasped corner at its
@@ -205,14 +212,15 @@ struct TouchingTriangle {
 };
 
 /// Surface triangle t's sweep input in step k (its model part tm, its
-/// corners' roles in cs) into tri: its corners' positions and blocks
+/// corners' roles) into tri: its corners' positions and blocks
 /// (corner_block), from the rest of their state loaded together; whether it
 /// may touch a tool.
 template <class T>
 __device__ __forceinline__ bool may_touch(const StateView<T>& s, const ContactTools<T>& tools,
                                           const StepCapsules<T>& capsule, const Packed3<T>* u_next, index_t t,
-                                          const TriangleModel<T>& tm, CornerState<T> cs, TouchingTriangle<T>& tri) {
-  load_corner_motion(s, tm, u_next, cs);
+                                          const TriangleModel<T>& tm, const CornerRoles& roles,
+                                          TouchingTriangle<T>& tri) {
+  const CornerState<T> cs = load_corner_state(s, tm, u_next, roles);
   tri.t = t;
 #pragma unroll
   for (int i = 0; i < 3; ++i) {
@@ -248,9 +256,7 @@ __device__ void sweep_warp_triangles(const ModelView<T>& m, const StateView<T>& 
   bool touching = false;
   if (t < m.n_tris) {
     const TriangleModel<T> tm = load_triangle(m, t);
-    CornerState<T> roles;
-    load_corner_roles(s, tm, roles);
-    touching = may_touch(s, tools, capsule, u_next, t, tm, roles, mine);
+    touching = may_touch(s, tools, capsule, u_next, t, tm, load_corner_roles(s, tm), mine);
   }
   unsigned left = __ballot_sync(~0u, touching);
   const int lane = int(threadIdx.x % 32), group = lane / kSweepLanes;
@@ -427,10 +433,10 @@ __global__ void __launch_bounds__(kBlock, kSweepBlocksPerSM<T>)
   const index_t t = thread_index();
   const bool active = t < m.n_tris;
   TriangleModel<T> tm;
-  CornerState<T> roles;
+  CornerRoles roles;
   if (active) {
     tm = load_triangle(m, t);
-    load_corner_roles(s, tm, roles);
+    roles = load_corner_roles(s, tm);
   }
   if (threadIdx.x == 0) n_touching = 0;
   copy_tools(tools, sh_tools);
