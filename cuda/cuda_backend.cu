@@ -610,6 +610,18 @@ void set_cuda_merge_wave_nodes(Backend& backend, index_t nodes) {
   gpu::with_cuda_backend(backend, [&](auto& b) { b.stepper().set_merge_wave_nodes(nodes); });
 }
 
+index_t cuda_streaming_elems(Backend& backend) {
+  return gpu::with_cuda_backend(backend, [](auto& b) { return b.stepper().limits().streaming_elems; });
+}
+
+void set_cuda_streaming_elems(Backend& backend, index_t elems) {
+  gpu::with_cuda_backend(backend, [&](auto& b) { b.stepper().set_streaming_elems(elems); });
+}
+
+std::int64_t cuda_streaming_force_launches() { return gpu::streaming_force_launches.load(); }
+
+void set_cuda_element_first_wave(index_t blocks) { gpu::element_first_wave_cap.store(std::max<index_t>(0, blocks)); }
+
 const char* to_string(CudaGradients g) {
   switch (g) {
     case CudaGradients::Auto: return "auto";

@@ -115,6 +115,27 @@ index_t cuda_merge_wave_nodes(Backend& backend);
 /// Overrides it (tests: 0 merges every surface in blocks of 64, the same bits).
 void set_cuda_merge_wave_nodes(Backend& backend, index_t nodes);
 
+/// Pass 3 runs its streaming kernel (three blocks an SM in double) over a
+/// region of more elements than this: where their force slots exceed half
+/// the L2. 0 in float, which has no such kernel (docs/cuda.md, "Later
+/// waves load after their wait").
+index_t cuda_streaming_elems(Backend& backend);
+/// Overrides it for this backend (tests: 1 runs the streaming kernel on
+/// every region in either precision, 0 never; the same bits).
+void set_cuda_streaming_elems(Backend& backend, index_t elems);
+
+/// Launches of pass 3's streaming kernel this process has queued (counted
+/// as they are launched or captured into a graph; replays add nothing).
+std::int64_t cuda_streaming_force_launches();
+
+/// Tests: at most `blocks` blocks of each launch of passes 1 and 3 (float;
+/// in double pass 3's streaming kernel) load their model data before
+/// waiting for the previous pass; the later ones wait first, as blocks past
+/// the device's first wave do (docs/cuda.md,
+/// "Later waves load after their wait"). Process-wide, read when a launch is
+/// queued or a graph captured; 0 restores the device's first wave.
+void set_cuda_element_first_wave(index_t blocks);
+
 /// CudaGradients (cuda/gradients.hpp) by name: "auto", "stored", "recomputed".
 const char* to_string(CudaGradients g);
 

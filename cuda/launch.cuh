@@ -122,4 +122,15 @@ struct NodePassLaunches {
 };
 inline NodePassLaunches node_pass_launches;
 
+/// Launches of element_forces_streaming_kernel this process has queued,
+/// counted on the host as they are launched or captured into a graph
+/// (cuda_streaming_force_launches: the tests' evidence that it ran).
+inline std::atomic<std::int64_t> streaming_force_launches{0};
+
+/// Tests: at most this many blocks of an element pass's launch load before
+/// their wait (set_cuda_element_first_wave); 0: the device's first wave
+/// (first_wave_blocks, cuda/tled.cuh).
+/// Read when a launch is queued or a graph captured.
+inline std::atomic<index_t> element_first_wave_cap{0};
+
 }  // namespace tissue::gpu

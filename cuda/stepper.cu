@@ -90,6 +90,8 @@ void Stepper<T>::init() {
   limits_.law_cluster_size = std::min(largest_cluster<T, true, false>(), largest_cluster<T, true, true>());
   limits_.fused_force_blocks = fused_force_blocks<T>();
   limits_.merge_wave_nodes = merge_wave_nodes<T>();
+  if constexpr (kStreamingForceBlocks<T> > 0)
+    limits_.streaming_elems = index_t(current_device_attribute(cudaDevAttrL2CacheSize) / (2 * 4 * sizeof(Packed3<T>)));
 }
 
 template <class T>
@@ -116,7 +118,7 @@ template <class T>
 void Stepper<T>::element_pressure(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                                   const Packed3<T>* u, cudaStream_t stream, const RegionView* gradients_of) {
   with_gradients(m, gradients_of ? *gradients_of : r, [&](auto recomputed) {
-    launch_chained(r.n_elems, stream, element_pressure_kernel<T, decltype(recomputed)::value>, m, s, r, u);
+    enqueue_element_pressures<T, decltype(recomputed)::value>(m, s, r, u, stream);
   });
 }
 
@@ -133,8 +135,14 @@ void Stepper<T>::element_forces(const ModelView<T>& m, const StateView<T>& s, co
     constexpr bool kRecomputed = decltype(recomputed)::value;
     if (beside_check && law_.neo_hookean())  // (a law kernel's Prony state must not move before the check)
       launch_chained(r.n_elems, stream, element_forces_beside_check_kernel<T, kRecomputed>, m, s, r, u);
+    else if (law_.neo_hookean() && streams_slots(r)) {
+      launch_chained(r.n_elems, stream, element_forces_streaming_kernel<T, kRecomputed>, m, s, r, u,
+                     first_wave_blocks<element_forces_streaming_kernel<T, kRecomputed>>());
+      if (r.n_elems > 0) streaming_force_launches.fetch_add(1, std::memory_order_relaxed);
+    }
     else if (law_.neo_hookean())
-      launch_chained(r.n_elems, stream, element_forces_kernel<T, kRecomputed>, m, s, r, u);
+      launch_chained(r.n_elems, stream, element_forces_kernel<T, kRecomputed>, m, s, r, u,
+                     first_wave_blocks<element_forces_kernel<T, kRecomputed>>());
     else
       launch_chained(r.n_elems, stream, law_element_forces_kernel<T, kRecomputed>, m, s, r, u, law_);
   });

@@ -91,6 +91,11 @@ struct PersistentLimits {
   /// in one wave of blocks of kBlock threads; a surface of more is merged in
   /// blocks of kSmallMergeBlock (Stepper::merge_block).
   index_t merge_wave_nodes = 0;
+  /// Regions of more elements than this write force slots (four a
+  /// element) beyond half the L2: pass 3 then runs its streaming kernel
+  /// (element_forces_streaming_kernel; Stepper::streams_slots). 0: the
+  /// precision has none (kStreamingForceBlocks).
+  index_t streaming_elems = 0;
 };
 
 /// Threads per block of the merge on a surface larger than one wave of
@@ -155,6 +160,18 @@ class Stepper {
   /// in blocks of kSmallMergeBlock, the same bits).
   void set_merge_wave_nodes(index_t nodes) {
     limits_.merge_wave_nodes = nodes;
+    graphs_.clear();
+  }
+  /// Whether pass 3 over region r runs its streaming kernel
+  /// (PersistentLimits::streaming_elems; Neo-Hookean models).
+  bool streams_slots(const RegionView& r) const {
+    return limits_.streaming_elems > 0 && r.n_elems > limits_.streaming_elems;
+  }
+  /// Sets PersistentLimits::streaming_elems (tests: 1 runs the streaming
+  /// kernel on every region of two elements or more, in either precision;
+  /// 0 never; the same bits).
+  void set_streaming_elems(index_t elems) {
+    limits_.streaming_elems = elems;
     graphs_.clear();
   }
   /// Threads per block of the contact stage's merge over n_surf surface

@@ -16,6 +16,8 @@
 
 #include <cooperative_groups.h>
 
+#include <algorithm>
+#include <atomic>
 #include <cstdint>
 #include <type_traits>
 
@@ -512,16 +514,80 @@ __device__ __forceinline__ Vec3<T> corner_force(const ElementForces<T>& out, int
 // plain launch) before it touches the state, and does nothing in a tick
 // whose region must grow first (StateView::skip).
 
-template <class T, bool kRecomputed>
-__global__ void element_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
+/// A thread of a chained element pass (passes 1 and 3): load() reads its
+/// element's model part, which no pass writes, and step(d) the state, then
+/// computes and stores. A block of the launch's first wave (blockIdx below
+/// first_wave: the blocks the device holds at once, first_wave_blocks) loads
+/// before its wait, so that those loads overlap the previous pass's tail. A
+/// later block is scheduled only as earlier ones end, when the previous pass
+/// has almost always ended too; it waits first and then issues its model and
+/// state loads together, one round trip to memory fewer before its
+/// arithmetic (the element's corners, then their positions, displacements
+/// and pressures). Both orders compute the same values: only where the wait
+/// falls differs. On 100k and 1M tets these passes run 4-8 waves (docs/cuda.md,
+/// "Later waves load after their wait"). kLate false: every block loads
+/// before its wait (first_wave unused), and the late path is not compiled.
+template <bool kLate, class T, class Load, class Step>
+__device__ __forceinline__ void run_element_pass(const StateView<T>& s, bool active, index_t first_wave,
+                                                 const Load& load, const Step& step) {
   let_next_pass_launch();
-  const index_t i = thread_index();
-  const bool active = i < r.n_elems;
-  ElementData<T> d;
-  if (active) d = load_element_shape<T, kRecomputed>(m, r.elem(i));
+  if (kLate && index_t(blockIdx.x) >= first_wave) {
+    wait_for_previous_pass();
+    if (skipped(s)) return;
+    if (active) step(load());
+    return;
+  }
+  decltype(load()) d;
+  if (active) d = load();
   wait_for_previous_pass();
   if (skipped(s)) return;
-  if (active) element_pressure_at(s, d, u);
+  if (active) step(d);
+}
+
+/// Whether passes 1 and 3 let their later blocks load after their wait
+/// (run_element_pass). In float they gained 2-3 % at 100k tets and 1 % at 1M
+/// on an H200. In double the late path's registers cost pass 1 a block an
+/// SM (64 -> 70 registers with recomputed gradients) and 100k ran 2 %
+/// slower, so double keeps every block loading first, except in pass 3's
+/// streaming kernel (docs/cuda.md, "Later waves load after their wait").
+template <class T>
+inline constexpr bool kLateLoads = sizeof(T) == 4;
+
+template <class T, bool kRecomputed>
+__global__ void element_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u,
+                                        index_t first_wave) {
+  const index_t i = thread_index();
+  run_element_pass<kLateLoads<T>>(
+      s, i < r.n_elems, first_wave, [&] { return load_element_shape<T, kRecomputed>(m, r.elem(i)); },
+      [&](const ElementData<T>& d) { element_pressure_at(s, d, u); });
+}
+
+/// Blocks of kBlock threads of `kernel` that the current device holds at
+/// once (its first wave), for run_element_pass; computed once per kernel
+/// and device. At most element_first_wave_cap, where set.
+template <auto kKernel>
+index_t first_wave_blocks() {
+  constexpr int kDevices = 64;
+  static std::atomic<index_t> cache[kDevices] = {};
+  int dev = 0;
+  CUDA_CHECK(cudaGetDevice(&dev));
+  index_t w = dev < kDevices ? cache[dev].load(std::memory_order_relaxed) : 0;
+  if (w == 0) {
+    int per_sm = 0;
+    CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, kKernel, kBlock, 0));
+    w = std::max<index_t>(1, index_t(per_sm) * current_device_attribute(cudaDevAttrMultiProcessorCount));
+    if (dev < kDevices) cache[dev].store(w, std::memory_order_relaxed);
+  }
+  const index_t cap = element_first_wave_cap.load(std::memory_order_relaxed);
+  return cap > 0 ? std::min(w, cap) : w;
+}
+
+/// Pass 1 over region r, one thread an element, chained.
+template <class T, bool kRecomputed>
+void enqueue_element_pressures(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
+                               const Packed3<T>* u, cudaStream_t stream) {
+  constexpr auto kKernel = element_pressure_kernel<T, kRecomputed>;
+  launch_chained(r.n_elems, stream, kKernel, m, s, r, u, first_wave_blocks<kKernel>());
 }
 
 /// Node kernels run kNodeLanes threads per node (launch kNodeLanes * n);
@@ -759,7 +825,7 @@ void enqueue_pressures(const ModelView<T>& m, const StateView<T>& s, const Regio
       launch_chained_in(kPackedBlock, index_t(kPackedBlock) * r.n_packs, stream,
                         packed_pressures_kernel<T, kRecomputed>, m, s, r, u);
     } else {
-      launch_chained(r.n_elems, stream, element_pressure_kernel<T, kRecomputed>, m, s, r, u);
+      enqueue_element_pressures<T, kRecomputed>(m, s, r, u, stream);
       enqueue_nodal_pressures(m, s, r, stream);
     }
   });
@@ -778,16 +844,41 @@ void enqueue_pressures(const ModelView<T>& m, const StateView<T>& s, const Regio
 /// kernels' pass 3 (run_steps) keep the forward order.
 __device__ __forceinline__ index_t pass3_elem(const RegionView& r, index_t i) { return r.elem(r.n_elems - 1 - i); }
 
-template <class T, bool kRecomputed>
-__global__ void element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
-  let_next_pass_launch();
+template <class T, bool kRecomputed, bool kLate>
+__device__ __forceinline__ void element_forces_thread(const ModelView<T>& m, const StateView<T>& s,
+                                                      const RegionView& r, const Packed3<T>* u, index_t first_wave) {
   const index_t i = thread_index();
-  const bool active = i < r.n_elems;
-  ElementData<T> d;
-  if (active) d = load_element<T, kRecomputed>(m, pass3_elem(r, i));
-  wait_for_previous_pass();
-  if (skipped(s)) return;
-  if (active) element_forces_at(s, d, u, m.ianp);
+  run_element_pass<kLate>(
+      s, i < r.n_elems, first_wave, [&] { return load_element<T, kRecomputed>(m, pass3_elem(r, i)); },
+      [&](const ElementData<T>& d) { element_forces_at(s, d, u, m.ianp); });
+}
+
+template <class T, bool kRecomputed>
+__global__ void element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u,
+                                      index_t first_wave) {
+  element_forces_thread<T, kRecomputed, kLateLoads<T>>(m, s, r, u, first_wave);
+}
+
+/// Blocks of kBlock an SM that pass 3's streaming kernel is compiled for
+/// (0: the precision has none). In double element_forces_kernel takes 104
+/// registers a thread, so an SM holds two blocks: too few loads in flight
+/// where the step's arrays stream from memory. Three blocks (80 registers,
+/// some spilled) ran 1M and 4M tets 9-11 % faster on an H200 and 100k
+/// tets, whose arrays stay in the L2, 9-11 % slower; in float (54 registers,
+/// four blocks) five blocks gained nothing at 1M (docs/cuda.md, "Later
+/// waves load after their wait").
+template <class T>
+inline constexpr int kStreamingForceBlocks = sizeof(T) == 8 ? 3 : 0;
+
+/// Pass 3 where the region's force slots exceed half the L2
+/// (streams_slots), in double: the same thread as element_forces_kernel
+/// under launch bounds of kStreamingForceBlocks blocks an SM, its later
+/// blocks loading after their wait (run_element_pass).
+template <class T, bool kRecomputed>
+__global__ void __launch_bounds__(kBlock, kStreamingForceBlocks<T> > 0 ? kStreamingForceBlocks<T> : 1)
+    element_forces_streaming_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u,
+                                    index_t first_wave) {
+  element_forces_thread<T, kRecomputed, true>(m, s, r, u, first_wave);
 }
 
 /// Pass 3 of a checked tick's first step when that step starts at pass 3

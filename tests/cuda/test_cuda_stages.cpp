@@ -872,15 +872,36 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
       CudaStepMode mode;
       bool apart;       // passes 3-4 held apart
       bool node_lanes;  // and the node passes two lanes a thread
+      bool late;        // every block of passes 1 and 3 but the first loads after its wait (in double:
+                        // of pass 3's streaming kernel only)
+      bool streaming;   // pass 3 (apart) in its streaming kernel
     };
-    for (const Run run : {Run{CudaStepMode::Grid, false, false}, Run{CudaStepMode::Graph, false, false},
-                          Run{CudaStepMode::Launch, false, false}, Run{CudaStepMode::Graph, true, false},
-                          Run{CudaStepMode::Graph, true, true}, Run{CudaStepMode::Launch, true, true}}) {
+    for (const Run run :
+         {Run{CudaStepMode::Grid, false, false, false, false}, Run{CudaStepMode::Graph, false, false, false, false},
+          Run{CudaStepMode::Launch, false, false, false, false}, Run{CudaStepMode::Graph, true, false, false, false},
+          Run{CudaStepMode::Graph, true, true, false, false}, Run{CudaStepMode::Launch, true, true, false, false},
+          Run{CudaStepMode::Graph, true, false, true, false}, Run{CudaStepMode::Launch, true, false, false, true},
+          Run{CudaStepMode::Graph, true, true, true, true}}) {
       SCOPED_TRACE(::testing::Message() << to_string(run.mode) << (run.apart ? ", passes 3-4 apart" : "")
-                                        << (run.node_lanes ? ", node passes two lanes a thread" : ""));
+                                        << (run.node_lanes ? ", node passes two lanes a thread" : "")
+                                        << (run.late ? ", element passes' later blocks load after their wait" : "")
+                                        << (run.streaming ? ", pass 3's streaming kernel" : ""));
+      // process-wide: restored when the run ends, however it ends
+      struct FirstWave {
+        explicit FirstWave(bool late) { set_cuda_element_first_wave(late ? 1 : 0); }
+        ~FirstWave() { set_cuda_element_first_wave(0); }
+      } first_wave(run.late);
       auto gpu = make_cuda_backend(p);
       set_cuda_step_mode(*gpu, run.mode);
       if (run.apart) set_cuda_fused_force_blocks(*gpu, 0);
+      // a mesh whose slots fill half an L2 would stream them (none of these in float, which has no
+      // streaming kernel)
+      if (p == Precision::Float) {
+        EXPECT_EQ(cuda_streaming_elems(*gpu), 0);
+      } else {
+        EXPECT_GT(cuda_streaming_elems(*gpu), m.n_elems);
+      }
+      if (run.streaming) set_cuda_streaming_elems(*gpu, 1);
       gpu->upload(m);
       if (run.node_lanes) {  // and pass 4 over the whole mesh drops the slots it has read from the L2
         set_cuda_lanes_node_min(*gpu, 0);
@@ -907,6 +928,7 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
         gpu->set_loads(seeds, std::span<const double>(force, 3 * seeds.size()));
       }
       const CudaNodePassLaunches before = cuda_node_pass_launches();
+      const std::int64_t streaming_before = cuda_streaming_force_launches();
       gpu->advance(5);
       std::vector<double> energies = {gpu->reduce().strain_energy};
       gpu->advance(4);
@@ -923,6 +945,8 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
       EXPECT_EQ(after.updates > before.updates, chained && !run.node_lanes && !cuda_fuses_forces(*gpu));
       EXPECT_EQ(after.pressures_lanes > before.pressures_lanes, run.node_lanes && c.pressures_apart);
       EXPECT_EQ(after.pressures > before.pressures, !run.node_lanes && c.pressures_apart);
+      EXPECT_EQ(cuda_streaming_force_launches() > streaming_before,
+                run.streaming && chained && !cuda_fuses_forces(*gpu));
       if (ref_u.empty()) {
         ref_u = f.u, ref_f = f.f, ref_p = f.node_p, ref_J = f.elem_J, ref_energy = energies;
         if (!driven.empty()) {  // the driven node moved: the test has its stale slots
