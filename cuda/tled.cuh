@@ -863,8 +863,8 @@ __global__ void element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView
 /// (0: the precision has none). In double element_forces_kernel takes 104
 /// registers a thread, so an SM holds two blocks: too few loads in flight
 /// where the step's arrays stream from memory. Three blocks (80 registers,
-/// some spilled) ran 1M and 4M tets 9-11 % faster on an H200 and 100k
-/// tets, whose arrays stay in the L2, 9-11 % slower; in float (54 registers,
+/// some spilled) ran 1M and 4M tets 9-12 % faster on an H200 and 100k
+/// tets, whose arrays stay in the L2, about 10 % slower; in float (54 registers,
 /// four blocks) five blocks gained nothing at 1M (docs/cuda.md, "Later
 /// waves load after their wait").
 template <class T>
