@@ -129,7 +129,7 @@ void set_cuda_streaming_elems(Backend& backend, index_t elems);
 std::int64_t cuda_streaming_force_launches();
 
 /// Tests: at most `blocks` blocks of each launch of passes 1 and 3 (float;
-/// in double pass 3's streaming kernel) load their model data before
+/// in double pass 3's streaming and law kernels) load their model data before
 /// waiting for the previous pass; the later ones wait first, as blocks past
 /// the device's first wave do (docs/cuda.md,
 /// "Later waves load after their wait"). Process-wide, read when a launch is

@@ -144,7 +144,8 @@ void Stepper<T>::element_forces(const ModelView<T>& m, const StateView<T>& s, co
       launch_chained(r.n_elems, stream, element_forces_kernel<T, kRecomputed>, m, s, r, u,
                      first_wave_blocks<element_forces_kernel<T, kRecomputed>>());
     else
-      launch_chained(r.n_elems, stream, law_element_forces_kernel<T, kRecomputed>, m, s, r, u, law_);
+      launch_chained(r.n_elems, stream, law_element_forces_kernel<T, kRecomputed>, m, s, r, u, law_,
+                     first_wave_blocks<law_element_forces_kernel<T, kRecomputed>>());
   });
 }
 

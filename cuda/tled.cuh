@@ -908,18 +908,18 @@ __global__ void element_forces_beside_check_kernel(ModelView<T> m, StateView<T> 
   if (active) store_element_forces(s, d, out);
 }
 
-/// Pass 3 of a model with law terms (core/material.hpp).
+/// Pass 3 of a model with law terms (core/material.hpp), its later blocks
+/// loading after their wait in both precisions: its 218 registers a thread
+/// in double (126 in float) leave an SM one block (two), so even 100k tets
+/// run several waves, and the late path costs no occupancy (docs/cuda.md,
+/// "Later waves load after their wait").
 template <class T, bool kRecomputed>
 __global__ void law_element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u,
-                                          LawView<T> w) {
-  let_next_pass_launch();
+                                          LawView<T> w, index_t first_wave) {
   const index_t i = thread_index();
-  const bool active = i < r.n_elems;
-  ElementData<T> d;
-  if (active) d = load_element<T, kRecomputed>(m, pass3_elem(r, i));
-  wait_for_previous_pass();
-  if (skipped(s)) return;
-  if (active) law_element_forces_at(m, s, d, u, w);
+  run_element_pass<true>(
+      s, i < r.n_elems, first_wave, [&] { return load_element<T, kRecomputed>(m, pass3_elem(r, i)); },
+      [&](const ElementData<T>& d) { law_element_forces_at(m, s, d, u, w); });
 }
 
 /// Drops from the L2, without writing them back to memory, the 128-byte
