@@ -620,7 +620,7 @@ void set_cuda_streaming_elems(Backend& backend, index_t elems) {
 
 std::int64_t cuda_streaming_force_launches() { return gpu::streaming_force_launches.load(); }
 
-void set_cuda_element_first_wave(index_t blocks) { gpu::element_first_wave_cap.store(std::max<index_t>(0, blocks)); }
+void set_cuda_element_first_wave(index_t blocks) { gpu::element_first_wave_cap.store(std::max<index_t>(-1, blocks)); }
 
 const char* to_string(CudaGradients g) {
   switch (g) {

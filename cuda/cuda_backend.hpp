@@ -132,8 +132,10 @@ std::int64_t cuda_streaming_force_launches();
 /// in double pass 3's streaming and law kernels) load their model data before
 /// waiting for the previous pass; the later ones wait first, as blocks past
 /// the device's first wave do (docs/cuda.md,
-/// "Later waves load after their wait"). Process-wide, read when a launch is
-/// queued or a graph captured; 0 restores the device's first wave.
+/// "Later waves load after their wait"); 0: every block waits first.
+/// Process-wide, read when a launch is queued or a graph captured (a graph
+/// captured before keeps its blocks' choice); a negative value restores the
+/// device's first wave.
 void set_cuda_element_first_wave(index_t blocks);
 
 /// CudaGradients (cuda/gradients.hpp) by name: "auto", "stored", "recomputed".

@@ -183,7 +183,7 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   u_held_.allocate(n);
   f_.allocate(n);
   f_slot_.allocate(4 * size_t(ne));
-  model_.discard_slots = 2 * f_slot_.bytes() > std::size_t(current_device_attribute(cudaDevAttrL2CacheSize));
+  model_.discard_slots = f_slot_.bytes() > half_l2_bytes();  // the whole mesh's slots (pass 3's streaming kernel: a region's)
   elem_dv_[0].allocate(ne);
   held_.allocate(n);
   driven_.allocate(n);

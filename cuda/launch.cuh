@@ -28,6 +28,22 @@ inline int current_device_attribute(cudaDeviceAttr attr) {
   return v;
 }
 
+/// Blocks of `block` threads of `kernel` that the current device holds at
+/// once (its occupancy times its multiprocessors): one wave of them.
+template <class Kernel>
+index_t resident_blocks(Kernel kernel, int block) {
+  int per_sm = 0;
+  CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, kernel, block, 0));
+  return index_t(per_sm) * current_device_attribute(cudaDevAttrMultiProcessorCount);
+}
+
+/// Half the current device's L2 in bytes: arrays larger than this stream
+/// from memory from pass to pass (pass 4's slot drop, pass 3's streaming
+/// kernel).
+inline std::size_t half_l2_bytes() {
+  return std::size_t(current_device_attribute(cudaDevAttrL2CacheSize)) / 2;
+}
+
 /// Blocks needed for n items at `block` threads each.
 inline int grid_for(index_t n, int block = kBlock) { return static_cast<int>((n + block - 1) / block); }
 
@@ -128,9 +144,9 @@ inline NodePassLaunches node_pass_launches;
 inline std::atomic<std::int64_t> streaming_force_launches{0};
 
 /// Tests: at most this many blocks of an element pass's launch load before
-/// their wait (set_cuda_element_first_wave); 0: the device's first wave
-/// (first_wave_blocks, cuda/tled.cuh).
-/// Read when a launch is queued or a graph captured.
-inline std::atomic<index_t> element_first_wave_cap{0};
+/// their wait (set_cuda_element_first_wave; 0: none); negative: the
+/// device's first wave (first_wave_blocks, cuda/tled.cuh). Read when a
+/// launch is queued or a graph captured.
+inline std::atomic<index_t> element_first_wave_cap{-1};
 
 }  // namespace tissue::gpu

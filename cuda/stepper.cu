@@ -54,24 +54,20 @@ int grid_blocks_per_sm() {
 /// instantiations alike: the fewest).
 template <class T>
 index_t fused_force_blocks() {
-  int fewest = std::numeric_limits<int>::max();
+  index_t fewest = std::numeric_limits<index_t>::max();
   for (auto kernel : {packed_forces_kernel<T, false, false, true>, packed_forces_kernel<T, false, true, true>,
                       packed_forces_kernel<T, true, false, true>, packed_forces_kernel<T, true, true, true>,
                       packed_forces_kernel<T, false, false, false>, packed_forces_kernel<T, false, true, false>,
                       packed_forces_kernel<T, true, false, false>, packed_forces_kernel<T, true, true, false>}) {
-    int blocks = 0;
-    CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, kernel, kPackedBlock, 0));
-    fewest = std::min(fewest, blocks);
+    fewest = std::min(fewest, resident_blocks(kernel, kPackedBlock));
   }
-  return index_t(fewest) * current_device_attribute(cudaDevAttrMultiProcessorCount);
+  return fewest;
 }
 
 /// Surface nodes one wave of the merge's blocks of kBlock holds.
 template <class T>
 index_t merge_wave_nodes() {
-  int blocks = 0;
-  CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, gather_contacts_kernel<T>, kBlock, 0));
-  return index_t(blocks) * kBlock * current_device_attribute(cudaDevAttrMultiProcessorCount);
+  return resident_blocks(gather_contacts_kernel<T>, kBlock) * kBlock;
 }
 
 }  // namespace
@@ -90,8 +86,8 @@ void Stepper<T>::init() {
   limits_.law_cluster_size = std::min(largest_cluster<T, true, false>(), largest_cluster<T, true, true>());
   limits_.fused_force_blocks = fused_force_blocks<T>();
   limits_.merge_wave_nodes = merge_wave_nodes<T>();
-  if constexpr (kStreamingForceBlocks<T> > 0)
-    limits_.streaming_elems = index_t(current_device_attribute(cudaDevAttrL2CacheSize) / (2 * 4 * sizeof(Packed3<T>)));
+  if constexpr (kStreamingForceBlocks<T> > 0)  // four slots an element
+    limits_.streaming_elems = index_t(half_l2_bytes() / (4 * sizeof(Packed3<T>)));
 }
 
 template <class T>
@@ -138,11 +134,11 @@ void Stepper<T>::element_forces(const ModelView<T>& m, const StateView<T>& s, co
     else if (law_.neo_hookean() && streams_slots(r)) {
       launch_chained(r.n_elems, stream, element_forces_streaming_kernel<T, kRecomputed>, m, s, r, u,
                      first_wave_blocks<element_forces_streaming_kernel<T, kRecomputed>>());
-      if (r.n_elems > 0) streaming_force_launches.fetch_add(1, std::memory_order_relaxed);
+      streaming_force_launches.fetch_add(1, std::memory_order_relaxed);
     }
     else if (law_.neo_hookean())
       launch_chained(r.n_elems, stream, element_forces_kernel<T, kRecomputed>, m, s, r, u,
-                     first_wave_blocks<element_forces_kernel<T, kRecomputed>>());
+                     first_wave_blocks<element_forces_kernel<T, kRecomputed>, kLateLoads<T>>());
     else
       launch_chained(r.n_elems, stream, law_element_forces_kernel<T, kRecomputed>, m, s, r, u, law_,
                      first_wave_blocks<law_element_forces_kernel<T, kRecomputed>>());

@@ -91,8 +91,9 @@ struct PersistentLimits {
   /// in one wave of blocks of kBlock threads; a surface of more is merged in
   /// blocks of kSmallMergeBlock (Stepper::merge_block).
   index_t merge_wave_nodes = 0;
-  /// Regions of more elements than this write force slots (four a
-  /// element) beyond half the L2: pass 3 then runs its streaming kernel
+  /// Regions of more elements than this write force slots (four an
+  /// element) beyond half the L2 (half_l2_bytes, the size at which pass 4
+  /// drops the whole mesh's slots): pass 3 then runs its streaming kernel
   /// (element_forces_streaming_kernel; Stepper::streams_slots). 0: the
   /// precision has none (kStreamingForceBlocks).
   index_t streaming_elems = 0;

@@ -512,7 +512,8 @@ __device__ __forceinline__ Vec3<T> corner_force(const ElementForces<T>& out, int
 // the region's lists, written before any pass ran), then waits for the
 // previous grid (programmatic dependent launch; both calls are no-ops for a
 // plain launch) before it touches the state, and does nothing in a tick
-// whose region must grow first (StateView::skip).
+// whose region must grow first (StateView::skip). The element passes' blocks
+// past the launch's first wave may wait first instead (run_element_pass).
 
 /// A thread of a chained element pass (passes 1 and 3): load() reads its
 /// element's model part, which no pass writes, and step(d) the state, then
@@ -522,20 +523,25 @@ __device__ __forceinline__ Vec3<T> corner_force(const ElementForces<T>& out, int
 /// later block is scheduled only as earlier ones end, when the previous pass
 /// has almost always ended too; it waits first and then issues its model and
 /// state loads together, one round trip to memory fewer before its
-/// arithmetic (the element's corners, then their positions, displacements
-/// and pressures). Both orders compute the same values: only where the wait
-/// falls differs. On 100k and 1M tets these passes run 4-8 waves (docs/cuda.md,
-/// "Later waves load after their wait"). kLate false: every block loads
-/// before its wait (first_wave unused), and the late path is not compiled.
+/// arithmetic with recomputed gradients (the element's corners, then their
+/// reference positions; stored gradients are indexed by the element and load
+/// with the corners, so there the late path saves nothing). Both orders
+/// compute the same values: only where the wait falls differs. On 1M tets
+/// in float pass 3 runs about 7 waves on an H200, while 100k tets fit in one
+/// (docs/cuda.md, "Later waves load after their wait"). kLate false: every
+/// block loads before its wait (first_wave unused), and the late path is
+/// not compiled.
 template <bool kLate, class T, class Load, class Step>
 __device__ __forceinline__ void run_element_pass(const StateView<T>& s, bool active, index_t first_wave,
                                                  const Load& load, const Step& step) {
   let_next_pass_launch();
-  if (kLate && index_t(blockIdx.x) >= first_wave) {
-    wait_for_previous_pass();
-    if (skipped(s)) return;
-    if (active) step(load());
-    return;
+  if constexpr (kLate) {
+    if (index_t(blockIdx.x) >= first_wave) {
+      wait_for_previous_pass();
+      if (skipped(s)) return;
+      if (active) step(load());
+      return;
+    }
   }
   decltype(load()) d;
   if (active) d = load();
@@ -545,11 +551,13 @@ __device__ __forceinline__ void run_element_pass(const StateView<T>& s, bool act
 }
 
 /// Whether passes 1 and 3 let their later blocks load after their wait
-/// (run_element_pass). In float they gained 2-3 % at 100k tets and 1 % at 1M
-/// on an H200. In double the late path's registers cost pass 1 a block an
-/// SM (64 -> 70 registers with recomputed gradients) and 100k ran 2 %
-/// slower, so double keeps every block loading first, except in pass 3's
-/// streaming kernel (docs/cuda.md, "Later waves load after their wait").
+/// (run_element_pass). In float 1M tets ran 1.3 % faster on an H200 (and
+/// 100k, whose blocks all fit in the first wave, 3 %: the kernels' code
+/// changed with the late path; not profiled). In double the late path's
+/// registers cost pass 1 a block an SM (64 -> 70 registers with recomputed
+/// gradients) and 100k ran up to 2.6 % slower, so double keeps every block
+/// loading first, except in pass 3's streaming and law kernels
+/// (docs/cuda.md, "Later waves load after their wait").
 template <class T>
 inline constexpr bool kLateLoads = sizeof(T) == 4;
 
@@ -563,23 +571,27 @@ __global__ void element_pressure_kernel(ModelView<T> m, StateView<T> s, RegionVi
 }
 
 /// Blocks of kBlock threads of `kernel` that the current device holds at
-/// once (its first wave), for run_element_pass; computed once per kernel
-/// and device. At most element_first_wave_cap, where set.
-template <auto kKernel>
+/// once (its first wave), for run_element_pass: computed once per kernel
+/// and device (resident_blocks), at most element_first_wave_cap where set
+/// (tests).
+/// kLate false (a kernel without the late path): 0, unused.
+template <auto kKernel, bool kLate = true>
 index_t first_wave_blocks() {
-  constexpr int kDevices = 64;
-  static std::atomic<index_t> cache[kDevices] = {};
-  int dev = 0;
-  CUDA_CHECK(cudaGetDevice(&dev));
-  index_t w = dev < kDevices ? cache[dev].load(std::memory_order_relaxed) : 0;
-  if (w == 0) {
-    int per_sm = 0;
-    CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, kKernel, kBlock, 0));
-    w = std::max<index_t>(1, index_t(per_sm) * current_device_attribute(cudaDevAttrMultiProcessorCount));
-    if (dev < kDevices) cache[dev].store(w, std::memory_order_relaxed);
+  if constexpr (!kLate) {
+    return 0;
+  } else {
+    constexpr int kDevices = 64;
+    static std::atomic<index_t> cache[kDevices] = {};
+    int dev = 0;
+    CUDA_CHECK(cudaGetDevice(&dev));
+    index_t w = dev < kDevices ? cache[dev].load(std::memory_order_relaxed) : 0;
+    if (w == 0) {
+      w = std::max<index_t>(1, resident_blocks(kKernel, kBlock));
+      if (dev < kDevices) cache[dev].store(w, std::memory_order_relaxed);
+    }
+    const index_t cap = element_first_wave_cap.load(std::memory_order_relaxed);
+    return cap >= 0 ? std::min(w, cap) : w;
   }
-  const index_t cap = element_first_wave_cap.load(std::memory_order_relaxed);
-  return cap > 0 ? std::min(w, cap) : w;
 }
 
 /// Pass 1 over region r, one thread an element, chained.
@@ -587,7 +599,7 @@ template <class T, bool kRecomputed>
 void enqueue_element_pressures(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
                                const Packed3<T>* u, cudaStream_t stream) {
   constexpr auto kKernel = element_pressure_kernel<T, kRecomputed>;
-  launch_chained(r.n_elems, stream, kKernel, m, s, r, u, first_wave_blocks<kKernel>());
+  launch_chained(r.n_elems, stream, kKernel, m, s, r, u, first_wave_blocks<kKernel, kLateLoads<T>>());
 }
 
 /// Node kernels run kNodeLanes threads per node (launch kNodeLanes * n);
