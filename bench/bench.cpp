@@ -17,6 +17,7 @@
 #include "io/atomic_file.hpp"
 #include "core/box_mesh.hpp"
 #include "core/scheduler.hpp"
+#include "cpu/element_lanes.hpp"
 #include "io/kidney.hpp"
 #include "scene/validate.hpp"
 
@@ -112,6 +113,7 @@ struct Context {
     r.add("backend", b.name());
     r.add("precision", std::string(to_string(b.precision())));
     r.add("float_math", float_math(b));
+    if (b.name() == "cpu") r.add("cpu_tuning", std::string(cpu::to_string(cpu::lanes_tuning())));
     r.add("device", device);
     r.add("date", date);
     r.add("measured_bandwidth_GBps", bandwidth * 1e-9);

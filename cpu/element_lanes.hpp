@@ -5,7 +5,7 @@
 // functions are branch-free and call no libm function (core/cube_root.hpp),
 // so GCC vectorises the lane loop across elements.
 //
-// Each lane kernel (element_lanes.cpp) is compiled three times (GCC target_clones: x86-64-v4 =
+// Each lane kernel (element_lanes_kernels.inc) is compiled three times (GCC target_clones: x86-64-v4 =
 // AVX-512, x86-64-v3 = AVX2 + FMA, and the baseline x86-64 = SSE2) and the
 // loader picks the best the CPU runs, so one binary is portable and fast.
 // The clones may round differently (FMA contraction), so results can differ
@@ -133,7 +133,7 @@ inline T corner_pressure_mean(const T* node_p, const index_t* en, std::size_t ne
 
 /// The corner displacements of a full run of kLanes elements whose corner
 /// rows start at en (row a at en[a * ne]): out[3 a + c][l] = u[c n +
-/// en[a ne + l]]. In the cloned file (element_lanes.cpp), so that the
+/// en[a ne + l]]. In the cloned file (element_lanes_kernels.inc), so that the
 /// AVX-512 and AVX2 clones gather a lane per element.
 template <class T>
 void lanes_corner_u(const T* u, index_t n, const index_t* en, index_t ne, T (&out)[12][kLanes]);
@@ -290,6 +290,24 @@ void scatter_law_lanes(const TissueModel<T>& m, T* q, const LawLanes<T>& w) {
     }
   }
 }
+
+/// Which compilation of the lane kernels below runs. They are compiled
+/// twice from one source: tuned for a recent Xeon (its vector gathers:
+/// docs/benchmarks/README.md, "Vector gathers on the cpu"), and under the
+/// compiler's generic tuning, with which an AMD EPYC (family 26, Zen 5
+/// class) ran 15-29 % more steps a second on one thread ("The cpu's tuning
+/// by vendor"). The tuning chooses instructions, not arithmetic: both give
+/// the same bits (CpuLanes.BothTuningsGiveTheSameBits).
+enum class LanesTuning { Xeon, Generic };
+/// The one in use: set_lanes_tuning's, else the environment's
+/// TISSUE_CPU_TUNING (xeon | generic; anything else throws
+/// std::invalid_argument at the first call), else Xeon on an Intel CPU and
+/// Generic on any other.
+LanesTuning lanes_tuning();
+/// Tests and benchmarks: runs the other compilation (process-wide; call it
+/// between advances, not while a pass runs).
+void set_lanes_tuning(LanesTuning t);
+const char* to_string(LanesTuning t);  ///< "xeon", "generic"
 
 /// Pass 1 on every lane: F = deformation_gradient, J = det F,
 /// dv = (J - 1) V.

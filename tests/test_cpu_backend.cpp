@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <numeric>
@@ -352,6 +353,88 @@ void expect_lane_gathers_read_each_elements_corners() {
 TEST(CpuLanes, FullRunGathersReadEachElementsCorners) {
   expect_lane_gathers_read_each_elements_corners<float>();
   expect_lane_gathers_read_each_elements_corners<double>();
+}
+
+/// The lane kernels' two compilations (cpu::LanesTuning: tuned for a Xeon,
+/// and generic) give the same bits: the whole mesh of a box whose halves
+/// are Neo-Hookean and fibre-viscoelastic (every kernel: passes 1 and 3 in
+/// full runs and gathered batches, the law terms, the energies), stepped
+/// from a random field with the top driven, a reduction after every chunk.
+TEST(CpuLanes, BothTuningsGiveTheSameBits) {
+  const cpu::LanesTuning initial = cpu::lanes_tuning();
+  struct Restore {
+    cpu::LanesTuning t;
+    ~Restore() { cpu::set_lanes_tuning(t); }
+  } restore{initial};
+#if defined(__GNUC__) && defined(__x86_64__)
+  if (std::getenv("TISSUE_CPU_TUNING") == nullptr) {  // the default follows the vendor
+    EXPECT_EQ(initial, __builtin_cpu_is("intel") ? cpu::LanesTuning::Xeon : cpu::LanesTuning::Generic);
+  }
+#endif
+  ModelInput in;
+  box_mesh(in, 5, 5, 5, kL, kL, kL);
+  const double E = 3000, nu = 0.45;
+  MaterialParams nh{E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu)), 1000}, law = nh;
+  law.fibre_eta = 2000;
+  law.fibre_dir = {0.0, 0.6, 0.8};
+  law.prony_terms = 2;
+  law.prony_g[0] = 0.3, law.prony_tau[0] = 0.01;
+  law.prony_g[1] = 0.2, law.prony_tau[1] = 0.1;
+  in.materials = {nh, law};
+  const index_t ne = index_t(in.tets.size() / 4);
+  in.elem_material.assign(ne, 0);
+  for (index_t e = ne / 2; e < ne; ++e) in.elem_material[e] = 1;
+  in.fixed.assign(in.nodes.size() / 3, 0);
+  std::vector<index_t> top;
+  std::vector<double> target;
+  for (size_t i = 0; i < in.fixed.size(); ++i) {
+    in.fixed[i] = in.nodes[3 * i + 2] == 0.0;
+    if (in.nodes[3 * i + 2] == kL) {
+      top.push_back(index_t(i));
+      target.insert(target.end(), {0.0, 0.0, -0.05 * kL});
+    }
+  }
+  const auto m = build_model(in);
+  ASSERT_TRUE(m.has_fibre() && m.has_visco());
+  for (Precision p : {Precision::Float, Precision::Double}) {
+    SCOPED_TRACE(p == Precision::Float ? "float" : "double");
+    struct Out {
+      Fields f;
+      std::vector<double> energy;
+    };
+    auto run = [&](cpu::LanesTuning t, int depth) {
+      cpu::set_lanes_tuning(t);
+      auto b = make_cpu_backend(p);
+      b->upload(m);
+      b->set_displacements(field(m, [](Vec3<double> x) { return Vec3<double>{0.01 * x.y, -0.02 * x.z, 0.015 * x.x}; }));
+      const index_t seed[] = {top.front()};
+      b->build_region(seed, depth);  // depth 1: gathered batches
+      if (depth == kDepthAll) {
+        b->set_driven(top, target);
+      } else {  // the region's seed only
+        b->set_driven(seed, std::span<const double>(target.data(), 3));
+      }
+      Out o;
+      for (int k = 0; k < 4; ++k) {
+        b->advance(25);
+        o.energy.push_back(b->reduce().strain_energy);
+      }
+      o.f = b->download();
+      return o;
+    };
+    for (int depth : {kDepthAll, 1}) {
+      SCOPED_TRACE(::testing::Message() << "depth " << depth);
+      const Out x = run(cpu::LanesTuning::Xeon, depth), g = run(cpu::LanesTuning::Generic, depth);
+      EXPECT_EQ(x.f.u, g.f.u);
+      EXPECT_EQ(x.f.f, g.f.f);
+      EXPECT_EQ(x.f.node_p, g.f.node_p);
+      EXPECT_EQ(x.f.elem_J, g.f.elem_J);
+      EXPECT_EQ(x.energy, g.energy);
+      EXPECT_GT(x.energy.back(), 0.0);
+    }
+  }
+  EXPECT_STREQ(cpu::to_string(cpu::LanesTuning::Xeon), "xeon");
+  EXPECT_STREQ(cpu::to_string(cpu::LanesTuning::Generic), "generic");
 }
 
 /// A slab whose top the tool presses: the BVH is built once, then rebuilt
