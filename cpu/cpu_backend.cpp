@@ -18,6 +18,9 @@
 namespace tissue {
 
 std::unique_ptr<Backend> make_cpu_backend(Precision precision) {
+  // the lane kernels' tuning, read here on the caller's thread: a bad
+  // TISSUE_CPU_TUNING is refused now, not inside a thread team's pass
+  (void)cpu::lanes_tuning();
   if (precision == Precision::Float) return std::make_unique<cpu::CpuBackend<float>>();
   return std::make_unique<cpu::CpuBackend<double>>();
 }
