@@ -31,6 +31,7 @@
 #include "cpu/host_backend.hpp"
 #include "cpu/surface_bvh.hpp"
 #include "tests/backend_test_support.hpp"
+#include "tests/pressed_box.hpp"
 
 namespace tissue {
 namespace {
@@ -371,29 +372,10 @@ TEST(CpuLanes, BothTuningsGiveTheSameBits) {
     EXPECT_EQ(initial, __builtin_cpu_is("intel") ? cpu::LanesTuning::Xeon : cpu::LanesTuning::Generic);
   }
 #endif
-  ModelInput in;
-  box_mesh(in, 5, 5, 5, kL, kL, kL);
-  const double E = 3000, nu = 0.45;
-  MaterialParams nh{E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu)), 1000}, law = nh;
-  law.fibre_eta = 2000;
-  law.fibre_dir = {0.0, 0.6, 0.8};
-  law.prony_terms = 2;
-  law.prony_g[0] = 0.3, law.prony_tau[0] = 0.01;
-  law.prony_g[1] = 0.2, law.prony_tau[1] = 0.1;
-  in.materials = {nh, law};
-  const index_t ne = index_t(in.tets.size() / 4);
-  in.elem_material.assign(ne, 0);
-  for (index_t e = ne / 2; e < ne; ++e) in.elem_material[e] = 1;
-  in.fixed.assign(in.nodes.size() / 3, 0);
-  std::vector<index_t> top;
-  std::vector<double> target;
-  for (size_t i = 0; i < in.fixed.size(); ++i) {
-    in.fixed[i] = in.nodes[3 * i + 2] == 0.0;
-    if (in.nodes[3 * i + 2] == kL) {
-      top.push_back(index_t(i));
-      target.insert(target.end(), {0.0, 0.0, -0.05 * kL});
-    }
-  }
+  ModelInput in = mixed_law_box(5, kL);
+  const test::PressedTop press = fix_bottom_press_top(in, kL, -0.05 * kL);
+  const std::vector<index_t>& top = press.nodes;
+  const std::vector<double>& target = press.target;
   const auto m = build_model(in);
   ASSERT_TRUE(m.has_fibre() && m.has_visco());
   for (Precision p : {Precision::Float, Precision::Double}) {

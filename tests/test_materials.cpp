@@ -26,6 +26,7 @@
 #include "io/scene_xml.hpp"
 #include "scene/validate.hpp"
 #include "tests/backend_test_support.hpp"
+#include "tests/pressed_box.hpp"
 #include "tests/temp_dir.hpp"
 
 namespace tissue {
@@ -634,16 +635,9 @@ TEST_P(Laws, MixedLawsMatchTheCpuInDouble) {
   // half the box Neo-Hookean, half fibre-reinforced and viscoelastic; the
   // top pressed down over 400 steps with the bottom fixed
   ModelInput in = box_input(law_params(true, true, {0.0, 0.6, 0.8}), true);
-  in.fixed.assign(in.nodes.size() / 3, 0);
-  std::vector<index_t> top;
-  std::vector<double> target;
-  for (size_t i = 0; i < in.fixed.size(); ++i) {
-    in.fixed[i] = in.nodes[3 * i + 2] == 0.0;
-    if (in.nodes[3 * i + 2] == kL) {
-      top.push_back(index_t(i));
-      target.insert(target.end(), {0.0, 0.0, -0.1 * kL});
-    }
-  }
+  const test::PressedTop press = test::fix_bottom_press_top(in, kL, -0.1 * kL);
+  const std::vector<index_t>& top = press.nodes;
+  const std::vector<double>& target = press.target;
   const auto m = build_model(in);
   EXPECT_GT(m.n_visco, 0);
   EXPECT_LT(m.n_visco, m.n_elems);

@@ -26,6 +26,7 @@
 #include "io/kidney.hpp"
 #include "scene/validate.hpp"
 #include "tests/cuda/cuda_test_support.hpp"
+#include "tests/pressed_box.hpp"
 #include "tests/sliver.hpp"
 
 namespace tissue::cuda_test {
@@ -427,28 +428,10 @@ struct ElementFirstWave {
 TEST_P(Stages, LawTermsMatchCpuInEveryStepMode) {
   SKIP_WITHOUT_GPU();
   const Precision p = GetParam();
-  ModelInput in;
-  box_mesh(in, 4, 4, 4, 0.02, 0.02, 0.02);
-  MaterialParams nh{1000, 20000, 1000}, law = nh;
-  law.fibre_eta = 3000;
-  law.fibre_dir = {0.0, 0.6, 0.8};
-  law.prony_terms = 2;
-  law.prony_g[0] = 0.3, law.prony_tau[0] = 0.01;
-  law.prony_g[1] = 0.2, law.prony_tau[1] = 0.1;
-  in.materials = {law, nh};
-  const index_t ne = index_t(in.tets.size() / 4);
-  in.elem_material.assign(ne, 0);
-  for (index_t e = ne / 2; e < ne; ++e) in.elem_material[e] = 1;
-  in.fixed.assign(in.nodes.size() / 3, 0);
-  std::vector<index_t> top;
-  std::vector<double> target;
-  for (size_t i = 0; i < in.fixed.size(); ++i) {
-    in.fixed[i] = in.nodes[3 * i + 2] == 0.0;
-    if (in.nodes[3 * i + 2] == 0.02) {
-      top.push_back(index_t(i));
-      target.insert(target.end(), {0.0, 0.0, -0.002});
-    }
-  }
+  ModelInput in = test::mixed_law_box(4, 0.02);
+  const test::PressedTop press = test::fix_bottom_press_top(in, 0.02, -0.002);
+  const std::vector<index_t>& top = press.nodes;
+  const std::vector<double>& target = press.target;
   const auto m = build_model(in);
   ASSERT_TRUE(m.has_fibre() && m.has_visco());
   auto run = [&](Backend& b) {
