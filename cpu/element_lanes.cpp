@@ -11,31 +11,12 @@
 
 namespace tissue::cpu {
 
-#define TISSUE_LANES_DECLARATIONS                                                                                \
-  template <class T>                                                                                             \
-  void lanes_corner_u(const T* u, index_t n, const index_t* en, index_t ne, T (&out)[12][kLanes]);              \
-  template <class T>                                                                                             \
-  void lanes_pbar(const T* node_p, const index_t* en, index_t ne, T (&pbar)[kLanes]);                          \
-  template <class T>                                                                                             \
-  void lanes_pressure(ElementLanes<T>& b);                                                                       \
-  template <class T, bool kIanp>                                                                                 \
-  void lanes_forces(ElementLanes<T>& b);                                                                         \
-  template <class T, bool kIanp, class Terms>                                                                    \
-  void lanes_forces_law(ElementLanes<T>& b, LawLanes<T>& w);                                                     \
-  template <class T, bool kIanp>                                                                                 \
-  void lanes_energy(ElementLanes<T>& b);                                                                         \
-  template <class T, bool kIanp>                                                                                 \
-  void lanes_energy_fibre(ElementLanes<T>& b, const LawLanes<T>& w);                                             \
-  template <class T, bool kIanp>                                                                                 \
-  void lanes_prony_energy(ElementLanes<T>& b, const LawLanes<T>& w, const T (&g)[kMaxProny][kLanes],            \
-                          const T (&tau)[kMaxProny][kLanes], T (&power)[kLanes], T (&stored)[kLanes]);
 namespace xeon {
-TISSUE_LANES_DECLARATIONS
+#include "cpu/element_lanes_api.inc"
 }
 namespace generic {
-TISSUE_LANES_DECLARATIONS
+#include "cpu/element_lanes_api.inc"
 }
-#undef TISSUE_LANES_DECLARATIONS
 
 namespace {
 

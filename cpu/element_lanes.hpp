@@ -131,17 +131,10 @@ inline T corner_pressure_mean(const T* node_p, const index_t* en, std::size_t ne
   return T(0.25) * (((node_p[en[e]] + node_p[en[ne + e]]) + node_p[en[2 * ne + e]]) + node_p[en[3 * ne + e]]);
 }
 
-/// The corner displacements of a full run of kLanes elements whose corner
-/// rows start at en (row a at en[a * ne]): out[3 a + c][l] = u[c n +
-/// en[a ne + l]]. In the cloned file (element_lanes_kernels.inc), so that the
-/// AVX-512 and AVX2 clones gather a lane per element.
 template <class T>
-void lanes_corner_u(const T* u, index_t n, const index_t* en, index_t ne, T (&out)[12][kLanes]);
+struct LawLanes;  // below
 
-/// pbar of a full run (corner rows at en, as above): the mean of its four
-/// corners' nodal pressures, summed in corner order.
-template <class T>
-void lanes_pbar(const T* node_p, const index_t* en, index_t ne, T (&pbar)[kLanes]);
+#include "cpu/element_lanes_api.inc"  // the lane kernels (lanes_corner_u, lanes_pbar, lanes_pressure, ...)
 
 /// A batch for pass 1: begin_lanes, the corner displacements from u (3 x
 /// n_nodes, component-major), and the output views: elem_J, elem_dv
@@ -291,7 +284,7 @@ void scatter_law_lanes(const TissueModel<T>& m, T* q, const LawLanes<T>& w) {
   }
 }
 
-/// Which compilation of the lane kernels below runs. They are compiled
+/// Which compilation of the lane kernels (element_lanes_api.inc) runs. They are compiled
 /// twice from one source: tuned for a recent Xeon (its vector gathers:
 /// docs/benchmarks/README.md, "Vector gathers on the cpu"), and under the
 /// compiler's generic tuning, with which an AMD EPYC (family 26, Zen 5
@@ -308,36 +301,5 @@ LanesTuning lanes_tuning();
 /// between advances, not while a pass runs).
 void set_lanes_tuning(LanesTuning t);
 const char* to_string(LanesTuning t);  ///< "xeon", "generic"
-
-/// Pass 1 on every lane: F = deformation_gradient, J = det F,
-/// dv = (J - 1) V.
-template <class T>
-void lanes_pressure(ElementLanes<T>& b);
-
-/// Pass 3 on every lane: ianp_element_forces (or plain_element_forces) of F
-/// into f, its returned J into ret.
-template <class T, bool kIanp>
-void lanes_forces(ElementLanes<T>& b);
-
-/// The same with the law terms Terms instantiates (w: gathered by
-/// gather_law_lanes; the Prony state in w advances).
-template <class T, bool kIanp, class Terms>
-void lanes_forces_law(ElementLanes<T>& b, LawLanes<T>& w);
-
-/// Strain energy on every lane from F: ret = element_strain_energy with
-/// Jbar from pbar (IANP) or Jbar = J (plain).
-template <class T, bool kIanp>
-void lanes_energy(ElementLanes<T>& b);
-
-/// The same with the fibre term (w: gather_law_lanes<LawTerms<true, ...>>).
-template <class T, bool kIanp>
-void lanes_energy_fibre(ElementLanes<T>& b, const LawLanes<T>& w);
-
-/// The Prony terms' power (W) and stored energy (J) on every lane (core
-/// element_prony_energy, in T): w from gather_law_lanes<LawTerms<false,
-/// true>>, g and tau per term and lane (g = 0: none, with tau = 1).
-template <class T, bool kIanp>
-void lanes_prony_energy(ElementLanes<T>& b, const LawLanes<T>& w, const T (&g)[kMaxProny][kLanes],
-                        const T (&tau)[kMaxProny][kLanes], T (&power)[kLanes], T (&stored)[kLanes]);
 
 }  // namespace tissue::cpu
