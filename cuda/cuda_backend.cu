@@ -622,6 +622,10 @@ std::int64_t cuda_streaming_force_launches() { return gpu::streaming_force_launc
 
 void set_cuda_element_first_wave(index_t blocks) { gpu::element_first_wave_cap.store(std::max<index_t>(-1, blocks)); }
 
+void set_cuda_small_element_blocks(bool always) { gpu::small_element_blocks_forced.store(always); }
+
+std::int64_t cuda_small_element_block_launches() { return gpu::small_element_block_launches.load(); }
+
 const char* to_string(CudaGradients g) {
   switch (g) {
     case CudaGradients::Auto: return "auto";

@@ -145,8 +145,19 @@ inline std::atomic<std::int64_t> streaming_force_launches{0};
 
 /// Tests: at most this many blocks of an element pass's launch load before
 /// their wait (set_cuda_element_first_wave; 0: none); negative: the
-/// device's first wave (first_wave_blocks, cuda/tled.cuh). Read when a
+/// device's first wave (element_launch, cuda/tled.cuh). Read when a
 /// launch is queued or a graph captured.
 inline std::atomic<index_t> element_first_wave_cap{-1};
+
+/// Tests: every launch of passes 1 and 3 but pass 3's streaming kernel in
+/// the blocks of a launch of several waves (set_cuda_small_element_blocks;
+/// element_launch, cuda/tled.cuh). Read when a launch is queued or a graph
+/// captured.
+inline std::atomic<bool> small_element_blocks_forced{false};
+
+/// Launches of passes 1 and 3 in those smaller blocks this process has
+/// queued, counted on the host as they are launched or captured into a
+/// graph (cuda_small_element_block_launches: the tests' evidence).
+inline std::atomic<std::int64_t> small_element_block_launches{0};
 
 }  // namespace tissue::gpu

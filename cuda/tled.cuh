@@ -20,6 +20,7 @@
 #include <atomic>
 #include <cstdint>
 #include <type_traits>
+#include <utility>
 
 #include "core/node_rules.hpp"
 #include "core/tet.hpp"
@@ -518,7 +519,7 @@ __device__ __forceinline__ Vec3<T> corner_force(const ElementForces<T>& out, int
 /// A thread of a chained element pass (passes 1 and 3): load() reads its
 /// element's model part, which no pass writes, and step(d) the state, then
 /// computes and stores. A block of the launch's first wave (blockIdx below
-/// first_wave: the blocks the device holds at once, first_wave_blocks) loads
+/// first_wave: the blocks the device holds at once, element_launch) loads
 /// before its wait, so that those loads overlap the previous pass's tail. A
 /// later block is scheduled only as earlier ones end, when the previous pass
 /// has almost always ended too; it waits first and then issues its model and
@@ -570,36 +571,84 @@ __global__ void element_pressure_kernel(ModelView<T> m, StateView<T> s, RegionVi
       [&](const ElementData<T>& d) { element_pressure_at(s, d, u); });
 }
 
-/// Blocks of kBlock threads of `kernel` that the current device holds at
-/// once (its first wave), for run_element_pass: computed once per kernel
-/// and device (resident_blocks), at most element_first_wave_cap where set
-/// (tests).
-/// kLate false (a kernel without the late path): 0, unused.
-template <auto kKernel, bool kLate = true>
-index_t first_wave_blocks() {
-  if constexpr (!kLate) {
-    return 0;
-  } else {
-    constexpr int kDevices = 64;
-    static std::atomic<index_t> cache[kDevices] = {};
-    int dev = 0;
-    CUDA_CHECK(cudaGetDevice(&dev));
-    index_t w = dev < kDevices ? cache[dev].load(std::memory_order_relaxed) : 0;
-    if (w == 0) {
-      w = std::max<index_t>(1, resident_blocks(kKernel, kBlock));
-      if (dev < kDevices) cache[dev].store(w, std::memory_order_relaxed);
-    }
-    const index_t cap = element_first_wave_cap.load(std::memory_order_relaxed);
-    return cap >= 0 ? std::min(w, cap) : w;
+/// Threads per block of pass 3 (and the law kernel) and of pass 1 where
+/// their launch in blocks of kBlock runs in more than one wave
+/// (element_launch). Pass 3 in float takes 54-56 registers a thread: an SM
+/// holds 36 of its warps, but only four blocks of 256 (32 warps), nine of
+/// 128 or eighteen of 64 (36). Smaller blocks also free their slot when
+/// their own few warps end, not the slowest of eight. On an H200, 1M tets
+/// in float ran 5 % faster with pass 3 in blocks of 64 and pass 1 in blocks
+/// of 128; pass 1 in blocks of 64 lost. 100k tets, whose launches fit one
+/// wave in float, ran 2-8 % slower in smaller blocks, so they keep blocks of
+/// 256 (docs/cuda.md, "Element passes of several waves in smaller blocks").
+inline constexpr int kPass3WaveBlock = 64;
+inline constexpr int kPass1WaveBlock = 128;
+
+/// How a chained element pass (passes 1 and 3) over n elements launches:
+/// its block size, and the blocks of its first wave for run_element_pass
+/// (0 where kLate is false: unused).
+struct ElementLaunch {
+  int block = kBlock;
+  index_t first_wave = 0;
+};
+
+/// Blocks of `kernel` that the current device holds at once in blocks of
+/// kBlock and of kWaveBlock threads (resident_blocks), computed once per
+/// kernel and device.
+template <auto kKernel, int kWaveBlock>
+std::pair<index_t, index_t> element_waves() {
+  auto query = [] {
+    return std::pair<index_t, index_t>{std::max<index_t>(1, resident_blocks(kKernel, kBlock)),
+                                       std::max<index_t>(1, resident_blocks(kKernel, kWaveBlock))};
+  };
+  constexpr int kDevices = 64;
+  static std::atomic<index_t> cache[kDevices][2] = {};
+  int dev = 0;
+  CUDA_CHECK(cudaGetDevice(&dev));
+  if (dev >= kDevices) return query();
+  std::pair<index_t, index_t> w{cache[dev][0].load(std::memory_order_relaxed),
+                                cache[dev][1].load(std::memory_order_relaxed)};
+  if (w.first == 0 || w.second == 0) {
+    w = query();
+    cache[dev][0].store(w.first, std::memory_order_relaxed);
+    cache[dev][1].store(w.second, std::memory_order_relaxed);
   }
+  return w;
+}
+
+/// The launch of `kernel` over n elements: blocks of kBlock where they fit
+/// in one wave, else of kWaveBlock (always, where
+/// small_element_blocks_forced: tests; kWaveBlock == kBlock, for a kernel
+/// compiled under launch bounds of kBlock: never); the first wave in those
+/// blocks, at most element_first_wave_cap where set (tests).
+template <auto kKernel, int kWaveBlock, bool kLate>
+ElementLaunch element_launch(index_t n) {
+  const auto [wave, small_wave] = element_waves<kKernel, kWaveBlock>();
+  ElementLaunch l;
+  if (small_element_blocks_forced.load(std::memory_order_relaxed) || grid_for(n, kBlock) > wave) l.block = kWaveBlock;
+  if constexpr (kLate) {
+    l.first_wave = l.block == kBlock ? wave : small_wave;
+    const index_t cap = element_first_wave_cap.load(std::memory_order_relaxed);
+    if (cap >= 0) l.first_wave = std::min(l.first_wave, cap);
+  }
+  return l;
+}
+
+/// Queues `kernel` over region r's n elements as element_launch chooses,
+/// its first wave as the last argument.
+template <auto kKernel, int kWaveBlock, bool kLate, class... Args>
+void launch_element_pass(index_t n, cudaStream_t stream, Args... args) {
+  const ElementLaunch l = element_launch<kKernel, kWaveBlock, kLate>(n);
+  launch_chained_in(l.block, n, stream, kKernel, args..., l.first_wave);
+  if (n > 0 && l.block != kBlock) small_element_block_launches.fetch_add(1, std::memory_order_relaxed);
 }
 
 /// Pass 1 over region r, one thread an element, chained.
 template <class T, bool kRecomputed>
-void enqueue_element_pressures(const ModelView<T>& m, const StateView<T>& s, const RegionView& r,
-                               const Packed3<T>* u, cudaStream_t stream) {
-  constexpr auto kKernel = element_pressure_kernel<T, kRecomputed>;
-  launch_chained(r.n_elems, stream, kKernel, m, s, r, u, first_wave_blocks<kKernel, kLateLoads<T>>());
+void enqueue_element_pressures(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, const Packed3<T>* u,
+                               cudaStream_t stream) {
+  constexpr bool kLate = kLateLoads<T>;
+  launch_element_pass<element_pressure_kernel<T, kRecomputed>, kPass1WaveBlock, kLate>(r.n_elems, stream, m, s, r, u);
 }
 
 /// Node kernels run kNodeLanes threads per node (launch kNodeLanes * n);

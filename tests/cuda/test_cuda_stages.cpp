@@ -410,10 +410,15 @@ TEST_P(Stages, MovingContactMatchesCpuInEveryStepMode) {
   }
 }
 
-/// Law terms (core/material.hpp) in every step mode: a box half
-/// Neo-Hookean, half fibre-reinforced and viscoelastic, its top pressed
-/// for 90 steps, against the cpu (the persistent kernels take the law path
-/// out of line, the pass kernels pick the law kernel at launch).
+/// An attribute of the current device (the queries' failures recorded; 0
+/// then).
+int device_attribute(cudaDeviceAttr attr) {
+  int dev = 0, v = 0;
+  EXPECT_EQ(cudaGetDevice(&dev), cudaSuccess);
+  EXPECT_EQ(cudaDeviceGetAttribute(&v, attr, dev), cudaSuccess);
+  return v;
+}
+
 /// Caps the blocks of each element pass's launch that load before their
 /// wait (set_cuda_element_first_wave; 0: every block waits first, -1: no
 /// cap) while it lives: the setting is process-wide, so it is restored
@@ -425,6 +430,21 @@ struct ElementFirstWave {
   ElementFirstWave& operator=(const ElementFirstWave&) = delete;
 };
 
+/// Runs every launch of passes 1 and 3 (but pass 3's streaming kernel) in
+/// the smaller blocks of a launch of several waves
+/// (set_cuda_small_element_blocks) while it lives; process-wide, restored
+/// however the test ends.
+struct SmallElementBlocks {
+  explicit SmallElementBlocks(bool always) { set_cuda_small_element_blocks(always); }
+  ~SmallElementBlocks() { set_cuda_small_element_blocks(false); }
+  SmallElementBlocks(const SmallElementBlocks&) = delete;
+  SmallElementBlocks& operator=(const SmallElementBlocks&) = delete;
+};
+
+/// Law terms (core/material.hpp) in every step mode: a box half
+/// Neo-Hookean, half fibre-reinforced and viscoelastic, its top pressed
+/// for 90 steps, against the cpu (the persistent kernels take the law path
+/// out of line, the pass kernels pick the law kernel at launch).
 TEST_P(Stages, LawTermsMatchCpuInEveryStepMode) {
   SKIP_WITHOUT_GPU();
   const Precision p = GetParam();
@@ -458,14 +478,29 @@ TEST_P(Stages, LawTermsMatchCpuInEveryStepMode) {
       report((std::string("law terms, step mode ") + to_string(mode) + ", gradients " + to_string(g)).c_str(), p, d);
       EXPECT_LT(d, p == Precision::Double ? 1e-9 : 1e-3);  // 90 dynamic steps
     }
-    // the law kernel's second block (of two) loading after its wait, as blocks past the first wave do
-    SCOPED_TRACE(::testing::Message() << "later blocks load after their wait, gradients " << to_string(g));
-    const ElementFirstWave first_wave(1);
-    auto gpu = make_cuda_backend(p);
-    set_cuda_step_mode(*gpu, CudaStepMode::Graph);
-    set_cuda_gradients(*gpu, g);
-    ASSERT_GT(m.n_elems, 256);  // at least two blocks
-    EXPECT_EQ(run(*gpu), graph_u);
+    {  // the law kernel's second block (of two) loading after its wait, as blocks past the first wave do
+      SCOPED_TRACE(::testing::Message() << "later blocks load after their wait, gradients " << to_string(g));
+      const ElementFirstWave first_wave(1);
+      auto gpu = make_cuda_backend(p);
+      set_cuda_step_mode(*gpu, CudaStepMode::Graph);
+      set_cuda_gradients(*gpu, g);
+      ASSERT_GT(m.n_elems, 256);  // at least two blocks
+      EXPECT_EQ(run(*gpu), graph_u);
+    }
+    {  // the law kernel and pass 1 in the smaller blocks of a launch of several waves, in either mode
+       // of loading
+      for (const index_t wave : {index_t(-1), index_t(1)}) {
+        SCOPED_TRACE(::testing::Message() << "smaller blocks, first wave " << wave << ", gradients " << to_string(g));
+        const ElementFirstWave first_wave(wave);
+        const SmallElementBlocks small_blocks(true);
+        const std::int64_t small_before = cuda_small_element_block_launches();
+        auto gpu = make_cuda_backend(p);
+        set_cuda_step_mode(*gpu, CudaStepMode::Graph);
+        set_cuda_gradients(*gpu, g);
+        EXPECT_EQ(run(*gpu), graph_u);
+        EXPECT_GT(cuda_small_element_block_launches(), small_before);
+      }
+    }
   }
 }
 
@@ -881,19 +916,27 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
       bool late;        // every block of passes 1 and 3 but the first loads after its wait (in double:
                         // of pass 3's streaming kernel only)
       bool streaming;   // pass 3 (apart) in its streaming kernel
+      bool small;       // passes 1 and 3 in the smaller blocks of a launch of several waves
     };
-    for (const Run run :
-         {Run{CudaStepMode::Grid, false, false, false, false}, Run{CudaStepMode::Graph, false, false, false, false},
-          Run{CudaStepMode::Launch, false, false, false, false}, Run{CudaStepMode::Graph, true, false, false, false},
-          Run{CudaStepMode::Graph, true, true, false, false}, Run{CudaStepMode::Launch, true, true, false, false},
-          Run{CudaStepMode::Graph, true, false, true, false}, Run{CudaStepMode::Launch, true, false, false, true},
-          Run{CudaStepMode::Graph, true, true, true, true}}) {
+    for (const Run run : {Run{CudaStepMode::Grid, false, false, false, false, false},
+                          Run{CudaStepMode::Graph, false, false, false, false, false},
+                          Run{CudaStepMode::Launch, false, false, false, false, false},
+                          Run{CudaStepMode::Graph, true, false, false, false, false},
+                          Run{CudaStepMode::Graph, true, true, false, false, false},
+                          Run{CudaStepMode::Launch, true, true, false, false, false},
+                          Run{CudaStepMode::Graph, true, false, true, false, false},
+                          Run{CudaStepMode::Launch, true, false, false, true, false},
+                          Run{CudaStepMode::Graph, true, true, true, true, false},
+                          Run{CudaStepMode::Graph, true, false, true, false, true},
+                          Run{CudaStepMode::Launch, true, true, false, false, true}}) {
       if (run.late && !run.streaming && p == Precision::Double) continue;  // double's kernels have no late path
       SCOPED_TRACE(::testing::Message() << to_string(run.mode) << (run.apart ? ", passes 3-4 apart" : "")
                                         << (run.node_lanes ? ", node passes two lanes a thread" : "")
                                         << (run.late ? ", element passes' later blocks load after their wait" : "")
-                                        << (run.streaming ? ", pass 3's streaming kernel" : ""));
+                                        << (run.streaming ? ", pass 3's streaming kernel" : "")
+                                        << (run.small ? ", element passes in smaller blocks" : ""));
       const ElementFirstWave first_wave(run.late ? 1 : -1);
+      const SmallElementBlocks small_blocks(run.small);
       auto gpu = make_cuda_backend(p);
       set_cuda_step_mode(*gpu, run.mode);
       if (run.apart) set_cuda_fused_force_blocks(*gpu, 0);
@@ -932,6 +975,7 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
       }
       const CudaNodePassLaunches before = cuda_node_pass_launches();
       const std::int64_t streaming_before = cuda_streaming_force_launches();
+      const std::int64_t small_before = cuda_small_element_block_launches();
       gpu->advance(5);
       std::vector<double> energies = {gpu->reduce().strain_energy};
       gpu->advance(4);
@@ -950,6 +994,11 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
       EXPECT_EQ(after.pressures > before.pressures, !run.node_lanes && c.pressures_apart);
       EXPECT_EQ(cuda_streaming_force_launches() > streaming_before,
                 run.streaming && chained && !cuda_fuses_forces(*gpu));
+      // smaller blocks where told (every such run holds pass 3 apart); else none: these regions'
+      // element passes, at most 60 blocks of 256, fit one wave on a device of 30 SMs or more
+      if (run.small || device_attribute(cudaDevAttrMultiProcessorCount) >= 30) {
+        EXPECT_EQ(cuda_small_element_block_launches() > small_before, run.small);
+      }
       if (ref_u.empty()) {
         ref_u = f.u, ref_f = f.f, ref_p = f.node_p, ref_J = f.elem_J, ref_energy = energies;
         if (!driven.empty()) {  // the driven node moved: the test has its stale slots
@@ -1477,15 +1526,6 @@ TEST_P(Stages, BadInputGivesClearErrors) {
   EXPECT_THROW(set_cuda_step_mode(*cpu, CudaStepMode::Graph), std::invalid_argument);
 }
 
-/// An attribute of the current device (the queries' failures recorded; 0
-/// then).
-int device_attribute(cudaDeviceAttr attr) {
-  int dev = 0, v = 0;
-  EXPECT_EQ(cudaGetDevice(&dev), cudaSuccess);
-  EXPECT_EQ(cudaDeviceGetAttribute(&v, attr, dev), cudaSuccess);
-  return v;
-}
-
 /// The node passes take two lanes a thread from two waves of the device's
 /// resident threads at eight threads a node (ModelView::lanes_node_min).
 TEST_P(Stages, NodePassesTakeTwoLanesAThreadFromTwoWaves) {
@@ -1616,6 +1656,7 @@ TEST_P(Stages, PassFourDropsTheSlotsItReadWhereTheyExceedHalfTheL2) {
     if (run.eight) set_cuda_lanes_node_min(*gpu, m.n_nodes + 1);
     gpu->set_displacements(u);
     const CudaNodePassLaunches before = cuda_node_pass_launches();
+    const std::int64_t small_before = cuda_small_element_block_launches();
     gpu->advance(4);
     std::vector<double> energies = {gpu->reduce().strain_energy};
     gpu->advance(3);
@@ -1624,6 +1665,9 @@ TEST_P(Stages, PassFourDropsTheSlotsItReadWhereTheyExceedHalfTheL2) {
     const bool lanes = m.n_nodes >= cuda_lanes_node_min(*gpu);  // two lanes a thread (on an H100 unless told)
     EXPECT_EQ(after.updates > before.updates, chained && !lanes);
     EXPECT_EQ(after.updates_lanes > before.updates_lanes, chained && lanes);
+    // the whole mesh's element passes run several waves: pass 1 (the reduction's in every mode) in the
+    // smaller blocks
+    EXPECT_GT(cuda_small_element_block_launches(), small_before) << m.n_elems << " elements";
     gpu->build_region(seeds, 2);
     gpu->advance(2);
     energies.push_back(gpu->reduce().strain_energy);
