@@ -727,20 +727,30 @@ bool runs_node_lanes(const ModelView<T>& m, const RegionView& r) {
   return r.n_nodes >= m.lanes_node_min;
 }
 
-/// Queues a node pass over region r (pressures: pass 2, else pass 4):
-/// `eight`, kNodeLanes threads a node, or `lanes`, kThreadLanes lanes a
-/// thread on a large region (runs_node_lanes; the same bits), counted in
-/// node_pass_launches.
+/// Threads per block of the chained pass 4. In float its kernels take 32-44
+/// registers a thread, and at 44 an SM holds 42 of their warps but five
+/// blocks of 256 (40 warps); smaller blocks also free their slot when
+/// their own two warps end. On an H200 100k and 1M tets in float ran 2 %
+/// faster with pass 4 in blocks of 64 (in blocks of 128, 0.6 %), double
+/// the same; pass 2 in blocks of 64 lost 7 %, so it keeps kBlock
+/// (docs/cuda.md, "Element passes of several waves in smaller blocks").
+inline constexpr int kNodeUpdateBlock = 64;
+
+/// Queues a node pass over region r (pressures: pass 2, else pass 4, in
+/// blocks of kNodeUpdateBlock): `eight`, kNodeLanes threads a node, or
+/// `lanes`, kThreadLanes lanes a thread on a large region
+/// (runs_node_lanes; the same bits), counted in node_pass_launches.
 template <class T, class... Params, class... Args>
 void enqueue_node_pass(bool pressures, const ModelView<T>& m, const RegionView& r, cudaStream_t stream,
                        void (*eight)(Params...), void (*lanes)(Params...), Args... args) {
   if (r.n_nodes == 0) return;
   const bool by_lanes = runs_node_lanes(m, r);
   node_pass_launches.count(pressures, by_lanes);
+  const int block = pressures ? kBlock : kNodeUpdateBlock;
   if (by_lanes)
-    launch_chained(kNodeLanes / kThreadLanes * r.n_nodes, stream, lanes, args...);
+    launch_chained_in(block, kNodeLanes / kThreadLanes * r.n_nodes, stream, lanes, args...);
   else
-    launch_chained(kNodeLanes * r.n_nodes, stream, eight, args...);
+    launch_chained_in(block, kNodeLanes * r.n_nodes, stream, eight, args...);
 }
 
 /// Queues pass 2 over region r (enqueue_node_pass).
