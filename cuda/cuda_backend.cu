@@ -624,7 +624,10 @@ void set_cuda_element_first_wave(index_t blocks) { gpu::element_first_wave_cap.s
 
 void set_cuda_small_element_blocks(bool always) { gpu::small_element_blocks_forced.store(always); }
 
-std::int64_t cuda_small_element_block_launches() { return gpu::small_element_block_launches.load(); }
+CudaSmallElementBlockLaunches cuda_small_element_block_launches() {
+  const auto& c = gpu::small_element_block_launches;
+  return {c.pressures.load(), c.forces.load()};
+}
 
 const char* to_string(CudaGradients g) {
   switch (g) {

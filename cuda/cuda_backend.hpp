@@ -138,17 +138,21 @@ std::int64_t cuda_streaming_force_launches();
 /// device's first wave.
 void set_cuda_element_first_wave(index_t blocks);
 
-/// Tests: true runs every launch of passes 1 and 3 (but pass 3's streaming
-/// kernel) in the smaller blocks that the backend gives a launch of several
-/// waves (docs/cuda.md, "Element passes of several waves in smaller
-/// blocks"); false restores the choice by waves. Process-wide, read when a
-/// launch is queued or a graph captured.
+/// Tests: true runs every launch of passes 1 and 3 in the smaller blocks
+/// that the backend gives a launch of several waves (docs/cuda.md, "Element
+/// passes of several waves in smaller blocks"), but pass 3's streaming
+/// kernel and the pass 3 beside a region check, which keep blocks of 256;
+/// false restores the choice by waves. Process-wide, read when a launch is
+/// queued or a graph captured.
 void set_cuda_small_element_blocks(bool always);
 
-/// Launches of passes 1 and 3 in those smaller blocks this process has
-/// queued (counted as they are launched or captured into a graph; replays
-/// add nothing).
-std::int64_t cuda_small_element_block_launches();
+/// Launches in those smaller blocks this process has queued, of pass 1
+/// (pressures) and of pass 3 or the law kernel (forces), counted as they
+/// are launched or captured into a graph (replays add nothing).
+struct CudaSmallElementBlockLaunches {
+  std::int64_t pressures = 0, forces = 0;
+};
+CudaSmallElementBlockLaunches cuda_small_element_block_launches();
 
 /// CudaGradients (cuda/gradients.hpp) by name: "auto", "stored", "recomputed".
 const char* to_string(CudaGradients g);

@@ -94,8 +94,9 @@ void launch_chained_in(int block, index_t n, cudaStream_t stream, void (*kernel)
 /// Like launch(), with programmatic dependent launch: the grid may be
 /// scheduled while the previous kernel in the stream still runs; the kernel
 /// must wait (cudaGridDependencySynchronize) before touching anything that
-/// kernel writes. Captured into graphs as programmatic edges. The four pass
-/// kernels (cuda/tled.cuh) are launched this way.
+/// kernel writes. Captured into graphs as programmatic edges. The pass
+/// kernels (cuda/tled.cuh) are launched this way, through launch_chained_in
+/// where their blocks are not kBlock (passes 1, 3 and 4).
 template <class... Params, class... Args>
 void launch_chained(index_t n, cudaStream_t stream, void (*kernel)(Params...), Args... args) {
   launch_chained_in(kBlock, n, stream, kernel, args...);
@@ -149,15 +150,20 @@ inline std::atomic<std::int64_t> streaming_force_launches{0};
 /// launch is queued or a graph captured.
 inline std::atomic<index_t> element_first_wave_cap{-1};
 
-/// Tests: every launch of passes 1 and 3 but pass 3's streaming kernel in
-/// the blocks of a launch of several waves (set_cuda_small_element_blocks;
-/// element_launch, cuda/tled.cuh). Read when a launch is queued or a graph
-/// captured.
+/// Tests: every launch of passes 1 and 3 in the blocks of a launch of
+/// several waves (set_cuda_small_element_blocks; element_launch,
+/// cuda/tled.cuh), but pass 3's streaming kernel and the pass 3 beside a
+/// region check, which always run in blocks of kBlock. Read when a launch
+/// is queued or a graph captured.
 inline std::atomic<bool> small_element_blocks_forced{false};
 
-/// Launches of passes 1 and 3 in those smaller blocks this process has
-/// queued, counted on the host as they are launched or captured into a
-/// graph (cuda_small_element_block_launches: the tests' evidence).
-inline std::atomic<std::int64_t> small_element_block_launches{0};
+/// Launches of pass 1 (pressures) and of pass 3 or the law kernel (forces)
+/// in those smaller blocks this process has queued, counted on the host as
+/// they are launched or captured into a graph
+/// (cuda_small_element_block_launches: the tests' evidence).
+struct SmallElementBlockLaunches {
+  std::atomic<std::int64_t> pressures{0}, forces{0};
+};
+inline SmallElementBlockLaunches small_element_block_launches;
 
 }  // namespace tissue::gpu

@@ -133,14 +133,16 @@ void Stepper<T>::element_forces(const ModelView<T>& m, const StateView<T>& s, co
       launch_chained(r.n_elems, stream, element_forces_beside_check_kernel<T, kRecomputed>, m, s, r, u);
     else if (law_.neo_hookean() && streams_slots(r)) {
       // (compiled under launch bounds of kBlock: never in smaller blocks)
-      launch_element_pass<element_forces_streaming_kernel<T, kRecomputed>, kBlock, true>(r.n_elems, stream, m, s, r, u);
+      launch_element_pass<element_forces_streaming_kernel<T, kRecomputed>, kBlock, true>(false, r.n_elems, stream, m, s,
+                                                                                         r, u);
       streaming_force_launches.fetch_add(1, std::memory_order_relaxed);
     } else if (law_.neo_hookean()) {
       constexpr bool kLate = kLateLoads<T>;
-      launch_element_pass<element_forces_kernel<T, kRecomputed>, kPass3WaveBlock, kLate>(r.n_elems, stream, m, s, r, u);
+      launch_element_pass<element_forces_kernel<T, kRecomputed>, kPass3WaveBlock, kLate>(false, r.n_elems, stream, m, s,
+                                                                                         r, u);
     } else {
-      launch_element_pass<law_element_forces_kernel<T, kRecomputed>, kPass3WaveBlock, true>(r.n_elems, stream, m, s, r,
-                                                                                            u, law_);
+      launch_element_pass<law_element_forces_kernel<T, kRecomputed>, kPass3WaveBlock, true>(false, r.n_elems, stream, m,
+                                                                                            s, r, u, law_);
     }
   });
 }

@@ -577,12 +577,13 @@ __global__ void element_pressure_kernel(ModelView<T> m, StateView<T> s, RegionVi
 /// holds 36 of its warps, but only four blocks of 256 (32 warps), nine of
 /// 128 or eighteen of 64 (36). Smaller blocks also free their slot when
 /// their own few warps end, not the slowest of eight. On an H200, 1M tets
-/// in float ran 5 % faster with pass 3 in blocks of 64 and pass 1 in blocks
-/// of 128; pass 1 in blocks of 64 lost. 100k tets, whose launches fit one
+/// in float ran 3.9 % faster with pass 3 in blocks of 64 and pass 1 in
+/// blocks of 128; pass 1 in blocks of 64 lost. 100k tets, whose launches fit one
 /// wave in float, ran 2-8 % slower in smaller blocks, so they keep blocks of
 /// 256 (docs/cuda.md, "Element passes of several waves in smaller blocks").
 inline constexpr int kPass3WaveBlock = 64;
 inline constexpr int kPass1WaveBlock = 128;
+static_assert(kPass3WaveBlock % 32 == 0 && kPass1WaveBlock % 32 == 0, "whole warps");
 
 /// How a chained element pass (passes 1 and 3) over n elements launches:
 /// its block size, and the blocks of its first wave for run_element_pass
@@ -635,12 +636,17 @@ ElementLaunch element_launch(index_t n) {
 }
 
 /// Queues `kernel` over region r's n elements as element_launch chooses,
-/// its first wave as the last argument.
+/// its first wave as the last argument; a launch in the smaller blocks is
+/// counted in small_element_block_launches (pressures: pass 1, else pass 3
+/// or the law kernel).
 template <auto kKernel, int kWaveBlock, bool kLate, class... Args>
-void launch_element_pass(index_t n, cudaStream_t stream, Args... args) {
+void launch_element_pass(bool pressures, index_t n, cudaStream_t stream, Args... args) {
   const ElementLaunch l = element_launch<kKernel, kWaveBlock, kLate>(n);
   launch_chained_in(l.block, n, stream, kKernel, args..., l.first_wave);
-  if (n > 0 && l.block != kBlock) small_element_block_launches.fetch_add(1, std::memory_order_relaxed);
+  if (n > 0 && l.block != kBlock) {
+    auto& c = pressures ? small_element_block_launches.pressures : small_element_block_launches.forces;
+    c.fetch_add(1, std::memory_order_relaxed);
+  }
 }
 
 /// Pass 1 over region r, one thread an element, chained.
@@ -648,7 +654,8 @@ template <class T, bool kRecomputed>
 void enqueue_element_pressures(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, const Packed3<T>* u,
                                cudaStream_t stream) {
   constexpr bool kLate = kLateLoads<T>;
-  launch_element_pass<element_pressure_kernel<T, kRecomputed>, kPass1WaveBlock, kLate>(r.n_elems, stream, m, s, r, u);
+  launch_element_pass<element_pressure_kernel<T, kRecomputed>, kPass1WaveBlock, kLate>(true, r.n_elems, stream, m, s, r,
+                                                                                       u);
 }
 
 /// Node kernels run kNodeLanes threads per node (launch kNodeLanes * n);
@@ -735,11 +742,12 @@ bool runs_node_lanes(const ModelView<T>& m, const RegionView& r) {
 /// the same; pass 2 in blocks of 64 lost 7 %, so it keeps kBlock
 /// (docs/cuda.md, "Element passes of several waves in smaller blocks").
 inline constexpr int kNodeUpdateBlock = 64;
+static_assert(kNodeUpdateBlock % 32 == 0, "whole warps: pass 4's lane groups and its slot drop work by warps");
 
-/// Queues a node pass over region r (pressures: pass 2, else pass 4, in
-/// blocks of kNodeUpdateBlock): `eight`, kNodeLanes threads a node, or
-/// `lanes`, kThreadLanes lanes a thread on a large region
-/// (runs_node_lanes; the same bits), counted in node_pass_launches.
+/// Queues a node pass over region r (pressures: pass 2, in blocks of
+/// kBlock; else pass 4, in blocks of kNodeUpdateBlock): `eight`, kNodeLanes
+/// threads a node, or `lanes`, kThreadLanes lanes a thread on a large
+/// region (runs_node_lanes; the same bits), counted in node_pass_launches.
 template <class T, class... Params, class... Args>
 void enqueue_node_pass(bool pressures, const ModelView<T>& m, const RegionView& r, cudaStream_t stream,
                        void (*eight)(Params...), void (*lanes)(Params...), Args... args) {

@@ -487,20 +487,47 @@ TEST_P(Stages, LawTermsMatchCpuInEveryStepMode) {
       ASSERT_GT(m.n_elems, 256);  // at least two blocks
       EXPECT_EQ(run(*gpu), graph_u);
     }
-    {  // the law kernel and pass 1 in the smaller blocks of a launch of several waves, in either mode
-       // of loading
+    {  // the law kernel in the smaller blocks of a launch of several waves, in either mode of loading
+       // (passes 1-2 run fused on this box)
       for (const index_t wave : {index_t(-1), index_t(1)}) {
         SCOPED_TRACE(::testing::Message() << "smaller blocks, first wave " << wave << ", gradients " << to_string(g));
         const ElementFirstWave first_wave(wave);
         const SmallElementBlocks small_blocks(true);
-        const std::int64_t small_before = cuda_small_element_block_launches();
+        const std::int64_t small_before = cuda_small_element_block_launches().forces;
         auto gpu = make_cuda_backend(p);
         set_cuda_step_mode(*gpu, CudaStepMode::Graph);
         set_cuda_gradients(*gpu, g);
         EXPECT_EQ(run(*gpu), graph_u);
-        EXPECT_GT(cuda_small_element_block_launches(), small_before);
+        EXPECT_GT(cuda_small_element_block_launches().forces, small_before);
       }
     }
+  }
+}
+
+/// The law kernel takes one or two blocks of 256 an SM, so a law model's
+/// pass 3 runs in several waves well below 1M tets and then takes the
+/// smaller blocks unforced: a mixed-law box of 162,000 elements (633
+/// blocks of 256, more than two a multiprocessor on any device of up to
+/// 316), from a random displacement, two steps over the whole mesh.
+TEST_P(Stages, LawKernelOfSeveralWavesTakesTheSmallerBlocks) {
+  SKIP_WITHOUT_GPU();
+  const Precision p = GetParam();
+  const auto m = build_model(test::mixed_law_box(30, 0.06));
+  ASSERT_EQ(m.n_elems, 162000);
+  ASSERT_GT((m.n_elems + 255) / 256, 2 * device_attribute(cudaDevAttrMultiProcessorCount));
+  for (CudaStepMode mode : {CudaStepMode::Launch, CudaStepMode::Graph}) {
+    SCOPED_TRACE(to_string(mode));
+    auto gpu = make_cuda_backend(p);
+    set_cuda_step_mode(*gpu, mode);
+    gpu->upload(m);
+    gpu->set_displacements(random_field(m.n_nodes, 1e-5, 41));
+    const CudaSmallElementBlockLaunches before = cuda_small_element_block_launches();
+    gpu->advance(2);
+    const Reductions red = gpu->reduce();
+    const CudaSmallElementBlockLaunches after = cuda_small_element_block_launches();
+    EXPECT_GT(after.forces, before.forces);
+    EXPECT_TRUE(std::isfinite(red.strain_energy));
+    EXPECT_GT(red.strain_energy, 0.0);
   }
 }
 
@@ -975,7 +1002,7 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
       }
       const CudaNodePassLaunches before = cuda_node_pass_launches();
       const std::int64_t streaming_before = cuda_streaming_force_launches();
-      const std::int64_t small_before = cuda_small_element_block_launches();
+      const CudaSmallElementBlockLaunches small_before = cuda_small_element_block_launches();
       gpu->advance(5);
       std::vector<double> energies = {gpu->reduce().strain_energy};
       gpu->advance(4);
@@ -994,10 +1021,13 @@ TEST_P(Stages, FusedPassesGiveTheSeparatePassesBits) {
       EXPECT_EQ(after.pressures > before.pressures, !run.node_lanes && c.pressures_apart);
       EXPECT_EQ(cuda_streaming_force_launches() > streaming_before,
                 run.streaming && chained && !cuda_fuses_forces(*gpu));
-      // smaller blocks where told (every such run holds pass 3 apart); else none: these regions'
-      // element passes, at most 60 blocks of 256, fit one wave on a device of 30 SMs or more
-      if (run.small || device_attribute(cudaDevAttrMultiProcessorCount) >= 30) {
-        EXPECT_EQ(cuda_small_element_block_launches() > small_before, run.small);
+      // smaller blocks where told: pass 3 (every such run holds it apart) and pass 1 where passes 1-2
+      // run apart; else none: these regions' element passes, at most 60 blocks of 256, fit one wave
+      // on a device of 60 SMs or more (one block an SM would do)
+      if (run.small || device_attribute(cudaDevAttrMultiProcessorCount) >= 60) {
+        const CudaSmallElementBlockLaunches small_after = cuda_small_element_block_launches();
+        EXPECT_EQ(small_after.forces > small_before.forces, run.small);
+        EXPECT_EQ(small_after.pressures > small_before.pressures, run.small && c.pressures_apart);
       }
       if (ref_u.empty()) {
         ref_u = f.u, ref_f = f.f, ref_p = f.node_p, ref_J = f.elem_J, ref_energy = energies;
@@ -1656,7 +1686,7 @@ TEST_P(Stages, PassFourDropsTheSlotsItReadWhereTheyExceedHalfTheL2) {
     if (run.eight) set_cuda_lanes_node_min(*gpu, m.n_nodes + 1);
     gpu->set_displacements(u);
     const CudaNodePassLaunches before = cuda_node_pass_launches();
-    const std::int64_t small_before = cuda_small_element_block_launches();
+    const CudaSmallElementBlockLaunches small_before = cuda_small_element_block_launches();
     gpu->advance(4);
     std::vector<double> energies = {gpu->reduce().strain_energy};
     gpu->advance(3);
@@ -1665,9 +1695,12 @@ TEST_P(Stages, PassFourDropsTheSlotsItReadWhereTheyExceedHalfTheL2) {
     const bool lanes = m.n_nodes >= cuda_lanes_node_min(*gpu);  // two lanes a thread (on an H100 unless told)
     EXPECT_EQ(after.updates > before.updates, chained && !lanes);
     EXPECT_EQ(after.updates_lanes > before.updates_lanes, chained && lanes);
-    // the whole mesh's element passes run several waves: pass 1 (the reduction's in every mode) in the
-    // smaller blocks
-    EXPECT_GT(cuda_small_element_block_launches(), small_before) << m.n_elems << " elements";
+    // the whole mesh's element passes run several waves, so they take the smaller blocks: pass 1 in
+    // every mode (the reduction's), pass 3 where the steps run it apart in float (in double its
+    // slots stream: the streaming kernel, in blocks of 256)
+    const CudaSmallElementBlockLaunches small_after = cuda_small_element_block_launches();
+    EXPECT_GT(small_after.pressures, small_before.pressures) << m.n_elems << " elements";
+    EXPECT_EQ(small_after.forces > small_before.forces, chained && p == Precision::Float);
     gpu->build_region(seeds, 2);
     gpu->advance(2);
     energies.push_back(gpu->reduce().strain_energy);
