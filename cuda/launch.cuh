@@ -146,12 +146,12 @@ inline std::atomic<std::int64_t> streaming_force_launches{0};
 
 /// Tests: at most this many blocks of an element pass's launch load before
 /// their wait (set_cuda_element_first_wave; 0: none); negative: the
-/// device's first wave (element_launch, cuda/tled.cuh). Read when a
+/// device's first wave (launch_element_pass, cuda/tled.cuh). Read when a
 /// launch is queued or a graph captured.
 inline std::atomic<index_t> element_first_wave_cap{-1};
 
 /// Tests: every launch of passes 1 and 3 in the blocks of a launch of
-/// several waves (set_cuda_small_element_blocks; element_launch,
+/// several waves (set_cuda_small_element_blocks; launch_element_pass,
 /// cuda/tled.cuh), but pass 3's streaming kernel and the pass 3 beside a
 /// region check, which always run in blocks of kBlock. Read when a launch
 /// is queued or a graph captured.

@@ -519,7 +519,7 @@ __device__ __forceinline__ Vec3<T> corner_force(const ElementForces<T>& out, int
 /// A thread of a chained element pass (passes 1 and 3): load() reads its
 /// element's model part, which no pass writes, and step(d) the state, then
 /// computes and stores. A block of the launch's first wave (blockIdx below
-/// first_wave: the blocks the device holds at once, element_launch) loads
+/// first_wave: the blocks the device holds at once, launch_element_pass) loads
 /// before its wait, so that those loads overlap the previous pass's tail. A
 /// later block is scheduled only as earlier ones end, when the previous pass
 /// has almost always ended too; it waits first and then issues its model and
@@ -573,7 +573,7 @@ __global__ void element_pressure_kernel(ModelView<T> m, StateView<T> s, RegionVi
 
 /// Threads per block of pass 3 (and the law kernel) and of pass 1 where
 /// their launch in blocks of kBlock runs in more than one wave
-/// (element_launch). Pass 3 in float takes 54-56 registers a thread: an SM
+/// (launch_element_pass). Pass 3 in float takes 54-56 registers a thread: an SM
 /// holds 36 of its warps, but only four blocks of 256 (32 warps), nine of
 /// 128 or eighteen of 64 (36). Smaller blocks also free their slot when
 /// their own few warps end, not the slowest of eight. On an H200, 1M tets
@@ -584,14 +584,6 @@ __global__ void element_pressure_kernel(ModelView<T> m, StateView<T> s, RegionVi
 inline constexpr int kPass3WaveBlock = 64;
 inline constexpr int kPass1WaveBlock = 128;
 static_assert(kPass3WaveBlock % 32 == 0 && kPass1WaveBlock % 32 == 0, "whole warps");
-
-/// How a chained element pass (passes 1 and 3) over n elements launches:
-/// its block size, and the blocks of its first wave for run_element_pass
-/// (0 where kLate is false: unused).
-struct ElementLaunch {
-  int block = kBlock;
-  index_t first_wave = 0;
-};
 
 /// Blocks of `kernel` that the current device holds at once in blocks of
 /// kBlock and of kWaveBlock threads (resident_blocks), computed once per
@@ -617,33 +609,27 @@ std::pair<index_t, index_t> element_waves() {
   return w;
 }
 
-/// The launch of `kernel` over n elements: blocks of kBlock where they fit
-/// in one wave, else of kWaveBlock (always, where
+/// Queues `kernel` over region r's n elements: in blocks of kBlock where
+/// they fit in one wave, else of kWaveBlock (always, where
 /// small_element_blocks_forced: tests; kWaveBlock == kBlock, for a kernel
-/// compiled under launch bounds of kBlock: never); the first wave in those
-/// blocks, at most element_first_wave_cap where set (tests).
-template <auto kKernel, int kWaveBlock, bool kLate>
-ElementLaunch element_launch(index_t n) {
-  const auto [wave, small_wave] = element_waves<kKernel, kWaveBlock>();
-  ElementLaunch l;
-  if (small_element_blocks_forced.load(std::memory_order_relaxed) || grid_for(n, kBlock) > wave) l.block = kWaveBlock;
-  if constexpr (kLate) {
-    l.first_wave = l.block == kBlock ? wave : small_wave;
-    const index_t cap = element_first_wave_cap.load(std::memory_order_relaxed);
-    if (cap >= 0) l.first_wave = std::min(l.first_wave, cap);
-  }
-  return l;
-}
-
-/// Queues `kernel` over region r's n elements as element_launch chooses,
-/// its first wave as the last argument; a launch in the smaller blocks is
-/// counted in small_element_block_launches (pressures: pass 1, else pass 3
-/// or the law kernel).
+/// compiled under launch bounds of kBlock: never), its first wave in those
+/// blocks (at most element_first_wave_cap where set: tests; 0 where kLate
+/// is false, unused) as the last argument. A launch in the smaller blocks
+/// is counted in small_element_block_launches (pressures: pass 1, else
+/// pass 3 or the law kernel).
 template <auto kKernel, int kWaveBlock, bool kLate, class... Args>
 void launch_element_pass(bool pressures, index_t n, cudaStream_t stream, Args... args) {
-  const ElementLaunch l = element_launch<kKernel, kWaveBlock, kLate>(n);
-  launch_chained_in(l.block, n, stream, kKernel, args..., l.first_wave);
-  if (n > 0 && l.block != kBlock) {
+  const auto [wave, small_wave] = element_waves<kKernel, kWaveBlock>();
+  const bool small = small_element_blocks_forced.load(std::memory_order_relaxed) || grid_for(n, kBlock) > wave;
+  const int block = small ? kWaveBlock : kBlock;
+  index_t first_wave = 0;
+  if constexpr (kLate) {
+    const index_t cap = element_first_wave_cap.load(std::memory_order_relaxed);
+    first_wave = small ? small_wave : wave;
+    if (cap >= 0) first_wave = std::min(first_wave, cap);
+  }
+  launch_chained_in(block, n, stream, kKernel, args..., first_wave);
+  if (n > 0 && block != kBlock) {
     auto& c = pressures ? small_element_block_launches.pressures : small_element_block_launches.forces;
     c.fetch_add(1, std::memory_order_relaxed);
   }

@@ -2,6 +2,7 @@
 // each other: its bottom face fixed, its top face driven down.
 #pragma once
 
+#include <algorithm>
 #include <vector>
 
 #include "core/box_mesh.hpp"
@@ -15,14 +16,18 @@ struct PressedTop {
   std::vector<double> target;
 };
 
-/// Fixes the nodes of `in` at z = 0 and returns those at z = top, each to
-/// be driven by (0, 0, dz).
-inline PressedTop fix_bottom_press_top(ModelInput& in, double top, double dz) {
+/// Fixes the nodes of `in` at its lowest z and returns those at its highest
+/// (the top face, found rather than named: box_mesh's rounding can leave a
+/// face a last bit off its nominal height), each to be driven by (0, 0, dz).
+inline PressedTop fix_bottom_press_top(ModelInput& in, double dz) {
+  const size_t n = in.nodes.size() / 3;
+  double lo = in.nodes[2], hi = in.nodes[2];
+  for (size_t i = 0; i < n; ++i) lo = std::min(lo, in.nodes[3 * i + 2]), hi = std::max(hi, in.nodes[3 * i + 2]);
   PressedTop p;
-  in.fixed.assign(in.nodes.size() / 3, 0);
-  for (size_t i = 0; i < in.fixed.size(); ++i) {
-    in.fixed[i] = in.nodes[3 * i + 2] == 0.0;
-    if (in.nodes[3 * i + 2] == top) {
+  in.fixed.assign(n, 0);
+  for (size_t i = 0; i < n; ++i) {
+    in.fixed[i] = in.nodes[3 * i + 2] == lo;
+    if (in.nodes[3 * i + 2] == hi) {
       p.nodes.push_back(index_t(i));
       p.target.insert(p.target.end(), {0.0, 0.0, dz});
     }

@@ -373,7 +373,7 @@ TEST(CpuLanes, BothTuningsGiveTheSameBits) {
   }
 #endif
   ModelInput in = mixed_law_box(5, kL);
-  const test::PressedTop press = fix_bottom_press_top(in, kL, -0.05 * kL);
+  const test::PressedTop press = fix_bottom_press_top(in, -0.05 * kL);
   const std::vector<index_t>& top = press.nodes;
   const std::vector<double>& target = press.target;
   const auto m = build_model(in);

@@ -419,26 +419,33 @@ int device_attribute(cudaDeviceAttr attr) {
   return v;
 }
 
+/// Sets a process-wide test hook of the backend while it lives, and sets
+/// it back to `restore` however the test ends.
+template <class V>
+class ScopedHook {
+ public:
+  ScopedHook(void (*set)(V), V value, V restore) : set_(set), restore_(restore) { set_(value); }
+  ~ScopedHook() { set_(restore_); }
+  ScopedHook(const ScopedHook&) = delete;
+  ScopedHook& operator=(const ScopedHook&) = delete;
+
+ private:
+  void (*set_)(V);
+  V restore_;
+};
+
 /// Caps the blocks of each element pass's launch that load before their
 /// wait (set_cuda_element_first_wave; 0: every block waits first, -1: no
-/// cap) while it lives: the setting is process-wide, so it is restored
-/// however the test ends.
-struct ElementFirstWave {
-  explicit ElementFirstWave(index_t blocks) { set_cuda_element_first_wave(blocks); }
-  ~ElementFirstWave() { set_cuda_element_first_wave(-1); }
-  ElementFirstWave(const ElementFirstWave&) = delete;
-  ElementFirstWave& operator=(const ElementFirstWave&) = delete;
+/// cap) while it lives.
+struct ElementFirstWave : ScopedHook<index_t> {
+  explicit ElementFirstWave(index_t blocks) : ScopedHook(set_cuda_element_first_wave, blocks, -1) {}
 };
 
 /// Runs every launch of passes 1 and 3 (but pass 3's streaming kernel) in
 /// the smaller blocks of a launch of several waves
-/// (set_cuda_small_element_blocks) while it lives; process-wide, restored
-/// however the test ends.
-struct SmallElementBlocks {
-  explicit SmallElementBlocks(bool always) { set_cuda_small_element_blocks(always); }
-  ~SmallElementBlocks() { set_cuda_small_element_blocks(false); }
-  SmallElementBlocks(const SmallElementBlocks&) = delete;
-  SmallElementBlocks& operator=(const SmallElementBlocks&) = delete;
+/// (set_cuda_small_element_blocks) while it lives.
+struct SmallElementBlocks : ScopedHook<bool> {
+  explicit SmallElementBlocks(bool always) : ScopedHook(set_cuda_small_element_blocks, always, false) {}
 };
 
 /// Law terms (core/material.hpp) in every step mode: a box half
@@ -449,7 +456,7 @@ TEST_P(Stages, LawTermsMatchCpuInEveryStepMode) {
   SKIP_WITHOUT_GPU();
   const Precision p = GetParam();
   ModelInput in = test::mixed_law_box(4, 0.02);
-  const test::PressedTop press = test::fix_bottom_press_top(in, 0.02, -0.002);
+  const test::PressedTop press = test::fix_bottom_press_top(in, -0.002);
   const std::vector<index_t>& top = press.nodes;
   const std::vector<double>& target = press.target;
   const auto m = build_model(in);
