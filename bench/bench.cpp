@@ -318,10 +318,10 @@ std::string today() {
 
 double bytes_per_step(long n, long ne, int s, bool recomputed) {
   // the element gradients and volume (dN 12s, V s per element), or the
-  // corners' reference positions they are recomputed from (a node's double
-  // x, y, z: 24 bytes read, counted as the 32-byte record, one memory
-  // sector, that holds them), in passes 1 and 3
-  const double gradients = recomputed ? 32.0 * n : 13.0 * s * ne;
+  // corners' reference positions they are recomputed from, in passes 1 and
+  // 3: in float a node's 16-byte grid point, in double its x, y, z (24 bytes
+  // read, counted as the 32-byte record, one memory sector, that holds them)
+  const double gradients = recomputed ? (s == 4 ? 16.0 : 32.0) * n : 13.0 * s * ne;
   // pass 1: corners 16, K s, u 3s per node; writes p_e V_e and J
   const double p1 = ne * (16.0 + 3 * s) + 3.0 * s * n + gradients;
   // pass 2: CSR offsets 4 per node, entries 16 per element, p V and V; writes p_a

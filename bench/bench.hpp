@@ -35,9 +35,9 @@ struct BenchOptions {
 /// Fewest bytes one whole-mesh TLED step must move through memory (each
 /// array the four passes read or write counted once per pass that touches
 /// it), for n nodes, ne elements and scalar size s bytes; `recomputed`: the
-/// element gradients and volumes are recomputed from double reference
-/// positions in passes 1 and 3 instead of loaded (the cuda backend's
-/// CudaGradients). Used for the achieved-bandwidth column; see
+/// element gradients and volumes are recomputed from reference positions
+/// (grid points in float, double coordinates in double) in passes 1 and 3
+/// instead of loaded (the cuda backend's CudaGradients). Used for the achieved-bandwidth column; see
 /// docs/benchmarks/README.md for the list.
 double bytes_per_step(long n, long ne, int s, bool recomputed = false);
 

@@ -540,16 +540,50 @@ TissueModel<double> build_model(const ModelInput& in) {
   return m;
 }
 
+ReferenceGrid reference_grid(const TissueModel<double>& m) {
+  ReferenceGrid g;
+  if (m.n_nodes == 0) return g;
+  Vec3<double> hi = reference_position(m, 0);
+  g.origin = hi;
+  for (index_t a = 1; a < m.n_nodes; ++a) {
+    const Vec3<double> x = reference_position(m, a);
+    g.origin = {std::fmin(g.origin.x, x.x), std::fmin(g.origin.y, x.y), std::fmin(g.origin.z, x.z)};
+    hi = {std::fmax(hi.x, x.x), std::fmax(hi.y, x.y), std::fmax(hi.z, x.z)};
+  }
+  const double extent = std::fmax(hi.x - g.origin.x, std::fmax(hi.y - g.origin.y, hi.z - g.origin.z));
+  if (!(extent > 0) || !std::isfinite(extent)) return g;
+  // below 2^31 - 1 steps, so that rounding to the nearest step stays an int32
+  constexpr double kMaxSteps = 2147483646.0;
+  g.step = std::ldexp(1.0, std::ilogb(extent) - 30);
+  while (extent / g.step > kMaxSteps) g.step *= 2;
+  return g;
+}
+
+GridPoint grid_point(const ReferenceGrid& g, const TissueModel<double>& m, index_t a) {
+  const Vec3<double> x = reference_position(m, a);
+  auto steps = [&](double v, double o) { return static_cast<std::int32_t>(std::llround((v - o) / g.step)); };
+  return {steps(x.x, g.origin.x), steps(x.y, g.origin.y), steps(x.z, g.origin.z), 0};
+}
+
 GradientDeviation worst_gradient_deviation(const TissueModel<double>& m, Precision p, double stop_above) {
   const index_t ne = m.n_elems;
+  const ReferenceGrid grid = reference_grid(m);
   GradientDeviation worst;
   for (index_t e = 0; e < ne; ++e) {
-    Vec3<double> X[4];
     double dN[12];
-    for (int a = 0; a < 4; ++a) X[a] = reference_position(m, m.elem_nodes[a * ne + e]);
     for (int k = 0; k < 12; ++k) dN[k] = m.dndx[k * size_t(ne) + e];
-    const double d = p == Precision::Float ? shape_gradient_deviation<float>(X, dN, m.volume[e])
-                                           : shape_gradient_deviation<double>(X, dN, m.volume[e]);
+    double d;
+    if (p == Precision::Float) {
+      GridPoint q[4];
+      for (int a = 0; a < 4; ++a) q[a] = grid_point(grid, m, m.elem_nodes[a * ne + e]);
+      float dN_f[12];
+      const float V = tet_shape_gradients_on_grid<float>(q, static_cast<float>(grid.step), dN_f);
+      d = gradient_deviation(dN_f, V, dN, m.volume[e]);
+    } else {
+      Vec3<double> X[4];
+      for (int a = 0; a < 4; ++a) X[a] = reference_position(m, m.elem_nodes[a * ne + e]);
+      d = shape_gradient_deviation<double>(X, dN, m.volume[e]);
+    }
     if (!(d <= worst.deviation)) worst = {d, e};
     if (!(worst.deviation <= stop_above)) break;
   }

@@ -17,6 +17,7 @@
 
 #include "core/hd.hpp"
 #include "core/material.hpp"
+#include "core/tet.hpp"
 #include "core/vec.hpp"
 
 namespace tissue {
@@ -265,6 +266,21 @@ std::vector<T> nodal_pressure_divisors(const TissueModel<T>& m) {
 template <class T>
 TissueModel<T> convert(const TissueModel<double>& m);
 
+/// A fixed-point grid over a model's reference positions: node a lies within
+/// half a step of origin + step * grid_point(a). The step is the smallest
+/// power of two that holds the mesh's widest extent in fewer than 2^31 steps,
+/// so that any two points' differences fit 32-bit integers (core/tet.hpp
+/// tet_shape_gradients_on_grid; the cuda backend's float passes).
+struct ReferenceGrid {
+  Vec3<double> origin = {};  ///< the mesh's lowest x, y and z (m)
+  double step = 1;           ///< m
+};
+
+ReferenceGrid reference_grid(const TissueModel<double>& m);
+
+/// Node a's reference position on the grid (rounded to the nearest step).
+GridPoint grid_point(const ReferenceGrid& g, const TissueModel<double>& m, index_t a);
+
 /// The largest shape_gradient_deviation (core/tet.hpp) over a model's
 /// elements, and the (first) element that has it.
 struct GradientDeviation {
@@ -272,10 +288,12 @@ struct GradientDeviation {
   index_t elem = -1;     ///< -1: no element
 };
 
-/// How far gradients and volumes recomputed at precision p from the double
-/// reference positions stray from the model's (the cuda backend's test
-/// before it recomputes them instead of loading them). Stops at the first
-/// element beyond `stop_above`.
+/// How far gradients and volumes recomputed at precision p stray from the
+/// model's (the cuda backend's test before it recomputes them instead of
+/// loading them): in double from the double reference positions
+/// (tet_shape_gradients_from), in float from the reference grid
+/// (tet_shape_gradients_on_grid), as the backend's passes recompute them.
+/// Stops at the first element beyond `stop_above`.
 GradientDeviation worst_gradient_deviation(const TissueModel<double>& m, Precision p, double stop_above = HUGE_VAL);
 
 }  // namespace tissue

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cmath>
+#include <cstdint>
 
 #include "core/cube_root.hpp"
 #include "core/material.hpp"
@@ -53,16 +54,45 @@ TISSUE_UNROLL
   return tet_shape_gradients(R, dN);
 }
 
-/// How far tet_shape_gradients_from<T> strays from the tet's double
-/// gradients dN_ref and volume V_ref (tet_shape_gradients<double>): the
-/// largest gradient difference relative to the largest |dN_ref|, or the
-/// volume's relative difference, whichever is larger. A few 1e-7 for a
-/// well-shaped tet in float; it grows with the tet's condition (a sliver's
-/// can reach 1 and beyond).
+/// A reference position on a fixed-point grid (core/model.hpp
+/// ReferenceGrid): whole steps from the grid's origin on each axis, below
+/// 2^31. w is unused: 16 bytes, one load on the GPU.
+struct alignas(16) GridPoint {
+  std::int32_t x = 0, y = 0, z = 0, w = 0;
+};
+
+/// tet_shape_gradients at precision T from corners on a grid of `step` m (a
+/// power of two): the edges from corner 0 are differenced exactly in
+/// integers, rounded to T once and scaled by the step (exact), as
+/// tet_shape_gradients_from rounds its double edges. The grid puts each
+/// corner within half a step of its position, so an edge moves by at most a
+/// step (2^-34 m, 5.8e-11 m, on a mesh 0.06-0.12 m across; 3e-8 of a 2 mm
+/// edge, a quarter of a float ulp): the gradients of tet_shape_gradients_from
+/// to about an ulp, from half the bytes of double coordinates. The cuda
+/// backend's float passes recompute an element's gradients with it
+/// (docs/cuda.md, "Reference positions on a grid"). dN is zero when the
+/// rounded tet has no volume.
 template <class T>
-double shape_gradient_deviation(const Vec3<double> X[4], const double dN_ref[12], double V_ref) {
-  T dN[12];
-  const double V = static_cast<double>(tet_shape_gradients_from<T>(X, dN));
+TISSUE_HD T tet_shape_gradients_on_grid(const GridPoint q[4], T step, T dN[12]) {
+  Vec3<T> R[4];
+  R[0] = {T(0), T(0), T(0)};
+TISSUE_UNROLL
+  for (int a = 1; a < 4; ++a)
+    R[a] = {T(q[a].x - q[0].x) * step, T(q[a].y - q[0].y) * step, T(q[a].z - q[0].z) * step};
+TISSUE_UNROLL
+  for (int k = 0; k < 12; ++k) dN[k] = T(0);
+  return tet_shape_gradients(R, dN);
+}
+
+/// How far recomputed gradients dN and volume V (at any precision) stray
+/// from the tet's double gradients dN_ref and volume V_ref
+/// (tet_shape_gradients<double>): the largest gradient difference relative
+/// to the largest |dN_ref|, or the volume's relative difference, whichever
+/// is larger. A few 1e-7 for a well-shaped tet in float; it grows with the
+/// tet's condition (a sliver's can reach 1 and beyond).
+template <class T>
+double gradient_deviation(const T dN[12], T V_recomputed, const double dN_ref[12], double V_ref) {
+  const double V = static_cast<double>(V_recomputed);
   double scale = 0, worst = 0;
   for (int k = 0; k < 12; ++k) {
     scale = std::fmax(scale, std::fabs(dN_ref[k]));
@@ -72,6 +102,14 @@ double shape_gradient_deviation(const Vec3<double> X[4], const double dN_ref[12]
   const double dV = std::fabs(V - V_ref) / std::fabs(V_ref);
   const double d = worst / scale;
   return std::isfinite(d) && std::isfinite(dV) ? std::fmax(d, dV) : HUGE_VAL;
+}
+
+/// gradient_deviation of tet_shape_gradients_from<T> (double positions).
+template <class T>
+double shape_gradient_deviation(const Vec3<double> X[4], const double dN_ref[12], double V_ref) {
+  T dN[12];
+  const T V = tet_shape_gradients_from<T>(X, dN);
+  return gradient_deviation(dN, V, dN_ref, V_ref);
 }
 
 /// Smallest altitude of the tet (m): 3 V / largest face area. The

@@ -109,9 +109,16 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   const bool keep_dndx = gradients != CudaGradients::Recomputed;
   const std::vector<Packed3<T>> X = packed_positions(m);
   upload_array(X_, X, log, stream);
-  std::vector<Packed3<double>> X_ref;
+  std::vector<ReferencePoint<T>> X_ref;
+  ReferenceGrid grid;  // float's recomputation reads points of it (cuda/views.hpp ReferencePoint)
   if (keep_X_ref) {
-    X_ref = packed_positions(ref);
+    if constexpr (sizeof(T) == 4) {
+      grid = reference_grid(ref);
+      X_ref.resize(n);
+      for (index_t a = 0; a < n; ++a) X_ref[a] = grid_point(grid, ref, a);
+    } else {
+      X_ref = packed_positions(ref);
+    }
     upload_array(X_ref_, X_ref, log, stream);
   } else {
     X_ref_.allocate(0);
@@ -156,6 +163,7 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   model_.dndx = keep_dndx ? dndx_.data() : nullptr;
   model_.volume = keep_dndx ? volume_.data() : nullptr;
   model_.X_ref = keep_X_ref ? X_ref_.data() : nullptr;
+  model_.grid_step = static_cast<T>(grid.step);
   model_.mu = mu_.data();
   model_.K = K_.data();
   model_.mass = mass_.data();

@@ -88,7 +88,7 @@ class DeviceStore {
   LawView<T> law_;
   // model (read-only after upload)
   DeviceArray<Packed3<T>> X_;
-  DeviceArray<Packed3<double>> X_ref_;  // empty when the gradients are stored
+  DeviceArray<ReferencePoint<T>> X_ref_;  // empty when the gradients are stored
   DeviceArray<index_t> elem_nodes_, node_elem_start_, node_elem_, slot_of_, tris_, pack_first_;
   DeviceArray<index_t> surf_nodes_, surf_slot_start_, surf_slot_;
   DeviceArray<T> dndx_, volume_, mu_, K_, mass_, cd_A_, cd_B_, cd_C_, node_divisor_;

@@ -12,9 +12,11 @@ namespace tissue {
 /// energies) get each element's shape gradients and volume (docs/cuda.md,
 /// "Element gradients"):
 ///   Stored      loaded: 13 scalars per element and pass;
-///   Recomputed  from its corners' reference positions, kept in double on
-///               the device, at every pass (core tet_shape_gradients_from):
-///               a quarter fewer bytes per step at 1M tets;
+///   Recomputed  from its corners' reference positions, kept on the device
+///               in double (double: core tet_shape_gradients_from) or as
+///               points of a fixed-point grid (float: core
+///               tet_shape_gradients_on_grid, half the bytes), at every
+///               pass: a quarter fewer bytes per step at 1M tets;
 ///   Auto        both kept on a mesh of kRecomputeMinElements or more when
 ///               every element's recomputation at the backend's precision
 ///               stays within kGradientTolerance of the model's double

@@ -68,6 +68,14 @@ __device__ __forceinline__ ElementData<T> load_element_shape(const ModelView<T>&
 #pragma unroll
     for (int k = 0; k < 12; ++k) d.dN[k] = __ldg(m.dndx + k * ne + e);
     d.V = __ldg(m.volume + e);
+  } else if constexpr (sizeof(T) == 4) {  // from the corners' grid points: 4 gathered 16-byte nodes
+    GridPoint q[4];
+#pragma unroll
+    for (int a = 0; a < 4; ++a) {
+      const int4 v = __ldg(reinterpret_cast<const int4*>(m.X_ref + d.c[a]));
+      q[a] = {v.x, v.y, v.z, 0};
+    }
+    d.V = tet_shape_gradients_on_grid<T>(q, m.grid_step, d.dN);
   } else {  // from the corners' reference positions: 4 gathered nodes instead of 13 element scalars
     Vec3<double> X[4];
 #pragma unroll

@@ -23,8 +23,10 @@
 #pragma once
 
 #include <cstdint>
+#include <type_traits>
 
 #include "core/hd.hpp"
+#include "core/tet.hpp"
 #include "core/vec.hpp"
 #include "cuda/gradients.hpp"
 
@@ -42,6 +44,16 @@ struct alignas(4 * sizeof(T)) Packed3 {
 /// computes the slots of a window of nodes, one slot a thread.
 inline constexpr int kPackedBlock = 128;
 
+/// A reference position as the element passes at precision T recompute an
+/// element's gradients from it: a point of the model's reference grid in
+/// float (core GridPoint: 16 bytes, one load; core/tet.hpp
+/// tet_shape_gradients_on_grid), its coordinates in double in double (32
+/// bytes, two loads; tet_shape_gradients_from). The grid keeps float's
+/// gradients within about an ulp of the double coordinates' (docs/cuda.md,
+/// "Reference positions on a grid"); in double it would cost accuracy.
+template <class T>
+using ReferencePoint = std::conditional_t<sizeof(T) == 4, GridPoint, Packed3<double>>;
+
 /// Read-only model on the device (shapes as core/model.hpp unless noted).
 template <class T>
 struct ModelView {
@@ -53,9 +65,12 @@ struct ModelView {
   /// X_ref (docs/cuda.md, "Element gradients"; cuda/tled.cuh recomputes).
   const T* dndx = nullptr;
   const T* volume = nullptr;
-  /// Reference positions in double (n_nodes) m, kept when the passes may
-  /// recompute the gradients; null when they always load them.
-  const Packed3<double>* X_ref = nullptr;
+  /// Reference positions (n_nodes), kept when the passes may recompute the
+  /// gradients; null when they always load them. On the model's reference
+  /// grid in float (core ReferenceGrid; grid_step m a step), in double m in
+  /// double (ReferencePoint).
+  const ReferencePoint<T>* X_ref = nullptr;
+  T grid_step = 0;
   const T* mu = nullptr;                  ///< (n_elems) Pa
   const T* K = nullptr;                   ///< (n_elems) Pa
   const T* mass = nullptr;                ///< (n_nodes) kg

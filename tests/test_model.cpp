@@ -681,15 +681,16 @@ TEST(Model, ConvertFloatKeepsSizesAndValues) {
   EXPECT_EQ(d.mass, m.mass);
 }
 
-/// The shape gradients recomputed at a precision from double reference
-/// positions (core tet_shape_gradients_from: the cuda backend's
-/// CudaGradients::Recomputed) on a box of 1 mm cells placed 0.1-0.12 m from
-/// the origin. Edges differenced in double and then rounded to float stay
-/// within a few 1e-7 of the double gradients; float copies of the absolute
-/// coordinates (the alternative not taken) carry their rounding of 0.1 m
-/// into every millimetre edge, ten times more. In double the recomputation
-/// is the model's own to rounding.
-TEST(Model, GradientsRecomputedFromDoubleEdgesStayNearTheModels) {
+/// The shape gradients recomputed at a precision as the cuda backend's
+/// CudaGradients::Recomputed does (core worst_gradient_deviation: in float
+/// from the reference grid, tet_shape_gradients_on_grid; in double from the
+/// double positions, tet_shape_gradients_from) on a box of 1 mm cells placed
+/// 0.1-0.12 m from the origin. Edges differenced exactly and then rounded to
+/// float stay within a few 1e-7 of the double gradients; float copies of the
+/// absolute coordinates (the alternative not taken) carry their rounding of
+/// 0.1 m into every millimetre edge, ten times more. In double the
+/// recomputation is the model's own to rounding.
+TEST(Model, GradientsRecomputedFromExactEdgesStayNearTheModels) {
   ModelInput in = box_input(6, 6, 6, 0.006, 0.006, 0.006);
   for (size_t i = 0; i < in.nodes.size(); ++i) in.nodes[i] += 0.1 + 0.01 * double(i % 3);
   const TissueModel<double> m = build_model(in);
@@ -703,7 +704,7 @@ TEST(Model, GradientsRecomputedFromDoubleEdgesStayNearTheModels) {
       const Vec3<double> x = node_X(m, m.elem_nodes[a * ne + e]);
       X[a] = {float(x.x), float(x.y), float(x.z)};
     }
-    float dN[12];
+    float dN[12] = {};
     tet_shape_gradients(X, dN);
     double scale = 0, worst = 0;
     for (int k = 0; k < 12; ++k) {
@@ -719,6 +720,92 @@ TEST(Model, GradientsRecomputedFromDoubleEdgesStayNearTheModels) {
   EXPECT_GE(dev_float.elem, 0);
   EXPECT_GT(naive, 10 * dev_float.deviation);
   EXPECT_LT(dev_double, 1e-13);
+}
+
+/// The reference grid (core reference_grid): its step is a power of two,
+/// the smallest that spans the mesh's widest extent in fewer than 2^31
+/// steps; every node lies within half a step of its grid point, whose
+/// coordinates are non-negative 32-bit integers. Checked on three meshes:
+/// millimetre cells 0.1 m from the origin, a 2 m box around it and a
+/// 20-micrometre box.
+TEST(Model, ReferenceGridHoldsEveryNodeWithinHalfAStep) {
+  struct Case {
+    double cell, offset;
+  };
+  for (const Case c : {Case{0.001, 0.1}, Case{0.4, -1.0}, Case{4e-6, 0.0}}) {
+    ModelInput in = box_input(5, 4, 3, 5 * c.cell, 4 * c.cell, 3 * c.cell);
+    for (size_t i = 0; i < in.nodes.size(); ++i) in.nodes[i] += c.offset + 0.3 * c.cell * double(i % 3);
+    const TissueModel<double> m = build_model(in);
+    const ReferenceGrid g = reference_grid(m);
+    int exponent = 0;
+    EXPECT_EQ(std::frexp(g.step, &exponent), 0.5) << "a power of two: " << g.step;
+    double widest = 0;
+    std::int64_t most = 0;
+    for (index_t a = 0; a < m.n_nodes; ++a) {
+      const GridPoint q = grid_point(g, m, a);
+      const Vec3<double> x = reference_position(m, a);
+      const std::int64_t qs[3] = {q.x, q.y, q.z};
+      const double xs[3] = {x.x, x.y, x.z}, os[3] = {g.origin.x, g.origin.y, g.origin.z};
+      for (int k = 0; k < 3; ++k) {
+        EXPECT_GE(qs[k], 0);
+        EXPECT_LE(std::fabs(os[k] + double(qs[k]) * g.step - xs[k]),
+                  0.5 * g.step * (1 + 1e-9) + 1e-12 * std::fabs(xs[k]));
+        most = std::max(most, qs[k]);
+        widest = std::max(widest, xs[k] - os[k]);
+      }
+    }
+    EXPECT_LT(most, std::int64_t(1) << 31);
+    EXPECT_GE(widest / g.step, double(std::int64_t(1) << 30)) << "not the smallest step";
+  }
+}
+
+/// Float gradients from the grid (tet_shape_gradients_on_grid) and from the
+/// double positions (tet_shape_gradients_from) on 2,000 random tets of
+/// 1-3 mm edges placed up to 0.1 m from the origin, on the grid of a 0.1 m
+/// mesh: both differ from the double gradients by a few float ulps, and
+/// from each other by no more than that.
+TEST(TetGeometry, GradientsOnTheGridAreThoseOfDoubleEdgesToAFewUlps) {
+  TissueModel<double> bounds;  // two corners that fix the grid: a 0.1 m cube
+  bounds.n_nodes = 2;
+  bounds.X = {0.0, 0.1, 0.0, 0.1, 0.0, 0.1};
+  const ReferenceGrid g = reference_grid(bounds);
+  EXPECT_EQ(g.step, std::ldexp(1.0, -34));
+  std::uint64_t seed = 7;
+  auto uniform = [&] {
+    seed = seed * 6364136223846793005ull + 1442695040888963407ull;
+    return double(seed >> 11) * 0x1.0p-53;
+  };
+  double worst_grid = 0, worst_double = 0, worst_between = 0;
+  int tested = 0;
+  for (int t = 0; t < 2000; ++t) {
+    Vec3<double> X[4];
+    const Vec3<double> at = {0.005 + 0.09 * uniform(), 0.005 + 0.09 * uniform(), 0.005 + 0.09 * uniform()};
+    for (int a = 0; a < 4; ++a) X[a] = at + Vec3<double>{0.003 * uniform(), 0.003 * uniform(), 0.003 * uniform()};
+    double ref[12];
+    const double V = tet_shape_gradients(X, ref);
+    if (std::fabs(V) < 1e-10) continue;  // a near-flat draw: its conditioning, not the grid, would dominate
+    ++tested;
+    TissueModel<double> corners;
+    corners.n_nodes = 4;
+    corners.X.resize(12);
+    for (int a = 0; a < 4; ++a) corners.X[a] = X[a].x, corners.X[4 + a] = X[a].y, corners.X[8 + a] = X[a].z;
+    GridPoint q[4];
+    for (int a = 0; a < 4; ++a) q[a] = grid_point(g, corners, a);
+    float on_grid[12], from_double[12];
+    const float Vg = tet_shape_gradients_on_grid<float>(q, float(g.step), on_grid);
+    const float Vd = tet_shape_gradients_from<float>(X, from_double);
+    worst_grid = std::max(worst_grid, gradient_deviation(on_grid, Vg, ref, V));
+    worst_double = std::max(worst_double, gradient_deviation(from_double, Vd, ref, V));
+    double from_double_d[12];
+    for (int k = 0; k < 12; ++k) from_double_d[k] = from_double[k];
+    worst_between = std::max(worst_between, gradient_deviation(on_grid, Vg, from_double_d, double(Vd)));
+  }
+  std::printf("[measured] %d tets: float gradients from the grid %.3g, from double positions %.3g, between %.3g\n",
+              tested, worst_grid, worst_double, worst_between);
+  EXPECT_GT(tested, 1000);
+  EXPECT_GT(worst_grid, 0.0);
+  EXPECT_LT(worst_grid, 4 * worst_double + 1e-6);
+  EXPECT_LT(worst_between, 4 * worst_double + 1e-6);
 }
 
 /// A sliver the model accepts (tests/sliver.hpp), apart from a box:
