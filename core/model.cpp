@@ -552,10 +552,12 @@ ReferenceGrid reference_grid(const TissueModel<double>& m) {
   }
   const double extent = std::fmax(hi.x - g.origin.x, std::fmax(hi.y - g.origin.y, hi.z - g.origin.z));
   if (!(extent > 0) || !std::isfinite(extent)) return g;
-  // below 2^31 - 1 steps, so that rounding to the nearest step stays an int32
-  constexpr double kMaxSteps = 2147483646.0;
-  g.step = std::ldexp(1.0, std::ilogb(extent) - 30);
-  while (extent / g.step > kMaxSteps) g.step *= 2;
+  g.step = std::ldexp(1.0, std::ilogb(extent) - 30);  // extent / step in [2^30, 2^31)
+  if (!(g.step > 0)) {  // an extent below 2^-1044 m (no model build_model accepts): one point
+    g.step = 1;
+    return g;
+  }
+  if (extent / g.step > kMaxGridSteps) g.step *= 2;
   return g;
 }
 

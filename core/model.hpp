@@ -266,11 +266,19 @@ std::vector<T> nodal_pressure_divisors(const TissueModel<T>& m) {
 template <class T>
 TissueModel<T> convert(const TissueModel<double>& m);
 
+/// The most steps a ReferenceGrid spans the mesh in: its points' integers
+/// and their differences stay within 32 bits.
+inline constexpr double kMaxGridSteps = 2147483646.0;  // 2^31 - 2
+
 /// A fixed-point grid over a model's reference positions: node a lies within
 /// half a step of origin + step * grid_point(a). The step is the smallest
-/// power of two that holds the mesh's widest extent in fewer than 2^31 steps,
-/// so that any two points' differences fit 32-bit integers (core/tet.hpp
-/// tet_shape_gradients_on_grid; the cuda backend's float passes).
+/// power of two that spans the mesh's widest extent in at most kMaxGridSteps
+/// steps, so that any two points' differences fit 32-bit integers
+/// (core/tet.hpp tet_shape_gradients_on_grid; the cuda backend's float
+/// passes). Rounding to the grid moves an edge by up to a step, at most
+/// 2^-30 of the extent: 6e-8 of an edge 1/64 of the extent (half a float
+/// ulp), up to 9e-6 of an edge 1/10,000 of it (docs/cuda.md, "Reference
+/// positions on a grid").
 struct ReferenceGrid {
   Vec3<double> origin = {};  ///< the mesh's lowest x, y and z (m)
   double step = 1;           ///< m
@@ -281,8 +289,8 @@ ReferenceGrid reference_grid(const TissueModel<double>& m);
 /// Node a's reference position on the grid (rounded to the nearest step).
 GridPoint grid_point(const ReferenceGrid& g, const TissueModel<double>& m, index_t a);
 
-/// The largest shape_gradient_deviation (core/tet.hpp) over a model's
-/// elements, and the (first) element that has it.
+/// The largest gradient_deviation (core/tet.hpp) over a model's elements of
+/// their recomputed gradients, and the (first) element that has it.
 struct GradientDeviation {
   double deviation = 0;  ///< HUGE_VAL when an element's recomputation is not finite
   index_t elem = -1;     ///< -1: no element

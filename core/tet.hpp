@@ -66,12 +66,14 @@ struct alignas(16) GridPoint {
 /// integers, rounded to T once and scaled by the step (exact), as
 /// tet_shape_gradients_from rounds its double edges. The grid puts each
 /// corner within half a step of its position, so an edge moves by at most a
-/// step (2^-34 m, 5.8e-11 m, on a mesh 0.06-0.12 m across; 3e-8 of a 2 mm
-/// edge, a quarter of a float ulp): the gradients of tet_shape_gradients_from
-/// to about an ulp, from half the bytes of double coordinates. The cuda
-/// backend's float passes recompute an element's gradients with it
-/// (docs/cuda.md, "Reference positions on a grid"). dN is zero when the
-/// rounded tet has no volume.
+/// step, about 2^-30 of the mesh's extent (2^-34 m, 5.8e-11 m, on a mesh
+/// 0.06-0.12 m across: 3e-8 of a 2 mm edge, a quarter of a float ulp). So
+/// the gradients are tet_shape_gradients_from's to an ulp or two where the
+/// edges are at least ~1/64 of the extent, and stray further as the
+/// elements shrink against it (core/model.hpp ReferenceGrid); the cuda
+/// backend checks every element before its float passes recompute with it
+/// (worst_gradient_deviation; docs/cuda.md, "Reference positions on a
+/// grid"). dN is zero when the rounded tet has no volume.
 template <class T>
 TISSUE_HD T tet_shape_gradients_on_grid(const GridPoint q[4], T step, T dN[12]) {
   Vec3<T> R[4];

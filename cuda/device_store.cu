@@ -96,11 +96,16 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   const GradientDeviation dev =
       may_recompute ? worst_gradient_deviation(ref, p, kGradientTolerance) : GradientDeviation{};
   const bool accurate = dev.deviation <= kGradientTolerance;
-  if (gradients == CudaGradients::Recomputed && !accurate)
+  if (gradients == CudaGradients::Recomputed && !accurate) {
+    const std::string cause = sizeof(T) == 4
+                                  ? str("a sliver, or an element too small for float's reference grid, whose step is ",
+                                        reference_grid(ref).step, " m over the whole mesh")
+                                  : std::string("a sliver");
     throw std::invalid_argument(str("cuda backend, gradients 'recomputed': element ", dev.elem,
                                     "'s shape gradients recomputed in ", sizeof(T) == 4 ? "float" : "double",
                                     " stray by ", dev.deviation, " from the model's (more than ", kGradientTolerance,
-                                    ": a sliver); use gradients 'auto' or 'stored'"));
+                                    ": ", cause, "); use gradients 'auto' or 'stored'"));
+  }
   // Stored: the gradients only; Recomputed: the reference positions only;
   // Auto: both on a large mesh whose recomputation is accurate enough (the
   // passes then choose by region size: cuda/views.hpp recomputes()), else

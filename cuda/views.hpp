@@ -48,9 +48,10 @@ inline constexpr int kPackedBlock = 128;
 /// element's gradients from it: a point of the model's reference grid in
 /// float (core GridPoint: 16 bytes, one load; core/tet.hpp
 /// tet_shape_gradients_on_grid), its coordinates in double in double (32
-/// bytes, two loads; tet_shape_gradients_from). The grid keeps float's
-/// gradients within about an ulp of the double coordinates' (docs/cuda.md,
-/// "Reference positions on a grid"); in double it would cost accuracy.
+/// bytes, two loads; tet_shape_gradients_from). The grid's float gradients
+/// are the double coordinates' to an ulp or two where the edges are not far
+/// smaller than the mesh, and the upload checks every element (docs/cuda.md,
+/// "Reference positions on a grid"); in double the grid would cost accuracy.
 template <class T>
 using ReferencePoint = std::conditional_t<sizeof(T) == 4, GridPoint, Packed3<double>>;
 

@@ -1460,6 +1460,44 @@ TEST_P(Stages, RecomputedGradientsMatchStoredOnes) {
     forced->upload(with_sliver);
     EXPECT_EQ(cuda_gradients(*forced), CudaGradients::Recomputed);
   }
+
+  // a large mesh of 20-micrometre cells with one tet 3 m away: float's reference grid (a step of 2^-29 m,
+  // 9.3e-5 of a cell; core ReferenceGrid) is too coarse for its cells, so in float Auto keeps the stored
+  // gradients and Recomputed is refused naming the grid; double recomputes from its coordinates
+  {
+    constexpr double kCell = 2e-5;
+    ModelInput fine;
+    box_mesh(fine, 21, 20, 20, 21 * kCell, 20 * kCell, 20 * kCell);
+    fine.materials = {{1000, 20000, 1000}};
+    const index_t first = index_t(fine.nodes.size() / 3);
+    for (const Vec3<double>& x : {Vec3<double>{3.0, 0.0, 0.0}, Vec3<double>{3.0 + kCell, 0.0, 0.0},
+                                  Vec3<double>{3.0, kCell, 0.0}, Vec3<double>{3.0, 0.0, kCell}})
+      fine.nodes.insert(fine.nodes.end(), {x.x, x.y, x.z});
+    fine.tets.insert(fine.tets.end(), {first, first + 1, first + 2, first + 3});
+    if (!fine.elem_material.empty()) fine.elem_material.push_back(0);
+    const TissueModel<double> wide = build_model(fine);
+    ASSERT_GE(wide.n_elems, kRecomputeMinElements);
+    auto automatic_wide = make_cuda_backend(p);
+    automatic_wide->upload(wide);
+    EXPECT_EQ(cuda_gradients(*automatic_wide),
+              p == Precision::Float ? CudaGradients::Stored : CudaGradients::Recomputed);
+    auto forced_wide = make_cuda_backend(p);
+    set_cuda_gradients(*forced_wide, CudaGradients::Recomputed);
+    if (p == Precision::Float) {
+      try {
+        forced_wide->upload(wide);
+        ADD_FAILURE() << "gradients recomputed on a grid too coarse for the cells were accepted";
+      } catch (const std::invalid_argument& e) {
+        const std::string what = e.what();
+        for (const std::string& part : {std::string("gradients 'recomputed'"), std::string("reference grid"),
+                                        std::string("1.86265e-09 m"), std::string("'stored'")})
+          EXPECT_NE(what.find(part), std::string::npos) << part << " not in: " << what;
+      }
+    } else {
+      forced_wide->upload(wide);
+      EXPECT_EQ(cuda_gradients(*forced_wide), CudaGradients::Recomputed);
+    }
+  }
 }
 
 TEST_P(Stages, PerTickTrafficIsFixedAndIndependentOfMeshSize) {
