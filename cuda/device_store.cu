@@ -96,10 +96,12 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   const GradientDeviation dev =
       may_recompute ? worst_gradient_deviation(ref, p, kGradientTolerance) : GradientDeviation{};
   const bool accurate = dev.deviation <= kGradientTolerance;
+  // float's recomputation reads points of this grid (cuda/views.hpp ReferencePoint), as the check did
+  const ReferenceGrid grid = sizeof(T) == 4 && may_recompute ? reference_grid(ref) : ReferenceGrid{};
   if (gradients == CudaGradients::Recomputed && !accurate) {
     const std::string cause = sizeof(T) == 4
                                   ? str("a sliver, or an element too small for float's reference grid, whose step is ",
-                                        reference_grid(ref).step, " m over the whole mesh")
+                                        grid.step, " m over the whole mesh")
                                   : std::string("a sliver");
     throw std::invalid_argument(str("cuda backend, gradients 'recomputed': element ", dev.elem,
                                     "'s shape gradients recomputed in ", sizeof(T) == 4 ? "float" : "double",
@@ -115,10 +117,8 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   const std::vector<Packed3<T>> X = packed_positions(m);
   upload_array(X_, X, log, stream);
   std::vector<ReferencePoint<T>> X_ref;
-  ReferenceGrid grid;  // float's recomputation reads points of it (cuda/views.hpp ReferencePoint)
   if (keep_X_ref) {
     if constexpr (sizeof(T) == 4) {
-      grid = reference_grid(ref);
       X_ref.resize(n);
       for (index_t a = 0; a < n; ++a) X_ref[a] = grid_point(grid, ref, a);
     } else {

@@ -842,12 +842,7 @@ TEST(TetGeometry, GradientsOnTheGridAreThoseOfDoubleEdgesToAFewUlps) {
 TEST(Model, FloatGridStraysWhereElementsAreFarSmallerThanTheMesh) {
   constexpr double kCell = 2e-5;
   ModelInput in = box_input(4, 4, 4, 4 * kCell, 4 * kCell, 4 * kCell);
-  const index_t first = index_t(in.nodes.size() / 3);  // a corner tet of one cell's legs at x = 3 m
-  for (const Vec3<double>& x : {Vec3<double>{3.0, 0.0, 0.0}, Vec3<double>{3.0 + kCell, 0.0, 0.0},
-                                Vec3<double>{3.0, kCell, 0.0}, Vec3<double>{3.0, 0.0, kCell}})
-    in.nodes.insert(in.nodes.end(), {x.x, x.y, x.z});
-  in.tets.insert(in.tets.end(), {first, first + 1, first + 2, first + 3});
-  if (!in.elem_material.empty()) in.elem_material.push_back(0);
+  test::append_corner_tet(in, {3.0, 0.0, 0.0}, kCell);
   const TissueModel<double> m = build_model(in);
   EXPECT_EQ(reference_grid(m).step, std::ldexp(1.0, -29));
   const GradientDeviation grid = worst_gradient_deviation(m, Precision::Float);

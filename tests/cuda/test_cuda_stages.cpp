@@ -1444,22 +1444,26 @@ TEST_P(Stages, RecomputedGradientsMatchStoredOnes) {
   EXPECT_EQ(cuda_gradients(*gpu), p == Precision::Float ? CudaGradients::Stored : CudaGradients::Recomputed);
   gpu->advance(3);
   EXPECT_TRUE(gpu->reduce().finite);
-  auto forced = make_cuda_backend(p);
-  set_cuda_gradients(*forced, CudaGradients::Recomputed);
-  if (p == Precision::Float) {
-    try {
-      forced->upload(with_sliver);
-      ADD_FAILURE() << "a sliver's recomputed gradients were accepted";
-    } catch (const std::invalid_argument& e) {
-      const std::string what = e.what();
-      for (const std::string& part : {std::string("gradients 'recomputed'"), "element " + std::to_string(sliver),
-                                     std::string("sliver"), std::string("'stored'")})
-        EXPECT_NE(what.find(part), std::string::npos) << part << " not in: " << what;
+  // Recomputed forced on a model: refused in float with a message holding every part, taken in double
+  auto expect_refused_in_float = [&](const TissueModel<double>& model, const std::vector<std::string>& parts) {
+    auto forced = make_cuda_backend(p);
+    set_cuda_gradients(*forced, CudaGradients::Recomputed);
+    if (p == Precision::Float) {
+      try {
+        forced->upload(model);
+        ADD_FAILURE() << "recomputed gradients straying by more than the tolerance were accepted";
+      } catch (const std::invalid_argument& e) {
+        const std::string what = e.what();
+        for (const std::string& part : parts)
+          EXPECT_NE(what.find(part), std::string::npos) << part << " not in: " << what;
+      }
+    } else {
+      forced->upload(model);
+      EXPECT_EQ(cuda_gradients(*forced), CudaGradients::Recomputed);
     }
-  } else {
-    forced->upload(with_sliver);
-    EXPECT_EQ(cuda_gradients(*forced), CudaGradients::Recomputed);
-  }
+  };
+  expect_refused_in_float(with_sliver,
+                          {"gradients 'recomputed'", "element " + std::to_string(sliver), "sliver", "'stored'"});
 
   // a large mesh of 20-micrometre cells with one tet 3 m away: float's reference grid (a step of 2^-29 m,
   // 9.3e-5 of a cell; core ReferenceGrid) is too coarse for its cells, so in float Auto keeps the stored
@@ -1469,34 +1473,14 @@ TEST_P(Stages, RecomputedGradientsMatchStoredOnes) {
     ModelInput fine;
     box_mesh(fine, 21, 20, 20, 21 * kCell, 20 * kCell, 20 * kCell);
     fine.materials = {{1000, 20000, 1000}};
-    const index_t first = index_t(fine.nodes.size() / 3);
-    for (const Vec3<double>& x : {Vec3<double>{3.0, 0.0, 0.0}, Vec3<double>{3.0 + kCell, 0.0, 0.0},
-                                  Vec3<double>{3.0, kCell, 0.0}, Vec3<double>{3.0, 0.0, kCell}})
-      fine.nodes.insert(fine.nodes.end(), {x.x, x.y, x.z});
-    fine.tets.insert(fine.tets.end(), {first, first + 1, first + 2, first + 3});
-    if (!fine.elem_material.empty()) fine.elem_material.push_back(0);
+    test::append_corner_tet(fine, {3.0, 0.0, 0.0}, kCell);
     const TissueModel<double> wide = build_model(fine);
     ASSERT_GE(wide.n_elems, kRecomputeMinElements);
     auto automatic_wide = make_cuda_backend(p);
     automatic_wide->upload(wide);
     EXPECT_EQ(cuda_gradients(*automatic_wide),
               p == Precision::Float ? CudaGradients::Stored : CudaGradients::Recomputed);
-    auto forced_wide = make_cuda_backend(p);
-    set_cuda_gradients(*forced_wide, CudaGradients::Recomputed);
-    if (p == Precision::Float) {
-      try {
-        forced_wide->upload(wide);
-        ADD_FAILURE() << "gradients recomputed on a grid too coarse for the cells were accepted";
-      } catch (const std::invalid_argument& e) {
-        const std::string what = e.what();
-        for (const std::string& part : {std::string("gradients 'recomputed'"), std::string("reference grid"),
-                                        std::string("1.86265e-09 m"), std::string("'stored'")})
-          EXPECT_NE(what.find(part), std::string::npos) << part << " not in: " << what;
-      }
-    } else {
-      forced_wide->upload(wide);
-      EXPECT_EQ(cuda_gradients(*forced_wide), CudaGradients::Recomputed);
-    }
+    expect_refused_in_float(wide, {"gradients 'recomputed'", "reference grid", "1.86265e-09 m", "'stored'"});
   }
 }
 
