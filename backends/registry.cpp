@@ -60,6 +60,30 @@ std::string element_gradients(Backend& backend) {
   return "stored";
 }
 
+std::vector<std::pair<std::string, double>> contact_chain_times(const std::string& backend, Precision precision) {
+  std::vector<std::pair<std::string, double>> out;
+#ifdef TISSUE_HAVE_CUDA
+  if (backend == "cuda") {
+    const CudaContactChains c = cuda_contact_chains(precision);
+    const auto both = [&](const std::string& name, double cycles) {
+      out.emplace_back(name + "_us", cycles / c.clock_mhz);
+      out.emplace_back(name + "_cycles", cycles);
+    };
+    out.emplace_back("clock_mhz", c.clock_mhz);
+    both("test", c.test_cycles);
+    both("sweep_corners_inside", c.sweep_pushed_cycles);
+    both("sweep_face_only", c.sweep_face_cycles);
+    for (int m = 0; m < 3; ++m) both("merge_" + std::to_string(c.merge_counts[m]), c.merge_cycles[m]);
+    // a step's stage in contact runs the three one after the other (the kidney's touched nodes have six
+    // proposals): no arrangement of its kernels goes below this
+    out.emplace_back("chain_per_step_us", (c.test_cycles + c.sweep_pushed_cycles + c.merge_cycles[1]) / c.clock_mhz);
+  }
+#endif
+  (void)backend;
+  (void)precision;
+  return out;
+}
+
 std::string float_math(const Backend& backend) {
 #ifdef TISSUE_HAVE_CUDA
   if (backend.name() == "cuda" && backend.precision() == Precision::Float) return cuda_float_math();

@@ -4,6 +4,7 @@
 
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/backend.hpp"
@@ -36,6 +37,12 @@ double measure_device_bandwidth(const std::string& name);
 /// volumes of its uploaded model: "stored" (loaded), or "recomputed" from
 /// the reference positions (the cuda backend's CudaGradients).
 std::string element_gradients(Backend& backend);
+
+/// The contact stage's parts timed alone on a device backend (the cuda
+/// backend's cuda_contact_chains, in `precision`), as named microseconds at
+/// the device's peak clock and their cycles; empty for a backend that has no
+/// such measurement (the cpu: its stage is timed in whole steps).
+std::vector<std::pair<std::string, double>> contact_chain_times(const std::string& backend, Precision precision);
 
 /// BackendInfo::float_math of the backend at its precision: "approximate"
 /// for the cuda backend in float where the build chose it, else "ieee".

@@ -275,6 +275,17 @@ void bench_contact(Context& c, long want_tris, Precision p, double radius = 0.00
   c.emit(r);
 }
 
+/// The contact stage's chains alone (a device backend's; none on the cpu):
+/// what a step's stage in contact costs before any memory or kernel boundary.
+void bench_contact_chains(Context& c, Precision p) {
+  const auto times = contact_chain_times(c.o.backend, p);
+  if (times.empty()) return;
+  auto b = create_backend(c.o.backend, p);
+  Row r = c.row("contact_chains", *b);
+  for (const auto& [name, value] : times) r.add(name, value);
+  c.emit(r);
+}
+
 void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_safety, const std::string& law) {
   scene::Scene s = kidney_with_law(law);
   s.solver.dt_safety = dt_safety.value_or(s.solver.dt_safety);
@@ -369,6 +380,7 @@ std::vector<std::string> run_bench(const BenchOptions& o) {
     for (long tris : {10'000L, 100'000L})
       if (!stopped()) bench_contact(c, tris, p);
     if (!stopped() && !c.o.quick) bench_contact(c, 100'000L, p, 0.010);  // a large instrument
+    if (!stopped()) bench_contact_chains(c, p);
     std::vector<std::optional<double>> safeties(o.tick_dt_safety.begin(), o.tick_dt_safety.end());
     if (safeties.empty()) safeties.emplace_back();  // the scene's own
     for (int depth : {5, kDepthAll})

@@ -52,6 +52,29 @@ struct CudaFloatMathProbe {
 };
 CudaFloatMathProbe cuda_probe_float_math(index_t samples = index_t(1) << 20);
 
+/// The contact stage's arithmetic chains alone on one warp of the current
+/// device (cuda/contact_chains.cu; docs/cuda.md, "The contact stage's own
+/// chains"): cycles per call, each part run `iters` times with every call's
+/// input depending on the last one's result, for a 2 mm probe 0.5 mm into a
+/// plane -- the test of a triangle, the sweep of a 1.5 mm triangle whose
+/// corners are inside the tip (node contact, then face contact) and of an
+/// 8 mm one (face contact alone) by a lane group, and the merge of 3, 6 and
+/// 8 proposals. clock_mhz is the device's peak clock (cycles / clock_mhz =
+/// microseconds at that clock). The sweeps' largest correction and how far
+/// the device's proposals lie from core's one-thread sweep on the host
+/// (m), and whether both triangles pass the test, say that a real contact
+/// was timed. Throws std::runtime_error without a GPU.
+struct CudaContactChains {
+  double clock_mhz = 0;
+  double test_cycles = 0, sweep_pushed_cycles = 0, sweep_face_cycles = 0;
+  int merge_counts[3] = {};
+  double merge_cycles[3] = {};
+  double merged_dx[3] = {};  ///< |dx| of each merge (m)
+  double pushed_dx = 0, face_dx = 0, pushed_apart = 0, face_apart = 0;
+  bool touching = false;
+};
+CudaContactChains cuda_contact_chains(Precision precision, int iters = 2000);
+
 /// How the cuda backend runs advance(n); every mode gives the same results
 /// (see cuda/stepper.hpp). Auto = Graph (captured, chained per-pass
 /// kernels), the fastest measured at every size.
