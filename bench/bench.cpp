@@ -305,6 +305,16 @@ void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_saf
   }
   if (lat.empty()) throw std::runtime_error("bench: the kidney tool path never touched the kidney");
   std::sort(lat.begin(), lat.end());
+  // the tick's reduction alone, where the path ended (the region as the ticks left it): one call of the
+  // backend's reduce() -- on the cuda backend its passes 1-2 and reduction kernel, their launch and the
+  // wait -- what a tick costs beside its steps
+  std::vector<double> red;
+  for (int k = 0; k < (c.o.quick ? 5 : 200); ++k) {
+    const auto t0 = Clock::now();
+    b->reduce();
+    red.push_back(since(t0));
+  }
+  std::sort(red.begin(), red.end());
   Row r = c.row("haptic_tick", *b);
   r.add("mesh", std::string("kidney"));
   r.add("law", law);
@@ -315,6 +325,7 @@ void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_saf
   r.add("tick_ms_p50", 1e3 * lat[lat.size() / 2]);
   r.add("tick_ms_p99", 1e3 * lat[lat.size() * 99 / 100]);
   r.add("tick_ms_max", 1e3 * lat.back());
+  r.add("reduce_ms_p50", 1e3 * red[red.size() / 2]);
   c.emit(r);
 }
 
