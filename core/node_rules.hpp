@@ -99,23 +99,26 @@ struct NodeContact {
 /// Passes of merge_corner over a node's proposals (core/contact.hpp's step 2).
 inline constexpr int kMergePasses = 4;
 
+/// How far the correction dx falls short of a proposal c of length len
+/// along c (merge_corner and pass_would_change: one expression for both).
+template <class T>
+TISSUE_HD T merge_shortfall(Vec3<T> dx, Vec3<T> c, T len) {
+  return len - dot(dx, c) / len;
+}
+
+/// Whether a shortfall counts: one within rounding of a proposal already met
+/// is none.
+template <class T>
+TISSUE_HD bool merge_falls_short(T shortfall, T len) {
+  return shortfall > T(8) * std::numeric_limits<T>::epsilon() * len;
+}
+
 /// Merges one triangle's proposal for this node (call in ascending triangle
 /// order, kMergePasses times over the node's proposals; core/contact.hpp's
 /// step 2): the first proposal is taken as it is, every further one adds its
 /// shortfall along its own direction. A blocked
 /// penetration (rigid support, outside the region) is kept only while no
 /// correction was proposed, rigid before outside.
-/// How far the correction dx falls short of a proposal c of length len
-/// along c (merge_corner), and whether that shortfall counts: one within
-/// rounding of a proposal already met is none.
-template <class T>
-TISSUE_HD T merge_shortfall(Vec3<T> dx, Vec3<T> c, T len) {
-  return len - dot(dx, c) / len;
-}
-template <class T>
-TISSUE_HD bool merge_falls_short(T shortfall, T len) {
-  return shortfall > T(8) * std::numeric_limits<T>::epsilon() * len;
-}
 
 template <class T>
 TISSUE_HD void merge_corner(NodeContact<T>& acc, const CornerContact<T>& c) {
@@ -160,8 +163,8 @@ TISSUE_HD bool same_bits(const NodeContact<T>& a, const NodeContact<T>& b) {
 /// squeezed from two sides) approach theirs by a factor cos(angle - 90 deg)
 /// per pass, and the next step goes on. A pass that leaves the state's bits
 /// as they were ends the passes: the rest would repeat it (the same result
-/// as all kMergePasses, in two passes for most nodes; the GPU's merge of a
-/// touched node is one thread's chain of these passes).
+/// as all kMergePasses, in two passes for most nodes; the GPU merges with
+/// merge_proposals_unrolled below).
 template <class T, class Get>
 TISSUE_HD NodeContact<T> merge_proposals(int count, Get get) {
   NodeContact<T> acc;
@@ -176,12 +179,19 @@ TISSUE_HD NodeContact<T> merge_proposals(int count, Get get) {
 /// Whether one more pass of merge_corner over a pushed node's proposals
 /// (at most N; get(j) as merge_proposals') would change its state acc. It
 /// would not when no proposal of positive length falls short of acc.dx
-/// (merge_falls_short) and none is longer than the largest merged: each
-/// merge_corner of the pass then meets the state the pass started with and
-/// leaves it as it is (a zero or blocked proposal leaves a pushed node as it
-/// is), and same_bits would end the passes after it. Every test here reads
-/// only that starting state, so they are independent and a GPU thread runs
-/// them side by side; the pass itself is one chain through acc.dx.
+/// (merge_falls_short) and none is longer than the largest merged (after a
+/// whole pass none is; tested all the same, so that the argument does not
+/// rest on it): each merge_corner of the pass then meets the state the pass
+/// started with and leaves it as it is (a zero or blocked proposal leaves a
+/// pushed node as it is), and same_bits would end the passes after it. Each
+/// test reads only that starting state, so they are independent and a GPU
+/// thread runs them side by side; the pass itself is one chain through
+/// acc.dx. The tests are merge_corner's own expressions: the same bits as
+/// long as the compiler rounds an inlined expression alike in both places,
+/// which the step modes' bits rest on as well (a fused multiply-add formed
+/// in one and not the other could differ by a rounding at the threshold);
+/// cuda_tests' Merge.LaterPassesCheckedSideBySideGiveEveryPassesBits checks
+/// it on the device.
 template <int N, class T, class Get>
 TISSUE_HD bool pass_would_change(const NodeContact<T>& acc, int count, Get get) {
   bool change = false;
@@ -206,8 +216,9 @@ TISSUE_HD bool pass_would_change(const NodeContact<T>& acc, int count, Get get) 
 /// to 7.7 us per step). A pass after the first runs only when
 /// pass_would_change says it would change something: most pushed nodes are
 /// done after one pass, and the check that says so is N independent tests
-/// where the pass that found it was a chain (an isolated merge of six
-/// proposals on an H200: 2,850 -> 2,110 cycles).
+/// where the pass that found it was a chain (on an H200 the kidney's tick
+/// about 2 % shorter; a node that needs a further pass pays for the check
+/// as well: docs/cuda.md, "The contact stage's own chains").
 template <int N, class T, class Get>
 TISSUE_HD NodeContact<T> merge_proposals_unrolled(int count, Get get) {
   NodeContact<T> acc;
