@@ -305,9 +305,10 @@ void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_saf
   }
   if (lat.empty()) throw std::runtime_error("bench: the kidney tool path never touched the kidney");
   std::sort(lat.begin(), lat.end());
-  // the tick's reduction alone, where the path ended (the region as the ticks left it): one call of the
-  // backend's reduce() -- on the cuda backend its passes 1-2 and reduction kernel, their launch and the
-  // wait -- what a tick costs beside its steps
+  // the reduction alone, where the path ended (the region as the ticks left it, the tool there): one call of
+  // the backend's reduce() -- on the cuda backend its passes 1-2 and reduction kernel as launches of their
+  // own, a copy down and the wait, where a tick runs the same kernels inside its graph and writes the answer
+  // into mapped host memory: an upper bound on what the reduction adds to a tick
   std::vector<double> red;
   for (int k = 0; k < (c.o.quick ? 5 : 200); ++k) {
     const auto t0 = Clock::now();

@@ -18,6 +18,7 @@
 #include "cuda/contact.cuh"
 #include "cuda/cuda_backend.hpp"
 #include "cuda/device_array.hpp"
+#include "cuda/launch.cuh"
 
 namespace tissue {
 namespace gpu {
@@ -130,10 +131,13 @@ __global__ void contact_chains_kernel(ChainInput<T> in, int iters, ChainOut<T>* 
     ChainTriangle<T> tri = small;
     int touching = 0;
     const long long c0 = clock64();
-    for (int i = 0; i < iters; ++i) {
+    for (int i = 0; i < iters; ++i) {  // every corner depends on the last call: nothing leaves the loop
       const bool t = triangle_may_touch(tools, capsule, tri.x);
       touching += t;
-      tri.x[0].x += t ? T(1e-30) : T(2e-30);
+      const T nudge = t ? T(1e-30) : T(2e-30);
+      tri.x[0].x += nudge;
+      tri.x[1].y += nudge;
+      tri.x[2].z += nudge;
     }
     r.test = (clock64() - c0) / iters;
     r.touching[0] = touching == iters;
@@ -147,9 +151,11 @@ __global__ void contact_chains_kernel(ChainInput<T> in, int iters, ChainOut<T>* 
   for (int m = 0; m < 3; ++m) {
     const int count = in.counts[m];
     const long long c0 = clock64();
-    for (int i = 0; i < iters; ++i) {
+    for (int i = 0; i < iters; ++i) {  // every proposal depends on the last call: nothing leaves the loop
       r.merged[m] = merge_proposals_unrolled<kHeldProposals, T>(count, [&](int j) { return p[j]; });
-      p[0].dx.x += r.merged[m].dx.x * T(1e-30);
+      const T nudge = r.merged[m].dx.x * T(1e-30);
+#pragma unroll
+      for (int j = 0; j < kHeldProposals; ++j) p[j].dx.x += nudge;
     }
     r.merge[m] = (clock64() - c0) / iters;
   }
@@ -160,8 +166,7 @@ template <class T>
 CudaContactChains measure(int iters) {
   DeviceArray<ChainOut<T>> d(1);
   const ChainInput<T> in = chain_input<T>();
-  contact_chains_kernel<T><<<1, 32>>>(in, iters, d.data());
-  CUDA_CHECK(cudaGetLastError());
+  launch_blocks(1, 32, nullptr, contact_chains_kernel<T>, in, iters, d.data());
   ChainOut<T> o;
   CUDA_CHECK(cudaMemcpy(&o, d.data(), sizeof(o), cudaMemcpyDeviceToHost));
   CudaContactChains c;
@@ -173,8 +178,16 @@ CudaContactChains measure(int iters) {
     c.merge_counts[m] = kMergeCounts[m];
     c.merge_cycles[m] = double(o.merge[m]);
     c.merged_dx[m] = norm(o.merged[m].dx);
+    // the merge on the host, of the same proposals (the device's last call: every one nudged by nothing)
+    const NodeContact<T> host = merge_proposals<T>(kMergeCounts[m], [&](int j) { return in.proposals[j]; });
+    c.merged_apart = std::max(c.merged_apart, double(norm(o.merged[m].dx - host.dx)));
   }
   c.touching = o.touching[0] != 0 && o.touching[1] != 0;
+  // a step's stage in contact runs its three chains one after the other; the kidney's touched nodes have six
+  // proposals
+  for (int m = 0; m < 3; ++m)
+    if (kMergeCounts[m] == 6)
+      c.chain_per_step_us = (c.test_cycles + c.sweep_pushed_cycles + c.merge_cycles[m]) / c.clock_mhz;
   // the sweeps' corrections against core's sweep of the same triangles on the host (one thread, in order)
   const std::uint8_t block[3] = {0, 0, 0};
   for (int s = 0; s < 2; ++s) {

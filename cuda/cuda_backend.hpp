@@ -60,18 +60,20 @@ CudaFloatMathProbe cuda_probe_float_math(index_t samples = index_t(1) << 20);
 /// corners are inside the tip (node contact, then face contact) and of an
 /// 8 mm one (face contact alone) by a lane group, and the merge of 3, 6 and
 /// 8 proposals. clock_mhz is the device's peak clock (cycles / clock_mhz =
-/// microseconds at that clock). The sweeps' largest correction and how far
-/// the device's proposals lie from core's one-thread sweep on the host
-/// (m), and whether both triangles pass the test, say that a real contact
-/// was timed. Throws std::runtime_error without a GPU.
+/// microseconds at that clock). The sweeps' largest correction, how far
+/// the device's proposals and merges lie from core's on the host (m), and
+/// whether both triangles pass the test, say that a real contact was timed.
+/// chain_per_step_us: test + sweep with corners inside + merge of six. Throws std::runtime_error without a GPU.
 struct CudaContactChains {
   double clock_mhz = 0;
   double test_cycles = 0, sweep_pushed_cycles = 0, sweep_face_cycles = 0;
   int merge_counts[3] = {};
   double merge_cycles[3] = {};
   double merged_dx[3] = {};  ///< |dx| of each merge (m)
+  double merged_apart = 0;   ///< the largest |dx| between a device merge and the host's of the same proposals (m)
   double pushed_dx = 0, face_dx = 0, pushed_apart = 0, face_apart = 0;
   bool touching = false;
+  double chain_per_step_us = 0;
 };
 CudaContactChains cuda_contact_chains(Precision precision, int iters = 2000);
 

