@@ -74,7 +74,8 @@ std::vector<std::pair<std::string, double>> contact_chain_times(const std::strin
     both("sweep_corners_inside", c.sweep_pushed_cycles);
     both("sweep_face_only", c.sweep_face_cycles);
     for (int m = 0; m < 3; ++m) both("merge_" + std::to_string(c.merge_counts[m]), c.merge_cycles[m]);
-    out.emplace_back("chain_per_step_us", c.chain_per_step_us);  // what no arrangement of the stage's kernels goes below
+    // what no arrangement of the stage's kernels goes below
+    out.emplace_back("chain_per_step_us", c.chain_per_step_us);
   }
 #endif
   (void)backend;

@@ -34,8 +34,7 @@ __device__ NodeContact<T> every_pass(const CornerContact<T>* v, int count) {
 }
 
 template <class T>
-__global__ void merge_both_kernel(const CornerContact<T>* lists, const int* counts, int n, int* differ,
-                                  int* early) {
+__global__ void merge_both_kernel(const CornerContact<T>* lists, const int* counts, int n, int* differ, int* early) {
   const int i = int(blockIdx.x * blockDim.x + threadIdx.x);
   if (i >= n) return;
   const CornerContact<T>* v = lists + i * kMax;
@@ -64,7 +63,8 @@ void check_merge_bits() {
       CornerContact<T>& c = lists[std::size_t(i) * kMax + j];
       const double kind = u01(rng);
       if (kind < 0.15) {  // no proposal, or a blocked one
-        c = {{T(0), T(0), T(0)}, static_cast<signed char>(j % 3),
+        c = {{T(0), T(0), T(0)},
+             static_cast<signed char>(j % 3),
              std::uint8_t(kind < 0.05 ? 0 : (kind < 0.1 ? kRigidContact : kOutsideRegion))};
         continue;
       }
