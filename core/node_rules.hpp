@@ -119,7 +119,6 @@ TISSUE_HD bool merge_falls_short(T shortfall, T len) {
 /// shortfall along its own direction. A blocked
 /// penetration (rigid support, outside the region) is kept only while no
 /// correction was proposed, rigid before outside.
-
 template <class T>
 TISSUE_HD void merge_corner(NodeContact<T>& acc, const CornerContact<T>& c) {
   const T s2 = dot(c.dx, c.dx);
