@@ -71,7 +71,13 @@ CornerContact<T> chain_proposal(int j) {
   return {{T(3e-5 * std::cos(a)), T(3e-5 * std::sin(a)), T(1e-4)}, 0, 0};
 }
 
-inline constexpr int kMergeCounts[3] = {3, 6, 8};
+/// The merges timed: of merge_count(m) proposals, m = 0, 1, 2; the second
+/// (kNodeMerge) is the kidney's touched node's.
+__host__ __device__ constexpr int merge_count(int m) {
+  return m == 0 ? 3 : (m == 1 ? 6 : 8);
+}
+inline constexpr int kNodeMerge = 1;
+static_assert(merge_count(kNodeMerge) == 6);
 
 /// What the kernel times, built on the host.
 template <class T>
@@ -79,7 +85,6 @@ struct ChainInput {
   ContactTools<T> tools;
   ChainTriangle<T> small, large;
   CornerContact<T> proposals[kHeldProposals];
-  int counts[3];
 };
 
 template <class T>
@@ -89,7 +94,6 @@ ChainInput<T> chain_input() {
   in.small = chain_triangle<T>(1.5e-3);
   in.large = chain_triangle<T>(8e-3);
   for (int j = 0; j < kHeldProposals; ++j) in.proposals[j] = chain_proposal<T>(j);
-  for (int m = 0; m < 3; ++m) in.counts[m] = kMergeCounts[m];
   return in;
 }
 
@@ -149,7 +153,7 @@ __global__ void contact_chains_kernel(ChainInput<T> in, int iters, ChainOut<T>* 
 #pragma unroll
   for (int j = 0; j < kHeldProposals; ++j) p[j] = in.proposals[j];
   for (int m = 0; m < 3; ++m) {
-    const int count = in.counts[m];
+    const int count = merge_count(m);
     const long long c0 = clock64();
     for (int i = 0; i < iters; ++i) {  // every proposal depends on the last call: nothing leaves the loop
       r.merged[m] = merge_proposals_unrolled<kHeldProposals, T>(count, [&](int j) { return p[j]; });
@@ -175,19 +179,16 @@ CudaContactChains measure(int iters) {
   c.sweep_pushed_cycles = double(o.sweep_pushed);
   c.sweep_face_cycles = double(o.sweep_face);
   for (int m = 0; m < 3; ++m) {
-    c.merge_counts[m] = kMergeCounts[m];
+    c.merge_counts[m] = merge_count(m);
     c.merge_cycles[m] = double(o.merge[m]);
     c.merged_dx[m] = norm(o.merged[m].dx);
     // the merge on the host, of the same proposals (the device's last call: every one nudged by nothing)
-    const NodeContact<T> host = merge_proposals<T>(kMergeCounts[m], [&](int j) { return in.proposals[j]; });
+    const NodeContact<T> host = merge_proposals<T>(merge_count(m), [&](int j) { return in.proposals[j]; });
     c.merged_apart = std::max(c.merged_apart, double(norm(o.merged[m].dx - host.dx)));
   }
   c.touching = o.touching[0] != 0 && o.touching[1] != 0;
-  // a step's stage in contact runs its three chains one after the other; the kidney's touched nodes have six
-  // proposals
-  for (int m = 0; m < 3; ++m)
-    if (kMergeCounts[m] == 6)
-      c.chain_per_step_us = (c.test_cycles + c.sweep_pushed_cycles + c.merge_cycles[m]) / c.clock_mhz;
+  // a step's stage in contact runs its three chains one after the other
+  c.chain_per_step_us = (c.test_cycles + c.sweep_pushed_cycles + c.merge_cycles[kNodeMerge]) / c.clock_mhz;
   // the sweeps' corrections against core's sweep of the same triangles on the host (one thread, in order)
   const std::uint8_t block[3] = {0, 0, 0};
   for (int s = 0; s < 2; ++s) {
