@@ -33,6 +33,7 @@
 #include "core/node_rules.hpp"
 #include "core/tet.hpp"
 #include "core/tool.hpp"
+#include "tests/merge_lists.hpp"
 
 namespace tissue {
 namespace {
@@ -2162,40 +2163,19 @@ TYPED_TEST(MergeCorner, ObtuseProposalsAreApproachedPassByPass) {
 // in two passes.
 TYPED_TEST(MergeCorner, PassesEndOnceOneChangesNothingWithTheSameBits) {
   using T = TypeParam;
-  const auto all_passes = [](const std::vector<CornerContact<T>>& v) {
-    NodeContact<T> acc;
-    for (int pass = 0; pass < kMergePasses; ++pass) {
-      for (const CornerContact<T>& c : v) merge_corner(acc, c);
-      if (acc.kind != kPushed) break;
-    }
-    return acc;
-  };
   std::mt19937 rng(20261126);
-  std::normal_distribution<double> g(0, 1);
-  std::uniform_real_distribution<double> u01(0, 1);
   int early = 0, near_parallel = 0, two_passes = 0;
   for (int trial = 0; trial < 20000; ++trial) {
     const int count = 1 + trial % 12;
     const bool scattered = trial % 3 == 0;
-    const VD n = (1 / std::sqrt(3.0)) * VD{1, 1, 1};
-    std::vector<CornerContact<T>> v;
-    for (int j = 0; j < count; ++j) {
-      const double kind = u01(rng);
-      if (kind < 0.15) {  // no proposal, or a blocked one
-        v.push_back(proposal<T>({0, 0, 0}, j % 3, kind < 0.05 ? 0 : (kind < 0.1 ? kRigidContact : kOutsideRegion)));
-        continue;
-      }
-      VD d{g(rng), g(rng), g(rng)};
-      if (!scattered) d = n + 0.2 * d;  // within a few tens of degrees of n
-      v.push_back(proposal<T>((1e-4 + 1e-3 * u01(rng)) * d, j % 3));
-    }
+    const std::vector<CornerContact<T>> v = test::random_proposal_list<T>(rng, count, scattered);
     int calls = 0;
     const NodeContact<T> a = merge_proposals<T>(count, [&](int j) {
       ++calls;
       return v[j];
     });
     const NodeContact<T> b = merge_proposals_unrolled<12, T>(count, [&](int j) { return v[j]; });
-    const NodeContact<T> ref = all_passes(v);
+    const NodeContact<T> ref = test::merge_every_pass<T>(count, [&](int j) { return v[j]; });
     ASSERT_TRUE(same_bits(a, ref)) << "trial " << trial << ": dx " << str(a.dx) << " against " << str(ref.dx);
     ASSERT_TRUE(same_bits(b, ref)) << "trial " << trial << " (unrolled)";
     if (ref.kind == kPushed && calls < kMergePasses * count) ++early;

@@ -3,11 +3,12 @@
 // pass_would_change says they would change something, and the result must be
 // that of every pass written out in full -- the same bits -- in a kernel of
 // its own, where nvcc inlines both again (the check and the pass evaluate the
-// same expressions, and must round them alike). Random proposal lists as on the host
-// (tests/test_contact.cpp, MergeCorner.PassesEndOnceOneChangesNothing...):
-// near-parallel ones, scattered ones with obtuse pairs, zero and blocked ones.
+// same expressions, and must round them alike). The lists and the passes
+// written out are the host test's (tests/merge_lists.hpp; tests/test_contact.cpp,
+// MergeCorner.PassesEndOnceOneChangesNothingWithTheSameBits).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <random>
 #include <vector>
@@ -16,22 +17,13 @@
 #include "cuda/contact.cuh"
 #include "cuda/device_array.hpp"
 #include "tests/cuda/cuda_test_support.hpp"
+#include "tests/merge_lists.hpp"
 
 namespace tissue::cuda_test {
 namespace {
 
 constexpr int kLists = 1 << 16;
 constexpr int kMax = gpu::kHeldProposals;
-
-template <class T>
-__device__ NodeContact<T> every_pass(const CornerContact<T>* v, int count) {
-  NodeContact<T> acc;
-  for (int pass = 0; pass < kMergePasses; ++pass) {
-    for (int j = 0; j < count; ++j) merge_corner(acc, v[j]);
-    if (acc.kind != kPushed) break;
-  }
-  return acc;
-}
 
 template <class T>
 __global__ void merge_both_kernel(const CornerContact<T>* lists, const int* counts, int n, int* differ, int* early) {
@@ -41,7 +33,7 @@ __global__ void merge_both_kernel(const CornerContact<T>* lists, const int* coun
   CornerContact<T> held[kMax];
   for (int j = 0; j < kMax; ++j) held[j] = v[j];
   const NodeContact<T> a = merge_proposals_unrolled<kMax, T>(counts[i], [&](int j) { return held[j]; });
-  const NodeContact<T> b = every_pass(v, counts[i]);
+  const NodeContact<T> b = test::merge_every_pass<T>(counts[i], [&](int j) { return v[j]; });
   if (!same_bits(a, b)) atomicAdd(differ, 1);
   NodeContact<T> one;  // the first pass: the check ends most pushed nodes' passes there
   for (int j = 0; j < counts[i]; ++j) merge_corner(one, v[j]);
@@ -52,28 +44,12 @@ __global__ void merge_both_kernel(const CornerContact<T>* lists, const int* coun
 template <class T>
 void check_merge_bits() {
   std::mt19937 rng(20261128);
-  std::normal_distribution<double> g(0, 1);
-  std::uniform_real_distribution<double> u01(0, 1);
   std::vector<CornerContact<T>> lists(std::size_t(kLists) * kMax);
   std::vector<int> counts(kLists);
   for (int i = 0; i < kLists; ++i) {
     counts[i] = 1 + i % kMax;
-    const bool scattered = i % 3 == 0;
-    for (int j = 0; j < kMax; ++j) {
-      CornerContact<T>& c = lists[std::size_t(i) * kMax + j];
-      const double kind = u01(rng);
-      if (kind < 0.15) {  // no proposal, or a blocked one
-        c = {{T(0), T(0), T(0)},
-             static_cast<signed char>(j % 3),
-             std::uint8_t(kind < 0.05 ? 0 : (kind < 0.1 ? kRigidContact : kOutsideRegion))};
-        continue;
-      }
-      double d[3] = {g(rng), g(rng), g(rng)};
-      if (!scattered)
-        for (double& x : d) x = 0.57735 + 0.2 * x;  // within a few tens of degrees of (1, 1, 1)
-      const double s = 1e-4 + 1e-3 * u01(rng);
-      c = {{T(s * d[0]), T(s * d[1]), T(s * d[2])}, static_cast<signed char>(j % 3), 0};
-    }
+    const std::vector<CornerContact<T>> v = test::random_proposal_list<T>(rng, kMax, i % 3 == 0);
+    std::copy(v.begin(), v.end(), lists.begin() + std::ptrdiff_t(i) * kMax);
   }
   gpu::DeviceArray<CornerContact<T>> dl(lists.size());
   gpu::DeviceArray<int> dc(kLists), flags(2);
