@@ -85,6 +85,7 @@ struct ChainInput {
   ContactTools<T> tools;
   ChainTriangle<T> small, large;
   CornerContact<T> proposals[kHeldProposals];
+  int counts[3];  ///< merge_count(m), handed over at run time: the stage's merge does not know its count either
 };
 
 template <class T>
@@ -94,6 +95,7 @@ ChainInput<T> chain_input() {
   in.small = chain_triangle<T>(1.5e-3);
   in.large = chain_triangle<T>(8e-3);
   for (int j = 0; j < kHeldProposals; ++j) in.proposals[j] = chain_proposal<T>(j);
+  for (int m = 0; m < 3; ++m) in.counts[m] = merge_count(m);
   return in;
 }
 
@@ -153,7 +155,7 @@ __global__ void contact_chains_kernel(ChainInput<T> in, int iters, ChainOut<T>* 
 #pragma unroll
   for (int j = 0; j < kHeldProposals; ++j) p[j] = in.proposals[j];
   for (int m = 0; m < 3; ++m) {
-    const int count = merge_count(m);
+    const int count = in.counts[m];
     const long long c0 = clock64();
     for (int i = 0; i < iters; ++i) {  // every proposal depends on the last call: nothing leaves the loop
       r.merged[m] = merge_proposals_unrolled<kHeldProposals, T>(count, [&](int j) { return p[j]; });
