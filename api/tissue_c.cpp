@@ -5,14 +5,23 @@
 #include <cmath>
 #include <exception>
 #include <new>
+#include <optional>
+#include <span>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "core/scheduler.hpp"
+#include "tissue/batch.hpp"
 #include "tissue/simulation.hpp"
 
 struct tissue_simulation {
   tissue::Simulation sim;
+};
+
+struct tissue_batch {
+  tissue::Batch batch;
+  std::string failure;  ///< tissue_batch_failure's answer
 };
 
 static_assert(int(tissue::Field::Displacement) == TISSUE_FIELD_DISPLACEMENT &&
@@ -165,6 +174,109 @@ tissue_status tissue_read_field(tissue_simulation* sim, tissue_field field, doub
   if (field < TISSUE_FIELD_DISPLACEMENT || field > TISSUE_FIELD_JACOBIAN)
     return fail(TISSUE_BAD_ARGUMENT, "tissue_read_field: field " + std::to_string(int(field)) + " is not a tissue_field");
   return guarded([&] { sim->sim.read_field(static_cast<tissue::Field>(field), {out, count}); });
+}
+
+tissue_status tissue_batch_open(const char* const* scenes, size_t count, const char* backend, const char* precision,
+                                const char* depth, tissue_batch** out) {
+  if (out == nullptr) return null_argument("tissue_batch_open", "out");
+  *out = nullptr;
+  if (scenes == nullptr) return null_argument("tissue_batch_open", "scenes");
+  std::vector<tissue::BatchScene> list;
+  for (size_t i = 0; i < count; ++i) {
+    if (scenes[i] == nullptr)
+      return fail(TISSUE_BAD_ARGUMENT, "tissue_batch_open: scenes[" + std::to_string(i) + "] is NULL");
+    list.push_back({scenes[i], {}, {}});
+  }
+  return guarded([&] {
+    *out = new tissue_batch{tissue::Batch::load(list, {text(backend), text(precision), text(depth)}), {}};
+  });
+}
+
+void tissue_batch_close(tissue_batch* batch) { delete batch; }
+
+size_t tissue_batch_size(const tissue_batch* batch) { return batch == nullptr ? 0 : batch->batch.size(); }
+int tissue_batch_max_tools(const tissue_batch* batch) { return batch == nullptr ? 0 : batch->batch.max_tools(); }
+
+size_t tissue_batch_node_count(const tissue_batch* batch, int scene) {
+  if (batch == nullptr || scene < 0 || size_t(scene) >= batch->batch.size()) return 0;
+  return batch->batch.n_nodes(scene);
+}
+
+tissue_status tissue_batch_set_material(tissue_batch* batch, int scene, const char* material, double youngs_modulus,
+                                        double poisson_ratio, double density) {
+  if (batch == nullptr) return null_argument("tissue_batch_set_material", "batch");
+  auto given = [](double v) { return std::isnan(v) ? std::nullopt : std::optional<double>(v); };
+  return guarded([&] {
+    batch->batch.set_material(scene, {text(material), given(youngs_modulus), given(poisson_ratio), given(density)});
+  });
+}
+
+tissue_status tissue_batch_set_tool_pose(tissue_batch* batch, int scene, int tool, const double tip[3],
+                                         const double axis[3]) {
+  if (batch == nullptr) return null_argument("tissue_batch_set_tool_pose", "batch");
+  if (tip == nullptr) return null_argument("tissue_batch_set_tool_pose", "tip");
+  return guarded([&] {
+    const tissue::Vector3 a = axis == nullptr ? tissue::Vector3{0, 0, 0} : tissue::Vector3{axis[0], axis[1], axis[2]};
+    batch->batch.set_tool_pose(scene, tool, {tip[0], tip[1], tip[2]}, a);
+  });
+}
+
+tissue_status tissue_batch_set_tool_poses(tissue_batch* batch, const double* tips, const double* axes, size_t count) {
+  if (batch == nullptr) return null_argument("tissue_batch_set_tool_poses", "batch");
+  if (tips == nullptr) return null_argument("tissue_batch_set_tool_poses", "tips");
+  return guarded([&] {
+    batch->batch.set_tool_poses({tips, count}, axes == nullptr ? std::span<const double>() : std::span(axes, count));
+  });
+}
+
+tissue_status tissue_batch_set_grasp(tissue_batch* batch, int scene, int tool, int down) {
+  if (batch == nullptr) return null_argument("tissue_batch_set_grasp", "batch");
+  return guarded([&] { batch->batch.set_grasp(scene, tool, down != 0); });
+}
+
+tissue_status tissue_batch_step(tissue_batch* batch, long ticks, size_t* running) {
+  if (batch == nullptr) return null_argument("tissue_batch_step", "batch");
+  return guarded([&] {
+    const size_t r = batch->batch.step(ticks);
+    if (running != nullptr) *running = r;
+  });
+}
+
+tissue_status tissue_batch_scene_failed(const tissue_batch* batch, int scene, int* failed) {
+  if (batch == nullptr) return null_argument("tissue_batch_scene_failed", "batch");
+  if (failed == nullptr) return null_argument("tissue_batch_scene_failed", "failed");
+  return guarded([&] { *failed = batch->batch.failed(scene) ? 1 : 0; });
+}
+
+const char* tissue_batch_failure(tissue_batch* batch, int scene) {
+  if (batch == nullptr) return "";
+  const tissue_status s = guarded([&] { batch->failure = batch->batch.failure(scene); });
+  return s == TISSUE_OK ? batch->failure.c_str() : "";
+}
+
+tissue_status tissue_batch_reset(tissue_batch* batch, int scene) {
+  if (batch == nullptr) return null_argument("tissue_batch_reset", "batch");
+  return guarded([&] {
+    if (scene == -1)
+      batch->batch.reset();
+    else
+      batch->batch.reset(scene);
+  });
+}
+
+tissue_status tissue_batch_forces(const tissue_batch* batch, double* out, size_t count) {
+  if (batch == nullptr) return null_argument("tissue_batch_forces", "batch");
+  if (out == nullptr) return null_argument("tissue_batch_forces", "out");
+  return guarded([&] { batch->batch.read_forces({out, count}); });
+}
+
+tissue_status tissue_batch_read_field(tissue_batch* batch, int scene, tissue_field field, double* out, size_t count) {
+  if (batch == nullptr) return null_argument("tissue_batch_read_field", "batch");
+  if (out == nullptr) return null_argument("tissue_batch_read_field", "out");
+  if (field < TISSUE_FIELD_DISPLACEMENT || field > TISSUE_FIELD_JACOBIAN)
+    return fail(TISSUE_BAD_ARGUMENT,
+                "tissue_batch_read_field: field " + std::to_string(int(field)) + " is not a tissue_field");
+  return guarded([&] { batch->batch.read_field(scene, static_cast<tissue::Field>(field), {out, count}); });
 }
 
 }  // extern "C"

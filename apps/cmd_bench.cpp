@@ -28,6 +28,11 @@ void add_bench_command(CLI::App& app, int& rc) {
                   "dt-safety values of the haptic-tick rows, compared in one run (default: the kidney scene's)")
       ->delimiter(',')
       ->check(real_number(0, 1, true, true));
+  cmd->add_option("--batch", o->batch,
+                  "Batch sizes: step that many kidneys together, every tool moving in contact (only the batch rows "
+                  "run; docs/batch.md)")
+      ->delimiter(',')
+      ->check(CLI::Range(1L, 1'000'000L));
   cmd->add_flag("--quick", o->quick, "Smoke run on tiny meshes (CI)");
   cmd->callback([o, precision, &rc] {
     InterruptGuard interrupt;

@@ -10,8 +10,10 @@
 #include <ctime>
 #include <fstream>
 #include <memory>
+#include <numeric>
 #include <stdexcept>
 #include <thread>
+#include <tbb/task_arena.h>
 
 #include "backends/registry.hpp"
 #include "io/atomic_file.hpp"
@@ -20,6 +22,7 @@
 #include "cpu/element_lanes.hpp"
 #include "io/kidney.hpp"
 #include "scene/validate.hpp"
+#include "session/scene_batch.hpp"
 
 namespace tissue::bench {
 namespace {
@@ -330,6 +333,159 @@ void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_saf
   c.emit(r);
 }
 
+/// The tip of scene i's tool at tick k of a batch run: on the kidney's press axis (its path's touch and deep
+/// points), coming down over the first `ramp` ticks and then pressing in and out between a quarter of the
+/// press and all of it with a period of 200 ticks, each scene at its own phase.
+Vec3<double> batch_tip(const std::vector<Waypoint>& path, long k, std::size_t i, std::size_t n, long ramp) {
+  const Vec3<double> touch = path.at(1).p, deep = path.at(2).p;
+  const double phase = 2 * M_PI * double(i) / double(n);
+  auto cycle = [&](long t) { return 0.625 - 0.375 * std::cos(2 * M_PI * double(t) / 200.0 + phase); };
+  const double s = k < ramp ? -0.5 + (cycle(ramp) + 0.5) * double(k) / double(ramp) : cycle(k);
+  return touch + s * (deep - touch);
+}
+
+struct BatchRun {
+  double ticks_per_s = 0, tick_p50 = 0, tick_p99 = 0, tick_max = 0;
+  long ticks = 0;
+  int steps_per_tick = 0;
+  double region_nodes = 0, region_elems = 0;  ///< means over the scenes at the end
+  std::size_t running = 0, in_contact = 0;
+  BatchMemory memory;
+  std::string skipped;  ///< why the batch did not run ("" = it ran)
+};
+
+/// N kidneys stepped together (SceneBatch) on c's backend; ticks timed one batch tick at a time.
+BatchRun run_batch(Context& c, Precision p, std::size_t n, double min_seconds, int worker_threads = -1) {
+  BatchRun out;
+  const auto scene = std::make_shared<const scene::Scene>(kidney_with_law(c.o.laws.front()));
+  std::unique_ptr<SceneBatch> batch;
+  try {
+    batch = std::make_unique<SceneBatch>(std::vector<std::shared_ptr<const scene::Scene>>(n, scene), c.o.backend, p);
+  } catch (const std::runtime_error& e) {
+    out.skipped = e.what();
+    return out;
+  }
+  if (worker_threads >= 0)
+    for (std::size_t i = 0; i < n; ++i) (*batch)[i].backend().set_worker_threads(worker_threads);
+  out.memory = batch->memory();
+  const std::vector<Waypoint>& path = scene->tools.front().path;
+  const long ramp = c.o.quick ? 5 : 30;
+  long k = 0;
+  auto drive = [&] {
+    for (std::size_t i = 0; i < n; ++i) (*batch)[i].device(0).set_pose(batch_tip(path, k, i, n, ramp), {0, 0, 0});
+  };
+  for (; k < ramp; ++k) {  // down to the tissue: regions grow, graphs are captured
+    drive();
+    batch->tick();
+  }
+  std::vector<double> lat;
+  const auto t0 = Clock::now();
+  while (lat.size() < (c.o.quick ? 3u : 20u) || since(t0) < min_seconds) {
+    drive();
+    const auto t1 = Clock::now();
+    out.running = batch->tick();
+    lat.push_back(since(t1));
+    ++k;
+  }
+  out.ticks = long(lat.size());
+  const double busy = std::accumulate(lat.begin(), lat.end(), 0.0);
+  out.ticks_per_s = double(lat.size()) / busy;
+  std::sort(lat.begin(), lat.end());
+  out.tick_p50 = lat[lat.size() / 2];
+  out.tick_p99 = lat[std::min(lat.size() - 1, lat.size() * 99 / 100)];
+  out.tick_max = lat.back();
+  out.steps_per_tick = (*batch)[0].scheduler().steps_per_tick();
+  for (std::size_t i = 0; i < n; ++i) {
+    const TickReport& r = (*batch)[i].last();
+    out.region_nodes += double(r.region_nodes) / double(n);
+    out.region_elems += double(r.region_elems) / double(n);
+    if (r.contact_nodes > 0) ++out.in_contact;
+  }
+  return out;
+}
+
+void emit_batch(Context& c, Precision p, std::size_t n, const BatchRun& run, double one_thread_steps,
+                double scaling) {
+  auto probe = create_backend(c.o.backend, p);
+  Row r = c.row("batch", *probe);
+  r.add("mesh", std::string("kidney"));
+  r.add("law", c.o.laws.front());
+  r.add("scenes", long(n));
+  if (!run.skipped.empty()) {
+    r.add("skipped", run.skipped);
+    c.emit(r);
+    return;
+  }
+  const int s = p == Precision::Float ? 4 : 8;
+  const double scene_steps = double(n) * run.steps_per_tick * run.ticks_per_s;
+  const TissueModel<double> m = scene::load_model(kidney_with_law(c.o.laws.front()));
+  const double bytes_region = bytes_per_step(std::lround(run.region_nodes), std::lround(run.region_elems), s);
+  r.add("elements", long(m.n_elems));
+  r.add("region_elements_mean", run.region_elems);
+  r.add("steps_per_tick", long(run.steps_per_tick));
+  r.add("scenes_running", long(run.running));
+  r.add("scenes_in_contact", long(run.in_contact));
+  r.add("ticks_timed", run.ticks);
+  r.add("scene_steps_per_s", scene_steps);
+  r.add("element_steps_per_s", scene_steps * run.region_elems);
+  r.add("bytes_per_element_step", bytes_region / std::max(run.region_elems, 1.0));
+  r.add("bandwidth_fraction", c.bandwidth > 0 ? scene_steps * bytes_region / c.bandwidth : 0.0);
+  r.add("host_bytes_per_scene", long(run.memory.per_scene_host));
+  r.add("device_bytes_per_scene", long(run.memory.per_scene_device));
+  r.add("tick_ms_p50", 1e3 * run.tick_p50);
+  r.add("tick_ms_p99", 1e3 * run.tick_p99);
+  r.add("tick_ms_max", 1e3 * run.tick_max);
+  r.add("real_time", std::string(run.tick_p99 <= 1e-3 ? "yes" : "no"));
+  if (one_thread_steps > 0) {
+    r.add("speedup_vs_one_thread", scene_steps / one_thread_steps);
+    r.add("scaling_limit", scaling);
+    r.add("fraction_of_scaling_limit", scene_steps / one_thread_steps / scaling);
+  }
+  c.emit(r);
+}
+
+void bench_batches(Context& c, Precision p) {
+  const bool host = !create_backend(c.o.backend, p)->asynchronous_ticks();
+  double one_thread = 0, scaling = 0;
+  const int threads = std::max(1, tbb::this_task_arena::max_concurrency());
+  if (host) {
+    // the machine's own limit, and one kidney on one thread, in this run
+    scaling = arithmetic_scaling(threads);
+    const BatchRun one = run_batch(c, p, 1, c.o.min_seconds, 1);
+    one_thread = one.steps_per_tick * one.ticks_per_s;
+    Row r = c.row("cpu_scaling_limit", *create_backend(c.o.backend, p));
+    r.add("threads", long(threads));
+    r.add("arithmetic_scaling", scaling);
+    r.add("kidney_steps_per_s_one_thread", one_thread);
+    c.emit(r);
+  }
+  std::vector<long> sizes = c.o.batch;
+  std::sort(sizes.begin(), sizes.end());
+  long pass = 0, fail = 0;  // the largest real-time size seen, the smallest that was not
+  for (long n : sizes) {
+    if (c.o.stop && c.o.stop()) return;
+    const BatchRun run = run_batch(c, p, std::size_t(n), c.o.min_seconds);
+    emit_batch(c, p, std::size_t(n), run, one_thread, scaling);
+    if (!run.skipped.empty()) continue;
+    if (run.tick_p99 <= 1e-3) pass = std::max(pass, n);
+    else if (fail == 0 || n < fail) fail = n;
+  }
+  // the largest real-time batch between the sizes: bisection, a few short runs
+  for (int k = 0; k < 6 && pass > 0 && fail > pass + 1 && !(c.o.stop && c.o.stop()); ++k) {
+    const long mid = (pass + fail) / 2;
+    const BatchRun run = run_batch(c, p, std::size_t(mid), std::min(c.o.min_seconds, 0.3));
+    if (!run.skipped.empty()) break;
+    (run.tick_p99 <= 1e-3 ? pass : fail) = mid;
+  }
+  Row r = c.row("batch_real_time", *create_backend(c.o.backend, p));
+  r.add("mesh", std::string("kidney"));
+  r.add("law", c.o.laws.front());
+  r.add("real_time_scenes", pass);
+  r.add("first_size_not_real_time", fail);
+  r.add("rule", std::string("batch tick p99 <= 1 ms, every scene's tool moving in contact"));
+  c.emit(r);
+}
+
 std::string today() {
   const std::time_t t = std::time(nullptr);
   char buf[32];
@@ -354,6 +510,35 @@ double bytes_per_step(long n, long ne, int s, bool recomputed) {
   // pass 4: CSR, element forces, u^n, u^{n-1}, A/B/C, held flag and target; writes u^{n+1}, f
   const double p4 = 5.0 * n + ne * (16.0 + 12 * s) + 18.0 * s * n;
   return p1 + p2 + p3 + p4;
+}
+
+double arithmetic_scaling(int threads) {
+  // a chain of dependent multiply-adds per lane, eight independent lanes: registers only
+  auto work = [](long iterations) {
+    double x[8] = {1.0, 1.1, 1.2, 1.3, 1.4, 1.5, 1.6, 1.7};
+    for (long k = 0; k < iterations; ++k)
+      for (double& v : x) v = v * 0.999999 + 1e-7;
+    double sum = 0;
+    for (double v : x) sum += v;
+    return sum;
+  };
+  const long iterations = 20'000'000;
+  volatile double sink = work(iterations / 10);  // warm-up
+  auto timed = [&](int n) {
+    double best = 1e300;
+    for (int r = 0; r < 3; ++r) {
+      std::vector<std::thread> th;
+      std::vector<double> out(static_cast<std::size_t>(n), 0.0);
+      const auto t0 = Clock::now();
+      for (int k = 0; k < n; ++k) th.emplace_back([&, k] { out[std::size_t(k)] = work(iterations); });
+      for (auto& t : th) t.join();
+      best = std::min(best, since(t0));
+      sink = sink + out[0];
+    }
+    return best;
+  };
+  const double one = timed(1), all = timed(threads);
+  return threads * one / all;
 }
 
 double host_copy_bandwidth() {
@@ -386,6 +571,10 @@ std::vector<std::string> run_bench(const BenchOptions& o) {
   c.bandwidth = o.backend == "cpu" ? host_copy_bandwidth() : measure_device_bandwidth(o.backend);
   const auto stopped = [&] { return o.stop && o.stop(); };
   for (Precision p : o.precisions) {
+    if (!o.batch.empty()) {
+      bench_batches(c, p);
+      continue;
+    }
     for (const std::string& mesh : o.sizes)
       for (const std::string& law : o.laws)
         if (!stopped()) bench_tled(c, mesh, p, law);

@@ -30,7 +30,18 @@ struct BenchOptions {
   /// more than one compares their tick cost in one run
   std::vector<double> tick_dt_safety;
   std::function<bool()> stop;  ///< asked before each measurement: true ends the run with the rows done
+  /// Batch sizes (--batch): when given, only the batch rows run. Each row
+  /// steps that many kidneys together (session/scene_batch.hpp), every
+  /// scene's tool moving in contact; then the largest real-time batch is
+  /// found between the sizes, and on the cpu the machine's scaling limit is
+  /// measured in the same run (arithmetic_scaling).
+  std::vector<long> batch;
 };
+
+/// How many times faster `threads` threads run a pure-arithmetic loop (no
+/// memory traffic: registers only) than one thread: the machine's own
+/// scaling limit, which memory-bound work can at best reach.
+double arithmetic_scaling(int threads);
 
 /// Fewest bytes one whole-mesh TLED step must move through memory (each
 /// array the four passes read or write counted once per pass that touches

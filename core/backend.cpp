@@ -27,6 +27,8 @@ ToolPose checked_pose(const ToolPose& p, const ToolShape& s, const char* which) 
 
 void Backend::require_upload(const char* what) const {
   if (!uploaded_) throw std::logic_error(fmt::format("{} backend: {}() called before upload()", name(), what));
+  if (tick_pending_)
+    throw std::logic_error(fmt::format("{} backend: {}() called between start_tick() and finish_tick()", name(), what));
 }
 
 void Backend::upload(const TissueModel<double>& m) {
@@ -341,6 +343,38 @@ std::optional<Reductions> Backend::do_advance_reduce_in_region(int steps, const 
   if (!do_contact_candidates(contact_tools(1)).empty()) return std::nullopt;
   return do_advance_reduce(steps, tools);
 }
+
+void Backend::start_tick(int steps, bool in_region) {
+  check_steps("start_tick", steps);
+  in_region = in_region && !shapes_.empty();
+  if (steps == 0) {
+    pending_ = do_reduce();
+  } else {
+    do_start_tick(steps, contact_tools(steps), in_region);
+  }
+  pending_steps_ = steps > 0;
+  tick_pending_ = true;
+}
+
+std::optional<Reductions> Backend::finish_tick() {
+  if (!tick_pending_) throw std::logic_error(fmt::format("{} backend: finish_tick() without start_tick()", name()));
+  tick_pending_ = false;
+  std::optional<Reductions> r;
+  if (pending_steps_) {
+    r = do_finish_tick();
+    if (r) steps_taken();
+  } else {
+    r = pending_;
+  }
+  pending_.reset();
+  return r;
+}
+
+void Backend::do_start_tick(int steps, const ContactTools<double>& tools, bool in_region) {
+  pending_ = in_region ? do_advance_reduce_in_region(steps, tools) : std::optional(do_advance_reduce(steps, tools));
+}
+
+std::optional<Reductions> Backend::do_finish_tick() { return pending_; }
 
 Fields Backend::download() {
   require_upload("download");

@@ -222,6 +222,27 @@ class Backend {
   /// round trip before its steps.
   std::optional<Reductions> advance_reduce_in_region(int steps);
 
+  /// The haptic tick's work in two halves, so that many backends' ticks run
+  /// at once (a batch of scenes): start_tick(steps, in_region) begins what
+  /// advance_reduce_in_region(steps) (in_region) or advance_reduce(steps)
+  /// would do and may return before it ends; finish_tick() waits for it and
+  /// returns that call's result. A device backend enqueues the tick on its
+  /// own stream; a host backend does the work in start_tick. Between the
+  /// two, every other call throws std::logic_error.
+  void start_tick(int steps, bool in_region);
+  std::optional<Reductions> finish_tick();
+  bool tick_pending() const { return tick_pending_; }
+  /// True when start_tick returns before the tick's work ends (a device
+  /// backend): a batch then starts every scene's tick from one thread
+  /// before it waits for any. False: start_tick does the work, and a batch
+  /// runs its scenes on threads of their own.
+  virtual bool asynchronous_ticks() const { return false; }
+
+  /// How many threads this backend's own steps may use (0: its default). A
+  /// batch of scenes on the cpu runs one scene per thread and sets 1; a
+  /// device backend has no host threads to set and ignores it.
+  virtual void set_worker_threads(int /*threads*/) {}
+
   /// Copies the store's fields to the host (output, tests).
   Fields download();
 
@@ -270,6 +291,12 @@ class Backend {
   virtual Reductions do_advance_reduce(int steps, const ContactTools<double>& tools);
   /// Default: do_contact_candidates over the whole motion, then do_advance_reduce if it is empty.
   virtual std::optional<Reductions> do_advance_reduce_in_region(int steps, const ContactTools<double>& tools);
+  /// start_tick's work (steps > 0; in_region only with tools). Default: runs
+  /// do_advance_reduce_in_region or do_advance_reduce now and keeps the
+  /// result for do_finish_tick.
+  virtual void do_start_tick(int steps, const ContactTools<double>& tools, bool in_region);
+  /// Waits for the started tick and returns its result. Default: the kept one.
+  virtual std::optional<Reductions> do_finish_tick();
   virtual Fields do_download() = 0;
   virtual void do_write_positions(float* dst) = 0;
 
@@ -290,6 +317,9 @@ class Backend {
   std::vector<ToolPose> grasp_pose_;    ///< pose when each tool's grasp started
   std::vector<std::uint8_t> grasping_;  ///< per tool
   std::vector<index_t> loaded_;         ///< set_loads' nodes
+  bool tick_pending_ = false;           ///< start_tick called, finish_tick not yet
+  bool pending_steps_ = false;          ///< the pending tick takes steps (else it is a reduction alone)
+  std::optional<Reductions> pending_;   ///< the default do_start_tick's result
 };
 
 }  // namespace tissue

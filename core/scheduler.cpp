@@ -170,12 +170,19 @@ TickReport Scheduler::tick(Device& device) {
 }
 
 TickReport Scheduler::tick(std::span<Device* const> devices) {
+  begin_tick(devices);
+  return end_tick();
+}
+
+void Scheduler::begin_tick(std::span<Device* const> devices) {
+  if (pending_) throw std::logic_error("Scheduler::begin_tick: the last tick was begun and not ended (end_tick)");
   const std::size_t n_tools = settings_.tools.size();
   if (devices.size() != n_tools)
     throw std::invalid_argument(fmt::format("Scheduler::tick: {} devices for {} tools (one device per tool)",
                                             devices.size(), n_tools));
   const double t_end = (tick_ + 1) * settings_.tick;
-  TickReport rep;
+  TickReport& rep = pending_report_;
+  rep = TickReport{};
   rep.n_tools = static_cast<int>(n_tools);
   for (std::size_t t = 0; t < n_tools; ++t) {
     const ToolInput in = devices[t]->read(t_end);
@@ -199,15 +206,26 @@ TickReport Scheduler::tick(std::span<Device* const> devices) {
   }
   has_prev_ = true;
   backend_.move_tools(motion_);
-  const long first_step = total_steps_;
+  pending_first_step_ = total_steps_;
+  pending_devices_.assign(devices.begin(), devices.end());
   // a limited region grows first where the tools' motion reaches beyond it (the cuda backend checks that
   // inside the tick's own graph: no round trip when the region holds)
-  std::optional<Reductions> ran;
-  if (!region_.whole()) ran = backend_.advance_reduce_in_region(steps_per_tick_);
+  backend_.start_tick(steps_per_tick_, !region_.whole());
+  pending_ = true;
+}
+
+TickReport Scheduler::end_tick() {
+  if (!pending_) throw std::logic_error("Scheduler::end_tick: no tick was begun (begin_tick)");
+  pending_ = false;
+  std::optional<Reductions> ran = backend_.finish_tick();
   if (!ran) {
     seed_region();
     ran = backend_.advance_reduce(steps_per_tick_);
   }
+  const std::size_t n_tools = settings_.tools.size();
+  const long first_step = pending_first_step_;
+  const double t_end = (tick_ + 1) * settings_.tick;
+  TickReport& rep = pending_report_;
   const Reductions& r = *ran;
   total_steps_ += steps_per_tick_;
   check_health(r, first_step);
@@ -253,7 +271,7 @@ TickReport Scheduler::tick(std::span<Device* const> devices) {
   }
   rep.depth = depth_;
   rep.steps = steps_per_tick_;
-  for (std::size_t t = 0; t < n_tools; ++t) devices[t]->send_force(rep.tools[t].force);
+  for (std::size_t t = 0; t < n_tools; ++t) pending_devices_[t]->send_force(rep.tools[t].force);
   ++tick_;
   return rep;
 }

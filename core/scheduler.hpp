@@ -113,6 +113,14 @@ class Scheduler {
   TickReport tick(std::span<Device* const> devices);
   /// The same for a scene with one tool.
   TickReport tick(Device& device);
+  /// tick() in two halves (Backend::start_tick): begin_tick reads the
+  /// devices, moves the tools and starts the backend's tick; end_tick waits
+  /// for it, grows the region if the tools reached beyond it, checks health
+  /// and returns the report (sending the forces to the same devices). A
+  /// batch begins every scene's tick before it ends any, so that device
+  /// backends run them side by side. tick() = begin_tick + end_tick.
+  void begin_tick(std::span<Device* const> devices);
+  TickReport end_tick();
 
   int steps_per_tick() const { return steps_per_tick_; }
   long ticks() const { return tick_; }
@@ -160,6 +168,11 @@ class Scheduler {
   double visco_power_ = 0;      ///< the last tick's Reductions::visco_power (W)
   double dissipated_ = 0;       ///< J, TickReport::dissipated
   std::vector<std::string> notes_;
+  // the tick between begin_tick and end_tick
+  bool pending_ = false;
+  TickReport pending_report_;
+  std::vector<Device*> pending_devices_;
+  long pending_first_step_ = 0;
 };
 
 /// True when p lies inside the closed surface of the model's reference

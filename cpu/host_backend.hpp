@@ -48,6 +48,8 @@ class CpuBackend final : public Backend {
       throw std::invalid_argument("set_team_size: " + std::to_string(size) + " is outside 0..255");
     team_size_ = size;
   }
+  /// A batch runs one scene per thread: set_team_size(threads).
+  void set_worker_threads(int threads) override { set_team_size(threads); }
   /// The members the last advance or reduce kept busy (0 before the first,
   /// and after upload or build_region until the next).
   int busy_team_members() const { return slices_.parts; }

@@ -152,6 +152,7 @@ class CudaBackend final : public Backend {
   Precision precision() const override { return sizeof(T) == 4 ? Precision::Float : Precision::Double; }
   std::string device_name() const override { return device_name_; }
   bool positions_on_device() const override { return true; }
+  bool asynchronous_ticks() const override { return true; }
   TransferCounters transfers() const override { return log_.counters(); }
   DeviceMemory device_memory() const override {
     std::size_t free = 0, total = 0;
@@ -412,6 +413,23 @@ class CudaBackend final : public Backend {
   /// `check`, led by the region's reach check: empty when the region must
   /// grow first (nothing ran).
   std::optional<Reductions> tick_graph(int steps, const ContactTools<double>& tools, bool check) {
+    launch_tick_graph(steps, tools, check);
+    return finish_tick_graph();
+  }
+
+  /// A launched tick graph that finish_tick_graph has not yet waited for.
+  struct LaunchedTick {
+    bool launched = false;
+    bool check = false;
+    int steps = 0;
+    std::size_t tool_bytes = 0;
+    StepStart start = StepStart::kPass1;
+    bool passes = false;
+  };
+
+  /// tick_graph's first half: stages the tools, launches the graph on the
+  /// backend's stream and returns without waiting.
+  void launch_tick_graph(int steps, const ContactTools<double>& tools, bool check) {
     const RegionView r = region_.view();
     const std::size_t tool_bytes = tools.n_tools > 0 ? contact_.stage(contact_tools_as<T>(tools)) : 0;
     const ContactTools<T>* dtools = tools.n_tools > 0 ? contact_.device_tools() : nullptr;
@@ -434,31 +452,51 @@ class CudaBackend final : public Backend {
           StateView<T> scratch = store_.pressure_scratch();
           scratch.skip = s.skip;
           stepper_.enqueue_steps(store_.model(), s, r, store_.u.current(), steps, dtools, steps_start, st);
-          // the reduction and the check write their answers into mapped host memory themselves: no
-          // copy nodes (on the kidney's tick on an H100: docs/benchmarks/README.md, "Answers written
-          // into host memory")
+          // the reduction and the check write their answers into mapped host memory themselves: the
+          // graph has no copy nodes, and its answers are read once the stream is done
           reducer_.enqueue(store_.model(), s, scratch, r, region_.front(), store_.u.at(store_.u.phase + steps), st,
                            true);
         },
         stream());
     if (check) contact_.reach_host()[0] = 0;  // the check kernel writes 1 when the region must grow
     CUDA_CHECK(cudaGraphLaunch(exec, stream()));
+    launched_ = {true, check, steps, tool_bytes, start, passes};
+  }
+
+  /// tick_graph's second half: waits for the launched graph and reads its answers.
+  std::optional<Reductions> finish_tick_graph() {
+    const LaunchedTick t = launched_;
+    launched_ = {};
     stream_.sync();
-    if (tool_bytes > 0) log_.count_to_device(tool_bytes);
-    if (check) {
+    if (t.tool_bytes > 0) log_.count_to_device(t.tool_bytes);
+    if (t.check) {
       log_.count_to_host(sizeof(int));
       if (contact_.reach_host()[0] != 0) {  // nothing ran: the same phase, the same state
-        if (start == StepStart::kPass3) {   // and the same pass arrays (download() sees no change)
+        if (t.start == StepStart::kPass3) {  // and the same pass arrays (download() sees no change)
           store_.swap_pressures();
           pressures_fresh_ = true;
         }
         return std::nullopt;
       }
     }
-    pressures_fresh_ = passes;
+    pressures_fresh_ = t.passes;
     log_.count_to_host(sizeof(Reductions));  // (a tick that did nothing wrote none)
-    store_.u.advance(steps);
+    store_.u.advance(t.steps);
     return reducer_.result_host()[0];
+  }
+
+  /// Starts the tick as one graph on this backend's stream (a batch's
+  /// scenes then run side by side) where tick_graph would run it; otherwise
+  /// runs it now (Backend's default).
+  void do_start_tick(int steps, const ContactTools<double>& tools, bool in_region) override {
+    if (tick_graph_runs(steps) && !(in_region && store_.model().n_surf == 0))
+      launch_tick_graph(steps, tools, in_region);
+    else
+      Backend::do_start_tick(steps, tools, in_region);
+  }
+
+  std::optional<Reductions> do_finish_tick() override {
+    return launched_.launched ? finish_tick_graph() : Backend::do_finish_tick();
   }
 
   /// The part of the tools' motion covering steps [first, first + count) of
@@ -509,6 +547,7 @@ class CudaBackend final : public Backend {
   }
 
   Stream stream_;
+  LaunchedTick launched_;  ///< the graph do_start_tick launched, until do_finish_tick
   Transfers log_;
   DeviceStore<T> store_;
   RegionFill region_;

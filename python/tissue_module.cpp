@@ -11,11 +11,13 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "tissue/batch.hpp"
 #include "tissue/simulation.hpp"
 
 namespace py = pybind11;
@@ -79,6 +81,49 @@ std::vector<T> flat(py::handle a, py::ssize_t cols, const char* what) {
   if (cols == 1 && arr.ndim() != 1)
     throw std::invalid_argument(std::string(what) + " must be one-dimensional");
   return {arr.data(), arr.data() + arr.size()};
+}
+
+/// A Batch with a lock: every call holds it, so that Python threads sharing
+/// one batch take turns (step() releases the GIL, not the lock).
+struct PyBatch {
+  tissue::Batch batch;
+  std::mutex lock;
+};
+
+/// Runs f(batch) holding the batch's lock, the GIL released while waiting and working.
+template <class F>
+auto locked(PyBatch& b, F&& f) {
+  py::gil_scoped_release free;
+  std::lock_guard<std::mutex> hold(b.lock);
+  return f(b.batch);
+}
+
+/// Every scene's field as (N, nodes[, components]) (scenes of one size).
+py::array_t<double> batch_field(PyBatch& b, Field f) {
+  const int c = tissue::field_components(f);
+  const py::ssize_t n = py::ssize_t(b.batch.size());
+  const py::ssize_t per = py::ssize_t(f == Field::Jacobian ? b.batch.n_elements(0) : b.batch.n_nodes(0));
+  py::array_t<double> a = c == 1 ? py::array_t<double>({n, per}) : py::array_t<double>({n, per, py::ssize_t(c)});
+  double* out = a.mutable_data();
+  const std::size_t size = std::size_t(a.size());
+  locked(b, [&](tissue::Batch& batch) { batch.read_fields(f, {out, size}); });
+  return a;
+}
+
+/// One scene's field as (nodes[, components]).
+py::array_t<double> scene_field(PyBatch& b, int scene, Field f) {
+  const int c = tissue::field_components(f);
+  const py::ssize_t per = py::ssize_t(f == Field::Jacobian ? b.batch.n_elements(scene) : b.batch.n_nodes(scene));
+  py::array_t<double> a = c == 1 ? py::array_t<double>({per}) : py::array_t<double>({per, py::ssize_t(c)});
+  double* out = a.mutable_data();
+  const std::size_t size = std::size_t(a.size());
+  locked(b, [&](tissue::Batch& batch) { batch.read_field(scene, f, {out, size}); });
+  return a;
+}
+
+/// field(scene=None): every scene's (N, ...) or one scene's.
+py::array_t<double> any_field(PyBatch& b, std::optional<int> scene, Field f) {
+  return scene ? scene_field(b, *scene, f) : batch_field(b, f);
 }
 
 }  // namespace
@@ -234,5 +279,155 @@ PYBIND11_MODULE(_tissue, m) {
       .def("__repr__", [](const Simulation& s) {
         return "<tissue.Simulation " + s.name() + ": " + std::to_string(s.n_nodes()) + " nodes, " +
                std::to_string(s.n_elements()) + " tets on " + s.backend() + " (" + s.precision() + ")>";
+      });
+
+  py::class_<tissue::MaterialChange>(m, "MaterialChange", "New parameters for one material of a scene (None keeps it)")
+      .def(py::init([](std::string material, std::optional<double> E, std::optional<double> nu,
+                       std::optional<double> rho) { return tissue::MaterialChange{std::move(material), E, nu, rho}; }),
+           py::arg("material") = "", py::kw_only(), py::arg("E") = py::none(), py::arg("nu") = py::none(),
+           py::arg("rho") = py::none())
+      .def_readwrite("material", &tissue::MaterialChange::material)
+      .def_readwrite("E", &tissue::MaterialChange::youngs_modulus)
+      .def_readwrite("nu", &tissue::MaterialChange::poisson_ratio)
+      .def_readwrite("rho", &tissue::MaterialChange::density);
+
+  py::class_<PyBatch>(m, "Batch", "Many scenes stepped together on one backend (docs/batch.md)")
+      .def(py::init([](py::object scenes, std::optional<int> copies, std::optional<std::string> backend,
+                       std::optional<std::string> precision, std::optional<std::string> depth) {
+             std::vector<tissue::BatchScene> list;
+             if (py::isinstance<py::str>(scenes)) {
+               const int n = copies.value_or(1);
+               if (n < 1) throw std::invalid_argument("Batch: copies = " + std::to_string(n) + " must be >= 1");
+               list.assign(std::size_t(n), tissue::BatchScene{scenes.cast<std::string>(), {}, {}});
+             } else {
+               if (copies) throw std::invalid_argument("Batch: copies applies to one scene name, not to a list");
+               for (py::handle item : scenes) {
+                 if (py::isinstance<py::str>(item)) {
+                   list.push_back({item.cast<std::string>(), {}, {}});
+                 } else {
+                   const auto pair = item.cast<py::tuple>();
+                   if (pair.size() != 2)
+                     throw std::invalid_argument("Batch: a scene is a name or (name, [MaterialChange, ...])");
+                   list.push_back({pair[0].cast<std::string>(), pair[1].cast<std::vector<tissue::MaterialChange>>(), {}});
+                 }
+               }
+             }
+             py::gil_scoped_release free;
+             return std::unique_ptr<PyBatch>(new PyBatch{tissue::Batch::load(list, options(backend, precision, depth)), {}});
+           }),
+           py::arg("scenes"), py::arg("copies") = py::none(), py::kw_only(), py::arg("backend") = py::none(),
+           py::arg("precision") = py::none(), py::arg("depth") = py::none(),
+           "Batch('@kidney', 64) or Batch(['a.xml', ('b.xml', [MaterialChange('tissue', E=5000)])])")
+      .def("__len__", [](PyBatch& b) { return b.batch.size(); })
+      .def_property_readonly("size", [](PyBatch& b) { return b.batch.size(); })
+      .def_property_readonly("backend", [](PyBatch& b) { return b.batch.backend(); })
+      .def_property_readonly("precision", [](PyBatch& b) { return b.batch.precision(); })
+      .def_property_readonly("device_name", [](PyBatch& b) { return b.batch.device_name(); })
+      .def_property_readonly("max_tools", [](PyBatch& b) { return b.batch.max_tools(); })
+      .def_property_readonly("distinct_models", [](PyBatch& b) { return b.batch.distinct_models(); })
+      .def_property_readonly("scene_host_bytes", [](PyBatch& b) { return b.batch.scene_host_bytes(); })
+      .def_property_readonly("scene_device_bytes", [](PyBatch& b) { return b.batch.scene_device_bytes(); })
+      .def("name", [](PyBatch& b, int scene) { return b.batch.name(scene); }, py::arg("scene"))
+      .def("n_nodes", [](PyBatch& b, int scene) { return b.batch.n_nodes(scene); }, py::arg("scene"))
+      .def("n_elements", [](PyBatch& b, int scene) { return b.batch.n_elements(scene); }, py::arg("scene"))
+      .def("n_tools", [](PyBatch& b, int scene) { return b.batch.n_tools(scene); }, py::arg("scene"))
+      .def("steps_per_tick", [](PyBatch& b, int scene) { return b.batch.steps_per_tick(scene); }, py::arg("scene"))
+      .def("dt", [](PyBatch& b, int scene) { return b.batch.dt(scene); }, py::arg("scene"))
+      .def("warnings", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.warnings(scene); }); },
+           py::arg("scene"))
+      .def("set_material", [](PyBatch& b, int scene, std::string material, std::optional<double> E,
+                              std::optional<double> nu, std::optional<double> rho) {
+        locked(b, [&](tissue::Batch& x) { x.set_material(scene, {material, E, nu, rho}); });
+      }, py::arg("scene"), py::arg("material") = "", py::kw_only(), py::arg("E") = py::none(),
+           py::arg("nu") = py::none(), py::arg("rho") = py::none(),
+           "New E, nu or rho for a scene's material ('' = all); that scene starts again at rest")
+      .def("set_tool_pose", [](PyBatch& b, int scene, int tool, py::handle tip, py::handle axis) {
+        const tissue::Vector3 t = vector3(tip, "tip");
+        const tissue::Vector3 a = axis.is_none() ? tissue::Vector3{0, 0, 0} : vector3(axis, "axis");
+        locked(b, [&](tissue::Batch& x) { x.set_tool_pose(scene, tool, t, a); });
+      }, py::arg("scene"), py::arg("tool"), py::arg("tip"), py::arg("axis") = py::none())
+      .def("set_tool_poses", [](PyBatch& b, py::handle tips, py::handle axes) {
+        const std::size_t n = b.batch.size(), t = std::size_t(b.batch.max_tools());
+        auto take = [&](py::handle h, const char* what) {
+          const auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(h);
+          if (!a || a.ndim() != 3 || std::size_t(a.shape(0)) != n || std::size_t(a.shape(1)) != t || a.shape(2) != 3)
+            throw std::invalid_argument(std::string("set_tool_poses: ") + what + " must have shape (" +
+                                        std::to_string(n) + ", " + std::to_string(t) + ", 3) (scenes, tools, xyz)");
+          return std::vector<double>(a.data(), a.data() + a.size());
+        };
+        const std::vector<double> tv = take(tips, "tips");
+        const std::vector<double> av = axes.is_none() ? std::vector<double>{} : take(axes, "axes");
+        locked(b, [&](tissue::Batch& x) { x.set_tool_poses(tv, av); });
+      }, py::arg("tips"), py::arg("axes") = py::none(),
+           "Every scene's tool poses from (N, max_tools, 3) arrays (m); rows past a scene's tools are ignored")
+      .def("set_grasp", [](PyBatch& b, int scene, int tool, bool down) {
+        locked(b, [&](tissue::Batch& x) { x.set_grasp(scene, tool, down); });
+      }, py::arg("scene"), py::arg("tool"), py::arg("down"))
+      .def("follow_scene_path", [](PyBatch& b, int scene, int tool) {
+        locked(b, [&](tissue::Batch& x) { x.follow_scene_path(scene, tool); });
+      }, py::arg("scene"), py::arg("tool"))
+      .def("set_tool_path", [](PyBatch& b, int scene, int tool, py::handle rows) {
+        const auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(rows);
+        if (!a || a.ndim() != 2 || (a.shape(1) != 4 && a.shape(1) != 5 && a.shape(1) != 8))
+          throw std::invalid_argument("set_tool_path: rows must have shape (n, 4), (n, 5) or (n, 8): t x y z "
+                                      "[grasp [ax ay az]]");
+        std::vector<tissue::PathPoint> path;
+        for (py::ssize_t i = 0; i < a.shape(0); ++i) {
+          tissue::PathPoint p;
+          p.t = a.at(i, 0);
+          p.tip = {a.at(i, 1), a.at(i, 2), a.at(i, 3)};
+          if (a.shape(1) >= 5) p.grasp = a.at(i, 4) != 0;
+          if (a.shape(1) == 8) p.axis = {a.at(i, 5), a.at(i, 6), a.at(i, 7)};
+          path.push_back(p);
+        }
+        locked(b, [&](tissue::Batch& x) { x.set_tool_path(scene, tool, path); });
+      }, py::arg("scene"), py::arg("tool"), py::arg("rows"), "A scripted path for one tool: rows t x y z [grasp [ax ay az]]")
+      .def("set_loads", [](PyBatch& b, int scene, py::handle nodes, py::handle forces) {
+        const std::vector<std::int32_t> ids = flat<std::int32_t>(nodes, 1, "nodes");
+        const std::vector<double> f = flat<double>(forces, 3, "forces");
+        locked(b, [&](tissue::Batch& x) { x.set_loads(scene, ids, f); });
+      }, py::arg("scene"), py::arg("nodes"), py::arg("forces"))
+      .def("step", [](PyBatch& b, long ticks) { return locked(b, [&](tissue::Batch& x) { return x.step(ticks); }); },
+           py::arg("ticks") = 1, "Run haptic ticks of every running scene; returns how many still run")
+      .def("failed", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.failed(scene); }); },
+           py::arg("scene"))
+      .def("failure", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.failure(scene); }); },
+           py::arg("scene"), "Why the scene stopped ('' while it runs)")
+      .def_property_readonly("failed_scenes",
+                             [](PyBatch& b) { return locked(b, [&](tissue::Batch& x) { return x.failed_scenes(); }); })
+      .def("last", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.last(scene); }); },
+           py::arg("scene"), "The scene's last TickResult (its last good one when it failed)")
+      .def("ticks", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.ticks(scene); }); },
+           py::arg("scene"))
+      .def("reset", [](PyBatch& b, std::optional<int> scene) {
+        locked(b, [&](tissue::Batch& x) {
+          if (scene)
+            x.reset(*scene);
+          else
+            x.reset();
+        });
+      }, py::arg("scene") = py::none(), "One scene (or every scene) back to rest")
+      .def("take_notes", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.take_notes(scene); }); },
+           py::arg("scene"))
+      .def("forces", [](PyBatch& b) {
+        py::array_t<double> a({py::ssize_t(b.batch.size()), py::ssize_t(b.batch.max_tools()), py::ssize_t(3)});
+        double* out = a.mutable_data();
+        const std::size_t size = std::size_t(a.size());
+        locked(b, [&](tissue::Batch& x) { x.read_forces({out, size}); });
+        return a;
+      }, "(N, max_tools, 3) forces on the tools after the last tick (N)")
+      .def("displacement", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Displacement); },
+           py::arg("scene") = py::none(), "(N, nodes, 3) m, or one scene's (nodes, 3)")
+      .def("positions", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Position); },
+           py::arg("scene") = py::none(), "(N, nodes, 3) X + u (m), or one scene's")
+      .def("pressure", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Pressure); },
+           py::arg("scene") = py::none(), "(N, nodes) Pa, or one scene's")
+      .def("internal_force", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::InternalForce); },
+           py::arg("scene") = py::none(), "(N, nodes, 3) N, or one scene's")
+      .def("jacobian", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Jacobian); },
+           py::arg("scene") = py::none(), "(N, elements) J, or one scene's")
+      .def("__repr__", [](PyBatch& b) {
+        return "<tissue.Batch " + std::to_string(b.batch.size()) + " scenes on " + b.batch.backend() + " (" +
+               b.batch.precision() + ")>";
       });
 }

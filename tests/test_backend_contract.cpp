@@ -808,6 +808,80 @@ TEST_P(Contract, AdvanceReduceInRegionRunsOnlyWhileTheRegionHolds) {
   EXPECT_THROW(checked->advance_reduce_in_region(-1), std::invalid_argument);
 }
 
+// A tick in two halves (start_tick, finish_tick) gives the bits of the one call, also with two backends' ticks
+// in flight at once (a batch's scenes), the region holding or not; between the halves the backend refuses
+// every other call.
+TEST_P(Contract, ATickInTwoHalvesGivesTheBitsOfOneCall) {
+  const auto m = slab(8);
+  const double r = 0.004;
+  const ToolShape shape{"probe", r, 0.01};
+  for (int depth : {kDepthAll, 2}) {
+    SCOPED_TRACE(::testing::Message() << "depth " << depth);
+    auto one = make(m), first = make(m), second = make(m);
+    std::vector<Backend*> all = {one.get(), first.get(), second.get()};
+    const ToolMotion start{{{0.0203, 0.0196, kTop + r + 5e-4}, {0, 0, 1}}, {{0.0203, 0.0196, kTop + r - 5e-4}, {0, 0, 1}}};
+    for (Backend* b : all) {
+      b->set_tools(std::span<const ToolShape>(&shape, 1));
+      b->move_tools(std::span<const ToolMotion>(&start, 1));
+      if (depth != kDepthAll) {
+        b->build_region({}, depth);
+        b->build_region(b->contact_candidates(), depth);
+      }
+    }
+    double z = kTop + r - 5e-4;
+    int refused = 0;
+    for (int tick = 0; tick < 10; ++tick) {
+      SCOPED_TRACE(::testing::Message() << "tick " << tick);
+      const double x0 = tick < 6 ? 0.0203 : 0.0203 + 0.004 * (tick - 6), x1 = tick < 5 ? 0.0203 : x0 + 0.004;
+      const ToolMotion mv{{{x0, 0.0196, z}, {0, 0, 1}}, {{x1, 0.0196, z - 1e-4}, {0, 0, 1}}};
+      const int steps = tick % 2 ? 7 : 4;
+      for (Backend* b : all) b->move_tools(std::span<const ToolMotion>(&mv, 1));
+      const bool in_region = depth != kDepthAll;
+      std::optional<Reductions> want =
+          in_region ? one->advance_reduce_in_region(steps) : std::optional(one->advance_reduce(steps));
+      first->start_tick(steps, in_region);
+      second->start_tick(steps, in_region);
+      EXPECT_TRUE(first->tick_pending());
+      EXPECT_THROW(first->download(), std::logic_error);
+      EXPECT_THROW(first->advance(1), std::logic_error);
+      const std::optional<Reductions> got2 = second->finish_tick();
+      const std::optional<Reductions> got1 = first->finish_tick();
+      EXPECT_FALSE(first->tick_pending());
+      ASSERT_EQ(got1.has_value(), want.has_value());
+      ASSERT_EQ(got2.has_value(), want.has_value());
+      if (!want) {  // the region must grow first: every backend grows it alike, then runs the tick
+        ++refused;
+        for (Backend* b : all) {
+          std::vector<index_t> seeds = b->contact_candidates();
+          for (index_t a : b->region().seeds) seeds.push_back(a);
+          std::sort(seeds.begin(), seeds.end());
+          seeds.erase(std::unique(seeds.begin(), seeds.end()), seeds.end());
+          b->build_region(seeds, depth);
+        }
+        want = one->advance_reduce(steps);
+        first->start_tick(steps, false);
+        expect_same(*first->finish_tick(), *want);
+        expect_same(second->advance_reduce(steps), *want);
+      } else {
+        expect_same(*got1, *want);
+        expect_same(*got2, *want);
+      }
+      const Fields a = one->download(), b1 = first->download(), b2 = second->download();
+      EXPECT_EQ(b1.u, a.u);
+      EXPECT_EQ(b2.u, a.u);
+      EXPECT_EQ(b1.f, a.f);
+      EXPECT_EQ(b1.node_p, a.node_p);
+      z -= 1e-4;
+    }
+    if (depth != kDepthAll) {
+      EXPECT_GT(refused, 0) << "the slide left the region";
+    }
+    EXPECT_THROW(first->finish_tick(), std::logic_error);
+    first->start_tick(0, false);  // no steps: the reduction alone
+    expect_same(*first->finish_tick(), one->reduce());
+  }
+}
+
 TEST_P(Contract, AToolStartingInsideTheSurfaceIsInContactFromTheFirstTick) {
   const auto m = slab(8);
   auto b = make(m);

@@ -9,13 +9,16 @@
 Fields (displacement, positions, pressure, internal_force, jacobian) are
 NumPy arrays; the reference mesh (rest_positions, tetrahedra,
 surface_triangles) is a read-only view of the simulation's own memory.
+Many scenes at once: tissue.Batch("@kidney", 64) steps 64 kidneys together;
+forces() is (N, tools, 3) and displacement() (N, nodes, 3) (docs/batch.md).
+
 Errors raise ValueError (a bad argument) or RuntimeError (a scene that does
 not validate, a backend that cannot run, an unstable simulation), with a
 message naming the file, element, node or value.
 """
-from ._tissue import (Simulation, TickResult, ToolResult, VolumeMesh, __version__, available_backends,
-                      mesh_surface)
+from ._tissue import (Batch, MaterialChange, Simulation, TickResult, ToolResult, VolumeMesh, __version__,
+                      available_backends, mesh_surface)
 from .meshes import box_mesh, box_node
 
-__all__ = ["Simulation", "TickResult", "ToolResult", "VolumeMesh", "available_backends", "mesh_surface",
+__all__ = ["Batch", "MaterialChange", "Simulation", "TickResult", "ToolResult", "VolumeMesh", "available_backends", "mesh_surface",
            "box_mesh", "box_node", "__version__"]

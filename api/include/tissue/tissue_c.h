@@ -11,7 +11,7 @@
  *   TISSUE_ERROR with a message.
  * - Units are SI (m, N, Pa, s). Vectors are 3 doubles x, y, z. Arrays of
  *   nodes are 3 values per node, interleaved.
- * - A tissue_simulation is used from one thread at a time.
+ * - A tissue_simulation (or tissue_batch) is used from one thread at a time.
  */
 #ifndef TISSUE_TISSUE_C_H
 #define TISSUE_TISSUE_C_H
@@ -99,6 +99,46 @@ double tissue_dissipated_energy(const tissue_simulation* sim);
 /* Copies a field into out, which holds exactly count values (components x
  * nodes, or elements for the Jacobian). */
 tissue_status tissue_read_field(tissue_simulation* sim, tissue_field field, double* out, size_t count);
+
+/* ---- A batch of scenes stepped together (tissue::Batch; docs/batch.md) ----
+ * Scenes are numbered 0 .. tissue_batch_size() - 1. A scene that goes
+ * unstable stops alone: tissue_batch_step still returns TISSUE_OK, and
+ * tissue_batch_scene_failed / tissue_batch_failure say which and why. */
+typedef struct tissue_batch tissue_batch;
+
+/* Opens count scenes (files or "@kidney"; the same name may repeat) on one
+ * backend and precision (NULL or "" = the first scene's). */
+tissue_status tissue_batch_open(const char* const* scenes, size_t count, const char* backend, const char* precision,
+                                const char* depth, tissue_batch** out);
+/* Frees the batch (NULL is ignored). */
+void tissue_batch_close(tissue_batch* batch);
+/* Scenes in the batch, and the most tools any has; 0 for a NULL batch. */
+size_t tissue_batch_size(const tissue_batch* batch);
+int tissue_batch_max_tools(const tissue_batch* batch);
+size_t tissue_batch_node_count(const tissue_batch* batch, int scene);
+/* New (E, nu, rho) for a scene's material ("" or NULL = every material);
+ * a value that is NaN keeps the scene's. The scene starts again at rest. */
+tissue_status tissue_batch_set_material(tissue_batch* batch, int scene, const char* material, double youngs_modulus,
+                                        double poisson_ratio, double density);
+tissue_status tissue_batch_set_tool_pose(tissue_batch* batch, int scene, int tool, const double tip[3],
+                                         const double axis[3]);
+/* Every scene's tool tips (and axes, or NULL) at once: count = size x
+ * max_tools x 3 values, row-major. */
+tissue_status tissue_batch_set_tool_poses(tissue_batch* batch, const double* tips, const double* axes, size_t count);
+tissue_status tissue_batch_set_grasp(tissue_batch* batch, int scene, int tool, int down);
+/* ticks >= 1 haptic ticks of every running scene; running (may be NULL)
+ * receives how many still run. */
+tissue_status tissue_batch_step(tissue_batch* batch, long ticks, size_t* running);
+/* *failed = 1 when the scene has stopped; tissue_batch_failure gives why
+ * ("" while it runs; valid until the next call on the batch). */
+tissue_status tissue_batch_scene_failed(const tissue_batch* batch, int scene, int* failed);
+const char* tissue_batch_failure(tissue_batch* batch, int scene);
+/* One scene (scene >= 0) or every scene (scene = -1) back to rest. */
+tissue_status tissue_batch_reset(tissue_batch* batch, int scene);
+/* Forces on every tool after the last tick: count = size x max_tools x 3. */
+tissue_status tissue_batch_forces(const tissue_batch* batch, double* out, size_t count);
+/* One scene's field (as tissue_read_field). */
+tissue_status tissue_batch_read_field(tissue_batch* batch, int scene, tissue_field field, double* out, size_t count);
 
 #ifdef __cplusplus
 }

@@ -1,0 +1,98 @@
+// What the facade's Simulation and Batch share (api/ only): a Session's
+// report as a TickResult, fields in the facade's layout, argument checks.
+#pragma once
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "core/backend.hpp"
+#include "core/scheduler.hpp"
+#include "core/vec.hpp"
+#include "scene/scene.hpp"
+#include "tissue/simulation.hpp"
+
+namespace tissue::facade {
+
+inline Vec3<double> vec(const Vector3& a) {
+  return {a[0], a[1], a[2]};
+}
+inline Vector3 arr(const Vec3<double>& v) {
+  return {v.x, v.y, v.z};
+}
+inline bool finite3(const Vector3& a) {
+  return std::isfinite(a[0]) && std::isfinite(a[1]) && std::isfinite(a[2]);
+}
+
+/// An interleaved copy (x y z per item) of a component-major array (all x, then all y, ...).
+template <class T>
+std::vector<T> interleave(const std::vector<T>& soa, std::size_t components) {
+  const std::size_t n = soa.size() / components;
+  std::vector<T> out(soa.size());
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t c = 0; c < components; ++c) out[components * i + c] = soa[c * n + i];
+  return out;
+}
+
+/// The scene of a host's mesh: one material on every element, the fixed
+/// nodes, and each tool parked above the body (one waypoint) until the host
+/// moves it. Throws std::invalid_argument for counts that do not divide.
+scene::Scene mesh_scene(const MeshScene& m);
+
+/// The facade's view of a tick report after `ticks` ticks.
+inline TickResult tick_result(const TickReport& r, long ticks) {
+  TickResult out;
+  out.tick = ticks;
+  out.time = r.time;
+  out.steps = r.steps;
+  out.tools.resize(std::size_t(r.n_tools));
+  for (int k = 0; k < r.n_tools; ++k) {
+    const ToolReport& t = r.tools[k];
+    out.tools[k] = {arr(t.tip), arr(t.axis), arr(t.force), int(t.contact_nodes), int(t.grasped), t.grasp};
+  }
+  out.max_displacement = r.max_disp;
+  out.residual = r.residual;
+  out.equilibrium = r.equilibrium;
+  out.region_nodes = int(r.region_nodes);
+  out.region_elements = int(r.region_elems);
+  return out;
+}
+
+/// Values field f has for n_nodes nodes and n_elems elements.
+inline std::size_t field_size(Field f, std::size_t n_nodes, std::size_t n_elems) {
+  return (f == Field::Jacobian ? n_elems : n_nodes) * std::size_t(field_components(f));
+}
+
+/// Writes field f of a download into out (x y z per node for vectors;
+/// positions add rest, the interleaved reference positions). out holds
+/// field_size values (checked by the caller).
+inline void copy_field(const Fields& s, std::span<const double> rest, Field f, std::span<double> out) {
+  const std::size_t nn = rest.size() / 3;
+  auto nodal3 = [&](const std::vector<double>& soa, bool add_rest) {  // component-major -> x y z per node
+    for (std::size_t i = 0; i < nn; ++i)
+      for (std::size_t c = 0; c < 3; ++c) out[3 * i + c] = soa[c * nn + i] + (add_rest ? rest[3 * i + c] : 0.0);
+  };
+  switch (f) {
+    case Field::Displacement:
+      nodal3(s.u, false);
+      break;
+    case Field::Position:
+      nodal3(s.u, true);
+      break;
+    case Field::Pressure:
+      std::copy(s.node_p.begin(), s.node_p.end(), out.begin());
+      break;
+    case Field::InternalForce:
+      nodal3(s.f, false);
+      break;
+    case Field::Jacobian:
+      std::copy(s.elem_J.begin(), s.elem_J.end(), out.begin());
+      break;
+  }
+}
+
+}  // namespace tissue::facade

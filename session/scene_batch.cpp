@@ -1,0 +1,265 @@
+#include "session/scene_batch.hpp"
+
+#include <fmt/format.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <exception>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+#include "backends/registry.hpp"
+#include "scene/validate.hpp"
+
+namespace tissue {
+namespace {
+
+bool same_material(const MaterialParams& a, const MaterialParams& b) {
+  if (a.mu != b.mu || a.K != b.K || a.rho != b.rho || a.fibre_eta != b.fibre_eta || a.prony_terms != b.prony_terms ||
+      a.fibre_dir.x != b.fibre_dir.x || a.fibre_dir.y != b.fibre_dir.y || a.fibre_dir.z != b.fibre_dir.z)
+    return false;
+  for (int k = 0; k < kMaxProny; ++k)
+    if (a.prony_g[k] != b.prony_g[k] || a.prony_tau[k] != b.prony_tau[k]) return false;
+  return true;
+}
+
+/// True when build_model would build the same model from both inputs.
+bool same_input(const ModelInput& a, const ModelInput& b) {
+  if (a.nodes != b.nodes || a.tets != b.tets || a.elem_material != b.elem_material || a.fixed != b.fixed ||
+      a.fixed_axes != b.fixed_axes || a.dt != b.dt || a.dt_safety != b.dt_safety || a.damping != b.damping ||
+      a.ianp != b.ianp || a.mass_scaling != b.mass_scaling || a.tick != b.tick || a.fibre_dirs != b.fibre_dirs ||
+      a.materials.size() != b.materials.size())
+    return false;
+  for (std::size_t k = 0; k < a.materials.size(); ++k)
+    if (!same_material(a.materials[k], b.materials[k])) return false;
+  return true;
+}
+
+/// MemAvailable of /proc/meminfo (bytes), -1 where unknown.
+std::int64_t host_available_bytes() {
+  std::ifstream f("/proc/meminfo");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind("MemAvailable:", 0) == 0) {
+      std::istringstream in(line.substr(13));
+      long kb = 0;
+      if (in >> kb) return std::int64_t(kb) * 1024;
+    }
+  return -1;
+}
+
+/// Bytes of a model's arrays in double (the host's shared copy).
+std::int64_t model_bytes(const TissueModel<double>& m) {
+  const std::int64_t n = m.n_nodes, ne = m.n_elems, nt = m.n_tris;
+  return 8 * (7 * n + 15 * ne) + 4 * (13 * ne + n + 7 * nt + 2 * std::int64_t(m.n_surf)) + n;
+}
+
+/// Bytes of a host backend's own store of the model (core/model.hpp and
+/// core/state.hpp in the backend's scalar): per node 30 scalars (positions,
+/// masses, the central difference's constants, the displacements and their
+/// targets, forces, contact normals and grasp offsets, pressure and its
+/// divisor) and 6 flag bytes; per element 38 scalars (gradients, volume,
+/// moduli, the pass arrays, F and the corner forces) and 13 ids; per surface
+/// triangle 7 ids.
+std::int64_t host_store_bytes(const TissueModel<double>& m, Precision p) {
+  const std::int64_t s = p == Precision::Float ? 4 : 8;
+  const std::int64_t n = m.n_nodes, ne = m.n_elems, nt = m.n_tris;
+  return s * (30 * n + 38 * ne) + 4 * (13 * ne + n + 7 * nt + 2 * std::int64_t(m.n_surf)) + 6 * n;
+}
+
+std::string gib(std::int64_t bytes) {
+  return fmt::format("{:.2f} GiB", double(bytes) / (1024.0 * 1024.0 * 1024.0));
+}
+
+}  // namespace
+
+void check_batch_memory(std::size_t scenes, const BatchMemory& m, const std::string& device) {
+  const std::int64_t rest = std::int64_t(scenes) - 1;  // the first is built
+  if (m.host_available >= 0 && rest * m.per_scene_host > m.host_available * 9 / 10)
+    throw std::runtime_error(fmt::format(
+        "a batch of {} scenes needs about {} of host memory ({} a scene, measured on the first), more than 90 % of "
+        "the {} available: use fewer scenes",
+        scenes, gib(std::int64_t(scenes) * m.per_scene_host), gib(m.per_scene_host), gib(m.host_available)));
+  if (m.device_free >= 0 && rest * m.per_scene_device > m.device_free * 9 / 10)
+    throw std::runtime_error(fmt::format(
+        "a batch of {} scenes needs about {} of device memory ({} a scene, measured on the first), more than 90 % of "
+        "the {} free on {}: use fewer scenes",
+        scenes, gib(std::int64_t(scenes) * m.per_scene_device), gib(m.per_scene_device), gib(m.device_free), device));
+}
+
+struct SceneBatch::BuiltModel {
+  ModelInput input;
+  std::shared_ptr<const TissueModel<double>> model;
+};
+
+SceneBatch::SceneBatch(const std::vector<std::shared_ptr<const scene::Scene>>& scenes, const std::string& backend,
+                       Precision precision)
+    : backend_(backend), precision_(precision) {
+  if (scenes.empty()) throw std::invalid_argument("a batch needs at least one scene");
+  const std::size_t n = scenes.size();
+  sessions_.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    sessions_.push_back(make_session(scenes[i], i));
+    if (i > 0) continue;
+    // the first scene's memory, before the others are built
+    Backend& b = sessions_[0]->backend();
+    const TissueModel<double>& m = sessions_[0]->model();
+    memory_.shared_host = model_bytes(m);
+    memory_.per_scene_host = b.asynchronous_ticks() ? 0 : host_store_bytes(m, b.precision());
+    const DeviceMemory dm = b.device_memory();
+    memory_.per_scene_device = std::max<std::int64_t>(dm.held, 0);
+    memory_.device_free = dm.free;
+    memory_.host_available = host_available_bytes();
+    check_batch_memory(n, memory_, b.device_name());
+  }
+  set_threads();
+}
+
+std::shared_ptr<const TissueModel<double>> SceneBatch::model_for(const scene::Scene& scene) {
+  ModelInput input = scene::to_model_input(scene);
+  for (const auto& b : models_)
+    if (same_input(b->input, input)) return b->model;
+  auto built = std::make_shared<BuiltModel>();
+  built->input = std::move(input);
+  built->model = std::make_shared<const TissueModel<double>>(scene::load_model(scene));
+  models_.push_back(built);
+  return built->model;
+}
+
+std::unique_ptr<Session> SceneBatch::make_session(const std::shared_ptr<const scene::Scene>& given, std::size_t index) {
+  if (!given) throw std::invalid_argument(fmt::format("batch scene {}: no scene given", index));
+  try {
+    // the scene on the batch's backend and precision, one copy per scene given
+    std::shared_ptr<const scene::Scene> scene;
+    for (const auto& [in, run] : run_scenes_)
+      if (in == given) scene = run;
+    if (!scene) {
+      if (given->solver.backend == backend_ && given->solver.precision == precision_) {
+        scene = given;
+      } else {
+        auto copy = std::make_shared<scene::Scene>(*given);
+        copy->solver.backend = backend_;
+        copy->solver.precision = precision_;
+        scene = std::move(copy);
+      }
+      run_scenes_.emplace_back(given, scene);
+    }
+    std::shared_ptr<const TissueModel<double>> model = model_for(*scene);
+    return std::make_unique<Session>(std::move(scene), std::move(model), create_backend(backend_, precision_));
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(fmt::format("batch scene {}: {}", index, e.what()));
+  } catch (const std::exception& e) {
+    throw std::runtime_error(fmt::format("batch scene {}: {}", index, e.what()));
+  }
+}
+
+void SceneBatch::set_threads() {
+  if (sessions_.front()->backend().asynchronous_ticks()) return;
+  const std::size_t threads = std::size_t(std::max(1, tbb::this_task_arena::max_concurrency()));
+  // a batch of one keeps the backend's own team; more scenes share the threads
+  const int each = size() == 1 ? 0 : int(std::max<std::size_t>(1, threads / size()));
+  for (auto& s : sessions_) s->backend().set_worker_threads(each);
+}
+
+int SceneBatch::max_tools() const {
+  int most = 0;
+  for (const auto& s : sessions_) most = std::max(most, s->n_tools());
+  return most;
+}
+
+std::size_t SceneBatch::distinct_models() const {
+  std::vector<const TissueModel<double>*> seen;
+  for (const auto& s : sessions_)
+    if (std::find(seen.begin(), seen.end(), &s->model()) == seen.end()) seen.push_back(&s->model());
+  return seen.size();
+}
+
+namespace {
+
+/// Ticks scenes [first, last) of a device backend: every tick started (each on its scene's stream) before any
+/// is waited for. A failure other than the simulation's own is rethrown once every started tick has ended.
+void tick_started_together(std::vector<std::unique_ptr<Session>>& sessions, std::size_t first, std::size_t last) {
+  std::vector<char> started(last - first, 0);
+  std::exception_ptr error;
+  for (std::size_t i = first; i < last && !error; ++i) {
+    Session& s = *sessions[i];
+    if (s.failed()) continue;
+    try {
+      s.begin_tick();
+      started[i - first] = 1;
+    } catch (const SimulationError&) {
+    } catch (...) {
+      error = std::current_exception();
+    }
+  }
+  for (std::size_t i = first; i < last; ++i) {
+    if (!started[i - first]) continue;
+    try {
+      sessions[i]->end_tick();
+    } catch (const SimulationError&) {
+    } catch (...) {
+      if (!error) error = std::current_exception();
+    }
+  }
+  if (error) std::rethrow_exception(error);
+}
+
+}  // namespace
+
+std::size_t SceneBatch::tick() {
+  const std::size_t n = size();
+  if (sessions_.front()->backend().asynchronous_ticks()) {
+    // one host thread per kScenesPerLauncher scenes (at most one per core) starts and ends their ticks: the
+    // launches, not the device, bound a tick of many small scenes
+    const std::size_t threads = std::size_t(std::max(1, tbb::this_task_arena::max_concurrency()));
+    const std::size_t chunks = std::clamp<std::size_t>((n + kScenesPerLauncher - 1) / kScenesPerLauncher, 1, threads);
+    if (chunks == 1) {
+      tick_started_together(sessions_, 0, n);
+    } else {
+      tbb::parallel_for(std::size_t(0), chunks,
+                        [&](std::size_t c) { tick_started_together(sessions_, c * n / chunks, (c + 1) * n / chunks); });
+    }
+  } else {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1), [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t i = r.begin(); i != r.end(); ++i) {
+        Session& s = *sessions_[i];
+        if (s.failed()) continue;
+        try {
+          s.tick();
+        } catch (const SimulationError&) {
+        }
+      }
+    });
+  }
+  return n - failed().size();
+}
+
+std::vector<std::size_t> SceneBatch::failed() const {
+  std::vector<std::size_t> out;
+  for (std::size_t i = 0; i < size(); ++i)
+    if (sessions_[i]->failed()) out.push_back(i);
+  return out;
+}
+
+void SceneBatch::restart(std::size_t i) {
+  sessions_.at(i)->restart();
+}
+
+void SceneBatch::replace(std::size_t i, std::shared_ptr<const scene::Scene> scene) {
+  if (i >= size()) throw std::out_of_range(fmt::format("batch scene {} does not exist (0..{})", i, size() - 1));
+  sessions_[i] = make_session(scene, i);
+  // forget what no scene uses any more
+  models_.erase(std::remove_if(models_.begin(), models_.end(), [](const auto& b) { return b->model.use_count() == 1; }),
+                models_.end());
+  auto unused = [&](const auto& p) {
+    return std::none_of(sessions_.begin(), sessions_.end(),
+                        [&](const auto& s) { return &s->scene() == p.second.get(); });
+  };
+  run_scenes_.erase(std::remove_if(run_scenes_.begin(), run_scenes_.end(), unused), run_scenes_.end());
+  set_threads();
+}
+
+}  // namespace tissue

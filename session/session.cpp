@@ -1,0 +1,102 @@
+#include "session/session.hpp"
+
+#include <fmt/format.h>
+
+#include <stdexcept>
+
+#include "backends/registry.hpp"
+#include "scene/validate.hpp"
+
+namespace tissue {
+
+ToolInput HostDevice::read(double t) {
+  if (!host_) {
+    ToolInput in = script_.read(t);
+    in.grasp = in.grasp || grasp_;
+    return in;
+  }
+  return {tip_, axis_, grasp_};
+}
+
+Session::Session(scene::Scene scene)
+    : Session(std::make_shared<const scene::Scene>(scene),
+              std::make_shared<const TissueModel<double>>(scene::load_model(scene)),
+              create_backend(scene.solver.backend, scene.solver.precision)) {}
+
+Session::Session(std::shared_ptr<const scene::Scene> scene, std::shared_ptr<const TissueModel<double>> model,
+                 std::unique_ptr<Backend> backend)
+    : scene_(std::move(scene)), model_(std::move(model)), backend_(std::move(backend)) {
+  if (scene_->tools.empty()) throw std::runtime_error(scene_->source + ": the scene has no tool to drive");
+  settings_ = scene::scheduler_settings(*scene_);
+  for (const scene::Tool& t : scene_->tools) devices_.emplace_back(t.path);
+  for (HostDevice& d : devices_) device_ptrs_.push_back(&d);
+  restart();
+}
+
+void Session::restart() {
+  scheduler_.reset();
+  backend_->upload(*model_);
+  scheduler_ = std::make_unique<Scheduler>(*backend_, *model_, settings_);
+  if (loads_)
+    scheduler_->set_loads(loads_->first, loads_->second);
+  else
+    scene::apply_loads(*scene_, *model_, *scheduler_);
+  last_ = TickReport{};
+  last_.n_tools = n_tools();
+  fields_.reset();
+  failure_.clear();
+}
+
+void Session::check_tool(int tool) const {
+  if (tool < 0 || tool >= n_tools())
+    throw std::invalid_argument(fmt::format("{}: tool {} does not exist (the scene has {} tool{}: 0..{})", name(), tool,
+                                            n_tools(), n_tools() == 1 ? "" : "s", n_tools() - 1));
+}
+
+void Session::check_running() const {
+  if (failed())
+    throw SimulationError(fmt::format("{}: the simulation stopped at tick {} ({}); call reset() to start again", name(),
+                                      scheduler_->ticks(), failure_));
+}
+
+TickReport Session::tick() {
+  begin_tick();
+  return end_tick();
+}
+
+void Session::begin_tick() {
+  check_running();
+  fields_.reset();
+  try {
+    scheduler_->begin_tick(device_ptrs_);
+  } catch (const SimulationError& e) {
+    failure_ = e.what();
+    throw;
+  }
+}
+
+TickReport Session::end_tick() {
+  try {
+    last_ = scheduler_->end_tick();
+  } catch (const SimulationError& e) {
+    failure_ = e.what();
+    throw;
+  }
+  return last_;
+}
+
+void Session::set_loads(std::vector<index_t> nodes, std::vector<double> forces) {
+  try {
+    scheduler_->set_loads(nodes, forces);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(fmt::format("{}: {}", name(), e.what()));
+  }
+  loads_.emplace(std::move(nodes), std::move(forces));
+}
+
+const Fields& Session::fields() {
+  if (!fields_) fields_ = backend_->download();
+  return *fields_;
+}
+
+}  // namespace tissue

@@ -1,0 +1,119 @@
+// One scene assembled for running: scene -> model -> backend -> Scheduler,
+// with one host-driven device per tool. The embedding facade's Simulation
+// and every scene of a Batch are Sessions (docs/batch.md).
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "core/backend.hpp"
+#include "core/device.hpp"
+#include "core/model.hpp"
+#include "core/scheduler.hpp"
+#include "scene/scene.hpp"
+
+namespace tissue {
+
+/// A tool's device: the scene's scripted path until the host sets a pose,
+/// the host's pose from then on. The grasp button is the path's or the
+/// host's (either held).
+class HostDevice final : public Device {
+ public:
+  explicit HostDevice(std::vector<Waypoint> path) : script_(std::move(path)) {}
+
+  ToolInput read(double t) override;
+  void send_force(const Vec3<double>&) override {}  // the Scheduler's report carries it
+
+  void set_pose(Vec3<double> tip, Vec3<double> axis) {
+    tip_ = tip;
+    axis_ = axis;
+    host_ = true;
+  }
+  void set_grasp(bool down) { grasp_ = down; }
+  /// Back to the path (the scene's, or set_path's).
+  void follow_path() { host_ = false; }
+  /// A new scripted path (ScriptedDevice's rules), followed from now on.
+  void set_path(std::vector<Waypoint> path) {
+    script_ = ScriptedDevice(std::move(path));
+    host_ = false;
+  }
+
+ private:
+  ScriptedDevice script_;
+  bool host_ = false;
+  bool grasp_ = false;
+  Vec3<double> tip_ = {}, axis_ = {};
+};
+
+class Session {
+ public:
+  /// Validates the scene and builds its model (scene::load_model).
+  explicit Session(scene::Scene scene);
+  /// A scene whose model is already built (several sessions of one mesh and
+  /// material share the scene and the model) on a backend already created.
+  /// Throws std::runtime_error for a scene without a tool, and what the
+  /// Scheduler throws for bad settings. Uploads the model and starts at rest.
+  Session(std::shared_ptr<const scene::Scene> scene, std::shared_ptr<const TissueModel<double>> model,
+          std::unique_ptr<Backend> backend);
+  Session(Session&&) = delete;
+
+  /// Back to rest: u = 0, tick 0, every grasp released, no failure; keeps
+  /// the host's tool modes and loads (set_loads, else the scene's).
+  void restart();
+
+  /// One haptic tick (begin_tick + end_tick). A SimulationError is kept as
+  /// failure() and rethrown; ticks are refused until restart().
+  TickReport tick();
+  /// The two halves of tick() (Scheduler::begin_tick): a batch begins every
+  /// scene's tick before it ends any.
+  void begin_tick();
+  TickReport end_tick();
+
+  /// Constant loads from the next tick on, kept across restart() (they
+  /// replace the scene's). Throws std::invalid_argument naming the scene.
+  void set_loads(std::vector<index_t> nodes, std::vector<double> forces);
+
+  const scene::Scene& scene() const { return *scene_; }
+  const std::string& name() const { return scene_->source; }
+  const TissueModel<double>& model() const { return *model_; }
+  const std::shared_ptr<const TissueModel<double>>& shared_model() const { return model_; }
+  Backend& backend() { return *backend_; }
+  const Backend& backend() const { return *backend_; }
+  Scheduler& scheduler() { return *scheduler_; }
+  const Scheduler& scheduler() const { return *scheduler_; }
+  const SchedulerSettings& settings() const { return settings_; }
+  int n_tools() const { return static_cast<int>(devices_.size()); }
+  HostDevice& device(int tool) { return devices_.at(std::size_t(tool)); }
+  /// Throws std::invalid_argument naming the scene when tool is not one of its tools.
+  void check_tool(int tool) const;
+
+  /// The last tick's report (a zero report before the first).
+  const TickReport& last() const { return last_; }
+  /// Why the last tick failed ("" while running).
+  const std::string& failure() const { return failure_; }
+  bool failed() const { return !failure_.empty(); }
+
+  /// The store's fields after the last tick (downloaded on the first call after it).
+  const Fields& fields();
+
+ private:
+  void check_running() const;
+
+  std::shared_ptr<const scene::Scene> scene_;
+  std::shared_ptr<const TissueModel<double>> model_;
+  std::unique_ptr<Backend> backend_;
+  SchedulerSettings settings_;
+  std::unique_ptr<Scheduler> scheduler_;
+  std::vector<HostDevice> devices_;
+  std::vector<Device*> device_ptrs_;
+  std::optional<std::pair<std::vector<index_t>, std::vector<double>>> loads_;  ///< set_loads' (else the scene's)
+  TickReport last_;
+  std::optional<Fields> fields_;
+  std::string failure_;
+};
+
+}  // namespace tissue

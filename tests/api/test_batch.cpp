@@ -1,0 +1,306 @@
+// The batch facade (tissue/batch.hpp) on every backend and precision this
+// machine runs: a scene in a batch gives what the same scene gives alone in
+// a Simulation (bit for bit on the cpu and in double on cuda, within a
+// stated tolerance in float on cuda), with mixed meshes, mixed materials,
+// tools in and out of contact, and one scene made to fail; the arrays'
+// layouts, material changes and every misuse.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "core/box_mesh.hpp"
+#include "session/scene_batch.hpp"
+#include "tissue/batch.hpp"
+#include "tissue/simulation.hpp"
+
+namespace {
+
+using tissue::Batch;
+using tissue::BatchScene;
+using tissue::Field;
+using tissue::Simulation;
+
+/// A 20 x 20 x 10 mm block of 6 x 6 x 3 cells, its base fixed; `tools` tools.
+tissue::MeshScene block(double E, int tools = 1) {
+  tissue::ModelInput in;
+  tissue::box_mesh(in, 6, 6, 3, 0.02, 0.02, 0.01);
+  tissue::MeshScene m;
+  m.name = "block";
+  m.nodes = in.nodes;
+  m.tets.assign(in.tets.begin(), in.tets.end());
+  m.youngs_modulus = E;
+  m.poisson_ratio = 0.4;
+  for (int j = 0; j <= 6; ++j)
+    for (int i = 0; i <= 6; ++i) m.fixed_nodes.push_back(tissue::box_node(6, 6, i, j, 0));
+  m.tool_radii.assign(std::size_t(tools), 4e-3);
+  return m;
+}
+
+/// A block finer than block(): another mesh.
+tissue::MeshScene fine_block(double E) {
+  tissue::ModelInput in;
+  tissue::box_mesh(in, 8, 8, 4, 0.02, 0.02, 0.01);
+  tissue::MeshScene m = block(E);
+  m.nodes = in.nodes;
+  m.tets.assign(in.tets.begin(), in.tets.end());
+  m.fixed_nodes.clear();
+  for (int j = 0; j <= 8; ++j)
+    for (int i = 0; i <= 8; ++i) m.fixed_nodes.push_back(tissue::box_node(8, 8, i, j, 0));
+  return m;
+}
+
+BatchScene mesh(const tissue::MeshScene& m) {
+  return {"", {}, m};
+}
+
+/// The tip over the block's top centre, `depth` below its surface after `ticks` of a press starting at tick 0.
+tissue::Vector3 press_pose(long tick, double depth, double x = 0.01) {
+  const double s = std::min(1.0, double(tick) / 40.0);
+  return {x, 0.01, 0.01 + 4e-3 - s * depth};
+}
+
+struct Config {
+  std::string backend, precision;
+};
+
+std::string config_name(const testing::TestParamInfo<Config>& p) {
+  return p.param.backend + "_" + p.param.precision;
+}
+
+std::vector<Config> configs() {
+  std::vector<Config> out;
+  for (const std::string& b : tissue::available_backends())
+    for (const char* p : {"float", "double"}) out.push_back({b, p});
+  return out;
+}
+
+class BatchEquals : public testing::TestWithParam<Config> {
+ protected:
+  tissue::SimulationOptions options() const { return {GetParam().backend, GetParam().precision, "all"}; }
+  /// Bit for bit, except cuda in float: within 1e-6 of the largest magnitude (the stated tolerance,
+  /// docs/batch.md).
+  bool exact() const { return !(GetParam().backend == "cuda" && GetParam().precision == "float"); }
+
+  void expect_same(const std::vector<double>& a, const std::vector<double>& b, const std::string& what) const {
+    ASSERT_EQ(a.size(), b.size()) << what;
+    double scale = 0;
+    for (double v : b) scale = std::max(scale, std::abs(v));
+    std::size_t differ = 0;
+    double worst = 0;
+    for (std::size_t k = 0; k < a.size(); ++k) {
+      if (a[k] != b[k]) ++differ;
+      worst = std::max(worst, std::abs(a[k] - b[k]));
+    }
+    if (exact())
+      EXPECT_EQ(differ, 0u) << what << ": " << differ << " of " << a.size() << " values differ, worst by " << worst;
+    else
+      EXPECT_LE(worst, 1e-6 * scale) << what << ": worst difference " << worst << " against " << scale;
+  }
+
+  void expect_same_scene(Batch& batch, int i, Simulation& alone, const std::string& what) {
+    ASSERT_EQ(batch.ticks(i), alone.ticks()) << what;
+    for (int t = 0; t < alone.n_tools(); ++t) {
+      const tissue::Vector3 fb = batch.last(i).tools[std::size_t(t)].force, fa = alone.force(t);
+      expect_same({fb.begin(), fb.end()}, {fa.begin(), fa.end()}, what + " force of tool " + std::to_string(t));
+      EXPECT_EQ(batch.last(i).tools[std::size_t(t)].contact_nodes, alone.last().tools[std::size_t(t)].contact_nodes)
+          << what;
+    }
+    std::vector<double> u(batch.n_nodes(i) * 3);
+    batch.read_field(i, Field::Displacement, u);
+    expect_same(u, alone.field(Field::Displacement), what + " displacement");
+  }
+};
+
+// Four scenes: the kidney on its scripted press, a block pressed by the host, a stiffer block on another mesh
+// pressed elsewhere, and a block whose tool stays in the air (out of contact). Each equals its scene alone.
+TEST_P(BatchEquals, MixedMeshesMaterialsAndToolsEqualEachSceneAlone) {
+  std::vector<BatchScene> list = {{"@kidney", {}, {}}, mesh(block(3000)), mesh(fine_block(9000)), mesh(block(3000))};
+  Batch batch = Batch::load(list, options());
+  ASSERT_EQ(batch.size(), 4u);
+  EXPECT_EQ(batch.backend(), GetParam().backend);
+  EXPECT_EQ(batch.precision(), GetParam().precision);
+  EXPECT_EQ(batch.distinct_models(), 3u);  // the two blocks of one mesh and material share their model
+  EXPECT_GT(batch.scene_host_bytes(), 0);
+
+  std::vector<Simulation> alone;
+  alone.push_back(Simulation::load("@kidney", options()));
+  alone.push_back(Simulation::from_mesh(block(3000), options()));
+  alone.push_back(Simulation::from_mesh(fine_block(9000), options()));
+  alone.push_back(Simulation::from_mesh(block(3000), options()));
+
+  const int ticks = 160;  // the kidney's scripted probe reaches the surface after 100
+  for (long k = 1; k <= ticks; ++k) {
+    batch.set_tool_pose(1, 0, press_pose(k, 2e-3));
+    alone[1].set_tool_pose(0, press_pose(k, 2e-3));
+    batch.set_tool_pose(2, 0, press_pose(k, 1.5e-3, 0.012));
+    alone[2].set_tool_pose(0, press_pose(k, 1.5e-3, 0.012));
+    batch.set_tool_pose(3, 0, {0.01, 0.01, 0.03});
+    alone[3].set_tool_pose(0, {0.01, 0.01, 0.03});
+    EXPECT_EQ(batch.step(), 4u);
+    for (Simulation& s : alone) s.step();
+  }
+  EXPECT_GT(batch.last(0).tools[0].contact_nodes, 0) << "the kidney's probe touches";
+  EXPECT_GT(batch.last(1).tools[0].contact_nodes, 0);
+  EXPECT_GT(batch.last(2).tools[0].contact_nodes, 0);
+  EXPECT_EQ(batch.last(3).tools[0].contact_nodes, 0) << "the fourth tool stays in the air";
+  EXPECT_GT(std::abs(batch.last(2).tools[0].force[2]), std::abs(batch.last(1).tools[0].force[2]))
+      << "the stiffer block presses back harder";
+  for (int i = 0; i < 4; ++i) expect_same_scene(batch, i, alone[std::size_t(i)], "scene " + std::to_string(i));
+}
+
+// A scene driven to blow up by a huge point load stops alone, named; the others go on equal to their scenes
+// alone; reset brings it back, equal to a fresh scene.
+TEST_P(BatchEquals, AFailingSceneStopsAloneAndResetsAlone) {
+  Batch batch = Batch::load({mesh(block(3000)), mesh(block(3000)), mesh(block(5000))}, options());
+  Simulation a = Simulation::from_mesh(block(3000), options());
+  Simulation c = Simulation::from_mesh(block(5000), options());
+  const int top = tissue::box_node(6, 6, 3, 3, 3);
+  const std::vector<std::int32_t> node = {top};
+  const std::vector<double> huge = {0, 0, -1e9};
+  batch.set_loads(1, node, huge);
+  for (long k = 1; k <= 30; ++k) {
+    batch.set_tool_pose(0, 0, press_pose(k, 2e-3));
+    a.set_tool_pose(0, press_pose(k, 2e-3));
+    batch.set_tool_pose(2, 0, press_pose(k, 1e-3));
+    c.set_tool_pose(0, press_pose(k, 1e-3));
+    batch.step();
+    a.step();
+    c.step();
+  }
+  ASSERT_EQ(batch.failed_scenes(), std::vector<int>{1});
+  EXPECT_TRUE(batch.failed(1));
+  EXPECT_FALSE(batch.failed(0));
+  const std::string why = batch.failure(1);
+  EXPECT_TRUE(why.find("element") != std::string::npos || why.find("non-finite") != std::string::npos) << why;
+  EXPECT_LT(batch.ticks(1), 30) << "the failed scene stopped";
+  expect_same_scene(batch, 0, a, "scene 0 beside a failure");
+  expect_same_scene(batch, 2, c, "scene 2 beside a failure");
+
+  // scene 1 again from rest, without the load: it equals a fresh block
+  batch.set_loads(1, {}, {});
+  batch.reset(1);
+  EXPECT_FALSE(batch.failed(1));
+  EXPECT_EQ(batch.ticks(1), 0);
+  Simulation fresh = Simulation::from_mesh(block(3000), options());
+  for (long k = 1; k <= 20; ++k) {
+    batch.set_tool_pose(1, 0, press_pose(k, 2e-3));
+    fresh.set_tool_pose(0, press_pose(k, 2e-3));
+    EXPECT_EQ(batch.step(), 3u);
+    fresh.step();
+  }
+  expect_same_scene(batch, 1, fresh, "scene 1 after its reset");
+}
+
+// A material change, given at load or later, equals the scene built with that material.
+TEST_P(BatchEquals, MaterialChangesEqualTheSceneWithThatMaterial) {
+  BatchScene changed = mesh(block(3000));
+  changed.materials.push_back({"", 6000.0, std::nullopt, std::nullopt});
+  Batch batch = Batch::load({changed, mesh(block(3000))}, options());
+  batch.set_material(1, {"tissue", 4500.0, 0.45, std::nullopt});
+  Simulation six = Simulation::from_mesh(block(6000), options());
+  tissue::MeshScene m = block(4500);
+  m.poisson_ratio = 0.45;
+  Simulation other = Simulation::from_mesh(m, options());
+  for (long k = 1; k <= 40; ++k) {
+    for (int i = 0; i < 2; ++i) batch.set_tool_pose(i, 0, press_pose(k, 1.5e-3));
+    six.set_tool_pose(0, press_pose(k, 1.5e-3));
+    other.set_tool_pose(0, press_pose(k, 1.5e-3));
+    batch.step();
+    six.step();
+    other.step();
+  }
+  expect_same_scene(batch, 0, six, "E changed at load");
+  expect_same_scene(batch, 1, other, "E and nu changed later");
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, BatchEquals, testing::ValuesIn(configs()), config_name);
+
+template <class F>
+std::string thrown(F&& f) {
+  try {
+    f();
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "(nothing thrown)";
+}
+
+// Forces are scenes x the most tools x 3, zero past a scene's own tools; fields are scenes x nodes x 3.
+TEST(Batch, ArraysHaveTheBatchLayout) {
+  Batch batch = Batch::load({mesh(block(3000, 2)), mesh(block(3000, 1))}, {"cpu", "double", "all"});
+  ASSERT_EQ(batch.max_tools(), 2);
+  // every tool pressed at once from one array; scene 1's second row is ignored
+  std::vector<double> tips(2 * 2 * 3);
+  for (long k = 1; k <= 30; ++k) {
+    const tissue::Vector3 a = press_pose(k, 1e-3, 0.006), b = press_pose(k, 1e-3, 0.014);
+    std::copy(a.begin(), a.end(), tips.begin());
+    std::copy(b.begin(), b.end(), tips.begin() + 3);
+    std::copy(a.begin(), a.end(), tips.begin() + 6);
+    std::copy(b.begin(), b.end(), tips.begin() + 9);
+    batch.set_tool_poses(tips);
+    batch.step();
+  }
+  const std::vector<double> f = batch.forces();
+  ASSERT_EQ(f.size(), 12u);
+  EXPECT_GT(f[2], 0) << "scene 0 tool 0 is pushed up";
+  EXPECT_GT(f[5], 0) << "scene 0 tool 1 is pushed up";
+  EXPECT_GT(f[8], 0) << "scene 1 tool 0 is pushed up";
+  EXPECT_EQ(f[9], 0);
+  EXPECT_EQ(f[10], 0);
+  EXPECT_EQ(f[11], 0) << "scene 1 has no tool 1";
+  EXPECT_EQ(f[8], batch.last(1).tools[0].force[2]);
+  const std::vector<double> u = batch.fields(Field::Displacement);
+  ASSERT_EQ(u.size(), 2 * batch.n_nodes(0) * 3);
+  std::vector<double> u1(batch.n_nodes(1) * 3);
+  batch.read_field(1, Field::Displacement, u1);
+  EXPECT_TRUE(std::equal(u1.begin(), u1.end(), u.begin() + std::ptrdiff_t(u1.size())));
+  const std::vector<double> J = batch.fields(Field::Jacobian);
+  EXPECT_EQ(J.size(), 2 * batch.n_elements(0));
+}
+
+TEST(Batch, MisuseIsAClearError) {
+  Batch batch = Batch::load({mesh(block(3000)), mesh(fine_block(3000))}, {"cpu", "float", "all"});
+  EXPECT_NE(thrown([&] { batch.set_tool_pose(2, 0, {0, 0, 0}); }).find("scene 2 does not exist"), std::string::npos);
+  EXPECT_NE(thrown([&] { batch.set_tool_pose(0, 1, {0, 0, 0}); }).find("tool 1 does not exist"), std::string::npos);
+  EXPECT_NE(thrown([&] { batch.set_tool_pose(0, 0, {0, NAN, 0}); }).find("not finite"), std::string::npos);
+  EXPECT_NE(thrown([&] { batch.set_tool_poses(std::vector<double>(5)); }).find("needs 6"), std::string::npos);
+  std::vector<double> tips(6, 0.0);
+  tips[4] = INFINITY;
+  EXPECT_NE(thrown([&] { batch.set_tool_poses(tips); }).find("scene 1 tool 0"), std::string::npos);
+  EXPECT_NE(thrown([&] { batch.fields(Field::Displacement); }).find("scenes 0"), std::string::npos)
+      << "scenes of different meshes have no (N, nodes, 3) field";
+  EXPECT_NE(thrown([&] { batch.step(0); }).find("must be >= 1"), std::string::npos);
+  const std::string bad_E = thrown([&] { batch.set_material(0, {"tissue", -5.0, std::nullopt, std::nullopt}); });
+  EXPECT_NE(bad_E.find("batch scene 0"), std::string::npos) << bad_E;
+  EXPECT_NE(bad_E.find("tissue"), std::string::npos) << bad_E;
+  const std::string unknown = thrown([&] { batch.set_material(1, {"liver", 5000.0, std::nullopt, std::nullopt}); });
+  EXPECT_NE(unknown.find("no material 'liver'"), std::string::npos) << unknown;
+  EXPECT_NE(thrown([] { Batch::load("@kidney", 0); }).find("copies = 0"), std::string::npos);
+  EXPECT_NE(thrown([] { Batch::load(std::vector<BatchScene>{}); }).find("no scenes"), std::string::npos);
+  EXPECT_NE(thrown([] { Batch::load({{"/nonexistent/scene.xml", {}, {}}}); }).find("scene.xml"), std::string::npos);
+  // a refused material change leaves the scene as it was
+  EXPECT_FALSE(batch.failed(0));
+  EXPECT_EQ(batch.step(), 2u);
+}
+
+// The memory rule: the first scene's measured size times the count against what the machine has.
+TEST(Batch, RefusesABatchBeyondMemoryNamingTheSizes) {
+  tissue::BatchMemory m;
+  m.per_scene_host = 2ll << 20;
+  m.host_available = 1ll << 30;
+  EXPECT_NO_THROW(tissue::check_batch_memory(400, m, "cpu"));
+  const std::string host = thrown([&] { tissue::check_batch_memory(1000, m, "cpu"); });
+  EXPECT_NE(host.find("1000 scenes"), std::string::npos) << host;
+  EXPECT_NE(host.find("host memory"), std::string::npos) << host;
+  m.per_scene_device = 64ll << 20;
+  m.device_free = 1ll << 30;
+  const std::string device = thrown([&] { tissue::check_batch_memory(100, m, "NVIDIA H200"); });
+  EXPECT_NE(device.find("device memory"), std::string::npos) << device;
+  EXPECT_NE(device.find("NVIDIA H200"), std::string::npos) << device;
+}
+
+}  // namespace

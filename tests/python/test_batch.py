@@ -1,0 +1,125 @@
+"""tissue.Batch (docs/batch.md): many scenes stepped together from NumPy.
+
+Checks that can fail: forces come back as (N, tools, 3) and fields as
+(N, nodes, 3) arrays equal, bit for bit on the cpu, to the same scenes run
+alone in Simulations; tool poses for the whole batch come from one array;
+material changes act on one scene; a scene that fails stops alone; two
+Python threads sharing one batch take turns; misuse raises ValueError
+naming the value.
+"""
+import threading
+
+import numpy as np
+import pytest
+
+import tissue
+
+
+def kidney_press(batch, sims, ticks):
+    """Every scene's probe on the kidney's own scripted press."""
+    for _ in range(ticks):
+        batch.step()
+        for s in sims:
+            s.step()
+
+
+def test_kidneys_in_a_batch_equal_kidneys_alone():
+    batch = tissue.Batch("@kidney", 3, backend="cpu", precision="float", depth="all")
+    assert len(batch) == 3 and batch.max_tools == 1 and batch.distinct_models == 1
+    # scene 2 is stiffer: its own model
+    batch.set_material(2, E=6000.0)
+    assert batch.distinct_models == 2
+    alone = [tissue.Simulation.load("@kidney", backend="cpu", precision="float", depth="all") for _ in range(2)]
+    kidney_press(batch, alone, 130)  # the scripted probe reaches the surface after 100 ticks
+    f = batch.forces()
+    assert f.shape == (3, 1, 3) and f.dtype == np.float64
+    assert np.array_equal(f[0, 0], alone[0].force(0))
+    assert np.array_equal(f[1, 0], alone[1].force(0))
+    assert np.linalg.norm(f[0, 0]) > 0, "the probe presses"
+    assert np.linalg.norm(f[2, 0]) > 1.5 * np.linalg.norm(f[0, 0]), "twice as stiff presses back harder"
+    u = batch.displacement()
+    assert u.shape == (3, alone[0].n_nodes, 3)
+    assert np.array_equal(u[0], alone[0].displacement())
+    assert np.array_equal(batch.displacement(1), alone[1].displacement())
+    assert batch.positions().shape == u.shape
+    assert batch.jacobian().shape == (3, alone[0].n_elements)
+
+
+def block_scene(tmp_path, name="block.xml", E=3000.0):
+    """A 20 x 20 x 10 mm block of 6 x 6 x 3 cells written as a scene file, its base fixed, one tool."""
+    nodes, tets = tissue.box_mesh(6, 6, 3, (0.02, 0.02, 0.01))
+    lines = ['<tissue-scene version="1">', '  <mesh>', '    <nodes>']
+    lines += ["      {:.9g} {:.9g} {:.9g}".format(*p) for p in nodes]
+    lines += ['    </nodes>', '    <elements>']
+    lines += ["      {} {} {} {}".format(*t) for t in tets]
+    lines += ['    </elements>', '  </mesh>',
+              f'  <material name="tissue" E="{E}" nu="0.4" rho="1000"/>',
+              '  <element-set material="tissue" elements="all"/>',
+              '  <fixed box-min="-1 -1 -1" box-max="1 1 0.0001"/>',
+              '  <tool name="probe" radius="0.004" device="scripted">',
+              '    <waypoint t="0" x="0.01" y="0.01" z="0.03"/>',
+              '  </tool>',
+              '</tissue-scene>']
+    path = tmp_path / name
+    path.write_text("\n".join(lines))
+    return str(path)
+
+
+def test_tool_poses_from_one_array_and_a_failing_scene_stops_alone(tmp_path):
+    scene = block_scene(tmp_path)
+    batch = tissue.Batch(scene, 4, backend="cpu", precision="double", depth="all")
+    top = tissue.box_node(6, 6, 3, 3, 3)
+    batch.set_loads(3, [top], [[0.0, 0.0, -1e9]])  # scene 3 blows up
+    tips = np.zeros((4, 1, 3))
+    for k in range(1, 41):
+        s = min(1.0, k / 30)
+        for i in range(4):
+            tips[i, 0] = [0.01, 0.01, 0.014 - s * 0.0005 * (i + 1)]
+        batch.set_tool_poses(tips)
+        batch.step()
+    assert batch.failed_scenes == [3]
+    assert batch.failed(3) and not batch.failed(0)
+    assert "element" in batch.failure(3) or "non-finite" in batch.failure(3)
+    fz = batch.forces()[:3, 0, 2]
+    assert (fz > 0).all() and fz[0] < fz[1] < fz[2], "deeper presses push back harder"
+    batch.set_loads(3, np.zeros(0, dtype=np.int32), np.zeros((0, 3)))
+    batch.reset(3)
+    assert not batch.failed(3) and batch.ticks(3) == 0
+    assert batch.step() == 4
+
+
+def test_two_threads_share_one_batch(tmp_path):
+    batch = tissue.Batch(block_scene(tmp_path), 2, backend="cpu", precision="double", depth="all")
+    ref = tissue.Batch(block_scene(tmp_path, "b.xml"), 2, backend="cpu", precision="double", depth="all")
+    for b in (batch, ref):
+        b.set_tool_poses(np.array([[[0.01, 0.01, 0.0135]], [[0.01, 0.01, 0.0132]]]))
+
+    def run():
+        for _ in range(20):
+            batch.step()
+
+    threads = [threading.Thread(target=run) for _ in range(2)]
+    reads = []
+    for t in threads:
+        t.start()
+    while any(t.is_alive() for t in threads):
+        reads.append(batch.displacement().sum())
+    for t in threads:
+        t.join()
+    ref.step(40)
+    assert batch.ticks(0) == 40
+    assert np.array_equal(batch.displacement(), ref.displacement()), "reads beside steps change nothing"
+
+
+def test_misuse_raises_naming_the_value(tmp_path):
+    batch = tissue.Batch(block_scene(tmp_path), 2, backend="cpu", depth="all")
+    with pytest.raises(ValueError, match=r"shape \(2, 1, 3\)"):
+        batch.set_tool_poses(np.zeros((3, 1, 3)))
+    with pytest.raises(ValueError, match="scene 5 does not exist"):
+        batch.set_tool_pose(5, 0, [0, 0, 0])
+    with pytest.raises(ValueError, match="no material 'liver'"):
+        batch.set_material(0, "liver", E=5000.0)
+    with pytest.raises(ValueError, match="copies"):
+        tissue.Batch(block_scene(tmp_path), 0)
+    with pytest.raises(ValueError, match="must be >= 1"):
+        batch.step(0)
