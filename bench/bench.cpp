@@ -357,7 +357,10 @@ struct BatchRun {
 /// N kidneys stepped together (SceneBatch) on c's backend; ticks timed one batch tick at a time.
 BatchRun run_batch(Context& c, Precision p, std::size_t n, double min_seconds, int worker_threads = -1) {
   BatchRun out;
-  const auto scene = std::make_shared<const scene::Scene>(kidney_with_law(c.o.laws.front()));
+  // the whole mesh: every scene's region is the kidney from the first tick (no region grows while timed)
+  scene::Scene kidney = kidney_with_law(c.o.laws.front());
+  kidney.solver.depth = kDepthAll;
+  const auto scene = std::make_shared<const scene::Scene>(std::move(kidney));
   std::unique_ptr<SceneBatch> batch;
   try {
     batch = std::make_unique<SceneBatch>(std::vector<std::shared_ptr<const scene::Scene>>(n, scene), c.o.backend, p);

@@ -48,7 +48,7 @@ void check_batch_memory(std::size_t scenes, const BatchMemory& m, const std::str
 class SceneBatch {
  public:
   /// On a device backend, scenes whose ticks one host thread starts and ends.
-  static constexpr std::size_t kScenesPerLauncher = 32;
+  static constexpr std::size_t kScenesPerLauncher = 4;
 
   /// Builds and uploads one session per scene, all on `backend` at
   /// `precision` (the scenes' own solver backend and precision are
