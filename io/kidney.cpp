@@ -283,4 +283,8 @@ std::optional<scene::Scene> builtin_scene(const std::string& name) {
   return std::nullopt;
 }
 
+bool is_builtin_scene(const std::string& name) {
+  return name == "@kidney" || name == "@kidney-visco";
+}
+
 }  // namespace tissue::io

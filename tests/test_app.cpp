@@ -3,8 +3,8 @@
 // refusal of `tissue run`, and -- through the built program -- interrupted
 // runs (SIGINT / SIGTERM: exit 130 / 143, the summary, a complete ticks.csv
 // and frame series, no .part file), output folders (another run's
-// outputs refused unless --overwrite, a folder in use refused) and the
-// version line.
+// outputs refused unless --overwrite, a folder in use refused), the version
+// line and `tissue mesh` of a built-in scene.
 #include <fcntl.h>
 #include <fmt/format.h>
 #include <gtest/gtest.h>
@@ -383,6 +383,41 @@ TEST(Program, VersionNamesTheProjectVersionAndCommit) {
   ASSERT_EQ(run_tissue(t, "info", {"info"}), 0) << slurp(t.file("info.err"));
   const std::string info = slurp(t.file("info.out"));
   EXPECT_EQ(info.substr(0, info.find('\n') + 1), out) << info;
+}
+
+// `tissue mesh @kidney` writes the built-in scene with the material options
+// given and refuses, by name, the options that steer meshing a surface
+// (they would be ignored); a bad material number is refused as a surface's is.
+TEST(Program, MeshOfABuiltInSceneTakesMaterialOptionsAndRefusesMeshingOnes) {
+  TempDir t;
+  const std::string out = t.file("k.xml");
+  EXPECT_EQ(run_tissue(t, "one", {"mesh", "@kidney", "-o", out, "--quality", "1.2"}), 1);
+  EXPECT_NE(
+      slurp(t.file("one.err")).find("@kidney: --quality applies to meshing a surface file, not to a built-in scene"),
+      std::string::npos)
+      << slurp(t.file("one.err"));
+  EXPECT_EQ(run_tissue(t, "two", {"mesh", "@kidney-visco", "-o", out, "--unit", "mm", "--target-tets", "900"}), 1);
+  EXPECT_NE(slurp(t.file("two.err"))
+                .find("@kidney-visco: --unit, --target-tets apply to meshing a surface file, not to a built-in scene"),
+            std::string::npos)
+      << slurp(t.file("two.err"));
+  EXPECT_EQ(run_tissue(t, "bad", {"mesh", "@kidney", "-o", out, "--E", "-5"}), 1);
+  EXPECT_NE(slurp(t.file("bad.err")).find("@kidney: material 'kidney': Young's modulus E = -5 Pa must be > 0"),
+            std::string::npos)
+      << slurp(t.file("bad.err"));
+  EXPECT_FALSE(fs::exists(out));
+
+  ASSERT_EQ(run_tissue(t, "good", {"mesh", "@kidney-visco", "-o", out, "--E", "5000", "--rho", "1100"}), 0)
+      << slurp(t.file("good.err"));
+  const scene::Scene s = io::read_scene(out);
+  ASSERT_EQ(s.materials.size(), 1u);
+  const scene::Material& m = s.materials[0];
+  EXPECT_EQ(m.name, "kidney");
+  EXPECT_EQ(m.form, scene::Material::Form::YoungPoisson);
+  EXPECT_DOUBLE_EQ(m.a, 5000);
+  EXPECT_DOUBLE_EQ(m.b, 0.45);  // --nu not given: the built-in value
+  EXPECT_DOUBLE_EQ(m.rho, 1100);
+  EXPECT_EQ(m.prony.size(), 2u);  // still the viscoelastic kidney
 }
 
 // tissue bench --tick-dt-safety compares the haptic tick at several step
