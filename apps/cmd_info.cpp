@@ -1,4 +1,5 @@
-// tissue info: which backends this build has and which can run here.
+// tissue info: the version and commit of this build, which backends it has
+// and which can run here.
 #include <fmt/format.h>
 
 #include "apps/commands.hpp"
@@ -8,8 +9,10 @@
 namespace tissue::app {
 
 void add_info_command(CLI::App& app, int& rc) {
-  auto* cmd = app.add_subcommand("info", "List the backends, whether they were built and can run here");
+  auto* cmd = app.add_subcommand(
+      "info", "Print the version and commit; list the backends, whether they were built and can run here");
   cmd->callback([&rc] {
+    fmt::print("{}\n", version_line());
     for (const BackendInfo& b : list_backends()) {
       fmt::print("{:6} {:10} {}\n", b.name, b.available ? "available" : (b.built ? "no device" : "not built"),
                  b.detail);

@@ -11,6 +11,10 @@
 //   height), holds, and retracts;
 // - an inclusion without its own material is ten times stiffer than the
 //   tissue (a tumour), with the tissue's nu and rho.
+//
+// A built-in scene (@kidney, @kidney-visco) is written as built, its
+// material's numbers from --E, --nu and --rho where given; the meshing
+// options, which cannot apply to its built-in mesh, are refused by name.
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -18,6 +22,8 @@
 #include <cmath>
 #include <map>
 #include <memory>
+#include <stdexcept>
+#include <string>
 
 #include "apps/commands.hpp"
 #include "apps/options.hpp"
@@ -222,6 +228,41 @@ scene::Scene make_scene(MeshOptions& o) {
   return s;
 }
 
+/// Whether an option of tissue mesh applies to a built-in scene: its mesh,
+/// fixed nodes and tool are built in (docs/kidney.md); only the output and
+/// its material's numbers can be chosen.
+bool applies_to_builtin(const std::string& option) {
+  return option == "surface" || option == "--output" || option == "--E" || option == "--nu" || option == "--rho";
+}
+
+/// `tissue mesh @kidney`: the built-in scene with the material options given
+/// (--E, --nu, --rho; for @kidney-visco the instantaneous moduli) in place of
+/// its material's, checked as a surface's material is. Every other option
+/// given (--unit, --quality, --inclusion, ...) would be ignored: refused by
+/// name before the scene is built.
+scene::Scene builtin_mesh_scene(const CLI::App& cmd, const MeshOptions& o) {
+  std::string ignored;
+  int n_ignored = 0;
+  for (const CLI::Option* opt : cmd.get_options()) {
+    if (opt->count() == 0 || applies_to_builtin(opt->get_name())) continue;
+    ignored += (n_ignored++ > 0 ? ", " : "") + opt->get_name();
+  }
+  if (n_ignored > 0)
+    throw std::invalid_argument(fmt::format(
+        "{}: {} {} to meshing a surface file, not to a built-in scene, whose mesh is built in (docs/kidney.md); "
+        "of the options only -o, --E, --nu and --rho apply to it (the last three set its material)",
+        o.surface, ignored, n_ignored == 1 ? "applies" : "apply"));
+  scene::Scene s = *io::builtin_scene(o.surface);
+  for (scene::Material& m : s.materials) {  // the built-in materials are given as E and nu
+    if (cmd.get_option("--E")->count() > 0) m.a = o.E;
+    if (cmd.get_option("--nu")->count() > 0) m.b = o.nu;
+    if (cmd.get_option("--rho")->count() > 0) m.rho = o.rho;
+    scene::validate_material(s, m);
+    fmt::print("material '{}': E = {:.4g} Pa, nu = {:.4g}, rho = {:.4g} kg/m^3\n", m.name, m.a, m.b, m.rho);
+  }
+  return s;
+}
+
 }  // namespace
 
 void add_mesh_command(CLI::App& app, int& rc) {
@@ -230,7 +271,10 @@ void add_mesh_command(CLI::App& app, int& rc) {
   io::MeshingOptions& m = o->pipeline.meshing;
   m.min_dihedral = io::kDefaultMinDihedral;
   m.optimise = io::kDefaultOptimise;
-  cmd->add_option("surface", o->surface, "Surface file, or @kidney to write the built-in kidney scene")->required();
+  cmd->add_option("surface", o->surface,
+                  "Surface file, or @kidney / @kidney-visco to write a built-in kidney scene (with -o, --E, --nu "
+                  "and --rho only)")
+      ->required();
   cmd->add_option("-o,--output", o->out, "Scene XML to write")->required()->check(output_file());  // before the meshing
   cmd->add_option("--unit", o->unit, "Length unit of the surface file(s): m, cm or mm")->default_val("m");
   cmd->add_option("--inclusion", o->inclusions,
@@ -252,11 +296,11 @@ void add_mesh_command(CLI::App& app, int& rc) {
   cmd->add_option("--optimise", m.optimise, "TetGen optimisation level (O, 0..10)")->default_val(io::kDefaultOptimise);
   cmd->add_option("--max-volume", m.max_volume, "Largest tet volume (m^3; 0 = no bound)")->default_val(0);
   cmd->add_option("--target-tets", m.target_tets, "Aim at about this many tets, within 15 % (0 = off)")->default_val(0);
-  cmd->add_option("--E", o->E, "Young's modulus (Pa)")->default_val(3000);
-  cmd->add_option("--nu", o->nu, "Poisson's ratio")->default_val(0.45);
-  cmd->add_option("--rho", o->rho, "Density (kg/m^3)")->default_val(1000);
-  cmd->callback([o, &rc] {
-    scene::Scene s = o->surface == "@kidney" ? io::default_kidney_scene() : make_scene(*o);
+  cmd->add_option("--E", o->E, "Young's modulus (Pa; a built-in scene's too)")->default_val(3000);
+  cmd->add_option("--nu", o->nu, "Poisson's ratio (a built-in scene's too)")->default_val(0.45);
+  cmd->add_option("--rho", o->rho, "Density (kg/m^3; a built-in scene's too)")->default_val(1000);
+  cmd->callback([o, cmd, &rc] {
+    scene::Scene s = io::is_builtin_scene(o->surface) ? builtin_mesh_scene(*cmd, *o) : make_scene(*o);
     io::write_scene(s, o->out, true);
     fmt::print("wrote {} ({} tets)\n", o->out, s.tets.size() / 4);
     rc = 0;

@@ -31,6 +31,11 @@ void add_palpate_command(CLI::App& app, int& rc);    ///< apps/cmd_palpate.cpp
 /// names the activity). main() of tissue and tissue-view.
 int run_command_line(CLI::App& app, int argc, char** argv, const int& rc, const char* program);
 
+/// "tissue 0.2.0 (commit 1a2b3c4)": the project version and the git commit
+/// the build was configured from ("unknown" outside a git checkout, e.g. a
+/// source archive). `tissue --version` and `tissue info` print it.
+std::string version_line();
+
 void set_activity(std::string what);
 const std::string& activity();
 

@@ -6,6 +6,9 @@
 
 int main(int argc, char** argv) {
   CLI::App app{"tissue: interactive nonlinear soft-tissue deformation (TLED, Neo-Hookean, IANP)"};
+  // --version answers before the sub-command requirement is checked (CLI11
+  // throws CallForVersion while parsing; run_command_line prints it, exit 0)
+  app.set_version_flag("--version", tissue::app::version_line(), "Print the version and the git commit, and exit");
   app.require_subcommand(1);
   int rc = 0;
   tissue::app::add_mesh_command(app, rc);

@@ -205,16 +205,16 @@ scene::Scene default_kidney_scene() {
   s.source = "@kidney";
   s.nodes = std::move(mesh.nodes);
   s.tets = std::move(mesh.tets);
-  scene::Material brain;
-  brain.name = "brain";
-  brain.form = scene::Material::Form::YoungPoisson;
-  brain.a = K::E;
-  brain.b = K::nu;
-  brain.rho = K::rho;
-  s.materials.push_back(brain);
+  scene::Material kidney;
+  kidney.name = "kidney";  // the organ's name; its numbers are brain tissue's (docs/kidney.md, "Material")
+  kidney.form = scene::Material::Form::YoungPoisson;
+  kidney.a = K::E;
+  kidney.b = K::nu;
+  kidney.rho = K::rho;
+  s.materials.push_back(kidney);
   scene::ElementSet all;
   all.name = "kidney";
-  all.material = "brain";
+  all.material = "kidney";
   all.all = true;
   s.sets.push_back(all);
 
@@ -281,6 +281,10 @@ std::optional<scene::Scene> builtin_scene(const std::string& name) {
   if (name == "@kidney") return default_kidney_scene();
   if (name == "@kidney-visco") return viscoelastic_kidney_scene();
   return std::nullopt;
+}
+
+bool is_builtin_scene(const std::string& name) {
+  return name == "@kidney" || name == "@kidney-visco";
 }
 
 }  // namespace tissue::io

@@ -117,5 +117,7 @@ scene::Scene viscoelastic_kidney_scene();
 
 /// The built-in scene of a name ("@kidney", "@kidney-visco"), or nullopt.
 std::optional<scene::Scene> builtin_scene(const std::string& name);
+/// Whether builtin_scene knows the name (without building the scene).
+bool is_builtin_scene(const std::string& name);
 
 }  // namespace tissue::io

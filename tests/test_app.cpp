@@ -2,8 +2,9 @@
 // (whole numbers in digits, ranges, finite), the tick count and the work
 // refusal of `tissue run`, and -- through the built program -- interrupted
 // runs (SIGINT / SIGTERM: exit 130 / 143, the summary, a complete ticks.csv
-// and frame series, no .part file) and output folders (another run's
-// outputs refused unless --overwrite, a folder in use refused).
+// and frame series, no .part file), output folders (another run's
+// outputs refused unless --overwrite, a folder in use refused), the version
+// line and `tissue mesh` of a built-in scene.
 #include <fcntl.h>
 #include <fmt/format.h>
 #include <gtest/gtest.h>
@@ -13,6 +14,7 @@
 
 #include <chrono>
 #include <csignal>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -338,6 +340,84 @@ TEST(Program, BadInputsGetClearErrors) {
   std::ofstream(t.file("nan.xml")) << scene;
   EXPECT_NE(error_of({"run", t.file("nan.xml")}).find("waypoint 1: t = nan is not a finite number"),
             std::string::npos);
+}
+
+/// Standard output of a shell command, its last newline dropped; its exit
+/// status in *status.
+std::string shell_output(const std::string& command, int* status) {
+  FILE* p = popen(command.c_str(), "r");
+  if (p == nullptr) {
+    *status = -1;
+    return "";
+  }
+  std::string out;
+  char buf[512];
+  while (fgets(buf, sizeof buf, p)) out += buf;
+  *status = pclose(p);
+  if (!out.empty() && out.back() == '\n') out.pop_back();
+  return out;
+}
+
+// `tissue --version` (no sub-command) and `tissue info` name the project
+// version and the git commit of the build: a commit of the source tree's
+// repository in a git checkout, "unknown" elsewhere.
+TEST(Program, VersionNamesTheProjectVersionAndCommit) {
+  TempDir t;
+  ASSERT_EQ(run_tissue(t, "version", {"--version"}), 0) << slurp(t.file("version.err"));
+  const std::string out = slurp(t.file("version.out"));
+  EXPECT_EQ(out, version_line() + "\n");
+  const std::string prefix = fmt::format("tissue {} (commit ", TISSUE_VERSION);
+  ASSERT_EQ(out.rfind(prefix, 0), 0u) << out;
+  ASSERT_EQ(out.substr(out.size() - 2), ")\n") << out;
+  const std::string commit = out.substr(prefix.size(), out.size() - prefix.size() - 2);
+  const std::string src = TISSUE_SOURCE_DIR;
+  int status = 0;
+  const std::string top = shell_output("git -C '" + src + "' rev-parse --show-toplevel 2>/dev/null", &status);
+  if (status == 0 && fs::equivalent(top, src)) {
+    ASSERT_NE(commit, "unknown") << "the source tree is a git checkout";
+    shell_output("git -C '" + src + "' cat-file -e '" + commit + "^{commit}' 2>&1", &status);
+    EXPECT_EQ(status, 0) << commit << " is not a commit of " << src;
+  } else {
+    EXPECT_EQ(commit, "unknown") << src << " is not a git checkout";
+  }
+  ASSERT_EQ(run_tissue(t, "info", {"info"}), 0) << slurp(t.file("info.err"));
+  const std::string info = slurp(t.file("info.out"));
+  EXPECT_EQ(info.substr(0, info.find('\n') + 1), out) << info;
+}
+
+// `tissue mesh @kidney` writes the built-in scene with the material options
+// given and refuses, by name, the options that steer meshing a surface
+// (they would be ignored); a bad material number is refused as a surface's is.
+TEST(Program, MeshOfABuiltInSceneTakesMaterialOptionsAndRefusesMeshingOnes) {
+  TempDir t;
+  const std::string out = t.file("k.xml");
+  EXPECT_EQ(run_tissue(t, "one", {"mesh", "@kidney", "-o", out, "--quality", "1.2"}), 1);
+  EXPECT_NE(
+      slurp(t.file("one.err")).find("@kidney: --quality applies to meshing a surface file, not to a built-in scene"),
+      std::string::npos)
+      << slurp(t.file("one.err"));
+  EXPECT_EQ(run_tissue(t, "two", {"mesh", "@kidney-visco", "-o", out, "--unit", "mm", "--target-tets", "900"}), 1);
+  EXPECT_NE(slurp(t.file("two.err"))
+                .find("@kidney-visco: --unit, --target-tets apply to meshing a surface file, not to a built-in scene"),
+            std::string::npos)
+      << slurp(t.file("two.err"));
+  EXPECT_EQ(run_tissue(t, "bad", {"mesh", "@kidney", "-o", out, "--E", "-5"}), 1);
+  EXPECT_NE(slurp(t.file("bad.err")).find("@kidney: material 'kidney': Young's modulus E = -5 Pa must be > 0"),
+            std::string::npos)
+      << slurp(t.file("bad.err"));
+  EXPECT_FALSE(fs::exists(out));
+
+  ASSERT_EQ(run_tissue(t, "good", {"mesh", "@kidney-visco", "-o", out, "--E", "5000", "--rho", "1100"}), 0)
+      << slurp(t.file("good.err"));
+  const scene::Scene s = io::read_scene(out);
+  ASSERT_EQ(s.materials.size(), 1u);
+  const scene::Material& m = s.materials[0];
+  EXPECT_EQ(m.name, "kidney");
+  EXPECT_EQ(m.form, scene::Material::Form::YoungPoisson);
+  EXPECT_DOUBLE_EQ(m.a, 5000);
+  EXPECT_DOUBLE_EQ(m.b, 0.45);  // --nu not given: the built-in value
+  EXPECT_DOUBLE_EQ(m.rho, 1100);
+  EXPECT_EQ(m.prony.size(), 2u);  // still the viscoelastic kidney
 }
 
 // tissue bench --tick-dt-safety compares the haptic tick at several step

@@ -132,12 +132,14 @@ TEST(KidneyScene, PositiveVolumesNoReorientation) {
 TEST(KidneyScene, MaterialAndSolverDefaults) {
   const auto& s = scene();
   ASSERT_EQ(s.materials.size(), 1u);
+  EXPECT_EQ(s.materials[0].name, "kidney");  // messages name the organ, not the tissue its numbers come from
   EXPECT_EQ(s.materials[0].form, tissue::scene::Material::Form::YoungPoisson);
   EXPECT_DOUBLE_EQ(s.materials[0].a, 3000);
   EXPECT_DOUBLE_EQ(s.materials[0].b, 0.45);
   EXPECT_DOUBLE_EQ(s.materials[0].rho, 1000);
   ASSERT_EQ(s.sets.size(), 1u);
   EXPECT_TRUE(s.sets[0].all);
+  EXPECT_EQ(s.sets[0].material, "kidney");
   EXPECT_EQ(s.solver.backend, "cpu");
   EXPECT_EQ(s.solver.precision, tissue::Precision::Float);
   EXPECT_FALSE(s.solver.dt);

