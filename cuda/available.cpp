@@ -2,7 +2,6 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <cstdlib>
 #include <stdexcept>
 #include <vector>
 
@@ -12,10 +11,6 @@
 namespace tissue {
 
 bool cuda_available(std::string* why) {
-  // A batch runs its scenes on a stream each: let 32 streams reach the device without sharing a hardware
-  // queue (CUDA's default is 8, and streams sharing one wait on each other's work), unless the host program
-  // chose a number itself. CUDA reads it when the context is created, after this first call.
-  setenv("CUDA_DEVICE_MAX_CONNECTIONS", "32", 0);
   std::string msg;
   int count = 0;
   const cudaError_t err = cudaGetDeviceCount(&count);
