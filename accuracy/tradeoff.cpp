@@ -15,6 +15,7 @@
 #include "backends/registry.hpp"
 #include "core/scheduler.hpp"
 #include "scene/validate.hpp"
+#include "session/engine.hpp"
 
 namespace tissue::accuracy {
 namespace {
@@ -179,16 +180,16 @@ std::vector<TradeoffRow> run_setting(const MeshCase& mc, const RefEntry& ref, co
   s.solver.mass_scaling = st.mass_scaling;
   s.solver.precision = st.precision;
   if (!o.backend.empty()) s.solver.backend = o.backend;
-  const TissueModel<double> model = scene::load_model(s);
   SchedulerSettings settings = scene::scheduler_settings(s);
   settings.depth = st.depth;
   settings.auto_tol = st.auto_tol;
   settings.residual_tol = st.residual_tol;
   settings.contact.face = st.face_contact;
   settings.contact.max_travel = st.max_travel;
-  auto backend = create_backend(s.solver.backend, st.precision);
-  backend->upload(model);
-  Scheduler sched(*backend, model, settings);
+  Engine engine = build_engine(s, settings);
+  const TissueModel<double>& model = *engine.model;
+  const std::unique_ptr<Backend>& backend = engine.backend;
+  Scheduler& sched = *engine.scheduler;
   const std::vector<Waypoint> path = path_to_hold(tool_path(s));
   const double t_hold = path.back().t;
   ScriptedDevice device(path);

@@ -15,6 +15,7 @@
 #include "io/vtu_writer.hpp"
 #include "scene/checks.hpp"
 #include "scene/validate.hpp"
+#include "session/engine.hpp"
 
 namespace tissue::app {
 namespace {
@@ -124,7 +125,9 @@ int run_scene(const RunOptions& o) {
   scene::Scene s = load_scene_arg(o.scene);
   apply_overrides(s, o);
   set_activity(fmt::format("building the model of {}", s.source));
-  const TissueModel<double> model = scene::load_model(s);  // validates the whole scene first
+  // validates the whole scene first
+  const auto model_ptr = std::make_shared<const TissueModel<double>>(scene::load_model(s));
+  const TissueModel<double>& model = *model_ptr;
   std::vector<ScriptedDevice> devices = scripted_devices(s);
   std::vector<Device*> device_ptrs;
   for (ScriptedDevice& d : devices) device_ptrs.push_back(&d);
@@ -142,10 +145,9 @@ int run_scene(const RunOptions& o) {
       fmt::print("--overwrite: removed {} files of the previous run from {}\n", folder->removed(), o.out_dir);
   }
   set_activity(fmt::format("uploading {} to the {} backend", s.source, s.solver.backend));
-  std::unique_ptr<Backend> backend = create_backend(s.solver.backend, s.solver.precision);
-  backend->upload(model);
-  Scheduler sched(*backend, model, settings);
-  scene::apply_loads(s, model, sched);
+  Engine engine = build_engine(s, settings, model_ptr);
+  Backend* backend = engine.backend.get();
+  Scheduler& sched = *engine.scheduler;
 
   if (model.reoriented > 0) fmt::print("note: {} inverted input tets were reoriented\n", model.reoriented);
   fmt::print("running {} ticks of {} on {} ({}), region depth {}\n", n_ticks, s.source, backend->name(),

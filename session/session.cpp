@@ -25,7 +25,7 @@ Session::Session(scene::Scene scene)
 
 Session::Session(std::shared_ptr<const scene::Scene> scene, std::shared_ptr<const TissueModel<double>> model,
                  std::unique_ptr<Backend> backend)
-    : scene_(std::move(scene)), model_(std::move(model)), backend_(std::move(backend)) {
+    : scene_(std::move(scene)), engine_{std::move(model), std::move(backend), nullptr} {
   if (scene_->tools.empty()) throw std::runtime_error(scene_->source + ": the scene has no tool to drive");
   settings_ = scene::scheduler_settings(*scene_);
   for (const scene::Tool& t : scene_->tools) devices_.emplace_back(t.path);
@@ -34,13 +34,7 @@ Session::Session(std::shared_ptr<const scene::Scene> scene, std::shared_ptr<cons
 }
 
 void Session::restart() {
-  scheduler_.reset();
-  backend_->upload(*model_);
-  scheduler_ = std::make_unique<Scheduler>(*backend_, *model_, settings_);
-  if (loads_)
-    scheduler_->set_loads(loads_->first, loads_->second);
-  else
-    scene::apply_loads(*scene_, *model_, *scheduler_);
+  start_engine(engine_, *scene_, settings_, loads_ ? &*loads_ : nullptr);
   last_ = TickReport{};
   last_.n_tools = n_tools();
   fields_.reset();
@@ -56,7 +50,7 @@ void Session::check_tool(int tool) const {
 void Session::check_running() const {
   if (failed())
     throw SimulationError(fmt::format("{}: the simulation stopped at tick {} ({}); call reset() to start again", name(),
-                                      scheduler_->ticks(), failure_));
+                                      engine_.scheduler->ticks(), failure_));
 }
 
 TickReport Session::tick() {
@@ -68,7 +62,7 @@ void Session::begin_tick() {
   check_running();
   fields_.reset();
   try {
-    scheduler_->begin_tick(device_ptrs_);
+    engine_.scheduler->begin_tick(device_ptrs_);
   } catch (const SimulationError& e) {
     failure_ = e.what();
     throw;
@@ -77,7 +71,7 @@ void Session::begin_tick() {
 
 TickReport Session::end_tick() {
   try {
-    last_ = scheduler_->end_tick();
+    last_ = engine_.scheduler->end_tick();
   } catch (const SimulationError& e) {
     failure_ = e.what();
     throw;
@@ -87,15 +81,15 @@ TickReport Session::end_tick() {
 
 void Session::set_loads(std::vector<index_t> nodes, std::vector<double> forces) {
   try {
-    scheduler_->set_loads(nodes, forces);
+    engine_.scheduler->set_loads(nodes, forces);
   } catch (const std::invalid_argument& e) {
     throw std::invalid_argument(fmt::format("{}: {}", name(), e.what()));
   }
-  loads_.emplace(std::move(nodes), std::move(forces));
+  loads_ = scene::SceneLoads{std::move(nodes), std::move(forces)};
 }
 
 const Fields& Session::fields() {
-  if (!fields_) fields_ = backend_->download();
+  if (!fields_) fields_ = engine_.backend->download();
   return *fields_;
 }
 

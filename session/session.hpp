@@ -15,6 +15,7 @@
 #include "core/model.hpp"
 #include "core/scheduler.hpp"
 #include "scene/scene.hpp"
+#include "session/engine.hpp"
 
 namespace tissue {
 
@@ -79,12 +80,12 @@ class Session {
 
   const scene::Scene& scene() const { return *scene_; }
   const std::string& name() const { return scene_->source; }
-  const TissueModel<double>& model() const { return *model_; }
-  const std::shared_ptr<const TissueModel<double>>& shared_model() const { return model_; }
-  Backend& backend() { return *backend_; }
-  const Backend& backend() const { return *backend_; }
-  Scheduler& scheduler() { return *scheduler_; }
-  const Scheduler& scheduler() const { return *scheduler_; }
+  const TissueModel<double>& model() const { return *engine_.model; }
+  const std::shared_ptr<const TissueModel<double>>& shared_model() const { return engine_.model; }
+  Backend& backend() { return *engine_.backend; }
+  const Backend& backend() const { return *engine_.backend; }
+  Scheduler& scheduler() { return *engine_.scheduler; }
+  const Scheduler& scheduler() const { return *engine_.scheduler; }
   const SchedulerSettings& settings() const { return settings_; }
   int n_tools() const { return static_cast<int>(devices_.size()); }
   HostDevice& device(int tool) { return devices_.at(std::size_t(tool)); }
@@ -104,13 +105,11 @@ class Session {
   void check_running() const;
 
   std::shared_ptr<const scene::Scene> scene_;
-  std::shared_ptr<const TissueModel<double>> model_;
-  std::unique_ptr<Backend> backend_;
+  Engine engine_;
   SchedulerSettings settings_;
-  std::unique_ptr<Scheduler> scheduler_;
   std::vector<HostDevice> devices_;
   std::vector<Device*> device_ptrs_;
-  std::optional<std::pair<std::vector<index_t>, std::vector<double>>> loads_;  ///< set_loads' (else the scene's)
+  std::optional<scene::SceneLoads> loads_;  ///< set_loads' (else the scene's)
   TickReport last_;
   std::optional<Fields> fields_;
   std::string failure_;

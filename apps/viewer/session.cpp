@@ -40,14 +40,7 @@ scene::Scene with_params(scene::Scene s, const LiveParams& p) {
 }
 
 Engine build_simulation(const scene::Scene& base, const LiveParams& p) {
-  const scene::Scene s = with_params(base, p);
-  Engine sim;
-  sim.model = std::make_unique<TissueModel<double>>(scene::load_model(s));
-  sim.backend = create_backend(s.solver.backend, s.solver.precision);
-  sim.backend->upload(*sim.model);
-  sim.scheduler = std::make_unique<Scheduler>(*sim.backend, *sim.model, scene::scheduler_settings(s));
-  scene::apply_loads(s, *sim.model, *sim.scheduler);
-  return sim;
+  return build_engine(with_params(base, p));
 }
 
 EngineFactory Session::factory() const {

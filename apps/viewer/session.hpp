@@ -6,7 +6,7 @@
 
 #include <string>
 
-#include "core/haptic_loop.hpp"
+#include "haptics/haptic_loop.hpp"
 #include "scene/scene.hpp"
 
 namespace tissue::viewer {
