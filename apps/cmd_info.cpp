@@ -4,7 +4,6 @@
 
 #include "apps/commands.hpp"
 #include "backends/registry.hpp"
-#include "cpu/element_lanes.hpp"
 
 namespace tissue::app {
 
@@ -20,9 +19,9 @@ void add_info_command(CLI::App& app, int& rc) {
         fmt::print("{:6} {:10} float division and square root: {}, denormals flushed "
                    "(TISSUE_CUDA_FAST_FLOAT_MATH; double: ieee)\n",
                    "", "", b.float_math);
-      if (b.name == "cpu")  // docs/benchmarks/README.md, "The cpu's tuning by vendor"
+      if (!b.tuning.empty())  // the cpu's lane kernels by vendor
         fmt::print("{:6} {:10} lane kernels: {} tuning (TISSUE_CPU_TUNING=xeon|generic overrides)\n", "", "",
-                   cpu::to_string(cpu::lanes_tuning()));
+                   b.tuning);
     }
     rc = 0;
   });

@@ -3,6 +3,7 @@
 #include <stdexcept>
 
 #include "cpu/cpu_backend.hpp"
+#include "cpu/element_lanes.hpp"
 #ifdef TISSUE_HAVE_CUDA
 #include "cuda/cuda_backend.hpp"
 #endif
@@ -18,7 +19,7 @@ std::string cuda_float_math() { return cuda_fast_float_math() ? "approximate" : 
 
 std::vector<BackendInfo> list_backends() {
   std::vector<BackendInfo> out;
-  out.push_back({"cpu", true, true, cpu_device_name()});
+  out.push_back({"cpu", true, true, cpu_device_name(), "ieee", cpu::to_string(cpu::lanes_tuning())});
 #ifdef TISSUE_HAVE_CUDA
   std::string why;
   const bool gpu = cuda_available(&why);
@@ -81,6 +82,50 @@ std::vector<std::pair<std::string, double>> contact_chain_times(const std::strin
   (void)backend;
   (void)precision;
   return out;
+}
+
+std::string backend_tuning(const Backend& backend) {
+  return backend.name() == "cpu" ? cpu::to_string(cpu::lanes_tuning()) : "";
+}
+
+std::vector<std::string> step_modes(const Backend& backend) {
+#ifdef TISSUE_HAVE_CUDA
+  if (backend.name() == "cuda") return {"auto", "launch", "graph", "grid", "cluster"};
+#endif
+  (void)backend;
+  return {"auto"};
+}
+
+void set_step_mode(Backend& backend, const std::string& mode) {
+#ifdef TISSUE_HAVE_CUDA
+  if (backend.name() == "cuda") {
+    for (CudaStepMode m :
+         {CudaStepMode::Auto, CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Grid, CudaStepMode::Cluster})
+      if (mode == to_string(m)) return set_cuda_step_mode(backend, m);
+  }
+#endif
+  if (mode == "auto") return;
+  throw std::invalid_argument("step mode '" + mode + "': the " + backend.name() + " backend has none of that name");
+}
+
+std::string step_mode(Backend& backend) {
+#ifdef TISSUE_HAVE_CUDA
+  if (backend.name() == "cuda") return to_string(cuda_step_mode(backend));
+#endif
+  (void)backend;
+  return "auto";
+}
+
+void set_element_gradients(Backend& backend, const std::string& where) {
+#ifdef TISSUE_HAVE_CUDA
+  if (backend.name() == "cuda") {
+    for (CudaGradients g : {CudaGradients::Auto, CudaGradients::Stored, CudaGradients::Recomputed})
+      if (where == to_string(g)) return set_cuda_gradients(backend, g);
+  }
+#endif
+  if (where == "auto" || where == "stored") return;
+  throw std::invalid_argument("element gradients '" + where + "': the " + backend.name() +
+                              " backend takes auto or stored" + (backend.name() == "cuda" ? " or recomputed" : ""));
 }
 
 std::string float_math(const Backend& backend) {

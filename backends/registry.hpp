@@ -20,6 +20,9 @@ struct BackendInfo {
   /// round-to-nearest) or "approximate" (the cuda build's
   /// TISSUE_CUDA_FAST_FLOAT_MATH; docs/cuda.md). Double is IEEE on both.
   std::string float_math = "ieee";
+  /// The tuning of its host kernels: the cpu's lane kernels, "xeon" or
+  /// "generic" (TISSUE_CPU_TUNING overrides); "" where there is none.
+  std::string tuning;
 };
 
 /// Every known backend, built or not.
@@ -43,6 +46,23 @@ std::string element_gradients(Backend& backend);
 /// the device's peak clock and their cycles; empty for a backend that has no
 /// such measurement (the cpu: its stage is timed in whole steps).
 std::vector<std::pair<std::string, double>> contact_chain_times(const std::string& backend, Precision precision);
+
+/// BackendInfo::tuning of a backend.
+std::string backend_tuning(const Backend& backend);
+
+/// The ways a backend can run advance() (all give the same results): the
+/// cuda backend's step modes "auto", "launch", "graph", "grid", "cluster"
+/// (docs/cuda.md); {"auto"} for a backend with one way.
+std::vector<std::string> step_modes(const Backend& backend);
+/// Selects one of step_modes(); std::invalid_argument naming the mode when
+/// the backend or its device does not have it.
+void set_step_mode(Backend& backend, const std::string& mode);
+/// The mode advance() uses for the current region ("auto" resolved).
+std::string step_mode(Backend& backend);
+/// Where the next upload() puts the element gradients: "auto", "stored" or
+/// "recomputed" (the cuda backend's CudaGradients); a host backend stores
+/// them and takes "auto" and "stored" only. std::invalid_argument otherwise.
+void set_element_gradients(Backend& backend, const std::string& where);
 
 /// BackendInfo::float_math of the backend at its precision: "approximate"
 /// for the cuda backend in float where the build chose it, else "ieee".

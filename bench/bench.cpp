@@ -19,9 +19,9 @@
 #include "io/atomic_file.hpp"
 #include "core/box_mesh.hpp"
 #include "core/scheduler.hpp"
-#include "cpu/element_lanes.hpp"
 #include "io/kidney.hpp"
 #include "scene/validate.hpp"
+#include "session/engine.hpp"
 #include "session/scene_batch.hpp"
 
 namespace tissue::bench {
@@ -116,7 +116,7 @@ struct Context {
     r.add("backend", b.name());
     r.add("precision", std::string(to_string(b.precision())));
     r.add("float_math", float_math(b));
-    if (b.name() == "cpu") r.add("cpu_tuning", std::string(cpu::to_string(cpu::lanes_tuning())));
+    if (!backend_tuning(b).empty()) r.add("cpu_tuning", backend_tuning(b));
     r.add("device", device);
     r.add("date", date);
     r.add("measured_bandwidth_GBps", bandwidth * 1e-9);
@@ -292,12 +292,13 @@ void bench_contact_chains(Context& c, Precision p) {
 void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_safety, const std::string& law) {
   scene::Scene s = kidney_with_law(law);
   s.solver.dt_safety = dt_safety.value_or(s.solver.dt_safety);
-  const TissueModel<double> m = scene::load_model(s);
+  s.solver.backend = c.o.backend;
+  s.solver.precision = p;
   SchedulerSettings st = scene::scheduler_settings(s);
   st.depth = depth;
-  auto b = create_backend(c.o.backend, p);
-  b->upload(m);
-  Scheduler sched(*b, m, st);
+  Engine engine = build_engine(s, st);
+  const std::unique_ptr<Backend>& b = engine.backend;
+  Scheduler& sched = *engine.scheduler;
   ScriptedDevice dev(s.tools.front().path);
   std::vector<double> lat;
   const long n = std::lround((c.o.quick ? 0.3 : dev.duration()) / st.tick);

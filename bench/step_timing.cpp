@@ -1,9 +1,10 @@
 // cuda_step_timing: steps/s of whole-mesh TLED advance on the cuda backend
-// for every step mode (launch, graph, grid, cluster, auto), float and
-// double, on the default kidney (~8.4k tets) and box meshes of about 8.6k,
+// for every step mode (launch, graph, grid, cluster, auto: the registry's
+// step_modes), float and double, on the default kidney (~8.4k tets) and box meshes of about 8.6k,
 // 100k, 1M and 4M tets, plus the latency of one full Scheduler tick
 // (depth 5) along a press path with a 2 mm sphere. Not a test: a measurement to
-// run on a GPU machine (docs/cuda.md records the results).
+// run on a GPU machine (docs/cuda.md, "Step modes", sums them up). It reaches the
+// backend through the registry and the Backend interface only.
 //   cuda_step_timing [--quick] [--gradients auto|stored|recomputed] [cases...]
 //   cases: kidney 8k 100k 1m 4m
 #include <fmt/format.h>
@@ -15,9 +16,10 @@
 #include <string>
 #include <vector>
 
+#include "backends/registry.hpp"
+#include "bench/bench.hpp"
 #include "core/box_mesh.hpp"
 #include "core/scheduler.hpp"
-#include "cuda/cuda_backend.hpp"
 #include "io/kidney.hpp"
 #include "scene/validate.hpp"
 
@@ -80,22 +82,13 @@ double steps_per_second(Backend& be, double min_seconds) {
   return rates[rates.size() / 2];
 }
 
-/// Fewest bytes one whole-mesh step moves through device memory in the
-/// device layouts (each array touched once per pass that touches it; s =
-/// scalar bytes): docs/cuda.md lists the terms. Recomputed gradients
-/// replace 2 x 13 element scalars by 2 x 32 bytes per node.
-double step_bytes(double n, double ne, int s, bool recomputed) {
-  return recomputed ? ne * (64 + 44.0 * s) + n * (73 + 34.0 * s) : ne * (64 + 70.0 * s) + n * (9 + 34.0 * s);
-}
-
-
 template <class T>
 T median(std::vector<T> v) {
   std::sort(v.begin(), v.end());
   return v[v.size() / 2];
 }
 
-void time_case(const Case& cs, double bw, double min_seconds, bool quick, CudaGradients gradients,
+void time_case(const Case& cs, double bw, double min_seconds, bool quick, const std::string& gradients,
                std::vector<std::string>& rows) {
   const TissueModel<double>& model = cs.model;
   std::mt19937 rng(7);
@@ -103,33 +96,33 @@ void time_case(const Case& cs, double bw, double min_seconds, bool quick, CudaGr
   std::vector<double> u0(3 * size_t(model.n_nodes));
   for (auto& v : u0) v = dist(rng);
   for (Precision p : {Precision::Float, Precision::Double}) {
-    auto be = make_cuda_backend(p);
-    set_cuda_gradients(*be, gradients);
+    auto be = create_backend("cuda", p);
+    set_element_gradients(*be, gradients);
     be->upload(model);
-    const bool recomputed = cuda_gradients(*be) == CudaGradients::Recomputed;
-    for (CudaStepMode mode : {CudaStepMode::Launch, CudaStepMode::Graph, CudaStepMode::Grid, CudaStepMode::Cluster,
-                              CudaStepMode::Auto}) {
+    const bool recomputed = element_gradients(*be) == "recomputed";
+    std::vector<std::string> modes = step_modes(*be);  // "auto" first: timed last
+    std::rotate(modes.begin(), modes.begin() + 1, modes.end());
+    for (const std::string& mode : modes) {
       try {
-        set_cuda_step_mode(*be, mode);
+        set_step_mode(*be, mode);
       } catch (const std::exception& e) {
-        fmt::print("{} {} {}: skipped ({})\n", cs.name, to_string(p), to_string(mode), e.what());
+        fmt::print("{} {} {}: skipped ({})\n", cs.name, to_string(p), mode, e.what());
         continue;
       }
-      if (mode == CudaStepMode::Cluster && model.n_elems > 200000) continue;  // one cluster: far too slow
+      if (mode == "cluster" && model.n_elems > 200000) continue;  // one cluster: far too slow
       be->set_displacements(u0);
       const double sps = steps_per_second(*be, min_seconds);
       const Reductions r = be->reduce();
       const double frac =
-          sps * step_bytes(model.n_nodes, model.n_elems, p == Precision::Float ? 4 : 8, recomputed) / bw;
+          sps * bench::bytes_per_step(model.n_nodes, model.n_elems, p == Precision::Float ? 4 : 8, recomputed) / bw;
       rows.push_back(fmt::format("{:>6} {:>8} {:>7} {:>6} {:>8}{} {:>12.0f} {:>10.3g} {:>6.3f} {} {}", cs.name,
-                                 model.n_elems, model.n_nodes, to_string(p), to_string(cuda_step_mode(*be)),
-                                 mode == CudaStepMode::Auto ? "*" : " ", sps, sps * model.n_elems, frac,
-                                 r.finite && r.bad_elem < 0 ? "ok" : "NONFINITE/BAD",
-                                 to_string(cuda_gradients(*be))));
+                                 model.n_elems, model.n_nodes, to_string(p), step_mode(*be),
+                                 mode == "auto" ? "*" : " ", sps, sps * model.n_elems, frac,
+                                 r.finite && r.bad_elem < 0 ? "ok" : "NONFINITE/BAD", element_gradients(*be)));
       fmt::print("{}\n", rows.back());
     }
     // full haptic ticks
-    set_cuda_step_mode(*be, CudaStepMode::Auto);
+    set_step_mode(*be, "auto");
     be->upload(model);
     ScriptedDevice dev(cs.path);
     SchedulerSettings st;
@@ -159,25 +152,26 @@ void time_case(const Case& cs, double bw, double min_seconds, bool quick, CudaGr
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string why;
-  if (!cuda_available(&why)) {
-    fmt::print("no GPU: {}\n", why);
-    return 1;
-  }
+  std::string device;
+  for (const BackendInfo& b : list_backends())
+    if (b.name == "cuda") {
+      if (!b.available) {
+        fmt::print("no GPU: {}\n", b.detail);
+        return 1;
+      }
+      device = b.detail;
+    }
   bool quick = false;
-  CudaGradients gradients = CudaGradients::Auto;
+  std::string gradients = "auto";
   std::vector<std::string> want;
   for (int k = 1; k < argc; ++k) {
     const std::string a = argv[k];
     if (a == "--quick") {
       quick = true;
     } else if (a == "--gradients" && k + 1 < argc) {
-      const std::string g = argv[++k];
-      if (g == "stored") gradients = CudaGradients::Stored;
-      else if (g == "recomputed") gradients = CudaGradients::Recomputed;
-      else if (g == "auto") gradients = CudaGradients::Auto;
-      else {
-        fmt::print(stderr, "--gradients {}: expected auto, stored or recomputed\n", g);
+      gradients = argv[++k];
+      if (gradients != "auto" && gradients != "stored" && gradients != "recomputed") {
+        fmt::print(stderr, "--gradients {}: expected auto, stored or recomputed\n", gradients);
         return 2;
       }
     } else {
@@ -187,8 +181,8 @@ int main(int argc, char** argv) {
   auto wanted = [&](const std::string& name) {
     return want.empty() || std::find(want.begin(), want.end(), name) != want.end();
   };
-  const double bw = cuda_copy_bandwidth();
-  fmt::print("device: {}\ncopy bandwidth: {:.1f} GB/s (read + write)\n", why, bw * 1e-9);
+  const double bw = measure_device_bandwidth("cuda");
+  fmt::print("device: {}\ncopy bandwidth: {:.1f} GB/s (read + write)\n", device, bw * 1e-9);
   const double min_seconds = quick ? 0.1 : 0.4;
   std::vector<std::string> rows;
   if (wanted("kidney")) time_case(kidney_case(), bw, min_seconds, quick, gradients, rows);
