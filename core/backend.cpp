@@ -197,12 +197,8 @@ void Backend::set_tools(std::span<const ToolShape> tools, const ContactOptions& 
   require_upload("set_tools");
   if (tools.size() > std::size_t(kMaxTools))
     throw std::invalid_argument(fmt::format("set_tools: {} tools; a scene holds at most {}", tools.size(), kMaxTools));
-  for (const ToolShape& t : tools) {
-    if (!(t.radius > 0) || !std::isfinite(t.radius))
-      throw std::invalid_argument(fmt::format("set_tools: tool '{}': radius {} m must be > 0", t.name, t.radius));
-    if (!(t.shaft >= 0) || !std::isfinite(t.shaft))
-      throw std::invalid_argument(fmt::format("set_tools: tool '{}': shaft length {} m must be >= 0", t.name, t.shaft));
-  }
+  for (const ToolShape& t : tools)
+    if (const std::string e = tool_shape_error(t); !e.empty()) throw std::invalid_argument("set_tools: " + e);
   if (!(options.max_travel > 0) || !std::isfinite(options.max_travel))
     throw std::invalid_argument(
         fmt::format("set_tools: contact check spacing {} radii must be > 0", options.max_travel));

@@ -24,17 +24,7 @@ void check_settings(const SchedulerSettings& s, const TissueModel<double>& m) {
     throw std::invalid_argument(fmt::format("{} tools: a scene holds at most {}", s.tools.size(), kMaxTools));
   const double extent = body_extent(m);
   for (const ToolSetting& t : s.tools) {
-    if (!(t.shape.radius > 0) || !std::isfinite(t.shape.radius))
-      throw std::invalid_argument(
-          fmt::format("tool '{}': radius {} m must be > 0 (the radius is the loaded patch)", t.shape.name,
-                      t.shape.radius));
-    if (2 * t.shape.radius > extent)
-      throw std::invalid_argument(fmt::format(
-          "tool '{}': radius {} m is larger than the body (its largest extent is {:.4g} m): a tool's diameter must "
-          "not exceed the body it touches",
-          t.shape.name, t.shape.radius, extent));
-    if (!(t.shape.shaft >= 0) || !std::isfinite(t.shape.shaft))
-      throw std::invalid_argument(fmt::format("tool '{}': shaft length {} m must be >= 0", t.shape.name, t.shape.shaft));
+    if (const std::string e = tool_shape_error(t.shape, extent); !e.empty()) throw std::invalid_argument(e);
     if (!(norm(t.axis) > 0) || !std::isfinite(norm(t.axis)))
       throw std::invalid_argument(fmt::format("tool '{}': direction ({}, {}, {}) must be a non-zero vector",
                                               t.shape.name, t.axis.x, t.axis.y, t.axis.z));

@@ -30,6 +30,13 @@ struct ToolShape {
   double shaft = 0;            ///< l: shaft length (m), >= 0; 0 = a sphere
 };
 
+/// The rule a tool's shape keeps, as the message of the first part it breaks
+/// ("" when it keeps it): the radius finite and > 0 and at most half the
+/// body's largest extent body_extent (m; 0 = not checked), the shaft
+/// length finite and >= 0. The scene's checks, the Scheduler and
+/// Backend::set_tools all report this one message, each with its context.
+std::string tool_shape_error(const ToolShape& t, double body_extent = 0);
+
 /// A tool's pose: tip position and the unit shaft axis (tip -> handle).
 struct ToolPose {
   Vec3<double> tip = {0, 0, 0};   ///< m

@@ -413,30 +413,19 @@ void check_path_near_mesh(const Scene& s, const Tool& t, const std::string& what
 
 void check_tool(const Scene& s, const Tool& t) {
   const std::string what = fmt::format("tool '{}'", t.name);
-  check_finite(s, t.line, what, "radius", t.radius);
-  if (!(t.radius > 0))
-    fail(s, t.line, fmt::format("{}: radius = {} m must be > 0 (the radius is the loaded patch)", what, t.radius));
-  check_finite(s, t.line, what, "shaft-length", t.shaft);
-  if (t.shaft < 0) fail(s, t.line, fmt::format("{}: shaft-length = {} m must be >= 0 (0 = a sphere)", what, t.shaft));
+  double ext = 0;  // a tool wider than the body cannot touch it as a tool
+  for (int c = 0; c < 3 && s.nodes.size() >= 3; ++c) {
+    double lo = INFINITY, hi = -INFINITY;
+    for (std::size_t i = c; i < s.nodes.size(); i += 3) {
+      lo = std::min(lo, s.nodes[i]);
+      hi = std::max(hi, s.nodes[i]);
+    }
+    ext = std::max(ext, hi - lo);
+  }
+  if (const std::string e = tool_shape_error({t.name, t.radius, t.shaft}, ext); !e.empty()) fail(s, t.line, e);
   for (int c = 0; c < 3; ++c) check_finite(s, t.line, what, fmt::format("direction {}", "xyz"[c]), t.direction[c]);
   if (!(norm(t.direction) > 0))
     fail(s, t.line, fmt::format("{}: direction (0, 0, 0) must be a non-zero vector (the shaft axis, tip to handle)", what));
-  if (s.nodes.size() >= 3) {  // a tool wider than the body cannot touch it as a tool
-    double ext = 0;
-    for (int c = 0; c < 3; ++c) {
-      double lo = INFINITY, hi = -INFINITY;
-      for (std::size_t i = c; i < s.nodes.size(); i += 3) {
-        lo = std::min(lo, s.nodes[i]);
-        hi = std::max(hi, s.nodes[i]);
-      }
-      ext = std::max(ext, hi - lo);
-    }
-    if (2 * t.radius > ext)
-      fail(s, t.line,
-           fmt::format("{}: radius = {} m is larger than the body (its largest extent is {:.4g} m); check the unit "
-                       "of the radius and of the mesh",
-                       what, t.radius, ext));
-  }
   if (t.device != "scripted" && t.device != "mouse" && t.device != "phantom")
     fail(s, t.line, fmt::format("{}: unknown device '{}'; expected scripted, mouse or phantom", what, t.device));
   if (t.device == "scripted" && t.path.empty())

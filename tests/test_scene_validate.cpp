@@ -288,7 +288,7 @@ TEST(SceneValidate, EmptyNodeList) {
 TEST(SceneValidate, ToolRadiusNonPositive) {
   Scene s = valid_scene();
   s.tools[0].radius = 0;
-  EXPECT_TRUE(rejects(s, {"organ.xml:15: ", "tool 'probe'", "radius = 0 m", "must be > 0"}));
+  EXPECT_TRUE(rejects(s, {"organ.xml:15: ", "tool 'probe'", "radius = 0 m", "must be finite and > 0"}));
 }
 
 TEST(SceneValidate, UnknownDevice) {
