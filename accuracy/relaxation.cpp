@@ -120,6 +120,42 @@ double rayleigh_omega2(std::span<const double> u0, std::span<const double> u1, s
   return den > 0 ? std::max(num, 0.0) / den : 0.0;
 }
 
+namespace {
+
+/// relax's first phase: the drive ramped from its start to its end over ramp_steps, health checked every
+/// check_every steps. Returns false when o.stop asked to stop.
+bool ramp_drive(Backend& b, const Drive& drive, const std::vector<double>& start, const HeldTool* tool,
+                const RelaxOptions& o, long ramp_steps, long& steps) {
+  const int ramp_chunk = static_cast<int>(std::clamp(ramp_steps / 200, 1L, long(o.check_every)));
+  long last_check = steps;
+  while (steps < ramp_steps) {
+    const int k = static_cast<int>(std::min<long>(ramp_chunk, ramp_steps - steps));
+    drive_at(b, drive, start, double(steps + k) / double(ramp_steps), tool, double(steps) / double(ramp_steps));
+    b.advance(k);
+    steps += k;
+    if (steps - last_check >= o.check_every || steps == ramp_steps) {
+      check_health(b.reduce(), last_check, steps - 1, double(steps) / double(ramp_steps));
+      last_check = steps;
+      if (o.stop && o.stop()) return false;
+    }
+  }
+  return true;
+}
+
+/// The lowest mode's frequency (rad/s) measured over two steps from the current state (a Rayleigh quotient
+/// of the free components; nodes on a tool are held by it, so theirs are left out). Takes two steps.
+double measured_omega(Backend& b, const TissueModel<double>& m, std::vector<std::uint8_t> mask, Fields& last) {
+  const Fields d0 = b.download();
+  b.advance(1);
+  const Fields d1 = b.download();
+  b.advance(1);
+  last = b.download();
+  for (const ContactNode& c : b.contacts()) mask[c.node] = 0;
+  return std::sqrt(rayleigh_omega2(d0.u, d1.u, d1.f, last.f, m.mass, mask));
+}
+
+}  // namespace
+
 RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& drive, const RelaxOptions& o,
                   std::span<const double> u0, const HeldTool* tool) {
   check_drive(model, drive);
@@ -149,23 +185,8 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
 
   RelaxResult out;
   const double ramp_time = o.ramp_time >= 0 ? o.ramp_time : 2 * M_PI / omega0;
-  const long ramp_steps = std::max(1L, std::lround(ramp_time / m.dt));
-  const int ramp_chunk = static_cast<int>(std::clamp(ramp_steps / 200, 1L, long(o.check_every)));
-  long steps = 0, last_check = 0;
-  while (steps < ramp_steps) {
-    const int k = static_cast<int>(std::min<long>(ramp_chunk, ramp_steps - steps));
-    drive_at(b, drive, start, double(steps + k) / double(ramp_steps), tool, double(steps) / double(ramp_steps));
-    b.advance(k);
-    steps += k;
-    if (steps - last_check >= o.check_every || steps == ramp_steps) {
-      check_health(b.reduce(), last_check, steps - 1, double(steps) / double(ramp_steps));
-      last_check = steps;
-      if (o.stop && o.stop()) {
-        out.interrupted = true;
-        break;
-      }
-    }
-  }
+  long steps = 0;
+  out.interrupted = !ramp_drive(b, drive, start, tool, o, std::max(1L, std::lround(ramp_time / m.dt)), steps);
 
   long last_adapt = steps;
   double best = INFINITY;  // best residual seen, and the step at which it last halved
@@ -203,20 +224,13 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
     }
     if (o.adapt_damping && out.residual > o.adapt_above && steps - last_adapt >= o.adapt_every) {
       last_adapt = steps;
-      const Fields d0 = b.download();
-      b.advance(1);
-      const Fields d1 = b.download();
-      b.advance(1);
-      const Fields d2 = b.download();
+      Fields now;
+      const double omega = measured_omega(b, m, free_mask, now);
       steps += 2;
-      // nodes on a tool are held by it (their projection is no stiffness of the tissue's)
-      std::vector<std::uint8_t> mask = free_mask;
-      for (const ContactNode& c : b.contacts()) mask[c.node] = 0;
-      const double omega = std::sqrt(rayleigh_omega2(d0.u, d1.u, d1.f, d2.f, m.mass, mask));
-      if (omega > 0 && std::fabs(2 * omega - alpha) > 0.1 * alpha) {
+      if (omega > 0 && std::fabs(2 * omega - alpha) > 0.1 * alpha) {  // restart there with alpha = 2 omega
         alpha = 2 * omega;
         set_time_step(m, m.dt, alpha);
-        load(d2.u);
+        load(now.u);
         drive_at(b, drive, start, 1.0, tool);
         ++out.restarts;
       }

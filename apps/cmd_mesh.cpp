@@ -104,6 +104,97 @@ std::pair<std::string, scene::Material> parse_inclusion(const std::string& spec,
 
 std::string mm_text(const Vec3<double>& e) { return fmt::format("{:.1f} x {:.1f} x {:.1f} mm", 1e3 * e.x, 1e3 * e.y, 1e3 * e.z); }
 
+/// The element sets of a meshed organ: one for the whole body, or one per TetGen region (the body and each
+/// inclusion, in the order of s.materials), each reported with its volume and material. Returns each tet's
+/// material index.
+std::vector<index_t> element_sets(scene::Scene& s, const io::VolumeMesh& vol, const MeshOptions& o,
+                                  const std::vector<std::string>& inclusion_files) {
+  std::vector<index_t> tet_material(vol.n_tets(), 0);
+  if (inclusion_files.empty()) {
+    s.sets.push_back({.name = "all", .material = "tissue", .all = true, .elements = {}, .line = 0});
+    return tet_material;
+  }
+  std::vector<scene::ElementSet> sets(inclusion_files.size() + 1);
+  for (size_t k = 0; k < sets.size(); ++k) {
+    sets[k].name = k == 0 ? "tissue" : s.materials[k].name;
+    sets[k].material = s.materials[k].name;
+  }
+  for (index_t e = 0; e < vol.n_tets(); ++e) {
+    const int r = vol.tet_region.at(e);
+    if (r < 0 || size_t(r) >= sets.size())
+      throw io::MeshError(fmt::format("{}: TetGen gave tet {} the unknown region {}", o.surface, e, r));
+    sets[r].elements.push_back(e);
+    tet_material[e] = r;
+  }
+  for (size_t k = 0; k < sets.size(); ++k) {
+    if (sets[k].elements.empty())
+      throw io::MeshError(fmt::format("{}: no tet landed in {} (is it thinner than the tets?)",
+                                      k == 0 ? o.surface : inclusion_files[k - 1], sets[k].name));
+    double v = 0;
+    for (index_t e : sets[k].elements) {
+      Vec3<double> X[4];
+      for (int a = 0; a < 4; ++a) {
+        const index_t c = vol.tets[4 * e + a];
+        X[a] = {vol.nodes[3 * c], vol.nodes[3 * c + 1], vol.nodes[3 * c + 2]};
+      }
+      double dN[12];
+      v += std::fabs(tet_shape_gradients(X, dN));
+    }
+    fmt::print("  element set '{}': {} tets, {:.4g} cm^3, material E = {:.4g} Pa, nu = {:.4g}, rho = {:.4g}\n",
+               sets[k].name, sets[k].elements.size(), 1e6 * v, s.materials[k].a, s.materials[k].b, s.materials[k].rho);
+  }
+  s.sets = std::move(sets);
+  return tet_material;
+}
+
+/// What the mesher did and the quality report, with a warning when the count is off its target.
+void report_mesh(const io::OrganMesh& result, const MeshOptions& o, std::size_t n_inclusions,
+                 const io::QualityReport& q) {
+  const io::VolumeMesh& vol = result.mesh;
+  if (result.mesher == io::Mesher::Mesh3)
+    fmt::print("meshed: {} nodes, {} tets ({} Mesh_3 runs, sliver perturbation and exudation)\n", vol.n_nodes(),
+               vol.n_tets(), vol.runs);
+  else
+    fmt::print("meshed: {} nodes, {} tets ({} TetGen runs, switches {})\n", vol.n_nodes(), vol.n_tets(), vol.runs,
+               io::tetgen_switches([&] {
+                 io::MeshingOptions m = o.pipeline.meshing;
+                 m.max_volume = vol.max_volume;
+                 m.regions.resize(n_inclusions);
+                 return m;
+               }(), o.surface));
+  if (o.pipeline.meshing.target_tets > 0) {
+    const double off = double(vol.n_tets()) / o.pipeline.meshing.target_tets - 1;
+    std::fflush(stdout);
+    if (std::fabs(off) > io::kTargetPromise)
+      fmt::print(stderr, "tissue mesh: warning: {} tets is {:+.0f} % off the target {}\n", vol.n_tets(), 100 * off,
+                 o.pipeline.meshing.target_tets);
+  }
+  fmt::print("quality:\n{}", q.summary());
+}
+
+/// The written scene's support (the nodes below fix_fraction of the height) and its probe, pressing the
+/// top of the organ's surface above the middle of its footprint.
+void support_and_probe(scene::Scene& s, const io::SurfaceMesh& organ, double fix_fraction) {
+  double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+  for (size_t i = 0; i < s.nodes.size(); ++i) {
+    lo[i % 3] = std::min(lo[i % 3], s.nodes[i]);
+    hi[i % 3] = std::max(hi[i % 3], s.nodes[i]);
+  }
+  scene::Constraint base;
+  base.kind = scene::Constraint::Kind::Plane;
+  base.point[2] = lo[2] + fix_fraction * (hi[2] - lo[2]);
+  base.normal[2] = -1;  // fixes (x - point) . normal >= 0: the nodes below the plane
+  s.constraints.push_back(base);
+  const double height = hi[2] - lo[2];
+  const Vec3<double> target = top_point(organ, 0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), lo[2], hi[2]);
+  scene::Tool tool;
+  tool.radius = 2e-3;
+  tool.path = press_path(target, {0, 0, -1}, std::min(5e-3, 0.1 * height), 1e-2);
+  s.tools.push_back(tool);
+  fmt::print("body: extent {}; fixed base below z = {:.4g} m; tool presses at ({:.4g}, {:.4g}, {:.4g}) m\n",
+             mm_text({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]}), base.point[2], target.x, target.y, target.z);
+}
+
 scene::Scene make_scene(MeshOptions& o) {
   const auto start = std::chrono::steady_clock::now();
   o.pipeline.meshing.progress = [start](const std::string& line) {
@@ -141,90 +232,17 @@ scene::Scene make_scene(MeshOptions& o) {
   std::vector<io::NamedSurface> inclusions;
   for (const std::string& f : inclusion_files) inclusions.push_back(read(f));
   const io::OrganMesh result = io::mesh_organ(organ, inclusions, o.pipeline);
-  const io::VolumeMesh& vol = result.mesh;
 
   s.source = o.out;
-  s.nodes = vol.nodes;
-  s.tets = vol.tets;
-  std::vector<index_t> tet_material(vol.n_tets(), 0);
-  if (inclusions.empty()) {
-    s.sets.push_back({.name = "all", .material = "tissue", .all = true, .elements = {}, .line = 0});
-  } else {
-    std::vector<scene::ElementSet> sets(inclusions.size() + 1);
-    for (size_t k = 0; k < sets.size(); ++k) {
-      sets[k].name = k == 0 ? "tissue" : s.materials[k].name;
-      sets[k].material = s.materials[k].name;
-    }
-    for (index_t e = 0; e < vol.n_tets(); ++e) {
-      const int r = vol.tet_region.at(e);
-      if (r < 0 || size_t(r) >= sets.size())
-        throw io::MeshError(fmt::format("{}: TetGen gave tet {} the unknown region {}", o.surface, e, r));
-      sets[r].elements.push_back(e);
-      tet_material[e] = r;
-    }
-    for (size_t k = 0; k < sets.size(); ++k) {
-      if (sets[k].elements.empty())
-        throw io::MeshError(fmt::format("{}: no tet landed in {} (is it thinner than the tets?)",
-                                        k == 0 ? o.surface : inclusion_files[k - 1], sets[k].name));
-      double v = 0;
-      for (index_t e : sets[k].elements) {
-        Vec3<double> X[4];
-        for (int a = 0; a < 4; ++a) {
-          const index_t c = vol.tets[4 * e + a];
-          X[a] = {vol.nodes[3 * c], vol.nodes[3 * c + 1], vol.nodes[3 * c + 2]};
-        }
-        double dN[12];
-        v += std::fabs(tet_shape_gradients(X, dN));
-      }
-      fmt::print("  element set '{}': {} tets, {:.4g} cm^3, material E = {:.4g} Pa, nu = {:.4g}, rho = {:.4g}\n",
-                 sets[k].name, sets[k].elements.size(), 1e6 * v, s.materials[k].a, s.materials[k].b,
-                 s.materials[k].rho);
-    }
-    s.sets = std::move(sets);
-  }
+  s.nodes = result.mesh.nodes;
+  s.tets = result.mesh.tets;
+  const std::vector<index_t> tet_material = element_sets(s, result.mesh, o, inclusion_files);
   std::vector<MaterialParams> params;
   for (const scene::Material& m : s.materials) params.push_back(m.params());
   const scene::Solver solver;
-  const io::QualityReport q =
-      io::mesh_quality(vol, params, tet_material, solver.tick, solver.dt_safety, solver.mass_scaling);
-  if (result.mesher == io::Mesher::Mesh3)
-    fmt::print("meshed: {} nodes, {} tets ({} Mesh_3 runs, sliver perturbation and exudation)\n", vol.n_nodes(),
-               vol.n_tets(), vol.runs);
-  else
-    fmt::print("meshed: {} nodes, {} tets ({} TetGen runs, switches {})\n", vol.n_nodes(), vol.n_tets(), vol.runs,
-               io::tetgen_switches([&] {
-                 io::MeshingOptions m = o.pipeline.meshing;
-                 m.max_volume = vol.max_volume;
-                 m.regions.resize(inclusions.size());
-                 return m;
-               }(), o.surface));
-  if (o.pipeline.meshing.target_tets > 0) {
-    const double off = double(vol.n_tets()) / o.pipeline.meshing.target_tets - 1;
-    std::fflush(stdout);
-    if (std::fabs(off) > io::kTargetPromise)
-      fmt::print(stderr, "tissue mesh: warning: {} tets is {:+.0f} % off the target {}\n", vol.n_tets(), 100 * off,
-                 o.pipeline.meshing.target_tets);
-  }
-  fmt::print("quality:\n{}", q.summary());
-
-  double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
-  for (size_t i = 0; i < s.nodes.size(); ++i) {
-    lo[i % 3] = std::min(lo[i % 3], s.nodes[i]);
-    hi[i % 3] = std::max(hi[i % 3], s.nodes[i]);
-  }
-  scene::Constraint base;
-  base.kind = scene::Constraint::Kind::Plane;
-  base.point[2] = lo[2] + o.fix_fraction * (hi[2] - lo[2]);
-  base.normal[2] = -1;  // fixes (x - point) . normal >= 0: the nodes below the plane
-  s.constraints.push_back(base);
-  const double height = hi[2] - lo[2];
-  const Vec3<double> target = top_point(organ.surface, 0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), lo[2], hi[2]);
-  scene::Tool tool;
-  tool.radius = 2e-3;
-  tool.path = press_path(target, {0, 0, -1}, std::min(5e-3, 0.1 * height), 1e-2);
-  s.tools.push_back(tool);
-  fmt::print("body: extent {}; fixed base below z = {:.4g} m; tool presses at ({:.4g}, {:.4g}, {:.4g}) m\n",
-             mm_text({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]}), base.point[2], target.x, target.y, target.z);
+  report_mesh(result, o, inclusions.size(),
+              io::mesh_quality(result.mesh, params, tet_material, solver.tick, solver.dt_safety, solver.mass_scaling));
+  support_and_probe(s, organ.surface, o.fix_fraction);
   return s;
 }
 

@@ -360,48 +360,66 @@ void set_time_step(TissueModel<double>& m, double dt, double damping) {
   }
 }
 
-TissueModel<double> build_model(const ModelInput& in) {
-  TissueModel<double> m;
+namespace {
+
+/// build_model's first step: the input's sizes, finiteness and masks.
+void check_input(const ModelInput& in) {
   if (in.nodes.size() % 3 != 0) throw ModelError(in.source + ": node coordinate count is not a multiple of 3");
   if (in.tets.size() % 4 != 0) throw ModelError(in.source + ": element corner count is not a multiple of 4");
-  m.n_nodes = static_cast<index_t>(in.nodes.size() / 3);
-  m.n_elems = static_cast<index_t>(in.tets.size() / 4);
-  if (m.n_nodes < 4 || m.n_elems < 1) throw ModelError(in.source + ": the mesh needs at least one tetrahedron");
+  const size_t n = in.nodes.size() / 3, ne = in.tets.size() / 4;
+  if (n < 4 || ne < 1) throw ModelError(in.source + ": the mesh needs at least one tetrahedron");
   check_materials(in);
-  const index_t n = m.n_nodes, ne = m.n_elems;
   for (size_t k = 0; k < in.nodes.size(); ++k)
     if (!std::isfinite(in.nodes[k]))
       throw ModelError(fmt::format("{}: node {}: coordinate {} is not finite", in.source, k / 3, "xyz"[k % 3]));
-  if (!in.elem_material.empty() && in.elem_material.size() != size_t(ne))
+  if (!in.elem_material.empty() && in.elem_material.size() != ne)
     throw ModelError(fmt::format("{}: {} element material ids for {} elements", in.source, in.elem_material.size(), ne));
-  if (!in.fixed.empty() && in.fixed.size() != size_t(n))
+  if (!in.fixed.empty() && in.fixed.size() != n)
     throw ModelError(fmt::format("{}: {} fixed flags for {} nodes", in.source, in.fixed.size(), n));
-  if (!in.fibre_dirs.empty() && in.fibre_dirs.size() != 3 * size_t(ne))
+  if (!in.fibre_dirs.empty() && in.fibre_dirs.size() != 3 * ne)
     throw ModelError(fmt::format("{}: {} fibre direction components for {} elements; fibre_dirs holds x y z per "
                                  "element ({} numbers) or is empty",
-                                 in.source, in.fibre_dirs.size(), ne, 3 * size_t(ne)));
-  if (!in.fixed_axes.empty() && in.fixed_axes.size() != size_t(n))
+                                 in.source, in.fibre_dirs.size(), ne, 3 * ne));
+  if (!in.fixed_axes.empty() && in.fixed_axes.size() != n)
     throw ModelError(fmt::format("{}: {} fixed-axis masks for {} nodes", in.source, in.fixed_axes.size(), n));
   for (size_t i = 0; i < in.fixed_axes.size(); ++i)
     if (in.fixed_axes[i] > kAllAxes)
       throw ModelError(fmt::format("{}: node {}: fixed-axis mask {} has bits beyond x, y, z (must be 0..7)", in.source,
                                    i, int(in.fixed_axes[i])));
+  if (in.dt < 0 || std::isnan(in.dt))
+    throw ModelError(fmt::format("{}: time step dt = {} s must be > 0 (or 0 for the default)", in.source, in.dt));
+  if (in.damping && !(*in.damping >= 0 && std::isfinite(*in.damping)))
+    throw ModelError(fmt::format("{}: damping alpha = {} 1/s must be finite and >= 0 (or unset for the default)",
+                                 in.source, *in.damping));
+  if (!(in.dt_safety > 0 && in.dt_safety < 1) && (in.dt == 0 || in.mass_scaling > 0))
+    throw ModelError(fmt::format("{}: dt safety factor {} must be in (0, 1)", in.source, in.dt_safety));
+  if (!(in.mass_scaling >= 0 && in.mass_scaling < 1))
+    throw ModelError(fmt::format("{}: mass scaling budget {} must be in [0, 1) (a fraction of the total mass)",
+                                 in.source, in.mass_scaling));
+}
 
+/// Each element's stable step and mass, for mass scaling (build_model's geometry step fills them).
+struct ElementSteps {
+  std::vector<double> dt;     ///< L_e / c_e (s)
+  std::vector<double> rho_V;  ///< rho_e V_e (kg)
+};
+
+/// build_model's geometry step: corners, volumes (inverted tets reoriented), shape gradients, materials,
+/// lumped masses, each element's stable step and dt_crit; `uses` counts each node's elements.
+ElementSteps element_geometry(const ModelInput& in, TissueModel<double>& m, std::vector<index_t>& uses) {
+  const index_t n = m.n_nodes, ne = m.n_elems;
   m.X.resize(3 * n);
   for (index_t i = 0; i < n; ++i)
     for (int c = 0; c < 3; ++c) m.X[c * n + i] = in.nodes[3 * i + c];
-
   m.elem_nodes.resize(4 * ne);
   m.dndx.resize(12 * ne);
   m.volume.resize(ne);
   m.mu.resize(ne);
   m.K.resize(ne);
   m.mass.assign(n, 0.0);
-  m.node_flags.assign(n, 0);
-  m.ianp = in.ianp;
   m.dt_crit = std::numeric_limits<double>::infinity();
-  std::vector<index_t> uses(n, 0);
-  std::vector<double> dt_elem(ne), rho_V(ne);  // for mass scaling
+  uses.assign(n, 0);
+  ElementSteps steps{std::vector<double>(ne), std::vector<double>(ne)};
   for (index_t e = 0; e < ne; ++e) {
     index_t c[4];
     for (int a = 0; a < 4; ++a) {
@@ -441,16 +459,21 @@ TissueModel<double> build_model(const ModelInput& in) {
     m.mu[e] = p.mu;
     m.K[e] = p.K;
     m.total_mass += p.rho * V;
-    const double dt_e = element_time_step(X, V, p, in.ianp);
-    dt_elem[e] = dt_e;
-    rho_V[e] = p.rho * V;
-    if (dt_e < m.dt_crit) {
-      m.dt_crit = dt_e;
+    steps.dt[e] = element_time_step(X, V, p, in.ianp);
+    steps.rho_V[e] = p.rho * V;
+    if (steps.dt[e] < m.dt_crit) {
+      m.dt_crit = steps.dt[e];
       m.dt_crit_elem = e;
     }
   }
-  check_duplicates(in, ne);
-  fill_law_terms(in, m);
+  return steps;
+}
+
+/// build_model's adjacency step: every node used (its flags from the fixed masks), the node -> (element,
+/// corner) lists sorted by element for a deterministic gather, and each corner's slot in them.
+void node_adjacency(const ModelInput& in, TissueModel<double>& m, const std::vector<index_t>& uses) {
+  const index_t n = m.n_nodes, ne = m.n_elems;
+  m.node_flags.assign(n, 0);
   for (index_t i = 0; i < n; ++i)
     if (uses[i] == 0)
       throw ModelError(fmt::format("{}: node {} belongs to no element (every node needs mass)", in.source, i));
@@ -458,8 +481,6 @@ TissueModel<double> build_model(const ModelInput& in) {
       m.node_flags[i] |= kFixed;
     else if (!in.fixed_axes.empty())
       m.node_flags[i] |= std::uint8_t(in.fixed_axes[i] << 2);
-
-  // node -> (element, corner) lists, sorted by element for a deterministic gather
   m.node_elem_start.assign(n + 1, 0);
   for (index_t i = 0; i < n; ++i) m.node_elem_start[i + 1] = m.node_elem_start[i] + uses[i];
   m.node_elem.resize(4 * ne);
@@ -469,45 +490,39 @@ TissueModel<double> build_model(const ModelInput& in) {
   m.elem_slot.resize(4 * size_t(ne));
   for (size_t k = 0; k < m.node_elem.size(); ++k)
     m.elem_slot[size_t(incident_corner(m.node_elem[k])) * ne + incident_element(m.node_elem[k])] = static_cast<index_t>(k);
+}
 
-  // IANP where materials of different K meet: an element's pressure comes from its corners' K_a
-  // (node_bulk_moduli), so its stable step is that of the stiffest corner's K
-  if (m.ianp && in.materials.size() > 1) {
-    const std::vector<double> node_K = node_bulk_moduli(m);
-    for (index_t e = 0; e < ne; ++e) {
-      double K = m.K[e];
-      for (int a = 0; a < 4; ++a) K = std::max(K, node_K[m.elem_nodes[a * ne + e]]);
-      if (!(K > m.K[e])) continue;
-      Vec3<double> X[4];
-      for (int a = 0; a < 4; ++a) X[a] = node_pos(in.nodes, m.elem_nodes[a * ne + e]);
-      const index_t mat = in.elem_material.empty() ? 0 : in.elem_material[e];
-      dt_elem[e] = element_time_step(X, m.volume[e], {in.materials[mat].mu, K, in.materials[mat].rho}, true);
-      if (dt_elem[e] < m.dt_crit) {
-        m.dt_crit = dt_elem[e];
-        m.dt_crit_elem = e;
-      }
+/// IANP where materials of different K meet: an element's pressure comes from its corners' K_a
+/// (node_bulk_moduli), so its stable step is that of the stiffest corner's K.
+void interface_steps(const ModelInput& in, TissueModel<double>& m, ElementSteps& steps) {
+  if (!m.ianp || in.materials.size() <= 1) return;
+  const index_t ne = m.n_elems;
+  const std::vector<double> node_K = node_bulk_moduli(m);
+  for (index_t e = 0; e < ne; ++e) {
+    double K = m.K[e];
+    for (int a = 0; a < 4; ++a) K = std::max(K, node_K[m.elem_nodes[a * ne + e]]);
+    if (!(K > m.K[e])) continue;
+    Vec3<double> X[4];
+    for (int a = 0; a < 4; ++a) X[a] = node_pos(in.nodes, m.elem_nodes[a * ne + e]);
+    const index_t mat = in.elem_material.empty() ? 0 : in.elem_material[e];
+    steps.dt[e] = element_time_step(X, m.volume[e], {in.materials[mat].mu, K, in.materials[mat].rho}, true);
+    if (steps.dt[e] < m.dt_crit) {
+      m.dt_crit = steps.dt[e];
+      m.dt_crit_elem = e;
     }
   }
+}
 
-  extract_surface(m);
-
-  if (in.dt < 0 || std::isnan(in.dt))
-    throw ModelError(fmt::format("{}: time step dt = {} s must be > 0 (or 0 for the default)", in.source, in.dt));
-  if (in.damping && !(*in.damping >= 0 && std::isfinite(*in.damping)))
-    throw ModelError(fmt::format("{}: damping alpha = {} 1/s must be finite and >= 0 (or unset for the default)",
-                                 in.source, *in.damping));
-  if (!(in.dt_safety > 0 && in.dt_safety < 1) && (in.dt == 0 || in.mass_scaling > 0))
-    throw ModelError(fmt::format("{}: dt safety factor {} must be in (0, 1)", in.source, in.dt_safety));
+/// build_model's time step: the requested or safe dt, selective mass scaling within its budget, the
+/// damping, and the central difference's constants.
+void choose_time_step(const ModelInput& in, TissueModel<double>& m, const ElementSteps& steps) {
   m.dt_crit_physical = m.dt_crit;
   if (in.dt == 0) check_step_count(in, m, in.dt_safety);
   double dt = in.dt > 0 ? in.dt : in.dt_safety * m.dt_crit;
-  if (!(in.mass_scaling >= 0 && in.mass_scaling < 1))
-    throw ModelError(fmt::format("{}: mass scaling budget {} must be in [0, 1) (a fraction of the total mass)",
-                                 in.source, in.mass_scaling));
   if (in.mass_scaling > 0) {
     MassScaling ms;
     if (in.dt > 0) {  // lift every element to the requested step
-      ms = mass_needed(dt_elem, rho_V, in.dt / in.dt_safety);
+      ms = mass_needed(steps.dt, steps.rho_V, in.dt / in.dt_safety);
       if (ms.added_mass > in.mass_scaling * m.total_mass)
         throw ModelError(fmt::format(
             "{}: time step dt = {:.6g} s is above the stable limit dt_crit = {:.6g} s set by element {} "
@@ -516,15 +531,16 @@ TissueModel<double> build_model(const ModelInput& in) {
             in.source, in.dt, m.dt_crit, m.dt_crit_elem, ms.need, 100 * ms.added_mass / m.total_mass,
             ms.scaled_elems, 100 * in.mass_scaling));
     } else if (in.tick > 0) {
-      ms = choose_mass_scaling(dt_elem, rho_V, in.tick, in.dt_safety, in.mass_scaling);
+      ms = choose_mass_scaling(steps.dt, steps.rho_V, in.tick, in.dt_safety, in.mass_scaling);
       dt = ms.dt;
     } else {
       throw ModelError(fmt::format("{}: mass scaling needs a haptic tick or an explicit dt to aim at", in.source));
     }
     if (ms.scaled_elems > 0) {
+      const index_t ne = m.n_elems;
       for (index_t e = 0; e < ne; ++e)
-        if (const double s_e = density_scale(dt_elem[e], ms.need); s_e > 1)
-          for (int a = 0; a < 4; ++a) m.mass[m.elem_nodes[a * ne + e]] += (s_e - 1) * rho_V[e] / 4;
+        if (const double s_e = density_scale(steps.dt[e], ms.need); s_e > 1)
+          for (int a = 0; a < 4; ++a) m.mass[m.elem_nodes[a * ne + e]] += (s_e - 1) * steps.rho_V[e] / 4;
       m.dt_crit = ms.need;  // every scaled element now has dt_e = need; the others had more
       m.added_mass = ms.added_mass;
       m.scaled_elems = ms.scaled_elems;
@@ -537,6 +553,24 @@ TissueModel<double> build_model(const ModelInput& in) {
   } catch (const ModelError& err) {
     throw ModelError(in.source + ": " + err.what());
   }
+}
+
+}  // namespace
+
+TissueModel<double> build_model(const ModelInput& in) {
+  check_input(in);
+  TissueModel<double> m;
+  m.n_nodes = static_cast<index_t>(in.nodes.size() / 3);
+  m.n_elems = static_cast<index_t>(in.tets.size() / 4);
+  m.ianp = in.ianp;
+  std::vector<index_t> uses;
+  ElementSteps steps = element_geometry(in, m, uses);
+  check_duplicates(in, m.n_elems);
+  fill_law_terms(in, m);
+  node_adjacency(in, m, uses);
+  interface_steps(in, m, steps);
+  extract_surface(m);
+  choose_time_step(in, m, steps);
   return m;
 }
 

@@ -85,22 +85,7 @@ bool Overlay::wants_mouse() const { return ImGui::GetIO().WantCaptureMouse; }
 
 void Overlay::panel_rect(float r[4]) const { std::copy_n(rect_, 4, r); }
 
-OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, const std::string& status, int w, int h,
-                             const DisplayState& display) {
-  OverlayActions act;
-  if (!editing_) edit_ = s.params;
-  ImGui_ImplOpenGL3_NewFrame();
-  if (glfw_) {
-    ImGui_ImplGlfw_NewFrame();
-  } else {
-    ImGuiIO& io = ImGui::GetIO();
-    io.DisplaySize = ImVec2(float(w), float(h));
-    io.DeltaTime = 1.0f / 60;
-  }
-  ImGui::NewFrame();
-  ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_Always);
-  ImGui::SetNextWindowSize(ImVec2(500, 0), ImGuiCond_Always);
-  ImGui::Begin("tissue", nullptr, ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse);
+void Overlay::show_status(const OverlayFacts& f, const HapticSnapshot& s) {
   const HapticStats& st = s.stats;
   row("backend", fmt::format("{} ({})", f.backend, to_string(s.params.precision)));
   row("device", f.device_name);
@@ -136,14 +121,9 @@ OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, con
                                                s.region.n_halo, s.region.n_elems,
                                                s.params.depth == kDepthAuto ? "auto, " : "", s.region.depth));
   row("time", fmt::format("{:.3f} s simulated, max |u| {:.2f} mm", s.time, 1e3 * s.max_disp));
-  if (display.forces) force_plot(*display.forces);
-  ImGui::Separator();
-  const FieldKind shown = display.field ? display.field->kind : FieldKind::None;
-  int field = int(shown);
-  if (ImGui::Combo("surface", &field, "organ\0|u| displacement\0pressure\0J = det F\0"))
-    act.field = static_cast<FieldKind>(field);
-  if (shown != FieldKind::None) legend(*display.field);
-  ImGui::Separator();
+}
+
+bool Overlay::edit_material(const OverlayFacts& f) {
   bool changed = false;
   const double nu_min = 0.0, nu_max = 0.499;
   if (!f.uniform_material && edit_.E <= 0) ImGui::TextDisabled("E, nu: the scene's %s", "materials (several sets)");
@@ -172,8 +152,13 @@ OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, con
       ImGui::PopID();
     }
   }
+  return changed;
+}
+
+bool Overlay::edit_region_and_precision() {
   // the region: adaptive (grows until its front barely moves), the whole
   // mesh, or a fixed number of rings around the contact triangle
+  bool changed = false;
   int mode = edit_.depth == kDepthAuto ? 0 : edit_.depth == kDepthAll ? 1 : 2;
   int rings = mode == 2 ? edit_.depth : 5;
   changed |= ImGui::Combo("region", &mode, "auto\0whole mesh\0rings\0");
@@ -184,7 +169,37 @@ OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, con
   int precision = edit_.precision == Precision::Float ? 0 : 1;
   changed |= ImGui::Combo("precision", &precision, "float\0double\0");
   edit_.precision = precision == 0 ? Precision::Float : Precision::Double;
-  editing_ = editing_ || changed;
+  return changed;
+}
+
+OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, const std::string& status, int w, int h,
+                             const DisplayState& display) {
+  OverlayActions act;
+  if (!editing_) edit_ = s.params;
+  ImGui_ImplOpenGL3_NewFrame();
+  if (glfw_) {
+    ImGui_ImplGlfw_NewFrame();
+  } else {
+    ImGuiIO& io = ImGui::GetIO();
+    io.DisplaySize = ImVec2(float(w), float(h));
+    io.DeltaTime = 1.0f / 60;
+  }
+  ImGui::NewFrame();
+  ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_Always);
+  ImGui::SetNextWindowSize(ImVec2(500, 0), ImGuiCond_Always);
+  ImGui::Begin("tissue", nullptr, ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse);
+  show_status(f, s);
+  if (display.forces) force_plot(*display.forces);
+  ImGui::Separator();
+  const FieldKind shown = display.field ? display.field->kind : FieldKind::None;
+  int field = int(shown);
+  if (ImGui::Combo("surface", &field, "organ\0|u| displacement\0pressure\0J = det F\0"))
+    act.field = static_cast<FieldKind>(field);
+  if (shown != FieldKind::None) legend(*display.field);
+  ImGui::Separator();
+  const bool material = edit_material(f);
+  const bool region = edit_region_and_precision();
+  editing_ = editing_ || material || region;
   if (ImGui::Button("Apply (rebuild)")) {
     act.apply = edit_;
     editing_ = false;
