@@ -1,4 +1,4 @@
-// Palpation (issue 11's example, docs/meshing.md): a block with a spherical
+// Palpation (docs/meshing.md): a block with a spherical
 // tumour stiffer than the tissue, meshed conformingly (io/organ_mesher: the
 // tumour its own element set and material), and a line scan of the tool
 // across the top above it: at each point the tool is pressed a fixed depth

@@ -1,4 +1,4 @@
-// tissue palpate: issue 11's palpation example (accuracy/palpation.hpp): a
+// tissue palpate: the palpation example (accuracy/palpation.hpp): a
 // line scan of the tool over a block with a stiff spherical tumour, and the
 // same scan without it; a table, optional JSON and a PNG.
 #include <fmt/format.h>

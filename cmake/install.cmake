@@ -3,14 +3,14 @@
 # libraries with theirs (under include/tissue/engine, for hosts that drive
 # the Scheduler themselves), and the CMake package: find_package(Tissue
 # CONFIG [COMPONENTS cuda]) gives Tissue::tissue, Tissue::core, Tissue::cpu,
-# Tissue::scene, Tissue::io, Tissue::backends, Tissue::session and, when the build had the
+# Tissue::scene, Tissue::io, Tissue::backends, Tissue::session, Tissue::haptics and, when the build had the
 # CUDA backend, Tissue::cuda.
 include(CMakePackageConfigHelpers)
 set(TISSUE_CMAKE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/Tissue)
 set(TISSUE_ENGINE_INCLUDE ${CMAKE_INSTALL_INCLUDEDIR}/tissue/engine)
 
-set(_tissue_engine tissue_core tissue_cpu tissue_scene tissue_io tissue_backends tissue_session)
-set(_tissue_engine_dirs core cpu scene io backends session)
+set(_tissue_engine tissue_core tissue_cpu tissue_scene tissue_io tissue_backends tissue_session tissue_haptics)
+set(_tissue_engine_dirs core cpu scene io backends session haptics)
 if(TISSUE_HAVE_CUDA)
   list(APPEND _tissue_engine tissue_cuda)
   list(APPEND _tissue_engine_dirs cuda)

@@ -11,7 +11,7 @@
 // O(surface nodes) when anything may have moved (the first query, after
 // invalidate()); otherwise only the nodes the caller says can have moved
 // since the last check -- the region's, since nodes outside it are held --
-// are checked: O(region), not O(surface), per query (issue 14: a 100k
+// are checked: O(region), not O(surface), per query (a 100k
 // triangle surface spent half its contact step in the full check). A query is an axis-aligned box: Embree's point query
 // (a sphere enclosing the box) walks the BVH, and each primitive it reports
 // is kept when its fattened box overlaps the query box.

@@ -1,4 +1,4 @@
-// A persistent team of threads for the cpu backend's TLED steps (issue 14).
+// A persistent team of threads for the cpu backend's TLED steps.
 // TBB's parallel_for forks and joins once per pass; on the kidney (8,576
 // elements) four passes of 10-40 us each spend much of their time in that
 // fork/join, so 16 threads barely beat 2. The team instead starts its

@@ -315,8 +315,7 @@ __device__ __forceinline__ SurfaceNodeModel<T> load_surface_node(const ModelView
 /// went from 10.9 to 6.7 us per step on an H100.) The node's state is loaded
 /// before the first store (a load after a store waits for it: the compiler
 /// cannot tell the arrays apart), so after the previous kernel the chain is
-/// the state, then the proposals: two round trips to memory (about seven
-/// before 2026-11-26).
+/// the state, then the proposals: two round trips to memory.
 template <class T>
 __device__ void merge_loaded_node(const StateView<T>& s, const ContactTools<T>& tools, int k, Packed3<T>* u,
                                   Packed3<T>* u_next, const SurfaceNodeModel<T>& n, const index_t* surf_slot) {
@@ -405,11 +404,10 @@ __device__ __forceinline__ void copy_tools(const ContactTools<T>* tools, Contact
 /// every tool), then the block's triangles that may touch are swept by
 /// groups of kSweepLanes lanes (SweepLanes), the groups dealt to the
 /// block's warps in turn. One thread's sweep of a touching triangle was the
-/// longest chain of the contact stage (2026-11-27, docs/cuda.md). The merge
+/// longest chain of the contact stage (docs/cuda.md). The merge
 /// may launch only once this kernel's wait is over: launched as the sweep
 /// started, its blocks waited on the multiprocessors beside the force
-/// pass's (the kidney's ticks 2.7-3.9 % shorter; docs/cuda.md, "The sweep
-/// lets the merge launch after its wait"). The triangle's corners' roles load
+/// pass's (the kidney's ticks are 2.7-3.9 % shorter so). The triangle's corners' roles load
 /// before the wait with its model part (load_corner_roles).
 ///
 /// Its blocks of 256 are compiled to fit three an SM in float (80

@@ -684,7 +684,7 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
 /// kPressureElements slots are loaded before the wait for pass 1; the same
 /// sums as nodal_pressure_at. (Written once with nodal_pressure_kernel as
 /// the L = 1 case, both compiled to different code and the float and
-/// double steps ran 0.3-2 % slower on an H100, 2026-11-28; kept apart.)
+/// double steps ran 0.3-2 % slower on an H100: kept apart.)
 template <class T, int L>
 __global__ void nodal_pressure_lanes_kernel(ModelView<T> m, StateView<T> s, RegionView r) {
   constexpr int P = kNodeLanes / L;
@@ -862,7 +862,7 @@ __global__ void __launch_bounds__(kPackedBlock)
 /// element outside the region, the slot's own value (zero since the
 /// region's build, clear_outside_forces_kernel; returning the zero without
 /// the load made the kidney's whole-mesh steps 1.5 % slower on an H100,
-/// docs/cuda.md, "Review mends"); lane 0 of the node's group ends pass 4. The computed
+/// docs/cuda.md, "The fused force pass stores no slots"); lane 0 of the node's group ends pass 4. The computed
 /// forces stay in shared memory: no pass reads them from the slots (a
 /// separate pass 4 reads the slots its own pass 3 wrote; Backend::node_update
 /// refuses to run without one), and not storing them made the kidney's
@@ -885,10 +885,8 @@ __global__ void __launch_bounds__(kPackedBlock, kPackedForceMinBlocks<T>)
 /// Queues passes 1 and 2 over region r at displacements u as the steps run
 /// them: one kernel on a small region (fuses_pressures), else the two; with
 /// programmatic dependent launch, for the steps and for the reduction alike
-/// (the reduction's were plain launches until 2026-11-27: chained, a
-/// one-step advance_reduce on the slabs of `tissue bench`'s contact_step is
-/// 0.7-2 us shorter on an H100; docs/cuda.md, "The reduction's passes
-/// chained").
+/// (chained, a one-step advance_reduce on the slabs of `tissue bench`'s
+/// contact_step is 0.7-2 us shorter on an H100 than with plain launches).
 template <class T>
 void enqueue_pressures(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, const Packed3<T>* u,
                        cudaStream_t stream) {

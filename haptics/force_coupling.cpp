@@ -1,4 +1,4 @@
-#include "core/force_coupling.hpp"
+#include "haptics/force_coupling.hpp"
 
 #include <fmt/format.h>
 

@@ -1,4 +1,4 @@
-#include "core/haptic_loop.hpp"
+#include "haptics/haptic_loop.hpp"
 
 #include <fmt/format.h>
 

@@ -1,6 +1,6 @@
 // The haptic loop (docs/design.md section 3, "Loops"): its own thread runs one
 // Scheduler tick per period (1 ms) on a steady clock, with the tool driven
-// through the virtual coupling of core/force_coupling.hpp.
+// through the virtual coupling of haptics/force_coupling.hpp.
 //
 // Timing. Deadline k is t0 + k T (T = the scheduler's tick); the thread
 // sleeps until it (std::this_thread::sleep_until on steady_clock), runs the
@@ -49,8 +49,9 @@
 #include <vector>
 
 #include "core/backend.hpp"
-#include "core/force_coupling.hpp"
+#include "haptics/force_coupling.hpp"
 #include "core/scheduler.hpp"
+#include "session/engine.hpp"
 
 namespace tissue {
 
@@ -67,16 +68,9 @@ struct LiveParams {
   double prony_g[kMaxProny] = {}, prony_tau[kMaxProny] = {};
 };
 
-/// What the haptic loop runs: the model, a backend holding it, and the
-/// scheduler over both (built together, destroyed together).
-struct Engine {
-  std::unique_ptr<TissueModel<double>> model;
-  std::unique_ptr<Backend> backend;
-  std::unique_ptr<Scheduler> scheduler;
-};
-
-/// Builds an Engine for the parameters (the app supplies it: scene ->
-/// model -> backend -> scheduler). Throws, with a message naming the rule
+/// Builds the Engine the loop runs (session/engine.hpp: the model, a backend
+/// holding it, the Scheduler over both; built together, destroyed together)
+/// for the parameters (the app supplies it, with build_engine). Throws, with a message naming the rule
 /// broken, for parameters it cannot use.
 using EngineFactory = std::function<Engine(const LiveParams&)>;
 

@@ -2155,8 +2155,7 @@ TYPED_TEST(MergeCorner, ObtuseProposalsAreApproachedPassByPass) {
 }
 
 // merge_proposals ends its passes once one leaves the state's bits as they
-// were. Against the passes written out in full (kMergePasses of them, as
-// before 2026-11-26), on random proposal lists -- near-parallel ones,
+// were. Against the passes written out in full (kMergePasses of them), on random proposal lists -- near-parallel ones,
 // scattered ones with obtuse pairs, zero and blocked ones among them --
 // the same bits, in both the looped and the unrolled merge; and a node
 // pushed by proposals within 90 degrees of each other is nearly always done

@@ -1,4 +1,4 @@
-// Force rendering through the virtual coupling (core/force_coupling.hpp):
+// Force rendering through the virtual coupling (haptics/force_coupling.hpp):
 // parameter checks, the clamp, the coupling's response to a jump of the
 // tissue force (bounded increment per period, then convergence to the tissue
 // force), a closed loop against a wall whose force jumps at contact, and a
@@ -15,7 +15,7 @@
 
 #include "backends/registry.hpp"
 #include "core/box_mesh.hpp"
-#include "core/force_coupling.hpp"
+#include "haptics/force_coupling.hpp"
 #include "core/scheduler.hpp"
 
 namespace tissue {

@@ -1,4 +1,4 @@
-// The haptic loop (core/haptic_loop.hpp): synchronous ticks, the haptic
+// The haptic loop (haptics/haptic_loop.hpp): synchronous ticks, the haptic
 // thread's start/stop, snapshots, tasks posted by the display, parameter
 // changes applied between ticks (and refused ones), late-tick detection with
 // a deliberately slow backend, and a solver failure. No assertion depends on
@@ -15,7 +15,7 @@
 
 #include "backends/registry.hpp"
 #include "core/box_mesh.hpp"
-#include "core/haptic_loop.hpp"
+#include "haptics/haptic_loop.hpp"
 
 #if defined(__SANITIZE_THREAD__)
 #include <tbb/global_control.h>

@@ -1,4 +1,4 @@
-// Stability at the extremes (issue 4, item 5). A box of tissue on a fixed
+// Stability at the extremes. A box of tissue on a fixed
 // base is pressed by the Scheduler's tool (approach, press, hold) on the cpu
 // backend; for each extreme case the engine either runs stably -- no NaN,
 // the total energy (kinetic + strain, tracked per tick in TickReport and the

@@ -38,7 +38,7 @@
 #include "apps/viewer/path_device.hpp"
 #include "apps/viewer/session.hpp"
 #include "apps/viewer/soak_device.hpp"
-#include "core/haptic_loop.hpp"
+#include "haptics/haptic_loop.hpp"
 #include "io/atomic_file.hpp"
 
 namespace {

@@ -12,7 +12,7 @@
 #include <string>
 
 #include "apps/viewer/field_view.hpp"
-#include "core/haptic_loop.hpp"
+#include "haptics/haptic_loop.hpp"
 
 struct GLFWwindow;
 
@@ -56,6 +56,13 @@ class Overlay {
   void panel_rect(float r[4]) const;
 
  private:
+  /// The rows of what runs, how fast and what each tool feels.
+  static void show_status(const OverlayFacts& f, const HapticSnapshot& s);
+  /// The material controls (E, nu, fibre, Prony) on edit_; true when one changed.
+  bool edit_material(const OverlayFacts& f);
+  /// The region and precision controls on edit_; true when one changed.
+  bool edit_region_and_precision();
+
   bool glfw_ = false;
   bool editing_ = false;  ///< the controls hold the user's values, not the running ones
   LiveParams edit_;

@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "apps/viewer/camera.hpp"
-#include "core/haptic_loop.hpp"
+#include "haptics/haptic_loop.hpp"
 
 namespace tissue::viewer {
 

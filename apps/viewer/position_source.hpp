@@ -17,7 +17,7 @@
 #include <string>
 
 #include "apps/viewer/renderer.hpp"
-#include "core/haptic_loop.hpp"
+#include "haptics/haptic_loop.hpp"
 
 namespace tissue::viewer {
 

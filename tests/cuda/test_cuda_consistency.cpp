@@ -1,4 +1,4 @@
-// Cross-backend consistency (docs/design.md section 5; issue 3 item 4): the same
+// Cross-backend consistency (docs/design.md section 5): the same
 // scene (a box, and the default kidney of io/kidney.hpp; each with a depth-N
 // region and the whole mesh) driven through core Scheduler by the same
 // ScriptedDevice path on the cpu and the cuda backend, tick by tick, in
@@ -12,7 +12,7 @@
 // equal within the tolerance below; equilibrium first reached within +-1 tick.
 //
 // Tolerances (relative to the largest displacement / reaction of the run),
-// measured on an NVIDIA H200 (docs/cuda.md has the table). Both backends run
+// measured on NVIDIA GPUs (docs/cuda.md, "Cross-backend consistency"). Both backends run
 // the same core functions over the same element orders; what differs is
 // rounding: nvcc contracts a * b + c into FMAs (so does the cpu backend's
 // AVX2 / AVX-512 element kernels, not its SSE2 fallback nor its node loops),

@@ -28,7 +28,7 @@ TEST(FloatMath, KernelsDivideAndTakeRootsAsTheBuildSays) {
     EXPECT_GT(p.sqrt_differ, 0);
     // x/y with -prec-div=false: 2 ulp, the CUDA C++ Programming Guide's bound (its table of
     // single-precision functions), reached on an H100; sqrtf with -prec-sqrt=false: 1 ulp measured there
-    // (2026-11-28, these operands), the bound leaving one more
+    // (these operands), the bound leaving one more
     EXPECT_LE(p.div_ulps_max, 2);
     EXPECT_LE(p.sqrt_ulps_max, 2);
   } else {
