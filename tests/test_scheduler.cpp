@@ -232,7 +232,7 @@ TEST(SchedulerTools, BadToolSettingsAreRefusedByName) {
     return refusal([&] { Scheduler sched(*backend, m, s); });
   };
   EXPECT_NE(with({{"probe", 0.0, 0}, {0, 0, 1}}).find("tool 'probe': radius = 0 m must be finite and > 0"), std::string::npos);
-  EXPECT_NE(with({{"probe", -1e-3, 0}, {0, 0, 1}}).find("must be > 0"), std::string::npos);
+  EXPECT_NE(with({{"probe", -1e-3, 0}, {0, 0, 1}}).find("must be finite and > 0"), std::string::npos);
   EXPECT_NE(with({{"big", 0.05, 0}, {0, 0, 1}}).find("tool 'big': radius = 0.05 m is larger than the body (its largest "
                                                       "extent is 0.04 m)"),
             std::string::npos);

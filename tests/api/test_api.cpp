@@ -17,26 +17,13 @@
 #include "io/kidney.hpp"
 #include "scene/validate.hpp"
 #include "tissue/simulation.hpp"
+#include "tests/api/api_test_support.hpp"
 
 namespace {
 
 using tissue::Simulation;
-
-/// A 20 x 20 x 10 mm block of 6 x 6 x 3 cells, its base fixed; one tool.
-tissue::MeshScene block(double E) {
-  tissue::ModelInput in;
-  tissue::box_mesh(in, 6, 6, 3, 0.02, 0.02, 0.01);
-  tissue::MeshScene m;
-  m.name = "block";
-  m.nodes = in.nodes;
-  m.tets.assign(in.tets.begin(), in.tets.end());
-  m.youngs_modulus = E;
-  m.poisson_ratio = 0.4;
-  for (int j = 0; j <= 6; ++j)
-    for (int i = 0; i <= 6; ++i) m.fixed_nodes.push_back(tissue::box_node(6, 6, i, j, 0));
-  m.tool_radii = {4e-3};
-  return m;
-}
+using tissue::test::block;
+using tissue::test::thrown;
 
 /// Presses the block's top centre `depth` deep over 200 ticks, holds for
 /// `hold` ticks; returns the force on the tool.
@@ -48,16 +35,6 @@ tissue::Vector3 press(Simulation& sim, double depth, int hold) {
     sim.step();
   }
   return sim.force(0);
-}
-
-template <class F>
-std::string thrown(F&& f) {
-  try {
-    f();
-  } catch (const std::exception& e) {
-    return e.what();
-  }
-  return "(nothing thrown)";
 }
 
 TEST(Facade, RunsTheKidneyExactlyAsTheScheduler) {

@@ -16,6 +16,7 @@
 #include "session/scene_batch.hpp"
 #include "tissue/batch.hpp"
 #include "tissue/simulation.hpp"
+#include "tests/api/api_test_support.hpp"
 
 namespace {
 
@@ -23,35 +24,11 @@ using tissue::Batch;
 using tissue::BatchScene;
 using tissue::Field;
 using tissue::Simulation;
-
-/// A 20 x 20 x 10 mm block of 6 x 6 x 3 cells, its base fixed; `tools` tools.
-tissue::MeshScene block(double E, int tools = 1) {
-  tissue::ModelInput in;
-  tissue::box_mesh(in, 6, 6, 3, 0.02, 0.02, 0.01);
-  tissue::MeshScene m;
-  m.name = "block";
-  m.nodes = in.nodes;
-  m.tets.assign(in.tets.begin(), in.tets.end());
-  m.youngs_modulus = E;
-  m.poisson_ratio = 0.4;
-  for (int j = 0; j <= 6; ++j)
-    for (int i = 0; i <= 6; ++i) m.fixed_nodes.push_back(tissue::box_node(6, 6, i, j, 0));
-  m.tool_radii.assign(std::size_t(tools), 4e-3);
-  return m;
-}
+using tissue::test::block;
+using tissue::test::thrown;
 
 /// A block finer than block(): another mesh.
-tissue::MeshScene fine_block(double E) {
-  tissue::ModelInput in;
-  tissue::box_mesh(in, 8, 8, 4, 0.02, 0.02, 0.01);
-  tissue::MeshScene m = block(E);
-  m.nodes = in.nodes;
-  m.tets.assign(in.tets.begin(), in.tets.end());
-  m.fixed_nodes.clear();
-  for (int j = 0; j <= 8; ++j)
-    for (int i = 0; i <= 8; ++i) m.fixed_nodes.push_back(tissue::box_node(8, 8, i, j, 0));
-  return m;
-}
+tissue::MeshScene fine_block(double E) { return block(E, 1, 8); }
 
 BatchScene mesh(const tissue::MeshScene& m) {
   return {"", {}, m};
@@ -222,16 +199,6 @@ TEST_P(BatchEquals, MaterialChangesEqualTheSceneWithThatMaterial) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, BatchEquals, testing::ValuesIn(configs()), config_name);
-
-template <class F>
-std::string thrown(F&& f) {
-  try {
-    f();
-  } catch (const std::exception& e) {
-    return e.what();
-  }
-  return "(nothing thrown)";
-}
 
 // Forces are scenes x the most tools x 3, zero past a scene's own tools; fields are scenes x nodes x 3.
 TEST(Batch, ArraysHaveTheBatchLayout) {
