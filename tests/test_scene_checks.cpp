@@ -2,7 +2,8 @@
 // (scene/checks.hpp): no support, every node fixed, a tick longer than the
 // tool path or far from 1 ms, many steps per tick with their cause, a
 // material more incompressible than the precision resolves, and the work
-// estimate.
+// estimate; and the mesh box that tool reach is measured in
+// (scene/validate.hpp).
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
@@ -123,6 +124,14 @@ TEST(SceneChecks, IncompressibilityBeyondThePrecision) {
   s.materials.front().b = 0.49;
   s.solver.precision = Precision::Float;
   EXPECT_TRUE(incompressibility_findings(s).empty());
+}
+
+TEST(SceneChecks, MeshBoxMeasuresTheToolReach) {
+  const std::vector<double> nodes = {0, 0, 0, 3, 4, 0, 1, 1, 12};
+  const MeshBox b = mesh_box(nodes);
+  EXPECT_EQ(b.size, 13);
+  EXPECT_EQ(b.distance({1, 1, 1}), 0);
+  EXPECT_EQ(b.distance({-3, 8, 6}), 5);  // 3 below x, 4 beyond y
 }
 
 }  // namespace

@@ -215,3 +215,12 @@ def test_loads_are_held_by_the_fixed_base():
         sim.set_loads(top, np.zeros(len(top)))
     with pytest.raises(ValueError, match="out of range"):
         sim.set_loads([10 ** 6], [[1.0, 0.0, 0.0]])
+
+
+def test_tool_poses_far_from_the_mesh_are_refused_as_scenes_refuse_waypoints():
+    sim = block(backend="cpu")  # 20 x 20 x 10 mm: 30 mm across, so 1000 x is 30 m
+    with pytest.raises(ValueError, match=r"tool 0 \('tool0'\) tip \(0.01, 0.01, 1e\+300\) m is 1e\+300 m from the "
+                                         r"mesh, more than 1000 x its size \(0\.03 m\) = 30 m"):
+        sim.set_tool_pose(0, [0.01, 0.01, 1e300])
+    sim.set_tool_pose(0, [0.01, 0.01, 20.0])  # far, but within reach
+    sim.step()
