@@ -224,3 +224,17 @@ def test_tool_poses_far_from_the_mesh_are_refused_as_scenes_refuse_waypoints():
         sim.set_tool_pose(0, [0.01, 0.01, 1e300])
     sim.set_tool_pose(0, [0.01, 0.01, 20.0])  # far, but within reach
     sim.step()
+
+
+def test_reoriented_tets_are_reported():
+    nodes, tets = tissue.box_mesh(2, 2, 2, (0.01, 0.01, 0.01))
+    fixed = [0, 1, 2]
+    assert not any("reoriented" in w for w in tissue.Simulation.from_mesh(nodes, tets, fixed=fixed).warnings)
+    flipped = tets.copy()
+    flipped[:5, [1, 2]] = flipped[:5, [2, 1]]
+    sim = tissue.Simulation.from_mesh(nodes, flipped, fixed=fixed)
+    assert [w for w in sim.warnings if "reoriented" in w] == [
+        f"<mesh>: 5 of {len(tets)} tetrahedra had a negative volume and were reoriented (corners 1 and 2 swapped); "
+        "check the corner order the mesh was written with"]
+    P = sim.rest_positions[sim.tetrahedra]
+    assert (np.einsum("ij,ij->i", np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), P[:, 3] - P[:, 0]) > 0).all()
