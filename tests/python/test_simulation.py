@@ -4,12 +4,14 @@ Checks that can fail: the reference mesh is a zero-copy read-only view, a
 host's mesh presses back with the force a Neo-Hookean body must give (it
 doubles with E; the Hertz closed form bounds a sphere's press on a block),
 fields have their shapes and meanings, a meshed surface keeps its volume,
-and misuse raises ValueError / RuntimeError naming the value.
+misuse raises ValueError / RuntimeError naming the value, and Python
+threads sharing a simulation take turns.
 """
 import math
 import os
 import subprocess
 import sys
+import threading
 
 import numpy as np
 import pytest
@@ -215,6 +217,65 @@ def test_loads_are_held_by_the_fixed_base():
         sim.set_loads(top, np.zeros(len(top)))
     with pytest.raises(ValueError, match="out of range"):
         sim.set_loads([10 ** 6], [[1.0, 0.0, 0.0]])
+
+
+def pulled_block():
+    """A block whose top is pulled up by a constant load: every tick changes the displacement."""
+    sim = block(backend="cpu", precision="double")
+    top = np.array([tissue.box_node(6, 6, i, j, 3) for j in range(7) for i in range(7)], dtype=np.int32)
+    sim.set_loads(top, np.tile([0.0, 0.0, 1e-3], (len(top), 1)))
+    return sim
+
+
+def test_threads_stepping_one_simulation_take_turns():
+    reference = pulled_block()
+    reference.step(40)
+    sim = pulled_block()
+    start = threading.Barrier(2)
+    errors = []
+
+    def stepper():
+        try:
+            start.wait()
+            for _ in range(20):
+                sim.step()
+        except Exception as e:  # noqa: BLE001 - reported below
+            errors.append(e)
+
+    threads = [threading.Thread(target=stepper) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    assert sim.ticks == 40
+    assert np.array_equal(sim.displacement(), reference.displacement())
+    assert np.array_equal(sim.force(0), reference.force(0))
+
+
+def test_reading_fields_while_another_thread_steps_changes_nothing():
+    reference = block(backend="cpu", precision="double")
+    press(reference, 1e-3, ramp=40, hold=20)
+    for attempt in range(5):  # a read landing inside a tick is a matter of timing: several presses
+        sim = block(backend="cpu", precision="double")
+        done = threading.Event()
+        reads = [0]
+
+        def reader():
+            while not done.is_set():
+                sim.displacement()
+                reads[0] += 1
+
+        t = threading.Thread(target=reader)
+        t.start()
+        try:
+            press(sim, 1e-3, ramp=40, hold=20)
+        finally:
+            done.set()
+            t.join()
+        assert reads[0] > 0
+        assert np.array_equal(sim.displacement(), reference.displacement()), f"press {attempt}"
+        assert np.array_equal(sim.force(0), reference.force(0)), f"press {attempt}"
 
 
 def test_tool_poses_far_from_the_mesh_are_refused_as_scenes_refuse_waypoints():
