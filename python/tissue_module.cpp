@@ -12,6 +12,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <cmath>
 #include <mutex>
 #include <optional>
 #include <stdexcept>
@@ -73,6 +74,70 @@ std::vector<T> flat(py::handle a, py::ssize_t cols, const char* what) {
   if (cols == 1 && arr.ndim() != 1)
     throw std::invalid_argument(std::string(what) + " must be one-dimensional");
   return {arr.data(), arr.data() + arr.size()};
+}
+
+/// Node ids from an array-like of shape (n, cols) (or (n,) for cols = 1):
+/// integers, or floats holding whole numbers, within the int32 range of the
+/// engine's ids. A fraction, a NaN or an id beyond int32 is refused naming
+/// the argument, the index and the value (a plain cast would truncate or
+/// wrap it into another, valid-looking node).
+std::vector<std::int32_t> node_ids(py::handle h, py::ssize_t cols, const char* what) {
+  const py::array a = py::array::ensure(h);
+  if (!a) throw std::invalid_argument(std::string(what) + " must be an array of node ids");
+  if (cols > 1 && (a.ndim() != 2 || a.shape(1) != cols))
+    throw std::invalid_argument(std::string(what) + " must have shape (n, " + std::to_string(cols) + "), not " +
+                                std::string(py::str(py::getattr(a, "shape"))));
+  if (cols == 1 && a.ndim() != 1) throw std::invalid_argument(std::string(what) + " must be one-dimensional");
+  const auto where = [&](py::ssize_t i) {
+    const std::string index = cols > 1 ? std::to_string(i / cols) + ", " + std::to_string(i % cols) : std::to_string(i);
+    return std::string(what) + "[" + index + "]";
+  };
+  const auto out_of_range = [&](py::ssize_t i, const std::string& value) {
+    return std::invalid_argument(where(i) + " = " + value + " is outside the range of node ids (" +
+                                 std::to_string(INT32_MIN) + " .. " + std::to_string(INT32_MAX) + ")");
+  };
+  std::vector<std::int32_t> out(std::size_t(a.size()));
+  const char kind = a.dtype().kind();
+  if (kind == 'i') {
+    const auto v = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>::ensure(a);
+    for (py::ssize_t i = 0; i < v.size(); ++i) {
+      const std::int64_t x = v.data()[i];
+      if (x < INT32_MIN || x > INT32_MAX) throw out_of_range(i, std::to_string(x));
+      out[std::size_t(i)] = std::int32_t(x);
+    }
+  } else if (kind == 'u') {
+    const auto v = py::array_t<std::uint64_t, py::array::c_style | py::array::forcecast>::ensure(a);
+    for (py::ssize_t i = 0; i < v.size(); ++i) {
+      const std::uint64_t x = v.data()[i];
+      if (x > std::uint64_t(INT32_MAX)) throw out_of_range(i, std::to_string(x));
+      out[std::size_t(i)] = std::int32_t(x);
+    }
+  } else if (kind == 'f') {
+    const auto v = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(a);
+    for (py::ssize_t i = 0; i < v.size(); ++i) {
+      const double x = v.data()[i];
+      const auto value = [x] { return std::string(py::repr(py::float_(x))); };
+      if (!(std::floor(x) == x))
+        throw std::invalid_argument(where(i) + " = " + value() + " is not a whole number (a node id)");
+      if (x < INT32_MIN || x > INT32_MAX) throw out_of_range(i, value());
+      out[std::size_t(i)] = std::int32_t(x);
+    }
+  } else if (kind == 'O') {  // Python ints beyond 64 bits, or mixed objects
+    const py::list items = a.attr("ravel")().attr("tolist")();
+    for (py::ssize_t i = 0; i < py::ssize_t(items.size()); ++i) {
+      const py::handle x = items[std::size_t(i)];
+      if (!py::isinstance<py::int_>(x) || py::isinstance<py::bool_>(x))
+        throw std::invalid_argument(where(i) + " = " + std::string(py::repr(x)) + " is not an integer (a node id)");
+      int overflow = 0;
+      const long long id = PyLong_AsLongLongAndOverflow(x.ptr(), &overflow);
+      if (overflow != 0 || id < INT32_MIN || id > INT32_MAX) throw out_of_range(i, py::str(x));
+      out[std::size_t(i)] = std::int32_t(id);
+    }
+  } else {
+    throw std::invalid_argument(std::string(what) + " must hold integer node ids, not " +
+                                std::string(py::str(a.dtype())) + " values");
+  }
+  return out;
 }
 
 /// A Simulation with a lock, as PyBatch below: every call that reads or
@@ -216,11 +281,11 @@ PYBIND11_MODULE(_tissue, m) {
         tissue::MeshScene s;
         s.name = std::move(name);
         s.nodes = flat<double>(nodes, 3, "nodes");
-        s.tets = flat<std::int32_t>(tets, 4, "tets");
+        s.tets = node_ids(tets, 4, "tets");
         s.youngs_modulus = E;
         s.poisson_ratio = nu;
         s.density = rho;
-        if (!fixed.is_none()) s.fixed_nodes = flat<std::int32_t>(fixed, 1, "fixed");
+        if (!fixed.is_none()) s.fixed_nodes = node_ids(fixed, 1, "fixed");
         s.tool_radii = std::move(tool_radii);
         s.tool_shaft = tool_shaft;
         py::gil_scoped_release free;
@@ -278,13 +343,12 @@ PYBIND11_MODULE(_tissue, m) {
            "Back to rest (u = 0, tick 0); keeps the loads")
       .def(
           "set_loads",
-          [](PySimulation& s, py::array_t<std::int32_t, py::array::c_style | py::array::forcecast> nodes,
-             py::array_t<double, py::array::c_style | py::array::forcecast> forces) {
-            if (forces.size() != 3 * nodes.size())
+          [](PySimulation& s, py::handle nodes, py::array_t<double, py::array::c_style | py::array::forcecast> forces) {
+            const std::vector<std::int32_t> ids = node_ids(nodes, 1, "nodes");
+            if (forces.size() != 3 * py::ssize_t(ids.size()))
               throw std::invalid_argument("set_loads: forces must hold 3 values (x y z, N) per node: " +
                                           std::to_string(forces.size()) + " values for " +
-                                          std::to_string(nodes.size()) + " nodes");
-            const std::span<const std::int32_t> ids(nodes.data(), std::size_t(nodes.size()));
+                                          std::to_string(ids.size()) + " nodes");
             const std::span<const double> f(forces.data(), std::size_t(forces.size()));
             locked(s, [&](Simulation& x) { x.set_loads(ids, f); });
           },

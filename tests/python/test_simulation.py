@@ -287,6 +287,28 @@ def test_tool_poses_far_from_the_mesh_are_refused_as_scenes_refuse_waypoints():
     sim.step()
 
 
+def test_mesh_ids_that_are_not_int32_are_refused_naming_them():
+    nodes, tets = tissue.box_mesh(2, 2, 2, (0.01, 0.01, 0.01))
+    as_float = tets.astype(np.float64)
+    assert tissue.Simulation.from_mesh(nodes, as_float).n_elements == len(tets)  # whole floats are ids
+    as_float[3, 1] = 1.5
+    with pytest.raises(ValueError, match=r"tets\[3, 1\] = 1\.5 is not a whole number"):
+        tissue.Simulation.from_mesh(nodes, as_float)
+    wide = tets.astype(np.int64)
+    wide[2, 3] += 2**32  # wrapped to 32 bits it would be a valid node
+    with pytest.raises(ValueError, match=rf"tets\[2, 3\] = {int(wide[2, 3])} is outside .*2147483647"):
+        tissue.Simulation.from_mesh(nodes, wide)
+    huge = tets.tolist()
+    huge[1][0] = 2**70
+    with pytest.raises(ValueError, match=rf"tets\[1, 0\] = {2**70} is outside"):
+        tissue.Simulation.from_mesh(nodes, huge)
+    with pytest.raises(ValueError, match=r"fixed\[1\] = 0\.5 is not a whole number"):
+        tissue.Simulation.from_mesh(nodes, tets, fixed=[0, 0.5])
+    sim = tissue.Simulation.from_mesh(nodes, tets, fixed=[0])
+    with pytest.raises(ValueError, match=r"nodes\[0\] = 2\.5 is not a whole number"):
+        sim.set_loads([2.5], [[0.0, 0.0, 1.0]])
+
+
 def test_reoriented_tets_are_reported():
     nodes, tets = tissue.box_mesh(2, 2, 2, (0.01, 0.01, 0.01))
     fixed = [0, 1, 2]
