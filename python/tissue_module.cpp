@@ -7,12 +7,17 @@
 //   from the tick's download);
 // - meshes made by mesh_surface hand their buffers to NumPy (no copy).
 // A Simulation or Batch holds a lock that every call takes, so Python threads
-// sharing one take turns; step() releases the GIL while the ticks run.
+// sharing one take turns; step() releases the GIL while the ticks run and
+// lets Python handle signals between ticks (Ctrl-C raises KeyboardInterrupt
+// at a tick boundary).
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <chrono>
+#include <climits>
 #include <cmath>
+#include <cstdio>
 #include <mutex>
 #include <optional>
 #include <stdexcept>
@@ -139,6 +144,54 @@ std::vector<std::int32_t> node_ids(py::handle h, py::ssize_t cols, const char* w
   }
   return out;
 }
+
+/// A Python int (or anything with __index__) as a tick count; a value beyond
+/// a C long is refused naming it and the range (the engine's own check
+/// refuses counts below 1).
+long tick_count(py::handle h) {
+  const py::object i = py::reinterpret_steal<py::object>(PyNumber_Index(h.ptr()));
+  if (!i) {
+    PyErr_Clear();
+    throw py::type_error("step(ticks=" + std::string(py::repr(h)) + "): the tick count must be an integer");
+  }
+  int overflow = 0;
+  const long long n = PyLong_AsLongLongAndOverflow(i.ptr(), &overflow);
+  if (overflow != 0 || n < LONG_MIN || n > LONG_MAX)
+    throw std::invalid_argument("step(ticks=" + std::string(py::str(i)) + "): the tick count is outside 1 .. " +
+                                std::to_string(LONG_MAX));
+  return long(n);
+}
+
+/// Runs `ticks` ticks as calls run(n) of kTicksPerCall ticks or fewer, the
+/// caller having released the GIL. Between calls, at most every
+/// kSignalInterval, it takes the GIL and lets Python handle signals: Ctrl-C
+/// (KeyboardInterrupt) then ends a long step at a tick boundary, the
+/// simulation consistent and able to step on. A count below 1 goes to run()
+/// whole, for the engine to refuse.
+constexpr long kTicksPerCall = 10;
+constexpr auto kSignalInterval = std::chrono::milliseconds(50);
+
+template <class Run>
+auto interruptible(long ticks, Run&& run) {
+  if (ticks < 1) return run(ticks);
+  using Clock = std::chrono::steady_clock;
+  auto checked = Clock::now();
+  for (long done = 0;;) {
+    const long n = std::min(kTicksPerCall, ticks - done);
+    auto r = run(n);
+    done += n;
+    if (done == ticks) return r;
+    if (Clock::now() - checked >= kSignalInterval) {
+      py::gil_scoped_acquire gil;
+      if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+      checked = Clock::now();
+    }
+  }
+}
+
+/// Element updates (ticks x steps per tick x elements) one step() call may
+/// take unless forced: tissue run's limit (scene::kMaxElementSteps).
+constexpr double kMaxElementUpdates = 1e12;
 
 /// A Simulation with a lock, as PyBatch below: every call that reads or
 /// changes the state holds it, so Python threads sharing one simulation take
@@ -333,8 +386,25 @@ PYBIND11_MODULE(_tissue, m) {
       }, py::arg("tool"))
       .def("tool_radius", [](PySimulation& s, int tool) { return s.sim.tool_radius(tool); }, py::arg("tool"))
       .def("tool_shaft", [](PySimulation& s, int tool) { return s.sim.tool_shaft(tool); }, py::arg("tool"))
-      .def("step", [](PySimulation& s, long ticks) { return locked(s, [&](Simulation& x) { return x.step(ticks); }); },
-           py::arg("ticks") = 1, "Run haptic ticks; returns the last one's TickResult")
+      .def("step", [](PySimulation& s, py::handle ticks_arg, bool force) {
+        const long ticks = tick_count(ticks_arg);
+        // The command line's rule (tissue run --force, scene/checks.hpp): beyond
+        // kMaxElementUpdates a call takes hours even on a GPU, most likely a slip.
+        const double updates = double(ticks) * s.sim.steps_per_tick() * double(s.sim.n_elements());
+        if (!force && updates > kMaxElementUpdates) {
+          char estimate[64];
+          std::snprintf(estimate, sizeof estimate, "%.3g element updates, beyond the %.0e", updates,
+                        kMaxElementUpdates);
+          throw std::invalid_argument("step(ticks=" + std::to_string(ticks) + "): " + std::to_string(ticks) +
+                                      " ticks x " + std::to_string(s.sim.steps_per_tick()) + " TLED steps x " +
+                                      std::to_string(s.sim.n_elements()) + " elements = " + estimate +
+                                      " a call may take without force=True (hours even on a GPU; a laptop CPU does "
+                                      "~1e8 per second); pass fewer ticks, or force=True to run it anyway");
+        }
+        return locked(s, [&](Simulation& x) { return interruptible(ticks, [&](long n) { return x.step(n); }); });
+      }, py::arg("ticks") = 1, py::kw_only(), py::arg("force") = false,
+           "Run haptic ticks; returns the last one's TickResult. Ctrl-C stops it at a tick boundary "
+           "(KeyboardInterrupt); more than 1e12 element updates need force=True")
       .def_property_readonly("last", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.last(); }); })
       .def("force", [](PySimulation& s, int tool) {
         return numpy3(locked(s, [&](Simulation& x) { return x.force(tool); }));
@@ -487,8 +557,10 @@ PYBIND11_MODULE(_tissue, m) {
         const std::vector<double> f = flat<double>(forces, 3, "forces");
         locked(b, [&](tissue::Batch& x) { x.set_loads(scene, ids, f); });
       }, py::arg("scene"), py::arg("nodes"), py::arg("forces"))
-      .def("step", [](PyBatch& b, long ticks) { return locked(b, [&](tissue::Batch& x) { return x.step(ticks); }); },
-           py::arg("ticks") = 1, "Run haptic ticks of every running scene; returns how many still run")
+      .def("step", [](PyBatch& b, long ticks) {
+        return locked(b, [&](tissue::Batch& x) { return interruptible(ticks, [&](long n) { return x.step(n); }); });
+      }, py::arg("ticks") = 1, "Run haptic ticks of every running scene; returns how many still run. Ctrl-C stops it "
+           "at a tick boundary (KeyboardInterrupt)")
       .def("failed", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.failed(scene); }); },
            py::arg("scene"))
       .def("failure", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.failure(scene); }); },

@@ -4,14 +4,17 @@ Checks that can fail: the reference mesh is a zero-copy read-only view, a
 host's mesh presses back with the force a Neo-Hookean body must give (it
 doubles with E; the Hertz closed form bounds a sphere's press on a block),
 fields have their shapes and meanings, a meshed surface keeps its volume,
-misuse raises ValueError / RuntimeError naming the value, and Python
-threads sharing a simulation take turns.
+misuse raises ValueError / RuntimeError naming the value, Python threads
+sharing a simulation take turns, and Ctrl-C stops a long step.
 """
+import _thread
 import math
 import os
+import re
 import subprocess
 import sys
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -276,6 +279,56 @@ def test_reading_fields_while_another_thread_steps_changes_nothing():
         assert reads[0] > 0
         assert np.array_equal(sim.displacement(), reference.displacement()), f"press {attempt}"
         assert np.array_equal(sim.force(0), reference.force(0)), f"press {attempt}"
+
+
+def test_ctrl_c_stops_a_long_step_at_a_tick_boundary():
+    sim = block(n=(2, 2, 2), size=(0.01, 0.01, 0.01), radius=2e-3, backend="cpu", depth="all")
+    timer = threading.Timer(0.5, _thread.interrupt_main)
+    timer.start()
+    begun = time.monotonic()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            sim.step(10**7, force=True)  # about 40 s on a laptop CPU
+    finally:
+        timer.cancel()
+    assert time.monotonic() - begun < 5
+    ran = sim.ticks
+    assert 0 < ran < 10**7
+    assert sim.step().tick == ran + 1  # consistent, and it steps on
+
+
+def test_ctrl_c_stops_a_long_batch_step():
+    batch = tissue.Batch("@kidney", 2, backend="cpu", precision="float", depth="all")
+    timer = threading.Timer(0.5, _thread.interrupt_main)
+    timer.start()
+    begun = time.monotonic()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            batch.step(10**4)  # about 30 s on a laptop CPU
+    finally:
+        timer.cancel()
+    assert time.monotonic() - begun < 5
+    ran = batch.ticks(0)
+    assert 0 < ran < 10**4 and batch.ticks(1) == ran
+    assert batch.step() == 2 and batch.ticks(0) == ran + 1
+
+
+def test_step_counts_beyond_reason_are_refused_naming_them():
+    sim = block(backend="cpu")
+    with pytest.raises(ValueError, match=r"ticks=18446744073709551616\): the tick count is outside 1 \.\. "
+                                         r"9223372036854775807"):
+        sim.step(2**64)
+    with pytest.raises(ValueError, match=r"ticks=-18446744073709551616"):
+        sim.step(-(2**64))
+    with pytest.raises(TypeError, match=r"ticks=1\.5"):
+        sim.step(1.5)
+    updates = 10**12 * sim.steps_per_tick * sim.n_elements
+    estimate = re.escape(f"{10**12} ticks x {sim.steps_per_tick} TLED steps x {sim.n_elements} elements = "
+                         f"{updates:.3g} element updates")
+    with pytest.raises(ValueError, match=estimate + ".*force=True"):
+        sim.step(10**12)
+    assert sim.step(np.int64(2)).tick == 2  # NumPy integers are integers
+    assert sim.ticks == 2  # nothing refused ran
 
 
 def test_tool_poses_far_from_the_mesh_are_refused_as_scenes_refuse_waypoints():
