@@ -6,11 +6,18 @@
 // - fields are new arrays that the engine writes straight into (one copy,
 //   from the tick's download);
 // - meshes made by mesh_surface hand their buffers to NumPy (no copy).
-// step() releases the GIL while the ticks run.
+// A Simulation or Batch holds a lock that every call takes, so Python threads
+// sharing one take turns; step() releases the GIL while the ticks run and
+// lets Python handle signals between ticks (Ctrl-C raises KeyboardInterrupt
+// at a tick boundary).
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <chrono>
+#include <climits>
+#include <cmath>
+#include <cstdio>
 #include <mutex>
 #include <optional>
 #include <stdexcept>
@@ -44,15 +51,6 @@ py::array_t<T> view(std::span<const T> s, py::ssize_t cols, py::handle owner) {
   return a;
 }
 
-/// A new array the engine fills with the field.
-py::array_t<double> field_array(Simulation& s, Field f) {
-  const int c = tissue::field_components(f);
-  const py::ssize_t n = py::ssize_t(f == Field::Jacobian ? s.n_elements() : s.n_nodes());
-  py::array_t<double> a = c == 1 ? py::array_t<double>({n}) : py::array_t<double>({n, py::ssize_t(c)});
-  s.read_field(f, {a.mutable_data(), std::size_t(a.size())});
-  return a;
-}
-
 tissue::Vector3 vector3(py::handle v, const char* what) {
   const auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(v);
   if (!a || a.size() != 3) throw std::invalid_argument(std::string(what) + " must be 3 numbers (x, y, z)");
@@ -81,6 +79,147 @@ std::vector<T> flat(py::handle a, py::ssize_t cols, const char* what) {
   if (cols == 1 && arr.ndim() != 1)
     throw std::invalid_argument(std::string(what) + " must be one-dimensional");
   return {arr.data(), arr.data() + arr.size()};
+}
+
+/// Node ids from an array-like of shape (n, cols) (or (n,) for cols = 1):
+/// integers, or floats holding whole numbers, within the int32 range of the
+/// engine's ids. A fraction, a NaN or an id beyond int32 is refused naming
+/// the argument, the index and the value (a plain cast would truncate or
+/// wrap it into another, valid-looking node).
+std::vector<std::int32_t> node_ids(py::handle h, py::ssize_t cols, const char* what) {
+  const py::array a = py::array::ensure(h);
+  if (!a) throw std::invalid_argument(std::string(what) + " must be an array of node ids");
+  if (cols > 1 && (a.ndim() != 2 || a.shape(1) != cols))
+    throw std::invalid_argument(std::string(what) + " must have shape (n, " + std::to_string(cols) + "), not " +
+                                std::string(py::str(py::getattr(a, "shape"))));
+  if (cols == 1 && a.ndim() != 1) throw std::invalid_argument(std::string(what) + " must be one-dimensional");
+  const auto where = [&](py::ssize_t i) {
+    const std::string index = cols > 1 ? std::to_string(i / cols) + ", " + std::to_string(i % cols) : std::to_string(i);
+    return std::string(what) + "[" + index + "]";
+  };
+  const auto out_of_range = [&](py::ssize_t i, const std::string& value) {
+    return std::invalid_argument(where(i) + " = " + value + " is outside the range of node ids (" +
+                                 std::to_string(INT32_MIN) + " .. " + std::to_string(INT32_MAX) + ")");
+  };
+  std::vector<std::int32_t> out(std::size_t(a.size()));
+  const char kind = a.dtype().kind();
+  if (kind == 'i') {
+    const auto v = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>::ensure(a);
+    for (py::ssize_t i = 0; i < v.size(); ++i) {
+      const std::int64_t x = v.data()[i];
+      if (x < INT32_MIN || x > INT32_MAX) throw out_of_range(i, std::to_string(x));
+      out[std::size_t(i)] = std::int32_t(x);
+    }
+  } else if (kind == 'u') {
+    const auto v = py::array_t<std::uint64_t, py::array::c_style | py::array::forcecast>::ensure(a);
+    for (py::ssize_t i = 0; i < v.size(); ++i) {
+      const std::uint64_t x = v.data()[i];
+      if (x > std::uint64_t(INT32_MAX)) throw out_of_range(i, std::to_string(x));
+      out[std::size_t(i)] = std::int32_t(x);
+    }
+  } else if (kind == 'f') {
+    const auto v = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(a);
+    for (py::ssize_t i = 0; i < v.size(); ++i) {
+      const double x = v.data()[i];
+      const auto value = [x] { return std::string(py::repr(py::float_(x))); };
+      if (!(std::floor(x) == x))
+        throw std::invalid_argument(where(i) + " = " + value() + " is not a whole number (a node id)");
+      if (x < INT32_MIN || x > INT32_MAX) throw out_of_range(i, value());
+      out[std::size_t(i)] = std::int32_t(x);
+    }
+  } else if (kind == 'O') {  // Python ints beyond 64 bits, or mixed objects
+    const py::list items = a.attr("ravel")().attr("tolist")();
+    for (py::ssize_t i = 0; i < py::ssize_t(items.size()); ++i) {
+      const py::handle x = items[std::size_t(i)];
+      if (!py::isinstance<py::int_>(x) || py::isinstance<py::bool_>(x))
+        throw std::invalid_argument(where(i) + " = " + std::string(py::repr(x)) + " is not an integer (a node id)");
+      int overflow = 0;
+      const long long id = PyLong_AsLongLongAndOverflow(x.ptr(), &overflow);
+      if (overflow != 0 || id < INT32_MIN || id > INT32_MAX) throw out_of_range(i, py::str(x));
+      out[std::size_t(i)] = std::int32_t(id);
+    }
+  } else {
+    throw std::invalid_argument(std::string(what) + " must hold integer node ids, not " +
+                                std::string(py::str(a.dtype())) + " values");
+  }
+  return out;
+}
+
+/// A Python int (or anything with __index__) as a tick count; a value beyond
+/// a C long is refused naming it and the range (the engine's own check
+/// refuses counts below 1).
+long tick_count(py::handle h) {
+  const py::object i = py::reinterpret_steal<py::object>(PyNumber_Index(h.ptr()));
+  if (!i) {
+    PyErr_Clear();
+    throw py::type_error("step(ticks=" + std::string(py::repr(h)) + "): the tick count must be an integer");
+  }
+  int overflow = 0;
+  const long long n = PyLong_AsLongLongAndOverflow(i.ptr(), &overflow);
+  if (overflow != 0 || n < LONG_MIN || n > LONG_MAX)
+    throw std::invalid_argument("step(ticks=" + std::string(py::str(i)) + "): the tick count is outside 1 .. " +
+                                std::to_string(LONG_MAX));
+  return long(n);
+}
+
+/// Runs `ticks` ticks as calls run(n) of kTicksPerCall ticks or fewer, the
+/// caller having released the GIL. Between calls, at most every
+/// kSignalInterval, it takes the GIL and lets Python handle signals: Ctrl-C
+/// (KeyboardInterrupt) then ends a long step at a tick boundary, the
+/// simulation consistent and able to step on. A count below 1 goes to run()
+/// whole, for the engine to refuse.
+constexpr long kTicksPerCall = 10;
+constexpr auto kSignalInterval = std::chrono::milliseconds(50);
+
+template <class Run>
+auto interruptible(long ticks, Run&& run) {
+  if (ticks < 1) return run(ticks);
+  using Clock = std::chrono::steady_clock;
+  auto checked = Clock::now();
+  for (long done = 0;;) {
+    const long n = std::min(kTicksPerCall, ticks - done);
+    auto r = run(n);
+    done += n;
+    if (done == ticks) return r;
+    if (Clock::now() - checked >= kSignalInterval) {
+      py::gil_scoped_acquire gil;
+      if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+      checked = Clock::now();
+    }
+  }
+}
+
+/// Element updates (ticks x steps per tick x elements) one step() call may
+/// take unless forced: tissue run's limit (scene::kMaxElementSteps).
+constexpr double kMaxElementUpdates = 1e12;
+
+/// A Simulation with a lock, as PyBatch below: every call that reads or
+/// changes the state holds it, so Python threads sharing one simulation take
+/// turns and a read never lands inside a tick. What is fixed when the
+/// simulation is made (sizes, names, the reference mesh, the tools' shapes,
+/// the warnings) is read without it.
+struct PySimulation {
+  Simulation sim;
+  std::mutex lock;
+};
+
+/// Runs f(sim) holding the simulation's lock, the GIL released while waiting and working.
+template <class F>
+auto locked(PySimulation& s, F&& f) {
+  py::gil_scoped_release free;
+  std::lock_guard<std::mutex> hold(s.lock);
+  return f(s.sim);
+}
+
+/// A new array the engine fills with the field.
+py::array_t<double> field_array(PySimulation& s, Field f) {
+  const int c = tissue::field_components(f);
+  const py::ssize_t n = py::ssize_t(f == Field::Jacobian ? s.sim.n_elements() : s.sim.n_nodes());
+  py::array_t<double> a = c == 1 ? py::array_t<double>({n}) : py::array_t<double>({n, py::ssize_t(c)});
+  double* out = a.mutable_data();
+  const std::size_t size = std::size_t(a.size());
+  locked(s, [&](Simulation& x) { x.read_field(f, {out, size}); });
+  return a;
 }
 
 /// A Batch with a lock: every call holds it, so that Python threads sharing
@@ -180,11 +319,12 @@ PYBIND11_MODULE(_tissue, m) {
         return s + ">";
       });
 
-  py::class_<Simulation>(m, "Simulation", "A scene running on a backend, driven tick by tick")
+  py::class_<PySimulation>(m, "Simulation", "A scene running on a backend, driven tick by tick")
       .def_static("load", [](const std::string& scene, std::optional<std::string> backend,
                              std::optional<std::string> precision, std::optional<std::string> depth) {
         py::gil_scoped_release free;
-        return Simulation::load(scene, options(backend, precision, depth));
+        return std::unique_ptr<PySimulation>(
+            new PySimulation{Simulation::load(scene, options(backend, precision, depth)), {}});
       }, py::arg("scene"), py::arg("backend") = py::none(), py::arg("precision") = py::none(),
                   py::arg("depth") = py::none(), "Load a scene file or '@kidney'")
       .def_static("from_mesh", [](py::handle nodes, py::handle tets, double E, double nu, double rho, py::handle fixed,
@@ -194,91 +334,121 @@ PYBIND11_MODULE(_tissue, m) {
         tissue::MeshScene s;
         s.name = std::move(name);
         s.nodes = flat<double>(nodes, 3, "nodes");
-        s.tets = flat<std::int32_t>(tets, 4, "tets");
+        s.tets = node_ids(tets, 4, "tets");
         s.youngs_modulus = E;
         s.poisson_ratio = nu;
         s.density = rho;
-        if (!fixed.is_none()) s.fixed_nodes = flat<std::int32_t>(fixed, 1, "fixed");
+        if (!fixed.is_none()) s.fixed_nodes = node_ids(fixed, 1, "fixed");
         s.tool_radii = std::move(tool_radii);
         s.tool_shaft = tool_shaft;
         py::gil_scoped_release free;
-        return Simulation::from_mesh(s, options(backend, precision, depth));
+        return std::unique_ptr<PySimulation>(
+            new PySimulation{Simulation::from_mesh(s, options(backend, precision, depth)), {}});
       }, py::arg("nodes"), py::arg("tets"), py::kw_only(), py::arg("E") = 3000.0, py::arg("nu") = 0.45,
                   py::arg("rho") = 1000.0, py::arg("fixed") = py::none(),
                   py::arg("tool_radii") = std::vector<double>{2e-3}, py::arg("tool_shaft") = 0.0,
                   py::arg("backend") = py::none(), py::arg("precision") = py::none(), py::arg("depth") = py::none(),
                   py::arg("name") = "<mesh>", "Build a simulation of a tetrahedral mesh with one material")
-      .def_property_readonly("name", &Simulation::name)
-      .def_property_readonly("backend", &Simulation::backend)
-      .def_property_readonly("precision", &Simulation::precision)
-      .def_property_readonly("device_name", &Simulation::device_name)
-      .def_property_readonly("n_nodes", &Simulation::n_nodes)
-      .def_property_readonly("n_elements", &Simulation::n_elements)
-      .def_property_readonly("n_tools", &Simulation::n_tools)
-      .def_property_readonly("tick_seconds", &Simulation::tick_seconds)
-      .def_property_readonly("steps_per_tick", &Simulation::steps_per_tick)
-      .def_property_readonly("dt", &Simulation::dt)
-      .def_property_readonly("warnings", &Simulation::warnings)
-      .def_property_readonly("ticks", &Simulation::ticks)
-      .def_property_readonly("time", &Simulation::time)
+      .def_property_readonly("name", [](PySimulation& s) { return s.sim.name(); })
+      .def_property_readonly("backend", [](PySimulation& s) { return s.sim.backend(); })
+      .def_property_readonly("precision", [](PySimulation& s) { return s.sim.precision(); })
+      .def_property_readonly("device_name", [](PySimulation& s) { return s.sim.device_name(); })
+      .def_property_readonly("n_nodes", [](PySimulation& s) { return s.sim.n_nodes(); })
+      .def_property_readonly("n_elements", [](PySimulation& s) { return s.sim.n_elements(); })
+      .def_property_readonly("n_tools", [](PySimulation& s) { return s.sim.n_tools(); })
+      .def_property_readonly("tick_seconds", [](PySimulation& s) { return s.sim.tick_seconds(); })
+      .def_property_readonly("steps_per_tick", [](PySimulation& s) { return s.sim.steps_per_tick(); })
+      .def_property_readonly("dt", [](PySimulation& s) { return s.sim.dt(); })
+      .def_property_readonly("warnings", [](PySimulation& s) { return s.sim.warnings(); })
+      .def_property_readonly("ticks",
+                             [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.ticks(); }); })
+      .def_property_readonly("time", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.time(); }); })
       .def_property_readonly("rest_positions", [](py::object self) {
-        return view<double>(self.cast<Simulation&>().rest_positions(), 3, self);
+        return view<double>(self.cast<PySimulation&>().sim.rest_positions(), 3, self);
       }, "(n_nodes, 3) reference positions (m), a read-only view")
       .def_property_readonly("tetrahedra", [](py::object self) {
-        return view<std::int32_t>(self.cast<Simulation&>().tetrahedra(), 4, self);
+        return view<std::int32_t>(self.cast<PySimulation&>().sim.tetrahedra(), 4, self);
       }, "(n_elements, 4) node ids, a read-only view")
       .def_property_readonly("surface_triangles", [](py::object self) {
-        return view<std::int32_t>(self.cast<Simulation&>().surface_triangles(), 3, self);
+        return view<std::int32_t>(self.cast<PySimulation&>().sim.surface_triangles(), 3, self);
       }, "(n_triangles, 3) outward surface triangles, a read-only view")
-      .def("set_tool_pose", [](Simulation& s, int tool, py::handle tip, py::handle axis) {
-        s.set_tool_pose(tool, vector3(tip, "tip"), axis.is_none() ? tissue::Vector3{0, 0, 0} : vector3(axis, "axis"));
+      .def("set_tool_pose", [](PySimulation& s, int tool, py::handle tip, py::handle axis) {
+        const tissue::Vector3 t = vector3(tip, "tip");
+        const tissue::Vector3 a = axis.is_none() ? tissue::Vector3{0, 0, 0} : vector3(axis, "axis");
+        locked(s, [&](Simulation& x) { x.set_tool_pose(tool, t, a); });
       }, py::arg("tool"), py::arg("tip"), py::arg("axis") = py::none(),
            "The pose the tool reaches at the end of the next tick (m); the host drives the tool from now on")
-      .def("set_grasp", &Simulation::set_grasp, py::arg("tool"), py::arg("down"))
-      .def("follow_scene_path", &Simulation::follow_scene_path, py::arg("tool"))
-      .def("tool_radius", &Simulation::tool_radius, py::arg("tool"))
-      .def("tool_shaft", &Simulation::tool_shaft, py::arg("tool"))
-      .def("step", &Simulation::step, py::arg("ticks") = 1, py::call_guard<py::gil_scoped_release>(),
-           "Run haptic ticks; returns the last one's TickResult")
-      .def_property_readonly("last", &Simulation::last)
-      .def("force", [](const Simulation& s, int tool) { return numpy3(s.force(tool)); }, py::arg("tool") = 0,
-           "Force on the tool after the last tick (N)")
-      .def("reset", &Simulation::reset, "Back to rest (u = 0, tick 0); keeps the loads")
+      .def("set_grasp", [](PySimulation& s, int tool, bool down) {
+        locked(s, [&](Simulation& x) { x.set_grasp(tool, down); });
+      }, py::arg("tool"), py::arg("down"))
+      .def("follow_scene_path", [](PySimulation& s, int tool) {
+        locked(s, [&](Simulation& x) { x.follow_scene_path(tool); });
+      }, py::arg("tool"))
+      .def("tool_radius", [](PySimulation& s, int tool) { return s.sim.tool_radius(tool); }, py::arg("tool"))
+      .def("tool_shaft", [](PySimulation& s, int tool) { return s.sim.tool_shaft(tool); }, py::arg("tool"))
+      .def("step", [](PySimulation& s, py::handle ticks_arg, bool force) {
+        const long ticks = tick_count(ticks_arg);
+        // The command line's rule (tissue run --force, scene/checks.hpp): beyond
+        // kMaxElementUpdates a call takes hours even on a GPU, most likely a slip.
+        const double updates = double(ticks) * s.sim.steps_per_tick() * double(s.sim.n_elements());
+        if (!force && updates > kMaxElementUpdates) {
+          char estimate[64];
+          std::snprintf(estimate, sizeof estimate, "%.3g element updates, beyond the %.0e", updates,
+                        kMaxElementUpdates);
+          throw std::invalid_argument("step(ticks=" + std::to_string(ticks) + "): " + std::to_string(ticks) +
+                                      " ticks x " + std::to_string(s.sim.steps_per_tick()) + " TLED steps x " +
+                                      std::to_string(s.sim.n_elements()) + " elements = " + estimate +
+                                      " a call may take without force=True (hours even on a GPU; a laptop CPU does "
+                                      "~1e8 per second); pass fewer ticks, or force=True to run it anyway");
+        }
+        return locked(s, [&](Simulation& x) { return interruptible(ticks, [&](long n) { return x.step(n); }); });
+      }, py::arg("ticks") = 1, py::kw_only(), py::arg("force") = false,
+           "Run haptic ticks; returns the last one's TickResult. Ctrl-C stops it at a tick boundary "
+           "(KeyboardInterrupt); more than 1e12 element updates need force=True")
+      .def_property_readonly("last", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.last(); }); })
+      .def("force", [](PySimulation& s, int tool) {
+        return numpy3(locked(s, [&](Simulation& x) { return x.force(tool); }));
+      }, py::arg("tool") = 0, "Force on the tool after the last tick (N)")
+      .def("reset", [](PySimulation& s) { locked(s, [](Simulation& x) { x.reset(); }); },
+           "Back to rest (u = 0, tick 0); keeps the loads")
       .def(
           "set_loads",
-          [](Simulation& s, py::array_t<std::int32_t, py::array::c_style | py::array::forcecast> nodes,
-             py::array_t<double, py::array::c_style | py::array::forcecast> forces) {
-            if (forces.size() != 3 * nodes.size())
+          [](PySimulation& s, py::handle nodes, py::array_t<double, py::array::c_style | py::array::forcecast> forces) {
+            const std::vector<std::int32_t> ids = node_ids(nodes, 1, "nodes");
+            if (forces.size() != 3 * py::ssize_t(ids.size()))
               throw std::invalid_argument("set_loads: forces must hold 3 values (x y z, N) per node: " +
                                           std::to_string(forces.size()) + " values for " +
-                                          std::to_string(nodes.size()) + " nodes");
-            s.set_loads(std::span<const std::int32_t>(nodes.data(), std::size_t(nodes.size())),
-                        std::span<const double>(forces.data(), std::size_t(forces.size())));
+                                          std::to_string(ids.size()) + " nodes");
+            const std::span<const double> f(forces.data(), std::size_t(forces.size()));
+            locked(s, [&](Simulation& x) { x.set_loads(ids, f); });
           },
           py::arg("nodes"), py::arg("forces"),
           "Constant external forces (N) from the next tick on: nodes (n,), forces (n, 3); replaces the scene's "
           "loads; empty arrays remove them")
-      .def("dissipated_energy", &Simulation::dissipated_energy,
-           "J dissipated by the viscoelastic (Prony) terms since the start")
-      .def("viscous_stored_energy", &Simulation::viscous_stored_energy,
-           "J stored in the Prony terms' branches after the last tick")
-      .def("take_notes", &Simulation::take_notes)
-      .def("displacement", [](Simulation& s) { return field_array(s, Field::Displacement); }, "(n_nodes, 3) m")
-      .def("positions", [](Simulation& s) { return field_array(s, Field::Position); }, "(n_nodes, 3) X + u (m)")
-      .def("pressure", [](Simulation& s) { return field_array(s, Field::Pressure); }, "(n_nodes,) Pa")
-      .def("internal_force", [](Simulation& s) { return field_array(s, Field::InternalForce); }, "(n_nodes, 3) N")
-      .def("jacobian", [](Simulation& s) { return field_array(s, Field::Jacobian); }, "(n_elements,) J = det F")
-      .def("positions_f32", [](Simulation& s) {
-        if (s.positions_on_device())
-          throw std::invalid_argument("positions_f32: the " + s.backend() +
+      .def("dissipated_energy", [](PySimulation& s) {
+        return locked(s, [](Simulation& x) { return x.dissipated_energy(); });
+      }, "J dissipated by the viscoelastic (Prony) terms since the start")
+      .def("viscous_stored_energy", [](PySimulation& s) {
+        return locked(s, [](Simulation& x) { return x.viscous_stored_energy(); });
+      }, "J stored in the Prony terms' branches after the last tick")
+      .def("take_notes", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.take_notes(); }); })
+      .def("displacement", [](PySimulation& s) { return field_array(s, Field::Displacement); }, "(n_nodes, 3) m")
+      .def("positions", [](PySimulation& s) { return field_array(s, Field::Position); }, "(n_nodes, 3) X + u (m)")
+      .def("pressure", [](PySimulation& s) { return field_array(s, Field::Pressure); }, "(n_nodes,) Pa")
+      .def("internal_force", [](PySimulation& s) { return field_array(s, Field::InternalForce); }, "(n_nodes, 3) N")
+      .def("jacobian", [](PySimulation& s) { return field_array(s, Field::Jacobian); }, "(n_elements,) J = det F")
+      .def("positions_f32", [](PySimulation& s) {
+        if (s.sim.positions_on_device())
+          throw std::invalid_argument("positions_f32: the " + s.sim.backend() +
                                       " backend writes positions to device memory; use positions()");
-        py::array_t<float> a({py::ssize_t(s.n_nodes()), py::ssize_t(3)});
-        s.write_positions(a.mutable_data());
+        py::array_t<float> a({py::ssize_t(s.sim.n_nodes()), py::ssize_t(3)});
+        float* out = a.mutable_data();
+        locked(s, [&](Simulation& x) { x.write_positions(out); });
         return a;
       }, "(n_nodes, 3) float32 deformed positions written straight from the store (host backends)")
-      .def("__repr__", [](const Simulation& s) {
-        return "<tissue.Simulation " + s.name() + ": " + std::to_string(s.n_nodes()) + " nodes, " +
-               std::to_string(s.n_elements()) + " tets on " + s.backend() + " (" + s.precision() + ")>";
+      .def("__repr__", [](PySimulation& s) {
+        return "<tissue.Simulation " + s.sim.name() + ": " + std::to_string(s.sim.n_nodes()) + " nodes, " +
+               std::to_string(s.sim.n_elements()) + " tets on " + s.sim.backend() + " (" + s.sim.precision() + ")>";
       });
 
   py::class_<tissue::MaterialChange>(m, "MaterialChange", "New parameters for one material of a scene (None keeps it)")
@@ -387,8 +557,10 @@ PYBIND11_MODULE(_tissue, m) {
         const std::vector<double> f = flat<double>(forces, 3, "forces");
         locked(b, [&](tissue::Batch& x) { x.set_loads(scene, ids, f); });
       }, py::arg("scene"), py::arg("nodes"), py::arg("forces"))
-      .def("step", [](PyBatch& b, long ticks) { return locked(b, [&](tissue::Batch& x) { return x.step(ticks); }); },
-           py::arg("ticks") = 1, "Run haptic ticks of every running scene; returns how many still run")
+      .def("step", [](PyBatch& b, long ticks) {
+        return locked(b, [&](tissue::Batch& x) { return interruptible(ticks, [&](long n) { return x.step(n); }); });
+      }, py::arg("ticks") = 1, "Run haptic ticks of every running scene; returns how many still run. Ctrl-C stops it "
+           "at a tick boundary (KeyboardInterrupt)")
       .def("failed", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.failed(scene); }); },
            py::arg("scene"))
       .def("failure", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.failure(scene); }); },

@@ -102,6 +102,10 @@ std::vector<std::string> scene_warnings(const Scene& s, const TissueModel<double
     out.push_back(fmt::format("{}: every node ({}) is fixed: nothing can move, the tool feels no force; fix only "
                               "the support",
                               s.source, m.n_nodes));
+  if (m.reoriented > 0)
+    out.push_back(fmt::format("{}: {} of {} tetrahedra had a negative volume and were reoriented (corners 1 and 2 "
+                              "swapped); check the corner order the mesh was written with",
+                              s.source, m.reoriented, m.n_elems));
   const double tick = s.solver.tick;
   for (const Tool& t : s.tools) {  // every scripted tool (a scene may have several)
     if (t.device != "scripted") continue;

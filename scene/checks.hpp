@@ -3,6 +3,8 @@
 // absurd. Each finding is a warning (the commands print them before
 // running) or, for the work estimate, a refusal the commands lift with
 // --force. The rules:
+//   mesh:         inverted input tets (negative volume) that the model
+//                 reoriented, counted (TissueModel::reoriented);
 //   support:      no node fixed (the tool pushes the body away as a rigid
 //                 body: no equilibrium, a `tissue reference` cannot
 //                 converge); every node fixed (nothing can move);

@@ -387,27 +387,17 @@ void check_path(const Scene& s, const Tool& t, const std::string& what) {
   }
 }
 
-/// Waypoints far beyond the mesh are a unit or typing mistake, and coordinates
-/// that overflow a float break the collision query: every waypoint must lie
-/// within kToolReach mesh sizes (bounding-box diagonal) of the mesh's box.
+/// Every waypoint within kToolReach mesh sizes of the mesh's box (the rule at kToolReach).
 void check_path_near_mesh(const Scene& s, const Tool& t, const std::string& what) {
-  constexpr double kToolReach = 1000;
-  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-  for (size_t k = 0; k < s.nodes.size(); ++k) {
-    lo[k % 3] = std::min(lo[k % 3], s.nodes[k]);
-    hi[k % 3] = std::max(hi[k % 3], s.nodes[k]);
-  }
-  const double size = std::hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]);
+  const MeshBox box = mesh_box(s.nodes);
   for (size_t k = 0; k < t.path.size(); ++k) {
     const Vec3<double>& p = t.path[k].p;
-    double out[3];
-    for (int c = 0; c < 3; ++c) out[c] = std::max({lo[c] - p[c], p[c] - hi[c], 0.0});
-    const double d = std::hypot(out[0], out[1], out[2]);
-    if (d > kToolReach * size)
+    const double d = box.distance(p);
+    if (d > kToolReach * box.size)
       fail(s, t.line,
            fmt::format("{}: waypoint {} at ({}, {}, {}) m is {:.3g} m from the mesh, more than {:.0f} x its size "
                        "({:.3g} m); coordinates are metres",
-                       what, k, p.x, p.y, p.z, d, kToolReach, size));
+                       what, k, p.x, p.y, p.z, d, kToolReach, box.size));
   }
 }
 
@@ -466,6 +456,24 @@ void check_solver(const Scene& s) {
 }
 
 }  // namespace
+
+double MeshBox::distance(const Vec3<double>& p) const {
+  const double out[3] = {std::max({lo.x - p.x, p.x - hi.x, 0.0}), std::max({lo.y - p.y, p.y - hi.y, 0.0}),
+                         std::max({lo.z - p.z, p.z - hi.z, 0.0})};
+  return std::hypot(out[0], out[1], out[2]);
+}
+
+MeshBox mesh_box(std::span<const double> nodes) {
+  MeshBox b;
+  b.lo = {INFINITY, INFINITY, INFINITY};
+  b.hi = {-INFINITY, -INFINITY, -INFINITY};
+  for (size_t k = 0; k + 2 < nodes.size(); k += 3) {
+    b.lo = {std::min(b.lo.x, nodes[k]), std::min(b.lo.y, nodes[k + 1]), std::min(b.lo.z, nodes[k + 2])};
+    b.hi = {std::max(b.hi.x, nodes[k]), std::max(b.hi.y, nodes[k + 1]), std::max(b.hi.z, nodes[k + 2])};
+  }
+  b.size = std::hypot(b.hi.x - b.lo.x, b.hi.y - b.lo.y, b.hi.z - b.lo.z);
+  return b;
+}
 
 std::string location(const Scene& scene, int line) {
   return line > 0 ? fmt::format("{}:{}", scene.source, line) : scene.source;

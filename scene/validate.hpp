@@ -33,11 +33,13 @@
 // scene file (ModelInput::source) and the element or node.
 #pragma once
 
+#include <span>
 #include <stdexcept>
 #include <string>
 
 #include "core/model.hpp"
 #include "core/scheduler.hpp"
+#include "core/vec.hpp"
 #include "scene/scene.hpp"
 
 namespace tissue::scene {
@@ -46,6 +48,22 @@ namespace tissue::scene {
 struct SceneError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
+
+/// Tool tips (scene waypoints and poses a host sets) must lie within
+/// kToolReach mesh sizes of the mesh's bounding box: farther is a unit or
+/// typing mistake, and coordinates that overflow a float break the collision
+/// query.
+inline constexpr double kToolReach = 1000;
+
+/// The axis-aligned bounding box of xyz-interleaved node coordinates and its
+/// diagonal, the mesh size the tool reach is measured in.
+struct MeshBox {
+  Vec3<double> lo, hi;
+  double size = 0;  ///< |hi - lo| (m)
+  /// How far p lies outside the box (0 inside).
+  double distance(const Vec3<double>& p) const;
+};
+MeshBox mesh_box(std::span<const double> nodes);
 
 /// "<source>:<line>", or just "<source>" when line is 0 (unknown).
 std::string location(const Scene& scene, int line);

@@ -1,8 +1,9 @@
 // The checks of a valid scene that may not do what its author meant
 // (scene/checks.hpp): no support, every node fixed, a tick longer than the
 // tool path or far from 1 ms, many steps per tick with their cause, a
-// material more incompressible than the precision resolves, and the work
-// estimate.
+// material more incompressible than the precision resolves, reoriented
+// tets, and the work estimate; and the mesh box that tool reach is measured
+// in (scene/validate.hpp).
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
@@ -123,6 +124,21 @@ TEST(SceneChecks, IncompressibilityBeyondThePrecision) {
   s.materials.front().b = 0.49;
   s.solver.precision = Precision::Float;
   EXPECT_TRUE(incompressibility_findings(s).empty());
+}
+
+TEST(SceneChecks, ReorientedTetsAreCounted) {
+  Scene s = box_scene();
+  std::swap(s.tets[4 * 3 + 0], s.tets[4 * 3 + 1]);  // elements 3 and 5 inverted
+  std::swap(s.tets[4 * 5 + 0], s.tets[4 * 5 + 1]);
+  EXPECT_TRUE(one_warning(warnings(s), {"2 of 12 tetrahedra had a negative volume", "reoriented"}));
+}
+
+TEST(SceneChecks, MeshBoxMeasuresTheToolReach) {
+  const std::vector<double> nodes = {0, 0, 0, 3, 4, 0, 1, 1, 12};
+  const MeshBox b = mesh_box(nodes);
+  EXPECT_EQ(b.size, 13);
+  EXPECT_EQ(b.distance({1, 1, 1}), 0);
+  EXPECT_EQ(b.distance({-3, 8, 6}), 5);  // 3 below x, 4 beyond y
 }
 
 }  // namespace

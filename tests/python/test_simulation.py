@@ -4,12 +4,17 @@ Checks that can fail: the reference mesh is a zero-copy read-only view, a
 host's mesh presses back with the force a Neo-Hookean body must give (it
 doubles with E; the Hertz closed form bounds a sphere's press on a block),
 fields have their shapes and meanings, a meshed surface keeps its volume,
-and misuse raises ValueError / RuntimeError naming the value.
+misuse raises ValueError / RuntimeError naming the value, Python threads
+sharing a simulation take turns, and Ctrl-C stops a long step.
 """
+import _thread
 import math
 import os
+import re
 import subprocess
 import sys
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -215,3 +220,157 @@ def test_loads_are_held_by_the_fixed_base():
         sim.set_loads(top, np.zeros(len(top)))
     with pytest.raises(ValueError, match="out of range"):
         sim.set_loads([10 ** 6], [[1.0, 0.0, 0.0]])
+
+
+def pulled_block():
+    """A block whose top is pulled up by a constant load: every tick changes the displacement."""
+    sim = block(backend="cpu", precision="double")
+    top = np.array([tissue.box_node(6, 6, i, j, 3) for j in range(7) for i in range(7)], dtype=np.int32)
+    sim.set_loads(top, np.tile([0.0, 0.0, 1e-3], (len(top), 1)))
+    return sim
+
+
+def test_threads_stepping_one_simulation_take_turns():
+    reference = pulled_block()
+    reference.step(40)
+    sim = pulled_block()
+    start = threading.Barrier(2)
+    errors = []
+
+    def stepper():
+        try:
+            start.wait()
+            for _ in range(20):
+                sim.step()
+        except Exception as e:  # noqa: BLE001 - reported below
+            errors.append(e)
+
+    threads = [threading.Thread(target=stepper) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    assert sim.ticks == 40
+    assert np.array_equal(sim.displacement(), reference.displacement())
+    assert np.array_equal(sim.force(0), reference.force(0))
+
+
+def test_reading_fields_while_another_thread_steps_changes_nothing():
+    reference = block(backend="cpu", precision="double")
+    press(reference, 1e-3, ramp=40, hold=20)
+    for attempt in range(5):  # a read landing inside a tick is a matter of timing: several presses
+        sim = block(backend="cpu", precision="double")
+        done = threading.Event()
+        reads = [0]
+
+        def reader():
+            while not done.is_set():
+                sim.displacement()
+                reads[0] += 1
+
+        t = threading.Thread(target=reader)
+        t.start()
+        try:
+            press(sim, 1e-3, ramp=40, hold=20)
+        finally:
+            done.set()
+            t.join()
+        assert reads[0] > 0
+        assert np.array_equal(sim.displacement(), reference.displacement()), f"press {attempt}"
+        assert np.array_equal(sim.force(0), reference.force(0)), f"press {attempt}"
+
+
+def test_ctrl_c_stops_a_long_step_at_a_tick_boundary():
+    sim = block(n=(2, 2, 2), size=(0.01, 0.01, 0.01), radius=2e-3, backend="cpu", depth="all")
+    timer = threading.Timer(0.5, _thread.interrupt_main)
+    timer.start()
+    begun = time.monotonic()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            sim.step(10**7, force=True)  # about 40 s on a laptop CPU
+    finally:
+        timer.cancel()
+    assert time.monotonic() - begun < 5
+    ran = sim.ticks
+    assert 0 < ran < 10**7
+    assert sim.step().tick == ran + 1  # consistent, and it steps on
+
+
+def test_ctrl_c_stops_a_long_batch_step():
+    batch = tissue.Batch("@kidney", 2, backend="cpu", precision="float", depth="all")
+    timer = threading.Timer(0.5, _thread.interrupt_main)
+    timer.start()
+    begun = time.monotonic()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            batch.step(10**4)  # about 30 s on a laptop CPU
+    finally:
+        timer.cancel()
+    assert time.monotonic() - begun < 5
+    ran = batch.ticks(0)
+    assert 0 < ran < 10**4 and batch.ticks(1) == ran
+    assert batch.step() == 2 and batch.ticks(0) == ran + 1
+
+
+def test_step_counts_beyond_reason_are_refused_naming_them():
+    sim = block(backend="cpu")
+    with pytest.raises(ValueError, match=r"ticks=18446744073709551616\): the tick count is outside 1 \.\. "
+                                         r"9223372036854775807"):
+        sim.step(2**64)
+    with pytest.raises(ValueError, match=r"ticks=-18446744073709551616"):
+        sim.step(-(2**64))
+    with pytest.raises(TypeError, match=r"ticks=1\.5"):
+        sim.step(1.5)
+    updates = 10**12 * sim.steps_per_tick * sim.n_elements
+    estimate = re.escape(f"{10**12} ticks x {sim.steps_per_tick} TLED steps x {sim.n_elements} elements = "
+                         f"{updates:.3g} element updates")
+    with pytest.raises(ValueError, match=estimate + ".*force=True"):
+        sim.step(10**12)
+    assert sim.step(np.int64(2)).tick == 2  # NumPy integers are integers
+    assert sim.ticks == 2  # nothing refused ran
+
+
+def test_tool_poses_far_from_the_mesh_are_refused_as_scenes_refuse_waypoints():
+    sim = block(backend="cpu")  # 20 x 20 x 10 mm: 30 mm across, so 1000 x is 30 m
+    with pytest.raises(ValueError, match=r"tool 0 \('tool0'\) tip \(0.01, 0.01, 1e\+300\) m is 1e\+300 m from the "
+                                         r"mesh, more than 1000 x its size \(0\.03 m\) = 30 m"):
+        sim.set_tool_pose(0, [0.01, 0.01, 1e300])
+    sim.set_tool_pose(0, [0.01, 0.01, 20.0])  # far, but within reach
+    sim.step()
+
+
+def test_mesh_ids_that_are_not_int32_are_refused_naming_them():
+    nodes, tets = tissue.box_mesh(2, 2, 2, (0.01, 0.01, 0.01))
+    as_float = tets.astype(np.float64)
+    assert tissue.Simulation.from_mesh(nodes, as_float).n_elements == len(tets)  # whole floats are ids
+    as_float[3, 1] = 1.5
+    with pytest.raises(ValueError, match=r"tets\[3, 1\] = 1\.5 is not a whole number"):
+        tissue.Simulation.from_mesh(nodes, as_float)
+    wide = tets.astype(np.int64)
+    wide[2, 3] += 2**32  # wrapped to 32 bits it would be a valid node
+    with pytest.raises(ValueError, match=rf"tets\[2, 3\] = {int(wide[2, 3])} is outside .*2147483647"):
+        tissue.Simulation.from_mesh(nodes, wide)
+    huge = tets.tolist()
+    huge[1][0] = 2**70
+    with pytest.raises(ValueError, match=rf"tets\[1, 0\] = {2**70} is outside"):
+        tissue.Simulation.from_mesh(nodes, huge)
+    with pytest.raises(ValueError, match=r"fixed\[1\] = 0\.5 is not a whole number"):
+        tissue.Simulation.from_mesh(nodes, tets, fixed=[0, 0.5])
+    sim = tissue.Simulation.from_mesh(nodes, tets, fixed=[0])
+    with pytest.raises(ValueError, match=r"nodes\[0\] = 2\.5 is not a whole number"):
+        sim.set_loads([2.5], [[0.0, 0.0, 1.0]])
+
+
+def test_reoriented_tets_are_reported():
+    nodes, tets = tissue.box_mesh(2, 2, 2, (0.01, 0.01, 0.01))
+    fixed = [0, 1, 2]
+    assert not any("reoriented" in w for w in tissue.Simulation.from_mesh(nodes, tets, fixed=fixed).warnings)
+    flipped = tets.copy()
+    flipped[:5, [1, 2]] = flipped[:5, [2, 1]]
+    sim = tissue.Simulation.from_mesh(nodes, flipped, fixed=fixed)
+    assert [w for w in sim.warnings if "reoriented" in w] == [
+        f"<mesh>: 5 of {len(tets)} tetrahedra had a negative volume and were reoriented (corners 1 and 2 swapped); "
+        "check the corner order the mesh was written with"]
+    P = sim.rest_positions[sim.tetrahedra]
+    assert (np.einsum("ij,ij->i", np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), P[:, 3] - P[:, 0]) > 0).all()

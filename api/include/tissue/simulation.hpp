@@ -143,6 +143,9 @@ class Simulation {
   /// shaft axis (tip -> handle; {0, 0, 0} = the scene's direction). From
   /// the first call on, the host drives the tool; before it, the tool
   /// follows the scene's scripted path (or rests at its first point).
+  /// Throws std::invalid_argument naming the tool and the value for a tip
+  /// or axis that is not finite, or a tip farther from the mesh's bounding
+  /// box than 1000 times its diagonal (the scene rule for waypoints).
   void set_tool_pose(int tool, const Vector3& tip, const Vector3& axis = {0, 0, 0});
   /// The grasp button: down grasps the nodes in contact, up releases them.
   void set_grasp(int tool, bool down);
