@@ -219,11 +219,7 @@ void Batch::set_material(int scene, const MaterialChange& change) {
 }
 
 void Batch::set_tool_pose(int scene, int tool, const Vector3& tip, const Vector3& axis) {
-  impl_->check_tool(scene, tool);
-  if (!finite3(tip) || !finite3(axis))
-    throw std::invalid_argument(fmt::format("scene {} tool {}: pose tip ({}, {}, {}) m axis ({}, {}, {}) is not finite",
-                                            scene, tool, tip[0], tip[1], tip[2], axis[0], axis[1], axis[2]));
-  impl_->at(scene).device(tool).set_pose(vec(tip), vec(axis));
+  impl_->at(scene).set_tool_pose(tool, vec(tip), vec(axis));
 }
 
 void Batch::set_tool_poses(std::span<const double> tips, std::span<const double> axes) {
@@ -238,16 +234,26 @@ void Batch::set_tool_poses(std::span<const double> tips, std::span<const double>
         fmt::format("set_tool_poses: axes hold {} values; the batch needs {} ({} scenes x {} "
                     "tools x 3) or none",
                     axes.size(), need, n, t));
-  for (std::size_t k = 0; k < tips.size(); ++k)
-    if (!std::isfinite(tips[k]) || (!axes.empty() && !std::isfinite(axes[k])))
-      throw std::invalid_argument(fmt::format("set_tool_poses: scene {} tool {}: {} is not finite", k / (3 * t),
-                                              k / 3 % t, std::isfinite(tips[k]) ? "the axis" : "the tip"));
+  // every pose checked before any is set: a refused array changes nothing
+  auto pose = [&](std::size_t i, int k) {
+    const std::size_t o = 3 * (i * t + std::size_t(k));
+    const Vec3<double> axis = axes.empty() ? Vec3<double>{0, 0, 0} : Vec3<double>{axes[o], axes[o + 1], axes[o + 2]};
+    return std::pair(Vec3<double>{tips[o], tips[o + 1], tips[o + 2]}, axis);
+  };
+  for (std::size_t i = 0; i < n; ++i) {
+    const Session& s = (*impl_->batch)[i];
+    for (int k = 0; k < s.n_tools(); ++k) try {
+        const auto [tip, axis] = pose(i, k);
+        s.check_tool_pose(k, tip, axis);
+      } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument(fmt::format("set_tool_poses: scene {}: {}", i, e.what()));
+      }
+  }
   for (std::size_t i = 0; i < n; ++i) {
     Session& s = (*impl_->batch)[i];
     for (int k = 0; k < s.n_tools(); ++k) {
-      const std::size_t o = 3 * (i * t + std::size_t(k));
-      const Vec3<double> axis = axes.empty() ? Vec3<double>{0, 0, 0} : Vec3<double>{axes[o], axes[o + 1], axes[o + 2]};
-      s.device(k).set_pose({tips[o], tips[o + 1], tips[o + 2]}, axis);
+      const auto [tip, axis] = pose(i, k);
+      s.device(k).set_pose(tip, axis);
     }
   }
 }

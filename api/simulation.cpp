@@ -129,7 +129,6 @@ struct Simulation::Impl {
   // The reference mesh interleaved (the model stores it component-major).
   std::vector<double> rest;
   std::vector<std::int32_t> tets, tris;
-  scene::MeshBox box;  // the reach host poses are held to, as scene waypoints are
 
   explicit Impl(scene::Scene s) : session(std::move(s)) {
     const TissueModel<double>& model = session.model();
@@ -137,7 +136,6 @@ struct Simulation::Impl {
     rest = interleave(model.X, 3);
     tets = interleave(model.elem_nodes, 4);
     tris = interleave(model.tris, 3);
-    box = scene::mesh_box(rest);
     last = tick_result(session.last(), 0);
   }
 
@@ -183,20 +181,7 @@ std::span<const std::int32_t> Simulation::tetrahedra() const { return impl_->tet
 std::span<const std::int32_t> Simulation::surface_triangles() const { return impl_->tris; }
 
 void Simulation::set_tool_pose(int tool, const Vector3& tip, const Vector3& axis) {
-  impl_->session.check_tool(tool);
-  if (!finite3(tip) || !finite3(axis))
-    throw std::invalid_argument(fmt::format("{}: tool {} pose tip ({}, {}, {}) m axis ({}, {}, {}) is not finite",
-                                            name(), tool, tip[0], tip[1], tip[2], axis[0], axis[1], axis[2]));
-  // The scene rule for waypoints (scene/validate.hpp, kToolReach): a tip this
-  // far away is a unit or typing mistake and overflows the float collision query.
-  const double d = impl_->box.distance(vec(tip)), reach = scene::kToolReach * impl_->box.size;
-  if (d > reach)
-    throw std::invalid_argument(fmt::format(
-        "{}: tool {} ('{}') tip ({}, {}, {}) m is {:.3g} m from the mesh, more than {:.0f} x its size ({:.3g} m) = "
-        "{:.3g} m; coordinates are metres",
-        name(), tool, impl_->session.scene().tools[std::size_t(tool)].name, tip[0], tip[1], tip[2], d,
-        scene::kToolReach, impl_->box.size, reach));
-  impl_->session.device(tool).set_pose(vec(tip), vec(axis));
+  impl_->session.set_tool_pose(tool, vec(tip), vec(axis));
 }
 
 void Simulation::set_grasp(int tool, bool down) {

@@ -149,7 +149,6 @@ int run_scene(const RunOptions& o) {
   Backend* backend = engine.backend.get();
   Scheduler& sched = *engine.scheduler;
 
-  if (model.reoriented > 0) fmt::print("note: {} inverted input tets were reoriented\n", model.reoriented);
   fmt::print("running {} ticks of {} on {} ({}), region depth {}\n", n_ticks, s.source, backend->name(),
              to_string(backend->precision()), settings.depth == kDepthAll ? "all" : settings.depth == kDepthAuto ? "auto" : std::to_string(settings.depth));
 

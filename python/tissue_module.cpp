@@ -193,6 +193,21 @@ auto interruptible(long ticks, Run&& run) {
 /// take unless forced: tissue run's limit (scene::kMaxElementSteps).
 constexpr double kMaxElementUpdates = 1e12;
 
+/// The command line's rule (tissue run --force, scene/checks.hpp): beyond
+/// kMaxElementUpdates a call takes hours even on a GPU, most likely a slip.
+/// per_tick: "S TLED steps x E elements" as the message shows it, updates
+/// per tick its value (summed over a batch's scenes).
+void check_work(long ticks, double updates_per_tick, const std::string& per_tick, bool force) {
+  const double updates = double(ticks) * updates_per_tick;
+  if (force || !(updates > kMaxElementUpdates)) return;
+  char estimate[64];
+  std::snprintf(estimate, sizeof estimate, "%.3g element updates, beyond the %.0e", updates, kMaxElementUpdates);
+  throw std::invalid_argument("step(ticks=" + std::to_string(ticks) + "): " + std::to_string(ticks) + " ticks x " +
+                              per_tick + " = " + estimate +
+                              " a call may take without force=True (hours even on a GPU; a laptop CPU does ~1e8 per "
+                              "second); pass fewer ticks, or force=True to run it anyway");
+}
+
 /// A Simulation with a lock, as PyBatch below: every call that reads or
 /// changes the state holds it, so Python threads sharing one simulation take
 /// turns and a read never lands inside a tick. What is fixed when the
@@ -265,9 +280,8 @@ py::array_t<double> any_field(PyBatch& b, std::optional<int> scene, Field f) {
   return scene ? scene_field(b, *scene, f) : batch_field(b, f);
 }
 
-}  // namespace
-
-PYBIND11_MODULE(_tissue, m) {
+/// The module, its functions and the meshes mesh_surface makes.
+void bind_module(py::module_& m) {
   m.doc() = "Tissue: nonlinear soft-tissue deformation (TLED, Neo-Hookean) with tool contact and haptic forces";
   m.attr("__version__") = tissue::version();
   m.def("available_backends", &tissue::available_backends, "Backends built in and usable on this machine");
@@ -291,7 +305,10 @@ PYBIND11_MODULE(_tissue, m) {
     return tissue::mesh_surface(path, unit, target_tets);
   }, py::arg("path"), py::arg("unit") = "m", py::arg("target_tets") = 0,
         "Repair, remesh and tetrahedralise a closed surface file (OBJ, STL, PLY, OFF, ...)");
+}
 
+/// What a tick gives back: TickResult and ToolResult.
+void bind_results(py::module_& m) {
   py::class_<tissue::ToolResult>(m, "ToolResult", "One tool at the end of a tick")
       .def_property_readonly("tip", [](const tissue::ToolResult& t) { return numpy3(t.tip); })
       .def_property_readonly("axis", [](const tissue::ToolResult& t) { return numpy3(t.axis); })
@@ -318,8 +335,70 @@ PYBIND11_MODULE(_tissue, m) {
                std::to_string(t.force[2]) + ") N";
         return s + ">";
       });
+}
 
-  py::class_<PySimulation>(m, "Simulation", "A scene running on a backend, driven tick by tick")
+/// tissue.Simulation: time, results, loads and fields.
+void bind_simulation_steps(py::class_<PySimulation>& cls) {
+  cls.def("step", [](PySimulation& s, py::handle ticks_arg, bool force) {
+        const long ticks = tick_count(ticks_arg);
+        check_work(ticks, double(s.sim.steps_per_tick()) * double(s.sim.n_elements()),
+                   std::to_string(s.sim.steps_per_tick()) + " TLED steps x " + std::to_string(s.sim.n_elements()) +
+                       " elements",
+                   force);
+        return locked(s, [&](Simulation& x) { return interruptible(ticks, [&](long n) { return x.step(n); }); });
+      }, py::arg("ticks") = 1, py::kw_only(), py::arg("force") = false,
+           "Run haptic ticks; returns the last one's TickResult. Ctrl-C stops it at a tick boundary "
+           "(KeyboardInterrupt); more than 1e12 element updates need force=True")
+      .def_property_readonly("last", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.last(); }); })
+      .def("force", [](PySimulation& s, int tool) {
+        return numpy3(locked(s, [&](Simulation& x) { return x.force(tool); }));
+      }, py::arg("tool") = 0, "Force on the tool after the last tick (N)")
+      .def("reset", [](PySimulation& s) { locked(s, [](Simulation& x) { x.reset(); }); },
+           "Back to rest (u = 0, tick 0); keeps the loads")
+      .def(
+          "set_loads",
+          [](PySimulation& s, py::handle nodes, py::array_t<double, py::array::c_style | py::array::forcecast> forces) {
+            const std::vector<std::int32_t> ids = node_ids(nodes, 1, "nodes");
+            if (forces.size() != 3 * py::ssize_t(ids.size()))
+              throw std::invalid_argument("set_loads: forces must hold 3 values (x y z, N) per node: " +
+                                          std::to_string(forces.size()) + " values for " +
+                                          std::to_string(ids.size()) + " nodes");
+            const std::span<const double> f(forces.data(), std::size_t(forces.size()));
+            locked(s, [&](Simulation& x) { x.set_loads(ids, f); });
+          },
+          py::arg("nodes"), py::arg("forces"),
+          "Constant external forces (N) from the next tick on: nodes (n,), forces (n, 3); replaces the scene's "
+          "loads; empty arrays remove them")
+      .def("dissipated_energy", [](PySimulation& s) {
+        return locked(s, [](Simulation& x) { return x.dissipated_energy(); });
+      }, "J dissipated by the viscoelastic (Prony) terms since the start")
+      .def("viscous_stored_energy", [](PySimulation& s) {
+        return locked(s, [](Simulation& x) { return x.viscous_stored_energy(); });
+      }, "J stored in the Prony terms' branches after the last tick")
+      .def("take_notes", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.take_notes(); }); })
+      .def("displacement", [](PySimulation& s) { return field_array(s, Field::Displacement); }, "(n_nodes, 3) m")
+      .def("positions", [](PySimulation& s) { return field_array(s, Field::Position); }, "(n_nodes, 3) X + u (m)")
+      .def("pressure", [](PySimulation& s) { return field_array(s, Field::Pressure); }, "(n_nodes,) Pa")
+      .def("internal_force", [](PySimulation& s) { return field_array(s, Field::InternalForce); }, "(n_nodes, 3) N")
+      .def("jacobian", [](PySimulation& s) { return field_array(s, Field::Jacobian); }, "(n_elements,) J = det F")
+      .def("positions_f32", [](PySimulation& s) {
+        if (s.sim.positions_on_device())
+          throw std::invalid_argument("positions_f32: the " + s.sim.backend() +
+                                      " backend writes positions to device memory; use positions()");
+        py::array_t<float> a({py::ssize_t(s.sim.n_nodes()), py::ssize_t(3)});
+        float* out = a.mutable_data();
+        locked(s, [&](Simulation& x) { x.write_positions(out); });
+        return a;
+      }, "(n_nodes, 3) float32 deformed positions written straight from the store (host backends)")
+      .def("__repr__", [](PySimulation& s) {
+        return "<tissue.Simulation " + s.sim.name() + ": " + std::to_string(s.sim.n_nodes()) + " nodes, " +
+               std::to_string(s.sim.n_elements()) + " tets on " + s.sim.backend() + " (" + s.sim.precision() + ")>";
+      });
+}
+
+/// tissue.Simulation: loading, sizes, the reference mesh and the tools.
+void bind_simulation(py::module_& m) {
+  auto cls = py::class_<PySimulation>(m, "Simulation", "A scene running on a backend, driven tick by tick")
       .def_static("load", [](const std::string& scene, std::optional<std::string> backend,
                              std::optional<std::string> precision, std::optional<std::string> depth) {
         py::gil_scoped_release free;
@@ -385,72 +464,67 @@ PYBIND11_MODULE(_tissue, m) {
         locked(s, [&](Simulation& x) { x.follow_scene_path(tool); });
       }, py::arg("tool"))
       .def("tool_radius", [](PySimulation& s, int tool) { return s.sim.tool_radius(tool); }, py::arg("tool"))
-      .def("tool_shaft", [](PySimulation& s, int tool) { return s.sim.tool_shaft(tool); }, py::arg("tool"))
-      .def("step", [](PySimulation& s, py::handle ticks_arg, bool force) {
-        const long ticks = tick_count(ticks_arg);
-        // The command line's rule (tissue run --force, scene/checks.hpp): beyond
-        // kMaxElementUpdates a call takes hours even on a GPU, most likely a slip.
-        const double updates = double(ticks) * s.sim.steps_per_tick() * double(s.sim.n_elements());
-        if (!force && updates > kMaxElementUpdates) {
-          char estimate[64];
-          std::snprintf(estimate, sizeof estimate, "%.3g element updates, beyond the %.0e", updates,
-                        kMaxElementUpdates);
-          throw std::invalid_argument("step(ticks=" + std::to_string(ticks) + "): " + std::to_string(ticks) +
-                                      " ticks x " + std::to_string(s.sim.steps_per_tick()) + " TLED steps x " +
-                                      std::to_string(s.sim.n_elements()) + " elements = " + estimate +
-                                      " a call may take without force=True (hours even on a GPU; a laptop CPU does "
-                                      "~1e8 per second); pass fewer ticks, or force=True to run it anyway");
-        }
-        return locked(s, [&](Simulation& x) { return interruptible(ticks, [&](long n) { return x.step(n); }); });
-      }, py::arg("ticks") = 1, py::kw_only(), py::arg("force") = false,
-           "Run haptic ticks; returns the last one's TickResult. Ctrl-C stops it at a tick boundary "
-           "(KeyboardInterrupt); more than 1e12 element updates need force=True")
-      .def_property_readonly("last", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.last(); }); })
-      .def("force", [](PySimulation& s, int tool) {
-        return numpy3(locked(s, [&](Simulation& x) { return x.force(tool); }));
-      }, py::arg("tool") = 0, "Force on the tool after the last tick (N)")
-      .def("reset", [](PySimulation& s) { locked(s, [](Simulation& x) { x.reset(); }); },
-           "Back to rest (u = 0, tick 0); keeps the loads")
-      .def(
-          "set_loads",
-          [](PySimulation& s, py::handle nodes, py::array_t<double, py::array::c_style | py::array::forcecast> forces) {
-            const std::vector<std::int32_t> ids = node_ids(nodes, 1, "nodes");
-            if (forces.size() != 3 * py::ssize_t(ids.size()))
-              throw std::invalid_argument("set_loads: forces must hold 3 values (x y z, N) per node: " +
-                                          std::to_string(forces.size()) + " values for " +
-                                          std::to_string(ids.size()) + " nodes");
-            const std::span<const double> f(forces.data(), std::size_t(forces.size()));
-            locked(s, [&](Simulation& x) { x.set_loads(ids, f); });
-          },
-          py::arg("nodes"), py::arg("forces"),
-          "Constant external forces (N) from the next tick on: nodes (n,), forces (n, 3); replaces the scene's "
-          "loads; empty arrays remove them")
-      .def("dissipated_energy", [](PySimulation& s) {
-        return locked(s, [](Simulation& x) { return x.dissipated_energy(); });
-      }, "J dissipated by the viscoelastic (Prony) terms since the start")
-      .def("viscous_stored_energy", [](PySimulation& s) {
-        return locked(s, [](Simulation& x) { return x.viscous_stored_energy(); });
-      }, "J stored in the Prony terms' branches after the last tick")
-      .def("take_notes", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.take_notes(); }); })
-      .def("displacement", [](PySimulation& s) { return field_array(s, Field::Displacement); }, "(n_nodes, 3) m")
-      .def("positions", [](PySimulation& s) { return field_array(s, Field::Position); }, "(n_nodes, 3) X + u (m)")
-      .def("pressure", [](PySimulation& s) { return field_array(s, Field::Pressure); }, "(n_nodes,) Pa")
-      .def("internal_force", [](PySimulation& s) { return field_array(s, Field::InternalForce); }, "(n_nodes, 3) N")
-      .def("jacobian", [](PySimulation& s) { return field_array(s, Field::Jacobian); }, "(n_elements,) J = det F")
-      .def("positions_f32", [](PySimulation& s) {
-        if (s.sim.positions_on_device())
-          throw std::invalid_argument("positions_f32: the " + s.sim.backend() +
-                                      " backend writes positions to device memory; use positions()");
-        py::array_t<float> a({py::ssize_t(s.sim.n_nodes()), py::ssize_t(3)});
-        float* out = a.mutable_data();
-        locked(s, [&](Simulation& x) { x.write_positions(out); });
-        return a;
-      }, "(n_nodes, 3) float32 deformed positions written straight from the store (host backends)")
-      .def("__repr__", [](PySimulation& s) {
-        return "<tissue.Simulation " + s.sim.name() + ": " + std::to_string(s.sim.n_nodes()) + " nodes, " +
-               std::to_string(s.sim.n_elements()) + " tets on " + s.sim.backend() + " (" + s.sim.precision() + ")>";
-      });
+      .def("tool_shaft", [](PySimulation& s, int tool) { return s.sim.tool_shaft(tool); }, py::arg("tool"));
+  bind_simulation_steps(cls);
+}
 
+/// tissue.Batch: time, failures, resets and arrays.
+void bind_batch_steps(py::class_<PyBatch>& cls) {
+  cls.def("step", [](PyBatch& b, py::handle ticks_arg, bool force) {
+        const long ticks = tick_count(ticks_arg);
+        double per_tick = 0;  // every scene's steps x elements
+        for (int i = 0; i < int(b.batch.size()); ++i)
+          per_tick += double(b.batch.steps_per_tick(i)) * double(b.batch.n_elements(i));
+        check_work(ticks, per_tick, std::to_string(b.batch.size()) + " scenes' TLED steps x elements", force);
+        return locked(b, [&](tissue::Batch& x) { return interruptible(ticks, [&](long n) { return x.step(n); }); });
+      }, py::arg("ticks") = 1, py::kw_only(), py::arg("force") = false,
+           "Run haptic ticks of every running scene; returns how many still run. Ctrl-C stops it at a tick boundary "
+           "(KeyboardInterrupt); more than 1e12 element updates in all need force=True")
+      .def("failed", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.failed(scene); }); },
+           py::arg("scene"))
+      .def("failure", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.failure(scene); }); },
+           py::arg("scene"), "Why the scene stopped ('' while it runs)")
+      .def_property_readonly("failed_scenes",
+                             [](PyBatch& b) { return locked(b, [&](tissue::Batch& x) { return x.failed_scenes(); }); })
+      .def("last", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.last(scene); }); },
+           py::arg("scene"), "The scene's last TickResult (its last good one when it failed)")
+      .def("ticks", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.ticks(scene); }); },
+           py::arg("scene"))
+      .def("reset", [](PyBatch& b, std::optional<int> scene) {
+        locked(b, [&](tissue::Batch& x) {
+          if (scene)
+            x.reset(*scene);
+          else
+            x.reset();
+        });
+      }, py::arg("scene") = py::none(), "One scene (or every scene) back to rest")
+      .def("take_notes", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.take_notes(scene); }); },
+           py::arg("scene"))
+      .def("forces", [](PyBatch& b) {
+        py::array_t<double> a({py::ssize_t(b.batch.size()), py::ssize_t(b.batch.max_tools()), py::ssize_t(3)});
+        double* out = a.mutable_data();
+        const std::size_t size = std::size_t(a.size());
+        locked(b, [&](tissue::Batch& x) { x.read_forces({out, size}); });
+        return a;
+      }, "(N, max_tools, 3) forces on the tools after the last tick (N)")
+      .def("displacement", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Displacement); },
+           py::arg("scene") = py::none(), "(N, nodes, 3) m, or one scene's (nodes, 3)")
+      .def("positions", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Position); },
+           py::arg("scene") = py::none(), "(N, nodes, 3) X + u (m), or one scene's")
+      .def("pressure", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Pressure); },
+           py::arg("scene") = py::none(), "(N, nodes) Pa, or one scene's")
+      .def("internal_force", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::InternalForce); },
+           py::arg("scene") = py::none(), "(N, nodes, 3) N, or one scene's")
+      .def("jacobian", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Jacobian); },
+           py::arg("scene") = py::none(), "(N, elements) J, or one scene's")
+      .def("__repr__", [](PyBatch& b) {
+        return "<tissue.Batch " + std::to_string(b.batch.size()) + " scenes on " + b.batch.backend() + " (" +
+               b.batch.precision() + ")>";
+      });
+}
+
+/// tissue.MaterialChange: a batch scene's new material parameters.
+void bind_material_change(py::module_& m) {
   py::class_<tissue::MaterialChange>(m, "MaterialChange", "New parameters for one material of a scene (None keeps it)")
       .def(py::init([](std::string material, std::optional<double> E, std::optional<double> nu,
                        std::optional<double> rho) { return tissue::MaterialChange{std::move(material), E, nu, rho}; }),
@@ -460,8 +534,11 @@ PYBIND11_MODULE(_tissue, m) {
       .def_readwrite("E", &tissue::MaterialChange::youngs_modulus)
       .def_readwrite("nu", &tissue::MaterialChange::poisson_ratio)
       .def_readwrite("rho", &tissue::MaterialChange::density);
+}
 
-  py::class_<PyBatch>(m, "Batch", "Many scenes stepped together on one backend (docs/batch.md)")
+/// tissue.Batch: loading, sizes, materials and the tools.
+void bind_batch(py::module_& m) {
+  auto cls = py::class_<PyBatch>(m, "Batch", "Many scenes stepped together on one backend (docs/batch.md)")
       .def(py::init([](py::object scenes, std::optional<int> copies, std::optional<std::string> backend,
                        std::optional<std::string> precision, std::optional<std::string> depth) {
              std::vector<tissue::BatchScene> list;
@@ -553,53 +630,19 @@ PYBIND11_MODULE(_tissue, m) {
         locked(b, [&](tissue::Batch& x) { x.set_tool_path(scene, tool, path); });
       }, py::arg("scene"), py::arg("tool"), py::arg("rows"), "A scripted path for one tool: rows t x y z [grasp [ax ay az]]")
       .def("set_loads", [](PyBatch& b, int scene, py::handle nodes, py::handle forces) {
-        const std::vector<std::int32_t> ids = flat<std::int32_t>(nodes, 1, "nodes");
+        const std::vector<std::int32_t> ids = node_ids(nodes, 1, "nodes");
         const std::vector<double> f = flat<double>(forces, 3, "forces");
         locked(b, [&](tissue::Batch& x) { x.set_loads(scene, ids, f); });
-      }, py::arg("scene"), py::arg("nodes"), py::arg("forces"))
-      .def("step", [](PyBatch& b, long ticks) {
-        return locked(b, [&](tissue::Batch& x) { return interruptible(ticks, [&](long n) { return x.step(n); }); });
-      }, py::arg("ticks") = 1, "Run haptic ticks of every running scene; returns how many still run. Ctrl-C stops it "
-           "at a tick boundary (KeyboardInterrupt)")
-      .def("failed", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.failed(scene); }); },
-           py::arg("scene"))
-      .def("failure", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.failure(scene); }); },
-           py::arg("scene"), "Why the scene stopped ('' while it runs)")
-      .def_property_readonly("failed_scenes",
-                             [](PyBatch& b) { return locked(b, [&](tissue::Batch& x) { return x.failed_scenes(); }); })
-      .def("last", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.last(scene); }); },
-           py::arg("scene"), "The scene's last TickResult (its last good one when it failed)")
-      .def("ticks", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.ticks(scene); }); },
-           py::arg("scene"))
-      .def("reset", [](PyBatch& b, std::optional<int> scene) {
-        locked(b, [&](tissue::Batch& x) {
-          if (scene)
-            x.reset(*scene);
-          else
-            x.reset();
-        });
-      }, py::arg("scene") = py::none(), "One scene (or every scene) back to rest")
-      .def("take_notes", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.take_notes(scene); }); },
-           py::arg("scene"))
-      .def("forces", [](PyBatch& b) {
-        py::array_t<double> a({py::ssize_t(b.batch.size()), py::ssize_t(b.batch.max_tools()), py::ssize_t(3)});
-        double* out = a.mutable_data();
-        const std::size_t size = std::size_t(a.size());
-        locked(b, [&](tissue::Batch& x) { x.read_forces({out, size}); });
-        return a;
-      }, "(N, max_tools, 3) forces on the tools after the last tick (N)")
-      .def("displacement", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Displacement); },
-           py::arg("scene") = py::none(), "(N, nodes, 3) m, or one scene's (nodes, 3)")
-      .def("positions", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Position); },
-           py::arg("scene") = py::none(), "(N, nodes, 3) X + u (m), or one scene's")
-      .def("pressure", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Pressure); },
-           py::arg("scene") = py::none(), "(N, nodes) Pa, or one scene's")
-      .def("internal_force", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::InternalForce); },
-           py::arg("scene") = py::none(), "(N, nodes, 3) N, or one scene's")
-      .def("jacobian", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Jacobian); },
-           py::arg("scene") = py::none(), "(N, elements) J, or one scene's")
-      .def("__repr__", [](PyBatch& b) {
-        return "<tissue.Batch " + std::to_string(b.batch.size()) + " scenes on " + b.batch.backend() + " (" +
-               b.batch.precision() + ")>";
-      });
+      }, py::arg("scene"), py::arg("nodes"), py::arg("forces"));
+  bind_batch_steps(cls);
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_tissue, m) {
+  bind_module(m);
+  bind_results(m);
+  bind_simulation(m);
+  bind_material_change(m);
+  bind_batch(m);
 }

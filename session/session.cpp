@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <cmath>
 #include <stdexcept>
 
 #include "backends/registry.hpp"
@@ -28,6 +29,7 @@ Session::Session(std::shared_ptr<const scene::Scene> scene, std::shared_ptr<cons
     : scene_(std::move(scene)), engine_{std::move(model), std::move(backend), nullptr} {
   if (scene_->tools.empty()) throw std::runtime_error(scene_->source + ": the scene has no tool to drive");
   settings_ = scene::scheduler_settings(*scene_);
+  box_ = scene::mesh_box(scene_->nodes);
   for (const scene::Tool& t : scene_->tools) devices_.emplace_back(t.path);
   for (HostDevice& d : devices_) device_ptrs_.push_back(&d);
   restart();
@@ -45,6 +47,29 @@ void Session::check_tool(int tool) const {
   if (tool < 0 || tool >= n_tools())
     throw std::invalid_argument(fmt::format("{}: tool {} does not exist (the scene has {} tool{}: 0..{})", name(), tool,
                                             n_tools(), n_tools() == 1 ? "" : "s", n_tools() - 1));
+}
+
+void Session::set_tool_pose(int tool, Vec3<double> tip, Vec3<double> axis) {
+  check_tool_pose(tool, tip, axis);
+  device(tool).set_pose(tip, axis);
+}
+
+void Session::check_tool_pose(int tool, Vec3<double> tip, Vec3<double> axis) const {
+  check_tool(tool);
+  const bool finite = std::isfinite(tip.x) && std::isfinite(tip.y) && std::isfinite(tip.z) && std::isfinite(axis.x) &&
+                      std::isfinite(axis.y) && std::isfinite(axis.z);
+  if (!finite)
+    throw std::invalid_argument(fmt::format("{}: tool {} pose tip ({}, {}, {}) m axis ({}, {}, {}) is not finite", name(),
+                                            tool, tip.x, tip.y, tip.z, axis.x, axis.y, axis.z));
+  // the scene rule for waypoints: a tip this far away is a unit or typing mistake and overflows the float
+  // collision query
+  const double d = box_.distance(tip), reach = scene::kToolReach * box_.size;
+  if (d > reach)
+    throw std::invalid_argument(fmt::format(
+        "{}: tool {} ('{}') tip ({}, {}, {}) m is {:.3g} m from the mesh, more than {:.0f} x its size ({:.3g} m) = "
+        "{:.3g} m; coordinates are metres",
+        name(), tool, scene_->tools[std::size_t(tool)].name, tip.x, tip.y, tip.z, d, scene::kToolReach, box_.size,
+        reach));
 }
 
 void Session::check_running() const {

@@ -15,6 +15,7 @@
 #include "core/model.hpp"
 #include "core/scheduler.hpp"
 #include "scene/scene.hpp"
+#include "scene/validate.hpp"
 #include "session/engine.hpp"
 
 namespace tissue {
@@ -91,6 +92,12 @@ class Session {
   HostDevice& device(int tool) { return devices_.at(std::size_t(tool)); }
   /// Throws std::invalid_argument naming the scene when tool is not one of its tools.
   void check_tool(int tool) const;
+  /// The host drives tool `tool` to this pose from the next tick on (HostDevice::set_pose). Throws
+  /// std::invalid_argument, naming the tool and the value, for a tool that does not exist, a pose that is
+  /// not finite, or a tip farther from the mesh than a scene's waypoints may be (scene::kToolReach).
+  void set_tool_pose(int tool, Vec3<double> tip, Vec3<double> axis);
+  /// set_tool_pose's checks alone.
+  void check_tool_pose(int tool, Vec3<double> tip, Vec3<double> axis) const;
 
   /// The last tick's report (a zero report before the first).
   const TickReport& last() const { return last_; }
@@ -106,6 +113,7 @@ class Session {
 
   std::shared_ptr<const scene::Scene> scene_;
   Engine engine_;
+  scene::MeshBox box_;  ///< the reach host poses are held to, as scene waypoints are
   SchedulerSettings settings_;
   std::vector<HostDevice> devices_;
   std::vector<Device*> device_ptrs_;

@@ -241,7 +241,14 @@ TEST(Batch, MisuseIsAClearError) {
   EXPECT_NE(thrown([&] { batch.set_tool_poses(std::vector<double>(5)); }).find("needs 6"), std::string::npos);
   std::vector<double> tips(6, 0.0);
   tips[4] = INFINITY;
-  EXPECT_NE(thrown([&] { batch.set_tool_poses(tips); }).find("scene 1 tool 0"), std::string::npos);
+  const std::string inf = thrown([&] { batch.set_tool_poses(tips); });
+  EXPECT_NE(inf.find("set_tool_poses: scene 1: "), std::string::npos) << inf;
+  EXPECT_NE(inf.find("tool 0 pose"), std::string::npos) << inf;
+  tips[4] = 1e300;  // farther than a scene's waypoints may be
+  EXPECT_NE(thrown([&] { batch.set_tool_poses(tips); }).find("from the mesh, more than 1000 x its size"),
+            std::string::npos);
+  EXPECT_NE(thrown([&] { batch.set_tool_pose(0, 0, {0, 0, 1e300}); }).find("coordinates are metres"),
+            std::string::npos);
   EXPECT_NE(thrown([&] { batch.fields(Field::Displacement); }).find("scenes 0"), std::string::npos)
       << "scenes of different meshes have no (N, nodes, 3) field";
   EXPECT_NE(thrown([&] { batch.step(0); }).find("must be >= 1"), std::string::npos);

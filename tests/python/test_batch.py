@@ -123,3 +123,12 @@ def test_misuse_raises_naming_the_value(tmp_path):
         tissue.Batch(block_scene(tmp_path), 0)
     with pytest.raises(ValueError, match="must be >= 1"):
         batch.step(0)
+    with pytest.raises(ValueError, match="outside 1"):
+        batch.step(2**64)
+    with pytest.raises(ValueError, match="force=True"):
+        batch.step(10**12)
+    with pytest.raises(ValueError, match="1.5"):
+        batch.set_loads(0, [1.5], [[0.0, 0.0, -1.0]])
+    with pytest.raises(ValueError, match="more than 1000 x its size"):
+        batch.set_tool_pose(1, 0, [0.0, 0.0, 1e300])
+    assert batch.ticks(0) == 0, "nothing refused ran"
