@@ -442,6 +442,22 @@ TEST(Program, TradeoffRefusesAHoldShorterThanATick) {
       << err;
 }
 
+// `locking --cells 64` printed nothing in 120 s: the plan (the tets of each
+// mesh and the cells^4 growth of the work) comes first, then each case as it
+// is solved, with the next mesh's forecast.
+TEST(Program, LockingPrintsItsPlanAndEachCaseAsItGoes) {
+  TempDir t;
+  ASSERT_EQ(run_tissue(t, "locking", {"locking", "--cells", "2,4"}), 0) << slurp(t.file("locking.err"));
+  const std::string err = slurp(t.file("locking.err"));
+  for (const char* part :
+       {"locking: meshes of 2 (48 tets), 4 (384 tets) cells per side, each solved plain and IANP; the work grows as "
+        "cells^4",
+        "locking: 2 cells (48 tets), plain: ", "locking: 2 cells (48 tets), IANP: ",
+        "; next: 4 cells, about ", " s per form (x 16, cells^4)", "locking: 4 cells (384 tets), plain: ",
+        "locking: 4 cells (384 tets), IANP: "})
+    EXPECT_NE(err.find(part), std::string::npos) << part << "\n" << err;
+}
+
 /// Standard output of a shell command, its last newline dropped; its exit
 /// status in *status.
 std::string shell_output(const std::string& command, int* status) {
