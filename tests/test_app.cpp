@@ -18,6 +18,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -96,10 +97,13 @@ std::string parse_error(std::vector<std::string> args) {
   add_bench_command(app, rc);
   add_tradeoff_command(app, rc);
   add_locking_command(app, rc);
-  // refusals only: a value these accept runs the command (meshing, a Hertz or convergence study)
+  // these three are checked for refusals only: the command itself (meshing, a Hertz or convergence study)
+  // is replaced, so that a value they accepted ends the parse at once instead of running it
   add_mesh_command(app, rc);
   add_hertz_command(app, rc);
   add_converge_command(app, rc);
+  for (const char* name : {"mesh", "hertz", "converge"})
+    app.get_subcommand(name)->callback([] { throw std::runtime_error("x.xml: cannot open the scene file"); });
   // `tissue view` hands its arguments to tissue-view: its options are the viewer's own
   viewer::add_view_options(*app.add_subcommand("view"), rc);
   std::reverse(args.begin(), args.end());
