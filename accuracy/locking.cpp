@@ -52,7 +52,8 @@ double richardson(double f4h, double f2h, double fh, double* rate) {
   return fh - d2 / (std::pow(2.0, *rate) - 1);
 }
 
-LockingStudy locking_study(double nu, const std::vector<int>& cells) {
+LockingStudy locking_study(double nu, const std::vector<int>& cells,
+                           const std::function<void(const LockingCase&)>& done) {
   if (!(nu > -1 && nu < 0.5)) throw std::invalid_argument(fmt::format("locking study: nu = {} must be in (-1, 0.5)", nu));
   LockingStudy s;
   s.nu = nu;
@@ -63,10 +64,11 @@ LockingStudy locking_study(double nu, const std::vector<int>& cells) {
                                               "finest one is the reference)",
                                               cells[k], cells[k - 1]));
   }
-  for (int c : cells) {
-    s.cases.push_back(solve(c, false, nu));
-    s.cases.push_back(solve(c, true, nu));
-  }
+  for (int c : cells)
+    for (bool ianp : {false, true}) {
+      s.cases.push_back(solve(c, ianp, nu));
+      if (done) done(s.cases.back());
+    }
   const std::size_t m = cells.size();
   if (m >= 3 && cells[m - 1] == 2 * cells[m - 2] && cells[m - 2] == 2 * cells[m - 3]) {
     auto f = [&](std::size_t k, bool ianp) { return s.cases[2 * k + (ianp ? 1 : 0)].force; };

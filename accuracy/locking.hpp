@@ -7,6 +7,7 @@
 // formulations are compared against.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -38,8 +39,11 @@ struct LockingStudy {
 /// differences shrink monotonically.
 double richardson(double f4h, double f2h, double fh, double* rate);
 
-/// Runs the study at Poisson ratio nu on boxes of cells^3 cells (ascending).
-LockingStudy locking_study(double nu, const std::vector<int>& cells);
+/// Runs the study at Poisson ratio nu on boxes of cells^3 cells (ascending);
+/// `done`, when set, is called with each case as soon as it is solved (the
+/// command line's progress: a fine mesh takes minutes to hours).
+LockingStudy locking_study(double nu, const std::vector<int>& cells,
+                           const std::function<void(const LockingCase&)>& done = {});
 
 /// The study as a text table with forces relative to the reference.
 std::string locking_table(const LockingStudy& study);

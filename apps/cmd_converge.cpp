@@ -4,12 +4,14 @@
 // distance from it; optionally uniform re-meshes as comparison rows.
 #include <fmt/format.h>
 
+#include <limits>
 #include <memory>
 
 #include "accuracy/convergence.hpp"
 #include "apps/commands.hpp"
 #include "apps/options.hpp"
 #include "io/atomic_file.hpp"
+#include "scene/text.hpp"
 
 namespace tissue::app {
 namespace {
@@ -39,6 +41,23 @@ std::string row_json(const accuracy::ConvergenceRow& r, bool in_limit) {
       "\"failed\": \"{}\"}}",
       r.name, r.nodes, r.tets, r.edge_under_tool, r.force.x, r.force.y, r.force.z, norm(r.force), r.rel_err,
       r.residual, r.steps, r.wall, in_limit, r.failed);
+}
+
+/// The smallest --tol: the relaxation runs in double, and a node's force is
+/// a sum of tens of element forces of opposite signs, each rounded to
+/// epsilon = 2.2e-16 of its size, so the free nodes' relative residual
+/// stalls at a few thousand epsilons; a tolerance below 1e-12 is never
+/// reached and the study would run until its time limit.
+constexpr double kMinResidualTol = 1e-12;
+
+/// --tol in [kMinResidualTol, 1); "" when `text` is one.
+std::string residual_tol_error(const std::string& text) {
+  if (std::string e = real_number_error(text, 0, 1, true, true); !e.empty()) return e;
+  if (*scene::parse_real(text) < kMinResidualTol)
+    return fmt::format("{} is below what double precision resolves: the relative residual of the forces stalls at "
+                       "rounding noise above {:g}; give a tolerance in [{:g}, 1)",
+                       text, kMinResidualTol, kMinResidualTol);
+  return "";
 }
 
 int run_converge(const ConvergeArgs& a) {
@@ -98,10 +117,12 @@ void add_converge_command(CLI::App& app, int& rc) {
                   "Richardson limit");
   cmd->add_option("scene", a->scene, "scene (the built-in @kidney)")->capture_default_str();
   cmd->add_option("--backend", a->backend, "cpu | cuda (relaxes in double)")->capture_default_str();
-  cmd->add_option("--tol", a->tol, "relative residual to reach")->capture_default_str()->check(CLI::PositiveNumber);
+  cmd->add_option("--tol", a->tol, "relative residual to reach")->capture_default_str()->check(
+      CLI::Validator([](std::string& t) { return residual_tol_error(t); }, fmt::format("REAL in [{:g}, 1)", kMinResidualTol)));
   cmd->add_option("--levels", a->levels, "how many of the family's meshes (3..5; docs/contact.md)")
       ->capture_default_str();
-  cmd->add_option("--uniform", a->uniform, "also these uniform re-mesh tet counts, as comparison rows");
+  cmd->add_option("--uniform", a->uniform, "also these uniform re-mesh tet counts, as comparison rows")
+      ->check(whole_number(100, std::numeric_limits<int>::max()));  // fewer than 100 tets keep no kidney shape
   cmd->add_option("--json", a->json, "write the rows as JSON")->check(output_file());
   cmd->callback([a, &rc] { rc = run_converge(*a); });
 }

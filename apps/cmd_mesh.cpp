@@ -20,6 +20,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <memory>
 #include <stdexcept>
@@ -33,6 +34,7 @@
 #include "io/organ_mesher.hpp"
 #include "io/scene_xml.hpp"
 #include "scene/checks.hpp"
+#include "scene/text.hpp"
 #include "scene/validate.hpp"
 
 namespace tissue::app {
@@ -103,6 +105,83 @@ std::pair<std::string, scene::Material> parse_inclusion(const std::string& spec,
 }
 
 std::string mm_text(const Vec3<double>& e) { return fmt::format("{:.1f} x {:.1f} x {:.1f} mm", 1e3 * e.x, 1e3 * e.y, 1e3 * e.z); }
+
+/// The most triangles a --remesh-edge may ask of the organ's surface: the
+/// tets a surface forces are a few times its triangle count
+/// (io/tetgen_mesher.hpp), so 5e6 triangles already mean over 1e7 tets --
+/// several GB for TetGen at io::kBytesPerTet and a model a thousand times
+/// the built-in kidney's 8,400 tets, far beyond any interactive run.
+constexpr double kMaxRemeshTriangles = 5e6;
+/// The fewest triangles a --remesh-edge or --target-tets may leave: below
+/// about 100 a surface keeps no shape (a cube's six faces alone take 12, a
+/// sphere of 80 triangles is an icosahedron subdivided once), and the body
+/// shrinks to the few tets that span it.
+constexpr double kMinSurfaceCells = 100;
+
+/// Area of a triangle mesh (m^2).
+double surface_area(const io::SurfaceMesh& s) {
+  double area = 0;
+  for (size_t t = 0; t < s.triangles.size() / 3; ++t) {
+    Vec3<double> p[3];
+    for (int k = 0; k < 3; ++k) {
+      const index_t v = s.triangles[3 * t + k];
+      p[k] = {s.vertices[3 * v], s.vertices[3 * v + 1], s.vertices[3 * v + 2]};
+    }
+    area += 0.5 * norm(cross(p[1] - p[0], p[2] - p[0]));
+  }
+  return area;
+}
+
+/// Refuses a --remesh-edge (> 0) whose triangle count on the organ's surface
+/// -- its area over an equilateral triangle's, sqrt(3) / 4 edge^2 -- is
+/// beyond kMaxRemeshTriangles (the memory and the model it would make) or
+/// below kMinSurfaceCells (an edge as large as the body keeps no shape),
+/// naming the estimate, the body's size and the edges that would be allowed.
+void check_remesh_edge(const io::NamedSurface& organ, double edge) {
+  if (!(edge > 0)) return;
+  const double area = surface_area(organ.surface);
+  const Vec3<double> e = io::surface_extents(organ.surface);
+  const double per_triangle = std::sqrt(3.0) / 4, triangles = area / (per_triangle * edge * edge);
+  if (triangles > kMaxRemeshTriangles)
+    throw std::invalid_argument(fmt::format(
+        "--remesh-edge {:g} m: the surface of {} ({:.4g} m^2) would be remeshed into about {:.3g} triangles, more "
+        "than the {:.0e} allowed (the tets it forces would need more memory than a workstation has, and make a "
+        "model far beyond an interactive run); use an edge of at least {:.3g} m",
+        edge, organ.source, area, triangles, kMaxRemeshTriangles, std::sqrt(area / (per_triangle * kMaxRemeshTriangles))));
+  if (triangles < kMinSurfaceCells)
+    throw std::invalid_argument(fmt::format(
+        "--remesh-edge {:g} m: the surface of {} ({:.4g} m^2, extent {}) would be remeshed into about {:.3g} "
+        "triangles, fewer than the {:.0f} that represent a surface (an edge this long against the body keeps no "
+        "shape); use an edge of at most {:.3g} m",
+        edge, organ.source, area, mm_text(e), triangles, kMinSurfaceCells,
+        std::sqrt(area / (per_triangle * kMinSurfaceCells))));
+}
+
+/// --remesh-edge: 0 (auto), -1 (never) or a length > 0; "" when `text` is one.
+std::string remesh_edge_error(const std::string& text) {
+  const auto v = scene::parse_real(text);
+  if (!v) return fmt::format("'{}' is not a number", text);
+  if (!std::isfinite(*v)) return fmt::format("{} is not a finite number", text);
+  if (*v == 0 || *v == -1 || *v > 0) return "";
+  return fmt::format("{} is not allowed: the edge is 0 (auto), -1 (never remesh) or a length > 0 m", text);
+}
+
+/// --target-tets: 0 (off) or a whole number of at least kMinSurfaceCells
+/// (fewer tets cannot hold the surface's shape: the mesh shrinks to a few
+/// tets spanning the body); "" when `text` is one.
+std::string target_tets_error(const std::string& text) {
+  constexpr long long most = std::numeric_limits<int>::max();
+  const std::string allowed =
+      fmt::format("--target-tets is 0 (off) or a whole number of tets in [{:.0f}, {}]", kMinSurfaceCells, most);
+  if (std::string e = whole_number_error(text, 0, most); !e.empty()) return e + "; " + allowed;
+  const long long n = *scene::parse_integer(text);
+  if (n > 0 && n < kMinSurfaceCells)
+    return fmt::format("{} tets are too few to represent a surface (the body would shrink to the few tets that span "
+                       "it); {}",
+                       n, allowed);
+  return "";
+}
+
 
 /// The element sets of a meshed organ: one for the whole body, or one per TetGen region (the body and each
 /// inclusion, in the order of s.materials), each reported with its volume and material. Returns each tet's
@@ -229,6 +308,7 @@ scene::Scene make_scene(MeshOptions& o) {
     return n;
   };
   io::NamedSurface organ = read(o.surface);
+  check_remesh_edge(organ, o.pipeline.remesh_edge);  // before any remeshing
   std::vector<io::NamedSurface> inclusions;
   for (const std::string& f : inclusion_files) inclusions.push_back(read(f));
   const io::OrganMesh result = io::mesh_organ(organ, inclusions, o.pipeline);
@@ -307,13 +387,16 @@ void add_mesh_command(CLI::App& app, int& rc) {
   cmd->add_flag("--no-repair", o->no_repair, "Refuse damaged surfaces instead of repairing them");
   cmd->add_option("--remesh-edge", o->pipeline.remesh_edge,
                   "Remesh the surfaces to this edge length (m); 0 = auto (when finer than the target needs), -1 = never")
-      ->default_val(0);
+      ->default_val(0)
+      ->check(CLI::Validator([](std::string& t) { return remesh_edge_error(t); }, "0 | -1 | EDGE > 0"));
   cmd->add_option("--quality", m.quality, "TetGen radius-edge ratio bound (q)")->default_val(1.414);
   cmd->add_option("--min-dihedral", m.min_dihedral, "TetGen minimum dihedral angle bound (degrees, q/..)")
       ->default_val(io::kDefaultMinDihedral);
   cmd->add_option("--optimise", m.optimise, "TetGen optimisation level (O, 0..10)")->default_val(io::kDefaultOptimise);
   cmd->add_option("--max-volume", m.max_volume, "Largest tet volume (m^3; 0 = no bound)")->default_val(0);
-  cmd->add_option("--target-tets", m.target_tets, "Aim at about this many tets, within 15 % (0 = off)")->default_val(0);
+  cmd->add_option("--target-tets", m.target_tets, "Aim at about this many tets, within 15 % (0 = off)")
+      ->default_val(0)
+      ->check(CLI::Validator([](std::string& t) { return target_tets_error(t); }, "0 | TETS >= 100"));
   cmd->add_option("--E", o->E, "Young's modulus (Pa; a built-in scene's too)")->default_val(3000);
   cmd->add_option("--nu", o->nu, "Poisson's ratio (a built-in scene's too)")->default_val(0.45);
   cmd->add_option("--rho", o->rho, "Density (kg/m^3; a built-in scene's too)")->default_val(1000);

@@ -20,6 +20,7 @@ struct TradeoffArgs {
   std::vector<std::string> depths;
   std::vector<int> meshes;
   bool quick = false;
+  bool max_hold_given = false;  ///< --max-hold was given (--quick sets its own)
 };
 
 int run_tradeoff_command(TradeoffArgs& a) {
@@ -27,6 +28,12 @@ int run_tradeoff_command(TradeoffArgs& a) {
   const scene::Scene s = load_scene_arg(a.scene);
   refuse_loads(s, "tradeoff");
   accuracy::TradeoffOptions& o = a.options;
+  // a hold shorter than one haptic tick runs no tick: every row would be unconverged
+  if (a.max_hold_given && o.max_hold < s.solver.tick)
+    throw std::invalid_argument(fmt::format(
+        "--max-hold {:g} s is shorter than one haptic tick of {} ({:g} s): the hold could not run a single tick "
+        "and every row would be unconverged; give at least {:g} s",
+        o.max_hold, s.source, s.solver.tick, s.solver.tick));
   o.backend = a.backend;
   if (!a.depths.empty()) {
     o.depths.clear();
@@ -77,7 +84,8 @@ void add_tradeoff_command(CLI::App& app, int& rc) {
       ->delimiter(',')
       ->check(whole_number(0, 100'000'000));
   cmd->add_option("--max-hold", a->options.max_hold, "Simulated seconds of hold before giving up on equilibrium")
-      ->check(real_number(0, 1e6, true));
+      ->check(real_number(0, 1e6, true))
+      ->each([a](const std::string&) { a->max_hold_given = true; });
   cmd->add_flag("--quick", a->quick, "Smoke run: the scene's mesh only and a handful of settings");
   cmd->callback([a, &rc] { rc = run_tradeoff_command(*a); });
 }

@@ -2,10 +2,14 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numeric>
 
 #include "core/vec.hpp"
+#include "scene/constraints.hpp"
+#include "scene/validate.hpp"
 
 namespace tissue::scene {
 namespace {
@@ -32,6 +36,91 @@ std::string describe(const Material& m) {
 
 double path_duration(const Tool& t) {
   return t.path.size() < 2 ? 0 : t.path.back().t - t.path.front().t;
+}
+
+/// "load box min (..) max (..)": the load's selection in words.
+std::string describe_as_load(const Constraint& c) { return "load" + describe(c).substr(5); }
+
+/// A warning for each <load> whose force lands only on nodes fixed in every
+/// component: the support takes the whole force and the body feels nothing.
+void fixed_load_warnings(const Scene& s, const TissueModel<double>& m, std::vector<std::string>& out) {
+  for (const Load& l : s.loads) {
+    Scene one = s;  // the nodes this load alone acts on (an area load: its faces' corners)
+    one.loads = {l};
+    SceneLoads r;
+    try {
+      r = resolve_loads(one, m);
+    } catch (const SceneError&) {
+      continue;  // a load that cannot be applied is an error where the loads are applied
+    }
+    if (r.nodes.empty()) continue;
+    const bool all_fixed = std::all_of(r.nodes.begin(), r.nodes.end(),
+                                       [&](index_t a) { return fixed_axes(m.node_flags[a]) == kAllAxes; });
+    if (all_fixed)
+      out.push_back(fmt::format("{}: {} acts only on fixed nodes ({} node(s), every one held by a <fixed> "
+                                "constraint): the support takes its whole force and the body does not feel it; "
+                                "move the load or the support",
+                                location(s, l.where.line), describe_as_load(l.where), r.nodes.size()));
+  }
+}
+
+/// The mesh's pieces: elements joined through shared nodes. Returns the piece
+/// of each node (-1 for a node of no element) and the number of pieces.
+index_t mesh_pieces(const TissueModel<double>& m, std::vector<index_t>& piece) {
+  std::vector<index_t> parent(m.n_nodes);
+  std::iota(parent.begin(), parent.end(), 0);
+  auto root = [&](index_t a) {
+    while (parent[a] != a) a = parent[a] = parent[parent[a]];
+    return a;
+  };
+  for (index_t e = 0; e < m.n_elems; ++e)
+    for (int c = 1; c < 4; ++c) {
+      const index_t a = root(m.elem_nodes[e]), b = root(m.elem_nodes[size_t(c) * m.n_elems + e]);
+      if (a != b) parent[std::max(a, b)] = std::min(a, b);
+    }
+  piece.assign(m.n_nodes, -1);
+  std::vector<index_t> id(m.n_nodes, -1);
+  index_t n = 0;
+  for (index_t e = 0; e < m.n_elems; ++e)  // pieces numbered by their lowest element
+    for (int c = 0; c < 4; ++c) {
+      const index_t a = m.elem_nodes[size_t(c) * m.n_elems + e], r = root(a);
+      if (id[r] < 0) id[r] = n++;
+      piece[a] = id[r];
+    }
+  return n;
+}
+
+/// A warning for each piece of a mesh of several that no constraint holds
+/// (the body as a whole is held): the tool pushes that piece away as a rigid
+/// body, as it would a body with no support at all.
+void unsupported_piece_warnings(const Scene& s, const TissueModel<double>& m, std::vector<std::string>& out) {
+  std::vector<index_t> piece;
+  const index_t n = mesh_pieces(m, piece);
+  if (n < 2) return;
+  std::vector<index_t> elems(n, 0), first(n, -1);
+  std::vector<std::uint8_t> held(n, 0);
+  for (index_t a = 0; a < m.n_nodes; ++a)
+    if (piece[a] >= 0 && fixed_axes(m.node_flags[a]) != 0) held[piece[a]] = 1;
+  for (index_t e = 0; e < m.n_elems; ++e) {
+    const index_t p = piece[m.elem_nodes[e]];
+    ++elems[p];
+    if (first[p] < 0) first[p] = e;
+  }
+  for (index_t p = 0; p < n; ++p) {
+    if (held[p]) continue;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (index_t a = 0; a < m.n_nodes; ++a)
+      if (piece[a] == p)
+        for (int c = 0; c < 3; ++c) {
+          lo[c] = std::min(lo[c], m.X[size_t(c) * m.n_nodes + a]);
+          hi[c] = std::max(hi[c], m.X[size_t(c) * m.n_nodes + a]);
+        }
+    out.push_back(fmt::format("{}: piece {} of the {} disconnected pieces of the mesh ({} element(s) from element "
+                              "{}, box ({:.4g}, {:.4g}, {:.4g}) .. ({:.4g}, {:.4g}, {:.4g}) m) has no fixed node: "
+                              "nothing holds it against the tool, so it is pushed away as a rigid body; fix a node "
+                              "of it, or join it to the body",
+                              s.source, p + 1, n, elems[p], first[p], lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]));
+  }
 }
 
 }  // namespace
@@ -106,6 +195,20 @@ std::vector<std::string> scene_warnings(const Scene& s, const TissueModel<double
     out.push_back(fmt::format("{}: {} of {} tetrahedra had a negative volume and were reoriented (corners 1 and 2 "
                               "swapped); check the corner order the mesh was written with",
                               s.source, m.reoriented, m.n_elems));
+  if (held > 0) unsupported_piece_warnings(s, m, out);
+  fixed_load_warnings(s, m, out);
+  if (s.solver.damping) {
+    // mass-proportional damping alpha gives the lowest mode the damping ratio alpha / (2 omega_1) (auto: 1,
+    // critical); far above it the body creeps with the time constant alpha / omega_1^2 instead of responding
+    const double omega = lowest_mode_estimate(m), alpha = *s.solver.damping;
+    if (omega > 0 && alpha > kMaxDampingPerMode * omega)
+      out.push_back(fmt::format(
+          "{}: solver: damping = {:g} 1/s is {:.3g} times the lowest mode's {:.4g} rad/s (more than {:.0f}): the body "
+          "is overdamped and creeps to the tool with a time constant of about alpha / omega^2 = {:.3g} s instead of "
+          "responding within the run; use \"auto\" ({:.4g} 1/s, critical) or a damping below {:.4g} 1/s",
+          location(s, s.solver.line), alpha, alpha / omega, omega, kMaxDampingPerMode, alpha / (omega * omega),
+          2 * omega, kMaxDampingPerMode * omega));
+  }
   const double tick = s.solver.tick;
   for (const Tool& t : s.tools) {  // every scripted tool (a scene may have several)
     if (t.device != "scripted") continue;

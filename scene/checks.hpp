@@ -7,11 +7,16 @@
 //                 reoriented, counted (TissueModel::reoriented);
 //   support:      no node fixed (the tool pushes the body away as a rigid
 //                 body: no equilibrium, a `tissue reference` cannot
-//                 converge); every node fixed (nothing can move);
+//                 converge); every node fixed (nothing can move); a
+//                 disconnected piece of the mesh with no node fixed while
+//                 the rest is held (that piece is pushed away); a <load>
+//                 whose force lands only on fixed nodes (the support takes it);
 //   tool path:    a haptic tick longer than the whole scripted path of
 //                 any tool (that tool jumps from its first to its last
 //                 waypoint in one tick); a tick outside 1e-5..0.1 s (far from a haptic
 //                 device's 1 ms);
+//   damping:      a damping alpha more than kMaxDampingPerMode times the
+//                 lowest mode's omega_1 (the body creeps instead of responding);
 //   cost:         more than kManyStepsPerTick TLED steps per tick, naming
 //                 the element, its material and wave speed that set the step;
 //   precision:    a material so nearly incompressible that the precision's
@@ -27,6 +32,12 @@
 #include "scene/scene.hpp"
 
 namespace tissue::scene {
+
+/// Damping alpha (1/s) per rad/s of the lowest mode above which a scene
+/// warns: 100 is a damping ratio of 50 (auto is 1, critical), so the body
+/// creeps with the time constant alpha / omega_1^2 = 100 / omega_1, some
+/// sixteen periods of its lowest mode, instead of following the tool.
+inline constexpr double kMaxDampingPerMode = 100;
 
 /// TLED steps per haptic tick above which a scene warns about its cost
 /// (the built-in kidney needs 3, typical meshes 1..20).

@@ -387,6 +387,28 @@ void check_path(const Scene& s, const Tool& t, const std::string& what) {
   }
 }
 
+/// The smallest tool radius, as a fraction of the body's largest extent: a
+/// tool a millionth of the body's size presses no node of any mesh the
+/// engine can hold (it falls between the nodes), so such a radius is a unit
+/// or typing mistake rather than a tool.
+constexpr double kMinToolRadius = 1e-6;
+
+/// The mesh's bounding box.
+struct Bounds {
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  double diagonal() const { return std::hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]); }
+  double largest_extent() const { return std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 0.0}); }
+};
+
+Bounds mesh_bounds(const Scene& s) {
+  Bounds b;
+  for (size_t k = 0; k < s.nodes.size(); ++k) {
+    b.lo[k % 3] = std::min(b.lo[k % 3], s.nodes[k]);
+    b.hi[k % 3] = std::max(b.hi[k % 3], s.nodes[k]);
+  }
+  return b;
+}
+
 /// Every waypoint within kToolReach mesh sizes of the mesh's box (the rule at kToolReach).
 void check_path_near_mesh(const Scene& s, const Tool& t, const std::string& what) {
   const MeshBox box = mesh_box(s.nodes);
@@ -403,16 +425,20 @@ void check_path_near_mesh(const Scene& s, const Tool& t, const std::string& what
 
 void check_tool(const Scene& s, const Tool& t) {
   const std::string what = fmt::format("tool '{}'", t.name);
-  double ext = 0;  // a tool wider than the body cannot touch it as a tool
-  for (int c = 0; c < 3 && s.nodes.size() >= 3; ++c) {
-    double lo = INFINITY, hi = -INFINITY;
-    for (std::size_t i = c; i < s.nodes.size(); i += 3) {
-      lo = std::min(lo, s.nodes[i]);
-      hi = std::max(hi, s.nodes[i]);
-    }
-    ext = std::max(ext, hi - lo);
-  }
+  const Bounds b = mesh_bounds(s);
+  const double ext = b.largest_extent();  // a tool wider than the body cannot touch it as a tool
   if (const std::string e = tool_shape_error({t.name, t.radius, t.shaft}, ext); !e.empty()) fail(s, t.line, e);
+  if (ext > 0 && t.radius < kMinToolRadius * ext)
+    fail(s, t.line,
+         fmt::format("{}: radius = {} m is below {:g} of the body's largest extent ({:.4g} m), the smallest "
+                     "radius allowed ({:.4g} m): a tool that small falls between the nodes and presses nothing; "
+                     "check the unit of the radius and of the mesh",
+                     what, t.radius, kMinToolRadius, ext, kMinToolRadius * ext));
+  if (const double size = b.diagonal(); t.shaft > kToolReach * size)
+    fail(s, t.line,
+         fmt::format("{}: shaft-length = {} m is longer than {:.0f} x the mesh's size ({:.3g} m, the limit "
+                     "{:.3g} m); coordinates are metres",
+                     what, t.shaft, kToolReach, size, kToolReach * size));
   for (int c = 0; c < 3; ++c) check_finite(s, t.line, what, fmt::format("direction {}", "xyz"[c]), t.direction[c]);
   if (!(norm(t.direction) > 0))
     fail(s, t.line, fmt::format("{}: direction (0, 0, 0) must be a non-zero vector (the shaft axis, tip to handle)", what));
@@ -424,6 +450,22 @@ void check_tool(const Scene& s, const Tool& t) {
                      t.path_file.empty() ? "" : fmt::format("; '{}' gave no waypoints", t.path_file)));
   check_path(s, t, what);
   check_path_near_mesh(s, t, what);
+}
+
+/// Every tool by the rules above, then their names: messages, warnings and
+/// the run's summary name a tool by its name, so two of one name could not
+/// be told apart.
+void check_tools(const Scene& s) {
+  std::map<std::string, const Tool*> seen;
+  for (const Tool& t : s.tools) {
+    check_tool(s, t);
+    const auto [it, fresh] = seen.emplace(t.name, &t);
+    if (!fresh)
+      fail(s, t.line,
+           fmt::format("tool '{}' is defined twice (first {}); tool names must be unique (a <tool> "
+                       "without name= is 'probe'): give each its own name=", t.name,
+                       location(s, it->second->line)));
+  }
 }
 
 // ---- solver ----------------------------------------------------------------
@@ -493,7 +535,7 @@ ModelInput to_model_input(const Scene& scene) {
   in.fibre_dirs = resolve_fibre_dirs(scene, in.elem_material);
   in.fixed = resolve_constraints(scene);
   check_loads(scene);  // the <load>s' rules, with file:line, before any work
-  for (const Tool& t : scene.tools) check_tool(scene, t);
+  check_tools(scene);
   check_solver(scene);
   in.nodes = scene.nodes;
   in.tets = scene.tets;
@@ -523,7 +565,7 @@ TissueModel<double> load_model(const Scene& scene) {
 
 SchedulerSettings scheduler_settings(const Scene& scene) {
   check_solver(scene);
-  for (const Tool& t : scene.tools) check_tool(scene, t);
+  check_tools(scene);
   SchedulerSettings st;
   st.tools.clear();
   for (const Tool& t : scene.tools) st.tools.push_back({{t.name, t.radius, t.shaft}, t.direction});

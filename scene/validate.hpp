@@ -19,11 +19,12 @@
 //                listed; a fibre field's axis off every element centroid;
 //   constraints: node ids in range; numbers finite; box min <= max; plane
 //                normal non-zero; every constraint fixes at least one node;
-//   tools:       radius finite, > 0 and at most half the body's largest
-//                extent; shaft-length >= 0; direction non-zero; device
-//                scripted | mouse | phantom; a scripted tool has a path;
-//                waypoints (tip and axis) finite with increasing t, tips within
-//                1000 mesh sizes (bounding-box diagonals) of the mesh;
+//   tools:       radius finite, > 0, at most half the body's largest
+//                extent and at least 1e-6 of it; shaft-length >= 0 and within
+//                1000 mesh sizes (bounding-box diagonals); direction
+//                non-zero; device scripted | mouse | phantom; a scripted tool
+//                has a path; waypoints (tip and axis) finite with increasing
+//                t, tips within 1000 mesh sizes of the mesh; names unique;
 //   solver:      backend cpu | cuda; numbers finite; dt > 0 or unset (auto);
 //                0 < dt-safety < 1; 0 <= mass-scaling < 1; damping >= 0 or
 //                unset (auto); depth >= 0, kDepthAll (-1) or kDepthAuto (-2);

@@ -18,6 +18,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -96,6 +97,13 @@ std::string parse_error(std::vector<std::string> args) {
   add_bench_command(app, rc);
   add_tradeoff_command(app, rc);
   add_locking_command(app, rc);
+  // these three are checked for refusals only: the command itself (meshing, a Hertz or convergence study)
+  // is replaced, so that a value they accepted ends the parse at once instead of running it
+  add_mesh_command(app, rc);
+  add_hertz_command(app, rc);
+  add_converge_command(app, rc);
+  for (const char* name : {"mesh", "hertz", "converge"})
+    app.get_subcommand(name)->callback([] { throw std::runtime_error("x.xml: cannot open the scene file"); });
   // `tissue view` hands its arguments to tissue-view: its options are the viewer's own
   viewer::add_view_options(*app.add_subcommand("view"), rc);
   std::reverse(args.begin(), args.end());
@@ -161,6 +169,40 @@ TEST(Options, CommandsRefuseBadValues) {
   EXPECT_EQ(parse_error({"reference", "x.xml", "--json", "/"}), "--json: / is a folder; give a file name");
   EXPECT_EQ(parse_error({"tradeoff", "x.xml", "--json", "/no/such/dir/t.json"}),
             "--json: /no/such/dir/t.json: the folder /no/such/dir does not exist");
+}
+
+// Values that ate the machine or gave an internal dump: each refused at the
+// parse, naming the option, the value and the rule (an estimate where the
+// rule is one).
+TEST(Options, StudiesAndMeshingRefuseValuesBeyondTheirRange) {
+  const std::string mesh_allowed = "; --target-tets is 0 (off) or a whole number of tets in [100, 2147483647]";
+  EXPECT_EQ(parse_error({"mesh", "s.obj", "-o", "x.xml", "--remesh-edge", "-5"}),
+            "--remesh-edge: -5 is not allowed: the edge is 0 (auto), -1 (never remesh) or a length > 0 m");
+  EXPECT_EQ(parse_error({"mesh", "s.obj", "-o", "x.xml", "--target-tets", "1"}),
+            "--target-tets: 1 tets are too few to represent a surface (the body would shrink to the few tets that "
+            "span it)" + mesh_allowed);
+  EXPECT_EQ(parse_error({"mesh", "s.obj", "-o", "x.xml", "--target-tets", "1e10"}),
+            "--target-tets: '1e10' is not a whole number written in digits (and 1e+10 is above the most, "
+            "2147483647)" + mesh_allowed);
+  EXPECT_EQ(parse_error({"hertz", "--levels", "0"}),
+            "--levels: 0 is out of range: it must be in [2, 100000] (cells per axis)");
+  const std::string levels = parse_error({"hertz", "--levels", "100000"});  // reached 8 GB in 11 s
+  EXPECT_EQ(levels.rfind("--levels: 100000 cells per axis make 6 x 100000^3 = 6e+15 tets, which need about 6e+09 GB "
+                         "of memory (1000 bytes per tet in double); only ",
+                         0),
+            0u)
+      << levels;
+  EXPECT_NE(levels.find("GB are available: use at most "), std::string::npos) << levels;
+  EXPECT_EQ(parse_error({"hertz", "--grading", "-3"}), "--grading: -3 is out of range: it must be in [1, 100]");
+  EXPECT_EQ(parse_error({"hertz", "--radius", "1e300"}), "--radius: 1e300 is out of range: it must be in [1e-06, 1]");
+  EXPECT_EQ(parse_error({"hertz", "--nu", "0.5"}), "--nu: 0.5 is out of range: it must be in (-1, 0.5)");
+  EXPECT_EQ(parse_error({"hertz", "--ratios", "5"}),
+            "--ratios: delta / R = 5 is outside the range where Hertz's closed form holds, (0, 0.2]: it assumes the "
+            "contact radius sqrt(R delta) small against R (at 0.2 it is already 0.45 R)");
+  EXPECT_EQ(parse_error({"converge", "--tol", "1e-300"}),
+            "--tol: 1e-300 is below what double precision resolves: the relative residual of the forces stalls at "
+            "rounding noise above 1e-12; give a tolerance in [1e-12, 1)");
+  EXPECT_EQ(parse_error({"converge", "--uniform", "-5"}), "--uniform: -5 is out of range: it must be in [100, 2147483647]");
 }
 
 // ---------------------------------------------------- tick count and work
@@ -340,6 +382,84 @@ TEST(Program, BadInputsGetClearErrors) {
   std::ofstream(t.file("nan.xml")) << scene;
   EXPECT_NE(error_of({"run", t.file("nan.xml")}).find("waypoint 1: t = nan is not a finite number"),
             std::string::npos);
+}
+
+/// A closed 2 cm cube as an OBJ file (outward triangles): 2.4e-3 m^2 of surface.
+const char* kCubeObj = R"(v 0 0 0
+v 0.02 0 0
+v 0.02 0.02 0
+v 0 0.02 0
+v 0 0 0.02
+v 0.02 0 0.02
+v 0.02 0.02 0.02
+v 0 0.02 0.02
+f 1 3 2
+f 1 4 3
+f 5 6 7
+f 5 7 8
+f 1 2 6
+f 1 6 5
+f 4 8 7
+f 4 7 3
+f 1 5 8
+f 1 8 4
+f 2 3 7
+f 2 7 6
+)";
+
+// `mesh --remesh-edge 1e-7` grew to 10.9 GB and `--remesh-edge 1e6` gave one
+// tet: the edge's triangle count on the surface is estimated and refused
+// beyond its bounds before any remeshing.
+TEST(Program, MeshRefusesARemeshEdgeFarFromTheBodysSize) {
+  TempDir t;
+  std::ofstream(t.file("cube.obj")) << kCubeObj;
+  const auto error_of = [&](const std::string& edge) {
+    EXPECT_EQ(run_tissue(t, "mesh", {"mesh", t.file("cube.obj"), "-o", t.file("cube.xml"), "--remesh-edge", edge}), 1);
+    return slurp(t.file("mesh.err"));
+  };
+  std::string err = error_of("1e-7");
+  EXPECT_NE(err.find("--remesh-edge 1e-07 m: the surface of " + t.file("cube.obj") +
+                     " (0.0024 m^2) would be remeshed into about 5.54e+11 triangles, more than the 5e+06 allowed"),
+            std::string::npos)
+      << err;
+  EXPECT_NE(err.find("use an edge of at least 3.33e-05 m"), std::string::npos) << err;
+  err = error_of("1e6");
+  EXPECT_NE(err.find("--remesh-edge 1e+06 m: the surface of " + t.file("cube.obj") +
+                     " (0.0024 m^2, extent 20.0 x 20.0 x 20.0 mm) would be remeshed into about 5.54e-15 triangles, "
+                     "fewer than the 100 that represent a surface"),
+            std::string::npos)
+      << err;
+  EXPECT_NE(err.find("use an edge of at most 0.00744 m"), std::string::npos) << err;
+  EXPECT_FALSE(fs::exists(t.file("cube.xml")));
+}
+
+// `tradeoff --max-hold 1e-9` printed a table of unconverged rows: a hold
+// shorter than the scene's tick is refused before the sweep.
+TEST(Program, TradeoffRefusesAHoldShorterThanATick) {
+  TempDir t;
+  std::ofstream(t.file("block.xml")) << kBlock;
+  EXPECT_EQ(run_tissue(t, "hold", {"tradeoff", t.file("block.xml"), "--max-hold", "1e-9"}), 1);
+  const std::string err = slurp(t.file("hold.err"));
+  EXPECT_NE(err.find("--max-hold 1e-09 s is shorter than one haptic tick of " + t.file("block.xml") +
+                     " (0.001 s): the hold could not run a single tick"),
+            std::string::npos)
+      << err;
+}
+
+// `locking --cells 64` printed nothing in 120 s: the plan (the tets of each
+// mesh and the cells^4 growth of the work) comes first, then each case as it
+// is solved, with the next mesh's forecast.
+TEST(Program, LockingPrintsItsPlanAndEachCaseAsItGoes) {
+  TempDir t;
+  ASSERT_EQ(run_tissue(t, "locking", {"locking", "--cells", "2,4"}), 0) << slurp(t.file("locking.err"));
+  const std::string err = slurp(t.file("locking.err"));
+  for (const char* part :
+       {"locking: meshes of 2 (48 tets), 4 (384 tets) cells per side, each solved plain and IANP; the work grows as "
+        "cells^4",
+        "locking: 2 cells (48 tets), plain: ", "locking: 2 cells (48 tets), IANP: ",
+        "; next: 4 cells, about ", " s per form (x 16, cells^4)", "locking: 4 cells (384 tets), plain: ",
+        "locking: 4 cells (384 tets), IANP: "})
+    EXPECT_NE(err.find(part), std::string::npos) << part << "\n" << err;
 }
 
 /// Standard output of a shell command, its last newline dropped; its exit

@@ -1,9 +1,10 @@
 // The checks of a valid scene that may not do what its author meant
-// (scene/checks.hpp): no support, every node fixed, a tick longer than the
-// tool path or far from 1 ms, many steps per tick with their cause, a
-// material more incompressible than the precision resolves, reoriented
-// tets, and the work estimate; and the mesh box that tool reach is measured
-// in (scene/validate.hpp).
+// (scene/checks.hpp): no support, every node fixed, an unsupported piece of
+// the mesh, a load on fixed nodes only, damping far above the lowest mode, a
+// tick longer than the tool path or far from 1 ms, many steps per tick with
+// their cause, a material more incompressible than the precision resolves,
+// reoriented tets, and the work estimate; and the mesh box that tool reach is
+// measured in (scene/validate.hpp).
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
@@ -40,10 +41,11 @@ Scene box_scene() {
   return s;
 }
 
-/// The warnings of a scene, with a check that each names the scene file.
+/// The warnings of a scene, with a check that each starts with the scene
+/// file ("box.xml: ", or "box.xml:21: " for a warning about one element).
 std::vector<std::string> warnings(const Scene& s) {
   const std::vector<std::string> w = scene_warnings(s, load_model(s));
-  for (const std::string& m : w) EXPECT_EQ(m.rfind(s.source + ": ", 0), 0u) << m;
+  for (const std::string& m : w) EXPECT_EQ(m.rfind(s.source + ":", 0), 0u) << m;
   return w;
 }
 
@@ -139,6 +141,59 @@ TEST(SceneChecks, MeshBoxMeasuresTheToolReach) {
   EXPECT_EQ(b.size, 13);
   EXPECT_EQ(b.distance({1, 1, 1}), 0);
   EXPECT_EQ(b.distance({-3, 8, 6}), 5);  // 3 below x, 4 beyond y
+}
+
+// A <load> on the fixed bottom face was accepted silently: its whole force
+// went into the support.
+TEST(SceneChecks, LoadOnlyOnFixedNodes) {
+  Scene s = box_scene();
+  Load l;
+  l.where.kind = Constraint::Kind::Box;
+  l.where.lo[0] = l.where.lo[1] = l.where.lo[2] = -1;
+  l.where.hi[0] = l.where.hi[1] = 1;
+  l.where.hi[2] = 0;  // the bottom face, which the <fixed> box holds
+  l.where.line = 21;
+  l.force[2] = -0.1;
+  s.loads.push_back(l);
+  EXPECT_TRUE(one_warning(warnings(s), {"box.xml:21: load box min (-1, -1, -1) max (1, 1, 0)",
+                                        "acts only on fixed nodes (6 node(s)", "does not feel it"}));
+  s.loads.front().each = true;  // a force on each node: the same nodes
+  EXPECT_TRUE(one_warning(warnings(s), {"box.xml:21: ", "acts only on fixed nodes"}));
+  s.loads.front().where.lo[2] = 0.005;  // the top face instead
+  s.loads.front().where.hi[2] = 1;
+  EXPECT_TRUE(warnings(s).empty());
+}
+
+// A second, floating box beside a supported one was accepted silently: the
+// "no node is fixed" check looked at the mesh as a whole.
+TEST(SceneChecks, DisconnectedPieceWithoutSupport) {
+  Scene s = box_scene();
+  ModelInput in;
+  box_mesh(in, 1, 1, 1, 0.01, 0.01, 0.01);
+  const index_t first_node = index_t(s.nodes.size() / 3), first_elem = index_t(s.tets.size() / 4);
+  for (size_t k = 0; k < in.nodes.size(); ++k) s.nodes.push_back(in.nodes[k] + (k % 3 == 2 ? 0.05 : 0.0));
+  for (index_t a : in.tets) s.tets.push_back(a + first_node);
+  const auto w = warnings(s);
+  EXPECT_TRUE(one_warning(w, {"piece 2 of the 2 disconnected pieces of the mesh",
+                              fmt::format("({} element(s) from element {}", in.tets.size() / 4, first_elem),
+                              "(0, 0, 0.05) .. (0.01, 0.01, 0.06) m", "has no fixed node", "rigid body"}));
+  EXPECT_EQ(w.size(), 1u);
+  s.constraints.front().hi[2] = 0.05;  // now holds the second box's bottom too
+  EXPECT_TRUE(warnings(s).empty());
+}
+
+// damping="1e12" was accepted silently: the body crept for years instead of
+// following the tool.
+TEST(SceneChecks, DampingFarAboveTheLowestMode) {
+  Scene s = box_scene();
+  s.solver.line = 30;
+  s.solver.damping = 1e12;
+  const double omega = lowest_mode_estimate(load_model(s));
+  EXPECT_TRUE(one_warning(warnings(s), {"box.xml:30: solver: damping = 1e+12 1/s",
+                                        fmt::format("the lowest mode's {:.4g} rad/s (more than 100)", omega),
+                                        "overdamped", "use \"auto\""}));
+  s.solver.damping = 10 * omega;  // five times critical: still responds
+  EXPECT_TRUE(warnings(s).empty());
 }
 
 }  // namespace

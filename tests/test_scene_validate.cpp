@@ -317,6 +317,41 @@ TEST(SceneValidate, NonFiniteWaypoint) {
   EXPECT_TRUE(rejects(s, {"organ.xml:15: ", "tool 'probe': waypoint 1", "z = nan", "not a finite number"}));
 }
 
+// Two tools of one name were accepted: the second's forces and messages
+// could not be told from the first's.
+TEST(SceneValidate, TwoToolsWithOneName) {
+  Scene s = valid_scene();
+  Tool second = s.tools[0];
+  second.line = 20;
+  s.tools.push_back(second);
+  EXPECT_TRUE(rejects(s, {"organ.xml:20: ", "tool 'probe' is defined twice (first organ.xml:15)",
+                          "tool names must be unique"}));
+  s.tools[1].name = "grasper";
+  EXPECT_NO_THROW(validate(s));
+}
+
+// shaft-length="1e6" was accepted on a 2.4 cm body: the shaft obeys the
+// waypoints' reach (1000 mesh sizes).
+TEST(SceneValidate, ShaftFarLongerThanTheMesh) {
+  Scene s = valid_scene();
+  s.tools[0].shaft = 1e6;
+  EXPECT_TRUE(rejects(s, {"organ.xml:15: ", "tool 'probe': shaft-length = 1000000 m",
+                          "longer than 1000 x the mesh's size (0.0245 m, the limit 24.5 m)", "metres"}));
+  s.tools[0].shaft = 0.2;  // a real instrument's shaft, eight times the body
+  EXPECT_NO_THROW(validate(s));
+}
+
+// radius="1e-300" was accepted and pressed nothing: the radius must be at
+// least a millionth of the body's largest extent.
+TEST(SceneValidate, RadiusFarBelowTheBody) {
+  Scene s = valid_scene();
+  s.tools[0].radius = 1e-300;
+  EXPECT_TRUE(rejects(s, {"organ.xml:15: ", "tool 'probe': radius = 1e-300 m", "below 1e-06 of the body's largest "
+                          "extent (0.02 m)", "smallest radius allowed (2e-08 m)", "presses nothing"}));
+  s.tools[0].radius = 1e-5;  // a fine needle on a 2 cm body
+  EXPECT_NO_THROW(validate(s));
+}
+
 // ---- solver ----
 
 // A waypoint at 1e300 m once reached the collision query as an invalid ray
