@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs the build into a fresh prefix and builds examples/embed against
 # it (find_package(Tissue CONFIG) with nothing but the prefix), then runs it
-# on the kidney and checks that the tool felt a force.
+# on the kidney and checks that the tool felt a force; then a host linking
+# every exported target (tests/api/install_targets) configures, links and runs.
 # Usage: install_embed.sh BUILD_DIR EMBED_SOURCE WORK_DIR
 set -euo pipefail
 build=$1 src=$2 work=$3
@@ -16,6 +17,11 @@ cmake --build "$work/embed"
 out=$("$work/embed/embed" @kidney cpu)
 echo "$out"
 grep -q "nodes, .* tets on cpu" <<< "$out"
+# every exported target, linked by a host of its own (tests/api/install_targets)
+cmake -S "$(dirname "$0")/install_targets" -B "$work/targets" -DCMAKE_PREFIX_PATH="$work/prefix" \
+  -DCMAKE_BUILD_TYPE=Release > "$work.targets.log" 2>&1 || { cat "$work.targets.log"; exit 1; }
+cmake --build "$work/targets" >> "$work.targets.log" 2>&1 || { cat "$work.targets.log"; exit 1; }
+"$work/targets/every_target" | tee -a "$work.targets.log" | grep -q "nodes, tick 0"
 # the Python package from the prefix alone (when it was built): its module
 # finds libtissue in the prefix's lib
 site=$(ls -d "$work/prefix"/lib*/python3*/dist-packages 2>/dev/null | head -1 || true)
