@@ -208,28 +208,31 @@ void check_work(long ticks, double updates_per_tick, const std::string& per_tick
                               "second); pass fewer ticks, or force=True to run it anyway");
 }
 
-/// A Simulation with a lock, as PyBatch below: every call that reads or
-/// changes the state holds it, so Python threads sharing one simulation take
-/// turns and a read never lands inside a tick. What is fixed when the
-/// simulation is made (sizes, names, the reference mesh, the tools' shapes,
-/// the warnings) is read without it.
-struct PySimulation {
-  Simulation sim;
+/// A Simulation or a Batch with a lock: every call that reads or changes the
+/// state holds it, so Python threads sharing one take turns and a read never
+/// lands inside a tick (step() releases the GIL, not the lock). What is fixed
+/// when it is made (sizes, names, the reference mesh, the tools' shapes, the
+/// warnings) is read without it.
+template <class T>
+struct Locked {
+  T value;
   std::mutex lock;
 };
+using PySimulation = Locked<Simulation>;
+using PyBatch = Locked<tissue::Batch>;
 
-/// Runs f(sim) holding the simulation's lock, the GIL released while waiting and working.
-template <class F>
-auto locked(PySimulation& s, F&& f) {
+/// Runs f(value) holding the object's lock, the GIL released while waiting and working.
+template <class T, class F>
+auto locked(Locked<T>& o, F&& f) {
   py::gil_scoped_release free;
-  std::lock_guard<std::mutex> hold(s.lock);
-  return f(s.sim);
+  std::lock_guard<std::mutex> hold(o.lock);
+  return f(o.value);
 }
 
 /// A new array the engine fills with the field.
 py::array_t<double> field_array(PySimulation& s, Field f) {
   const int c = tissue::field_components(f);
-  const py::ssize_t n = py::ssize_t(f == Field::Jacobian ? s.sim.n_elements() : s.sim.n_nodes());
+  const py::ssize_t n = py::ssize_t(f == Field::Jacobian ? s.value.n_elements() : s.value.n_nodes());
   py::array_t<double> a = c == 1 ? py::array_t<double>({n}) : py::array_t<double>({n, py::ssize_t(c)});
   double* out = a.mutable_data();
   const std::size_t size = std::size_t(a.size());
@@ -237,26 +240,12 @@ py::array_t<double> field_array(PySimulation& s, Field f) {
   return a;
 }
 
-/// A Batch with a lock: every call holds it, so that Python threads sharing
-/// one batch take turns (step() releases the GIL, not the lock).
-struct PyBatch {
-  tissue::Batch batch;
-  std::mutex lock;
-};
-
-/// Runs f(batch) holding the batch's lock, the GIL released while waiting and working.
-template <class F>
-auto locked(PyBatch& b, F&& f) {
-  py::gil_scoped_release free;
-  std::lock_guard<std::mutex> hold(b.lock);
-  return f(b.batch);
-}
 
 /// Every scene's field as (N, nodes[, components]) (scenes of one size).
 py::array_t<double> batch_field(PyBatch& b, Field f) {
   const int c = tissue::field_components(f);
-  const py::ssize_t n = py::ssize_t(b.batch.size());
-  const py::ssize_t per = py::ssize_t(f == Field::Jacobian ? b.batch.n_elements(0) : b.batch.n_nodes(0));
+  const py::ssize_t n = py::ssize_t(b.value.size());
+  const py::ssize_t per = py::ssize_t(f == Field::Jacobian ? b.value.n_elements(0) : b.value.n_nodes(0));
   py::array_t<double> a = c == 1 ? py::array_t<double>({n, per}) : py::array_t<double>({n, per, py::ssize_t(c)});
   double* out = a.mutable_data();
   const std::size_t size = std::size_t(a.size());
@@ -267,7 +256,7 @@ py::array_t<double> batch_field(PyBatch& b, Field f) {
 /// One scene's field as (nodes[, components]).
 py::array_t<double> scene_field(PyBatch& b, int scene, Field f) {
   const int c = tissue::field_components(f);
-  const py::ssize_t per = py::ssize_t(f == Field::Jacobian ? b.batch.n_elements(scene) : b.batch.n_nodes(scene));
+  const py::ssize_t per = py::ssize_t(f == Field::Jacobian ? b.value.n_elements(scene) : b.value.n_nodes(scene));
   py::array_t<double> a = c == 1 ? py::array_t<double>({per}) : py::array_t<double>({per, py::ssize_t(c)});
   double* out = a.mutable_data();
   const std::size_t size = std::size_t(a.size());
@@ -341,8 +330,8 @@ void bind_results(py::module_& m) {
 void bind_simulation_steps(py::class_<PySimulation>& cls) {
   cls.def("step", [](PySimulation& s, py::handle ticks_arg, bool force) {
         const long ticks = tick_count(ticks_arg);
-        check_work(ticks, double(s.sim.steps_per_tick()) * double(s.sim.n_elements()),
-                   std::to_string(s.sim.steps_per_tick()) + " TLED steps x " + std::to_string(s.sim.n_elements()) +
+        check_work(ticks, double(s.value.steps_per_tick()) * double(s.value.n_elements()),
+                   std::to_string(s.value.steps_per_tick()) + " TLED steps x " + std::to_string(s.value.n_elements()) +
                        " elements",
                    force);
         return locked(s, [&](Simulation& x) { return interruptible(ticks, [&](long n) { return x.step(n); }); });
@@ -382,17 +371,17 @@ void bind_simulation_steps(py::class_<PySimulation>& cls) {
       .def("internal_force", [](PySimulation& s) { return field_array(s, Field::InternalForce); }, "(n_nodes, 3) N")
       .def("jacobian", [](PySimulation& s) { return field_array(s, Field::Jacobian); }, "(n_elements,) J = det F")
       .def("positions_f32", [](PySimulation& s) {
-        if (s.sim.positions_on_device())
-          throw std::invalid_argument("positions_f32: the " + s.sim.backend() +
+        if (s.value.positions_on_device())
+          throw std::invalid_argument("positions_f32: the " + s.value.backend() +
                                       " backend writes positions to device memory; use positions()");
-        py::array_t<float> a({py::ssize_t(s.sim.n_nodes()), py::ssize_t(3)});
+        py::array_t<float> a({py::ssize_t(s.value.n_nodes()), py::ssize_t(3)});
         float* out = a.mutable_data();
         locked(s, [&](Simulation& x) { x.write_positions(out); });
         return a;
       }, "(n_nodes, 3) float32 deformed positions written straight from the store (host backends)")
       .def("__repr__", [](PySimulation& s) {
-        return "<tissue.Simulation " + s.sim.name() + ": " + std::to_string(s.sim.n_nodes()) + " nodes, " +
-               std::to_string(s.sim.n_elements()) + " tets on " + s.sim.backend() + " (" + s.sim.precision() + ")>";
+        return "<tissue.Simulation " + s.value.name() + ": " + std::to_string(s.value.n_nodes()) + " nodes, " +
+               std::to_string(s.value.n_elements()) + " tets on " + s.value.backend() + " (" + s.value.precision() + ")>";
       });
 }
 
@@ -428,28 +417,28 @@ void bind_simulation(py::module_& m) {
                   py::arg("tool_radii") = std::vector<double>{2e-3}, py::arg("tool_shaft") = 0.0,
                   py::arg("backend") = py::none(), py::arg("precision") = py::none(), py::arg("depth") = py::none(),
                   py::arg("name") = "<mesh>", "Build a simulation of a tetrahedral mesh with one material")
-      .def_property_readonly("name", [](PySimulation& s) { return s.sim.name(); })
-      .def_property_readonly("backend", [](PySimulation& s) { return s.sim.backend(); })
-      .def_property_readonly("precision", [](PySimulation& s) { return s.sim.precision(); })
-      .def_property_readonly("device_name", [](PySimulation& s) { return s.sim.device_name(); })
-      .def_property_readonly("n_nodes", [](PySimulation& s) { return s.sim.n_nodes(); })
-      .def_property_readonly("n_elements", [](PySimulation& s) { return s.sim.n_elements(); })
-      .def_property_readonly("n_tools", [](PySimulation& s) { return s.sim.n_tools(); })
-      .def_property_readonly("tick_seconds", [](PySimulation& s) { return s.sim.tick_seconds(); })
-      .def_property_readonly("steps_per_tick", [](PySimulation& s) { return s.sim.steps_per_tick(); })
-      .def_property_readonly("dt", [](PySimulation& s) { return s.sim.dt(); })
-      .def_property_readonly("warnings", [](PySimulation& s) { return s.sim.warnings(); })
+      .def_property_readonly("name", [](PySimulation& s) { return s.value.name(); })
+      .def_property_readonly("backend", [](PySimulation& s) { return s.value.backend(); })
+      .def_property_readonly("precision", [](PySimulation& s) { return s.value.precision(); })
+      .def_property_readonly("device_name", [](PySimulation& s) { return s.value.device_name(); })
+      .def_property_readonly("n_nodes", [](PySimulation& s) { return s.value.n_nodes(); })
+      .def_property_readonly("n_elements", [](PySimulation& s) { return s.value.n_elements(); })
+      .def_property_readonly("n_tools", [](PySimulation& s) { return s.value.n_tools(); })
+      .def_property_readonly("tick_seconds", [](PySimulation& s) { return s.value.tick_seconds(); })
+      .def_property_readonly("steps_per_tick", [](PySimulation& s) { return s.value.steps_per_tick(); })
+      .def_property_readonly("dt", [](PySimulation& s) { return s.value.dt(); })
+      .def_property_readonly("warnings", [](PySimulation& s) { return s.value.warnings(); })
       .def_property_readonly("ticks",
                              [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.ticks(); }); })
       .def_property_readonly("time", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.time(); }); })
       .def_property_readonly("rest_positions", [](py::object self) {
-        return view<double>(self.cast<PySimulation&>().sim.rest_positions(), 3, self);
+        return view<double>(self.cast<PySimulation&>().value.rest_positions(), 3, self);
       }, "(n_nodes, 3) reference positions (m), a read-only view")
       .def_property_readonly("tetrahedra", [](py::object self) {
-        return view<std::int32_t>(self.cast<PySimulation&>().sim.tetrahedra(), 4, self);
+        return view<std::int32_t>(self.cast<PySimulation&>().value.tetrahedra(), 4, self);
       }, "(n_elements, 4) node ids, a read-only view")
       .def_property_readonly("surface_triangles", [](py::object self) {
-        return view<std::int32_t>(self.cast<PySimulation&>().sim.surface_triangles(), 3, self);
+        return view<std::int32_t>(self.cast<PySimulation&>().value.surface_triangles(), 3, self);
       }, "(n_triangles, 3) outward surface triangles, a read-only view")
       .def("set_tool_pose", [](PySimulation& s, int tool, py::handle tip, py::handle axis) {
         const tissue::Vector3 t = vector3(tip, "tip");
@@ -463,8 +452,8 @@ void bind_simulation(py::module_& m) {
       .def("follow_scene_path", [](PySimulation& s, int tool) {
         locked(s, [&](Simulation& x) { x.follow_scene_path(tool); });
       }, py::arg("tool"))
-      .def("tool_radius", [](PySimulation& s, int tool) { return s.sim.tool_radius(tool); }, py::arg("tool"))
-      .def("tool_shaft", [](PySimulation& s, int tool) { return s.sim.tool_shaft(tool); }, py::arg("tool"));
+      .def("tool_radius", [](PySimulation& s, int tool) { return s.value.tool_radius(tool); }, py::arg("tool"))
+      .def("tool_shaft", [](PySimulation& s, int tool) { return s.value.tool_shaft(tool); }, py::arg("tool"));
   bind_simulation_steps(cls);
 }
 
@@ -473,9 +462,9 @@ void bind_batch_steps(py::class_<PyBatch>& cls) {
   cls.def("step", [](PyBatch& b, py::handle ticks_arg, bool force) {
         const long ticks = tick_count(ticks_arg);
         double per_tick = 0;  // every scene's steps x elements
-        for (int i = 0; i < int(b.batch.size()); ++i)
-          per_tick += double(b.batch.steps_per_tick(i)) * double(b.batch.n_elements(i));
-        check_work(ticks, per_tick, std::to_string(b.batch.size()) + " scenes' TLED steps x elements", force);
+        for (int i = 0; i < int(b.value.size()); ++i)
+          per_tick += double(b.value.steps_per_tick(i)) * double(b.value.n_elements(i));
+        check_work(ticks, per_tick, std::to_string(b.value.size()) + " scenes' TLED steps x elements", force);
         return locked(b, [&](tissue::Batch& x) { return interruptible(ticks, [&](long n) { return x.step(n); }); });
       }, py::arg("ticks") = 1, py::kw_only(), py::arg("force") = false,
            "Run haptic ticks of every running scene; returns how many still run. Ctrl-C stops it at a tick boundary "
@@ -501,7 +490,7 @@ void bind_batch_steps(py::class_<PyBatch>& cls) {
       .def("take_notes", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.take_notes(scene); }); },
            py::arg("scene"))
       .def("forces", [](PyBatch& b) {
-        py::array_t<double> a({py::ssize_t(b.batch.size()), py::ssize_t(b.batch.max_tools()), py::ssize_t(3)});
+        py::array_t<double> a({py::ssize_t(b.value.size()), py::ssize_t(b.value.max_tools()), py::ssize_t(3)});
         double* out = a.mutable_data();
         const std::size_t size = std::size_t(a.size());
         locked(b, [&](tissue::Batch& x) { x.read_forces({out, size}); });
@@ -518,8 +507,8 @@ void bind_batch_steps(py::class_<PyBatch>& cls) {
       .def("jacobian", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Jacobian); },
            py::arg("scene") = py::none(), "(N, elements) J, or one scene's")
       .def("__repr__", [](PyBatch& b) {
-        return "<tissue.Batch " + std::to_string(b.batch.size()) + " scenes on " + b.batch.backend() + " (" +
-               b.batch.precision() + ")>";
+        return "<tissue.Batch " + std::to_string(b.value.size()) + " scenes on " + b.value.backend() + " (" +
+               b.value.precision() + ")>";
       });
 }
 
@@ -565,21 +554,21 @@ void bind_batch(py::module_& m) {
            py::arg("scenes"), py::arg("copies") = py::none(), py::kw_only(), py::arg("backend") = py::none(),
            py::arg("precision") = py::none(), py::arg("depth") = py::none(),
            "Batch('@kidney', 64) or Batch(['a.xml', ('b.xml', [MaterialChange('tissue', E=5000)])])")
-      .def("__len__", [](PyBatch& b) { return b.batch.size(); })
-      .def_property_readonly("size", [](PyBatch& b) { return b.batch.size(); })
-      .def_property_readonly("backend", [](PyBatch& b) { return b.batch.backend(); })
-      .def_property_readonly("precision", [](PyBatch& b) { return b.batch.precision(); })
-      .def_property_readonly("device_name", [](PyBatch& b) { return b.batch.device_name(); })
-      .def_property_readonly("max_tools", [](PyBatch& b) { return b.batch.max_tools(); })
-      .def_property_readonly("distinct_models", [](PyBatch& b) { return b.batch.distinct_models(); })
-      .def_property_readonly("scene_host_bytes", [](PyBatch& b) { return b.batch.scene_host_bytes(); })
-      .def_property_readonly("scene_device_bytes", [](PyBatch& b) { return b.batch.scene_device_bytes(); })
-      .def("name", [](PyBatch& b, int scene) { return b.batch.name(scene); }, py::arg("scene"))
-      .def("n_nodes", [](PyBatch& b, int scene) { return b.batch.n_nodes(scene); }, py::arg("scene"))
-      .def("n_elements", [](PyBatch& b, int scene) { return b.batch.n_elements(scene); }, py::arg("scene"))
-      .def("n_tools", [](PyBatch& b, int scene) { return b.batch.n_tools(scene); }, py::arg("scene"))
-      .def("steps_per_tick", [](PyBatch& b, int scene) { return b.batch.steps_per_tick(scene); }, py::arg("scene"))
-      .def("dt", [](PyBatch& b, int scene) { return b.batch.dt(scene); }, py::arg("scene"))
+      .def("__len__", [](PyBatch& b) { return b.value.size(); })
+      .def_property_readonly("size", [](PyBatch& b) { return b.value.size(); })
+      .def_property_readonly("backend", [](PyBatch& b) { return b.value.backend(); })
+      .def_property_readonly("precision", [](PyBatch& b) { return b.value.precision(); })
+      .def_property_readonly("device_name", [](PyBatch& b) { return b.value.device_name(); })
+      .def_property_readonly("max_tools", [](PyBatch& b) { return b.value.max_tools(); })
+      .def_property_readonly("distinct_models", [](PyBatch& b) { return b.value.distinct_models(); })
+      .def_property_readonly("scene_host_bytes", [](PyBatch& b) { return b.value.scene_host_bytes(); })
+      .def_property_readonly("scene_device_bytes", [](PyBatch& b) { return b.value.scene_device_bytes(); })
+      .def("name", [](PyBatch& b, int scene) { return b.value.name(scene); }, py::arg("scene"))
+      .def("n_nodes", [](PyBatch& b, int scene) { return b.value.n_nodes(scene); }, py::arg("scene"))
+      .def("n_elements", [](PyBatch& b, int scene) { return b.value.n_elements(scene); }, py::arg("scene"))
+      .def("n_tools", [](PyBatch& b, int scene) { return b.value.n_tools(scene); }, py::arg("scene"))
+      .def("steps_per_tick", [](PyBatch& b, int scene) { return b.value.steps_per_tick(scene); }, py::arg("scene"))
+      .def("dt", [](PyBatch& b, int scene) { return b.value.dt(scene); }, py::arg("scene"))
       .def("warnings", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.warnings(scene); }); },
            py::arg("scene"))
       .def("set_material", [](PyBatch& b, int scene, std::string material, std::optional<double> E,
@@ -594,7 +583,7 @@ void bind_batch(py::module_& m) {
         locked(b, [&](tissue::Batch& x) { x.set_tool_pose(scene, tool, t, a); });
       }, py::arg("scene"), py::arg("tool"), py::arg("tip"), py::arg("axis") = py::none())
       .def("set_tool_poses", [](PyBatch& b, py::handle tips, py::handle axes) {
-        const std::size_t n = b.batch.size(), t = std::size_t(b.batch.max_tools());
+        const std::size_t n = b.value.size(), t = std::size_t(b.value.max_tools());
         auto take = [&](py::handle h, const char* what) {
           const auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(h);
           if (!a || a.ndim() != 3 || std::size_t(a.shape(0)) != n || std::size_t(a.shape(1)) != t || a.shape(2) != 3)
