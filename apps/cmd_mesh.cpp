@@ -49,6 +49,14 @@ struct MeshOptions {
   double fix_fraction = 0.05;
 };
 
+/// The corners of surface triangle t (m).
+void corners(const io::SurfaceMesh& s, size_t t, Vec3<double> p[3]) {
+  for (int k = 0; k < 3; ++k) {
+    const index_t v = s.triangles[3 * t + k];
+    p[k] = {s.vertices[3 * v], s.vertices[3 * v + 1], s.vertices[3 * v + 2]};
+  }
+}
+
 /// Topmost surface point straight above or below (cx, cy), by a vertical
 /// segment through the whole surface; throws if the vertical misses.
 Vec3<double> top_point(const io::SurfaceMesh& s, double cx, double cy, double zlo, double zhi) {
@@ -56,10 +64,7 @@ Vec3<double> top_point(const io::SurfaceMesh& s, double cx, double cy, double zl
   double best = 2.0;
   for (size_t t = 0; t < s.triangles.size() / 3; ++t) {
     Vec3<double> p[3];
-    for (int k = 0; k < 3; ++k) {
-      const index_t v = s.triangles[3 * t + k];
-      p[k] = {s.vertices[3 * v], s.vertices[3 * v + 1], s.vertices[3 * v + 2]};
-    }
+    corners(s, t, p);
     double bary[2];
     const double hit = segment_triangle(a, b, p[0], p[1], p[2], bary);
     if (hit >= 0 && hit < best) best = hit;
@@ -123,10 +128,7 @@ double surface_area(const io::SurfaceMesh& s) {
   double area = 0;
   for (size_t t = 0; t < s.triangles.size() / 3; ++t) {
     Vec3<double> p[3];
-    for (int k = 0; k < 3; ++k) {
-      const index_t v = s.triangles[3 * t + k];
-      p[k] = {s.vertices[3 * v], s.vertices[3 * v + 1], s.vertices[3 * v + 2]};
-    }
+    corners(s, t, p);
     area += 0.5 * norm(cross(p[1] - p[0], p[2] - p[0]));
   }
   return area;
