@@ -393,22 +393,6 @@ void check_path(const Scene& s, const Tool& t, const std::string& what) {
 /// or typing mistake rather than a tool.
 constexpr double kMinToolRadius = 1e-6;
 
-/// The mesh's bounding box.
-struct Bounds {
-  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-  double diagonal() const { return std::hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]); }
-  double largest_extent() const { return std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 0.0}); }
-};
-
-Bounds mesh_bounds(const Scene& s) {
-  Bounds b;
-  for (size_t k = 0; k < s.nodes.size(); ++k) {
-    b.lo[k % 3] = std::min(b.lo[k % 3], s.nodes[k]);
-    b.hi[k % 3] = std::max(b.hi[k % 3], s.nodes[k]);
-  }
-  return b;
-}
-
 /// Every waypoint within kToolReach mesh sizes of the mesh's box (the rule at kToolReach).
 void check_path_near_mesh(const Scene& s, const Tool& t, const std::string& what) {
   const MeshBox box = mesh_box(s.nodes);
@@ -425,7 +409,7 @@ void check_path_near_mesh(const Scene& s, const Tool& t, const std::string& what
 
 void check_tool(const Scene& s, const Tool& t) {
   const std::string what = fmt::format("tool '{}'", t.name);
-  const Bounds b = mesh_bounds(s);
+  const MeshBox b = mesh_box(s.nodes);
   const double ext = b.largest_extent();  // a tool wider than the body cannot touch it as a tool
   if (const std::string e = tool_shape_error({t.name, t.radius, t.shaft}, ext); !e.empty()) fail(s, t.line, e);
   if (ext > 0 && t.radius < kMinToolRadius * ext)
@@ -434,7 +418,7 @@ void check_tool(const Scene& s, const Tool& t) {
                      "radius allowed ({:.4g} m): a tool that small falls between the nodes and presses nothing; "
                      "check the unit of the radius and of the mesh",
                      what, t.radius, kMinToolRadius, ext, kMinToolRadius * ext));
-  if (const double size = b.diagonal(); t.shaft > kToolReach * size)
+  if (const double size = b.size; t.shaft > kToolReach * size)
     fail(s, t.line,
          fmt::format("{}: shaft-length = {} m is longer than {:.0f} x the mesh's size ({:.3g} m, the limit "
                      "{:.3g} m); coordinates are metres",

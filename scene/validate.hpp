@@ -34,6 +34,8 @@
 // scene file (ModelInput::source) and the element or node.
 #pragma once
 
+#include <algorithm>
+
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -61,6 +63,8 @@ inline constexpr double kToolReach = 1000;
 struct MeshBox {
   Vec3<double> lo, hi;
   double size = 0;  ///< |hi - lo| (m)
+  /// The box's largest side (m; 0 for no nodes).
+  double largest_extent() const { return std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z, 0.0}); }
   /// How far p lies outside the box (0 inside).
   double distance(const Vec3<double>& p) const;
 };
