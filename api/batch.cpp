@@ -22,7 +22,7 @@ namespace tissue {
 namespace {
 
 using facade::finite3;
-using facade::tick_result;
+using facade::set_tick_result;
 using facade::vec;
 
 scene::Scene read_any(const std::string& path) {
@@ -83,7 +83,7 @@ struct Batch::Impl {
   void check_tool(int scene, int tool) const { at(scene).check_tool(tool); }
   void update(std::size_t i) {
     Session& s = (*batch)[i];
-    last[i] = tick_result(s.last(), s.scheduler().ticks());
+    set_tick_result(last[i], s.last(), s.scheduler().ticks());
   }
   const std::vector<double>& rest_of(const Session& s) {
     auto it = rest.find(&s.model());

@@ -43,9 +43,10 @@ std::vector<T> interleave(const std::vector<T>& soa, std::size_t components) {
 /// moves it. Throws std::invalid_argument for counts that do not divide.
 scene::Scene mesh_scene(const MeshScene& m);
 
-/// The facade's view of a tick report after `ticks` ticks.
-inline TickResult tick_result(const TickReport& r, long ticks) {
-  TickResult out;
+/// Writes the facade's view of a tick report after `ticks` ticks into out,
+/// reusing its tool list (the tick loop allocates nothing once it has the
+/// scene's tool count).
+inline void set_tick_result(TickResult& out, const TickReport& r, long ticks) {
   out.tick = ticks;
   out.time = r.time;
   out.steps = r.steps;
@@ -54,6 +55,12 @@ inline TickResult tick_result(const TickReport& r, long ticks) {
     const ToolReport& t = r.tools[k];
     out.tools[k] = {arr(t.tip), arr(t.axis), arr(t.force), int(t.contact_nodes), int(t.grasped), t.grasp};
   }
+  out.max_displacement = r.max_disp;
+  out.residual = r.residual;
+  out.equilibrium = r.equilibrium;
+  out.region_nodes = int(r.region_nodes);
+  out.region_elements = int(r.region_elems);
+}
   out.max_displacement = r.max_disp;
   out.residual = r.residual;
   out.equilibrium = r.equilibrium;

@@ -32,7 +32,7 @@ namespace {
 
 using facade::finite3;
 using facade::interleave;
-using facade::tick_result;
+using facade::set_tick_result;
 using facade::vec;
 
 void apply(scene::Scene& s, const SimulationOptions& o) {
@@ -136,12 +136,12 @@ struct Simulation::Impl {
     rest = interleave(model.X, 3);
     tets = interleave(model.elem_nodes, 4);
     tris = interleave(model.tris, 3);
-    last = tick_result(session.last(), 0);
+    set_tick_result(last, session.last(), 0);
   }
 
   void tick() {
-    const TickReport r = session.tick();
-    last = tick_result(r, session.scheduler().ticks());
+    session.tick();
+    set_tick_result(last, session.last(), session.scheduler().ticks());
   }
 };
 
@@ -229,7 +229,7 @@ double Simulation::time() const { return impl_->session.scheduler().time(); }
 
 void Simulation::reset() {
   impl_->session.restart();
-  impl_->last = tick_result(impl_->session.last(), 0);
+  set_tick_result(impl_->last, impl_->session.last(), 0);
 }
 
 std::vector<std::string> Simulation::take_notes() { return impl_->session.scheduler().take_notes(); }
