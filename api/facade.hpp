@@ -61,13 +61,6 @@ inline void set_tick_result(TickResult& out, const TickReport& r, long ticks) {
   out.region_nodes = int(r.region_nodes);
   out.region_elements = int(r.region_elems);
 }
-  out.max_displacement = r.max_disp;
-  out.residual = r.residual;
-  out.equilibrium = r.equilibrium;
-  out.region_nodes = int(r.region_nodes);
-  out.region_elements = int(r.region_elems);
-  return out;
-}
 
 /// Values field f has for n_nodes nodes and n_elems elements.
 inline std::size_t field_size(Field f, std::size_t n_nodes, std::size_t n_elems) {
