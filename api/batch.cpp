@@ -171,6 +171,12 @@ std::int64_t Batch::scene_host_bytes() const {
 std::int64_t Batch::scene_device_bytes() const {
   return impl_->batch->memory().per_scene_device;
 }
+std::size_t Batch::groups() const {
+  return impl_->batch->groups();
+}
+std::int64_t Batch::ticks_together() const {
+  return impl_->batch->ticks_together();
+}
 
 std::string Batch::name(int scene) const {
   return impl_->at(scene).name();

@@ -1,5 +1,6 @@
 #include "backends/registry.hpp"
 
+#include <algorithm>
 #include <stdexcept>
 
 #include "cpu/cpu_backend.hpp"
@@ -82,6 +83,35 @@ std::vector<std::pair<std::string, double>> contact_chain_times(const std::strin
   (void)backend;
   (void)precision;
   return out;
+}
+
+std::shared_ptr<BackendGroup> make_backend_group(const std::string& name, Precision precision, int scenes,
+                                                std::size_t scene_bytes) {
+#ifdef TISSUE_HAVE_CUDA
+  if (name == "cuda" && scenes >= 2) return make_cuda_scene_group(precision, std::min(scenes, kMaxCudaGroupScenes), scene_bytes);
+#endif
+  (void)name;
+  (void)precision;
+  (void)scenes;
+  (void)scene_bytes;
+  return nullptr;
+}
+
+int max_group_scenes(const std::string& name) {
+#ifdef TISSUE_HAVE_CUDA
+  if (name == "cuda") return kMaxCudaGroupScenes;
+#endif
+  (void)name;
+  return 0;
+}
+
+void join_backend_group(Backend& backend, const std::shared_ptr<BackendGroup>& group, int slot) {
+#ifdef TISSUE_HAVE_CUDA
+  if (backend.name() == "cuda") return join_cuda_scene_group(backend, group, slot);
+#endif
+  (void)group;
+  (void)slot;
+  throw std::invalid_argument("backend '" + backend.name() + "' steps no scene groups");
 }
 
 std::string backend_tuning(const Backend& backend) {

@@ -48,6 +48,16 @@ std::string element_gradients(Backend& backend);
 std::vector<std::pair<std::string, double>> contact_chain_times(const std::string& backend, Precision precision);
 
 /// BackendInfo::tuning of a backend.
+/// A group in which the named backend steps `scenes` scenes of one model as
+/// one (BackendGroup), each taking at most `scene_bytes` of device memory;
+/// null where the backend has no groups (the cpu) or for fewer than two
+/// scenes. max_group_scenes: the most one group holds (0: none).
+std::shared_ptr<BackendGroup> make_backend_group(const std::string& name, Precision precision, int scenes,
+                                                std::size_t scene_bytes);
+int max_group_scenes(const std::string& name);
+/// Makes `backend`, before its upload, scene `slot` of `group`.
+void join_backend_group(Backend& backend, const std::shared_ptr<BackendGroup>& group, int slot);
+
 std::string backend_tuning(const Backend& backend);
 
 /// The ways a backend can run advance() (all give the same results): the

@@ -353,6 +353,8 @@ struct BatchRun {
   std::size_t running = 0, in_contact = 0;
   BatchMemory memory;
   std::string skipped;  ///< why the batch did not run ("" = it ran)
+  std::size_t groups = 0;   ///< groups of scenes stepped as one (SceneBatch::groups)
+  double together = 0;      ///< of the timed scene ticks, the fraction run in a group
 };
 
 /// N kidneys stepped together (SceneBatch) on c's backend; ticks timed one batch tick at a time.
@@ -383,6 +385,7 @@ BatchRun run_batch(Context& c, Precision p, std::size_t n, double min_seconds, i
     batch->tick();
   }
   std::vector<double> lat;
+  const std::int64_t together0 = batch->ticks_together(), alone0 = batch->ticks_alone();
   const auto t0 = Clock::now();
   while (lat.size() < (c.o.quick ? 3u : 20u) || since(t0) < min_seconds) {
     drive();
@@ -392,6 +395,9 @@ BatchRun run_batch(Context& c, Precision p, std::size_t n, double min_seconds, i
     ++k;
   }
   out.ticks = long(lat.size());
+  out.groups = batch->groups();
+  const std::int64_t together = batch->ticks_together() - together0, alone = batch->ticks_alone() - alone0;
+  out.together = together + alone > 0 ? double(together) / double(together + alone) : 0.0;
   const double busy = std::accumulate(lat.begin(), lat.end(), 0.0);
   out.ticks_per_s = double(lat.size()) / busy;
   std::sort(lat.begin(), lat.end());
@@ -430,6 +436,8 @@ void emit_batch(Context& c, Precision p, std::size_t n, const BatchRun& run, dou
   r.add("scenes_running", long(run.running));
   r.add("scenes_in_contact", long(run.in_contact));
   r.add("ticks_timed", run.ticks);
+  r.add("groups", long(run.groups));
+  r.add("group_tick_fraction", run.together);
   r.add("scene_steps_per_s", scene_steps);
   r.add("element_steps_per_s", scene_steps * run.region_elems);
   r.add("bytes_per_element_step", bytes_region / std::max(run.region_elems, 1.0));

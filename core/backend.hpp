@@ -104,6 +104,23 @@ struct ContactNode {
   Vec3<double> normal = {};        ///< contact normal of a pushed node (unit, out of the tool)
 };
 
+/// Scenes of one model that a device backend steps as one: each pass of a
+/// tick is one launch over all of them (the cuda backend's scene group,
+/// docs/batch.md "One launch per pass"). Made by the registry
+/// (make_backend_group); each scene's backend joins it before its upload.
+/// A scene's start_tick then only stages its tick; launch() runs every
+/// staged tick, and a scene's finish_tick calls it if no one has.
+class BackendGroup {
+ public:
+  virtual ~BackendGroup() = default;
+  /// Runs the ticks the group's scenes have started and waits for them.
+  virtual void launch() = 0;
+  /// Ticks run as one launch per pass since the group was made, and ticks
+  /// its scenes ran alone (a scene the group could not take that tick).
+  virtual std::int64_t ticks_together() const = 0;
+  virtual std::int64_t ticks_alone() const = 0;
+};
+
 class Backend {
  public:
   virtual ~Backend() = default;

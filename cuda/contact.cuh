@@ -423,6 +423,11 @@ template <class T>
 __global__ void __launch_bounds__(kBlock, kSweepBlocksPerSM<T>)
     sweep_triangles_kernel(ModelView<T> m, StateView<T> s, const ContactTools<T>* tools, int k,
                            const Packed3<T>* u_next) {
+  if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    tools = s.tools_moved(tools, d);
+    u_next = s.slot_moved(u_next, d);
+    s = s.moved(d);
+  }
   __shared__ alignas(TouchingTriangle<T>) unsigned char raw[kBlock * sizeof(TouchingTriangle<T>)];
   __shared__ alignas(ContactTools<T>) unsigned char tools_raw[sizeof(ContactTools<T>)];
   __shared__ int n_touching;
@@ -455,6 +460,12 @@ __global__ void __launch_bounds__(kBlock, kSweepBlocksPerSM<T>)
 template <class T>
 __global__ void gather_contacts_kernel(ModelView<T> m, StateView<T> s, const ContactTools<T>* tools, int k,
                                        Packed3<T>* u, Packed3<T>* u_next) {
+  if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    tools = s.tools_moved(tools, d);
+    u = s.slot_moved(u, d);
+    u_next = s.slot_moved(u_next, d);
+    s = s.moved(d);
+  }
   // the nodes a tool pushes are neighbours: dealt to different warps in runs of 8, their merges run side
   // by side, not one after another in one warp (docs/benchmarks/README.md, "The reduction's tail")
   const index_t i = dealt_index<8>();

@@ -16,7 +16,12 @@
 #include "cuda/cuda_backend.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <cstddef>
+#include <map>
+#include <memory>
+#include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -140,6 +145,107 @@ std::string current_device_name() {
 }
 
 template <class T>
+class CudaBackend;
+
+/// What a group tick's graph depends on: scenes whose ticks agree in it run
+/// in one graph (their buffers at one phase, their pass arrays in one set).
+struct GroupTickKey {
+  int phase = 0, steps = 0, start = 0, pressures = 0;
+  std::size_t tool_bytes = 0;  ///< 0: no tool
+  auto operator<=>(const GroupTickKey&) const = default;
+};
+
+/// Scenes of one model stepped as one (BackendGroup; docs/batch.md, "One
+/// launch per pass"). Each scene's backend allocates its arrays in its slot
+/// of the group's arena (SceneArena), so that scene k's arrays are those of
+/// any other member moved by whole slots. A tick: each scene stages its
+/// tools' motion in the group's pinned array and its graph key (start);
+/// launch() then runs, per key, one graph captured from one member with
+/// every kernel over all slots (gridDim.y; the kernels move their
+/// per-scene arrays, cuda/views.hpp SceneSlots): the tools' copy, the
+/// slots' skip flags (non-zero for a slot not in this key's tick), the
+/// steps, the reduction, and the copy of every slot's Reductions into the
+/// group's pinned array. Graphs are cached per key.
+template <class T>
+class SceneGroup final : public BackendGroup {
+ public:
+  SceneGroup(int slots, std::size_t slot_bytes)
+      : arena_(slots, slot_bytes), members_(slots, nullptr), started_(slots, 0), ran_(slots, 0), keys_(slots) {
+    tools_dev_.allocate(slots);
+    tools_host_.allocate(slots);
+    for (int k = 0; k < slots; ++k) tools_host_[k] = ContactTools<T>{};
+    results_host_.allocate(slots);
+  }
+  ~SceneGroup() override { cudaStreamSynchronize(stream_.get()); }
+
+  const SceneArena& arena() const { return arena_; }
+  int slots() const { return arena_.slots(); }
+  char* slot(int k) const { return arena_.slot(k); }
+
+  void join(CudaBackend<T>* b, int k) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (members_.at(k) && members_[k] != b)
+      throw std::logic_error(str("cuda scene group: slot ", k, " already has a scene"));
+    members_[k] = b;
+  }
+  void leave(int k) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    members_.at(k) = nullptr;
+    started_[k] = ran_[k] = 0;
+  }
+
+  /// Whether `offsets` (a member's arrays from its slot's start) are the
+  /// group's layout; the first member to ask sets it.
+  bool same_layout(const std::vector<std::ptrdiff_t>& offsets) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (layout_.empty()) layout_ = offsets;
+    return layout_ == offsets;
+  }
+
+  /// Scene k's tick, to run at the next launch().
+  void start(int k, const GroupTickKey& key, const ContactTools<double>& tools) {
+    if (key.tool_bytes > 0) tools_host_[k] = contact_tools_as<T>(tools);
+    std::lock_guard<std::mutex> lock(mutex_);
+    keys_[k] = key;
+    started_[k] = 1;
+  }
+
+  void launch() override;
+
+  /// Scene k's Reductions of the tick it started (launched now if no one has).
+  Reductions finish(int k) {
+    if (!ran_[k]) launch();
+    ran_[k] = 0;
+    return results_host_[k];
+  }
+
+  void count_alone() { ticks_alone_.fetch_add(1, std::memory_order_relaxed); }
+  std::int64_t ticks_together() const override { return ticks_together_.load(); }
+  std::int64_t ticks_alone() const override { return ticks_alone_.load(); }
+
+ private:
+  struct Graph {
+    GraphExec exec;
+    DeviceArray<int> skip_dev;
+    PinnedArray<int> skip_host;
+  };
+  Graph& graph(const GroupTickKey& key, int rep);
+
+  SceneArena arena_;
+  std::vector<CudaBackend<T>*> members_;
+  std::vector<char> started_, ran_;
+  std::vector<GroupTickKey> keys_;
+  std::vector<std::ptrdiff_t> layout_;
+  DeviceArray<ContactTools<T>> tools_dev_;   ///< one entry a slot
+  PinnedArray<ContactTools<T>> tools_host_;  ///< its staging
+  PinnedArray<Reductions> results_host_;     ///< one entry a slot
+  std::map<GroupTickKey, std::unique_ptr<Graph>> graphs_;
+  Stream stream_;
+  std::mutex mutex_;
+  std::atomic<std::int64_t> ticks_together_{0}, ticks_alone_{0};
+};
+
+template <class T>
 class CudaBackend final : public Backend {
  public:
   /// Needs a usable device (make_cuda_backend checks first).
@@ -147,6 +253,36 @@ class CudaBackend final : public Backend {
     device_name_ = current_device_name();
     stepper_.init();
   }
+  ~CudaBackend() override {
+    if (group_) group_->leave(slot_);
+  }
+
+  /// Makes this backend scene `slot` of `group`: its arrays go to that slot
+  /// from its next upload, and its ticks run with the group's where they can.
+  void join(std::shared_ptr<SceneGroup<T>> group, int slot) {
+    group->join(this, slot);
+    if (group_) group_->leave(slot_);
+    group_ = std::move(group);
+    slot_ = slot;
+  }
+
+  /// Queues a group tick of `key` captured from this scene (SceneGroup::graph):
+  /// the steps and the reduction over every slot, as tick_graph queues them.
+  void enqueue_group_tick(const GroupTickKey& key, const SceneSlots& slots, const int* skip,
+                          const ContactTools<T>* tools, cudaStream_t st) {
+    const RegionView r = region_.view();
+    StateView<T> s = store_.state();
+    s.slots = slots;
+    s.skip = skip;
+    StateView<T> scratch = store_.pressure_scratch();
+    scratch.slots = slots;
+    scratch.skip = skip;
+    stepper_.enqueue_steps(store_.model(), s, r, store_.u.current(), key.steps, tools,
+                           static_cast<StepStart>(key.start), st);
+    reducer_.enqueue(store_.model(), s, scratch, r, region_.front(), store_.u.at(store_.u.phase + key.steps), st,
+                     false);
+  }
+  const Reductions* result_device() const { return reducer_.result(); }
 
   std::string name() const override { return "cuda"; }
   Precision precision() const override { return sizeof(T) == 4 ? Precision::Float : Precision::Double; }
@@ -185,6 +321,8 @@ class CudaBackend final : public Backend {
  protected:
   void do_upload(const TissueModel<double>& model) override {
     try {
+      std::optional<SceneArena::SlotScope> in_slot;  // a group's scene: its arrays in its slot
+      if (group_) in_slot.emplace(group_->arena(), slot_);
       upload_arrays(model);
     } catch (const OutOfDeviceMemory& e) {
       throw OutOfDeviceMemory("cuda backend: the model (" + std::to_string(model.n_nodes) + " nodes, " +
@@ -425,6 +563,7 @@ class CudaBackend final : public Backend {
     std::size_t tool_bytes = 0;
     StepStart start = StepStart::kPass1;
     bool passes = false;
+    bool group = false;  ///< staged in the scene group (start_group_tick)
   };
 
   /// tick_graph's first half: stages the tools, launches the graph on the
@@ -489,6 +628,11 @@ class CudaBackend final : public Backend {
   /// scenes then run side by side) where tick_graph would run it; otherwise
   /// runs it now (Backend's default).
   void do_start_tick(int steps, const ContactTools<double>& tools, bool in_region) override {
+    if (group_ && !in_region && group_takes(steps)) {
+      start_group_tick(steps, tools);
+      return;
+    }
+    if (group_) group_->count_alone();
     if (tick_graph_runs(steps) && !(in_region && store_.model().n_surf == 0))
       launch_tick_graph(steps, tools, in_region);
     else
@@ -496,7 +640,63 @@ class CudaBackend final : public Backend {
   }
 
   std::optional<Reductions> do_finish_tick() override {
+    if (launched_.group) return finish_group_tick();
     return launched_.launched ? finish_tick_graph() : Backend::do_finish_tick();
+  }
+
+  /// Whether the group can run this scene's tick of `steps` steps with
+  /// others: a tick graph over the whole mesh, no law terms, no load, and
+  /// every array the tick's kernels touch in this scene's slot at the
+  /// group's layout.
+  bool group_takes(int steps) {
+    const RegionView r = region_.view();
+    if (!tick_graph_runs(steps) || r.nodes || r.elems || !store_.law().neo_hookean() || store_.state().load) return false;
+    std::vector<std::ptrdiff_t> offsets;
+    const char* base = group_->slot(slot_);
+    const auto add = [&](const void* p) {
+      const std::ptrdiff_t d = static_cast<const char*>(p) - base;
+      offsets.push_back(p && d >= 0 && std::size_t(d) < group_->arena().stride() ? d : -1);
+    };
+    // the two pass-array sets in their own order (which is the state's changes from tick to tick)
+    const StateView<T> state = store_.state(), scratch = store_.pressure_scratch();
+    for (const StateView<T>& v : {store_.pressure_set() == 0 ? state : scratch, store_.pressure_set() == 0 ? scratch : state})
+      for (const void* p : {(const void*)v.u_held, (const void*)v.held, (const void*)v.driven, (const void*)v.role,
+                            (const void*)v.elem_dv, (const void*)v.elem_J, (const void*)v.node_p, (const void*)v.f_slot,
+                            (const void*)v.f, (const void*)v.bad, (const void*)v.contact, (const void*)v.contact_tool,
+                            (const void*)v.contact_normal, (const void*)v.grasp_offset, (const void*)v.corner_dx,
+                            (const void*)v.corner_tool, (const void*)v.corner_blocked, (const void*)v.proposed})
+        add(p);
+    for (auto& b : store_.u.buf) add(b.data());
+    for (const void* p : reducer_.device_arrays()) add(p);
+    if (std::find(offsets.begin(), offsets.end(), std::ptrdiff_t(-1)) != offsets.end()) return false;
+    return group_->same_layout(offsets);
+  }
+
+  /// A group tick's first half: what launch_tick_graph does before its
+  /// launch, the tools staged in the group's array.
+  void start_group_tick(int steps, const ContactTools<double>& tools) {
+    const StepStart start = take_pressures();
+    const bool passes = prepare_reduction(region_.view());
+    // work this scene queued on its own stream (a grasp, a copy of the pass arrays) before the group's
+    if (cudaStreamQuery(stream()) != cudaSuccess) {
+      cudaGetLastError();  // (cudaErrorNotReady is not an error)
+      stream_.sync();
+    }
+    const std::size_t tool_bytes =
+        tools.n_tools > 0 ? offsetof(ContactTools<T>, tool) + sizeof(ToolStep<T>) * size_t(tools.n_tools) : 0;
+    group_->start(slot_, {store_.u.phase, steps, static_cast<int>(start), store_.pressure_set(), tool_bytes}, tools);
+    launched_ = {false, false, steps, tool_bytes, start, passes, true};
+  }
+
+  std::optional<Reductions> finish_group_tick() {
+    const LaunchedTick t = launched_;
+    launched_ = {};
+    const Reductions out = group_->finish(slot_);
+    if (t.tool_bytes > 0) log_.count_to_device(t.tool_bytes);
+    pressures_fresh_ = t.passes;
+    log_.count_to_host(sizeof(Reductions));
+    store_.u.advance(t.steps);
+    return out;
   }
 
   /// The part of the tools' motion covering steps [first, first + count) of
@@ -546,6 +746,9 @@ class CudaBackend final : public Backend {
     stepper_.element_pressure(store_.model(), store_.state(), all, store_.u.current().u, stream(), &region);
   }
 
+  // first: destroyed last, after every array that may lie in the group's arena
+  std::shared_ptr<SceneGroup<T>> group_;
+  int slot_ = -1;
   Stream stream_;
   LaunchedTick launched_;  ///< the graph do_start_tick launched, until do_finish_tick
   Transfers log_;
@@ -570,6 +773,76 @@ class CudaBackend final : public Backend {
   std::string device_name_;
 };
 
+template <class T>
+typename SceneGroup<T>::Graph& SceneGroup<T>::graph(const GroupTickKey& key, int rep) {
+  std::unique_ptr<Graph>& g = graphs_[key];
+  if (g && g->exec.get()) return *g;
+  g = std::make_unique<Graph>();
+  const int n = slots();
+  g->skip_dev.allocate(n);
+  g->skip_host.allocate(n);
+  const cudaStream_t st = stream_.get();
+  const SceneSlots where{rep, static_cast<std::int64_t>(arena_.stride()), static_cast<std::int64_t>(sizeof(ContactTools<T>))};
+  cudaGraph_t captured = nullptr;
+  CUDA_CHECK(cudaStreamBeginCapture(st, cudaStreamCaptureModeThreadLocal));
+  try {
+    if (key.tool_bytes > 0)
+      CUDA_CHECK(cudaMemcpy2DAsync(tools_dev_.data(), sizeof(ContactTools<T>), tools_host_.data(),
+                                   sizeof(ContactTools<T>), key.tool_bytes, n, cudaMemcpyHostToDevice, st));
+    CUDA_CHECK(cudaMemcpyAsync(g->skip_dev.data(), g->skip_host.data(), sizeof(int) * n, cudaMemcpyHostToDevice, st));
+    {
+      ScenesInLaunches over(n);
+      members_[rep]->enqueue_group_tick(key, where, g->skip_dev.data() + rep,
+                                        key.tool_bytes > 0 ? tools_dev_.data() + rep : nullptr, st);
+    }
+    // every slot's Reductions: rep's result moved to slot 0, one slot apart
+    const char* first = reinterpret_cast<const char*>(members_[rep]->result_device()) - std::size_t(rep) * arena_.stride();
+    CUDA_CHECK(cudaMemcpy2DAsync(results_host_.data(), sizeof(Reductions), first, arena_.stride(), sizeof(Reductions),
+                                 n, cudaMemcpyDeviceToHost, st));
+  } catch (...) {
+    cudaStreamEndCapture(st, &captured);
+    if (captured) cudaGraphDestroy(captured);
+    throw;
+  }
+  CUDA_CHECK(cudaStreamEndCapture(st, &captured));
+  cudaGraphExec_t exec = nullptr;
+  const cudaError_t err = cudaGraphInstantiate(&exec, captured, 0);
+  cudaGraphDestroy(captured);
+  CUDA_CHECK(err);
+  g->exec = GraphExec(exec);
+  return *g;
+}
+
+template <class T>
+void SceneGroup<T>::launch() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const int n = slots();
+  std::vector<int> order;
+  for (int k = 0; k < n; ++k)
+    if (started_[k] && members_[k]) order.push_back(k);
+  if (order.empty()) return;
+  std::vector<char> done(n, 0);
+  for (int k : order) {
+    if (done[k]) continue;
+    const GroupTickKey key = keys_[k];
+    Graph& g = graph(key, k);
+    for (int j = 0; j < n; ++j) g.skip_host[j] = 1;
+    for (int j : order)
+      if (!done[j] && keys_[j] == key) {
+        g.skip_host[j] = 0;
+        done[j] = 1;
+      }
+    CUDA_CHECK(cudaGraphLaunch(g.exec.get(), stream_.get()));
+    // the next key's graph may share this one's tools and results arrays: the copies are in stream order
+  }
+  stream_.sync();
+  for (int k : order) {
+    started_[k] = 0;
+    ran_[k] = 1;
+  }
+  ticks_together_.fetch_add(std::int64_t(order.size()), std::memory_order_relaxed);
+}
+
 template <class F>
 decltype(auto) with_cuda_backend(Backend& b, F&& f) {
   if (auto* p = dynamic_cast<CudaBackend<float>*>(&b)) return f(*p);
@@ -581,6 +854,27 @@ decltype(auto) with_cuda_backend(Backend& b, F&& f) {
 }  // namespace gpu
 
 void set_cuda_memory_limit(std::size_t bytes) { gpu::set_device_memory_limit(bytes); }
+
+std::shared_ptr<BackendGroup> make_cuda_scene_group(Precision precision, int slots, std::size_t slot_bytes) {
+  if (slots < 1 || slots > kMaxCudaGroupScenes)
+    throw std::invalid_argument(gpu::str("cuda scene group: ", slots, " scenes (1..", kMaxCudaGroupScenes, ")"));
+  if (precision == Precision::Float) return std::make_shared<gpu::SceneGroup<float>>(slots, slot_bytes);
+  return std::make_shared<gpu::SceneGroup<double>>(slots, slot_bytes);
+}
+
+void join_cuda_scene_group(Backend& backend, const std::shared_ptr<BackendGroup>& group, int slot) {
+  if (auto* b = dynamic_cast<gpu::CudaBackend<float>*>(&backend)) {
+    auto g = std::dynamic_pointer_cast<gpu::SceneGroup<float>>(group);
+    if (!g) throw std::invalid_argument("join_cuda_scene_group: a float backend needs a float group");
+    return b->join(std::move(g), slot);
+  }
+  if (auto* b = dynamic_cast<gpu::CudaBackend<double>*>(&backend)) {
+    auto g = std::dynamic_pointer_cast<gpu::SceneGroup<double>>(group);
+    if (!g) throw std::invalid_argument("join_cuda_scene_group: a double backend needs a double group");
+    return b->join(std::move(g), slot);
+  }
+  throw std::invalid_argument("backend '" + backend.name() + "' is not a cuda backend");
+}
 
 std::unique_ptr<Backend> make_cuda_backend(Precision precision) {
   std::string why;  // checked before any CUDA object is made, for a clear message

@@ -14,6 +14,18 @@ namespace tissue {
 
 std::unique_ptr<Backend> make_cuda_backend(Precision precision);
 
+/// Scenes of one model stepped as one on the GPU (BackendGroup; docs/batch.md,
+/// "One launch per pass"): `slots` scenes of at most `slot_bytes` of device
+/// memory each (a scene's bytes, measured, with room for the arrays'
+/// alignment), in one allocation. At most kMaxCudaGroupScenes scenes (a
+/// launch's gridDim.y).
+inline constexpr int kMaxCudaGroupScenes = 65535;
+std::shared_ptr<BackendGroup> make_cuda_scene_group(Precision precision, int slots, std::size_t slot_bytes);
+
+/// Makes `backend` (a cuda backend of the group's precision) scene `slot` of
+/// `group`, before its upload: its arrays then lie in the slot.
+void join_cuda_scene_group(Backend& backend, const std::shared_ptr<BackendGroup>& group, int slot);
+
 /// True when a CUDA device can be used; otherwise *why says why not.
 /// On success *why holds the device name.
 bool cuda_available(std::string* why);

@@ -33,6 +33,44 @@ std::size_t device_bytes_held();
 /// but the GPU's own); a host that shares the GPU with its renderer sets it.
 void set_device_memory_limit(std::size_t bytes);
 
+/// One device allocation cut into `slots` equal slots of `stride` bytes, one
+/// per scene of a group stepped as one (cuda/scene_group.hpp). While a
+/// thread holds a SlotScope, device_allocate on that thread takes its
+/// arrays from the slot in turn (each aligned to 256 bytes) instead of
+/// cudaMalloc; scenes of one model then allocate the same arrays at the
+/// same offsets of their slots, so that scene k's array is scene 0's moved
+/// by k strides. An array that no longer fits its slot is allocated apart
+/// (that scene is then stepped alone). device_free of slot memory frees
+/// nothing: the arena is freed whole. Move-only; the bytes are counted
+/// (device_bytes_held) once, at construction.
+class SceneArena {
+ public:
+  SceneArena(int slots, std::size_t stride);
+  SceneArena(const SceneArena&) = delete;
+  SceneArena& operator=(const SceneArena&) = delete;
+  ~SceneArena();
+  int slots() const { return slots_; }
+  std::size_t stride() const { return stride_; }
+  char* slot(int k) const { return base_ + std::size_t(k) * stride_; }
+
+  /// Places the calling thread's device allocations in slot k until it ends.
+  class SlotScope {
+   public:
+    SlotScope(const SceneArena& arena, int k);
+    SlotScope(const SlotScope&) = delete;
+    SlotScope& operator=(const SlotScope&) = delete;
+    ~SlotScope();
+
+   private:
+    char *saved_begin_, *saved_cursor_, *saved_end_;
+  };
+
+ private:
+  char* base_ = nullptr;
+  int slots_ = 0;
+  std::size_t stride_ = 0;
+};
+
 /// Owns n elements of T in device memory (cudaMalloc); move-only.
 /// Contents are uninitialised after allocate().
 template <class T>

@@ -73,6 +73,8 @@ class DeviceStore {
   StateView<T> pressure_scratch();
   /// The scratch set becomes the state's (and the state's the scratch).
   void swap_pressures() { pressures_ ^= 1; }
+  /// Which of the two sets is the state's (0 or 1).
+  int pressure_set() const { return pressures_; }
   /// Copies the state's set whole into the scratch set (so that the two
   /// agree outside any region the reduction runs over).
   void copy_pressures_to_scratch(cudaStream_t stream);

@@ -47,11 +47,29 @@ inline std::size_t half_l2_bytes() {
 /// Blocks needed for n items at `block` threads each.
 inline int grid_for(index_t n, int block = kBlock) { return static_cast<int>((n + block - 1) / block); }
 
-/// Launches kernel<<<blocks, block, 0, stream>>>(args...) when blocks > 0.
+/// Scenes the launches of the calling thread cover (gridDim.y): 1, or a
+/// group's slots while a ScenesInLaunches is alive on it (the capture of a
+/// group's tick, cuda/scene_group.hpp; the kernels then move their
+/// per-scene arrays to block row y's scene, cuda/views.hpp SceneSlots).
+inline thread_local int launch_scenes = 1;
+
+/// Sets launch_scenes for its lifetime.
+class ScenesInLaunches {
+ public:
+  explicit ScenesInLaunches(int scenes) : saved_(launch_scenes) { launch_scenes = scenes; }
+  ScenesInLaunches(const ScenesInLaunches&) = delete;
+  ScenesInLaunches& operator=(const ScenesInLaunches&) = delete;
+  ~ScenesInLaunches() { launch_scenes = saved_; }
+
+ private:
+  int saved_;
+};
+
+/// Launches kernel<<<(blocks, launch_scenes), block, 0, stream>>>(args...) when blocks > 0.
 template <class Kernel, class... Args>
 void launch_blocks(int blocks, int block, cudaStream_t stream, Kernel kernel, Args... args) {
   if (blocks <= 0) return;
-  kernel<<<blocks, block, 0, stream>>>(args...);
+  kernel<<<dim3(blocks, launch_scenes), block, 0, stream>>>(args...);
   CUDA_CHECK(cudaGetLastError());
 #ifdef TISSUE_CUDA_SYNC_CHECK
   CUDA_CHECK(cudaStreamSynchronize(stream));  // not during graph capture
@@ -77,7 +95,7 @@ template <class... Params, class... Args>
 void launch_chained_in(int block, index_t n, cudaStream_t stream, void (*kernel)(Params...), Args... args) {
   if (n <= 0) return;
   cudaLaunchConfig_t cfg = {};
-  cfg.gridDim = dim3(grid_for(n, block));
+  cfg.gridDim = dim3(grid_for(n, block), launch_scenes);
   cfg.blockDim = dim3(block);
   cfg.stream = stream;
   cudaLaunchAttribute attr;

@@ -304,6 +304,16 @@ __global__ void __launch_bounds__(kReduceBlock)
     reduce_kernel(ModelView<T> m, StateView<T> s, RegionView r, FrontView front, StepBuffers<T> b,
                   const T* energy_node_p, LawView<T> w, int* partial, int* contact, unsigned* touched_tools,
                   unsigned* done, Reductions* out, Reductions* host_out) {
+  if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene (no host_out)
+    b = b.moved(d * s.slots.stride);
+    energy_node_p = s.slot_moved(energy_node_p, d);
+    partial = s.slot_moved(partial, d);
+    contact = s.slot_moved(contact, d);
+    touched_tools = s.slot_moved(touched_tools, d);
+    done = s.slot_moved(done, d);
+    out = s.slot_moved(out, d);
+    s = s.moved(d);
+  }
   if (skipped(s)) return;  // every block: the count stays at 0
   // the bad flag as the steps' pass 3 left it (the kernels before this one have finished; only the last
   // block's thread 0 uses it: loaded now, its round trip overlaps the sums)

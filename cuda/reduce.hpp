@@ -14,6 +14,8 @@
 
 #include <cuda_runtime.h>
 
+#include <vector>
+
 #include "core/backend.hpp"
 #include "cuda/device_array.hpp"
 #include "cuda/views.hpp"
@@ -80,6 +82,10 @@ class Reducer {
   void enqueue(const ModelView<T>& m, const StateView<T>& s, const StateView<T>& scratch, const RegionView& r,
                FrontView front, StepBuffers<T> b, cudaStream_t stream, bool to_host = false);
   const Reductions* result() const { return result_.data(); }
+  /// The device arrays its kernel writes (a scene group checks that they lie in the scene's slot).
+  std::vector<const void*> device_arrays() const {
+    return {partial_.data(), contact_partial_.data(), touched_.data(), done_.data(), result_.data()};
+  }
   /// Pinned, mapped host memory for the result's download.
   Reductions* result_host() { return result_host_.data(); }
 

@@ -29,6 +29,7 @@
 #include "cuda/cuda_backend.hpp"
 #include "core/contact.hpp"
 #include "cuda/device_store.hpp"
+#include "cuda/launch.cuh"
 
 namespace tissue::gpu {
 
@@ -149,7 +150,8 @@ class Stepper {
   /// which pays only while every block runs in the first wave (docs/cuda.md,
   /// "Passes 3 and 4 as one kernel").
   bool fuses_forces(const RegionView& r) const {
-    return law_.neo_hookean() && r.n_packs > 0 && r.n_packs <= limits_.fused_force_blocks;
+    // (a group's launch: every scene's windows, launch_scenes, must fit the device at once)
+    return law_.neo_hookean() && r.n_packs > 0 && index_t(launch_scenes) * r.n_packs <= limits_.fused_force_blocks;
   }
   /// Sets PersistentLimits::fused_force_blocks (tests: 0 runs passes 3 and
   /// 4 apart on every region, until the next init()).

@@ -573,6 +573,10 @@ inline constexpr bool kLateLoads = sizeof(T) == 4;
 template <class T, bool kRecomputed>
 __global__ void element_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u,
                                         index_t first_wave) {
+  if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    u = s.slot_moved(u, d);
+    s = s.moved(d);
+  }
   const index_t i = thread_index();
   run_element_pass<kLateLoads<T>>(
       s, i < r.n_elems, first_wave, [&] { return load_element_shape<T, kRecomputed>(m, r.elem(i)); },
@@ -656,6 +660,7 @@ void enqueue_element_pressures(const ModelView<T>& m, const StateView<T>& s, con
 /// whole groups are active or not.
 template <class T>
 __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView r) {
+  if (const std::int64_t d = slots_moved(s.slots)) s = s.moved(d);  // a group's launch: this block row's scene
   let_next_pass_launch();
   const index_t g = thread_index(), i = g / kNodeLanes;
   const bool active = i < r.n_nodes;
@@ -687,6 +692,7 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
 /// double steps ran 0.3-2 % slower on an H100: kept apart.)
 template <class T, int L>
 __global__ void nodal_pressure_lanes_kernel(ModelView<T> m, StateView<T> s, RegionView r) {
+  if (const std::int64_t d = slots_moved(s.slots)) s = s.moved(d);  // a group's launch: this block row's scene
   constexpr int P = kNodeLanes / L;
   let_next_pass_launch();
   const index_t g = thread_index(), i = g / P;
@@ -839,6 +845,10 @@ __device__ __forceinline__ void run_packed(const ModelView<T>& m, const StateVie
 template <class T, bool kRecomputed>
 __global__ void __launch_bounds__(kPackedBlock)
     packed_pressures_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
+  if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    u = s.slot_moved(u, d);
+    s = s.moved(d);
+  }
   run_packed<T, kRecomputed, false, true, T>(
       m, s, r,
       [&](index_t, const SlotElement<T>& x) {
@@ -870,6 +880,10 @@ __global__ void __launch_bounds__(kPackedBlock)
 template <class T, bool kRecomputed, bool kLoad, bool kEarly>
 __global__ void __launch_bounds__(kPackedBlock, kPackedForceMinBlocks<T>)
     packed_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
+  if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    b = b.moved(d * s.slots.stride);
+    s = s.moved(d);
+  }
   run_packed<T, kRecomputed, true, kEarly, Vec3<T>>(
       m, s, r,
       [&](index_t k, const SlotElement<T>& x) {
@@ -892,7 +906,9 @@ void enqueue_pressures(const ModelView<T>& m, const StateView<T>& s, const Regio
                        cudaStream_t stream) {
   with_gradients(m, r, [&](auto recomputed) {
     constexpr bool kRecomputed = decltype(recomputed)::value;
-    if (fuses_pressures(r)) {
+    // a group's launch counts every scene's elements (launch_scenes): the fused kernel pays for its
+    // fourfold loads only on a small launch
+    if (fuses_pressures(r) && index_t(launch_scenes) * r.n_elems < kFusedPressuresMaxElements) {
       launch_chained_in(kPackedBlock, index_t(kPackedBlock) * r.n_packs, stream,
                         packed_pressures_kernel<T, kRecomputed>, m, s, r, u);
     } else {
@@ -927,6 +943,10 @@ __device__ __forceinline__ void element_forces_thread(const ModelView<T>& m, con
 template <class T, bool kRecomputed>
 __global__ void element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u,
                                       index_t first_wave) {
+  if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    u = s.slot_moved(u, d);
+    s = s.moved(d);
+  }
   element_forces_thread<T, kRecomputed, kLateLoads<T>>(m, s, r, u, first_wave);
 }
 
@@ -949,6 +969,10 @@ template <class T, bool kRecomputed>
 __global__ void __launch_bounds__(kBlock, kStreamingForceBlocks<T> > 0 ? kStreamingForceBlocks<T> : 1)
     element_forces_streaming_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u,
                                     index_t first_wave) {
+  if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    u = s.slot_moved(u, d);
+    s = s.moved(d);
+  }
   element_forces_thread<T, kRecomputed, true>(m, s, r, u, first_wave);
 }
 
@@ -965,6 +989,10 @@ __global__ void __launch_bounds__(kBlock, kStreamingForceBlocks<T> > 0 ? kStream
 template <class T, bool kRecomputed>
 __global__ void element_forces_beside_check_kernel(ModelView<T> m, StateView<T> s, RegionView r,
                                                    const Packed3<T>* u) {
+  if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    u = s.slot_moved(u, d);
+    s = s.moved(d);
+  }
   let_next_pass_launch();
   const index_t i = thread_index();
   const bool active = i < r.n_elems;
@@ -1017,6 +1045,10 @@ __device__ __forceinline__ void discard_slots(const Packed3<T>* f_slot, index_t 
 /// line read for the last time need not go back to memory.
 template <class T, bool kLoad, int L>
 __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
+  if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    b = b.moved(d * s.slots.stride);
+    s = s.moved(d);
+  }
   constexpr int P = kNodeLanes / L;
   let_next_pass_launch();
   const index_t g = thread_index(), i = g / P;

@@ -25,6 +25,7 @@
 #include <cstdint>
 #include <type_traits>
 
+#include "core/contact.hpp"
 #include "core/hd.hpp"
 #include "core/tet.hpp"
 #include "core/vec.hpp"
@@ -139,6 +140,9 @@ struct StepBuffers {
   Packed3<T>* u = nullptr;       ///< u^n (n_nodes) m
   Packed3<T>* u_next = nullptr;  ///< u^{n+1} (n_nodes) m
   TISSUE_HD StepBuffers rotated() const { return {u, u_next, u_prev}; }
+  TISSUE_HD StepBuffers moved(std::int64_t bytes) const {
+    return {moved_by(u_prev, bytes), moved_by(u, bytes), moved_by(u_next, bytes)};
+  }
 };
 
 /// The region's active lists; a null list means the identity (whole mesh).
@@ -177,6 +181,34 @@ TISSUE_HD bool recomputes(const ModelView<T>& m, const RegionView& r) {
   return !m.dndx || (m.X_ref && r.n_elems >= kRecomputeMinElements);
 }
 
+/// Where a launch over a group's scenes finds each scene's arrays
+/// (cuda/scene_group.hpp). Such a launch has gridDim.y scenes, block row y
+/// working on slot y. Every per-scene array of a group's scene lies at the
+/// same offset of its slot of the group's SceneArena, so slot y's arrays
+/// are those of the slot the launch was captured from (`captured`) moved by
+/// (y - captured) slots; the group's own per-scene entries (the tools'
+/// motion, the skip flags) are arrays of one entry a slot. A launch of one
+/// scene (gridDim.y 1) moves nothing.
+struct SceneSlots {
+  int captured = 0;             ///< the slot whose pointers the launch holds
+  std::int64_t stride = 0;      ///< bytes from one slot of the arena to the next
+  std::int64_t tools_size = 0;  ///< bytes of one slot's entry of the group's tools array
+};
+
+#ifdef __CUDACC__
+/// Slots from the captured scene to this block's (0 in a launch of one scene).
+__device__ __forceinline__ std::int64_t slots_moved(const SceneSlots& g) {
+  return gridDim.y > 1 ? std::int64_t(blockIdx.y) - g.captured : 0;
+}
+#endif
+
+/// p moved by `bytes` (null stays null).
+template <class P>
+TISSUE_HD P* moved_by(P* p, std::int64_t bytes) {
+  using Byte = std::conditional_t<std::is_const_v<P>, const char, char>;
+  return p ? reinterpret_cast<P*>(reinterpret_cast<Byte*>(p) + bytes) : p;
+}
+
 /// Mutable per-step state on the device (shapes as core/state.hpp, layouts
 /// as described at the top of this file). Pointers are deliberately not
 /// __restrict__/read-only: persistent kernels read what other blocks wrote.
@@ -205,8 +237,47 @@ struct StateView {
                                        ///< in this step's sweep; the gather clears it (n_nodes)
   /// Set only in a tick graph that checks its region first (one int): while
   /// it is non-zero the region must grow before this tick, and the step and
-  /// reduction kernels do nothing. Null: they always run.
+  /// reduction kernels do nothing. In a group's tick, the group's flag of
+  /// this scene: non-zero when the scene does not take part. Null: they
+  /// always run.
   const int* skip = nullptr;
+  SceneSlots slots;  ///< a group's launch: where the other scenes' arrays lie
+
+  /// This view for the scene `d` slots on (skip: `d` flags on).
+  TISSUE_HD StateView moved(std::int64_t d) const {
+    StateView v = *this;
+    const std::int64_t b = d * slots.stride;
+    v.u_held = moved_by(u_held, b);
+    v.held = moved_by(held, b);
+    v.driven = moved_by(driven, b);
+    v.role = moved_by(role, b);
+    v.elem_dv = moved_by(elem_dv, b);
+    v.elem_J = moved_by(elem_J, b);
+    v.node_p = moved_by(node_p, b);
+    v.f_slot = moved_by(f_slot, b);
+    v.f = moved_by(f, b);
+    v.load = moved_by(load, b);
+    v.bad = moved_by(bad, b);
+    v.contact = moved_by(contact, b);
+    v.contact_tool = moved_by(contact_tool, b);
+    v.contact_normal = moved_by(contact_normal, b);
+    v.grasp_offset = moved_by(grasp_offset, b);
+    v.corner_dx = moved_by(corner_dx, b);
+    v.corner_tool = moved_by(corner_tool, b);
+    v.corner_blocked = moved_by(corner_blocked, b);
+    v.proposed = moved_by(proposed, b);
+    v.skip = skip ? skip + d : skip;
+    return v;
+  }
+  /// A slot's array of this scene `d` slots on.
+  template <class P>
+  TISSUE_HD P* slot_moved(P* p, std::int64_t d) const {
+    return moved_by(p, d * slots.stride);
+  }
+  /// The tools' motion of the scene `d` slots on (the group's array of one entry a slot).
+  TISSUE_HD const ContactTools<T>* tools_moved(const ContactTools<T>* t, std::int64_t d) const {
+    return moved_by(t, d * slots.tools_size);
+  }
 };
 
 }  // namespace tissue::gpu

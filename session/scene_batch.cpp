@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <exception>
+#include <mutex>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
@@ -100,22 +101,54 @@ SceneBatch::SceneBatch(const std::vector<std::shared_ptr<const scene::Scene>>& s
     : backend_(backend), precision_(precision) {
   if (scenes.empty()) throw std::invalid_argument("a batch needs at least one scene");
   const std::size_t n = scenes.size();
+  std::vector<Prepared> prepared;
+  prepared.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) prepared.push_back(prepare(scenes[i], i));
+  const int max_group = max_group_scenes(backend_);
   sessions_.reserve(n);
+  member_.assign(n, {});
   for (std::size_t i = 0; i < n; ++i) {
-    sessions_.push_back(make_session(scenes[i], i));
-    if (i > 0) continue;
-    // the first scene's memory, before the others are built
-    Backend& b = sessions_[0]->backend();
-    const TissueModel<double>& m = sessions_[0]->model();
-    memory_.shared_host = model_bytes(m);
-    memory_.per_scene_host = b.asynchronous_ticks() ? 0 : host_store_bytes(m, b.precision());
-    const DeviceMemory dm = b.device_memory();
-    memory_.per_scene_device = std::max<std::int64_t>(dm.held, 0);
-    memory_.device_free = dm.free;
-    memory_.host_available = host_available_bytes();
-    check_batch_memory(n, memory_, b.device_name());
+    const TissueModel<double>* model = prepared[i].model.get();
+    Membership slot;
+    if (max_group > 0) {  // the scenes of one model in groups of up to max_group, in order
+      auto open = std::find_if(groups_.begin(), groups_.end(), [&](const Group& g) {
+        return g.model.get() == model && g.filled < g.slots;
+      });
+      if (open == groups_.end()) {
+        const auto rest = std::count_if(prepared.begin() + std::ptrdiff_t(i), prepared.end(),
+                                        [&](const Prepared& p) { return p.model.get() == model; });
+        const int slots = int(std::min<std::ptrdiff_t>(rest, max_group));
+        if (slots >= 2) {
+          // a scene's device bytes, measured on a scene built alone (also the memory check's first scene)
+          std::int64_t bytes = 0;
+          std::unique_ptr<Session> alone = build(prepared[i], i, {}, &bytes);
+          if (i == 0) measure_first(*alone, n, bytes);
+          alone.reset();
+          // room for each array's alignment in the slot (256 bytes an array)
+          const std::size_t slot_bytes = std::size_t(bytes) + std::size_t(bytes) / 32 + (std::size_t(1) << 18);
+          groups_.push_back({prepared[i].model, make_backend_group(backend_, precision_, slots, slot_bytes), slots, 0});
+          open = groups_.end() - 1;
+        }
+      }
+      if (open != groups_.end()) slot = {open->group, open->filled++};
+    }
+    std::int64_t bytes = 0;
+    sessions_.push_back(build(prepared[i], i, slot, &bytes));
+    member_[i] = slot;
+    if (i == 0 && !slot.group) measure_first(*sessions_[0], n, bytes);
   }
   set_threads();
+}
+
+void SceneBatch::measure_first(const Session& first, std::size_t scenes, std::int64_t device_bytes) {
+  const Backend& b = first.backend();
+  const TissueModel<double>& m = first.model();
+  memory_.shared_host = model_bytes(m);
+  memory_.per_scene_host = b.asynchronous_ticks() ? 0 : host_store_bytes(m, b.precision());
+  memory_.per_scene_device = std::max<std::int64_t>(device_bytes, 0);
+  memory_.device_free = b.device_memory().free;
+  memory_.host_available = host_available_bytes();
+  check_batch_memory(scenes, memory_, b.device_name());
 }
 
 std::shared_ptr<const TissueModel<double>> SceneBatch::model_for(const scene::Scene& scene) {
@@ -129,7 +162,7 @@ std::shared_ptr<const TissueModel<double>> SceneBatch::model_for(const scene::Sc
   return built->model;
 }
 
-std::unique_ptr<Session> SceneBatch::make_session(const std::shared_ptr<const scene::Scene>& given, std::size_t index) {
+SceneBatch::Prepared SceneBatch::prepare(const std::shared_ptr<const scene::Scene>& given, std::size_t index) {
   if (!given) throw std::invalid_argument(fmt::format("batch scene {}: no scene given", index));
   try {
     // the scene on the batch's backend and precision, one copy per scene given
@@ -148,7 +181,24 @@ std::unique_ptr<Session> SceneBatch::make_session(const std::shared_ptr<const sc
       run_scenes_.emplace_back(given, scene);
     }
     std::shared_ptr<const TissueModel<double>> model = model_for(*scene);
-    return std::make_unique<Session>(std::move(scene), std::move(model), create_backend(backend_, precision_));
+    return {std::move(scene), std::move(model)};
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(fmt::format("batch scene {}: {}", index, e.what()));
+  } catch (const std::exception& e) {
+    throw std::runtime_error(fmt::format("batch scene {}: {}", index, e.what()));
+  }
+}
+
+std::unique_ptr<Session> SceneBatch::build(const Prepared& p, std::size_t index, const Membership& slot,
+                                           std::int64_t* device_bytes) {
+  try {
+    std::unique_ptr<Backend> backend = create_backend(backend_, precision_);
+    if (slot.group) join_backend_group(*backend, slot.group, slot.slot);
+    const std::int64_t before = backend->device_memory().held;
+    auto session = std::make_unique<Session>(p.scene, p.model, std::move(backend));
+    // the device bytes its backend took (held counts every backend of the process)
+    if (device_bytes) *device_bytes = session->backend().device_memory().held - before;
+    return session;
   } catch (const std::invalid_argument& e) {
     throw std::invalid_argument(fmt::format("batch scene {}: {}", index, e.what()));
   } catch (const std::exception& e) {
@@ -211,7 +261,9 @@ void tick_started_together(std::vector<std::unique_ptr<Session>>& sessions, std:
 
 std::size_t SceneBatch::tick() {
   const std::size_t n = size();
-  if (sessions_.front()->backend().asynchronous_ticks()) {
+  if (!groups_.empty()) {
+    tick_in_groups();
+  } else if (sessions_.front()->backend().asynchronous_ticks()) {
     // one host thread per kScenesPerLauncher scenes (at most one per core) starts and ends their ticks: the
     // launches, not the device, bound a tick of many small scenes
     const std::size_t threads = std::size_t(std::max(1, tbb::this_task_arena::max_concurrency()));
@@ -237,6 +289,63 @@ std::size_t SceneBatch::tick() {
   return n - failed().size();
 }
 
+void SceneBatch::tick_in_groups() {
+  // every running scene's tick started (a group's scene only stages it), then each group's launched, then
+  // every started tick ended; the threads share the starts and the ends
+  const std::size_t n = size();
+  std::vector<char> started(n, 0);
+  std::mutex error_mutex;
+  std::exception_ptr error;
+  const auto keep = [&] {
+    std::lock_guard<std::mutex> lock(error_mutex);
+    if (!error) error = std::current_exception();
+  };
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kScenesPerLauncher), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      Session& s = *sessions_[i];
+      if (s.failed()) continue;
+      try {
+        s.begin_tick();
+        started[i] = 1;
+      } catch (const SimulationError&) {
+      } catch (...) {
+        keep();
+      }
+    }
+  });
+  for (const Group& g : groups_) {
+    try {
+      g.group->launch();
+    } catch (...) {
+      keep();
+    }
+  }
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kScenesPerLauncher), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      if (!started[i]) continue;
+      try {
+        sessions_[i]->end_tick();
+      } catch (const SimulationError&) {
+      } catch (...) {
+        keep();
+      }
+    }
+  });
+  if (error) std::rethrow_exception(error);
+}
+
+std::int64_t SceneBatch::ticks_together() const {
+  std::int64_t t = 0;
+  for (const Group& g : groups_) t += g.group->ticks_together();
+  return t;
+}
+
+std::int64_t SceneBatch::ticks_alone() const {
+  std::int64_t t = 0;
+  for (const Group& g : groups_) t += g.group->ticks_alone();
+  return t;
+}
+
 std::vector<std::size_t> SceneBatch::failed() const {
   std::vector<std::size_t> out;
   for (std::size_t i = 0; i < size(); ++i)
@@ -250,7 +359,14 @@ void SceneBatch::restart(std::size_t i) {
 
 void SceneBatch::replace(std::size_t i, std::shared_ptr<const scene::Scene> scene) {
   if (i >= size()) throw std::out_of_range(fmt::format("batch scene {} does not exist (0..{})", i, size() - 1));
-  sessions_[i] = make_session(scene, i);
+  const Prepared p = prepare(scene, i);
+  // the same model as its group's: the new scene takes the old one's slot; otherwise it runs alone
+  Membership slot;
+  for (const Group& g : groups_)
+    if (member_[i].group == g.group && g.model == p.model) slot = member_[i];
+  sessions_[i].reset();  // (leaves its slot first)
+  sessions_[i] = build(p, i, slot);
+  member_[i] = slot;
   // forget what no scene uses any more
   models_.erase(std::remove_if(models_.begin(), models_.end(), [](const auto& b) { return b->model.use_count() == 1; }),
                 models_.end());

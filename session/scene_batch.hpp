@@ -75,6 +75,12 @@ class SceneBatch {
   /// One haptic tick of every running scene (those not failed). Returns
   /// how many still run after it.
   std::size_t tick();
+  /// Scene ticks run as one launch per pass in a group (BackendGroup), and
+  /// ticks of grouped scenes run alone (a tick the group could not take).
+  std::int64_t ticks_together() const;
+  std::int64_t ticks_alone() const;
+  /// Groups of scenes stepped as one (cuda: scenes of one model).
+  std::size_t groups() const { return groups_.size(); }
   /// Scenes that have failed (ascending).
   std::vector<std::size_t> failed() const;
   /// Scene i back to rest (Session::restart), failure cleared.
@@ -85,7 +91,24 @@ class SceneBatch {
   void replace(std::size_t i, std::shared_ptr<const scene::Scene> scene);
 
  private:
-  std::unique_ptr<Session> make_session(const std::shared_ptr<const scene::Scene>& scene, std::size_t index);
+  struct Prepared {
+    std::shared_ptr<const scene::Scene> scene;
+    std::shared_ptr<const TissueModel<double>> model;
+  };
+  struct Membership {
+    std::shared_ptr<BackendGroup> group;  ///< null: the scene runs alone
+    int slot = -1;
+  };
+  struct Group {
+    std::shared_ptr<const TissueModel<double>> model;
+    std::shared_ptr<BackendGroup> group;
+    int slots = 0, filled = 0;
+  };
+  Prepared prepare(const std::shared_ptr<const scene::Scene>& scene, std::size_t index);
+  std::unique_ptr<Session> build(const Prepared& p, std::size_t index, const Membership& slot,
+                                 std::int64_t* device_bytes = nullptr);
+  void measure_first(const Session& first, std::size_t scenes, std::int64_t device_bytes);
+  void tick_in_groups();
   std::shared_ptr<const TissueModel<double>> model_for(const scene::Scene& scene);
   void set_threads();
 
@@ -98,6 +121,8 @@ class SceneBatch {
   /// The scenes as given and as run (the batch's backend and precision), for scenes given by one pointer.
   std::vector<std::pair<std::shared_ptr<const scene::Scene>, std::shared_ptr<const scene::Scene>>> run_scenes_;
   BatchMemory memory_;
+  std::vector<Group> groups_;
+  std::vector<Membership> member_;  ///< per scene
 };
 
 }  // namespace tissue

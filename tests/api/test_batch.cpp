@@ -176,6 +176,41 @@ TEST_P(BatchEquals, AFailingSceneStopsAloneAndResetsAlone) {
   expect_same_scene(batch, 1, fresh, "scene 1 after its reset");
 }
 
+// Scenes of one model: on cuda one group, each pass of a tick one launch over them all (docs/batch.md, "One
+// launch per pass"), with tools pressing at different depths and places, one in the air and one grasping;
+// each scene equals its scene alone.
+TEST_P(BatchEquals, ScenesOfOneModelRunTogetherAndEqualEachAlone) {
+  const int n = 5, ticks = 60;
+  Batch batch = Batch::load(std::vector<BatchScene>(n, mesh(block(3000))), options());
+  std::vector<Simulation> alone;
+  for (int i = 0; i < n; ++i) alone.push_back(Simulation::from_mesh(block(3000), options()));
+  const auto pose = [](int i, long k) {
+    return i == 4 ? tissue::Vector3{0.01, 0.01, 0.03} : press_pose(k, (1.0 + 0.3 * i) * 1e-3, 0.008 + 0.001 * i);
+  };
+  for (long k = 1; k <= ticks; ++k) {
+    for (int i = 0; i < n; ++i) {
+      batch.set_tool_pose(i, 0, pose(i, k));
+      alone[std::size_t(i)].set_tool_pose(0, pose(i, k));
+    }
+    if (k == 45) {  // scene 2 grasps what its tool touches
+      batch.set_grasp(2, 0, true);
+      alone[2].set_grasp(0, true);
+    }
+    EXPECT_EQ(batch.step(), std::size_t(n));
+    for (Simulation& s : alone) s.step();
+  }
+  if (GetParam().backend == "cuda") {
+    EXPECT_EQ(batch.groups(), 1u);
+    EXPECT_EQ(batch.ticks_together(), std::int64_t(n) * ticks) << "every tick of every scene ran in the group";
+  } else {
+    EXPECT_EQ(batch.groups(), 0u);
+    EXPECT_EQ(batch.ticks_together(), 0);
+  }
+  EXPECT_EQ(batch.last(4).tools[0].contact_nodes, 0) << "the fifth tool stays in the air";
+  EXPECT_GT(batch.last(2).tools[0].grasped_nodes, 0) << "the third scene grasps";
+  for (int i = 0; i < n; ++i) expect_same_scene(batch, i, alone[std::size_t(i)], "scene " + std::to_string(i));
+}
+
 // A material change, given at load or later, equals the scene built with that material.
 TEST_P(BatchEquals, MaterialChangesEqualTheSceneWithThatMaterial) {
   BatchScene changed = mesh(block(3000));

@@ -80,6 +80,11 @@ class Batch {
   /// Host and device bytes one scene takes, measured on the first scene.
   std::int64_t scene_host_bytes() const;
   std::int64_t scene_device_bytes() const;
+  /// How the backend runs them: groups of scenes of one model stepped as
+  /// one, each pass one launch over the group (cuda; 0 on the cpu), and the
+  /// scene ticks run that way so far (docs/batch.md, "One launch per pass").
+  std::size_t groups() const;
+  std::int64_t ticks_together() const;
 
   std::string name(int scene) const;
   std::size_t n_nodes(int scene) const;
