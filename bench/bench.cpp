@@ -355,6 +355,7 @@ struct BatchRun {
   std::string skipped;  ///< why the batch did not run ("" = it ran)
   std::size_t groups = 0;   ///< groups of scenes stepped as one (SceneBatch::groups)
   double together = 0;      ///< of the timed scene ticks, the fraction run in a group
+  double start_s = 0, device_s = 0, end_s = 0;  ///< mean of a timed tick's phases (SceneBatch::TickPhases)
 };
 
 /// N kidneys stepped together (SceneBatch) on c's backend; ticks timed one batch tick at a time.
@@ -392,9 +393,15 @@ BatchRun run_batch(Context& c, Precision p, std::size_t n, double min_seconds, i
     const auto t1 = Clock::now();
     out.running = batch->tick();
     lat.push_back(since(t1));
+    out.start_s += batch->last_phases().start;
+    out.device_s += batch->last_phases().device;
+    out.end_s += batch->last_phases().end;
     ++k;
   }
   out.ticks = long(lat.size());
+  out.start_s /= double(out.ticks);
+  out.device_s /= double(out.ticks);
+  out.end_s /= double(out.ticks);
   out.groups = batch->groups();
   const std::int64_t together = batch->ticks_together() - together0, alone = batch->ticks_alone() - alone0;
   out.together = together + alone > 0 ? double(together) / double(together + alone) : 0.0;
@@ -438,6 +445,11 @@ void emit_batch(Context& c, Precision p, std::size_t n, const BatchRun& run, dou
   r.add("ticks_timed", run.ticks);
   r.add("groups", long(run.groups));
   r.add("group_tick_fraction", run.together);
+  if (run.groups > 0) {  // where a tick's time goes
+    r.add("tick_ms_host_start", 1e3 * run.start_s);
+    r.add("tick_ms_device", 1e3 * run.device_s);
+    r.add("tick_ms_host_end", 1e3 * run.end_s);
+  }
   r.add("scene_steps_per_s", scene_steps);
   r.add("element_steps_per_s", scene_steps * run.region_elems);
   r.add("bytes_per_element_step", bytes_region / std::max(run.region_elems, 1.0));

@@ -19,6 +19,12 @@ namespace {
 constexpr int kReduceBlock = 128;
 static_assert(kReduceBlock % 32 == 0 && kReduceBlock >= 64, "the last block combines on two warps");
 constexpr int kMaxReduceBlocks = 1024;
+/// Blocks an SM holds of a group's reduction (reduce_kernel). Compiled for
+/// one wave, the kernel takes 246 registers a thread in float: two blocks
+/// an SM, 12.5 % occupancy over the ~100 waves of 256 kidneys, and 481 us
+/// of a 2 ms tick on an H200 (ncu). Four blocks an SM took 256 kidneys
+/// from 492k to 556k scene-steps/s (docs/batch.md).
+constexpr int kGroupReduceBlocks = 4;
 
 __device__ ReducePartial zero_partial() {
   ReducePartial p;
@@ -299,8 +305,12 @@ __device__ void combine_columns(P& p, const int* words, int lane, int blocks, Ta
 /// the contact partial in local memory and summed by every block; on the
 /// 100k slab's 396 blocks, 28 us with the partials in rows, 19 us in
 /// columns.)
-template <class T, bool kRecomputed>
-__global__ void __launch_bounds__(kReduceBlock)
+/// kMinBlocks: the blocks an SM must hold at once. One scene's reduction
+/// runs in one wave and keeps every register it wants (246 a thread in
+/// float: two blocks an SM); a group's (launch_scenes scenes, dozens of
+/// waves) runs kGroupReduceBlocks an SM. The same arithmetic either way.
+template <class T, bool kRecomputed, int kMinBlocks>
+__global__ void __launch_bounds__(kReduceBlock, kMinBlocks)
     reduce_kernel(ModelView<T> m, StateView<T> s, RegionView r, FrontView front, StepBuffers<T> b,
                   const T* energy_node_p, LawView<T> w, int* partial, int* contact, unsigned* touched_tools,
                   unsigned* done, Reductions* out, Reductions* host_out) {
@@ -415,7 +425,9 @@ void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const Sta
   // its blocks resident and waiting while the passes before it run; docs/cuda.md, "The reduction's
   // passes chained")
   with_gradients(m, r, [&](auto recomputed) {  // the energies with the gradients of the steps
-    launch_blocks(blocks, kReduceBlock, stream, reduce_kernel<T, decltype(recomputed)::value>, m, s, r, front, b,
+    const auto kernel = launch_scenes > 1 ? reduce_kernel<T, decltype(recomputed)::value, kGroupReduceBlocks>
+                                          : reduce_kernel<T, decltype(recomputed)::value, 1>;
+    launch_blocks(blocks, kReduceBlock, stream, kernel, m, s, r, front, b,
                   static_cast<const T*>(scratch.node_p), law_, partial_.data(), contact_partial_.data(), touched_.data(), done_.data(),
                   result_.data(), to_host ? result_host_.device() : nullptr);
   });

@@ -632,7 +632,9 @@ std::pair<index_t, index_t> element_waves() {
 template <auto kKernel, int kWaveBlock, bool kLate, class... Args>
 void launch_element_pass(bool pressures, index_t n, cudaStream_t stream, Args... args) {
   const auto [wave, small_wave] = element_waves<kKernel, kWaveBlock>();
-  const bool small = small_element_blocks_forced.load(std::memory_order_relaxed) || grid_for(n, kBlock) > wave;
+  // (a group's launch runs every scene's elements: launch_scenes block rows)
+  const bool small = small_element_blocks_forced.load(std::memory_order_relaxed) ||
+                     index_t(grid_for(n, kBlock)) * launch_scenes > wave;
   const int block = small ? kWaveBlock : kBlock;
   index_t first_wave = 0;
   if constexpr (kLate) {
@@ -728,10 +730,11 @@ __global__ void nodal_pressure_lanes_kernel(ModelView<T> m, StateView<T> s, Regi
 inline constexpr int kThreadLanes = 2;
 
 /// Whether the chained node passes over region r take kThreadLanes of a
-/// node's lanes a thread (ModelView::lanes_node_min).
+/// node's lanes a thread (ModelView::lanes_node_min; a group's launch
+/// counts every scene's nodes, launch_scenes).
 template <class T>
 bool runs_node_lanes(const ModelView<T>& m, const RegionView& r) {
-  return r.n_nodes >= m.lanes_node_min;
+  return index_t(launch_scenes) * r.n_nodes >= m.lanes_node_min;
 }
 
 /// Threads per block of the chained pass 4. In float its kernels take 32-44

@@ -6,6 +6,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <chrono>
 #include <exception>
 #include <mutex>
 #include <fstream>
@@ -300,6 +301,8 @@ void SceneBatch::tick_in_groups() {
     std::lock_guard<std::mutex> lock(error_mutex);
     if (!error) error = std::current_exception();
   };
+  using Clock = std::chrono::steady_clock;
+  const auto t0 = Clock::now();
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kScenesPerLauncher), [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       Session& s = *sessions_[i];
@@ -313,6 +316,7 @@ void SceneBatch::tick_in_groups() {
       }
     }
   });
+  const auto t1 = Clock::now();
   for (const Group& g : groups_) {
     try {
       g.group->launch();
@@ -320,6 +324,7 @@ void SceneBatch::tick_in_groups() {
       keep();
     }
   }
+  const auto t2 = Clock::now();
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kScenesPerLauncher), [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       if (!started[i]) continue;
@@ -331,6 +336,9 @@ void SceneBatch::tick_in_groups() {
       }
     }
   });
+  const auto t3 = Clock::now();
+  const auto seconds = [](Clock::duration d) { return std::chrono::duration<double>(d).count(); };
+  phases_ = {seconds(t1 - t0), seconds(t2 - t1), seconds(t3 - t2)};
   if (error) std::rethrow_exception(error);
 }
 

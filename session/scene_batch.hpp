@@ -81,6 +81,13 @@ class SceneBatch {
   std::int64_t ticks_alone() const;
   /// Groups of scenes stepped as one (cuda: scenes of one model).
   std::size_t groups() const { return groups_.size(); }
+  /// The last tick of a batch with groups, in seconds: the host's starts
+  /// (every scene's tick staged, or launched alone), the groups' launches
+  /// up to the device's end, and the host's ends (results read, checks).
+  struct TickPhases {
+    double start = 0, device = 0, end = 0;
+  };
+  const TickPhases& last_phases() const { return phases_; }
   /// Scenes that have failed (ascending).
   std::vector<std::size_t> failed() const;
   /// Scene i back to rest (Session::restart), failure cleared.
@@ -123,6 +130,7 @@ class SceneBatch {
   BatchMemory memory_;
   std::vector<Group> groups_;
   std::vector<Membership> member_;  ///< per scene
+  TickPhases phases_;
 };
 
 }  // namespace tissue
