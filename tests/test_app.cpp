@@ -507,6 +507,30 @@ TEST(Program, MeshRefusesARemeshEdgeFarFromTheBodysSize) {
   EXPECT_FALSE(fs::exists(t.file("cube.xml")));
 }
 
+// The same --inclusion twice was meshed as two overlapping bodies and
+// reported as a self-intersecting organ: refused before any file is read.
+TEST(Program, MeshRefusesAnInclusionGivenTwice) {
+  TempDir t;
+  std::ofstream(t.file("cube.obj")) << kCubeObj;
+  std::ofstream(t.file("tumour.obj")) << kCubeObj;  // its content is never read
+  EXPECT_EQ(run_tissue(t, "twice", {"mesh", t.file("cube.obj"), "-o", t.file("x.xml"), "--inclusion",
+                                    t.file("tumour.obj"), "--inclusion", t.file("tumour.obj") + ":E=5000"}),
+            1);
+  std::string err = slurp(t.file("twice.err"));
+  EXPECT_NE(err.find("--inclusion " + t.file("tumour.obj") + ": the file is given twice (inclusions 1 and 2)"),
+            std::string::npos)
+      << err;
+  EXPECT_EQ(err.find("intersects itself"), std::string::npos) << err;
+  EXPECT_EQ(slurp(t.file("twice.out")).find("reading"), std::string::npos);  // before any file is read
+  EXPECT_EQ(run_tissue(t, "organ", {"mesh", t.file("cube.obj"), "-o", t.file("x.xml"), "--inclusion",
+                                    t.file("cube.obj")}),
+            1);
+  err = slurp(t.file("organ.err"));
+  EXPECT_NE(err.find("--inclusion " + t.file("cube.obj") + ": the file is the organ's surface"), std::string::npos)
+      << err;
+  EXPECT_FALSE(fs::exists(t.file("x.xml")));
+}
+
 // `tradeoff --max-hold 1e-9` printed a table of unconverged rows: a hold
 // shorter than the scene's tick is refused before the sweep.
 TEST(Program, TradeoffRefusesAHoldShorterThanATick) {
