@@ -531,6 +531,27 @@ TEST(Program, MeshRefusesAnInclusionGivenTwice) {
   EXPECT_FALSE(fs::exists(t.file("x.xml")));
 }
 
+// SIGINT while TetGen meshed the built-in kidney (in a child process) was
+// reported as "TetGen crashed (signal 9)", exit 1: it is an interruption,
+// exit 130.
+TEST(Program, InterruptWhileTetGenRunsExitsWith130) {
+  TempDir t;
+  const Child c = start(t, "kidney", {"run", "@kidney", "--ticks", "5", "--quiet"});
+  // wait for the TetGen child to appear (the kidney is meshed before the run)
+  const std::string children = fmt::format("/proc/{}/task/{}/children", c.pid, c.pid);
+  bool meshing = false;
+  for (int k = 0; k < 2000 && !meshing; ++k) {
+    meshing = !slurp(children).empty();
+    if (!meshing) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_TRUE(meshing) << "no TetGen child seen: " << slurp(c.err);
+  kill(c.pid, SIGINT);
+  EXPECT_EQ(finish(c), 130) << slurp(c.err);
+  const std::string err = slurp(c.err);
+  EXPECT_EQ(err.find("crashed"), std::string::npos) << err;
+  EXPECT_NE(err.find("SIGINT"), std::string::npos) << err;
+}
+
 // `tradeoff --max-hold 1e-9` printed a table of unconverged rows: a hold
 // shorter than the scene's tick is refused before the sweep.
 TEST(Program, TradeoffRefusesAHoldShorterThanATick) {
