@@ -109,8 +109,9 @@ HertzStudy run_hertz(const HertzOptions& o) {
       const RelaxResult r = relax(*backend, m, {}, ro, u, &tool);
       if (!r.converged)
         throw std::runtime_error(fmt::format(
-            "hertz: {} cells, delta/R = {}: the relaxation stopped after {} steps ({}) at residual {:.3g}, kinetic {:.3g}",
-            n, ratio, r.steps, r.stalled ? "stalled" : "step or time limit", r.residual, r.kinetic));
+            "hertz: {} cells, delta/R = {}: the relaxation stopped after {} steps at residual {:.3g}, kinetic {:.3g}: "
+            "it {}",
+            n, ratio, r.steps, r.residual, r.kinetic, r.why));
       u = backend->download().u;
       HertzPoint p;
       p.delta = delta;

@@ -23,9 +23,9 @@ ReferenceSolution reference_solution(const TissueModel<double>& model, const Dri
   if (!ref.relax.converged && !ref.relax.interrupted)
     throw std::runtime_error(fmt::format(
         "reference: dynamic relaxation stopped after {} steps ({:.1f} s) at relative residual {:.3g} "
-        "(wanted {:.3g}) and relative kinetic energy {:.3g} (wanted {:.3g})",
+        "(wanted {:.3g}) and relative kinetic energy {:.3g} (wanted {:.3g}): it {}",
         ref.relax.steps, ref.relax.wall, ref.relax.residual, o.relax.residual_tol, ref.relax.kinetic,
-        o.relax.kinetic_tol));
+        o.relax.kinetic_tol, ref.relax.why));
   ref.fields = backend->download();
   ref.reaction = ref.relax.last.reaction;
   ref.tool_force = -1.0 * ref.relax.last.tools[0].reaction;

@@ -187,6 +187,11 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
   const double ramp_time = o.ramp_time >= 0 ? o.ramp_time : 2 * M_PI / omega0;
   long steps = 0;
   out.interrupted = !ramp_drive(b, drive, start, tool, o, std::max(1L, std::lround(ramp_time / m.dt)), steps);
+  if (out.interrupted) out.why = fmt::format("was interrupted by a stop request during the ramp, after {} steps", steps);
+  const auto tolerances = [&] {
+    return fmt::format("relative residual {:.3g} (tolerance {:.3g}), relative kinetic energy {:.3g} (tolerance {:.3g})",
+                       out.residual, o.residual_tol, out.kinetic, o.kinetic_tol);
+  };
 
   long last_adapt = steps;
   double best = INFINITY;  // best residual seen, and the step at which it last halved
@@ -203,6 +208,7 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
     out.history.push_back(out.residual);
     if (out.residual <= o.residual_tol && out.kinetic <= o.kinetic_tol) {
       out.converged = true;
+      out.why = fmt::format("converged to the tolerances after {} steps: {}", steps, tolerances());
       break;
     }
     if (out.residual < 0.5 * best) {
@@ -215,11 +221,28 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
       out.stalled = true;
       if (tool && out.residual <= o.contact_floor * o.residual_tol && out.kinetic <= o.kinetic_tol)
         out.converged = out.at_contact_floor = true;
+      out.why = out.converged
+                    ? fmt::format("converged at the contact's floor after {} steps: the residual stalled within {:g} x "
+                                  "its tolerance (a contact node of zero force going in and out of contact); {}",
+                                  steps, o.contact_floor, tolerances())
+                    : fmt::format("stalled after {} steps: the best residual, {:.3g}, did not halve in the last {} "
+                                  "steps ({:g} periods of the lowest mode): the precision's rounding floor lies above "
+                                  "the tolerance; {}",
+                                  steps, best, steps - best_step, o.stall_periods, tolerances());
       break;
     }
-    if (steps >= o.max_steps || seconds_since(t0) > o.max_wall) break;
+    if (steps >= o.max_steps) {
+      out.why = fmt::format("hit the step limit of {} steps before converging; {}", o.max_steps, tolerances());
+      break;
+    }
+    if (seconds_since(t0) > o.max_wall) {
+      out.why = fmt::format("hit the wall-time limit of {:g} s after {} steps before converging; {}", o.max_wall, steps,
+                            tolerances());
+      break;
+    }
     if (o.stop && o.stop()) {
       out.interrupted = true;
+      out.why = fmt::format("was interrupted by a stop request after {} steps; {}", steps, tolerances());
       break;
     }
     if (o.adapt_damping && out.residual > o.adapt_above && steps - last_adapt >= o.adapt_every) {

@@ -20,6 +20,7 @@
 #include <cstdint>
 #include <span>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "core/backend.hpp"
@@ -87,6 +88,11 @@ struct RelaxResult {
   bool stalled = false;         ///< stopped at the precision's rounding floor (see stall_periods)
   bool at_contact_floor = false; ///< converged at the contact's floor (see contact_floor)
   bool interrupted = false;     ///< RelaxOptions::stop ended it
+  std::string why;              ///< why it stopped, a phrase that follows "it" ("converged to the tolerances
+                                ///< after N steps: ...", "hit the step limit of N steps ..."), with the numbers:
+                                ///< converged to the tolerances,
+                                ///< stalled (the rounding floor), the step or wall-time limit, interrupted
+                                ///< (a breakdown -- NaN, an inverted element -- throws RelaxError instead)
   double residual = 0;          ///< relative free residual at the end
   double kinetic = 0;           ///< kinetic energy relative to 0.5 |f_held| max|u| at the end
   long steps = 0;               ///< TLED steps taken (ramp included)

@@ -20,6 +20,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <limits>
 #include <map>
 #include <memory>
@@ -107,6 +108,35 @@ std::pair<std::string, scene::Material> parse_inclusion(const std::string& spec,
     start = end + 1;
   }
   return {file, m};
+}
+
+/// Refuses a surface given twice among the organ and its inclusions (the same
+/// path, or two paths of one file): the second copy would be meshed as a body
+/// overlapping the first, which the mesher reports as a self-intersecting
+/// organ. Checked before any file is read.
+void refuse_repeated_surfaces(const std::string& organ, const std::vector<std::string>& inclusion_files) {
+  namespace fs = std::filesystem;
+  const auto same = [](const std::string& a, const std::string& b) {
+    if (a == b) return true;
+    std::error_code ec, ec_a, ec_b;
+    if (fs::equivalent(a, b, ec) && !ec) return true;
+    const fs::path ca = fs::weakly_canonical(a, ec_a), cb = fs::weakly_canonical(b, ec_b);
+    return !ec_a && !ec_b && ca == cb;  // two spellings of a path that does not exist (yet)
+  };
+  for (size_t k = 0; k < inclusion_files.size(); ++k) {
+    const std::string& f = inclusion_files[k];
+    if (same(f, organ))
+      throw std::invalid_argument(fmt::format(
+          "--inclusion {}: the file is the organ's surface ({}); an inclusion is a second, smaller body inside the "
+          "organ: give a different file",
+          f, organ));
+    for (size_t j = 0; j < k; ++j)
+      if (same(f, inclusion_files[j]))
+        throw std::invalid_argument(fmt::format(
+            "--inclusion {}: the file is given twice (inclusions {} and {}{}); two copies of one body overlap, "
+            "which would be meshed as a self-intersecting organ: give each inclusion once",
+            f, j + 1, k + 1, f == inclusion_files[j] ? "" : fmt::format(", as {}", inclusion_files[j])));
+  }
 }
 
 std::string mm_text(const Vec3<double>& e) { return fmt::format("{:.1f} x {:.1f} x {:.1f} mm", 1e3 * e.x, 1e3 * e.y, 1e3 * e.z); }
@@ -295,6 +325,7 @@ scene::Scene make_scene(MeshOptions& o) {
     s.materials.push_back(m);
   }
   for (const scene::Material& m : s.materials) scene::validate_material(s, m);
+  refuse_repeated_surfaces(o.surface, inclusion_files);
 
   const double unit = io::parse_unit(o.unit);
   auto read = [&](const std::string& file) {

@@ -64,11 +64,13 @@ int run_reference(const ReferenceArgs& a) {
                InterruptGuard::signal_name());
   fmt::print(
       "  dynamic relaxation  {} steps of dt = {:.4g} s in {:.2f} s, damping {:.4g} 1/s ({} re-estimates)\n"
+      "  stopped because     it {}\n"
       "  residual reached    {:.3g} (relative free-node residual; wanted <= {:.3g}{}), relative kinetic {:.3g}\n"
       "  force on the tool   ({:.6g}, {:.6g}, {:.6g}) N, |F| = {:.6g} N, {} nodes in contact\n"
       "  max displacement    {:.6g} mm\n"
       "  strain energy       {:.6g} J\n",
-      ref.relax.steps, ref.dt, ref.relax.wall, ref.relax.damping, ref.relax.restarts, ref.relax.residual, a.tol,
+      ref.relax.steps, ref.dt, ref.relax.wall, ref.relax.damping, ref.relax.restarts, ref.relax.why,
+      ref.relax.residual, a.tol,
       ref.relax.at_contact_floor ? "; stopped at the contact's floor, a zero-force node going in and out" : "",
       ref.relax.kinetic, force.x, force.y, force.z, norm(force), ref.contact_nodes, 1e3 * ref.max_disp,
       ref.strain_energy);

@@ -31,7 +31,7 @@ void add_run_command(CLI::App& app, int& rc) {
       ->default_val(10)
       ->check(whole_number(0, 1'000'000));
   cmd->add_flag("--overwrite", opt->overwrite, "Replace another run's outputs in the --out folder");
-  cmd->add_flag("--force", opt->force, "Run even when the work estimate is beyond any usual run (1e12 element updates)");
+  cmd->add_flag("--force", opt->force, "Run even when the work estimate is beyond any usual run (1e12 element updates, or over 10 s of a scene that needs more than 100 steps per tick)");
   cmd->add_flag("--quiet", opt->quiet, "No progress lines");
   cmd->callback([opt, &rc] { rc = run_scene(*opt); });
 }

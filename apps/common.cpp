@@ -7,6 +7,7 @@
 
 #include "apps/commands.hpp"
 #include "io/kidney.hpp"
+#include "io/surface_import.hpp"
 #include "io/scene_xml.hpp"
 #include "scene/validate.hpp"
 
@@ -21,6 +22,9 @@ int run_command_line(CLI::App& app, int argc, char** argv, const int& rc, const 
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
+  } catch (const io::MeshInterrupted& e) {  // Ctrl-C while TetGen ran: the user's request, 128 + the signal
+    std::fprintf(stderr, "%s: interrupted: %s\n", program, e.what());
+    return 128 + e.signal;
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr, "%s: error: out of memory while %s\n", program, activity().c_str());
     return 1;

@@ -81,16 +81,23 @@ void print_summary(const RunSummary& r, const Backend& b, const TissueModel<doub
 }
 
 /// What the scene checks say about a run that stopped on NaN or an inverted
-/// element, as text to append to its message.
+/// element, as text to append to its message: the values that most likely
+/// made it stop (scene::stop_causes), or else the indentation.
 std::string instability_causes(const scene::Scene& s, const TissueModel<double>& m) {
-  std::vector<std::string> causes = scene::incompressibility_findings(s);
-  if (scene::supported_nodes(m) == 0) causes.push_back("no node is fixed (nothing holds the body)");
+  const std::vector<std::string> causes = scene::stop_causes(s, m);
   if (causes.empty())
-    return "\n  the scene checks found no material or support problem: a tool has most likely pressed deeper "
+    return "\n  the scene checks found no material, load or support problem: a tool has most likely pressed deeper "
            "than the elements under it can follow (reduce the indentation or refine the mesh there)";
   std::string out = "\n  likely cause:";
   for (const std::string& c : causes) out += "\n    " + c;
   return out;
+}
+
+/// "0.25 s", "3.2 min", "5.1 h": a duration for the plan line.
+std::string duration_text(double seconds) {
+  if (seconds < 120) return fmt::format("{:.2g} s", seconds);
+  if (seconds < 7200) return fmt::format("{:.2g} min", seconds / 60);
+  return fmt::format("{:.3g} h", seconds / 3600);
 }
 
 }  // namespace
@@ -109,15 +116,38 @@ long tick_count(const RunOptions& o, double path_duration, double tick) {
   return std::max(1L, static_cast<long>(n));
 }
 
+std::string work_plan(const scene::Scene& s, const TissueModel<double>& model, long ticks) {
+  const scene::WorkEstimate w = scene::estimate_work(model, s.solver.tick, double(ticks), s.solver.backend);
+  const scene::StepCost c = scene::nominal_step_cost(s.solver.backend);
+  return fmt::format("plan: {} ticks x {:.0f} TLED steps = {:.4g} steps on {} elements = {:.3g} element updates; "
+                     "about {} on the {} backend (at its nominal {:.2g} s a step + {:.2g} s an element update)",
+                     ticks, w.steps_per_tick, w.steps, model.n_elems, w.element_steps, duration_text(w.seconds),
+                     s.solver.backend, c.per_step, c.per_element);
+}
+
 void check_work(const scene::Scene& s, const TissueModel<double>& model, long ticks, bool force) {
-  const scene::WorkEstimate w = scene::estimate_work(model, s.solver.tick, double(ticks));
-  if (force || !(w.element_steps > scene::kMaxElementSteps)) return;
-  throw std::runtime_error(fmt::format(
-      "{}: this run would take {} ticks x {:.0f} TLED steps x {} elements = {:.3g} element updates, beyond the "
-      "{:.0e} a run may take without --force (hours even on a GPU; a laptop CPU does ~1e8 per second). The step: "
-      "{}. Pass fewer --ticks or --time, fix the scene, or --force to run it anyway",
-      s.source, ticks, w.steps_per_tick, model.n_elems, w.element_steps, scene::kMaxElementSteps,
-      scene::step_cause(s, model)));
+  const scene::WorkEstimate w = scene::estimate_work(model, s.solver.tick, double(ticks), s.solver.backend);
+  if (force) return;
+  if (w.element_steps > scene::kMaxElementSteps)
+    throw std::runtime_error(fmt::format(
+        "{}: this run would take {} ticks x {:.0f} TLED steps x {} elements = {:.3g} element updates, beyond the "
+        "{:.0e} a run may take without --force (hours even on a GPU; a laptop CPU does ~1e8 per second). The step: "
+        "{}. Pass fewer --ticks or --time, fix the scene, or --force to run it anyway",
+        s.source, ticks, w.steps_per_tick, model.n_elems, w.element_steps, scene::kMaxElementSteps,
+        scene::step_cause(s, model)));
+  if (w.steps_per_tick > scene::kManyStepsPerTick && w.seconds > scene::kMaxSecondsAtManySteps) {
+    std::string also;
+    for (const std::string& f : scene::incompressibility_findings(s)) also += "; " + f;
+    throw std::runtime_error(fmt::format(
+        "{}: {:.0f} TLED steps per {:.4g} s tick, more than the {:.0f} above which a scene is far from what was "
+        "meant (typical scenes need 1..20): this run would take {} ticks x {:.0f} steps = {:.4g} steps x {} elements "
+        "= {:.3g} element updates, about {} on the {} backend, beyond the {:.0f} s such a run may take without "
+        "--force. The step: {}{}. Fix the material (its units: Pa, kg/m^3), pass fewer --ticks or --time, or --force "
+        "to run it anyway",
+        s.source, w.steps_per_tick, s.solver.tick, scene::kManyStepsPerTick, ticks, w.steps_per_tick, w.steps,
+        model.n_elems, w.element_steps, duration_text(w.seconds), s.solver.backend, scene::kMaxSecondsAtManySteps,
+        scene::step_cause(s, model), also));
+  }
 }
 
 int run_scene(const RunOptions& o) {
@@ -136,6 +166,8 @@ int run_scene(const RunOptions& o) {
   for (const ScriptedDevice& d : devices) path_duration = std::max(path_duration, d.duration());
   const long n_ticks = tick_count(o, path_duration, settings.tick);
   for (const std::string& w : scene::scene_warnings(s, model)) fmt::print(stderr, "warning: {}\n", w);
+  fmt::print("{}\n", work_plan(s, model, n_ticks));  // before the backend is built and the ticks start
+  std::fflush(stdout);
   check_work(s, model, n_ticks, o.force);
 
   std::optional<io::OutputFolder> folder;

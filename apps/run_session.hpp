@@ -49,9 +49,16 @@ void apply_overrides(scene::Scene& s, const RunOptions& o);
 /// duration (s) divided by the tick, at least 1.
 long tick_count(const RunOptions& o, double path_duration, double tick);
 
+/// "plan: N ticks x S TLED steps = .. steps on E elements = .. element
+/// updates; about T on the <backend> backend (...)": what the run will cost,
+/// printed before the backend is built.
+std::string work_plan(const scene::Scene& s, const TissueModel<double>& model, long ticks);
+
 /// Refuses (std::runtime_error naming the scene, the counts, what sets the
-/// step and --force) a run of more than scene::kMaxElementSteps element
-/// updates unless `force`.
+/// step and --force) unless `force`: a run of more than
+/// scene::kMaxElementSteps element updates, and a run of a scene that needs
+/// more than scene::kManyStepsPerTick steps per tick whose estimated time is
+/// beyond scene::kMaxSecondsAtManySteps.
 void check_work(const scene::Scene& s, const TissueModel<double>& model, long ticks, bool force);
 
 /// Runs the session; prints warnings, progress and the summary. With

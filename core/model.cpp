@@ -109,6 +109,18 @@ std::string material_name(const ModelInput& in, size_t k) {
                                       : fmt::format("material {}", k);
 }
 
+/// The moduli element e's stable step is computed from: its material's, with
+/// IANP's bulk modulus of its stiffest corner where materials of different K
+/// meet (interface_steps).
+MaterialParams step_params(const ModelInput& in, const TissueModel<double>& m, index_t e) {
+  MaterialParams p = in.materials[in.elem_material.empty() ? 0 : size_t(in.elem_material[e])];
+  if (m.ianp && in.materials.size() > 1) {
+    const std::vector<double> node_K = node_bulk_moduli(m);
+    for (int a = 0; a < 4; ++a) p.K = std::max(p.K, node_K[m.elem_nodes[size_t(a) * m.n_elems + e]]);
+  }
+  return p;
+}
+
 /// Refuses a model whose stable step would need more than kMaxStepsPerTick
 /// steps per haptic tick, naming the element, its material's values and the
 /// wave speed that set it (the cause is a modulus or density far outside
@@ -125,14 +137,18 @@ void check_step_count(const ModelInput& in, const TissueModel<double>& m, double
                                  kMaxStepsPerTick));
   const index_t e = m.dt_crit_elem;
   const size_t k = in.elem_material.empty() ? 0 : size_t(in.elem_material[e]);
-  const MaterialParams& p = in.materials[k];
-  const double c = wave_speed(p);  // sqrt((K + 4 mu / 3) / rho)
+  const MaterialParams p = step_params(in, m, e);  // the moduli the step was computed from
+  const double c = wave_speed(p);
+  const bool fibre_sets_it = fibre_wave_modulus(p.fibre_eta) > p.K + 4 * p.mu / 3;
   throw ModelError(fmt::format(
-      "{}: element {} ({}: mu = {:.4g} Pa, K = {:.4g} Pa, rho = {:.4g} kg/m^3) has a wave speed c = sqrt((K + 4 mu / "
-      "3) / rho) = {:.4g} m/s, so its stable step is dt_crit = L / c = {:.4g} s: one {:.4g} s haptic tick would need "
-      "{:.3g} TLED steps (the most is {:.0e}). The modulus is far too high or the density far too low for tissue "
-      "(soft tissue: E ~ 1e3..1e6 Pa, rho ~ 1000 kg/m^3); check the units (Pa, kg/m^3)",
-      in.source, e, material_name(in, k), p.mu, p.K, p.rho, c, m.dt_crit, in.tick, steps, kMaxStepsPerTick));
+      "{}: element {} ({}: mu = {:.4g} Pa, K = {:.4g} Pa{}{}, rho = {:.4g} kg/m^3) has a wave speed {}, so its "
+      "stable step is dt_crit = L / c = {:.4g} s (L = {:.4g} m, its smallest altitude{}): one {:.4g} s haptic tick "
+      "would need {:.3g} TLED steps (the most is {:.0e}). The {} is far too high or the density far too low for "
+      "tissue (soft tissue: E ~ 1e3..1e6 Pa, rho ~ 1000 kg/m^3); check the units (Pa, kg/m^3)",
+      in.source, e, material_name(in, k), p.mu, p.K, p.K > in.materials[k].K ? " (its stiffest corner's, IANP)" : "",
+      p.fibre_eta > 0 ? fmt::format(", fibre stiffness eta = {:.4g} Pa", p.fibre_eta) : std::string(), p.rho,
+      wave_speed_text(p), m.dt_crit, m.dt_crit * c, in.ianp ? "" : " x 0.85 for a plain tet", in.tick, steps,
+      kMaxStepsPerTick, fibre_sets_it ? "fibre stiffness" : "modulus"));
 }
 
 /// Boundary faces (faces owned by one tet), oriented outward. Sorts all
@@ -269,6 +285,14 @@ void fill_law_terms(const ModelInput& in, TissueModel<double>& m) {
 double wave_speed(const MaterialParams& p) {
   const double lambda = p.K - 2.0 * p.mu / 3.0;
   return std::sqrt((lambda + 2 * p.mu + fibre_wave_modulus(p.fibre_eta)) / p.rho);
+}
+
+std::string wave_speed_text(const MaterialParams& p) {
+  const bool fibre = p.fibre_eta > 0;
+  return fmt::format("c = sqrt((K + 4 mu / 3{}) / rho) = sqrt(({:.4g} Pa + 4 x {:.4g} Pa / 3{}) / {:.4g} kg/m^3) = "
+                     "{:.4g} m/s",
+                     fibre ? " + 4 eta" : "", p.K, p.mu,
+                     fibre ? fmt::format(" + 4 x {:.4g} Pa", p.fibre_eta) : std::string(), p.rho, wave_speed(p));
 }
 
 double element_time_step(const Vec3<double> X[4], double volume, const MaterialParams& p, bool ianp) {
@@ -505,7 +529,9 @@ void interface_steps(const ModelInput& in, TissueModel<double>& m, ElementSteps&
     Vec3<double> X[4];
     for (int a = 0; a < 4; ++a) X[a] = node_pos(in.nodes, m.elem_nodes[a * ne + e]);
     const index_t mat = in.elem_material.empty() ? 0 : in.elem_material[e];
-    steps.dt[e] = element_time_step(X, m.volume[e], {in.materials[mat].mu, K, in.materials[mat].rho}, true);
+    MaterialParams p = in.materials[mat];  // the fibre's share of the step too
+    p.K = K;
+    steps.dt[e] = element_time_step(X, m.volume[e], p, true);
     if (steps.dt[e] < m.dt_crit) {
       m.dt_crit = steps.dt[e];
       m.dt_crit_elem = e;

@@ -174,6 +174,13 @@ TissueModel<double> build_model(const ModelInput& in);
 /// (m/s), lambda = K - 2 mu / 3.
 double wave_speed(const MaterialParams& p);
 
+/// wave_speed(p) with the numbers it follows from, for messages: "c = sqrt((K
+/// + 4 mu / 3) / rho) = sqrt((K Pa + 4 x mu Pa / 3) / rho kg/m^3) = c m/s",
+/// with "+ 4 eta" and the fibre stiffness where p has a fibre term (its share
+/// of the stable step, fibre_wave_modulus). Every number is printed to 4
+/// significant digits, so the speed can be checked from the moduli printed.
+std::string wave_speed_text(const MaterialParams& p);
+
 /// An element's stable step L_e / c_e (s): L_e = tet_min_altitude of the tet
 /// X (m) with volume V (m^3), times 0.85 for plain (non-IANP) tets (their
 /// measured limit); c_e = wave_speed(p). build_model's dt_crit is the

@@ -31,12 +31,12 @@ Row parse_row(std::string_view text, const std::string& source, int line) {
          fmt::format("{} field{}; a row is {} (0-based element id, fibre direction)", f.size(),
                      f.size() == 1 ? "" : "s", kColumns));
   const auto id = scene::parse_integer(f[0]);
-  if (!id) fail(source, line, fmt::format("element '{}' is not an element id (a whole number)", f[0]));
+  if (!id) fail(source, line, fmt::format("element '{}' is not an element id (a whole number)", scene::printable(f[0])));
   if (*id < std::numeric_limits<index_t>::min() || *id > std::numeric_limits<index_t>::max())
     fail(source, line, fmt::format("element {} is out of range", *id));
   const auto number = [&](int k, std::string_view name) {
     const auto r = scene::parse_real(f[k]);
-    if (!r) fail(source, line, fmt::format("{} '{}' is not a number", name, f[k]));
+    if (!r) fail(source, line, fmt::format("{} '{}' is not a number", name, scene::printable(f[k])));
     if (!std::isfinite(*r)) fail(source, line, fmt::format("{} = {} is not a finite number", name, *r));
     return *r;
   };
@@ -56,6 +56,10 @@ std::vector<Row> parse_fibre_csv(std::istream& in, const std::string& source) {
   std::vector<Row> rows;
   while (std::getline(in, text)) {
     ++line;
+    if (const auto at = scene::binary_byte(text))
+      fail(source, line,
+           scene::binary_line_message("the file", line, text, *at) +
+               fmt::format("; a fibre file is a text CSV of rows {}", kColumns));
     if (scene::csv_skipped(text)) continue;
     if (first) {
       first = false;
@@ -64,7 +68,7 @@ std::vector<Row> parse_fibre_csv(std::istream& in, const std::string& source) {
         if (f.size() != 4 || f[0] != "element" || f[1] != "ax" || f[2] != "ay" || f[3] != "az")
           fail(source, line,
                fmt::format("header is '{}'; expected '{}' (or no header: rows start with an element id)",
-                           scene::trim(text), kColumns));
+                           scene::printable(scene::trim(text)), kColumns));
         continue;
       }
     }

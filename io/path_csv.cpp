@@ -80,6 +80,10 @@ std::vector<Waypoint> parse_path_csv(std::istream& in, const std::string& source
   std::vector<Waypoint> path;
   while (std::getline(in, text)) {
     ++line;
+    if (const auto at = scene::binary_byte(text))
+      fail(source, line,
+           scene::binary_line_message("the file", line, text, *at) +
+               "; a tool path is a text CSV with the header t,x,y,z and one waypoint a row");
     if (scene::csv_skipped(text)) continue;
     if (!have_header) {
       cols = parse_header(text, source, line);

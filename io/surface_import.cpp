@@ -11,6 +11,7 @@
 #include <new>
 #include <tuple>
 #include <sstream>
+#include <cstdint>
 #include <cstdlib>
 #include <cerrno>
 #include <filesystem>
@@ -111,6 +112,36 @@ std::string lower(std::string s) {
   return s;
 }
 
+/// A binary STL is an 80-byte header, a little-endian 32-bit triangle count
+/// and 50 bytes per triangle; Assimp reads a .stl file as binary only when
+/// its size is exactly 84 + 50 x count (computed in 32 bits, so a count
+/// that wraps around can pass and make it allocate for billions), as ASCII
+/// when it starts with "solid", and otherwise fails with "Failed to
+/// determine STL storage representation". So a file that is not ASCII
+/// (no "solid" start, or a NUL byte in its first MiB, which ASCII never
+/// holds) is checked here: the count must match the size, computed in 64
+/// bits. `head` is the file's first MiB, `size` its size in bytes.
+void guard_binary_stl(const std::string& path, const std::string& head, unsigned long long size) {
+  const auto first = head.find_first_not_of(" \t\r\n");
+  const bool ascii = first != std::string::npos && lower(head.substr(first, 5)) == "solid" &&
+                     head.find('\0') == std::string::npos;
+  if (ascii) return;
+  if (size < 84)
+    throw MeshError(fmt::format("{}: not an ASCII STL (it does not start with 'solid'), and its {} bytes cannot hold "
+                                "a binary STL's 80-byte header and 4-byte triangle count",
+                                path, size));
+  std::uint32_t count = 0;
+  for (int k = 3; k >= 0; --k) count = count << 8 | static_cast<unsigned char>(head[80 + size_t(k)]);
+  const unsigned long long need = 84ULL + 50ULL * count;
+  if (need == size) return;
+  const unsigned long long room = (size - 84) / 50, left = (size - 84) % 50;
+  throw MeshError(fmt::format(
+      "{}: the binary STL header claims {} triangles, which take 84 + 50 x {} = {} bytes, but the file has {} bytes "
+      "(room for {} triangle{}{}): the file is truncated, padded or not a binary STL",
+      path, count, count, need, size, room, room == 1 ? "" : "s",
+      left ? fmt::format(" and {} bytes over", left) : std::string()));
+}
+
 /// Checks the element counts a PLY or OFF header claims before Assimp
 /// allocates for them (docs/reliability.md, "Findings in surface import"):
 ///  - a PLY file (magic "ply" in any case, after blanks) must have an
@@ -118,7 +149,8 @@ std::string lower(std::string s) {
 ///    elements must fit in the file: at least one byte each;
 ///  - an OFF file's vertex and face counts (a .off file's, with or without
 ///    the OFF keyword; a vertex count given alone as well) must fit in the
-///    file: at least two bytes per number of each vertex and face line.
+///    file: at least two bytes per number of each vertex and face line;
+///  - a .stl file that is not ASCII: guard_binary_stl.
 /// Headers are a few hundred bytes; the first 1 MiB is read.
 void guard_header(const std::string& path) {
   std::ifstream f(path, std::ios::binary | std::ios::ate);
@@ -143,6 +175,10 @@ void guard_header(const std::string& path) {
       throw MeshError(fmt::format("{}:{}: '{}' is not an element count", path, at, word.substr(0, 40)));
     return n;
   };
+  if (lower(std::filesystem::path(path).extension().string()) == ".stl") {
+    guard_binary_stl(path, head, size);
+    return;
+  }
   if (magic.rfind("ply", 0) == 0) {
     // Assimp 5.2's PLY reader hangs on headers that bend the format (a magic or keyword in another
     // case, an end_header line with more on it, no end_header): only the format's exact lines pass

@@ -37,6 +37,15 @@ struct MeshError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// Thrown when a signal (SIGINT, SIGTERM, SIGHUP) stopped the meshing: the
+/// TetGen child was killed for it (io/tetgen_mesher.cpp), so its end is the
+/// user's request, not a crash. `signal` is the signal received; a command
+/// exits with 128 + signal.
+struct MeshInterrupted : MeshError {
+  MeshInterrupted(int sig, const std::string& what) : MeshError(what), signal(sig) {}
+  int signal;
+};
+
 /// Metres per unit for a unit name: "m" -> 1, "cm" -> 0.01, "mm" -> 0.001.
 /// Throws MeshError naming the unit and the accepted names otherwise.
 double parse_unit(const std::string& unit);

@@ -10,7 +10,9 @@
 // The child must not outlive the parent: it asks the kernel for SIGKILL when
 // the parent dies (PR_SET_PDEATHSIG), and while a run is in flight the
 // parent's SIGINT/SIGTERM/SIGHUP handler kills the child first and then
-// lets the signal take its usual course.
+// lets the signal take its usual course. Where that course returns (a
+// command's handler that only records the request, apps/interrupt.hpp), the
+// run throws MeshInterrupted naming the signal, not a TetGen crash.
 #include "io/tetgen_mesher.hpp"
 
 #include <fmt/format.h>
@@ -193,6 +195,9 @@ double process_virtual_size() {
 
 /// The child of the run in flight (0 = none), for the signal handler.
 std::atomic<pid_t> g_child{0};
+/// The signal the handler forwarded during the run in flight (0 = none): the
+/// child's end is then the user's request, not a crash.
+std::atomic<int> g_forwarded{0};
 struct sigaction g_previous[3];
 constexpr int kForwarded[3] = {SIGINT, SIGTERM, SIGHUP};
 
@@ -200,6 +205,7 @@ constexpr int kForwarded[3] = {SIGINT, SIGTERM, SIGHUP};
 /// parent then ends (or handles the signal) as it would have without us.
 extern "C" void kill_child_and_reraise(int sig) {
   const pid_t child = g_child.load();
+  g_forwarded = sig;
   if (child > 0) ::kill(child, SIGKILL);
   for (int k = 0; k < 3; ++k)
     if (kForwarded[k] == sig) ::sigaction(sig, &g_previous[k], nullptr);
@@ -210,6 +216,7 @@ extern "C" void kill_child_and_reraise(int sig) {
 struct ChildGuard {
   explicit ChildGuard(pid_t child) {
     g_child = child;
+    g_forwarded = 0;
     struct sigaction sa {};
     sa.sa_handler = kill_child_and_reraise;
     sigemptyset(&sa.sa_mask);
@@ -260,6 +267,11 @@ TetgenOutput run_tetgen(const SurfaceMesh& s, const MeshingOptions& o, const std
   while (::wait4(pid, &status, 0, &usage) < 0 && errno == EINTR) {
   }
   out.peak_bytes = 1024.0 * double(usage.ru_maxrss);
+  if (const int sig = g_forwarded.load(); sig != 0)  // a handler that returned (a command's InterruptGuard)
+    throw MeshInterrupted(sig, fmt::format("{}: meshing interrupted by {}: the TetGen run in progress was stopped",
+                                           source, sig == SIGINT    ? "SIGINT"
+                                                       : sig == SIGTERM ? "SIGTERM"
+                                                                        : "SIGHUP"));
   if (WIFSIGNALED(status))
     throw MeshError(fmt::format("{}: TetGen crashed (signal {}, {}) with switches '{}'", source, WTERMSIG(status),
                                 strsignal(WTERMSIG(status)), switches));

@@ -30,7 +30,8 @@ std::string describe(const Material& m) {
   static constexpr const char* kNames[3][2] = {{"E", "nu"}, {"mu", "K"}, {"lambda", "mu"}};
   const auto& n = kNames[static_cast<int>(m.form)];
   const char* unit_b = m.form == Material::Form::YoungPoisson ? "" : " Pa";
-  return fmt::format("material '{}' ({} = {} Pa, {} = {}{}, rho = {} kg/m^3)", m.name, n[0], m.a, n[1], m.b, unit_b,
+  return fmt::format("material '{}' ({} = {} Pa, {} = {}{}, {}rho = {} kg/m^3)", m.name, n[0], m.a, n[1], m.b, unit_b,
+                     m.fibre_eta > 0 ? fmt::format("fibre stiffness eta = {} Pa, ", m.fibre_eta) : std::string(),
                      m.rho);
 }
 
@@ -125,30 +126,106 @@ void unsupported_piece_warnings(const Scene& s, const TissueModel<double>& m, st
 
 }  // namespace
 
-WorkEstimate estimate_work(const TissueModel<double>& m, double tick, double ticks) {
+StepCost nominal_step_cost(const std::string& backend) {
+  if (backend == "cuda") return {1.5e-5, 1e-10};
+  return {2e-6, 1.5e-8};
+}
+
+WorkEstimate estimate_work(const TissueModel<double>& m, double tick, double ticks, const std::string& backend) {
   WorkEstimate w;
-  w.steps_per_tick = std::round(tick / m.dt);
+  w.steps_per_tick = std::max(1.0, std::round(tick / m.dt));
   w.ticks = ticks;
   w.steps = w.steps_per_tick * ticks;
   w.element_steps = w.steps * m.n_elems;
+  const StepCost c = nominal_step_cost(backend);
+  w.seconds = w.steps * c.per_step + w.element_steps * c.per_element;
   return w;
+}
+
+std::vector<std::string> stop_causes(const Scene& s, const TissueModel<double>& m) {
+  std::vector<std::string> out;
+  double softest_E = INFINITY;
+  for (const Material& mat : s.materials) {
+    const MaterialParams p = mat.params();
+    const double E = 9 * p.K * p.mu / (3 * p.K + p.mu);  // from any pair of constants
+    softest_E = std::min(softest_E, E);
+    if (E < kTissueE[0] || E > kTissueE[1])
+      out.push_back(fmt::format("{}: Young's modulus E = {:.4g} Pa is far outside soft tissue's 1e3..1e6 Pa (check "
+                                "the value and its unit, Pa)",
+                                location(s, mat.line) + ": material '" + mat.name + "'", E));
+    if (mat.rho < kTissueRho[0] || mat.rho > kTissueRho[1])
+      out.push_back(fmt::format("{}: material '{}': density rho = {:.4g} kg/m^3 is far from soft tissue's ~1000 "
+                                "kg/m^3 (check the value and its unit, kg/m^3)",
+                                location(s, mat.line), mat.name, mat.rho));
+    if (mat.fibre_eta > 1e3 * p.mu)
+      out.push_back(fmt::format("{}: material '{}': fibre stiffness eta = {:.4g} Pa is {:.3g} x its shear modulus "
+                                "mu = {:.4g} Pa (fibres are stiffer than the matrix by 1..1e3)",
+                                location(s, mat.fibre_line ? mat.fibre_line : mat.line), mat.name, mat.fibre_eta,
+                                mat.fibre_eta / p.mu, p.mu));
+    for (size_t k = 0; k < mat.prony.size(); ++k)
+      if (mat.prony[k].tau < m.dt)
+        out.push_back(fmt::format("{}: material '{}': Prony term {}: tau = {:.4g} s is shorter than the step dt = "
+                                  "{:.4g} s, so the term relaxes within one step (its modulus g = {:g} drops at once "
+                                  "instead of acting as a viscosity); use a tau of many steps or remove the term",
+                                  location(s, mat.prony[k].line ? mat.prony[k].line : mat.line), mat.name, k + 1,
+                                  mat.prony[k].tau, m.dt, mat.prony[k].g));
+  }
+  // the body's largest extent: the loads' nominal stress F / L^2 over it is a lower bound of the stress they cause
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (index_t a = 0; a < m.n_nodes; ++a)
+    for (int c = 0; c < 3; ++c) {
+      lo[c] = std::min(lo[c], m.X[size_t(c) * m.n_nodes + a]);
+      hi[c] = std::max(hi[c], m.X[size_t(c) * m.n_nodes + a]);
+    }
+  const double L = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+  for (const Load& l : s.loads) {
+    Scene one = s;
+    one.loads = {l};
+    SceneLoads r;
+    try {
+      r = resolve_loads(one, m);
+    } catch (const SceneError&) {
+      continue;
+    }
+    double f[3] = {0, 0, 0};
+    for (size_t k = 0; k < r.nodes.size(); ++k)
+      for (int c = 0; c < 3; ++c) f[c] += r.force[3 * k + c];
+    const double F = std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]), stress = F / (L * L);
+    if (L > 0 && stress > kMaxLoadStrain * softest_E)
+      out.push_back(fmt::format("{}: {}: its total force {:.4g} N over the body's extent L = {:.4g} m squared is a "
+                                "nominal stress F / L^2 = {:.4g} Pa, {:.3g} x the softest material's E = {:.4g} Pa "
+                                "(a strain far beyond what the elements can follow); check the force (N){}",
+                                location(s, l.where.line), describe_as_load(l.where), F, L, stress,
+                                stress / softest_E, softest_E, l.each ? ", given to each of the selected nodes" : ""));
+  }
+  for (const std::string& c : incompressibility_findings(s)) out.push_back(c);
+  if (supported_nodes(m) == 0) out.push_back("no node is fixed (nothing holds the body)");
+  return out;
 }
 
 std::string step_cause(const Scene& s, const TissueModel<double>& m) {
   const index_t e = m.dt_crit_elem;
   if (e < 0 || e >= m.n_elems) return "no element";
-  const MaterialParams p = material_of(s, e) ? material_of(s, e)->params() : MaterialParams{};
-  Vec3<double> X[4];
-  for (int a = 0; a < 4; ++a) {
-    const index_t i = m.elem_nodes[size_t(a) * m.n_elems + e];
-    X[a] = {m.X[i], m.X[size_t(m.n_nodes) + i], m.X[2 * size_t(m.n_nodes) + i]};
+  const Material* mat = material_of(s, e);
+  MaterialParams p = mat ? mat->params() : MaterialParams{};
+  // the moduli the step was computed from: IANP takes the bulk modulus of the element's stiffest corner where
+  // materials of different K meet (core build_model)
+  bool corner_K = false;
+  if (m.ianp && s.materials.size() > 1) {
+    const std::vector<double> node_K = node_bulk_moduli(m);
+    for (int a = 0; a < 4; ++a)
+      if (const double k = node_K[m.elem_nodes[size_t(a) * m.n_elems + e]]; k > p.K) {
+        p.K = k;
+        corner_K = true;
+      }
   }
   const double c = p.rho > 0 ? wave_speed(p) : 0;
-  const Material* mat = material_of(s, e);
-  return fmt::format("element {} of {}: wave speed c = {:.4g} m/s across its smallest altitude L = {:.4g} m gives "
+  return fmt::format("element {} of {}{}: wave speed {} across its smallest altitude L = {:.4g} m{} gives "
                      "dt_crit = L / c = {:.4g} s{}",
-                     e, mat ? describe(*mat) : "no material", c, c > 0 ? m.dt_crit_physical * c : 0.0,
-                     m.dt_crit_physical,
+                     e, mat ? describe(*mat) : "no material",
+                     corner_K ? fmt::format(" (its stiffest corner's K = {:.4g} Pa, IANP)", p.K) : std::string(),
+                     p.rho > 0 ? wave_speed_text(p) : std::string("c = 0 m/s"), c > 0 ? m.dt_crit_physical * c : 0.0,
+                     m.ianp ? "" : " (x 0.85 for a plain tet)", m.dt_crit_physical,
                      m.scaled_elems > 0 ? fmt::format(" ({:.4g} s after mass scaling)", m.dt_crit) : "");
 }
 

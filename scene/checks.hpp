@@ -19,6 +19,8 @@
 //                 lowest mode's omega_1 (the body creeps instead of responding);
 //   cost:         more than kManyStepsPerTick TLED steps per tick, naming
 //                 the element, its material and wave speed that set the step;
+//   stop causes:  after a run stopped, the values above that most likely
+//                 made it stop (stop_causes below);
 //   precision:    a material so nearly incompressible that the precision's
 //                 rounding of J moves the pressure by more than 1 % of the
 //                 shear modulus (K / mu x epsilon > 1e-2): the run may stop
@@ -49,15 +51,38 @@ struct WorkEstimate {
   double ticks = 0;
   double steps = 0;           ///< TLED steps in all
   double element_steps = 0;   ///< steps x elements: the unit of TLED work
+  double seconds = 0;         ///< a rough wall time at the backend's nominal rates (below); the whole mesh, so
+                              ///< an upper bound where a region of limited depth runs
 };
 
-/// The cost of `ticks` ticks of length `tick` (s) on `model` (its dt).
-WorkEstimate estimate_work(const TissueModel<double>& model, double tick, double ticks);
+/// Nominal cost of one TLED step on a backend, for WorkEstimate::seconds:
+/// a fixed part (contact, reductions, launches) and a part per element.
+/// Measured on the development machines and rounded up: the cpu backend on
+/// 2 shared cores ran 8.2k steps/s on the kidney's 8,576 tets (1.4e-8 s an
+/// element update) and 480k steps/s on a 6-tet block (2.1e-6 s a step); an
+/// H200 runs the kidney's step in ~16 us and 1M tets in ~83 us.
+struct StepCost {
+  double per_step = 0;     ///< s
+  double per_element = 0;  ///< s
+};
+StepCost nominal_step_cost(const std::string& backend);
+
+/// The cost of `ticks` ticks of length `tick` (s) on `model` (its dt), its
+/// time at the nominal rates of `backend` ("cpu", "cuda").
+WorkEstimate estimate_work(const TissueModel<double>& model, double tick, double ticks,
+                           const std::string& backend = "cpu");
 
 /// Element updates a run may take before it is refused unless forced: 1e12,
 /// hours on a workstation (the kidney's whole mesh runs ~1e8 per second on
 /// a laptop CPU, ~1e9 on a GPU).
 inline constexpr double kMaxElementSteps = 1e12;
+
+/// Estimated wall seconds beyond which a run of a scene that needs more than
+/// kManyStepsPerTick steps per tick is refused unless forced: such a scene
+/// (E = 1e15 Pa, a density of 1e-12, nu = 0.49999) cannot run at a haptic
+/// rate, is most often a unit mistake or a material beyond what was meant,
+/// and its run takes minutes to hours while the warning scrolls away.
+inline constexpr double kMaxSecondsAtManySteps = 10;
 
 /// "element 12 of material 'brain' (E = .. Pa, nu = .., rho = .. kg/m^3):
 /// wave speed c = .. m/s across its smallest altitude L = .. m": what sets
@@ -72,6 +97,26 @@ std::vector<std::string> scene_warnings(const Scene& scene, const TissueModel<do
 /// Materials whose incompressibility the scene's precision cannot resolve
 /// (the precision rule above), one phrase each; empty when none.
 std::vector<std::string> incompressibility_findings(const Scene& scene);
+
+/// The scene's values that most likely made a run stop (NaN or an inverted
+/// element), one phrase each naming the material or load, the value and the
+/// range or limit it is measured against; empty when none is suspect:
+///   - a material's E (from any pair of constants) outside kTissueE, its
+///     density outside kTissueRho, a fibre stiffness above 1e3 x its mu;
+///   - a Prony term whose tau is shorter than the step dt (it relaxes within
+///     one step: a modulus that jumps, not a viscosity);
+///   - a <load> whose total force over the body's largest extent squared,
+///     F / L^2, is more than kMaxLoadStrain x the softest material's E (a
+///     nominal strain the elements cannot follow);
+///   - the incompressibility findings below and no fixed node.
+std::vector<std::string> stop_causes(const Scene& scene, const TissueModel<double>& model);
+
+/// The ranges stop_causes measures materials against: soft tissue spans E ~
+/// 1e3..1e6 Pa and rho ~ 1000 kg/m^3; a decade beyond either end is taken as
+/// the suspect's edge.
+inline constexpr double kTissueE[2] = {1e2, 1e7};        ///< Pa
+inline constexpr double kTissueRho[2] = {100, 1e4};      ///< kg/m^3
+inline constexpr double kMaxLoadStrain = 0.5;            ///< F / (L^2 E_min)
 
 /// Number of nodes the model fixes in any component.
 index_t supported_nodes(const TissueModel<double>& model);

@@ -81,6 +81,34 @@ std::vector<std::string_view> split_commas(std::string_view text) {
   return out;
 }
 
+std::optional<size_t> binary_byte(std::string_view line) {
+  for (size_t k = 0; k < line.size(); ++k) {
+    const unsigned char c = static_cast<unsigned char>(line[k]);
+    if ((c < 0x20 && c != '\t' && c != '\r' && c != '\v' && c != '\f') || c == 0x7f) return k;
+  }
+  return std::nullopt;
+}
+
+std::string printable(std::string_view text, size_t max) {
+  std::string out;
+  for (size_t k = 0; k < text.size() && k < max; ++k) {
+    const unsigned char c = static_cast<unsigned char>(text[k]);
+    if (c >= 0x20 && c < 0x7f && c != '\\')
+      out += static_cast<char>(c);
+    else if (c == '\\')
+      out += "\\\\";
+    else
+      out += fmt::format("\\x{:02x}", c);
+  }
+  if (text.size() > max) out += "...";
+  return out;
+}
+
+std::string binary_line_message(const std::string& what, int line, std::string_view text, size_t at) {
+  return fmt::format("{} is binary, not text: line {} holds byte 0x{:02x} at column {} ('{}')", what, line,
+                     static_cast<unsigned char>(text[at]), at + 1, printable(text));
+}
+
 bool csv_skipped(std::string_view line) {
   const std::string_view t = trim(line);
   return t.empty() || t.front() == '#';

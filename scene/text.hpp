@@ -34,6 +34,21 @@ std::vector<std::string_view> split_commas(std::string_view text);
 /// True for a CSV line to skip: blank, or a comment starting with '#'.
 bool csv_skipped(std::string_view line);
 
+/// Where `line` holds a byte that no text file holds (NUL or another control
+/// character but tab, CR, vertical tab and form feed): its offset, or nullopt
+/// for a line of text. A CSV reader checks each line with it, so that a binary
+/// file is named as such instead of as a field that is not a number.
+std::optional<size_t> binary_byte(std::string_view line);
+
+/// `text` safe to quote in a message: printable ASCII as it is, every other
+/// byte as \xNN (a NUL would otherwise end the message where it is printed),
+/// cut after `max` bytes with "...".
+std::string printable(std::string_view text, size_t max = 60);
+
+/// "<what> is binary, not text: line L holds byte 0xNN at column C
+/// ('<printable line>')": the message for a line binary_byte found.
+std::string binary_line_message(const std::string& what, int line, std::string_view text, size_t at);
+
 /// "float" | "double"; std::invalid_argument naming the text otherwise.
 Precision parse_precision(const std::string& s);
 

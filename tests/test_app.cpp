@@ -29,6 +29,7 @@
 #include "apps/viewer/view_command.hpp"
 #include "bench/bench.hpp"
 #include "io/scene_xml.hpp"
+#include "scene/checks.hpp"
 #include "scene/validate.hpp"
 #include "tests/temp_dir.hpp"
 
@@ -235,6 +236,38 @@ TEST(RunPlan, WorkBeyondTheBoundIsRefusedUnlessForced) {
   EXPECT_NO_THROW(check_work(s, m, 100'000'000'000L, false));  // 6e11 element updates: within the bound
 }
 
+// A scene that needs far more steps per tick than any usual one (a density
+// of 1e-6 here; E = 1e15, nu = 0.49999 alike) ran on for minutes after a
+// warning: beyond 10 s of estimated work it is refused unless --force, with
+// the plan's figures and the step's cause; a short run of it still goes.
+TEST(RunPlan, ManyStepsPerTickAreRefusedBeyondTheirTimeUnlessForced) {
+  scene::Scene s = io::parse_scene(kBlock, "block.xml", "");
+  s.materials.front().rho = 1e-6;
+  s.solver.mass_scaling = 0;
+  const TissueModel<double> m = scene::load_model(s);
+  const scene::WorkEstimate one = scene::estimate_work(m, s.solver.tick, 1);
+  ASSERT_GT(one.steps_per_tick, scene::kManyStepsPerTick);
+  ASSERT_LT(one.seconds, 1.0);
+  const long within = long(scene::kMaxSecondsAtManySteps / one.seconds) - 1, beyond = 2 * within + 2;
+  EXPECT_NO_THROW(check_work(s, m, within, false));
+  try {
+    check_work(s, m, beyond, false);
+    FAIL() << "expected a refusal";
+  } catch (const std::runtime_error& e) {
+    const std::string msg = e.what();
+    for (const std::string& part : std::vector<std::string>{
+             fmt::format("block.xml: {:.0f} TLED steps per 0.001 s tick, more than the 100", one.steps_per_tick),
+          fmt::format("{} ticks x {:.0f} steps", beyond, one.steps_per_tick), "element updates, about ",
+          "on the cpu backend, beyond the 10 s", "--force", "rho = 1e-06 kg/m^3", "wave speed c = sqrt("})
+      EXPECT_NE(msg.find(part), std::string::npos) << part << " in: " << msg;
+  }
+  EXPECT_NO_THROW(check_work(s, m, beyond, true));
+  const std::string plan = work_plan(s, m, beyond);
+  EXPECT_EQ(plan.rfind(fmt::format("plan: {} ticks x {:.0f} TLED steps = ", beyond, one.steps_per_tick), 0), 0u)
+      << plan;
+  EXPECT_NE(plan.find("element updates; about "), std::string::npos) << plan;
+}
+
 // ------------------------------------------------- the program, end to end
 
 struct Child {
@@ -384,6 +417,47 @@ TEST(Program, BadInputsGetClearErrors) {
             std::string::npos);
 }
 
+// `tissue run` prints what the run will cost before it builds the backend;
+// the kidney at nu = 0.49999 (217 steps per tick, half a minute or more)
+// is refused unless --force, naming its material.
+TEST(Program, RunPrintsItsPlanAndRefusesTheStepBlowUp) {
+  TempDir t;
+  std::ofstream(t.file("block.xml")) << kBlock;
+  ASSERT_EQ(run_tissue(t, "plan", {"run", t.file("block.xml"), "--ticks", "5", "--quiet"}), 0)
+      << slurp(t.file("plan.err"));
+  const std::string out = slurp(t.file("plan.out"));
+  const size_t plan = out.find("plan: 5 ticks x 1 TLED steps = 5 steps on 6 elements = 30 element updates; about ");
+  EXPECT_NE(plan, std::string::npos) << out;
+  EXPECT_LT(plan, out.find("running 5 ticks")) << out;
+
+  ASSERT_EQ(run_tissue(t, "k", {"mesh", "@kidney", "-o", t.file("k.xml"), "--nu", "0.49999"}), 0)
+      << slurp(t.file("k.err"));
+  const auto t0 = std::chrono::steady_clock::now();
+  EXPECT_EQ(run_tissue(t, "nu", {"run", t.file("k.xml")}), 1);
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(20));  // refused, not run
+  const std::string err = slurp(t.file("nu.err"));
+  for (const char* part : {"TLED steps per 0.001 s tick, more than the 100", "element updates, about ",
+                           "beyond the 10 s such a run may take without --force", "nu = 0.49999"})
+    EXPECT_NE(err.find(part), std::string::npos) << part << "\n" << err;
+  EXPECT_NE(slurp(t.file("nu.out")).find("plan: 1000 ticks x "), std::string::npos) << slurp(t.file("nu.out"));
+}
+
+// A stop caused by a value of the scene names that value: a load of 1e6 N on
+// the 2 cm block inverts an element at once; the message blamed the tool.
+TEST(Program, AStopNamesTheLikelyParameter) {
+  TempDir t;
+  std::string scene = kBlock;
+  scene.insert(scene.find("</tissue-scene>"),
+               "  <load box-min=\"-1 -1 0.01\" box-max=\"1 1 1\" force=\"0 0 -1e6\"/>\n");
+  std::ofstream(t.file("load.xml")) << scene;
+  EXPECT_EQ(run_tissue(t, "load", {"run", t.file("load.xml"), "--quiet"}), 1);
+  const std::string err = slurp(t.file("load.err"));
+  for (const char* part : {"(inverted or degenerate)", "likely cause:", "load box",
+                           "total force 1e+06 N", "nominal stress F / L^2 = 2.5e+09 Pa", "check the force (N)"})
+    EXPECT_NE(err.find(part), std::string::npos) << part << "\n" << err;
+  EXPECT_EQ(err.find("a tool has most likely pressed deeper"), std::string::npos) << err;
+}
+
 /// A closed 2 cm cube as an OBJ file (outward triangles): 2.4e-3 m^2 of surface.
 const char* kCubeObj = R"(v 0 0 0
 v 0.02 0 0
@@ -431,6 +505,51 @@ TEST(Program, MeshRefusesARemeshEdgeFarFromTheBodysSize) {
       << err;
   EXPECT_NE(err.find("use an edge of at most 0.00744 m"), std::string::npos) << err;
   EXPECT_FALSE(fs::exists(t.file("cube.xml")));
+}
+
+// The same --inclusion twice was meshed as two overlapping bodies and
+// reported as a self-intersecting organ: refused before any file is read.
+TEST(Program, MeshRefusesAnInclusionGivenTwice) {
+  TempDir t;
+  std::ofstream(t.file("cube.obj")) << kCubeObj;
+  std::ofstream(t.file("tumour.obj")) << kCubeObj;  // its content is never read
+  EXPECT_EQ(run_tissue(t, "twice", {"mesh", t.file("cube.obj"), "-o", t.file("x.xml"), "--inclusion",
+                                    t.file("tumour.obj"), "--inclusion", t.file("tumour.obj") + ":E=5000"}),
+            1);
+  std::string err = slurp(t.file("twice.err"));
+  EXPECT_NE(err.find("--inclusion " + t.file("tumour.obj") + ": the file is given twice (inclusions 1 and 2)"),
+            std::string::npos)
+      << err;
+  EXPECT_EQ(err.find("intersects itself"), std::string::npos) << err;
+  EXPECT_EQ(slurp(t.file("twice.out")).find("reading"), std::string::npos);  // before any file is read
+  EXPECT_EQ(run_tissue(t, "organ", {"mesh", t.file("cube.obj"), "-o", t.file("x.xml"), "--inclusion",
+                                    t.file("cube.obj")}),
+            1);
+  err = slurp(t.file("organ.err"));
+  EXPECT_NE(err.find("--inclusion " + t.file("cube.obj") + ": the file is the organ's surface"), std::string::npos)
+      << err;
+  EXPECT_FALSE(fs::exists(t.file("x.xml")));
+}
+
+// SIGINT while TetGen meshed the built-in kidney (in a child process) was
+// reported as "TetGen crashed (signal 9)", exit 1: it is an interruption,
+// exit 130.
+TEST(Program, InterruptWhileTetGenRunsExitsWith130) {
+  TempDir t;
+  const Child c = start(t, "kidney", {"run", "@kidney", "--ticks", "5", "--quiet"});
+  // wait for the TetGen child to appear (the kidney is meshed before the run)
+  const std::string children = fmt::format("/proc/{}/task/{}/children", c.pid, c.pid);
+  bool meshing = false;
+  for (int k = 0; k < 2000 && !meshing; ++k) {
+    meshing = !slurp(children).empty();
+    if (!meshing) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_TRUE(meshing) << "no TetGen child seen: " << slurp(c.err);
+  kill(c.pid, SIGINT);
+  EXPECT_EQ(finish(c), 130) << slurp(c.err);
+  const std::string err = slurp(c.err);
+  EXPECT_EQ(err.find("crashed"), std::string::npos) << err;
+  EXPECT_NE(err.find("SIGINT"), std::string::npos) << err;
 }
 
 // `tradeoff --max-hold 1e-9` printed a table of unconverged rows: a hold

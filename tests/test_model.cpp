@@ -488,6 +488,59 @@ TEST(ModelErrors, ExtremeMaterialNamesTheCauseOfTheStepLimit) {
   EXPECT_NO_THROW(build_model(in));
 }
 
+/// The wave speed a message prints and the moduli it prints it from, "c =
+/// sqrt((K + 4 mu / 3 [+ 4 eta]) / rho) = sqrt((K Pa + 4 x mu Pa / 3 [+ 4 x
+/// eta Pa]) / rho kg/m^3) = c m/s": success when c follows from them (to the
+/// 4 digits printed).
+testing::AssertionResult speed_follows_from_the_moduli(const std::string& msg) {
+  size_t at = msg.find("/ rho) = sqrt((");  // the numbers follow the formula
+  if (at == std::string::npos) return testing::AssertionFailure() << "no sqrt((...)) in: " << msg;
+  at += 7;
+  double K = 0, mu = 0, eta = 0, rho = 0, c = 0;
+  const char* p = msg.c_str() + at;
+  if (std::sscanf(p, "= sqrt((%lf Pa + 4 x %lf Pa / 3 + 4 x %lf Pa) / %lf kg/m^3) = %lf m/s", &K, &mu, &eta, &rho,
+                  &c) != 5) {
+    eta = 0;
+    if (std::sscanf(p, "= sqrt((%lf Pa + 4 x %lf Pa / 3) / %lf kg/m^3) = %lf m/s", &K, &mu, &rho, &c) != 4)
+      return testing::AssertionFailure() << "cannot read the moduli in: " << msg;
+  }
+  const double want = std::sqrt((K + 4 * mu / 3 + 4 * eta) / rho);
+  if (std::fabs(c - want) > 1e-3 * want)
+    return testing::AssertionFailure() << "c = " << c << " but the moduli give " << want << ": " << msg;
+  return testing::AssertionSuccess();
+}
+
+// A fibre stiffness far beyond the matrix's set the step; the refusal
+// printed mu, K and rho but a speed that included the fibre's share: the
+// numbers printed now give the speed printed.
+TEST(ModelErrors, FibreStiffnessRefusalPrintsTheModuliOfItsSpeed) {
+  ModelInput in = box_input(2, 1, 1, 0.02, 0.01, 0.01);
+  in.materials = {material(kE, kNu, kRho)};
+  in.materials[0].fibre_eta = 1e25;
+  in.material_names = {"muscle"};
+  in.tick = 1e-3;
+  in.dt_safety = 0.9;
+  try {
+    build_model(in);
+    FAIL() << "a fibre of 1e25 Pa was accepted";
+  } catch (const ModelError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("fibre stiffness eta = 1e+25 Pa"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("c = sqrt((K + 4 mu / 3 + 4 eta) / rho)"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("The fibre stiffness is far too high"), std::string::npos) << msg;
+    EXPECT_TRUE(speed_follows_from_the_moduli(msg));
+  }
+  in.materials[0].fibre_eta = 0;  // the isotropic refusal's numbers too
+  in.materials[0].rho = 1e-30;
+  try {
+    build_model(in);
+    FAIL() << "a density of 1e-30 was accepted";
+  } catch (const ModelError& e) {
+    EXPECT_NE(std::string(e.what()).find("The modulus is far too high"), std::string::npos) << e.what();
+    EXPECT_TRUE(speed_follows_from_the_moduli(e.what()));
+  }
+}
+
 TEST(ModelErrors, InvertedTetsAreReorientedAndCounted) {
   const ModelInput good = box_input(2, 2, 2, 0.02, 0.02, 0.02);
   const auto ref = build_model(good);

@@ -149,7 +149,36 @@ TEST(Reference, UnfinishedRelaxationIsReportedWithItsResidual) {
     FAIL() << "300 steps cannot reach 1e-9";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("relative residual"), std::string::npos) << e.what();
+    // and why it stopped: the step limit, not a breakdown
+    EXPECT_NE(std::string(e.what()).find("it hit the step limit of 300 steps before converging"), std::string::npos)
+        << e.what();
   }
+}
+
+// A relaxation says why it stopped: the tolerances it met, the step or
+// wall-time limit, a stop request (a stall says which residual did not halve).
+TEST(Relaxation, SaysWhyItStopped) {
+  const TissueModel<double> m = build_model(box_input());
+  const HeldTool h = held_tool(m, kTool, press(), 1e-3, 0.15);
+  auto b = create_backend("cpu", Precision::Double);
+  RelaxOptions o;
+  o.residual_tol = 1e-4;
+  o.kinetic_tol = 1e-6;
+  const RelaxResult done = relax(*b, m, {}, o, {}, &h);
+  ASSERT_TRUE(done.converged);
+  EXPECT_EQ(done.why.rfind(fmt::format("converged to the tolerances after {} steps: relative residual ", done.steps), 0),
+            0u)
+      << done.why;
+  EXPECT_NE(done.why.find("(tolerance 0.0001)"), std::string::npos) << done.why;
+  o.max_wall = 0;
+  const RelaxResult wall = relax(*b, m, {}, o, {}, &h);
+  EXPECT_FALSE(wall.converged);
+  EXPECT_EQ(wall.why.rfind("hit the wall-time limit of 0 s after ", 0), 0u) << wall.why;
+  o.max_wall = 600;
+  o.stop = [] { return true; };
+  const RelaxResult stopped = relax(*b, m, {}, o, {}, &h);
+  EXPECT_TRUE(stopped.interrupted);
+  EXPECT_EQ(stopped.why.rfind("was interrupted by a stop request", 0), 0u) << stopped.why;
 }
 
 TEST(Relaxation, InvertingDriveStopsWithTheElement) {

@@ -114,6 +114,69 @@ TEST(SceneChecks, ManyStepsPerTickNameTheirCause) {
   EXPECT_EQ(w.steps_per_tick, steps);
   EXPECT_EQ(w.steps, 300 * steps);
   EXPECT_EQ(w.element_steps, 300 * steps * m.n_elems);
+  // its time at the backend's nominal rates
+  const StepCost cpu = nominal_step_cost("cpu");
+  EXPECT_DOUBLE_EQ(w.seconds, w.steps * cpu.per_step + w.element_steps * cpu.per_element);
+  const StepCost gpu = nominal_step_cost("cuda");  // more a step (launches), less an element
+  EXPECT_GT(gpu.per_step, cpu.per_step);
+  EXPECT_LT(gpu.per_element, cpu.per_element);
+  EXPECT_DOUBLE_EQ(estimate_work(m, s.solver.tick, 300, "cuda").seconds,
+                   w.steps * gpu.per_step + w.element_steps * gpu.per_element);
+}
+
+// The step's cause prints the moduli its wave speed follows from, the
+// fibre's share included (it printed E, nu and rho and a speed that had the
+// fibre in it).
+TEST(SceneChecks, StepCausePrintsTheModuliOfItsSpeed) {
+  Scene s = box_scene();
+  s.materials.front().fibre_eta = 1e13;
+  s.materials.front().fibre_line = 0;
+  s.solver.mass_scaling = 0;
+  const TissueModel<double> m = load_model(s);
+  const std::string cause = step_cause(s, m);
+  const MaterialParams p = s.materials.front().params();
+  const double c = std::sqrt((p.K + 4 * p.mu / 3 + 4 * 1e13) / 1000);
+  EXPECT_NE(cause.find("fibre stiffness eta = 10000000000000 Pa"), std::string::npos) << cause;
+  EXPECT_NE(cause.find(fmt::format("c = sqrt((K + 4 mu / 3 + 4 eta) / rho) = sqrt(({:.4g} Pa + 4 x {:.4g} Pa / 3 + "
+                                   "4 x 1e+13 Pa) / 1000 kg/m^3) = {:.4g} m/s",
+                                   p.K, p.mu, c)),
+            std::string::npos)
+      << cause;
+}
+
+// A run that stops (NaN, an inverted element) names the values most likely
+// to blame, each against the range or limit it broke; it blamed the tool's
+// indentation whatever the scene held.
+TEST(SceneChecks, StopCausesNameTheParameter) {
+  Scene s = box_scene();
+  EXPECT_TRUE(stop_causes(s, load_model(s)).empty());  // brain-like tissue, supported, no load
+  const auto one = [](const std::vector<std::string>& causes, std::initializer_list<std::string> parts) {
+    return one_warning(causes, parts);
+  };
+  Scene e = box_scene();
+  e.materials.front().a = 1e15;
+  EXPECT_TRUE(one(stop_causes(e, load_model(e)), {"material 'brain'", "E = 1e+15 Pa", "far outside soft tissue's"}));
+  Scene r = box_scene();
+  r.materials.front().rho = 1e-12;
+  EXPECT_TRUE(one(stop_causes(r, load_model(r)), {"material 'brain'", "density rho = 1e-12 kg/m^3", "kg/m^3)"}));
+  Scene t = box_scene();
+  t.materials.front().prony = {{0.5, 1e-12, 0}};
+  const TissueModel<double> tm = load_model(t);
+  EXPECT_TRUE(one(stop_causes(t, tm), {"material 'brain': Prony term 1: tau = 1e-12 s is shorter than the step dt = "
+                                       + fmt::format("{:.4g} s", tm.dt)}));
+  Scene l = box_scene();
+  Load load;
+  load.where.kind = Constraint::Kind::Box;
+  load.where.lo[0] = load.where.lo[1] = -1;
+  load.where.lo[2] = 0.01;
+  load.where.hi[0] = load.where.hi[1] = load.where.hi[2] = 1;
+  load.force[2] = -1e6;
+  l.loads.push_back(load);
+  EXPECT_TRUE(one(stop_causes(l, load_model(l)),
+                  {"load box", "total force 1e+06 N over the body's extent L = 0.02 m squared is a nominal stress "
+                               "F / L^2 = 2.5e+09 Pa", "check the force (N)"}));
+  l.loads.front().force[2] = -0.05;  // 125 Pa: a load tissue takes
+  EXPECT_TRUE(stop_causes(l, load_model(l)).empty());
 }
 
 TEST(SceneChecks, IncompressibilityBeyondThePrecision) {

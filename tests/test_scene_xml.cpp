@@ -722,6 +722,10 @@ TEST(SceneXml, FibreFileErrorsNameTheCsvLine) {
   EXPECT_TRUE(scene_error("0,1,0,0\n0,0,1,0\n", {csv + ":2: ", "element 0 is listed twice (first at line 1)"}));
   EXPECT_TRUE(scene_error("0,0,0,0\n", {csv + ":1: ", "element 0: fibre direction (0, 0, 0) must be finite and "
                                                        "non-zero"}));
+  // a binary file: named as such at its line, its bytes escaped (a NUL cut the message where it stood)
+  const std::string binary("element,ax,ay,az\n0,1\0\x01\xff,0,0\nPK\x03\x04\0\0\n", 35);
+  EXPECT_TRUE(scene_error(binary, {"s.xml:7: ", csv + ":2: ", "is binary, not text: line 2 holds byte 0x00 at column 4",
+                                   "('0,1\\x00\\x01\\xff,0,0')", "a fibre file is a text CSV"}));
   // a missing file
   dir.write("t.xml", fibre_xml(R"(<fibre stiffness="1" file="gone.csv"/>)"));
   EXPECT_TRUE(throws_with<SceneError>([&] { (void)read_scene(dir.file("t.xml")); },
@@ -881,6 +885,10 @@ TEST(PathCsv, ErrorsNameFileAndLine) {
   EXPECT_TRUE(csv_error("t,x,y,z,grasp,grasp\n", {"p.csv:1: ", "'grasp' appears twice"}));
   EXPECT_TRUE(csv_error("t,x,y,z,grasp\n0,0,0,0,2\n", {"p.csv:2: ", "grasp '2' must be 0 or 1"}));
   EXPECT_TRUE(csv_error("t,x,y,z,ax,ay,az\n0,0,0,0,0,nan,0\n", {"p.csv:2: ", "ay = nan is not a finite number"}));
+  // a binary file: named as such, its bytes escaped
+  EXPECT_TRUE(csv_error(std::string("t,x,y,z\n0,0\0\x7f,0,0\n", 18),
+                        {"p.csv:2: ", "is binary, not text: line 2 holds byte 0x00 at column 4 ('0,0\\x00\\x7f,0,0')",
+                         "a tool path is a text CSV"}));
 }
 
 TEST(PathCsv, GraspAndAxisColumnsRoundTrip) {

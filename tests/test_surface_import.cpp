@@ -181,6 +181,42 @@ TEST(LoadSurface, StlBinary) {
   EXPECT_GT(enclosed_volume(s), 0);
 }
 
+// A binary STL whose header's triangle count does not match the file's
+// size got Assimp's "Failed to determine STL storage representation" (and a
+// count that wraps 32 bits could pass Assimp's own check): the count is
+// checked against the size first, naming the file, the count and the size.
+TEST(LoadSurface, StlBinaryWhoseCountLiesIsRefusedNamingCountAndSize) {
+  TempDir t;
+  const auto refused = [&](std::uint32_t count, std::initializer_list<std::string> parts) {
+    const std::string path = t.file("lie.stl");
+    write_cube_stl_binary(path, 5.0);  // 84 + 12 x 50 = 684 bytes
+    {
+      std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+      f.seekp(80);
+      f.write(reinterpret_cast<const char*>(&count), 4);
+    }
+    try {
+      load_surface(path, 1e-3);
+      return testing::AssertionFailure() << "count " << count << " was read";
+    } catch (const MeshError& e) {
+      const std::string msg = e.what();
+      for (const std::string& p : parts)
+        if (msg.find(p) == std::string::npos) return testing::AssertionFailure() << msg << "\nlacks: " << p;
+    }
+    return testing::AssertionSuccess();
+  };
+  const std::string path = t.file("lie.stl");
+  EXPECT_TRUE(refused(1000000, {path + ": the binary STL header claims 1000000 triangles, which take 84 + 50 x "
+                                       "1000000 = 50000084 bytes, but the file has 684 bytes (room for 12 triangles)"}));
+  EXPECT_TRUE(refused(11, {"claims 11 triangles", "684 bytes (room for 12 triangles)", "truncated"}));
+  // 84 + 50 n wraps to 684 in 32 bits: Assimp's own test would take it for billions of triangles
+  EXPECT_TRUE(refused(2147483660u, {"claims 2147483660 triangles", "107374183084 bytes", "684 bytes"}));
+  write_text(t.file("short.stl"), "tiny");
+  EXPECT_THROW(load_surface(t.file("short.stl"), 1.0), MeshError);
+  write_cube_stl_binary(path, 5.0);  // the count restored: read
+  expect_cube(load_surface(path, 1e-3), 5e-3);
+}
+
 TEST(LoadSurface, Ply) {
   TempDir t;
   write_text(t.file("cube.ply"), cube_ply(0.5));
