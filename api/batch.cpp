@@ -11,6 +11,7 @@
 #include <stdexcept>
 
 #include "api/facade.hpp"
+#include "backends/registry.hpp"
 #include "io/kidney.hpp"
 #include "io/scene_xml.hpp"
 #include "scene/checks.hpp"
@@ -226,6 +227,66 @@ void Batch::set_material(int scene, const MaterialChange& change) {
 
 void Batch::set_tool_pose(int scene, int tool, const Vector3& tip, const Vector3& axis) {
   impl_->at(scene).set_tool_pose(tool, vec(tip), vec(axis));
+}
+
+void Batch::set_tool_poses_from_device(std::uintptr_t tips, std::size_t count, bool single) {
+  const std::size_t need = size() * std::size_t(max_tools()) * 3;
+  if (count != need)
+    throw std::invalid_argument(fmt::format(
+        "set_tool_poses: the device array holds {} values; the batch needs {} ({} scenes x {} tools x 3)", count, need,
+        size(), max_tools()));
+  std::vector<double> host(need);
+  if (single) {
+    std::vector<float> f(need);
+    copy_from_device(reinterpret_cast<const void*>(tips), f.data(), need * sizeof(float));
+    std::copy(f.begin(), f.end(), host.begin());
+  } else {
+    copy_from_device(reinterpret_cast<const void*>(tips), host.data(), need * sizeof(double));
+  }
+  set_tool_poses(host);
+}
+
+Batch::DeviceView Batch::device_field(int scene, Field f) {
+  impl_->check(scene);
+  if (f != Field::Displacement && f != Field::InternalForce)
+    throw std::invalid_argument("device_field: only the displacement and the internal force lie on the device "
+                                "per node (read the others with read_field)");
+  Session& s = (*impl_->batch)[std::size_t(scene)];
+  const DeviceField d = tissue::device_field(
+      s.backend(), f == Field::Displacement ? NodeField::Displacement : NodeField::InternalForce);
+  if (!d.data)
+    throw std::invalid_argument(fmt::format("device_field: the {} backend keeps its fields on the host; read them with "
+                                            "read_field or fields()",
+                                            backend()));
+  DeviceView v;
+  v.data = reinterpret_cast<std::uintptr_t>(d.data);
+  v.shape = {d.nodes, 3};
+  v.strides = {d.node_stride, d.scalar_bytes};
+  v.scalar_bytes = d.scalar_bytes;
+  v.device = d.device;
+  return v;
+}
+
+Batch::DeviceView Batch::device_field(Field f) {
+  DeviceView first = device_field(0, f);
+  const std::int64_t n = std::int64_t(size());
+  std::int64_t stride = 0;
+  if (n > 1) {
+    const DeviceView second = device_field(1, f);
+    stride = std::int64_t(second.data) - std::int64_t(first.data);
+  }
+  for (std::int64_t i = 1; i < n; ++i) {
+    const DeviceView v = device_field(int(i), f);
+    if (v.shape != first.shape || stride <= 0 || std::int64_t(v.data) != std::int64_t(first.data) + i * stride)
+      throw std::invalid_argument(fmt::format(
+          "device_field: scene {}'s field does not lie one stride after scene {}'s ({}); every scene's at once "
+          "needs scenes of one model stepped in one group (docs/batch.md); read scenes one by one with "
+          "device_field(scene, field)",
+          i, i - 1, v.shape != first.shape ? "another mesh" : "another model, or a scene outside the group"));
+  }
+  first.shape.insert(first.shape.begin(), n);
+  first.strides.insert(first.strides.begin(), n > 1 ? stride : first.shape[1] * first.strides[0]);
+  return first;
 }
 
 void Batch::set_tool_poses(std::span<const double> tips, std::span<const double> axes) {

@@ -158,6 +158,29 @@ void set_element_gradients(Backend& backend, const std::string& where) {
                               " backend takes auto or stored" + (backend.name() == "cuda" ? " or recomputed" : ""));
 }
 
+DeviceField device_field(Backend& backend, NodeField field) {
+#ifdef TISSUE_HAVE_CUDA
+  if (backend.name() == "cuda") {
+    const CudaNodeField f = cuda_node_field(backend, field == NodeField::Displacement ? 0 : 1);
+    return {f.data, f.nodes, f.node_stride, f.scalar_bytes, f.device};
+  }
+#endif
+  (void)backend;
+  (void)field;
+  return {};
+}
+
+void copy_from_device(const void* src, void* dst, std::size_t bytes) {
+#ifdef TISSUE_HAVE_CUDA
+  return cuda_copy_to_host(src, dst, bytes);
+#else
+  (void)src;
+  (void)dst;
+  (void)bytes;
+  throw std::invalid_argument("a device array: this build has no cuda backend (configure with -DTISSUE_WITH_CUDA=ON)");
+#endif
+}
+
 std::string float_math(const Backend& backend) {
 #ifdef TISSUE_HAVE_CUDA
   if (backend.name() == "cuda" && backend.precision() == Precision::Float) return cuda_float_math();

@@ -2,6 +2,8 @@
 // this machine can run.
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <utility>
@@ -77,5 +79,24 @@ void set_element_gradients(Backend& backend, const std::string& where);
 /// BackendInfo::float_math of the backend at its precision: "approximate"
 /// for the cuda backend in float where the build chose it, else "ieee".
 std::string float_math(const Backend& backend);
+
+/// A per-node field as it lies in a device backend's memory: 3 scalars a
+/// node (scalar_bytes each), nodes node_stride bytes apart (padding after
+/// the three), on CUDA device `device`. Valid until the backend's next
+/// step, reset, upload or region build (the displacement buffers rotate
+/// with every step). Null data where the backend keeps its fields on the
+/// host.
+struct DeviceField {
+  const void* data = nullptr;
+  std::int64_t nodes = 0, node_stride = 0;
+  int scalar_bytes = 0;
+  int device = -1;
+};
+enum class NodeField { Displacement, InternalForce };
+DeviceField device_field(Backend& backend, NodeField field);
+
+/// Copies `bytes` from device memory at `src` (a CUDA device pointer) to
+/// the host; refuses a pointer that is not device memory.
+void copy_from_device(const void* src, void* dst, std::size_t bytes);
 
 }  // namespace tissue

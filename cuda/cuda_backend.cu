@@ -284,6 +284,14 @@ class CudaBackend final : public Backend {
   }
   const Reductions* result_device() const { return reducer_.result(); }
 
+  /// The current displacement (which 0) or the internal force (1) where they lie.
+  CudaNodeField node_field(int which) {
+    int dev = 0;
+    CUDA_CHECK(cudaGetDevice(&dev));
+    const void* p = which == 0 ? static_cast<const void*>(store_.u.current().u) : static_cast<const void*>(store_.state().f);
+    return {p, store_.n_nodes(), static_cast<std::int64_t>(sizeof(Packed3<T>)), static_cast<int>(sizeof(T)), dev};
+  }
+
   std::string name() const override { return "cuda"; }
   Precision precision() const override { return sizeof(T) == 4 ? Precision::Float : Precision::Double; }
   std::string device_name() const override { return device_name_; }
@@ -881,6 +889,20 @@ std::unique_ptr<Backend> make_cuda_backend(Precision precision) {
   if (!cuda_available(&why)) throw std::runtime_error("backend 'cuda' cannot run here: " + why);
   if (precision == Precision::Float) return std::make_unique<gpu::CudaBackend<float>>();
   return std::make_unique<gpu::CudaBackend<double>>();
+}
+
+CudaNodeField cuda_node_field(Backend& backend, int which) {
+  return gpu::with_cuda_backend(backend, [&](auto& b) { return b.node_field(which); });
+}
+
+void cuda_copy_to_host(const void* src, void* dst, std::size_t bytes) {
+  cudaPointerAttributes attr;
+  if (cudaPointerGetAttributes(&attr, src) != cudaSuccess ||
+      (attr.type != cudaMemoryTypeDevice && attr.type != cudaMemoryTypeManaged)) {
+    cudaGetLastError();
+    throw std::invalid_argument(gpu::str("a device array at ", src, " is not CUDA device memory"));
+  }
+  CUDA_CHECK(cudaMemcpy(dst, src, bytes, cudaMemcpyDeviceToHost));
 }
 
 const char* to_string(CudaStepMode mode) {

@@ -26,6 +26,20 @@ std::shared_ptr<BackendGroup> make_cuda_scene_group(Precision precision, int slo
 /// `group`, before its upload: its arrays then lie in the slot.
 void join_cuda_scene_group(Backend& backend, const std::shared_ptr<BackendGroup>& group, int slot);
 
+/// A per-node field where it lies in a cuda backend's device memory
+/// (registry.hpp DeviceField): which 0 displacement (the current buffer),
+/// 1 internal force less the load.
+struct CudaNodeField {
+  const void* data = nullptr;
+  std::int64_t nodes = 0, node_stride = 0;
+  int scalar_bytes = 0, device = -1;
+};
+CudaNodeField cuda_node_field(Backend& backend, int which);
+
+/// cudaMemcpy from device memory to the host (throws naming the pointer
+/// where src is not device memory).
+void cuda_copy_to_host(const void* src, void* dst, std::size_t bytes);
+
 /// True when a CUDA device can be used; otherwise *why says why not.
 /// On success *why holds the device name.
 bool cuda_available(std::string* why);

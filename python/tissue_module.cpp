@@ -17,11 +17,13 @@
 #include <chrono>
 #include <climits>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "tissue/batch.hpp"
@@ -457,6 +459,147 @@ void bind_simulation(py::module_& m) {
   bind_simulation_steps(cls);
 }
 
+// ---- device arrays: __cuda_array_interface__ (version 3) and DLPack ----
+
+/// DLPack's ABI (dlpack.h, version 0.8): the structs a consumer reads
+/// from the "dltensor" capsule.
+struct DLDevice {
+  std::int32_t device_type;  ///< 2: CUDA
+  std::int32_t device_id;
+};
+struct DLDataType {
+  std::uint8_t code;  ///< 2: float
+  std::uint8_t bits;
+  std::uint16_t lanes;
+};
+struct DLTensor {
+  void* data;
+  DLDevice device;
+  std::int32_t ndim;
+  DLDataType dtype;
+  std::int64_t* shape;
+  std::int64_t* strides;  ///< in elements
+  std::uint64_t byte_offset;
+};
+struct DLManagedTensor {
+  DLTensor dl_tensor;
+  void* manager_ctx;
+  void (*deleter)(DLManagedTensor*);
+};
+
+/// A batch's field where it lies on the GPU (tissue.DeviceArray): no copy.
+/// It keeps the batch alive; its memory holds the field until the batch's
+/// next step, reset, set_material or set_loads.
+struct PyDeviceArray {
+  tissue::Batch::DeviceView view;
+  py::object owner;
+};
+
+/// What a DLPack capsule owns: the shape and strides it points to, and the batch.
+struct DLPackHold {
+  DLManagedTensor tensor;
+  std::vector<std::int64_t> shape, strides;
+  py::object owner;
+};
+
+void dlpack_delete(DLManagedTensor* t) {
+  PyGILState_STATE gil = PyGILState_Ensure();  // (a consumer may free its tensor without the GIL)
+  delete static_cast<DLPackHold*>(t->manager_ctx);
+  PyGILState_Release(gil);
+}
+
+py::capsule dlpack_capsule(const PyDeviceArray& a) {
+  auto* hold = new DLPackHold{};
+  hold->shape = a.view.shape;
+  for (std::int64_t b : a.view.strides) hold->strides.push_back(b / a.view.scalar_bytes);
+  hold->owner = a.owner;
+  DLTensor& t = hold->tensor.dl_tensor;
+  t.data = reinterpret_cast<void*>(a.view.data);
+  t.device = {2, a.view.device};
+  t.ndim = std::int32_t(hold->shape.size());
+  t.dtype = {2, std::uint8_t(8 * a.view.scalar_bytes), 1};
+  t.shape = hold->shape.data();
+  t.strides = hold->strides.data();
+  t.byte_offset = 0;
+  hold->tensor.manager_ctx = hold;
+  hold->tensor.deleter = dlpack_delete;
+  // a capsule no consumer took (still named "dltensor") frees its tensor itself
+  return py::capsule(&hold->tensor, "dltensor", [](PyObject* cap) {
+    if (PyCapsule_IsValid(cap, "dltensor")) {
+      auto* m = static_cast<DLManagedTensor*>(PyCapsule_GetPointer(cap, "dltensor"));
+      if (m && m->deleter) m->deleter(m);
+    } else {
+      PyErr_Clear();
+    }
+  });
+}
+
+void bind_device_array(py::module_& m) {
+  py::class_<PyDeviceArray>(m, "DeviceArray",
+                            "A batch's field where it lies on the GPU, for PyTorch, CuPy or any DLPack reader without a copy "
+                            "(__cuda_array_interface__, DLPack). Valid until the batch's next step, reset, "
+                            "set_material or set_loads: read or copy it before then")
+      .def_property_readonly("shape", [](const PyDeviceArray& a) { return py::tuple(py::cast(a.view.shape)); })
+      .def_property_readonly("strides", [](const PyDeviceArray& a) { return py::tuple(py::cast(a.view.strides)); },
+                             "bytes per step of each dimension")
+      .def_property_readonly("dtype", [](const PyDeviceArray& a) { return a.view.scalar_bytes == 4 ? "float32" : "float64"; })
+      .def_property_readonly("__cuda_array_interface__", [](const PyDeviceArray& a) {
+        py::dict d;
+        d["shape"] = py::tuple(py::cast(a.view.shape));
+        d["typestr"] = a.view.scalar_bytes == 4 ? "<f4" : "<f8";
+        // (not marked read-only: PyTorch refuses the flag; writing would change the simulation)
+        d["data"] = py::make_tuple(a.view.data, false);
+        d["strides"] = py::tuple(py::cast(a.view.strides));
+        d["version"] = 3;
+        return d;
+      })
+      .def("__dlpack__", [](const PyDeviceArray& a, py::object /*stream*/) { return dlpack_capsule(a); },
+           py::arg("stream") = py::none(), "The field as a DLPack capsule (the engine's work is done when step() returns)")
+      .def("__dlpack_device__", [](const PyDeviceArray& a) { return py::make_tuple(2, a.view.device); })
+      .def("__repr__", [](const PyDeviceArray& a) {
+        std::string shape;
+        for (std::int64_t v : a.view.shape) shape += (shape.empty() ? "" : ", ") + std::to_string(v);
+        return "<tissue.DeviceArray (" + shape + ") " + (a.view.scalar_bytes == 4 ? "float32" : "float64") +
+               " on cuda:" + std::to_string(a.view.device) + ">";
+      });
+}
+
+/// A batch's field on the device, every scene's or one's.
+PyDeviceArray device_array(py::object self, std::optional<int> scene, Field f) {
+  PyBatch& b = self.cast<PyBatch&>();
+  tissue::Batch::DeviceView v =
+      locked(b, [&](tissue::Batch& x) { return scene ? x.device_field(*scene, f) : x.device_field(f); });
+  return {std::move(v), self};
+}
+
+/// The CUDA pointer, value count and scalar size of a __cuda_array_interface__
+/// array of `shape`, C-contiguous float32 or float64; throws naming `what`.
+std::tuple<std::uintptr_t, std::size_t, bool> cuda_array(py::handle h, const std::vector<py::ssize_t>& shape,
+                                                          const std::string& what) {
+  const py::dict cai = h.attr("__cuda_array_interface__").cast<py::dict>();
+  const auto got = cai["shape"].cast<std::vector<py::ssize_t>>();
+  const std::string type = cai["typestr"].cast<std::string>();
+  std::string want;
+  for (py::ssize_t v : shape) want += (want.empty() ? "" : ", ") + std::to_string(v);
+  if (got != shape)
+    throw std::invalid_argument(what + ": the device array must have shape (" + want + ") (scenes, tools, xyz)");
+  if (type != "<f8" && type != "<f4")
+    throw std::invalid_argument(what + ": the device array's type is " + type + "; it must be float64 or float32");
+  const std::size_t scalar = type == "<f8" ? 8 : 4;
+  if (cai.contains("strides") && !cai["strides"].is_none()) {
+    const auto strides = cai["strides"].cast<std::vector<py::ssize_t>>();
+    py::ssize_t expect = py::ssize_t(scalar);
+    for (std::size_t k = shape.size(); k-- > 0;) {
+      if (strides[k] != expect)
+        throw std::invalid_argument(what + ": the device array must be C-contiguous (call .contiguous())");
+      expect *= shape[k];
+    }
+  }
+  std::size_t count = 1;
+  for (py::ssize_t v : shape) count *= std::size_t(v);
+  return {cai["data"].cast<py::tuple>()[0].cast<std::uintptr_t>(), count, scalar == 4};
+}
+
 /// tissue.Batch: time, failures, resets and arrays.
 void bind_batch_steps(py::class_<PyBatch>& cls) {
   cls.def("step", [](PyBatch& b, py::handle ticks_arg, bool force) {
@@ -506,6 +649,14 @@ void bind_batch_steps(py::class_<PyBatch>& cls) {
            py::arg("scene") = py::none(), "(N, nodes, 3) N, or one scene's")
       .def("jacobian", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Jacobian); },
            py::arg("scene") = py::none(), "(N, elements) J, or one scene's")
+      .def("device_displacement",
+           [](py::object self, std::optional<int> s) { return device_array(self, s, Field::Displacement); },
+           py::arg("scene") = py::none(),
+           "(N, nodes, 3) m where it lies on the GPU (a DeviceArray: torch.as_tensor(a, device='cuda'), "
+           "torch.from_dlpack(a), cupy.asarray(a)); valid until the next step")
+      .def("device_internal_force",
+           [](py::object self, std::optional<int> s) { return device_array(self, s, Field::InternalForce); },
+           py::arg("scene") = py::none(), "(N, nodes, 3) N where it lies on the GPU; valid until the next step")
       .def("__repr__", [](PyBatch& b) {
         return "<tissue.Batch " + std::to_string(b.value.size()) + " scenes on " + b.value.backend() + " (" +
                b.value.precision() + ")>";
@@ -584,6 +735,14 @@ void bind_batch(py::module_& m) {
       }, py::arg("scene"), py::arg("tool"), py::arg("tip"), py::arg("axis") = py::none())
       .def("set_tool_poses", [](PyBatch& b, py::handle tips, py::handle axes) {
         const std::size_t n = b.value.size(), t = std::size_t(b.value.max_tools());
+        if (py::hasattr(tips, "__cuda_array_interface__") && axes.is_none()) {  // a device array: one copy
+          const auto [ptr, count, single] =
+              cuda_array(tips, {py::ssize_t(n), py::ssize_t(t), 3}, "set_tool_poses: tips");
+          locked(b, [&, ptr = ptr, count = count, single = single](tissue::Batch& x) {
+            x.set_tool_poses_from_device(ptr, count, single);
+          });
+          return;
+        }
         auto take = [&](py::handle h, const char* what) {
           const auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(h);
           if (!a || a.ndim() != 3 || std::size_t(a.shape(0)) != n || std::size_t(a.shape(1)) != t || a.shape(2) != 3)
@@ -595,7 +754,8 @@ void bind_batch(py::module_& m) {
         const std::vector<double> av = axes.is_none() ? std::vector<double>{} : take(axes, "axes");
         locked(b, [&](tissue::Batch& x) { x.set_tool_poses(tv, av); });
       }, py::arg("tips"), py::arg("axes") = py::none(),
-           "Every scene's tool poses from (N, max_tools, 3) arrays (m); rows past a scene's tools are ignored")
+           "Every scene's tool poses from (N, max_tools, 3) arrays (m), NumPy or a CUDA device array "
+           "(__cuda_array_interface__: PyTorch, CuPy); rows past a scene's tools are ignored")
       .def("set_grasp", [](PyBatch& b, int scene, int tool, bool down) {
         locked(b, [&](tissue::Batch& x) { x.set_grasp(scene, tool, down); });
       }, py::arg("scene"), py::arg("tool"), py::arg("down"))
@@ -633,5 +793,6 @@ PYBIND11_MODULE(_tissue, m) {
   bind_results(m);
   bind_simulation(m);
   bind_material_change(m);
+  bind_device_array(m);
   bind_batch(m);
 }

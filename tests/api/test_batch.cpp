@@ -8,10 +8,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "backends/registry.hpp"
 #include "core/box_mesh.hpp"
 #include "session/scene_batch.hpp"
 #include "tissue/batch.hpp"
@@ -131,6 +133,10 @@ TEST_P(BatchEquals, MixedMeshesMaterialsAndToolsEqualEachSceneAlone) {
   EXPECT_GT(std::abs(batch.last(2).tools[0].force[2]), std::abs(batch.last(1).tools[0].force[2]))
       << "the stiffer block presses back harder";
   for (int i = 0; i < 4; ++i) expect_same_scene(batch, i, alone[std::size_t(i)], "scene " + std::to_string(i));
+  if (GetParam().backend == "cuda") {  // four meshes' fields are not one device array
+    EXPECT_NE(thrown([&] { batch.device_field(Field::Displacement); }).find("does not lie one stride after"),
+              std::string::npos);
+  }
 }
 
 // A scene driven to blow up by a huge point load stops alone, named; the others go on equal to their scenes
@@ -209,6 +215,43 @@ TEST_P(BatchEquals, ScenesOfOneModelRunTogetherAndEqualEachAlone) {
   EXPECT_EQ(batch.last(4).tools[0].contact_nodes, 0) << "the fifth tool stays in the air";
   EXPECT_GT(batch.last(2).tools[0].grasped_nodes, 0) << "the third scene grasps";
   for (int i = 0; i < n; ++i) expect_same_scene(batch, i, alone[std::size_t(i)], "scene " + std::to_string(i));
+
+  // the fields where they lie: every scene's one stride apart, equal to what read_field copies out
+  if (GetParam().backend != "cuda") {
+    EXPECT_NE(thrown([&] { batch.device_field(Field::Displacement); }).find("keeps its fields on the host"),
+              std::string::npos);
+    return;
+  }
+  for (Field f : {Field::Displacement, Field::InternalForce}) {
+    const Batch::DeviceView all = batch.device_field(f);
+    const std::int64_t nodes = std::int64_t(batch.n_nodes(0));
+    ASSERT_EQ(all.shape, (std::vector<std::int64_t>{n, nodes, 3}));
+    ASSERT_EQ(all.strides.size(), 3u);
+    for (int i = 0; i < n; ++i) {
+      const Batch::DeviceView one = batch.device_field(i, f);
+      EXPECT_EQ(one.data, all.data + std::uintptr_t(i * all.strides[0])) << "scene " << i;
+      std::vector<unsigned char> raw(std::size_t(nodes * one.strides[0]));
+      tissue::copy_from_device(reinterpret_cast<const void*>(one.data), raw.data(), raw.size());
+      std::vector<double> host(std::size_t(nodes) * 3), device(host.size());
+      batch.read_field(i, f, host);
+      for (std::int64_t a = 0; a < nodes; ++a)
+        for (int c = 0; c < 3; ++c) {
+          const unsigned char* p = raw.data() + a * one.strides[0] + c * one.strides[1];
+          double v = 0;
+          if (one.scalar_bytes == 4) {
+            float x;
+            std::memcpy(&x, p, 4);
+            v = x;
+          } else {
+            std::memcpy(&v, p, 8);
+          }
+          device[std::size_t(3 * a + c)] = v;
+        }
+      EXPECT_EQ(device, host) << "scene " << i << " field " << int(f);
+    }
+  }
+  EXPECT_NE(thrown([&] { batch.device_field(Field::Pressure); }).find("only the displacement and the internal force"),
+            std::string::npos);
 }
 
 // A material change, given at load or later, equals the scene built with that material.

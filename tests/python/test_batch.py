@@ -132,3 +132,56 @@ def test_misuse_raises_naming_the_value(tmp_path):
     with pytest.raises(ValueError, match="more than 1000 x its size"):
         batch.set_tool_pose(1, 0, [0.0, 0.0, 1e300])
     assert batch.ticks(0) == 0, "nothing refused ran"
+
+
+def test_device_arrays_on_the_cpu_raise_naming_the_host():
+    batch = tissue.Batch("@kidney", 2, backend="cpu", depth="all")
+    with pytest.raises(ValueError, match="keeps its fields on the host"):
+        batch.device_displacement()
+
+
+cuda = pytest.mark.skipif("cuda" not in tissue.available_backends(), reason="no usable CUDA backend here")
+
+
+@cuda
+@pytest.mark.parametrize("precision", ["float", "double"])
+def test_device_arrays_are_the_fields_where_they_lie(precision):
+    """PyTorch reads a group's displacement and internal force without a copy, and sets the tool poses from a
+    device tensor: the same numbers as the NumPy copies and the host arrays."""
+    torch = pytest.importorskip("torch")
+    if not torch.cuda.is_available():
+        pytest.skip("PyTorch sees no GPU")
+    n = 6
+    batch = tissue.Batch("@kidney", n, backend="cuda", precision=precision, depth="all")
+    twin = tissue.Batch("@kidney", n, backend="cuda", precision=precision, depth="all")
+    for _ in range(110):  # the scripted probe reaches the kidney
+        batch.step()
+        twin.step()
+    tip = np.array(batch.last(0).tools[0].tip)
+    centre = batch.positions(0).mean(axis=0)
+    down = (centre - tip) / np.linalg.norm(centre - tip)  # on towards the kidney's centre
+    tips = torch.zeros((n, batch.max_tools, 3), dtype=torch.float64, device="cuda")
+    for k in range(1, 21):
+        for i in range(n):  # each scene's probe presses on to its own depth
+            tips[i, 0] = torch.as_tensor(tip + down * 2e-5 * (i + 1) * k)
+        batch.set_tool_poses(tips)               # from the device
+        twin.set_tool_poses(tips.cpu().numpy())  # from the host
+        batch.step()
+        twin.step()
+    assert (batch.forces()[:, 0, :] != 0).any(axis=1).all(), "every probe presses"
+    np.testing.assert_array_equal(batch.forces(), twin.forces())
+    for name, host in (("device_displacement", batch.displacement()), ("device_internal_force", batch.internal_force())):
+        a = getattr(batch, name)()
+        assert a.shape == (n, host.shape[1], 3)
+        seen = torch.as_tensor(a, device="cuda")               # __cuda_array_interface__
+        same = torch.from_dlpack(a)                            # DLPack
+        assert seen.data_ptr() == same.data_ptr() == a.__cuda_array_interface__["data"][0], "no copy"
+        np.testing.assert_array_equal(seen.double().cpu().numpy(), host, err_msg=name)
+        np.testing.assert_array_equal(same.double().cpu().numpy(), host, err_msg=name)
+        one = torch.as_tensor(getattr(batch, name)(3), device="cuda")
+        np.testing.assert_array_equal(one.double().cpu().numpy(), host[3], err_msg=name + " of scene 3")
+    assert float(torch.as_tensor(batch.device_displacement(), device="cuda").abs().max()) > 1e-5, "the kidneys moved"
+    with pytest.raises(ValueError, match="float64 or float32"):
+        batch.set_tool_poses(torch.zeros((n, batch.max_tools, 3), dtype=torch.int32, device="cuda"))
+    with pytest.raises(ValueError, match=r"shape \(6, 1, 3\)"):
+        batch.set_tool_poses(torch.zeros((n + 1, batch.max_tools, 3), dtype=torch.float64, device="cuda"))

@@ -101,6 +101,27 @@ class Batch {
   /// (an unknown material, E <= 0, nu outside (-1, 0.5), ...).
   void set_material(int scene, const MaterialChange& change);
 
+  // --- device arrays (cuda) ---
+  /// A field where it lies in GPU memory, as __cuda_array_interface__ and
+  /// DLPack describe it: no copy.
+  struct DeviceView {
+    std::uintptr_t data = 0;
+    std::vector<std::int64_t> shape;    ///< (scenes, nodes, 3) or (nodes, 3)
+    std::vector<std::int64_t> strides;  ///< bytes per step of each dimension
+    int scalar_bytes = 0;               ///< 4 (float) or 8 (double)
+    int device = 0;                     ///< the CUDA device
+  };
+  /// Field::Displacement or Field::InternalForce of every scene, (size(),
+  /// nodes, 3), read where the cuda backend keeps it; of one scene, (nodes,
+  /// 3). Valid until the next step(), reset, set_material or set_loads of
+  /// the batch (the displacement's buffers rotate every step); read it, or
+  /// copy it, before then. Every scene's at once needs them one stride
+  /// apart: scenes of one model in one group (docs/batch.md); otherwise
+  /// throws naming the first scene that is not, as for the cpu backend,
+  /// another field or scenes of different sizes.
+  DeviceView device_field(Field f);
+  DeviceView device_field(int scene, Field f);
+
   // --- tools ---
   /// The pose tool `tool` of `scene` reaches at the end of the next tick
   /// (Simulation::set_tool_pose).
@@ -109,6 +130,11 @@ class Batch {
   /// scenes' directions) hold size() x max_tools() x 3 values, row-major.
   /// Rows past a scene's own tools are ignored.
   void set_tool_poses(std::span<const double> tips, std::span<const double> axes = {});
+  /// The same from a CUDA device array (size() x max_tools() x 3 tips,
+  /// contiguous, float64, or float32 with `single`): one copy to the host,
+  /// then set_tool_poses(tips). Throws naming the pointer where it is not
+  /// device memory.
+  void set_tool_poses_from_device(std::uintptr_t tips, std::size_t count, bool single = false);
   void set_grasp(int scene, int tool, bool down);
   /// A new scripted path for a tool, followed from the next tick on.
   void set_tool_path(int scene, int tool, const std::vector<PathPoint>& path);
