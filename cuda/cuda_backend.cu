@@ -789,11 +789,8 @@ typename SceneGroup<T>::Graph& SceneGroup<T>::graph(const GroupTickKey& key, int
   const int n = slots();
   g->skip_dev.allocate(n);
   g->skip_host.allocate(n);
-  const cudaStream_t st = stream_.get();
   const SceneSlots where{rep, static_cast<std::int64_t>(arena_.stride()), static_cast<std::int64_t>(sizeof(ContactTools<T>))};
-  cudaGraph_t captured = nullptr;
-  CUDA_CHECK(cudaStreamBeginCapture(st, cudaStreamCaptureModeThreadLocal));
-  try {
+  g->exec = capture_graph(stream_.get(), [&](cudaStream_t st) {
     if (key.tool_bytes > 0)
       CUDA_CHECK(cudaMemcpy2DAsync(tools_dev_.data(), sizeof(ContactTools<T>), tools_host_.data(),
                                    sizeof(ContactTools<T>), key.tool_bytes, n, cudaMemcpyHostToDevice, st));
@@ -807,17 +804,7 @@ typename SceneGroup<T>::Graph& SceneGroup<T>::graph(const GroupTickKey& key, int
     const char* first = reinterpret_cast<const char*>(members_[rep]->result_device()) - std::size_t(rep) * arena_.stride();
     CUDA_CHECK(cudaMemcpy2DAsync(results_host_.data(), sizeof(Reductions), first, arena_.stride(), sizeof(Reductions),
                                  n, cudaMemcpyDeviceToHost, st));
-  } catch (...) {
-    cudaStreamEndCapture(st, &captured);
-    if (captured) cudaGraphDestroy(captured);
-    throw;
-  }
-  CUDA_CHECK(cudaStreamEndCapture(st, &captured));
-  cudaGraphExec_t exec = nullptr;
-  const cudaError_t err = cudaGraphInstantiate(&exec, captured, 0);
-  cudaGraphDestroy(captured);
-  CUDA_CHECK(err);
-  g->exec = GraphExec(exec);
+  });
   return *g;
 }
 

@@ -196,6 +196,10 @@ template <class T>
 cudaGraphExec_t Stepper<T>::cached_graph(const GraphKey& key, const std::function<void(cudaStream_t)>& enqueue,
                                          cudaStream_t stream) {
   if (auto it = graphs_.find(key); it != graphs_.end()) return it->second.get();
+  return graphs_.emplace(key, capture_graph(stream, enqueue)).first->second.get();
+}
+
+GraphExec capture_graph(cudaStream_t stream, const std::function<void(cudaStream_t)>& enqueue) {
   cudaGraph_t g = nullptr;
   CUDA_CHECK(cudaStreamBeginCapture(stream, cudaStreamCaptureModeThreadLocal));
   try {
@@ -210,7 +214,7 @@ cudaGraphExec_t Stepper<T>::cached_graph(const GraphKey& key, const std::functio
   const cudaError_t err = cudaGraphInstantiate(&exec, g, 0);
   cudaGraphDestroy(g);
   CUDA_CHECK(err);
-  return graphs_.emplace(key, GraphExec(exec)).first->second.get();
+  return GraphExec(exec);
 }
 
 template <class T>

@@ -61,6 +61,10 @@ class GraphExec {
 /// may then run beside the check (kPass3BesideCheck: a model without law
 /// terms computes its forces while the check runs; cuda/tled.cuh
 /// element_forces_beside_check_kernel).
+/// The work `enqueue` queues on `stream`, captured as one graph and
+/// instantiated (a failure leaves no capture open).
+GraphExec capture_graph(cudaStream_t stream, const std::function<void(cudaStream_t)>& enqueue);
+
 enum class StepStart { kPass1, kPass3, kPass3BesideCheck };
 
 /// What a cached graph holds: `steps` steps from buffer phase `phase`, with
