@@ -437,10 +437,13 @@ TEST_P(Contract, ContactNeverPullsAndEndsWhenTheToolWithdraws) {
   ScriptedDevice dev(press_at(0.0203, 0.0196, r, 0.002, 0.1));  // retracts to 3 mm above at t = 0.3 s
   double min_fz = INFINITY;
   TickReport rep;
+  std::vector<std::string> notes;
   while (sched.time() < 0.5) {
     rep = sched.tick(dev);
     if (rep.contact_nodes > 0) min_fz = std::min(min_fz, rep.force.z);
+    for (std::string& s : sched.take_notes()) notes.push_back(std::move(s));
   }
+  EXPECT_TRUE(notes.empty()) << "a slow press and withdrawal is neither fast nor through the surface: " << notes[0];
   EXPECT_GE(min_fz, 0.0) << "a frictionless contact never pulls the tool into the tissue";
   EXPECT_EQ(rep.contact_nodes, 0);
   EXPECT_EQ(norm(rep.force), 0.0);
