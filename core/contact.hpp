@@ -27,9 +27,13 @@
 //     beyond its centre) -- (a) moves that face's corners and
 //     (b) the face along -N to the far side of the tip (tip_exit),
 //     instead of radially out through the tool: a tool cannot slip through
-//     the surface. A face nearest the shaft instead is the rim of the hole
-//     the shaft makes: its corners go out radially from the shaft (moving
-//     it along -N would carry it down the whole shaft);
+//     the surface. A face lying along the shaft (N crosswise to it) that
+//     the shaft lies more than kThrough radii behind, under the face or
+//     having crossed its plane since the previous check, goes the same way
+//     to the shaft's far side (through_exit), the whole face at least as
+//     far as its point over the axis. A face across the shaft instead is
+//     the rim of the hole the shaft makes: its corners go out radially from
+//     the shaft (moving it along -N would carry it down the whole shaft);
 //  2. each surface node combines its triangles' proposals dx_i, in
 //     ascending triangle order, into one correction that satisfies each of
 //     them along its own direction: dx = dx_1, then for every further
@@ -357,6 +361,53 @@ TISSUE_HD T tip_exit(const Capsule<T>& cap, Vec3<T> x, Vec3<T> d) {
   return c < T(0) && disc > T(0) ? -b + std::sqrt(disc) : T(0);
 }
 
+/// A direction d is crosswise to the shaft when |d . axis| is below this
+/// (d within 60 degrees of perpendicular to the shaft): moving along it
+/// crosses the shaft's width, at most 2 r / sin(60 degrees), never its length.
+template <class T>
+inline constexpr T kCrosswise = T(0.5);
+
+/// How far a point x must move along the unit direction d to leave the tool
+/// where a face has passed it (0 when x is outside): the tip sphere's far
+/// side (tip_exit), and, where d is crosswise to the shaft, the shaft's far
+/// side too -- a face that the shaft lies behind (a tool lying along the
+/// surface pressed through it) goes back under the shaft, not out over it.
+/// Along the shaft only the tip sphere counts (tip_exit says why).
+template <class T>
+TISSUE_HD T through_exit(const Capsule<T>& cap, Vec3<T> x, Vec3<T> d) {
+  T exit = tip_exit(cap, x, d);
+  const Vec3<T> ab = cap.b - cap.a;
+  const T len = norm(ab);
+  if (!(len > T(0))) return exit;
+  const Vec3<T> e = (T(1) / len) * ab;
+  const T de = dot(d, e);
+  if (!(std::fabs(de) < kCrosswise<T>)) return exit;
+  const Vec3<T> m = x - cap.a;
+  const T me = dot(m, e);
+  const T sx = me < T(0) ? T(0) : (me > len ? len : me);
+  if (!(norm(m - sx * e) < cap.r)) return exit;  // outside the capsule: nothing to leave
+  // the capsule is convex and holds x: the ray leaves it at the largest exit of its three pieces
+  // (tip sphere, cylinder level with the shaft, far end's sphere)
+  const Vec3<T> mp = m - me * e, dp = d - de * e;
+  const T a = dot(dp, dp), b = dot(mp, dp), c = dot(mp, mp) - cap.r * cap.r, disc = b * b - a * c;
+  if (a > T(0) && disc > T(0)) {
+    const T root = std::sqrt(disc);
+    T lo = (-b - root) / a, hi = (-b + root) / a;  // inside the infinite cylinder
+    if (de != T(0)) {                               // and level with the shaft
+      const T t0 = -me / de, t1 = (len - me) / de;
+      lo = t0 < t1 ? (lo > t0 ? lo : t0) : (lo > t1 ? lo : t1);
+      hi = t0 < t1 ? (hi < t1 ? hi : t1) : (hi < t0 ? hi : t0);
+    } else if (me < T(0) || me > len) {
+      hi = lo - T(1);
+    }
+    if (hi >= lo && hi > exit) exit = hi;
+  }
+  const Vec3<T> mb = x - cap.b;
+  const T bb = dot(mb, d), cb = dot(mb, mb) - cap.r * cap.r, discb = bb * bb - cb;
+  if (discb > T(0) && -bb + std::sqrt(discb) > exit) exit = -bb + std::sqrt(discb);
+  return exit;
+}
+
 /// Per-corner result of the contact sweep of one triangle.
 template <class T>
 struct CornerContact {
@@ -462,7 +513,7 @@ TISSUE_HD CornerPush<T> corner_push(const Capsule<T>& cap, Vec3<T> x, bool throu
   Vec3<T> n;
   if (!push_out_of_capsule(cap, p.x, n)) return p;
   p.inside = true;
-  const T exit = through ? tip_exit(cap, x, T(-1) * N) : T(0);
+  const T exit = through ? through_exit(cap, x, T(-1) * N) : T(0);
   if (exit > T(0)) p.x = x + exit * (T(-1) * N);  // to the face's far side, not out through the tool
   return p;
 }
@@ -501,17 +552,38 @@ TISSUE_HD void sweep_touching_triangle(const ContactTools<T>& tools, const Capsu
       Vec3<T> c;
       const Vec3<T> N = unit_or(cross(x[1] - x[0], x[2] - x[0]), axis_escape(cap, T(0)));  // outward
       Vec3<T> q = parts.deepest(cap, x, w, c);
-      // only the tip passes through a face: the axis meets the face at the tip, or the tip is
-      // behind the face's plane having crossed it since the last check, or behind it and over the
-      // face (its nearest point inside the face: the face cuts the tip sphere beyond its centre).
-      // A face beside the shaft is a hole's rim, and a face whose edge the tissue tilted past the
+      // the tip passes through a face: the axis meets the face at the tip, or the tip is behind
+      // the face's plane having crossed it since the last check, or behind it and over the face
+      // (its nearest point inside the face: the face cuts the tip sphere beyond its centre).
+      // The shaft passes a face that lies along it (its normal crosswise to the shaft) the same
+      // two ways: crossed since the last check, or lying under the face -- a tool lying on
+      // the surface, which the tissue pushed more than its radius into it in one step, would
+      // otherwise have that face pushed radially out over it and sink through the surface.
+      // A face across the shaft is a hole's rim, and a face whose edge the tissue tilted past the
       // tip is rounded off: both are pushed radially.
       const bool at_tip = !(norm(c - cap.a) > kPierced<T> * cap.r);
-      const Vec3<T> tip_before = capsule(t, j - 1).a;
+      const Capsule<T> before = capsule(t, j - 1);
+      const T along = at_tip ? T(0) : closest_on_segment(cap.a, cap.b, c);
+      const Vec3<T> c_before = before.a + along * (before.b - before.a);  // c's axis point at the last check
       const bool behind = dot(c - q, N) < -kThrough<T> * cap.r;
-      const bool crossed = behind && dot(tip_before - q, N) >= T(0);
+      const bool crossed = behind && dot(c_before - q, N) >= T(0);
       const bool under = behind && w[0] > T(0) && w[1] > T(0) && w[2] > T(0);
-      const bool through = at_tip && (!(norm(q - c) > kPierced<T> * cap.r) || crossed || under);
+      // over the face, for the shaft: the face's plane lies over c to within kThrough radii sideways
+      // (its nearest point is where the axis passes under it, inside the face or on its edge: a shaft
+      // lying across a face is nearest it all along its chord, and the first found is on an edge)
+      const Vec3<T> up = q - c;
+      const Vec3<T> side = up - dot(up, N) * N;
+      const bool over = behind && !(norm(side) > kThrough<T> * cap.r);
+      const Vec3<T> shaft = cap.b - cap.a;
+      const bool lies_along = !at_tip && std::fabs(dot(N, shaft)) < kCrosswise<T> * norm(shaft);
+      const bool tip_through = at_tip && (!(norm(q - c) > kPierced<T> * cap.r) || crossed || under);
+      const bool shaft_through = !tip_through && lies_along && norm(up) < cap.r && (crossed || over);
+      const bool through = tip_through || shaft_through;
+      // a face the shaft lies under goes whole to the shaft's far side: the shaft is under it all
+      // along a chord, and moving the corners by barycentric shares of one point's exit would tilt
+      // the face about its far corner until the shaft pierced it
+      const T shaft_exit = shaft_through ? through_exit(cap, q, T(-1) * N) : T(0);
+      const Vec3<T> x_check[3] = {x[0], x[1], x[2]};
       bool moved = false;  // by (a): else (b) starts from the deepest point found above
       CornerPush<T> push[3];
       parts.push_corners(cap, x, through, N, push);
@@ -527,6 +599,21 @@ TISSUE_HD void sweep_touching_triangle(const ContactTools<T>& tools, const Capsu
         out[i].tool = static_cast<signed char>(t);
       }
       if (!tools.face) continue;
+      if (shaft_through) {  // (b) for a face the shaft lies under: every corner at least shaft_exit along -N
+        const bool all_blocked = block[0] && block[1] && block[2];
+        for (int i = 0; i < 3; ++i) {
+          if (block[i]) {  // it cannot move; reported where none of the face can (as face contact does)
+            if (all_blocked) out[i].blocked = block[i];
+            if (all_blocked && out[i].tool < 0) out[i].tool = static_cast<signed char>(t);
+            continue;
+          }
+          const T gone = -dot(x[i] - x_check[i], N);
+          if (!(gone < shaft_exit)) continue;
+          x[i] = x[i] + (shaft_exit - gone) * (T(-1) * N);
+          out[i].tool = static_cast<signed char>(t);
+        }
+        continue;
+      }
       if (moved) q = parts.deepest(cap, x, w, c);  // (b) face contact, after (a)
       const Vec3<T> d = q - c;
       const T dist = norm(d);
@@ -536,7 +623,7 @@ TISSUE_HD void sweep_touching_triangle(const ContactTools<T>& tools, const Capsu
       const bool pierced = !(dist > kPierced<T> * cap.r);  // the direction out is the face's, not rounding's
       if (pierced && !through) continue;  // the shaft through a rim face: its corners go out radially, by (a)
       const Vec3<T> n = through || pierced ? T(-1) * N : (T(1) / dist) * d;
-      const T delta = through || pierced ? tip_exit(cap, q, n) : reach - dist;
+      const T delta = through || pierced ? through_exit(cap, q, n) : reach - dist;
       if (!(delta > T(0))) continue;
       T wsum = T(0);
       for (int i = 0; i < 3; ++i) wsum += block[i] ? T(0) : w[i] * w[i];

@@ -43,19 +43,40 @@ double body_extent(const TissueModel<double>& m) {
   return ext;
 }
 
-bool inside_reference_surface(const TissueModel<double>& m, Vec3<double> p) {
+bool inside_surface(const TissueModel<double>& m, std::span<const double> u, Vec3<double> p) {
   // a direction no mesh axis or edge is likely to share, long enough to leave the body
   const Vec3<double> dir = unit_or(Vec3<double>{1.0, 0.0137, 0.0071}, Vec3<double>{1, 0, 0});
-  const Vec3<double> far = p + (4 * body_extent(m) + 1.0) * dir;
+  const index_t n = m.n_nodes;
+  const auto at = [&](index_t a) {
+    const Vec3<double> X = reference_position(m, a);
+    return u.empty() ? X : X + Vec3<double>{u[a], u[n + a], u[2 * std::size_t(n) + a]};
+  };
+  double largest_u = 0;
+  for (double v : u) largest_u = std::max(largest_u, std::fabs(v));
+  const double extent = body_extent(m) + 2 * largest_u;
+  const Vec3<double> far = p + (4 * extent + 1.0) * dir;
   int crossings = 0;
   const index_t nt = m.n_tris;
   for (index_t t = 0; t < nt; ++t) {
     double bary[2];
-    const Vec3<double> P0 = reference_position(m, m.tris[t]), P1 = reference_position(m, m.tris[nt + t]),
-                       P2 = reference_position(m, m.tris[2 * nt + t]);
-    if (segment_triangle(p, far, P0, P1, P2, bary) > 0) ++crossings;
+    if (segment_triangle(p, far, at(m.tris[t]), at(m.tris[nt + t]), at(m.tris[2 * nt + t]), bary) > 0) ++crossings;
   }
   return crossings % 2 == 1;
+}
+
+bool inside_reference_surface(const TissueModel<double>& m, Vec3<double> p) { return inside_surface(m, {}, p); }
+
+/// The median length of the model's surface edges (m).
+double median_surface_edge(const TissueModel<double>& m) {
+  const index_t nt = m.n_tris;
+  std::vector<double> len;
+  len.reserve(3 * std::size_t(nt));
+  for (index_t t = 0; t < nt; ++t)
+    for (int k = 0; k < 3; ++k)
+      len.push_back(norm(reference_position(m, m.tris[k * nt + t]) - reference_position(m, m.tris[((k + 1) % 3) * nt + t])));
+  if (len.empty()) return 0;
+  std::nth_element(len.begin(), len.begin() + long(len.size() / 2), len.end());
+  return len[len.size() / 2];
 }
 
 Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, SchedulerSettings settings)
@@ -80,6 +101,13 @@ Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, Schedul
   prev_.assign(settings_.tools.size(), ToolPose{});
   motion_.assign(settings_.tools.size(), ToolMotion{});
   rigid_reported_.assign(settings_.tools.size(), 0);
+  last_contact_.assign(settings_.tools.size(), 0);
+  last_force_.assign(settings_.tools.size(), 0.0);
+  through_reported_.assign(settings_.tools.size(), 0);
+  fast_reported_.assign(settings_.tools.size(), 0);
+  // a contact carries the surface it meets with the tool within each step: beyond half an edge per step
+  // the elements under it deform by a large fraction of their size in one step (and invert at a few edges)
+  follow_step_ = 0.5 * median_surface_edge(model_);
   // depth N: an empty region (nothing moves) until the first contact seeds it
   region_ = backend_.build_region({}, depth_);
 }
@@ -123,12 +151,88 @@ bool Scheduler::grow_region(const Reductions& r) {
   return true;
 }
 
+std::string Scheduler::fast_tools(bool in_contact_only, const Reductions& r) const {
+  std::string out;
+  for (std::size_t t = 0; t < settings_.tools.size(); ++t) {
+    const ToolMotion& m = motion_[t];
+    const double l = settings_.tools[t].shape.shaft;
+    const double move = std::max(norm(m.to.tip - m.from.tip), norm((m.to.tip + l * m.to.axis) - (m.from.tip + l * m.from.axis)));
+    const double per_step = move / steps_per_tick_;
+    if (!(per_step > follow_step_)) continue;
+    if (in_contact_only && r.tools[t].contact + r.tools[t].rigid + r.tools[t].outside == 0) continue;
+    out += fmt::format("{}tool '{}' moved {:.3g} mm per TLED step ({:.3g} m/s)", out.empty() ? "" : "; ",
+                       settings_.tools[t].shape.name, 1e3 * per_step, move / settings_.tick);
+  }
+  if (!out.empty())
+    out += fmt::format(
+        ": a contact carries the surface it meets along with the tool within each step (checked every r / 2 of "
+        "its path), and more than {:.3g} mm (half the surface's median edge) a step deforms the elements under it "
+        "by a large part of their size; slow the tool or shorten the step",
+        1e3 * follow_step_);
+  return out;
+}
+
+void Scheduler::note_fast_tools(const Reductions& r) {
+  for (std::size_t t = 0; t < settings_.tools.size(); ++t) {
+    const ToolReduction& tr = r.tools[t];
+    const bool touching = tr.contact + tr.rigid + tr.outside > 0;
+    if (!touching) {
+      fast_reported_[t] = 0;
+      continue;
+    }
+    if (fast_reported_[t]) continue;
+    const ToolMotion& m = motion_[t];
+    const double l = settings_.tools[t].shape.shaft;
+    const double move = std::max(norm(m.to.tip - m.from.tip), norm((m.to.tip + l * m.to.axis) - (m.from.tip + l * m.from.axis)));
+    if (!(move / steps_per_tick_ > follow_step_)) continue;
+    fast_reported_[t] = 1;
+    notes_.push_back(fmt::format("tick {}: tool '{}' moved {:.3g} mm per TLED step ({:.3g} m/s) in contact: a contact "
+                                 "carries the surface it meets along with the tool within each step, and more than "
+                                 "{:.3g} mm (half the surface's median edge) a step deforms the elements under it by a "
+                                 "large part of their size; slow the tool or shorten the step",
+                                 tick_, settings_.tools[t].shape.name, 1e3 * move / steps_per_tick_,
+                                 move / settings_.tick, 1e3 * follow_step_));
+  }
+}
+
+void Scheduler::note_passed_through(const Reductions& r) {
+  std::vector<double> u;  // downloaded once, only where a contact ended
+  for (std::size_t t = 0; t < settings_.tools.size(); ++t) {
+    const ToolReduction& tr = r.tools[t];
+    const index_t before = last_contact_[t];
+    const double force = last_force_[t];
+    last_contact_[t] = tr.contact;
+    last_force_[t] = norm(tr.reaction);
+    if (tr.contact > 0) through_reported_[t] = 0;
+    if (before == 0 || tr.contact > 0 || tr.rigid > 0 || through_reported_[t]) continue;
+    if (u.empty()) u = backend_.download().u;
+    // the tip, the shaft's middle and its end: the part that went through
+    const ToolMotion& m = motion_[t];
+    const double l = settings_.tools[t].shape.shaft;
+    const char* part = nullptr;
+    if (inside_surface(model_, u, m.to.tip))
+      part = "tip";
+    else if (l > 0 && inside_surface(model_, u, m.to.tip + 0.5 * l * m.to.axis))
+      part = "shaft";
+    if (part == nullptr) continue;
+    through_reported_[t] = 1;
+    notes_.push_back(fmt::format(
+        "tick {}: tool '{}' lost contact with its {} inside the tissue (it pushed with {:.3g} N the tick before): it "
+        "went through the surface, so it feels nothing until it comes out. The tissue pushed a face more than about "
+        "the tool's radius into it in one TLED step (the contact's limit, docs/contact.md); reduce the indentation "
+        "or the time step",
+        tick_, settings_.tools[t].shape.name, part, force));
+  }
+}
+
 void Scheduler::check_health(const Reductions& r, long first_step) const {
-  if (r.bad_elem >= 0)
+  if (r.bad_elem >= 0) {
+    const std::string fast = fast_tools(false, r);
     throw SimulationError(fmt::format(
         "tick {} (TLED steps {}..{}): element {} has J = {:.4g} (inverted or degenerate); stopping. "
-        "Reduce the indentation or the time step",
-        tick_, first_step, total_steps_ - 1, r.bad_elem, r.bad_J));
+        "Reduce the indentation or the time step{}",
+        tick_, first_step, total_steps_ - 1, r.bad_elem, r.bad_J, fast.empty() ? "" : ". " + fast));
+  }
   if (!r.finite)
     throw SimulationError(fmt::format("tick {} (TLED steps {}..{}): non-finite displacement or force; stopping",
                                       tick_, first_step, total_steps_ - 1));
@@ -220,6 +324,8 @@ TickReport Scheduler::end_tick() {
   total_steps_ += steps_per_tick_;
   check_health(r, first_step);
   note_contacts(r);
+  note_fast_tools(r);
+  note_passed_through(r);
 
   rep.tick = tick_;
   rep.time = t_end;

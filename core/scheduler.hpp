@@ -141,7 +141,9 @@ class Scheduler {
   void set_loads(std::span<const index_t> nodes, std::span<const double> force);
 
   /// Notices since the last call (a tool pressing a rigid support, naming
-  /// its nodes; a tool starting inside the body): one line each.
+  /// its nodes; a tool starting inside the body; a tool moving more than
+  /// half the surface's median edge per TLED step in contact; a tool whose
+  /// contact ended inside the tissue): one line each.
   std::vector<std::string> take_notes();
 
  private:
@@ -149,6 +151,13 @@ class Scheduler {
   bool grow_region(const Reductions& r);
   void check_health(const Reductions& r, long first_step) const;
   void note_contacts(const Reductions& r);
+  /// The tools that moved more than follow_step_ per TLED step this tick, as
+  /// a sentence naming them ("" when none): for the failure message and notes.
+  std::string fast_tools(bool in_contact_only, const Reductions& r) const;
+  void note_fast_tools(const Reductions& r);
+  /// A tool whose contact ended while it lies inside the tissue's deformed
+  /// surface went through that surface: noted, naming it, once per episode.
+  void note_passed_through(const Reductions& r);
 
   Backend& backend_;
   const TissueModel<double>& model_;
@@ -163,6 +172,11 @@ class Scheduler {
   std::vector<ToolPose> prev_;  ///< each tool's pose at the end of the last tick
   std::vector<ToolMotion> motion_;
   std::vector<index_t> rigid_reported_;  ///< per tool: rigid count last reported (0 = none)
+  std::vector<index_t> last_contact_;    ///< per tool: contact nodes at the end of the last tick
+  std::vector<double> last_force_;       ///< per tool: |force| at the end of the last tick (N)
+  std::vector<char> through_reported_;   ///< per tool: its pass through the surface was noted
+  std::vector<char> fast_reported_;      ///< per tool: its speed in contact was noted
+  double follow_step_ = 0;               ///< m: the most a tool may move per TLED step in contact unnoted
   RegionSizes region_;
   std::vector<index_t> seeds_;  ///< seeds of the current region (sorted)
   double visco_power_ = 0;      ///< the last tick's Reductions::visco_power (W)
@@ -179,6 +193,9 @@ class Scheduler {
 /// configuration (ray parity along +x; points on the surface count as
 /// outside). For the start-inside notice and tests.
 bool inside_reference_surface(const TissueModel<double>& m, Vec3<double> p);
+/// The same for the surface displaced by u (3 x n_nodes, components in
+/// blocks of n_nodes, as Fields::u).
+bool inside_surface(const TissueModel<double>& m, std::span<const double> u, Vec3<double> p);
 
 /// Largest extent of the model's reference bounding box (m).
 double body_extent(const TissueModel<double>& m);

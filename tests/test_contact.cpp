@@ -1491,23 +1491,23 @@ TYPED_TEST(SweepTriangle, ShaftThroughARimFacePushesItsCornersRadiallyNotAlongTh
       EXPECT_LE(std::fabs(double(out[i].dx.z)), tol<T>(10 * r)) << "corner " << i;
     }
   }
-  {  // a face beside the shaft with its normal across it, +x, the axis 0.5 r behind it (as a tilted wall of the
-     // hole): P = (0.5, -0.1, -0.3) r, (0.5, 0.1, -0.3) r, (0.5, -0.1, 0.3) r, each 0.5099 r from the axis, go
-     // radially to (0.5, +-0.1) r / 0.5099 = (0.98058, +-0.19612) r at their heights (not across the shaft to
-     // x < 0). The pushed face is then 0.98058 r >= reach = 0.95 r from the axis (legs 0.3922 r and 0.6 r:
-     // circumradius 0.3584 r, sagitta 0.066 r over the cap 0.05 r): no face contact
+  {  // a face lying along the shaft, its outward normal +x across it, the axis 0.5 r behind it under the face:
+     // P = (0.5, -0.1, -0.3) r, (0.5, 0.1, -0.3) r, (0.5, -0.1, 0.3) r. The shaft is on the tissue's side of a
+     // face it lies along: it has passed it (as a tool lying on the surface pressed through it would), so the
+     // corners go along -N to the shaft's far side, x = -sqrt(r^2 - y^2) = -0.99499 r at y = +-0.1 r (not
+     // radially out to x = +0.98 r, which leaves the shaft inside the tissue), and the face after them
     const VD p[3] = {{0.5 * r, -0.1 * r, -0.3 * r}, {0.5 * r, 0.1 * r, -0.3 * r}, {0.5 * r, -0.1 * r, 0.3 * r}};
     const Vec3<T> x[3] = {as<T>(p[0]), as<T>(p[1]), as<T>(p[2])};
     ASSERT_GT(dot(outward(x), Vec3<T>{1, 0, 0}), T(0.99));
     CornerContact<T> out[3];
     Vec3<T> y[3];
     sweep(tools, 0, x, kFree, out, y);
-    const double s = r / std::hypot(0.5 * r, 0.1 * r);
     for (int i = 0; i < 3; ++i) {
-      EXPECT_LE(dist(y[i], as<T>(VD{s * p[i].x, s * p[i].y, p[i].z})), tol<T>(10 * r)) << "corner " << i;
-      EXPECT_GT(double(y[i].x), 0.0) << "corner " << i;
+      EXPECT_LE(double(y[i].x), -std::sqrt(1 - 0.01) * r + tol<T>(10 * r)) << "corner " << i;
+      EXPECT_LE(std::fabs(double(out[i].dx.y)) + std::fabs(double(out[i].dx.z)), tol<T>(10 * r)) << "corner " << i;
       EXPECT_EQ(out[i].tool, 0);
     }
+    EXPECT_GE(deepest_distance(cap, y), ref_reach(y, r) - tol<T>(10 * r));
   }
   {  // a big face pierced by the shaft 0.5 r up from a tip 0.5 r behind it (the tip sphere reaches 0.5 r past the
      // face, the shaft through it): the nearest axis point is the piercing point, not the tip, so this is a rim
@@ -1520,6 +1520,75 @@ TYPED_TEST(SweepTriangle, ShaftThroughARimFacePushesItsCornersRadiallyNotAlongTh
     for (int i = 0; i < 3; ++i)
       EXPECT_TRUE(out[i].dx.x == T(0) && out[i].dx.y == T(0) && out[i].dx.z == T(0) && out[i].tool == -1);
   }
+}
+
+// A horizontal capsule (shaft along +x) 0.5 r under a face larger than the
+// tool, crossing it from edge to edge: the face (-3,-3,0), (3,-3,0),
+// (-3,3,0), outward +z, r = 1, the axis from (-4,-1,-0.5) to (4,-1,-0.5).
+// Its ends lie beyond the face, so the axis point nearest the face is where
+// it passes under an edge, (1,-1,-0.5) under the hypotenuse, inside the
+// shaft, not the tip. Only the tip passed faces before: this face went
+// radially out from that point, up to 0.95 r over the axis, and the shaft
+// was through the surface (a capsule pressed flat sank through the block's
+// top). The shaft holds it as the tip does: the face goes along -N to the
+// shaft's far side, its reach under the axis, no corner moving sideways.
+TYPED_TEST(SweepTriangle, AShaftLyingUnderAFaceMovesItToTheShaftsFarSide) {
+  using T = TypeParam;
+  const Vec3<T> x[3] = {{-3, -3, 0}, {3, -3, 0}, {-3, 3, 0}};
+  const auto tools = static_tool<T>({-4, -1, -0.5}, {1, 0, 0}, 1, 8);
+  const Capsule<T> cap = last_capsule(tools);
+  {
+    T w[3];
+    Vec3<T> c;
+    triangle_deepest_point(cap, x, w, c);
+    ASSERT_GT(norm(c - cap.a), T(1)) << "the nearest axis point is on the shaft, not the tip";
+  }
+  CornerContact<T> out[3];
+  Vec3<T> y[3];
+  sweep(tools, 0, x, kFree, out, y);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_LE(double(out[i].dx.z), 0.0) << "corner " << i << ": never up over the shaft";
+    EXPECT_EQ(double(out[i].dx.x), 0.0) << "corner " << i;
+    EXPECT_EQ(double(out[i].dx.y), 0.0) << "corner " << i;
+  }
+  // the face is now under the shaft, at least its reach from the axis: the shaft is back on its outer side
+  {
+    T w[3];
+    Vec3<T> c;
+    const Vec3<T> q = triangle_deepest_point(cap, y, w, c);
+    EXPECT_LT(double(q.z), double(c.z));
+    EXPECT_GE(double(norm(q - c)), ref_reach(y, 1.0) - tol<T>(10));
+  }
+  // a face in front of the shaft is pushed away from it (down) as before, and one at the shaft's level (the
+  // axis within kThrough r behind its plane) radially: up, the level band where a hole's rim lies
+  for (double z : {0.5, -0.05}) {
+    const auto other = static_tool<T>({-4, -1, z}, {1, 0, 0}, 1, 8);
+    sweep(other, 0, x, kFree, out, y);
+    for (int i = 0; i < 3; ++i)
+      EXPECT_GE((z > 0 ? -1 : 1) * double(out[i].dx.z), 0.0) << "z " << z << " corner " << i;
+  }
+}
+
+// The exit along a direction crosswise to the shaft is its far side; along
+// the shaft it is only the tip sphere's (a rim face is never carried the
+// shaft's length).
+TYPED_TEST(SweepTriangle, ThroughExitLeavesAcrossTheShaftNotAlongIt) {
+  using T = TypeParam;
+  const Capsule<T> cap{{0, 0, 0}, {10, 0, 0}, 1};
+  // from (5, 0, 0.5) straight down: the cylinder's far side at z = -1, 1.5 away
+  EXPECT_NEAR(double(through_exit(cap, Vec3<T>{5, 0, 0.5}, Vec3<T>{0, 0, -1})), 1.5, tol<T>(10));
+  // from (5, 0.6, 0.5) down: z = -sqrt(1 - 0.36) = -0.8, 1.3 away
+  EXPECT_NEAR(double(through_exit(cap, Vec3<T>{5, 0.6, 0.5}, Vec3<T>{0, 0, -1})), 1.3, tol<T>(10));
+  // near the far end, level with it: the end's sphere, from (10.5, 0, 0.5) down to z = -sqrt(1 - 0.25)
+  EXPECT_NEAR(double(through_exit(cap, Vec3<T>{10.5, 0, 0.5}, Vec3<T>{0, 0, -1})), 0.5 + std::sqrt(0.75), tol<T>(10));
+  // along the shaft: the tip sphere only (0 here, far from it), never the shaft's length
+  EXPECT_EQ(double(through_exit(cap, Vec3<T>{5, 0, 0.5}, Vec3<T>{1, 0, 0})), 0.0);
+  EXPECT_NEAR(double(through_exit(cap, Vec3<T>{0.2, 0, 0}, Vec3<T>{-1, 0, 0})), 1.2, tol<T>(10));
+  // outside the capsule: nothing to leave
+  EXPECT_EQ(double(through_exit(cap, Vec3<T>{5, 0, 1.5}, Vec3<T>{0, 0, -1})), 0.0);
+  // a sphere (no shaft): tip_exit
+  const Capsule<T> ball{{0, 0, 0}, {0, 0, 0}, 1};
+  EXPECT_EQ(through_exit(ball, Vec3<T>{0.3, 0.2, 0.1}, Vec3<T>{0, 0, -1}), tip_exit(ball, Vec3<T>{0.3, 0.2, 0.1}, Vec3<T>{0, 0, -1}));
 }
 
 // A tool at the surface's level beside a face (its centre 0.05 = 0.083 r
