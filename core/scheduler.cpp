@@ -151,13 +151,17 @@ bool Scheduler::grow_region(const Reductions& r) {
   return true;
 }
 
+double Scheduler::tick_move(std::size_t t) const {
+  // the farther of the tip's path and the shaft end's this tick
+  const ToolMotion& m = motion_[t];
+  const double l = settings_.tools[t].shape.shaft;
+  return std::max(norm(m.to.tip - m.from.tip), norm((m.to.tip + l * m.to.axis) - (m.from.tip + l * m.from.axis)));
+}
+
 std::string Scheduler::fast_tools(bool in_contact_only, const Reductions& r) const {
   std::string out;
   for (std::size_t t = 0; t < settings_.tools.size(); ++t) {
-    const ToolMotion& m = motion_[t];
-    const double l = settings_.tools[t].shape.shaft;
-    const double move = std::max(norm(m.to.tip - m.from.tip), norm((m.to.tip + l * m.to.axis) - (m.from.tip + l * m.from.axis)));
-    const double per_step = move / steps_per_tick_;
+    const double move = tick_move(t), per_step = move / steps_per_tick_;
     if (!(per_step > follow_step_)) continue;
     if (in_contact_only && r.tools[t].contact + r.tools[t].rigid + r.tools[t].outside == 0) continue;
     out += fmt::format("{}tool '{}' moved {:.3g} mm per TLED step ({:.3g} m/s)", out.empty() ? "" : "; ",
@@ -181,9 +185,7 @@ void Scheduler::note_fast_tools(const Reductions& r) {
       continue;
     }
     if (fast_reported_[t]) continue;
-    const ToolMotion& m = motion_[t];
-    const double l = settings_.tools[t].shape.shaft;
-    const double move = std::max(norm(m.to.tip - m.from.tip), norm((m.to.tip + l * m.to.axis) - (m.from.tip + l * m.from.axis)));
+    const double move = tick_move(t);
     if (!(move / steps_per_tick_ > follow_step_)) continue;
     fast_reported_[t] = 1;
     notes_.push_back(fmt::format("tick {}: tool '{}' moved {:.3g} mm per TLED step ({:.3g} m/s) in contact: a contact "

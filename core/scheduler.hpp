@@ -154,6 +154,8 @@ class Scheduler {
   /// The tools that moved more than follow_step_ per TLED step this tick, as
   /// a sentence naming them ("" when none): for the failure message and notes.
   std::string fast_tools(bool in_contact_only, const Reductions& r) const;
+  /// How far tool t moved this tick: the farther of its tip and its shaft's end (m).
+  double tick_move(std::size_t t) const;
   void note_fast_tools(const Reductions& r);
   /// A tool whose contact ended while it lies inside the tissue's deformed
   /// surface went through that surface: noted, naming it, once per episode.
