@@ -207,10 +207,15 @@ void Scheduler::note_passed_through(const Reductions& r) {
     last_force_[t] = norm(tr.reaction);
     if (tr.contact > 0) through_reported_[t] = 0;
     if (before == 0 || tr.contact > 0 || tr.rigid > 0 || through_reported_[t]) continue;
-    if (u.empty()) u = backend_.download().u;
     // the tip, the shaft's middle and its end: the part that went through
     const ToolMotion& m = motion_[t];
     const double l = settings_.tools[t].shape.shaft;
+    // a tool lifted off ends its contact outside the undeformed body: only one inside it costs a download
+    // (the haptic tick's traffic stays fixed)
+    if (!inside_reference_surface(model_, m.to.tip) &&
+        !(l > 0 && inside_reference_surface(model_, m.to.tip + 0.5 * l * m.to.axis)))
+      continue;
+    if (u.empty()) u = backend_.download().u;
     const char* part = nullptr;
     if (inside_surface(model_, u, m.to.tip))
       part = "tip";
