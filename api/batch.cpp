@@ -100,6 +100,7 @@ Batch::~Batch() = default;
 
 Batch Batch::load(const std::vector<BatchScene>& list, const SimulationOptions& options) {
   if (list.empty()) throw std::invalid_argument("Batch::load: no scenes given (a batch needs at least one)");
+  check_batch_size(list.size());
   auto impl = std::make_unique<Impl>();
   std::map<std::string, std::shared_ptr<scene::Scene>> read;  // each file read once, its scene shared
   std::vector<std::shared_ptr<const scene::Scene>> ready;
@@ -145,6 +146,7 @@ Batch Batch::load(const std::vector<BatchScene>& list, const SimulationOptions& 
 
 Batch Batch::load(const std::string& scene, int copies, const SimulationOptions& options) {
   if (copies < 1) throw std::invalid_argument(fmt::format("Batch::load: copies = {} must be >= 1", copies));
+  check_batch_size(std::size_t(copies));  // before a list of that many is made
   return load(std::vector<BatchScene>(std::size_t(copies), BatchScene{scene, {}, {}}), options);
 }
 

@@ -88,7 +88,7 @@ void add_hertz_command(CLI::App& app, int& rc) {
   cmd->add_option("--nu", args->nus, "Poisson's ratios to run")
       ->capture_default_str()
       ->check(real_number(-1, 0.5, true, true));  // 0.5 is incompressible: K would be infinite
-  cmd->add_option("--E", args->options.E, "Young's modulus (Pa)")->capture_default_str()->check(CLI::PositiveNumber);
+  cmd->add_option("--E", args->options.E, "Young's modulus (Pa)")->capture_default_str()->check(positive_real());
   // a sphere from a micrometre to a metre: beyond, the block's coordinates leave any physical scale (and overflow)
   cmd->add_option("--radius", args->options.R, "sphere radius (m)")->capture_default_str()->check(real_number(1e-6, 1));
   cmd->add_option("--ratios", args->options.ratios, "indentations delta / R, ascending")
@@ -103,8 +103,8 @@ void add_hertz_command(CLI::App& app, int& rc) {
       ->check(real_number(1, 100));  // >= 1: cells that grow away from the core
   cmd->add_option("--core", args->options.core, "uniform core edge / contact radius at the deepest press")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
-  cmd->add_option("--block", args->options.block, "block edge L / contact radius at the deepest press")->capture_default_str()->check(CLI::PositiveNumber);
+      ->check(positive_real());
+  cmd->add_option("--block", args->options.block, "block edge L / contact radius at the deepest press")->capture_default_str()->check(positive_real());
   cmd->add_option("--backend", args->options.backend, "cpu | cuda (relaxes in double)")->capture_default_str();
   cmd->add_option("--json", args->json, "write the studies as JSON (scripts/plot hertz draws them)")
       ->check(output_file());

@@ -28,6 +28,7 @@
 #include <string>
 
 #include "apps/commands.hpp"
+#include "apps/interrupt.hpp"
 #include "apps/options.hpp"
 #include "core/tet.hpp"
 #include "io/kidney.hpp"
@@ -434,7 +435,14 @@ void add_mesh_command(CLI::App& app, int& rc) {
   cmd->add_option("--nu", o->nu, "Poisson's ratio (a built-in scene's too)")->default_val(0.45);
   cmd->add_option("--rho", o->rho, "Density (kg/m^3; a built-in scene's too)")->default_val(1000);
   cmd->callback([o, cmd, &rc] {
+    // Ctrl-C or SIGTERM: TetGen's run stops at once (io::MeshInterrupted, 128 + the signal); an in-process
+    // stage (remeshing, Mesh_3) ends first, and then nothing is written
+    InterruptGuard interrupt;
     scene::Scene s = io::is_builtin_scene(o->surface) ? builtin_mesh_scene(*cmd, *o) : make_scene(*o);
+    if (InterruptGuard::requested())
+      throw io::MeshInterrupted(InterruptGuard::signal(),
+                                fmt::format("{}: meshing stopped by {}; {} was not written", o->surface,
+                                            InterruptGuard::signal_name(), o->out));
     io::write_scene(s, o->out, true);
     fmt::print("wrote {} ({} tets)\n", o->out, s.tets.size() / 4);
     rc = 0;

@@ -50,15 +50,15 @@ void add_palpate_command(CLI::App& app, int& rc) {
   auto a = std::make_shared<PalpateArgs>();
   auto* cmd = app.add_subcommand("palpate", "Palpation example: a line scan over a block with a stiff tumour");
   cmd->add_option("--ratio", a->o.stiffness_ratio, "tumour E / tissue E")->capture_default_str()
-      ->check(CLI::PositiveNumber);
-  cmd->add_option("--press", a->o.press, "press depth (m)")->capture_default_str()->check(CLI::PositiveNumber);
+      ->check(positive_real());
+  cmd->add_option("--press", a->o.press, "press depth (m)")->capture_default_str()->check(positive_real());
   cmd->add_option("--positions", a->o.positions, "scan points")->capture_default_str()->check(CLI::Range(2, 200));
   cmd->add_option("--target-tets", a->o.target_tets, "mesh size")->capture_default_str()->check(CLI::Range(500, 2000000));
   cmd->add_option("--depth", a->o.tumour_depth, "tumour centre below the top (m)")->capture_default_str()
-      ->check(CLI::PositiveNumber);
-  cmd->add_option("--tumour-radius", a->o.tumour_radius, "m")->capture_default_str()->check(CLI::PositiveNumber);
+      ->check(positive_real());
+  cmd->add_option("--tumour-radius", a->o.tumour_radius, "m")->capture_default_str()->check(positive_real());
   cmd->add_option("--tool-radius", a->o.tool_radius, "the probe's sphere (m)")->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(positive_real());
   cmd->add_option("--backend", a->o.backend, "cpu | cuda (relaxes in double)")->capture_default_str()
       ->check(CLI::IsMember({"cpu", "cuda"}));
   cmd->add_option("--json", a->json, "write the profile as JSON (scripts/plot palpate draws it)")->check(output_file());

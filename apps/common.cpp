@@ -20,6 +20,16 @@ std::string g_activity = "starting";
 int run_command_line(CLI::App& app, int argc, char** argv, const int& rc, const char* program) {
   try {
     app.parse(argc, argv);
+  } catch (const CLI::RequiredError& e) {
+    // a first word that is no command: name it and the commands (CLI11 says only that one is required)
+    if (argc > 1 && argv[1][0] != '-' && app.get_subcommands().empty()) {
+      std::string names;
+      for (const CLI::App* c : app.get_subcommands({})) names += (names.empty() ? "" : ", ") + c->get_name();
+      std::fprintf(stderr, "%s: '%s' is not a command; the commands are %s (%s --help)\n", program, argv[1],
+                   names.c_str(), program);
+      return e.get_exit_code();
+    }
+    return app.exit(e);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   } catch (const io::MeshInterrupted& e) {  // Ctrl-C while TetGen ran: the user's request, 128 + the signal

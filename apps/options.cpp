@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <limits>
 #include <filesystem>
 
 #include "scene/text.hpp"
@@ -73,6 +74,10 @@ CLI::Validator real_number(double lo, double hi, bool lo_open, bool hi_open) {
   return CLI::Validator(
       [=](std::string& s) { return real_number_error(s, lo, hi, lo_open, hi_open); },
       fmt::format("REAL in {}{}, {}{}", lo_open ? "(" : "[", lo, hi, hi_open ? ")" : "]"));
+}
+
+CLI::Validator positive_real() {
+  return real_number(0, std::numeric_limits<double>::infinity(), true, true);
 }
 
 }  // namespace tissue::app

@@ -32,6 +32,8 @@ std::string output_folder_error(const std::string& path);
 /// CLI11 checks wrapping the functions above (for each value of a list option too).
 CLI::Validator whole_number(long long lo, long long hi);
 CLI::Validator real_number(double lo, double hi, bool lo_open = false, bool hi_open = false);
+/// A finite number > 0 (real_number over (0, inf)).
+CLI::Validator positive_real();
 CLI::Validator output_file();
 CLI::Validator output_folder();
 

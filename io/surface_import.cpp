@@ -153,6 +153,9 @@ void guard_binary_stl(const std::string& path, const std::string& head, unsigned
 ///  - a .stl file that is not ASCII: guard_binary_stl.
 /// Headers are a few hundred bytes; the first 1 MiB is read.
 void guard_header(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw MeshError(fmt::format("{}: is a directory, not a surface file", path));
   std::ifstream f(path, std::ios::binary | std::ios::ate);
   if (!f) return;  // Assimp reports unreadable files itself
   const auto size = static_cast<unsigned long long>(std::max<std::streamoff>(f.tellg(), 0));

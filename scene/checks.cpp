@@ -274,6 +274,22 @@ std::vector<std::string> scene_warnings(const Scene& s, const TissueModel<double
                               s.source, m.reoriented, m.n_elems));
   if (held > 0) unsupported_piece_warnings(s, m, out);
   fixed_load_warnings(s, m, out);
+  // coordinates are metres: a body far outside an organ's size is most likely in other units
+  const double extent = mesh_box(s.nodes).largest_extent();
+  if (extent > kMaxBodyExtent || (extent > 0 && extent < kMinBodyExtent))
+    out.push_back(fmt::format("{}: the body is {:.4g} m across, far from an organ's size ({:g}..{:g} m): "
+                              "coordinates are read in metres; check the mesh's units (tissue mesh --unit)",
+                              s.source, extent, kMinBodyExtent, kMaxBodyExtent));
+  // a Prony term that relaxes within one step never acts as a viscosity at the simulated rates
+  for (const Material& mat : s.materials)
+    for (size_t k = 0; k < mat.prony.size(); ++k)
+      if (mat.prony[k].tau < m.dt)
+        out.push_back(fmt::format("{}: material '{}': Prony term {}: tau = {:.4g} s is shorter than the step dt = "
+                                  "{:.4g} s: the term relaxes within one step, so its g = {:g} acts as if it were "
+                                  "not there (the long-term modulus from the start); use a tau of many steps or "
+                                  "remove the term",
+                                  location(s, mat.prony[k].line ? mat.prony[k].line : mat.line), mat.name, k + 1,
+                                  mat.prony[k].tau, m.dt, mat.prony[k].g));
   if (s.solver.damping) {
     // mass-proportional damping alpha gives the lowest mode the damping ratio alpha / (2 omega_1) (auto: 1,
     // critical); far above it the body creeps with the time constant alpha / omega_1^2 instead of responding

@@ -92,6 +92,11 @@ std::string step_cause(const Scene& scene, const TissueModel<double>& model);
 /// The warnings listed above, each one sentence naming the scene file, the
 /// values and what to change; empty when none applies. `scene` must be the
 /// one `model` was loaded from (scene::load_model).
+/// A body's largest extent (m) outside which a scene warns that its
+/// coordinates are likely not in metres (organs are centimetres to tens of
+/// centimetres across).
+inline constexpr double kMinBodyExtent = 1e-4, kMaxBodyExtent = 5.0;
+
 std::vector<std::string> scene_warnings(const Scene& scene, const TissueModel<double>& model);
 
 /// Materials whose incompressibility the scene's precision cannot resolve

@@ -92,6 +92,16 @@ void check_batch_memory(std::size_t scenes, const BatchMemory& m, const std::str
         scenes, gib(std::int64_t(scenes) * m.per_scene_device), gib(m.per_scene_device), gib(m.device_free), device));
 }
 
+void check_batch_size(std::size_t scenes) {
+  const std::int64_t available = host_available_bytes();
+  if (available < 0 || double(scenes) * double(kMinSceneHostBytes) <= double(available)) return;
+  throw std::invalid_argument(fmt::format(
+      "a batch of {} scenes needs at least {} of host memory ({} KiB a scene before its mesh), more than the {} "
+      "available: use fewer scenes",
+      scenes, gib(std::int64_t(double(scenes) * double(kMinSceneHostBytes))), kMinSceneHostBytes / 1024,
+      gib(available)));
+}
+
 struct SceneBatch::BuiltModel {
   ModelInput input;
   std::shared_ptr<const TissueModel<double>> model;

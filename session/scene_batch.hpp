@@ -45,6 +45,15 @@ struct BatchMemory {
 /// names the device in the message.
 void check_batch_memory(std::size_t scenes, const BatchMemory& m, const std::string& device);
 
+/// The least host memory one scene of a batch takes whatever its mesh (its
+/// session, scheduler, tools and facade state): kMinSceneHostBytes.
+inline constexpr std::int64_t kMinSceneHostBytes = 64 * 1024;
+/// Refuses, before anything is built, a batch of more scenes than the
+/// host's available memory could hold at kMinSceneHostBytes each, naming
+/// the count and the memory (check_batch_memory then checks the measured
+/// bytes once the first scene is built).
+void check_batch_size(std::size_t scenes);
+
 class SceneBatch {
  public:
   /// On a device backend, scenes whose ticks one host thread starts and ends.

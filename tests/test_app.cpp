@@ -197,6 +197,8 @@ TEST(Options, StudiesAndMeshingRefuseValuesBeyondTheirRange) {
   EXPECT_EQ(parse_error({"hertz", "--grading", "-3"}), "--grading: -3 is out of range: it must be in [1, 100]");
   EXPECT_EQ(parse_error({"hertz", "--radius", "1e300"}), "--radius: 1e300 is out of range: it must be in [1e-06, 1]");
   EXPECT_EQ(parse_error({"hertz", "--nu", "0.5"}), "--nu: 0.5 is out of range: it must be in (-1, 0.5)");
+  EXPECT_EQ(parse_error({"hertz", "--E", "inf"}), "--E: inf is not a finite number");
+  EXPECT_EQ(parse_error({"hertz", "--block", "0"}), "--block: 0 is out of range: it must be in (0, inf)");
   EXPECT_EQ(parse_error({"hertz", "--ratios", "5"}),
             "--ratios: delta / R = 5 is outside the range where Hertz's closed form holds, (0, 0.2]: it assumes the "
             "contact radius sqrt(R delta) small against R (at 0.2 it is already 0.45 R)");
@@ -415,6 +417,10 @@ TEST(Program, BadInputsGetClearErrors) {
   std::ofstream(t.file("nan.xml")) << scene;
   EXPECT_NE(error_of({"run", t.file("nan.xml")}).find("waypoint 1: t = nan is not a finite number"),
             std::string::npos);
+  // a first word that is no command is named, with the commands
+  EXPECT_EQ(run_tissue(t, "word", {"simulate", t.file("block.xml")}), 106);
+  const std::string word = slurp(t.file("word.err"));
+  EXPECT_NE(word.find("'simulate' is not a command; the commands are mesh, run"), std::string::npos) << word;
 }
 
 // `tissue run` prints what the run will cost before it builds the backend;
@@ -550,6 +556,26 @@ TEST(Program, InterruptWhileTetGenRunsExitsWith130) {
   const std::string err = slurp(c.err);
   EXPECT_EQ(err.find("crashed"), std::string::npos) << err;
   EXPECT_NE(err.find("SIGINT"), std::string::npos) << err;
+}
+
+// `tissue mesh` stopped by SIGINT while TetGen meshes the kidney ends with 130, names the signal and writes
+// nothing (it was killed by the signal's default action, with no word).
+TEST(Program, InterruptWhileTissueMeshRunsExitsWith130AndWritesNothing) {
+  TempDir t;
+  const std::string out = t.file("k.xml");
+  const Child c = start(t, "mesh", {"mesh", "@kidney", "-o", out});
+  const std::string children = fmt::format("/proc/{}/task/{}/children", c.pid, c.pid);
+  bool meshing = false;
+  for (int k = 0; k < 2000 && !meshing; ++k) {
+    meshing = !slurp(children).empty();
+    if (!meshing) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_TRUE(meshing) << "no TetGen child seen: " << slurp(c.err);
+  kill(c.pid, SIGINT);
+  EXPECT_EQ(finish(c), 130) << slurp(c.err);
+  const std::string err = slurp(c.err);
+  EXPECT_NE(err.find("SIGINT"), std::string::npos) << err;
+  EXPECT_FALSE(std::filesystem::exists(out)) << "nothing is written";
 }
 
 // `tradeoff --max-hold 1e-9` printed a table of unconverged rows: a hold

@@ -259,5 +259,27 @@ TEST(SceneChecks, DampingFarAboveTheLowestMode) {
   EXPECT_TRUE(warnings(s).empty());
 }
 
+// A body 100 km across (a mesh in other units) and a Prony term relaxing within one step ran without a word.
+TEST(SceneChecks, ABodyFarFromAnOrgansSizeAndAPronyTermBelowTheStepAreWarned) {
+  Scene big = box_scene();
+  for (double& x : big.nodes) x *= 5e3;  // 0.02 m -> 100 m (a mesh in mm read as m)
+  EXPECT_TRUE(one_warning(warnings(big), {"box.xml: the body is 100 m across", "check the mesh's units"}));
+  Scene tiny = box_scene();
+  for (double& x : tiny.nodes) x *= 1e-3;  // 0.02 m -> 20 um (a mesh in um read as mm), the tool with it
+  for (Tool& tool : tiny.tools) {
+    tool.radius *= 1e-3;
+    for (Waypoint& w : tool.path) w.p = 1e-3 * w.p;
+  }
+  EXPECT_TRUE(one_warning(warnings(tiny), {"the body is 2e-05 m across"}));
+  Scene t = box_scene();
+  t.materials.front().prony = {{0.3, 1e-9, 0}};
+  const TissueModel<double> tm = load_model(t);
+  EXPECT_TRUE(one_warning(warnings(t), {"material 'brain': Prony term 1: tau = 1e-09 s is shorter than the step dt = " +
+                                           fmt::format("{:.4g} s", tm.dt),
+                                       "acts as if it were not there"}));
+  t.materials.front().prony = {{0.3, 1.0, 0}};  // a tau of many steps: no warning
+  EXPECT_TRUE(warnings(t).empty());
+}
+
 }  // namespace
 }  // namespace tissue::scene

@@ -215,6 +215,14 @@ TEST(LoadSurface, StlBinaryWhoseCountLiesIsRefusedNamingCountAndSize) {
   EXPECT_THROW(load_surface(t.file("short.stl"), 1.0), MeshError);
   write_cube_stl_binary(path, 5.0);  // the count restored: read
   expect_cube(load_surface(path, 1e-3), 5e-3);
+  // a folder named like a surface is a folder, not a file of 2^63 bytes
+  fs::create_directory(t.file("d.stl"));
+  try {
+    load_surface(t.file("d.stl"), 1.0);
+    ADD_FAILURE() << "a folder was read as a surface";
+  } catch (const MeshError& e) {
+    EXPECT_EQ(std::string(e.what()), t.file("d.stl") + ": is a directory, not a surface file");
+  }
 }
 
 TEST(LoadSurface, Ply) {

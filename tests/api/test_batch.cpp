@@ -359,4 +359,11 @@ TEST(Batch, RefusesABatchBeyondMemoryNamingTheSizes) {
   EXPECT_NE(device.find("NVIDIA H200"), std::string::npos) << device;
 }
 
+// A hundred million copies are refused at once, before a list of that many is made (it ran for minutes).
+TEST(Batch, RefusesAHugeCopyCountBeforeBuildingAnything) {
+  // (the message is check_batch_size's, made before any scene is read)
+  const std::string why = thrown([] { Batch::load("@kidney", 100000000, {"cpu"}); });
+  EXPECT_NE(why.find("a batch of 100000000 scenes needs at least"), std::string::npos) << why;
+}
+
 }  // namespace
