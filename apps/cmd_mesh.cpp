@@ -423,7 +423,7 @@ void add_mesh_command(CLI::App& app, int& rc) {
                   "Remesh the surfaces to this edge length (m); 0 = auto (when finer than the target needs), -1 = never")
       ->default_val(0)
       ->check(CLI::Validator([](std::string& t) { return remesh_edge_error(t); }, "0 | -1 | EDGE > 0"));
-  cmd->add_option("--quality", m.quality, "TetGen radius-edge ratio bound (q)")->default_val(1.414);
+  cmd->add_option("--quality", m.quality, "TetGen radius-edge ratio bound (q; >= 1, or 0 for none)")->default_val(1.414);
   cmd->add_option("--min-dihedral", m.min_dihedral, "TetGen minimum dihedral angle bound (degrees, q/..)")
       ->default_val(io::kDefaultMinDihedral);
   cmd->add_option("--optimise", m.optimise, "TetGen optimisation level (O, 0..10)")->default_val(io::kDefaultOptimise);
@@ -438,6 +438,9 @@ void add_mesh_command(CLI::App& app, int& rc) {
     // Ctrl-C or SIGTERM: TetGen's run stops at once (io::MeshInterrupted, 128 + the signal); an in-process
     // stage (remeshing, Mesh_3) ends first, and then nothing is written
     InterruptGuard interrupt;
+    if (o->pipeline.meshing.quality == 0 && !io::is_builtin_scene(o->surface))
+      fmt::print(stderr, "tissue mesh: warning: --quality 0: TetGen meshes with no radius-edge ratio bound "
+                         "(poorly shaped tets, and a smaller stable step, are then possible)\n");
     scene::Scene s = io::is_builtin_scene(o->surface) ? builtin_mesh_scene(*cmd, *o) : make_scene(*o);
     if (InterruptGuard::requested())
       throw io::MeshInterrupted(InterruptGuard::signal(),

@@ -685,7 +685,11 @@ void bind_batch(py::module_& m) {
              if (py::isinstance<py::str>(scenes)) {
                const int n = copies.value_or(1);
                if (n < 1) throw std::invalid_argument("Batch: copies = " + std::to_string(n) + " must be >= 1");
-               list.assign(std::size_t(n), tissue::BatchScene{scenes.cast<std::string>(), {}, {}});
+               // the facade's copies: a count beyond the host's memory is refused before a list is made
+               const std::string name = scenes.cast<std::string>();
+               const tissue::SimulationOptions o = options(backend, precision, depth);
+               py::gil_scoped_release free;
+               return std::unique_ptr<PyBatch>(new PyBatch{tissue::Batch::load(name, n, o), {}});
              } else {
                if (copies) throw std::invalid_argument("Batch: copies applies to one scene name, not to a list");
                for (py::handle item : scenes) {

@@ -537,6 +537,19 @@ TEST(Program, MeshRefusesAnInclusionGivenTwice) {
   EXPECT_FALSE(fs::exists(t.file("x.xml")));
 }
 
+// `--quality 0` (no radius-edge bound: TetGen's q switch dropped) meshed without a word: it is documented as
+// "none" and warned.
+TEST(Program, MeshWarnsThatQualityZeroDropsTheBound) {
+  TempDir t;
+  std::ofstream(t.file("cube.obj")) << kCubeObj;
+  EXPECT_EQ(run_tissue(t, "q0", {"mesh", t.file("cube.obj"), "-o", t.file("x.xml"), "--quality", "0", "--mesher",
+                                 "tetgen"}),
+            0);
+  const std::string err = slurp(t.file("q0.err"));
+  EXPECT_NE(err.find("warning: --quality 0: TetGen meshes with no radius-edge ratio bound"), std::string::npos) << err;
+  EXPECT_TRUE(fs::exists(t.file("x.xml")));
+}
+
 // SIGINT while TetGen meshed the built-in kidney (in a child process) was
 // reported as "TetGen crashed (signal 9)", exit 1: it is an interruption,
 // exit 130.

@@ -134,6 +134,11 @@ def test_misuse_raises_naming_the_value(tmp_path):
     assert batch.ticks(0) == 0, "nothing refused ran"
 
 
+def test_a_huge_copy_count_is_refused_at_once():
+    with pytest.raises(ValueError, match="a batch of 100000000 scenes needs at least"):
+        tissue.Batch("@kidney", 10**8, backend="cpu")
+
+
 def test_device_arrays_on_the_cpu_raise_naming_the_host():
     batch = tissue.Batch("@kidney", 2, backend="cpu", depth="all")
     with pytest.raises(ValueError, match="keeps its fields on the host"):
