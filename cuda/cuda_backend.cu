@@ -264,6 +264,7 @@ class CudaBackend final : public Backend {
     if (group_) group_->leave(slot_);
     group_ = std::move(group);
     slot_ = slot;
+    in_group_layout_ = false;  // until its next upload, into the slot
   }
 
   /// Queues a group tick of `key` captured from this scene (SceneGroup::graph):
@@ -359,6 +360,7 @@ class CudaBackend final : public Backend {
     probe_host_.allocate(n);
     n_driven_ = 0;
     do_build_region({}, kDepthAll);
+    in_group_layout_ = group_ && store_.pressure_set() == 0 && slot_layout_matches();
     stream_.sync();
   }
 
@@ -654,20 +656,24 @@ class CudaBackend final : public Backend {
 
   /// Whether the group can run this scene's tick of `steps` steps with
   /// others: a tick graph over the whole mesh, no law terms, no load, and
-  /// every array the tick's kernels touch in this scene's slot at the
-  /// group's layout.
+  /// its arrays in its slot at the group's layout (checked at upload).
   bool group_takes(int steps) {
     const RegionView r = region_.view();
-    if (!tick_graph_runs(steps) || r.nodes || r.elems || !store_.law().neo_hookean() || store_.state().load) return false;
+    return in_group_layout_ && tick_graph_runs(steps) && !r.nodes && !r.elems && store_.law().neo_hookean() &&
+           !store_.state().load;
+  }
+
+  /// Whether every array a group tick's kernels touch lies in this scene's
+  /// slot at the group's layout (the first member's offsets). Those arrays
+  /// change only at an upload, where this is asked.
+  bool slot_layout_matches() {
     std::vector<std::ptrdiff_t> offsets;
     const char* base = group_->slot(slot_);
     const auto add = [&](const void* p) {
       const std::ptrdiff_t d = static_cast<const char*>(p) - base;
       offsets.push_back(p && d >= 0 && std::size_t(d) < group_->arena().stride() ? d : -1);
     };
-    // the two pass-array sets in their own order (which is the state's changes from tick to tick)
-    const StateView<T> state = store_.state(), scratch = store_.pressure_scratch();
-    for (const StateView<T>& v : {store_.pressure_set() == 0 ? state : scratch, store_.pressure_set() == 0 ? scratch : state})
+    for (const StateView<T>& v : {store_.state(), store_.pressure_scratch()})  // (set 0 first: just uploaded)
       for (const void* p : {(const void*)v.u_held, (const void*)v.held, (const void*)v.driven, (const void*)v.role,
                             (const void*)v.elem_dv, (const void*)v.elem_J, (const void*)v.node_p, (const void*)v.f_slot,
                             (const void*)v.f, (const void*)v.bad, (const void*)v.contact, (const void*)v.contact_tool,
@@ -757,6 +763,7 @@ class CudaBackend final : public Backend {
   // first: destroyed last, after every array that may lie in the group's arena
   std::shared_ptr<SceneGroup<T>> group_;
   int slot_ = -1;
+  bool in_group_layout_ = false;  ///< its arrays lie in its slot at the group's layout (slot_layout_matches)
   Stream stream_;
   LaunchedTick launched_;  ///< the graph do_start_tick launched, until do_finish_tick
   Transfers log_;
