@@ -53,6 +53,31 @@ std::string hertz_ratio_error(const std::string& text) {
   return "";
 }
 
+/// --core: the uniform core under the tool, in contact radii at the deepest press; "" when `text` is one.
+std::string hertz_core_error(const std::string& text) {
+  if (std::string e = real_number_error(text, 0, INFINITY, true, true); !e.empty()) return e;
+  const double c = *scene::parse_real(text);
+  if (c < 0.25 || c > 5)
+    return fmt::format("a core of {} contact radii is outside [0.25, 5]: the core's uniform cells must hold the "
+                       "contact (below a quarter of its radius the contact falls on the graded cells, which a core "
+                       "of 1e-9 makes degenerate), and a core much wider than the contact spends its cells away "
+                       "from it",
+                       text);
+  return "";
+}
+
+/// --block: the block's edge in contact radii at the deepest press; "" when `text` is one.
+std::string hertz_block_error(const std::string& text) {
+  if (std::string e = real_number_error(text, 0, INFINITY, true, true); !e.empty()) return e;
+  const double b = *scene::parse_real(text);
+  if (b < 10 || b > 1000)
+    return fmt::format("a block of {} contact radii is outside [10, 1000]: it stands for Hertz's half-space, so its "
+                       "base and sides must lie far from the contact (10 radii at least), and beyond 1000 the graded "
+                       "cells stretch so far that the relaxation stalls",
+                       text);
+  return "";
+}
+
 struct HertzArgs {
   accuracy::HertzOptions options;
   std::vector<double> nus = {0.45, 0.49};
@@ -103,8 +128,10 @@ void add_hertz_command(CLI::App& app, int& rc) {
       ->check(real_number(1, 100));  // >= 1: cells that grow away from the core
   cmd->add_option("--core", args->options.core, "uniform core edge / contact radius at the deepest press")
       ->capture_default_str()
-      ->check(positive_real());
-  cmd->add_option("--block", args->options.block, "block edge L / contact radius at the deepest press")->capture_default_str()->check(positive_real());
+      ->check(CLI::Validator([](std::string& t) { return hertz_core_error(t); }, "[0.25, 5]"));
+  cmd->add_option("--block", args->options.block, "block edge L / contact radius at the deepest press")
+      ->capture_default_str()
+      ->check(CLI::Validator([](std::string& t) { return hertz_block_error(t); }, "[10, 1000]"));
   cmd->add_option("--backend", args->options.backend, "cpu | cuda (relaxes in double)")->capture_default_str();
   cmd->add_option("--json", args->json, "write the studies as JSON (scripts/plot hertz draws them)")
       ->check(output_file());

@@ -80,19 +80,6 @@ void print_summary(const RunSummary& r, const Backend& b, const TissueModel<doub
       1e3 * r.max_disp, tool_lines(r), r.region_nodes, r.region_elems, r.equilibrium ? "reached" : "not reached");
 }
 
-/// What the scene checks say about a run that stopped on NaN or an inverted
-/// element, as text to append to its message: the values that most likely
-/// made it stop (scene::stop_causes), or else the indentation.
-std::string instability_causes(const scene::Scene& s, const TissueModel<double>& m) {
-  const std::vector<std::string> causes = scene::stop_causes(s, m);
-  if (causes.empty())
-    return "\n  the scene checks found no material, load or support problem: a tool has most likely pressed deeper "
-           "than the elements under it can follow (reduce the indentation or refine the mesh there)";
-  std::string out = "\n  likely cause:";
-  for (const std::string& c : causes) out += "\n    " + c;
-  return out;
-}
-
 /// "0.25 s", "3.2 min", "5.1 h": a duration for the plan line.
 std::string duration_text(double seconds) {
   if (seconds < 120) return fmt::format("{:.2g} s", seconds);
@@ -221,7 +208,7 @@ int run_scene(const RunOptions& o) {
       }
     }
   } catch (const SimulationError& e) {
-    throw SimulationError(e.what() + instability_causes(s, model));  // the log keeps the ticks that ran
+    throw SimulationError(e.what() + scene::stop_cause_text(s, model));  // the log keeps the ticks that ran
   }
   if (InterruptGuard::requested()) {
     sum.stopped_by = InterruptGuard::signal_name();

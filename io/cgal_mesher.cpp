@@ -84,7 +84,8 @@ VolumeMesh mesh3_surface(const SurfaceMesh& surface, const Mesh3Options& o, cons
   check_tet_memory(o.target_tets > 0 ? o.target_tets : volume / (std::pow(4 / std::sqrt(6.0) * o.cell_size, 3) / (6 * std::sqrt(2.0))),
                    kMesh3BytesPerTet,
                    o.target_tets > 0 ? fmt::format("a target of {} tets", o.target_tets)
-                                     : fmt::format("a cell size of {:.3g} m", o.cell_size),
+                     : o.cell_size_from.empty() ? fmt::format("a cell size of {:.3g} m", o.cell_size)
+                                                : fmt::format("{} (a cell size of {:.3g} m)", o.cell_size_from, o.cell_size),
                    source);
   const Polyhedron poly = to_polyhedron(surface);
   // circumradius of the regular tet of the mean volume: edge a = (6 sqrt(2) v)^(1/3), R = a sqrt(6) / 4

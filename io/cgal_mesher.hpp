@@ -12,6 +12,7 @@ namespace tissue::io {
 
 struct Mesh3Options {
   double cell_size = 0;        ///< largest tet circumradius (m); 0 = from target_tets
+  std::string cell_size_from;  ///< what set cell_size, for messages ("--max-volume 1e-15"); "" = the size itself
   int target_tets = 0;         ///< aim at this many tets (cell size iterated, up to kMesh3Rounds runs)
   double sliver_bound = 12;    ///< dihedral angle (degrees) perturbation and exudation aim above
   double time_limit = 30;      ///< seconds for each of perturbation and exudation

@@ -108,6 +108,7 @@ VolumeMesh tetrahedralize(const NamedSurface& organ, const std::vector<NamedSurf
     if (m.target_tets == 0) {
       if (!(m.max_volume > 0)) throw MeshError(organ.source + ": Mesh_3 needs --target-tets or --max-volume");
       o3.cell_size = std::sqrt(6.0) / 4 * regular_tet_edge(m.max_volume);
+      o3.cell_size_from = fmt::format("--max-volume {:g} m^3", m.max_volume);
     }
     o3.progress = m.progress;
     return mesh3_surface(organ.surface, o3, organ.source);

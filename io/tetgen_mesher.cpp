@@ -413,7 +413,7 @@ VolumeMesh tetrahedralize_surface(const SurfaceMesh& surface, const MeshingOptio
                      source);
   else if (options.max_volume > 0)
     check_tet_memory(std::fabs(enclosed_volume(surface)) / options.max_volume, kBytesPerTet,
-                     fmt::format("a maximum tet volume of {:.3g} m^3", options.max_volume), source);
+                     fmt::format("--max-volume {:g} m^3", options.max_volume), source);
   for (const RegionSeed& r : options.regions)
     if (r.attribute <= 0 || !std::isfinite(r.point.x + r.point.y + r.point.z))
       throw MeshError(fmt::format("{}: region attribute {} must be > 0 with a finite seed point", source, r.attribute));

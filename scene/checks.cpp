@@ -142,7 +142,7 @@ WorkEstimate estimate_work(const TissueModel<double>& m, double tick, double tic
   return w;
 }
 
-std::vector<std::string> stop_causes(const Scene& s, const TissueModel<double>& m) {
+std::vector<std::string> stop_causes(const Scene& s, const TissueModel<double>& m, const SceneLoads* host_loads) {
   std::vector<std::string> out;
   double softest_E = INFINITY;
   for (const Material& mat : s.materials) {
@@ -178,7 +178,25 @@ std::vector<std::string> stop_causes(const Scene& s, const TissueModel<double>& 
       hi[c] = std::max(hi[c], m.X[size_t(c) * m.n_nodes + a]);
     }
   const double L = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
-  for (const Load& l : s.loads) {
+  const auto nominal_stress = [&](const SceneLoads& r, double& F) {
+    double f[3] = {0, 0, 0};
+    for (size_t k = 0; k < r.nodes.size(); ++k)
+      for (int c = 0; c < 3; ++c) f[c] += r.force[3 * k + c];
+    F = std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
+    return F / (L * L);
+  };
+  if (host_loads != nullptr) {
+    double F = 0;
+    const double stress = nominal_stress(*host_loads, F);
+    if (L > 0 && stress > kMaxLoadStrain * softest_E)
+      out.push_back(fmt::format("the loads set through the API (set_loads, on {} node{}): their total force {:.4g} N "
+                                "over the body's extent L = {:.4g} m squared is a nominal stress F / L^2 = {:.4g} Pa, "
+                                "{:.3g} x the softest material's E = {:.4g} Pa (a strain far beyond what the elements "
+                                "can follow); check the forces (N, 3 per node)",
+                                host_loads->nodes.size(), host_loads->nodes.size() == 1 ? "" : "s", F, L, stress,
+                                stress / softest_E, softest_E));
+  }
+  for (const Load& l : host_loads != nullptr ? std::vector<Load>{} : s.loads) {
     Scene one = s;
     one.loads = {l};
     SceneLoads r;
@@ -187,10 +205,8 @@ std::vector<std::string> stop_causes(const Scene& s, const TissueModel<double>& 
     } catch (const SceneError&) {
       continue;
     }
-    double f[3] = {0, 0, 0};
-    for (size_t k = 0; k < r.nodes.size(); ++k)
-      for (int c = 0; c < 3; ++c) f[c] += r.force[3 * k + c];
-    const double F = std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]), stress = F / (L * L);
+    double F = 0;
+    const double stress = nominal_stress(r, F);
     if (L > 0 && stress > kMaxLoadStrain * softest_E)
       out.push_back(fmt::format("{}: {}: its total force {:.4g} N over the body's extent L = {:.4g} m squared is a "
                                 "nominal stress F / L^2 = {:.4g} Pa, {:.3g} x the softest material's E = {:.4g} Pa "
@@ -200,6 +216,16 @@ std::vector<std::string> stop_causes(const Scene& s, const TissueModel<double>& 
   }
   for (const std::string& c : incompressibility_findings(s)) out.push_back(c);
   if (supported_nodes(m) == 0) out.push_back("no node is fixed (nothing holds the body)");
+  return out;
+}
+
+std::string stop_cause_text(const Scene& s, const TissueModel<double>& m, const SceneLoads* host_loads) {
+  const std::vector<std::string> causes = stop_causes(s, m, host_loads);
+  if (causes.empty())
+    return "\n  the scene checks found no material, load or support problem: a tool has most likely pressed deeper "
+           "than the elements under it can follow (reduce the indentation or refine the mesh there)";
+  std::string out = "\n  likely cause:";
+  for (const std::string& c : causes) out += "\n    " + c;
   return out;
 }
 

@@ -35,6 +35,8 @@
 
 namespace tissue::scene {
 
+struct SceneLoads;  // scene/validate.hpp
+
 /// Damping alpha (1/s) per rad/s of the lowest mode above which a scene
 /// warns: 100 is a damping ratio of 50 (auto is 1, critical), so the body
 /// creeps with the time constant alpha / omega_1^2 = 100 / omega_1, some
@@ -114,7 +116,16 @@ std::vector<std::string> incompressibility_findings(const Scene& scene);
 ///     F / L^2, is more than kMaxLoadStrain x the softest material's E (a
 ///     nominal strain the elements cannot follow);
 ///   - the incompressibility findings below and no fixed node.
-std::vector<std::string> stop_causes(const Scene& scene, const TissueModel<double>& model);
+/// `host_loads`, when given, are loads set through the API (set_loads) in
+/// place of the scene's <load>s, measured by the same F / L^2 rule.
+std::vector<std::string> stop_causes(const Scene& scene, const TissueModel<double>& model,
+                                     const SceneLoads* host_loads = nullptr);
+
+/// stop_causes as text to append to a stop's message: "\n  likely cause:"
+/// and one indented line each, or else a line saying that the checks found
+/// nothing and a tool most likely pressed deeper than the elements follow.
+std::string stop_cause_text(const Scene& scene, const TissueModel<double>& model,
+                            const SceneLoads* host_loads = nullptr);
 
 /// The ranges stop_causes measures materials against: soft tissue spans E ~
 /// 1e3..1e6 Pa and rho ~ 1000 kg/m^3; a decade beyond either end is taken as

@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "backends/registry.hpp"
+#include "scene/checks.hpp"
 #include "scene/validate.hpp"
 
 namespace tissue {
@@ -78,6 +79,12 @@ void Session::check_running() const {
                                       engine_.scheduler->ticks(), failure_));
 }
 
+void Session::fail(const SimulationError& e) {
+  // the values that most likely made it stop, as `tissue run` names them, the host's loads among them
+  failure_ = e.what() + scene::stop_cause_text(*scene_, model(), loads_ ? &*loads_ : nullptr);
+  throw SimulationError(failure_);
+}
+
 TickReport Session::tick() {
   begin_tick();
   return end_tick();
@@ -89,8 +96,7 @@ void Session::begin_tick() {
   try {
     engine_.scheduler->begin_tick(device_ptrs_);
   } catch (const SimulationError& e) {
-    failure_ = e.what();
-    throw;
+    fail(e);
   }
 }
 
@@ -98,8 +104,7 @@ TickReport Session::end_tick() {
   try {
     last_ = engine_.scheduler->end_tick();
   } catch (const SimulationError& e) {
-    failure_ = e.what();
-    throw;
+    fail(e);
   }
   return last_;
 }

@@ -110,6 +110,8 @@ class Session {
 
  private:
   void check_running() const;
+  /// Keeps a stop as failure(), with the scene checks' likely causes appended, and throws it.
+  [[noreturn]] void fail(const SimulationError& e);
 
   std::shared_ptr<const scene::Scene> scene_;
   Engine engine_;

@@ -199,6 +199,9 @@ TEST(Options, StudiesAndMeshingRefuseValuesBeyondTheirRange) {
   EXPECT_EQ(parse_error({"hertz", "--nu", "0.5"}), "--nu: 0.5 is out of range: it must be in (-1, 0.5)");
   EXPECT_EQ(parse_error({"hertz", "--E", "inf"}), "--E: inf is not a finite number");
   EXPECT_EQ(parse_error({"hertz", "--block", "0"}), "--block: 0 is out of range: it must be in (0, inf)");
+  // a block of 1e9 contact radii stalled the relaxation; a core of 1e-9 inverted the graded cells
+  EXPECT_EQ(parse_error({"hertz", "--block", "1e9"}).rfind("--block: a block of 1e9 contact radii is outside [10, 1000]", 0), 0u);
+  EXPECT_EQ(parse_error({"hertz", "--core", "1e-9"}).rfind("--core: a core of 1e-9 contact radii is outside [0.25, 5]", 0), 0u);
   EXPECT_EQ(parse_error({"hertz", "--ratios", "5"}),
             "--ratios: delta / R = 5 is outside the range where Hertz's closed form holds, (0, 0.2]: it assumes the "
             "contact radius sqrt(R delta) small against R (at 0.2 it is already 0.45 R)");

@@ -160,6 +160,22 @@ TEST(OrganMesher, AbsurdTargetIsRefusedNamingTheMemory) {
   }
 }
 
+// a tiny largest volume is refused naming the option and its value, on either mesher
+TEST(OrganMesher, TinyMaxVolumeIsRefusedNamingTheOption) {
+  for (Mesher mesher : {Mesher::TetGen, Mesher::Mesh3}) {
+    OrganMeshOptions o = target(0, mesher);
+    o.meshing.max_volume = 1e-15;
+    try {
+      mesh_organ(organ(2), {}, o);
+      FAIL();
+    } catch (const MeshError& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find("--max-volume 1e-15 m^3"), std::string::npos) << msg;
+      EXPECT_NE(msg.find("GB of memory"), std::string::npos) << msg;
+    }
+  }
+}
+
 TEST(UnitWarning, NamesTheLikelyUnit) {
   EXPECT_EQ(unit_warning(0.12, "m"), "");
   const std::string big = unit_warning(120.0, "m");  // a 12 cm organ written in mm, read as m

@@ -163,6 +163,10 @@ TEST_P(BatchEquals, AFailingSceneStopsAloneAndResetsAlone) {
   EXPECT_FALSE(batch.failed(0));
   const std::string why = batch.failure(1);
   EXPECT_TRUE(why.find("element") != std::string::npos || why.find("non-finite") != std::string::npos) << why;
+  // the stop names the host's load as its likely cause: 1e9 N over a 2 cm block is far beyond any strain
+  EXPECT_NE(why.find("likely cause:\n    the loads set through the API (set_loads, on 1 node): their total force 1e+09 N"),
+            std::string::npos)
+      << why;
   EXPECT_LT(batch.ticks(1), 30) << "the failed scene stopped";
   expect_same_scene(batch, 0, a, "scene 0 beside a failure");
   expect_same_scene(batch, 2, c, "scene 2 beside a failure");
