@@ -48,6 +48,31 @@ void change_material(scene::Scene& s, const MaterialChange& c) {
       m.b = c.poisson_ratio.value_or(m.b);
     }
     if (c.density) m.rho = *c.density;
+    if (c.fibre_stiffness) {
+      const bool has_fibre = m.fibre_eta > 0 || m.fibre_line > 0 || m.fibre_field != scene::Material::FibreField::Uniform;
+      if (!has_fibre && *c.fibre_stiffness != 0)
+        throw std::invalid_argument(fmt::format("{}: material '{}' has no <fibre>: a fibre stiffness needs the "
+                                                "fibres' directions, which only the scene gives",
+                                                s.source, m.name));
+      m.fibre_eta = *c.fibre_stiffness;
+    }
+    for (const PronyChange& p : c.prony) {
+      const int n = int(m.prony.size());
+      if (p.term < 1 || p.term > n + 1)
+        throw std::invalid_argument(fmt::format("{}: material '{}': Prony term {} does not exist (it has {}; "
+                                                "term {} would add one)",
+                                                s.source, m.name, p.term, n, n + 1));
+      if (p.term == n + 1) {
+        if (!p.g || !p.tau)
+          throw std::invalid_argument(fmt::format("{}: material '{}': the new Prony term {} needs both g and tau",
+                                                  s.source, m.name, p.term));
+        m.prony.push_back({*p.g, *p.tau, 0});
+      } else {
+        scene::Material::Prony& t = m.prony[std::size_t(p.term - 1)];
+        t.g = p.g.value_or(t.g);
+        t.tau = p.tau.value_or(t.tau);
+      }
+    }
     scene::validate_material(s, m);
   }
   if (!found) {
@@ -201,6 +226,13 @@ double Batch::dt(int scene) const {
 }
 double Batch::tick_seconds(int scene) const {
   return impl_->at(scene).settings().tick;
+}
+
+double Batch::path_end(int scene) const {
+  double end = 0;
+  for (const scene::Tool& t : impl_->at(scene).scene().tools)
+    if (!t.path.empty()) end = std::max(end, t.path.back().t);
+  return end;
 }
 
 const std::vector<std::string>& Batch::warnings(int scene) const {
@@ -399,19 +431,30 @@ std::vector<std::string> Batch::take_notes(int scene) {
   return impl_->at(scene).scheduler().take_notes();
 }
 
-void Batch::read_forces(std::span<double> out) const {
-  const std::size_t t = std::size_t(max_tools()), need = size() * t * 3;
+namespace {
+
+/// One vector of each tool's last result, size() x max_tools x 3, zero past a scene's own tools.
+void read_tool_vectors(const std::vector<TickResult>& last, std::size_t tools, Vector3 ToolResult::*member,
+                       const char* what, std::span<double> out) {
+  const std::size_t need = last.size() * tools * 3;
   if (out.size() != need)
-    throw std::invalid_argument(
-        fmt::format("read_forces: the buffer holds {} values; the batch has {} ({} scenes x {} "
-                    "tools x 3)",
-                    out.size(), need, size(), t));
+    throw std::invalid_argument(fmt::format("{}: the buffer holds {} values; the batch has {} ({} scenes x {} "
+                                            "tools x 3)",
+                                            what, out.size(), need, last.size(), tools));
   std::fill(out.begin(), out.end(), 0.0);
-  for (std::size_t i = 0; i < size(); ++i) {
-    const TickResult& r = impl_->last[i];
-    for (std::size_t k = 0; k < r.tools.size(); ++k)
-      for (std::size_t c = 0; c < 3; ++c) out[3 * (i * t + k) + c] = r.tools[k].force[c];
-  }
+  for (std::size_t i = 0; i < last.size(); ++i)
+    for (std::size_t k = 0; k < last[i].tools.size(); ++k)
+      for (std::size_t c = 0; c < 3; ++c) out[3 * (i * tools + k) + c] = (last[i].tools[k].*member)[c];
+}
+
+}  // namespace
+
+void Batch::read_forces(std::span<double> out) const {
+  read_tool_vectors(impl_->last, std::size_t(max_tools()), &ToolResult::force, "read_forces", out);
+}
+
+void Batch::read_tips(std::span<double> out) const {
+  read_tool_vectors(impl_->last, std::size_t(max_tools()), &ToolResult::tip, "read_tips", out);
 }
 
 std::vector<double> Batch::forces() const {

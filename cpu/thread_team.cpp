@@ -1,10 +1,14 @@
 #include "cpu/thread_team.hpp"
 
+#include <fmt/format.h>
+#include <sched.h>
 #include <tbb/global_control.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
+#include <cstdlib>
 #include <stdexcept>
 
 namespace tissue::cpu {
@@ -72,9 +76,34 @@ void wake(std::atomic<V>& a, const std::atomic<int>& sleepers) {
 
 }  // namespace
 
+int thread_cap(const char* text) {
+  if (text == nullptr || *text == '\0') return 0;
+  char* end = nullptr;
+  errno = 0;
+  const long n = std::strtol(text, &end, 10);
+  if (errno != 0 || end == text || *end != '\0' || n < 1 || n > ThreadTeam::kMaxSize)
+    throw std::invalid_argument(fmt::format("TISSUE_THREADS='{}' must be a whole number in 1..{} (the threads the cpu "
+                                            "backend may use), or unset",
+                                            text, ThreadTeam::kMaxSize));
+  return int(n);
+}
+
 int default_team_size() {
+  // TISSUE_THREADS caps TBB's threads too, for the process's life (read once)
+  static const int cap = [] {
+    const int n = thread_cap(std::getenv("TISSUE_THREADS"));
+    if (n > 0) static const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(n));
+    return n;
+  }();
   const auto limit = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);
-  return std::clamp(std::min(int(limit), tbb::this_task_arena::max_concurrency()), 1, ThreadTeam::kMaxSize);
+  int n = std::min(int(limit), tbb::this_task_arena::max_concurrency());
+  if (cap > 0) n = std::min(n, cap);
+  // the calling thread's CPU affinity mask now: TBB reads the process's once, when it loads, so a mask narrowed
+  // later (a worker given its share of the cores) would leave a team larger than its cores, spinning at barriers
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (::sched_getaffinity(0, sizeof set, &set) == 0 && CPU_COUNT(&set) > 0) n = std::min(n, CPU_COUNT(&set));
+  return std::clamp(n, 1, ThreadTeam::kMaxSize);
 }
 
 ThreadTeam::ThreadTeam(int size) : size_(size) {

@@ -106,7 +106,13 @@ class ThreadTeam {
 };
 
 /// The number of threads the cpu backend's team uses: TBB's current limit
-/// (tbb::global_control, the process's CPU affinity mask, e.g. `taskset`).
+/// (tbb::global_control, the process's CPU affinity mask, e.g. `taskset`),
+/// at most the cores of the calling thread's affinity mask now, and at most
+/// the environment's TISSUE_THREADS (which also caps TBB's threads for the
+/// process's life). Throws std::invalid_argument naming a TISSUE_THREADS
+/// that is not a whole number in 1..kMaxSize.
 int default_team_size();
+/// TISSUE_THREADS' value: 0 when unset or empty; throws as above.
+int thread_cap(const char* text);
 
 }  // namespace tissue::cpu

@@ -14,6 +14,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <algorithm>
 #include <chrono>
 #include <climits>
 #include <cmath>
@@ -600,6 +601,15 @@ std::tuple<std::uintptr_t, std::size_t, bool> cuda_array(py::handle h, const std
   return {cai["data"].cast<py::tuple>()[0].cast<std::uintptr_t>(), count, scalar == 4};
 }
 
+/// (N, max_tools, 3): one vector per tool after the last tick, as `read` (Batch::read_forces, read_tips) gives it.
+py::array_t<double> tool_array(PyBatch& b, void (tissue::Batch::*read)(std::span<double>) const) {
+  py::array_t<double> a({py::ssize_t(b.value.size()), py::ssize_t(b.value.max_tools()), py::ssize_t(3)});
+  double* out = a.mutable_data();
+  const std::size_t size = std::size_t(a.size());
+  locked(b, [&](tissue::Batch& x) { (x.*read)({out, size}); });
+  return a;
+}
+
 /// tissue.Batch: time, failures, resets and arrays.
 void bind_batch_steps(py::class_<PyBatch>& cls) {
   cls.def("step", [](PyBatch& b, py::handle ticks_arg, bool force) {
@@ -632,13 +642,10 @@ void bind_batch_steps(py::class_<PyBatch>& cls) {
       }, py::arg("scene") = py::none(), "One scene (or every scene) back to rest")
       .def("take_notes", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.take_notes(scene); }); },
            py::arg("scene"))
-      .def("forces", [](PyBatch& b) {
-        py::array_t<double> a({py::ssize_t(b.value.size()), py::ssize_t(b.value.max_tools()), py::ssize_t(3)});
-        double* out = a.mutable_data();
-        const std::size_t size = std::size_t(a.size());
-        locked(b, [&](tissue::Batch& x) { x.read_forces({out, size}); });
-        return a;
-      }, "(N, max_tools, 3) forces on the tools after the last tick (N)")
+      .def("forces", [](PyBatch& b) { return tool_array(b, &tissue::Batch::read_forces); },
+           "(N, max_tools, 3) forces on the tools after the last tick (N)")
+      .def("tips", [](PyBatch& b) { return tool_array(b, &tissue::Batch::read_tips); },
+           "(N, max_tools, 3) the tools' tips after the last tick (m)")
       .def("displacement", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Displacement); },
            py::arg("scene") = py::none(), "(N, nodes, 3) m, or one scene's (nodes, 3)")
       .def("positions", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Position); },
@@ -663,17 +670,47 @@ void bind_batch_steps(py::class_<PyBatch>& cls) {
       });
 }
 
+/// {term: (g, tau)} (1-based terms; None keeps a value) as Prony changes; throws naming the entry.
+std::vector<tissue::PronyChange> prony_changes(py::handle h) {
+  if (!py::isinstance<py::dict>(h))
+    throw std::invalid_argument("MaterialChange: prony must be a dict {term: (g, tau)} with 1-based terms");
+  std::vector<tissue::PronyChange> out;
+  for (auto [k, v] : h.cast<py::dict>()) {
+    if (!py::isinstance<py::int_>(k) || py::isinstance<py::bool_>(k))
+      throw std::invalid_argument("MaterialChange: prony term " + py::repr(k).cast<std::string>() +
+                                  " must be a whole number (1-based)");
+    const py::tuple pair = py::reinterpret_borrow<py::object>(v).cast<py::tuple>();
+    if (pair.size() != 2)
+      throw std::invalid_argument("MaterialChange: prony term " + py::repr(k).cast<std::string>() +
+                                  " must map to a pair (g, tau)");
+    out.push_back({k.cast<int>(), pair[0].cast<std::optional<double>>(), pair[1].cast<std::optional<double>>()});
+  }
+  std::sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.term < b.term; });
+  return out;
+}
+
 /// tissue.MaterialChange: a batch scene's new material parameters.
 void bind_material_change(py::module_& m) {
   py::class_<tissue::MaterialChange>(m, "MaterialChange", "New parameters for one material of a scene (None keeps it)")
       .def(py::init([](std::string material, std::optional<double> E, std::optional<double> nu,
-                       std::optional<double> rho) { return tissue::MaterialChange{std::move(material), E, nu, rho}; }),
+                       std::optional<double> rho, std::optional<double> fibre_stiffness, py::handle prony) {
+             tissue::MaterialChange c{std::move(material), E, nu, rho, fibre_stiffness, {}};
+             if (!prony.is_none()) c.prony = prony_changes(prony);
+             return c;
+           }),
            py::arg("material") = "", py::kw_only(), py::arg("E") = py::none(), py::arg("nu") = py::none(),
-           py::arg("rho") = py::none())
+           py::arg("rho") = py::none(), py::arg("fibre_stiffness") = py::none(), py::arg("prony") = py::none(),
+           "prony: {term: (g, tau)} with 1-based terms, None in a pair keeping that value")
       .def_readwrite("material", &tissue::MaterialChange::material)
       .def_readwrite("E", &tissue::MaterialChange::youngs_modulus)
       .def_readwrite("nu", &tissue::MaterialChange::poisson_ratio)
-      .def_readwrite("rho", &tissue::MaterialChange::density);
+      .def_readwrite("rho", &tissue::MaterialChange::density)
+      .def_readwrite("fibre_stiffness", &tissue::MaterialChange::fibre_stiffness)
+      .def_property_readonly("prony", [](const tissue::MaterialChange& c) {
+        py::dict d;
+        for (const tissue::PronyChange& p : c.prony) d[py::int_(p.term)] = py::make_tuple(p.g, p.tau);
+        return d;
+      });
 }
 
 /// tissue.Batch: loading, sizes, materials and the tools.
@@ -724,6 +761,9 @@ void bind_batch(py::module_& m) {
       .def("n_tools", [](PyBatch& b, int scene) { return b.value.n_tools(scene); }, py::arg("scene"))
       .def("steps_per_tick", [](PyBatch& b, int scene) { return b.value.steps_per_tick(scene); }, py::arg("scene"))
       .def("dt", [](PyBatch& b, int scene) { return b.value.dt(scene); }, py::arg("scene"))
+      .def("tick_seconds", [](PyBatch& b, int scene) { return b.value.tick_seconds(scene); }, py::arg("scene"))
+      .def("path_end", [](PyBatch& b, int scene) { return b.value.path_end(scene); }, py::arg("scene"),
+           "When the scene's scripted tool paths end (s); 0 without paths")
       .def("warnings", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.warnings(scene); }); },
            py::arg("scene"))
       .def("set_material", [](PyBatch& b, int scene, std::string material, std::optional<double> E,

@@ -11,8 +11,10 @@ PACKAGES=(build-essential cmake pkg-config libfmt-dev libeigen3-dev libtbb-dev l
           xvfb xauth libgl1-mesa-dri
           # scripts/fuzz: libFuzzer targets built with clang
           clang-15 libfuzzer-15-dev
-          # the Python package (python/): pybind11, NumPy, pytest; matplotlib for scripts/plot and the examples
-          pybind11-dev python3-dev python3-numpy python3-pytest python3-matplotlib)
+          # the Python package (python/): pybind11, NumPy, pytest; matplotlib for scripts/plot and the examples;
+          # Dask, SciPy and tqdm for tissue sweep / tissue fit (python/tissue/distributed.py, fitting.py)
+          pybind11-dev python3-dev python3-numpy python3-pytest python3-matplotlib
+          python3-dask python3-distributed python3-scipy python3-tqdm)
 
 install_packages() {
   local missing=()

@@ -6,6 +6,7 @@
 // region's lists exactly once. scripts/tsan runs this file under
 // ThreadSanitizer (the team is our code, so TSan sees its synchronisation).
 #include <gtest/gtest.h>
+#include <sched.h>
 #include <tbb/global_control.h>
 #include <tbb/task_arena.h>
 
@@ -256,6 +257,37 @@ TEST(ThreadTeam, DefaultSizeFollowsTbbsLimits) {
   }
   tbb::task_arena one(1);
   one.execute([] { EXPECT_EQ(default_team_size(), 1); });
+}
+
+TEST(ThreadTeam, DefaultSizeFollowsTheAffinityMaskNarrowedLater) {
+  cpu_set_t all;
+  ASSERT_EQ(::sched_getaffinity(0, sizeof all, &all), 0);
+  int first = -1;
+  for (int c = 0; c < CPU_SETSIZE && first < 0; ++c)
+    if (CPU_ISSET(c, &all)) first = c;
+  std::thread([first] {  // a thread kept to one core after TBB read the process's mask: a team of one
+    cpu_set_t one;
+    CPU_ZERO(&one);
+    CPU_SET(first, &one);
+    ASSERT_EQ(::sched_setaffinity(0, sizeof one, &one), 0);
+    EXPECT_EQ(default_team_size(), 1);
+  }).join();
+}
+
+TEST(ThreadTeam, TheThreadCapIsAWholeNumberOrUnset) {
+  EXPECT_EQ(thread_cap(nullptr), 0);
+  EXPECT_EQ(thread_cap(""), 0);
+  EXPECT_EQ(thread_cap("3"), 3);
+  for (const char* bad : {"0", "-2", "abc", "2.5", "1000"}) {
+    try {
+      thread_cap(bad);
+      ADD_FAILURE() << bad;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(std::string("TISSUE_THREADS='") + bad + "' must be a whole number in 1..255"),
+                std::string::npos)
+          << e.what();
+    }
+  }
 }
 
 TEST(ThreadTeam, RunInsideAJobIsRefused) {

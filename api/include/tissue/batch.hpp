@@ -30,6 +30,15 @@
 
 namespace tissue {
 
+/// A new relative modulus or relaxation time for one Prony term of a
+/// material (unset: the term's value). term = the material's term count + 1
+/// adds a term, then both g and tau are needed.
+struct PronyChange {
+  int term = 1;              ///< 1-based, in the scene's order
+  std::optional<double> g;   ///< relative modulus (> 0, the terms' sum < 1)
+  std::optional<double> tau; ///< relaxation time (s, > 0)
+};
+
 /// New parameters for one material of a scene (unset: the scene's value).
 /// The material's form becomes (E, nu) when E or nu is given.
 struct MaterialChange {
@@ -37,6 +46,8 @@ struct MaterialChange {
   std::optional<double> youngs_modulus;  ///< E (Pa)
   std::optional<double> poisson_ratio;   ///< nu
   std::optional<double> density;         ///< rho (kg/m^3)
+  std::optional<double> fibre_stiffness; ///< eta (Pa) of a material that has a <fibre>
+  std::vector<PronyChange> prony = {};   ///< changed or added Prony terms
 };
 
 /// One scene of a batch: a scene file or "@kidney" (or a host's mesh), and
@@ -93,6 +104,9 @@ class Batch {
   int steps_per_tick(int scene) const;
   double dt(int scene) const;
   double tick_seconds(int scene) const;
+  /// When the scene's scripted tool paths end (s): the latest last waypoint
+  /// of its tools (0 for tools without a path).
+  double path_end(int scene) const;
   const std::vector<std::string>& warnings(int scene) const;
 
   /// Replaces a scene's material parameters (MaterialChange) and starts
@@ -167,6 +181,8 @@ class Batch {
   /// x 3, zero past a scene's own tools.
   void read_forces(std::span<double> out) const;
   std::vector<double> forces() const;
+  /// Every tool's tip after the last tick (m), laid out as read_forces.
+  void read_tips(std::span<double> out) const;
   /// Copies one scene's field (Simulation::read_field).
   void read_field(int scene, Field f, std::span<double> out);
   /// Every scene's field, size() x (nodes or elements) x components; the
