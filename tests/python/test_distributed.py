@@ -31,7 +31,8 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 
 
 def write_block(path, E=3000.0, nu=0.4, prony=None, cells=(6, 6, 3), size=(0.02, 0.02, 0.01), press=0.003,
-                press_time=0.2, hold=0.2, radius=0.004, start_gap=0.0005, precision="double", nodes_tets=None):
+                press_time=0.2, hold=0.2, radius=0.004, start_gap=0.0005, precision="double", nodes_tets=None,
+                fibre=None):
     """A block scene (base fixed) with a sphere pressed into the middle of its top, then held."""
     nodes, tets = nodes_tets if nodes_tets is not None else tissue.box_mesh(*cells, size)
     top = float(nodes[:, 2].max())
@@ -42,6 +43,8 @@ def write_block(path, E=3000.0, nu=0.4, prony=None, cells=(6, 6, 3), size=(0.02,
     lines += ['    </nodes>', '    <elements>']
     lines += ["      {} {} {} {}".format(*t) for t in tets]
     lines += ['    </elements>', '  </mesh>', f'  <material name="tissue" E="{E}" nu="{nu}" rho="1000">']
+    if fibre is not None:
+        lines.append(f'    <fibre stiffness="{fibre}" direction="1 0 0"/>')
     for g, tau in prony or []:
         lines.append(f'    <prony g="{g}" tau="{tau}"/>')
     zb = float(nodes[:, 2].min())
@@ -293,6 +296,20 @@ def test_fit_recovers_a_prony_term_from_a_held_press(visco):
     fit = tf.fit(visco, tf.Measurement("time", t, F), {"prony1.g": 0.15, "prony1.tau": 0.2})
     assert fit.params["prony1.g"] == pytest.approx(0.3, rel=0.05)
     assert fit.params["prony1.tau"] == pytest.approx(0.08, rel=0.05)
+
+
+def test_fit_recovers_a_fibre_stiffness(tmp_path):
+    # fibres along x in a block pressed from above: stretched around the tool, they stiffen the press
+    scene = write_block(tmp_path / "fibre.xml", fibre=20000.0)
+    truth = td.run([td.Variant(scene)], local=True).results[0]
+    softer = td.run([td.Variant(scene, {"fibre_stiffness": 0.0})], local=True).results[0]
+    F, F0 = (np.linalg.norm(r.force[-1, 0]) for r in (truth, softer))
+    assert F > 1.05 * F0, "the fibres carry part of the press"
+    t, Fm = noisy(truth, 10, 0.0)
+    fit = tf.fit(scene, tf.Measurement("time", t, Fm), {"fibre_stiffness": 5000.0})
+    assert fit.params["fibre_stiffness"] == pytest.approx(20000, rel=0.02)
+    with pytest.raises(ValueError, match="has no <fibre>"):
+        td.run([td.Variant(write_block(tmp_path / "plain.xml"), {"fibre_stiffness": 1000.0})], local=True)
 
 
 def test_fit_names_the_row_and_the_rule(block, tmp_path):
