@@ -155,10 +155,11 @@ struct GroupTickKey {
   auto operator<=>(const GroupTickKey&) const = default;
 };
 
-/// Scenes of one model stepped as one (BackendGroup; docs/batch.md, "One
-/// launch per pass"). Each scene's backend allocates its arrays in its slot
-/// of the group's arena (SceneArena), so that scene k's arrays are those of
-/// any other member moved by whole slots. A tick: each scene stages its
+/// Scenes of one mesh and one step stepped as one (BackendGroup;
+/// docs/batch.md, "One launch per pass"); their materials may differ. Each
+/// scene's backend allocates its arrays in its slot of the group's arena
+/// (SceneArena), so that scene k's arrays are those of any other member
+/// moved by whole slots. A tick: each scene stages its
 /// tools' motion in the group's pinned array and its graph key (start);
 /// launch() then runs, per key, one graph captured from one member with
 /// every kernel over all slots (gridDim.y; the kernels move their
@@ -663,9 +664,10 @@ class CudaBackend final : public Backend {
            !store_.state().load;
   }
 
-  /// Whether every array a group tick's kernels touch lies in this scene's
-  /// slot at the group's layout (the first member's offsets). Those arrays
-  /// change only at an upload, where this is asked.
+  /// Whether every array a group tick's kernels touch per scene (the state,
+  /// the buffers, the reduction's, and the model's that follow its material)
+  /// lies in this scene's slot at the group's layout (the first member's
+  /// offsets). Those arrays change only at an upload, where this is asked.
   bool slot_layout_matches() {
     std::vector<std::ptrdiff_t> offsets;
     const char* base = group_->slot(slot_);
@@ -681,6 +683,10 @@ class CudaBackend final : public Backend {
                             (const void*)v.corner_tool, (const void*)v.corner_blocked, (const void*)v.proposed})
         add(p);
     for (auto& b : store_.u.buf) add(b.data());
+    const ModelView<T>& m = store_.model();  // the arrays that follow the scene's material (materials_moved)
+    for (const void* p : {(const void*)m.mu, (const void*)m.K, (const void*)m.mass, (const void*)m.cd_A,
+                          (const void*)m.cd_B, (const void*)m.cd_C, (const void*)m.node_divisor})
+      if (p) add(p);  // (the divisors are null without IANP: alike in every member of one mesh)
     for (const void* p : reducer_.device_arrays()) add(p);
     if (std::find(offsets.begin(), offsets.end(), std::ptrdiff_t(-1)) != offsets.end()) return false;
     return group_->same_layout(offsets);

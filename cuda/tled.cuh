@@ -574,6 +574,7 @@ template <class T, bool kRecomputed>
 __global__ void element_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u,
                                         index_t first_wave) {
   if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    m = m.materials_moved(d * s.slots.stride);
     u = s.slot_moved(u, d);
     s = s.moved(d);
   }
@@ -662,7 +663,10 @@ void enqueue_element_pressures(const ModelView<T>& m, const StateView<T>& s, con
 /// whole groups are active or not.
 template <class T>
 __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView r) {
-  if (const std::int64_t d = slots_moved(s.slots)) s = s.moved(d);  // a group's launch: this block row's scene
+  if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    m = m.materials_moved(d * s.slots.stride);
+    s = s.moved(d);
+  }
   let_next_pass_launch();
   const index_t g = thread_index(), i = g / kNodeLanes;
   const bool active = i < r.n_nodes;
@@ -694,7 +698,10 @@ __global__ void nodal_pressure_kernel(ModelView<T> m, StateView<T> s, RegionView
 /// double steps ran 0.3-2 % slower on an H100: kept apart.)
 template <class T, int L>
 __global__ void nodal_pressure_lanes_kernel(ModelView<T> m, StateView<T> s, RegionView r) {
-  if (const std::int64_t d = slots_moved(s.slots)) s = s.moved(d);  // a group's launch: this block row's scene
+  if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    m = m.materials_moved(d * s.slots.stride);
+    s = s.moved(d);
+  }
   constexpr int P = kNodeLanes / L;
   let_next_pass_launch();
   const index_t g = thread_index(), i = g / P;
@@ -849,6 +856,7 @@ template <class T, bool kRecomputed>
 __global__ void __launch_bounds__(kPackedBlock)
     packed_pressures_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u) {
   if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    m = m.materials_moved(d * s.slots.stride);
     u = s.slot_moved(u, d);
     s = s.moved(d);
   }
@@ -884,6 +892,7 @@ template <class T, bool kRecomputed, bool kLoad, bool kEarly>
 __global__ void __launch_bounds__(kPackedBlock, kPackedForceMinBlocks<T>)
     packed_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
   if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    m = m.materials_moved(d * s.slots.stride);
     b = b.moved(d * s.slots.stride);
     s = s.moved(d);
   }
@@ -947,6 +956,7 @@ template <class T, bool kRecomputed>
 __global__ void element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u,
                                       index_t first_wave) {
   if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    m = m.materials_moved(d * s.slots.stride);
     u = s.slot_moved(u, d);
     s = s.moved(d);
   }
@@ -973,6 +983,7 @@ __global__ void __launch_bounds__(kBlock, kStreamingForceBlocks<T> > 0 ? kStream
     element_forces_streaming_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u,
                                     index_t first_wave) {
   if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    m = m.materials_moved(d * s.slots.stride);
     u = s.slot_moved(u, d);
     s = s.moved(d);
   }
@@ -993,6 +1004,7 @@ template <class T, bool kRecomputed>
 __global__ void element_forces_beside_check_kernel(ModelView<T> m, StateView<T> s, RegionView r,
                                                    const Packed3<T>* u) {
   if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    m = m.materials_moved(d * s.slots.stride);
     u = s.slot_moved(u, d);
     s = s.moved(d);
   }
@@ -1049,6 +1061,7 @@ __device__ __forceinline__ void discard_slots(const Packed3<T>* f_slot, index_t 
 template <class T, bool kLoad, int L>
 __global__ void node_update_kernel(ModelView<T> m, StateView<T> s, RegionView r, StepBuffers<T> b) {
   if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    m = m.materials_moved(d * s.slots.stride);
     b = b.moved(d * s.slots.stride);
     s = s.moved(d);
   }

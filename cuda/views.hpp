@@ -56,6 +56,9 @@ inline constexpr int kPackedBlock = 128;
 template <class T>
 using ReferencePoint = std::conditional_t<sizeof(T) == 4, GridPoint, Packed3<double>>;
 
+template <class P>
+TISSUE_HD P* moved_by(P* p, std::int64_t bytes);
+
 /// Read-only model on the device (shapes as core/model.hpp unless noted).
 template <class T>
 struct ModelView {
@@ -111,6 +114,23 @@ struct ModelView {
   const index_t* surf_slot = nullptr;     ///< each surface node's (triangle, corner) slots 3 t + k (3 n_tris)
   double dt = 0;                          ///< s
   bool ianp = true;
+
+  /// The arrays that follow a scene's material (moduli, masses, the central
+  /// difference's constants, the pressure divisors) of the scene `bytes`
+  /// away in a group's arena: scenes of one mesh and one step but different
+  /// materials share a group's launch, each reading its own (the mesh's
+  /// arrays are read from the captured scene's copy for all).
+  TISSUE_HD ModelView materials_moved(std::int64_t bytes) const {
+    ModelView v = *this;
+    v.mu = moved_by(mu, bytes);
+    v.K = moved_by(K, bytes);
+    v.mass = moved_by(mass, bytes);
+    v.cd_A = moved_by(cd_A, bytes);
+    v.cd_B = moved_by(cd_B, bytes);
+    v.cd_C = moved_by(cd_C, bytes);
+    v.node_divisor = moved_by(node_divisor, bytes);
+    return v;
+  }
 };
 
 /// The optional law terms (core/material.hpp) on the device: null when no

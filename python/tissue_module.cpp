@@ -753,6 +753,10 @@ void bind_batch(py::module_& m) {
       .def_property_readonly("device_name", [](PyBatch& b) { return b.value.device_name(); })
       .def_property_readonly("max_tools", [](PyBatch& b) { return b.value.max_tools(); })
       .def_property_readonly("distinct_models", [](PyBatch& b) { return b.value.distinct_models(); })
+      .def_property_readonly("groups", [](PyBatch& b) { return b.value.groups(); },
+                             "groups of scenes stepped as one launch per pass (cuda; docs/batch.md)")
+      .def_property_readonly("ticks_together", [](PyBatch& b) { return b.value.ticks_together(); },
+                             "scene ticks run in a group so far")
       .def_property_readonly("scene_host_bytes", [](PyBatch& b) { return b.value.scene_host_bytes(); })
       .def_property_readonly("scene_device_bytes", [](PyBatch& b) { return b.value.scene_device_bytes(); })
       .def("name", [](PyBatch& b, int scene) { return b.value.name(scene); }, py::arg("scene"))

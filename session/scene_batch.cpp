@@ -40,6 +40,27 @@ bool same_input(const ModelInput& a, const ModelInput& b) {
   return true;
 }
 
+/// True when scenes of these models can share a group's launch (docs/batch.md,
+/// "One launch per pass"): one mesh, supports, fibre directions and IANP, the
+/// same step (dt, so the same steps a tick), and materials that differ at most
+/// in their values (moduli, density, damping, mass scaling: the arrays each
+/// scene reads from its own slot, cuda ModelView::materials_moved), not in
+/// their laws.
+bool same_group(const ModelInput& a, const TissueModel<double>& ma, const ModelInput& b,
+                const TissueModel<double>& mb) {
+  if (&ma == &mb) return true;
+  if (ma.dt != mb.dt || ma.n_nodes != mb.n_nodes || ma.n_elems != mb.n_elems || a.ianp != b.ianp ||
+      a.tick != b.tick || a.materials.size() != b.materials.size() || a.nodes != b.nodes || a.tets != b.tets ||
+      a.elem_material != b.elem_material || a.fixed != b.fixed || a.fixed_axes != b.fixed_axes ||
+      a.fibre_dirs != b.fibre_dirs)
+    return false;
+  for (std::size_t k = 0; k < a.materials.size(); ++k)
+    if ((a.materials[k].fibre_eta > 0) != (b.materials[k].fibre_eta > 0) ||
+        a.materials[k].prony_terms != b.materials[k].prony_terms)
+      return false;
+  return true;
+}
+
 /// MemAvailable of /proc/meminfo (bytes), -1 where unknown.
 std::int64_t host_available_bytes() {
   std::ifstream f("/proc/meminfo");
@@ -116,18 +137,28 @@ SceneBatch::SceneBatch(const std::vector<std::shared_ptr<const scene::Scene>>& s
   prepared.reserve(n);
   for (std::size_t i = 0; i < n; ++i) prepared.push_back(prepare(scenes[i], i));
   const int max_group = max_group_scenes(backend_);
+  // each scene's group class: the first earlier scene whose model can share a launch with its (same_group)
+  std::vector<std::size_t> cls(n);
+  std::vector<std::size_t> firsts;
+  for (std::size_t i = 0; i < n && max_group > 0; ++i) {
+    cls[i] = i;
+    for (std::size_t f : firsts)
+      if (groupable(prepared[f].model, prepared[i].model)) {
+        cls[i] = f;
+        break;
+      }
+    if (cls[i] == i) firsts.push_back(i);
+  }
   sessions_.reserve(n);
   member_.assign(n, {});
   for (std::size_t i = 0; i < n; ++i) {
-    const TissueModel<double>* model = prepared[i].model.get();
     Membership slot;
-    if (max_group > 0) {  // the scenes of one model in groups of up to max_group, in order
+    if (max_group > 0) {  // the scenes of one class in groups of up to max_group, in order
       auto open = std::find_if(groups_.begin(), groups_.end(), [&](const Group& g) {
-        return g.model.get() == model && g.filled < g.slots;
+        return g.model == prepared[cls[i]].model && g.filled < g.slots;
       });
       if (open == groups_.end()) {
-        const auto rest = std::count_if(prepared.begin() + std::ptrdiff_t(i), prepared.end(),
-                                        [&](const Prepared& p) { return p.model.get() == model; });
+        const auto rest = std::count(cls.begin() + std::ptrdiff_t(i), cls.end(), cls[i]);
         const int slots = int(std::min<std::ptrdiff_t>(rest, max_group));
         if (slots >= 2) {
           // a scene's device bytes, measured on a scene built alone (also the memory check's first scene)
@@ -137,7 +168,8 @@ SceneBatch::SceneBatch(const std::vector<std::shared_ptr<const scene::Scene>>& s
           alone.reset();
           // room for each array's alignment in the slot (256 bytes an array)
           const std::size_t slot_bytes = std::size_t(bytes) + std::size_t(bytes) / 32 + (std::size_t(1) << 18);
-          groups_.push_back({prepared[i].model, make_backend_group(backend_, precision_, slots, slot_bytes), slots, 0});
+          groups_.push_back(
+              {prepared[cls[i]].model, make_backend_group(backend_, precision_, slots, slot_bytes), slots, 0});
           open = groups_.end() - 1;
         }
       }
@@ -160,6 +192,17 @@ void SceneBatch::measure_first(const Session& first, std::size_t scenes, std::in
   memory_.device_free = b.device_memory().free;
   memory_.host_available = host_available_bytes();
   check_batch_memory(scenes, memory_, b.device_name());
+}
+
+bool SceneBatch::groupable(const std::shared_ptr<const TissueModel<double>>& a,
+                           const std::shared_ptr<const TissueModel<double>>& b) const {
+  if (a == b) return true;
+  const ModelInput *ia = nullptr, *ib = nullptr;
+  for (const auto& m : models_) {
+    if (m->model == a) ia = &m->input;
+    if (m->model == b) ib = &m->input;
+  }
+  return ia && ib && same_group(*ia, *a, *ib, *b);
 }
 
 std::shared_ptr<const TissueModel<double>> SceneBatch::model_for(const scene::Scene& scene) {
@@ -378,10 +421,10 @@ void SceneBatch::restart(std::size_t i) {
 void SceneBatch::replace(std::size_t i, std::shared_ptr<const scene::Scene> scene) {
   if (i >= size()) throw std::out_of_range(fmt::format("batch scene {} does not exist (0..{})", i, size() - 1));
   const Prepared p = prepare(scene, i);
-  // the same model as its group's: the new scene takes the old one's slot; otherwise it runs alone
+  // a model that can share its group's launch: the new scene takes the old one's slot; otherwise it runs alone
   Membership slot;
   for (const Group& g : groups_)
-    if (member_[i].group == g.group && g.model == p.model) slot = member_[i];
+    if (member_[i].group == g.group && groupable(g.model, p.model)) slot = member_[i];
   sessions_[i].reset();  // (leaves its slot first)
   sessions_[i] = build(p, i, slot);
   member_[i] = slot;

@@ -88,7 +88,7 @@ class SceneBatch {
   /// ticks of grouped scenes run alone (a tick the group could not take).
   std::int64_t ticks_together() const;
   std::int64_t ticks_alone() const;
-  /// Groups of scenes stepped as one (cuda: scenes of one model).
+  /// Groups of scenes stepped as one (cuda: scenes of one mesh and one step, whatever their materials).
   std::size_t groups() const { return groups_.size(); }
   /// The last tick of a batch with groups, in seconds: the host's starts
   /// (every scene's tick staged, or launched alone), the groups' launches
@@ -116,7 +116,7 @@ class SceneBatch {
     int slot = -1;
   };
   struct Group {
-    std::shared_ptr<const TissueModel<double>> model;
+    std::shared_ptr<const TissueModel<double>> model;  ///< its first scene's (the others' are groupable with it)
     std::shared_ptr<BackendGroup> group;
     int slots = 0, filled = 0;
   };
@@ -126,6 +126,9 @@ class SceneBatch {
   void measure_first(const Session& first, std::size_t scenes, std::int64_t device_bytes);
   void tick_in_groups();
   std::shared_ptr<const TissueModel<double>> model_for(const scene::Scene& scene);
+  /// Whether scenes of these models can share a group's launch (one mesh and step; materials may differ).
+  bool groupable(const std::shared_ptr<const TissueModel<double>>& a,
+                 const std::shared_ptr<const TissueModel<double>>& b) const;
   void set_threads();
 
   std::string backend_;

@@ -76,6 +76,13 @@ def parse_param(text: str, need_value: bool = True):
     return name, vals
 
 
+def check_depth(text: str) -> None:
+    """--depth: all, auto, scene or a whole number of rings >= 1."""
+    if text in ("all", "auto", "scene") or (text.isdigit() and int(text) >= 1):
+        return
+    raise UsageError(f"--depth {text}: give all, auto, scene or a number of rings >= 1")
+
+
 def prepare_out(path: str, overwrite: bool, mine: Sequence[str]) -> None:
     """The output folder: created; one holding a previous result is refused unless --overwrite."""
     if os.path.exists(path) and not os.path.isdir(path):
@@ -253,6 +260,8 @@ def sweep_main(argv: Sequence[str]) -> int:
     ap.add_argument("--local", action="store_true", help="run in this process, without Dask")
     ap.add_argument("--backend", choices=("auto", "cpu", "cuda"), default="auto")
     ap.add_argument("--precision", choices=("float", "double"))
+    ap.add_argument("--depth", default="all", help="deformation region: all (default: the whole mesh), auto, a ring "
+                    "count, or scene (each scene's own)")
     ap.add_argument("--fields", default="", help="final fields to keep: displacement,pressure,...")
     ap.add_argument("--chunk", type=int, help="variants per task (default: what fills a worker)")
     ap.add_argument("--no-plots", action="store_true")
@@ -275,6 +284,7 @@ def sweep_main(argv: Sequence[str]) -> int:
             raise UsageError(f"--workers {a.workers}: must be >= 1")
         if a.chunk is not None and a.chunk < 1:
             raise UsageError(f"--chunk {a.chunk}: must be >= 1")
+        check_depth(a.depth)
         fields = [f for f in a.fields.split(",") if f]
         bad = [f for f in fields if f not in td.FIELDS]
         if bad:
@@ -307,7 +317,8 @@ def sweep_main(argv: Sequence[str]) -> int:
     interrupted = False
     try:
         res = td.run(variants, scheduler=a.scheduler, workers=a.workers, backend=a.backend, precision=a.precision,
-                     fields=fields, chunk=a.chunk, progress=progress, local=a.local)
+                     fields=fields, chunk=a.chunk, progress=progress, local=a.local,
+                     depth=None if a.depth == "scene" else a.depth)
     except KeyboardInterrupt:
         interrupted = True
         res = None
@@ -371,6 +382,7 @@ def fit_main(argv: Sequence[str]) -> int:
     ap.add_argument("--cluster", action="store_true", help="evaluate on a Dask cluster started on this machine")
     ap.add_argument("--backend", choices=("auto", "cpu", "cuda"), default="auto")
     ap.add_argument("--precision", choices=("float", "double"), default="double")
+    ap.add_argument("--depth", default="all", help="deformation region: all (default), auto, a ring count, or scene")
     ap.add_argument("--max-evaluations", type=int, default=30)
     a = ap.parse_args(argv)
     try:
@@ -387,6 +399,7 @@ def fit_main(argv: Sequence[str]) -> int:
             fixed[n] = v[0]
         if not start:
             raise UsageError("--param: give at least one parameter to fit (E=3000)")
+        check_depth(a.depth)
         if a.max_evaluations < 1:
             raise UsageError(f"--max-evaluations {a.max_evaluations}: must be >= 1")
         m = tf.read_measurement(a.measured, a.x)
@@ -407,7 +420,8 @@ def fit_main(argv: Sequence[str]) -> int:
               file=sys.stderr)
         fit = tf.fit(a.scene, m, start, path=path, fixed=fixed, tool=a.tool, precision=a.precision,
                      backend=a.backend, scheduler=a.scheduler, client=client, local=client is None and not a.scheduler,
-                     max_evaluations=a.max_evaluations, log=lambda s: print(s, file=sys.stderr))
+                     max_evaluations=a.max_evaluations, log=lambda s: print(s, file=sys.stderr),
+                     depth=None if a.depth == "scene" else a.depth)
     except KeyboardInterrupt:
         print("tissue fit: interrupted by SIGINT", file=sys.stderr)
         return 130

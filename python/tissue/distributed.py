@@ -228,7 +228,8 @@ def _ticks(batch, scene: int, v: Variant) -> int:
 
 
 def run_chunk(chunk: Sequence[Variant], indices: Sequence[int], backend: Optional[str] = None,
-              precision: Optional[str] = None, fields: Sequence[str] = (), worker: str = "local") -> List[VariantResult]:
+              precision: Optional[str] = None, fields: Sequence[str] = (), worker: str = "local",
+              depth: Optional[str] = "all") -> List[VariantResult]:
     """Runs variants as one Batch here; the worker side of run()."""
     note = ""
     if backend in (None, "auto"):
@@ -236,7 +237,7 @@ def run_chunk(chunk: Sequence[Variant], indices: Sequence[int], backend: Optiona
     elif backend == "cuda" and "cuda" not in tissue.available_backends():
         backend, note = "cpu", f"worker {worker} has no usable GPU: it ran on the cpu"
     batch = tissue.Batch([(v.scene, material_changes(v.params)) for v in chunk], backend=backend,
-                         precision=precision)
+                         precision=precision, depth=depth)
     ticks = []
     for i, v in enumerate(chunk):
         if v.path is not None:
@@ -277,7 +278,7 @@ def _pin_to_cores() -> None:
             os.sched_setaffinity(0, want)
 
 
-def _run_task(chunk, indices, backend, precision, fields):
+def _run_task(chunk, indices, backend, precision, fields, depth):
     """The Dask task: run_chunk on this worker, named by its address."""
     from distributed import get_worker
     _pin_to_cores()
@@ -285,7 +286,7 @@ def _run_task(chunk, indices, backend, precision, fields):
         name = get_worker().address
     except ValueError:
         name = "local"
-    return run_chunk(chunk, indices, backend, precision, fields, name)
+    return run_chunk(chunk, indices, backend, precision, fields, name, depth)
 
 
 # --------------------------------------------------------------- the cluster
@@ -357,15 +358,18 @@ def default_chunk(n_variants: int, workers: int, backend: Optional[str]) -> int:
 def run(variants: Sequence[Variant], *, scheduler: Optional[str] = None, workers: Optional[int] = None,
         backend: Optional[str] = None, precision: Optional[str] = None, fields: Sequence[str] = (),
         chunk: Optional[int] = None, progress: Optional[Callable[[VariantResult, int, int], None]] = None,
-        client=None, local: bool = False) -> Result:
+        client=None, local: bool = False, depth: Optional[str] = "all") -> Result:
     """Runs every variant and returns their results in order.
 
     scheduler: a running cluster's address ('tcp://host:8786'); None starts a
     LocalCluster on this machine (local_cluster), or, with local=True, runs
     the chunks in this process without Dask. client: an existing
     distributed.Client to use instead. progress(result, done, total) is
-    called as each variant's result arrives. Every variant is checked before
-    any runs (ParameterError, ValueError naming it)."""
+    called as each variant's result arrives. depth: the deformation region
+    ("all", the default: the whole mesh, the accurate choice and the one a
+    GPU steps many scenes of in one launch; "auto" or a ring count: the
+    haptic loop's shortcut; None: each scene's own). Every variant is checked
+    before any runs (ParameterError, ValueError naming it)."""
     variants = list(variants)
     if not variants:
         raise ValueError("run: no variants")
@@ -396,7 +400,7 @@ def run(variants: Sequence[Variant], *, scheduler: Optional[str] = None, workers
         size = chunk or default_chunk(len(variants), 1, backend)
         for start in range(0, len(variants), size):
             idx = list(range(start, min(start + size, len(variants))))
-            take(run_chunk([variants[i] for i in idx], idx, backend, precision, fields), len(variants))
+            take(run_chunk([variants[i] for i in idx], idx, backend, precision, fields, "local", depth), len(variants))
         return _result(variants, results, t0, 1)
 
     _dask()
@@ -415,7 +419,7 @@ def run(variants: Sequence[Variant], *, scheduler: Optional[str] = None, workers
         for start in range(0, len(variants), size):
             idx = list(range(start, min(start + size, len(variants))))
             futures.append(client.submit(_run_task, [variants[i] for i in idx], idx, backend, precision,
-                                         tuple(fields), pure=False))
+                                         tuple(fields), depth, pure=False))
         for fut in as_completed(futures):
             take(fut.result(), len(variants))
         return _result(variants, results, t0, n_workers)

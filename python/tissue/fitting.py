@@ -166,7 +166,7 @@ def _bounds(name: str) -> Tuple[float, float]:
 def fit(scene: str, measurement: Measurement, start: Mapping[str, float], *, path: Optional[np.ndarray] = None,
         fixed: Optional[Mapping[str, float]] = None, tool: int = 0, precision: str = "double",
         backend: Optional[str] = None, scheduler: Optional[str] = None, client=None, local: bool = True,
-        step: float = 1e-3, max_evaluations: int = 30, log=None) -> FitResult:
+        step: float = 1e-3, max_evaluations: int = 30, log=None, depth: Optional[str] = "all") -> FitResult:
     """Least squares (scipy.optimize.least_squares, trust region reflective)
     of the simulated force magnitude against the measured one, residuals
     scaled by the largest measured force. start: the parameters to fit and
@@ -229,7 +229,7 @@ def fit(scene: str, measurement: Measurement, start: Mapping[str, float], *, pat
         points = [z] + [z + step * np.eye(p)[j] * (1 if z[j] + step < hi[j] else -1) for j in range(p)]
         variants = [td.Variant(scene, {**fixed, **values(zz)}, path, tool, duration) for zz in points]
         result = td.run(variants, backend=backend, precision=precision, scheduler=scheduler, client=client,
-                        local=local and scheduler is None and client is None)
+                        local=local and scheduler is None and client is None, depth=depth)
         res = [residual_of(r, ", ".join(f"{k} = {v:.6g}" for k, v in values(zz).items()))
                for r, zz in zip(result.results, points)]
         J = np.stack([(res[j + 1] - res[0]) / (points[j + 1][j] - z[j]) for j in range(p)], axis=1)

@@ -186,6 +186,42 @@ TEST_P(BatchEquals, AFailingSceneStopsAloneAndResetsAlone) {
   expect_same_scene(batch, 1, fresh, "scene 1 after its reset");
 }
 
+// Scenes of one mesh and one step but different materials (a sweep of E and rho): on cuda one group whose
+// every scene reads its own moduli, masses and constants; each equals its scene alone. Two far stiffer scenes
+// take a smaller step: a second group.
+TEST_P(BatchEquals, ScenesOfOneMeshWithDifferentMaterialsRunTogetherAndEqualEachAlone) {
+  const std::vector<double> E = {3000, 3150, 2900, 3050, 40000, 40500};
+  std::vector<BatchScene> list;
+  std::vector<Simulation> alone;
+  for (std::size_t i = 0; i < E.size(); ++i) {
+    tissue::MeshScene m = block(E[i]);
+    m.density = 1000 + 10 * double(i);
+    list.push_back(mesh(m));
+    alone.push_back(Simulation::from_mesh(m, options()));
+  }
+  Batch batch = Batch::load(list, options());
+  for (std::size_t i = 1; i < 4; ++i) ASSERT_EQ(batch.dt(int(i)), batch.dt(0)) << "the test wants one step for E ~ 3 kPa";
+  ASSERT_EQ(batch.dt(5), batch.dt(4));
+  ASSERT_NE(batch.dt(4), batch.dt(0)) << "the test wants a smaller step for E = 40 kPa";
+  EXPECT_EQ(batch.distinct_models(), E.size());
+  const int ticks = 50;
+  for (long k = 1; k <= ticks; ++k) {
+    for (std::size_t i = 0; i < E.size(); ++i) {
+      batch.set_tool_pose(int(i), 0, press_pose(k, (1.0 + 0.2 * double(i)) * 1e-3));
+      alone[i].set_tool_pose(0, press_pose(k, (1.0 + 0.2 * double(i)) * 1e-3));
+    }
+    EXPECT_EQ(batch.step(), E.size());
+    for (Simulation& s : alone) s.step();
+  }
+  if (GetParam().backend == "cuda") {
+    EXPECT_EQ(batch.groups(), 2u);
+    EXPECT_EQ(batch.ticks_together(), std::int64_t(E.size()) * ticks) << "every tick of every scene ran in a group";
+  }
+  for (std::size_t i = 0; i < E.size(); ++i) expect_same_scene(batch, int(i), alone[i], "scene " + std::to_string(i));
+  const auto mag = [](const tissue::Vector3& v) { return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]); };
+  EXPECT_GT(mag(batch.last(1).tools[0].force), mag(batch.last(0).tools[0].force)) << "stiffer, deeper";
+}
+
 // Scenes of one model: on cuda one group, each pass of a tick one launch over them all (docs/batch.md, "One
 // launch per pass"), with tools pressing at different depths and places, one in the air and one grasping;
 // each scene equals its scene alone.

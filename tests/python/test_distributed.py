@@ -236,7 +236,8 @@ def test_sweep_refuses_bad_options_naming_them(block, tmp_path):
              (["--param", "E=abc"], "--param E: 'abc' is not a number"),
              (["--param", "E=1,2", "--param", "E=3"], "--param E is given twice"),
              (["--param", "E=1:1e9:400", "--param", "nu=0:0.49:400"], "the grid has 160000 variants"),
-             (["--fields", "stress"], "--fields: 'stress' is not a field")]
+             (["--fields", "stress"], "--fields: 'stress' is not a field"),
+             (["--depth", "-2"], "--depth -2: give all, auto, scene or a number of rings >= 1")]
     for k, (args, want) in enumerate(cases):
         p = cli("sweep", block, *args, "--out", str(tmp_path / f"o{k}"), "--local")
         assert p.returncode == 2 and want in p.stderr, (args, p.stderr)
