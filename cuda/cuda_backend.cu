@@ -656,16 +656,16 @@ class CudaBackend final : public Backend {
   }
 
   /// Whether the group can run this scene's tick of `steps` steps with
-  /// others: a tick graph over the whole mesh, no law terms, no load, and
-  /// its arrays in its slot at the group's layout (checked at upload).
+  /// others: a tick graph over the whole mesh, no load, and its arrays in
+  /// its slot at the group's layout (checked at upload).
   bool group_takes(int steps) {
     const RegionView r = region_.view();
-    return in_group_layout_ && tick_graph_runs(steps) && !r.nodes && !r.elems && store_.law().neo_hookean() &&
-           !store_.state().load;
+    return in_group_layout_ && tick_graph_runs(steps) && !r.nodes && !r.elems && !store_.state().load;
   }
 
   /// Whether every array a group tick's kernels touch per scene (the state,
-  /// the buffers, the reduction's, and the model's that follow its material)
+  /// the buffers, the reduction's, the model's that follow its material, the
+  /// law terms')
   /// lies in this scene's slot at the group's layout (the first member's
   /// offsets). Those arrays change only at an upload, where this is asked.
   bool slot_layout_matches() {
@@ -687,6 +687,12 @@ class CudaBackend final : public Backend {
     for (const void* p : {(const void*)m.mu, (const void*)m.K, (const void*)m.mass, (const void*)m.cd_A,
                           (const void*)m.cd_B, (const void*)m.cd_C, (const void*)m.node_divisor})
       if (p) add(p);  // (the divisors are null without IANP: alike in every member of one mesh)
+    const LawView<T>& w = store_.law();  // the law arrays (LawView::moved): null where no set uses them
+#define TISSUE_LAW_OFFSET(kind, name, len) \
+  if (w.name) add(w.name);
+    TISSUE_LAW_MODEL_FIELDS(TISSUE_LAW_OFFSET)
+    TISSUE_LAW_STATE_FIELDS(TISSUE_LAW_OFFSET)
+#undef TISSUE_LAW_OFFSET
     for (const void* p : reducer_.device_arrays()) add(p);
     if (std::find(offsets.begin(), offsets.end(), std::ptrdiff_t(-1)) != offsets.end()) return false;
     return group_->same_layout(offsets);

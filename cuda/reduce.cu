@@ -317,6 +317,7 @@ __global__ void __launch_bounds__(kReduceBlock, kMinBlocks)
                   unsigned* done, Reductions* out, Reductions* host_out) {
   if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene (no host_out)
     m = m.materials_moved(d * s.slots.stride);
+    w = w.moved(d * s.slots.stride);
     b = b.moved(d * s.slots.stride);
     energy_node_p = s.slot_moved(energy_node_p, d);
     partial = s.slot_moved(partial, d);

@@ -1030,6 +1030,12 @@ __global__ void element_forces_beside_check_kernel(ModelView<T> m, StateView<T> 
 template <class T, bool kRecomputed>
 __global__ void law_element_forces_kernel(ModelView<T> m, StateView<T> s, RegionView r, const Packed3<T>* u,
                                           LawView<T> w, index_t first_wave) {
+  if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene
+    m = m.materials_moved(d * s.slots.stride);
+    w = w.moved(d * s.slots.stride);
+    u = s.slot_moved(u, d);
+    s = s.moved(d);
+  }
   const index_t i = thread_index();
   run_element_pass<true>(
       s, i < r.n_elems, first_wave, [&] { return load_element<T, kRecomputed>(m, pass3_elem(r, i)); },

@@ -150,6 +150,16 @@ struct LawView {
 #undef TISSUE_LAW_MODEL_POINTER
 #undef TISSUE_LAW_STATE_POINTER
   TISSUE_HD bool neo_hookean() const { return !fibre && !visco_slot; }
+  /// Every law array (the model's, which follow the scene's material, and
+  /// the Prony state) of the scene `bytes` away in a group's arena.
+  TISSUE_HD LawView moved(std::int64_t bytes) const {
+    LawView v = *this;
+#define TISSUE_LAW_MOVE(kind, name, len) v.name = moved_by(name, bytes);
+    TISSUE_LAW_MODEL_FIELDS(TISSUE_LAW_MOVE)
+    TISSUE_LAW_STATE_FIELDS(TISSUE_LAW_MOVE)
+#undef TISSUE_LAW_MOVE
+    return v;
+  }
 };
 
 /// The three displacement buffers of one step: pass 4 writes u_next from u

@@ -222,6 +222,44 @@ TEST_P(BatchEquals, ScenesOfOneMeshWithDifferentMaterialsRunTogetherAndEqualEach
   EXPECT_GT(mag(batch.last(1).tools[0].force), mag(batch.last(0).tools[0].force)) << "stiffer, deeper";
 }
 
+// Viscoelastic kidneys of one mesh with different Prony terms (and one stiffer): on cuda one group whose every
+// scene reads its own law arrays and Prony state; each equals its scene alone (a batch of one scene).
+TEST_P(BatchEquals, ViscoelasticScenesOfOneMeshRunTogetherAndEqualEachAlone) {
+  using tissue::MaterialChange;
+  using tissue::PronyChange;
+  const std::vector<MaterialChange> changes = {
+      MaterialChange{},
+      MaterialChange{"", {}, {}, {}, {}, {PronyChange{1, 0.3, 0.05}}},
+      MaterialChange{"", {}, {}, 1100.0, {}, {PronyChange{2, {}, 2.0}}},
+      MaterialChange{"", {}, {}, {}, {}, {PronyChange{1, 0.1, {}}, PronyChange{2, 0.05, 0.4}}}};
+  std::vector<BatchScene> list;
+  for (const MaterialChange& c : changes) list.push_back({"@kidney-visco", {c}, {}});
+  Batch batch = Batch::load(list, options());
+  std::vector<Batch> alone;
+  for (const BatchScene& b : list) alone.push_back(Batch::load({b}, options()));
+  for (std::size_t i = 1; i < list.size(); ++i) ASSERT_EQ(batch.dt(int(i)), batch.dt(0)) << "one step for all";
+  const int ticks = 130;  // the scripted probe reaches the surface after 100
+  for (int k = 0; k < ticks; ++k) {
+    EXPECT_EQ(batch.step(), list.size());
+    for (Batch& a : alone) a.step();
+  }
+  if (GetParam().backend == "cuda") {
+    EXPECT_EQ(batch.groups(), 1u);
+    EXPECT_EQ(batch.ticks_together(), std::int64_t(list.size()) * ticks) << "every tick of every scene ran in the group";
+  }
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const std::string what = "visco scene " + std::to_string(i);
+    const tissue::Vector3 fb = batch.last(int(i)).tools[0].force, fa = alone[i].last(0).tools[0].force;
+    EXPECT_GT(std::abs(fa[2]), 0.0) << what << " presses";
+    expect_same({fb.begin(), fb.end()}, {fa.begin(), fa.end()}, what + " force");
+    std::vector<double> ub(batch.n_nodes(int(i)) * 3), ua(ub.size());
+    batch.read_field(int(i), Field::Displacement, ub);
+    alone[i].read_field(0, Field::Displacement, ua);
+    expect_same(ub, ua, what + " displacement");
+  }
+  EXPECT_NE(batch.last(1).tools[0].force[2], batch.last(0).tools[0].force[2]) << "the Prony terms matter";
+}
+
 // Scenes of one model: on cuda one group, each pass of a tick one launch over them all (docs/batch.md, "One
 // launch per pass"), with tools pressing at different depths and places, one in the air and one grasping;
 // each scene equals its scene alone.
