@@ -151,6 +151,7 @@ class CudaBackend;
 /// in one graph (their buffers at one phase, their pass arrays in one set).
 struct GroupTickKey {
   int phase = 0, steps = 0, start = 0, pressures = 0;
+  int load = 0;                ///< 1: the scene has a load (the node update's variant)
   std::size_t tool_bytes = 0;  ///< 0: no tool
   auto operator<=>(const GroupTickKey&) const = default;
 };
@@ -344,6 +345,7 @@ class CudaBackend final : public Backend {
 
   void upload_arrays(const TissueModel<double>& model) {
     const TissueModel<T> m = convert<T>(model);
+    store_.set_reserve_load(group_ != nullptr);
     store_.upload(m, model, gradients_, log_, stream());
     const index_t n = m.n_nodes;
     region_.allocate(n, m.n_elems, store_.model().n_windows, stream());
@@ -656,11 +658,12 @@ class CudaBackend final : public Backend {
   }
 
   /// Whether the group can run this scene's tick of `steps` steps with
-  /// others: a tick graph over the whole mesh, no load, and its arrays in
-  /// its slot at the group's layout (checked at upload).
+  /// others: a tick graph over the whole mesh and its arrays in its slot
+  /// at the group's layout (checked at upload). A scene with a load and one
+  /// without run in graphs of different keys.
   bool group_takes(int steps) {
     const RegionView r = region_.view();
-    return in_group_layout_ && tick_graph_runs(steps) && !r.nodes && !r.elems && !store_.state().load;
+    return in_group_layout_ && tick_graph_runs(steps) && !r.nodes && !r.elems;
   }
 
   /// Whether every array a group tick's kernels touch per scene (the state,
@@ -687,6 +690,7 @@ class CudaBackend final : public Backend {
     for (const void* p : {(const void*)m.mu, (const void*)m.K, (const void*)m.mass, (const void*)m.cd_A,
                           (const void*)m.cd_B, (const void*)m.cd_C, (const void*)m.node_divisor})
       if (p) add(p);  // (the divisors are null without IANP: alike in every member of one mesh)
+    if (const void* load = store_.load_space()) add(load);  // reserved in a group's slot
     const LawView<T>& w = store_.law();  // the law arrays (LawView::moved): null where no set uses them
 #define TISSUE_LAW_OFFSET(kind, name, len) \
   if (w.name) add(w.name);
@@ -710,7 +714,10 @@ class CudaBackend final : public Backend {
     }
     const std::size_t tool_bytes =
         tools.n_tools > 0 ? offsetof(ContactTools<T>, tool) + sizeof(ToolStep<T>) * size_t(tools.n_tools) : 0;
-    group_->start(slot_, {store_.u.phase, steps, static_cast<int>(start), store_.pressure_set(), tool_bytes}, tools);
+    group_->start(slot_,
+                  {store_.u.phase, steps, static_cast<int>(start), store_.pressure_set(),
+                   store_.state().load ? 1 : 0, tool_bytes},
+                  tools);
     launched_ = {false, false, steps, tool_bytes, start, passes, true};
   }
 

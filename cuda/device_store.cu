@@ -204,7 +204,8 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   elem_J_[0].allocate(ne);
   node_p_[0].allocate(n);
   bad_.allocate(1);
-  load_.allocate(0);
+  load_.allocate(reserve_load_ ? std::size_t(m.n_nodes) : 0);  // a group's scene: its load's room in its slot
+  load_on_ = false;
   // the law arrays (core/material.hpp's lists): state sized from the model,
   // and a null pointer for every empty array
 #define TISSUE_LAW_ALLOCATE(kind, name, len) law_arrays_.name.allocate(len);
@@ -269,15 +270,17 @@ void DeviceStore<T>::clear_law_state(cudaStream_t stream) {
 template <class T>
 void DeviceStore<T>::set_load(std::span<const double> load, Transfers& log, cudaStream_t stream) {
   const index_t n = model_.n_nodes;
+  load_on_ = false;
   if (load.empty()) {
-    load_.allocate(0);
+    if (!reserve_load_) load_.allocate(0);
     return;
   }
   std::vector<Packed3<T>> r(n);
   for (index_t i = 0; i < n; ++i)
     r[i] = {T(load[i]), T(load[n + i]), T(load[2 * std::size_t(n) + i]), T(0)};
-  load_.allocate(r.size());
+  if (load_.size() != r.size()) load_.allocate(r.size());  // (a reserved load keeps its place)
   log.to_device_now(load_.data(), r.data(), load_.bytes(), stream);  // r is pageable and local
+  load_on_ = true;
 }
 
 template <class T>
@@ -292,7 +295,7 @@ StateView<T> DeviceStore<T>::state() {
   s.node_p = node_p_[pressures_].data();
   s.f_slot = f_slot_.data();
   s.f = f_.data();
-  s.load = load_.size() ? load_.data() : nullptr;
+  s.load = load_on_ ? load_.data() : nullptr;
   s.bad = bad_.data();
   s.contact = contact_.data();
   s.contact_tool = contact_tool_.data();

@@ -52,6 +52,13 @@ class DeviceStore {
   /// The applied load (Backend::set_loads): 3 x n_nodes component-major
   /// (N), or empty for none (frees it; state().load is then null).
   void set_load(std::span<const double> load, Transfers& log, cudaStream_t stream);
+  /// From the next upload on, keep the load's array allocated (at upload,
+  /// in a group's slot) whether or not a load is set, so that it lies at
+  /// the same place in every member's slot; state().load stays null while
+  /// no load is set.
+  void set_reserve_load(bool reserve) { reserve_load_ = reserve; }
+  /// The load's array (reserved or set), or null.
+  const void* load_space() const { return load_.size() ? load_.data() : nullptr; }
 
   ModelView<T> model() const { return model_; }
   /// Overrides ModelView::lanes_node_min until the next upload (tests: 0
@@ -109,7 +116,9 @@ class DeviceStore {
 #undef TISSUE_LAW_DEVICE_ARRAY
   };
   LawArrays law_arrays_;
-  DeviceArray<Packed3<T>> load_;  // applied load: empty when none
+  DeviceArray<Packed3<T>> load_;  // applied load: empty when none (unless reserved)
+  bool load_on_ = false;          // a load is set (state().load)
+  bool reserve_load_ = false;     // set_reserve_load
   DeviceArray<unsigned long long> bad_;
 };
 

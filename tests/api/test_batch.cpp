@@ -222,6 +222,38 @@ TEST_P(BatchEquals, ScenesOfOneMeshWithDifferentMaterialsRunTogetherAndEqualEach
   EXPECT_GT(mag(batch.last(1).tools[0].force), mag(batch.last(0).tools[0].force)) << "stiffer, deeper";
 }
 
+// Blocks of one model, two of them under loads of their own set by the host: on cuda one group (the loaded and
+// the unloaded scenes in graphs of their own kind), every tick run in it; each equals its scene alone.
+TEST_P(BatchEquals, LoadedScenesRunInTheirGroupAndEqualEachAlone) {
+  const int n = 4, ticks = 60;
+  Batch batch = Batch::load(std::vector<BatchScene>(n, mesh(block(3000))), options());
+  std::vector<Simulation> alone;
+  for (int i = 0; i < n; ++i) alone.push_back(Simulation::from_mesh(block(3000), options()));
+  const std::vector<std::int32_t> corner = {tissue::box_node(6, 6, 6, 6, 3)}, edge = {tissue::box_node(6, 6, 0, 3, 3)};
+  const std::vector<double> up = {0, 0, 2e-3}, side = {1e-3, 0, 0};
+  batch.set_loads(1, corner, up);
+  alone[1].set_loads(corner, up);
+  batch.set_loads(3, edge, side);
+  alone[3].set_loads(edge, side);
+  for (long k = 1; k <= ticks; ++k) {
+    for (int i = 0; i < n; ++i) {
+      batch.set_tool_pose(i, 0, press_pose(k, (1.0 + 0.25 * i) * 1e-3));
+      alone[std::size_t(i)].set_tool_pose(0, press_pose(k, (1.0 + 0.25 * i) * 1e-3));
+    }
+    EXPECT_EQ(batch.step(), std::size_t(n));
+    for (Simulation& s : alone) s.step();
+  }
+  if (GetParam().backend == "cuda") {
+    EXPECT_EQ(batch.groups(), 1u);
+    EXPECT_EQ(batch.ticks_together(), std::int64_t(n) * ticks) << "the loaded scenes' ticks ran in the group too";
+  }
+  for (int i = 0; i < n; ++i) expect_same_scene(batch, i, alone[std::size_t(i)], "scene " + std::to_string(i));
+  std::vector<double> u1(batch.n_nodes(1) * 3), u0(u1.size());
+  batch.read_field(1, Field::Displacement, u1);
+  batch.read_field(0, Field::Displacement, u0);
+  EXPECT_NE(u1, u0) << "the load moves its scene";
+}
+
 // Viscoelastic kidneys of one mesh with different Prony terms (and one stiffer): on cuda one group whose every
 // scene reads its own law arrays and Prony state; each equals its scene alone (a batch of one scene).
 TEST_P(BatchEquals, ViscoelasticScenesOfOneMeshRunTogetherAndEqualEachAlone) {
