@@ -279,4 +279,30 @@ tissue_status tissue_batch_read_field(tissue_batch* batch, int scene, tissue_fie
   return guarded([&] { batch->batch.read_field(scene, static_cast<tissue::Field>(field), {out, count}); });
 }
 
+tissue_status tissue_batch_device_field(tissue_batch* batch, int scene, tissue_field field, tissue_device_view* out) {
+  if (batch == nullptr) return null_argument("tissue_batch_device_field", "batch");
+  if (out == nullptr) return null_argument("tissue_batch_device_field", "out");
+  if (field < TISSUE_FIELD_DISPLACEMENT || field > TISSUE_FIELD_JACOBIAN)
+    return fail(TISSUE_BAD_ARGUMENT,
+                "tissue_batch_device_field: field " + std::to_string(int(field)) + " is not a tissue_field");
+  return guarded([&] {
+    const tissue::Field f = static_cast<tissue::Field>(field);
+    const tissue::Batch::DeviceView v = scene < 0 ? batch->batch.device_field(f) : batch->batch.device_field(scene, f);
+    *out = {};
+    out->data = v.data;
+    out->ndim = int(v.shape.size());
+    for (std::size_t k = 0; k < v.shape.size() && k < 3; ++k) {
+      out->shape[k] = v.shape[k];
+      out->strides[k] = v.strides[k];
+    }
+    out->scalar_bytes = v.scalar_bytes;
+    out->device = v.device;
+  });
+}
+
+tissue_status tissue_batch_set_tool_poses_from_device(tissue_batch* batch, uintptr_t tips, size_t count, int single) {
+  if (batch == nullptr) return null_argument("tissue_batch_set_tool_poses_from_device", "batch");
+  return guarded([&] { batch->batch.set_tool_poses_from_device(tips, count, single != 0); });
+}
+
 }  // extern "C"

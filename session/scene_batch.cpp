@@ -28,16 +28,17 @@ bool same_material(const MaterialParams& a, const MaterialParams& b) {
   return true;
 }
 
-/// True when build_model would build the same model from both inputs.
+/// True when build_model would build the same model from both inputs. The
+/// settings and materials are compared before the mesh: a sweep's inputs
+/// differ there, and a batch compares each new input with every model built.
 bool same_input(const ModelInput& a, const ModelInput& b) {
-  if (a.nodes != b.nodes || a.tets != b.tets || a.elem_material != b.elem_material || a.fixed != b.fixed ||
-      a.fixed_axes != b.fixed_axes || a.dt != b.dt || a.dt_safety != b.dt_safety || a.damping != b.damping ||
-      a.ianp != b.ianp || a.mass_scaling != b.mass_scaling || a.tick != b.tick || a.fibre_dirs != b.fibre_dirs ||
-      a.materials.size() != b.materials.size())
+  if (a.dt != b.dt || a.dt_safety != b.dt_safety || a.damping != b.damping || a.ianp != b.ianp ||
+      a.mass_scaling != b.mass_scaling || a.tick != b.tick || a.materials.size() != b.materials.size())
     return false;
   for (std::size_t k = 0; k < a.materials.size(); ++k)
     if (!same_material(a.materials[k], b.materials[k])) return false;
-  return true;
+  return a.nodes == b.nodes && a.tets == b.tets && a.elem_material == b.elem_material && a.fixed == b.fixed &&
+         a.fixed_axes == b.fixed_axes && a.fibre_dirs == b.fibre_dirs;
 }
 
 /// True when scenes of these models can share a group's launch (docs/batch.md,

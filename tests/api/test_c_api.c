@@ -4,6 +4,7 @@
  * printed. */
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "tissue/tissue_c.h"
@@ -42,6 +43,78 @@ static void cube(double* nodes, int32_t* tets) {
         for (int s = 0; s < 6; ++s, ++t)
           for (int a = 0; a < 4; ++a) tets[4 * t + a] = c[split[s][a]];
       }
+}
+
+/* A batch of two kidneys through the C interface on `backend`: stepping,
+ * forces, fields, a material change, resets, the device view (cuda) or its
+ * refusal (cpu), and misuse answered by a status and a message. */
+static void batch_checks(const char* backend) {
+  const char* scenes[2] = {"@kidney", "@kidney"};
+  tissue_batch* b = NULL;
+  const int cuda = strcmp(backend, "cuda") == 0;
+  if (tissue_batch_open(scenes, 2, backend, "float", "all", &b) != TISSUE_OK) {
+    CHECK(cuda); /* the cpu always opens */
+    CHECK(b == NULL);
+    if (cuda) printf("batch on cuda skipped: %s\n", tissue_last_error());
+    return;
+  }
+  CHECK(tissue_batch_size(b) == 2 && tissue_batch_max_tools(b) == 1);
+  const size_t nodes = tissue_batch_node_count(b, 0);
+  CHECK(nodes > 1000 && tissue_batch_node_count(b, 1) == nodes);
+  if (cuda) { /* the two copies form one group: their fields lie one slot apart */
+    tissue_device_view all, one;
+    CHECK(tissue_batch_device_field(b, -1, TISSUE_FIELD_DISPLACEMENT, &all) == TISSUE_OK);
+    CHECK(all.ndim == 3 && all.shape[0] == 2 && all.shape[1] == (int64_t)nodes && all.shape[2] == 3);
+    CHECK(all.scalar_bytes == 4 && all.data != 0 && all.strides[2] == 4);
+    CHECK(tissue_batch_device_field(b, 1, TISSUE_FIELD_INTERNAL_FORCE, &one) == TISSUE_OK);
+    CHECK(one.ndim == 2 && one.shape[0] == (int64_t)nodes && one.scalar_bytes == 4);
+    CHECK(tissue_batch_device_field(b, 1, TISSUE_FIELD_DISPLACEMENT, &one) == TISSUE_OK);
+    CHECK(one.data == all.data + (uintptr_t)all.strides[0]);
+  } else {
+    tissue_device_view v;
+    CHECK(tissue_batch_device_field(b, -1, TISSUE_FIELD_DISPLACEMENT, &v) == TISSUE_BAD_ARGUMENT);
+    CHECK(contains(tissue_last_error(), "host"));
+  }
+  tissue_device_view v;
+  CHECK(tissue_batch_device_field(b, 0, TISSUE_FIELD_JACOBIAN, &v) == TISSUE_BAD_ARGUMENT);
+  CHECK(tissue_batch_device_field(b, 0, (tissue_field)9, &v) == TISSUE_BAD_ARGUMENT);
+  CHECK(tissue_batch_device_field(b, 0, TISSUE_FIELD_DISPLACEMENT, NULL) == TISSUE_BAD_ARGUMENT);
+  CHECK(tissue_batch_set_tool_poses_from_device(b, 0, 5, 0) == TISSUE_BAD_ARGUMENT);
+  CHECK(contains(tissue_last_error(), "holds 5 values"));
+
+  size_t running = 0;
+  CHECK(tissue_batch_step(b, 120, &running) == TISSUE_OK && running == 2); /* the probe presses after 100 */
+  double f[6];
+  CHECK(tissue_batch_forces(b, f, 6) == TISSUE_OK);
+  const double f0 = sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
+  CHECK(f0 > 0);
+  CHECK(f[0] == f[3] && f[1] == f[4] && f[2] == f[5]); /* two copies of one scene */
+  CHECK(tissue_batch_forces(b, f, 5) == TISSUE_BAD_ARGUMENT && contains(tissue_last_error(), "holds 5 values"));
+  double* u = (double*)malloc(3 * nodes * sizeof(double));
+  CHECK(u != NULL);
+  CHECK(tissue_batch_read_field(b, 1, TISSUE_FIELD_DISPLACEMENT, u, 3 * nodes) == TISSUE_OK);
+  double umax = 0;
+  for (size_t k = 0; k < 3 * nodes; ++k) umax = fmax(umax, fabs(u[k]));
+  CHECK(umax > 1e-4); /* pressed more than 0.1 mm */
+  CHECK(tissue_batch_read_field(b, 7, TISSUE_FIELD_DISPLACEMENT, u, 3 * nodes) == TISSUE_BAD_ARGUMENT);
+  CHECK(contains(tissue_last_error(), "scene 7 does not exist"));
+  free(u);
+
+  /* scene 1 twice as stiff: it starts again at rest and presses back harder */
+  CHECK(tissue_batch_set_material(b, 1, "", 6000.0, NAN, NAN) == TISSUE_OK);
+  CHECK(tissue_batch_reset(b, -1) == TISSUE_OK);
+  CHECK(tissue_batch_step(b, 120, &running) == TISSUE_OK && running == 2);
+  CHECK(tissue_batch_forces(b, f, 6) == TISSUE_OK);
+  CHECK(sqrt(f[3] * f[3] + f[4] * f[4] + f[5] * f[5]) > 1.5 * f0);
+  int failed = 1;
+  CHECK(tissue_batch_scene_failed(b, 0, &failed) == TISSUE_OK && failed == 0);
+  CHECK(strcmp(tissue_batch_failure(b, 0), "") == 0);
+  CHECK(tissue_batch_set_material(b, 0, "liver", 5000.0, NAN, NAN) == TISSUE_BAD_ARGUMENT);
+  CHECK(contains(tissue_last_error(), "no material 'liver'"));
+  CHECK(tissue_batch_reset(b, 5) == TISSUE_BAD_ARGUMENT);
+  CHECK(tissue_batch_step(NULL, 1, NULL) == TISSUE_BAD_ARGUMENT);
+  tissue_batch_close(b);
+  tissue_batch_close(NULL);
 }
 
 int main(void) {
@@ -125,6 +198,9 @@ int main(void) {
   CHECK(contains(tissue_last_error(), "5"));
   mesh.n_tets = -1;
   CHECK(tissue_open_mesh(&mesh, "cpu", NULL, &none) == TISSUE_BAD_ARGUMENT);
+
+  batch_checks("cpu");
+  batch_checks("cuda"); /* skipped where no GPU is usable */
 
   if (failures) fprintf(stderr, "%d checks failed\n", failures);
   else printf("all C interface checks passed\n");

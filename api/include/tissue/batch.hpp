@@ -46,7 +46,7 @@ struct MaterialChange {
   std::optional<double> youngs_modulus;  ///< E (Pa)
   std::optional<double> poisson_ratio;   ///< nu
   std::optional<double> density;         ///< rho (kg/m^3)
-  std::optional<double> fibre_stiffness; ///< eta (Pa) of a material that has a <fibre>
+  std::optional<double> fibre_stiffness = {};  ///< eta (Pa) of a material that has a <fibre>
   std::vector<PronyChange> prony = {};   ///< changed or added Prony terms
 };
 

@@ -140,6 +140,27 @@ tissue_status tissue_batch_forces(const tissue_batch* batch, double* out, size_t
 /* One scene's field (as tissue_read_field). */
 tissue_status tissue_batch_read_field(tissue_batch* batch, int scene, tissue_field field, double* out, size_t count);
 
+/* A field where the cuda backend keeps it, described for CUDA host code (no
+ * copy; tissue::Batch::device_field, docs/batch.md "Device arrays"). */
+typedef struct tissue_device_view {
+  uintptr_t data;      /* a device pointer */
+  int ndim;            /* 3: (scenes, nodes, 3); 2: one scene's (nodes, 3) */
+  int64_t shape[3];
+  int64_t strides[3];  /* bytes per step of each dimension */
+  int scalar_bytes;    /* 4 (float) or 8 (double) */
+  int device;          /* the CUDA device */
+} tissue_device_view;
+/* TISSUE_FIELD_DISPLACEMENT or TISSUE_FIELD_INTERNAL_FORCE of one scene
+ * (scene >= 0) or of every scene (scene = -1: they must lie one stride
+ * apart, scenes of one group). Valid until the next step, reset,
+ * set_material or set_loads of the batch. TISSUE_BAD_ARGUMENT naming why
+ * on the cpu backend, for another field or for scenes not one stride apart. */
+tissue_status tissue_batch_device_field(tissue_batch* batch, int scene, tissue_field field, tissue_device_view* out);
+/* Every scene's tool tips from a CUDA device array of count = size x
+ * max_tools x 3 contiguous values, double (single = 0) or float: one copy to
+ * the host, then as tissue_batch_set_tool_poses. */
+tissue_status tissue_batch_set_tool_poses_from_device(tissue_batch* batch, uintptr_t tips, size_t count, int single);
+
 #ifdef __cplusplus
 }
 #endif
