@@ -64,6 +64,34 @@ bool touches_reference_surface(const TissueModel<double>& m, const ToolShape& sh
   return false;
 }
 
+namespace {
+
+/// How far (in tool radii) held_tool retracts a start in contact.
+constexpr int kMaxRetractSteps = 1000;
+
+/// A pose the relaxation's ramp can start from: `start` itself when it does
+/// not touch the undeformed surface, else `start` moved back, a radius at a
+/// time, along the motion from `held` to it (the tool's axis for a tool that
+/// does not move) until it no longer touches. A path that begins inside the
+/// tissue would otherwise have its contact push the surface nodes a press
+/// deep in one step, inverting the elements under the tool.
+ToolPose retracted(const TissueModel<double>& model, const ToolShape& shape, ToolPose start, const ToolPose& held) {
+  if (!touches_reference_surface(model, shape, start)) return start;
+  const Vec3<double> away = start.tip - held.tip;
+  const Vec3<double> dir = norm(away) > 1e-9 * shape.radius ? (1 / norm(away)) * away : unit_or(held.axis, {0, 0, 1});
+  const double step = shape.radius;
+  for (int k = 0; k < kMaxRetractSteps; ++k) {
+    start.tip = start.tip + step * dir;
+    if (!touches_reference_surface(model, shape, start)) return start;
+  }
+  throw std::runtime_error(fmt::format(
+      "held_tool: tool '{}' starts in contact with the tissue and still touches it {} radii back along ({:.3g}, "
+      "{:.3g}, {:.3g}); start its path outside the body",
+      shape.name, kMaxRetractSteps, dir.x, dir.y, dir.z));
+}
+
+}  // namespace
+
 HeldTool held_tool(const TissueModel<double>& model, const ToolSetting& tool, const std::vector<Waypoint>& path,
                    double tick, double t_hold, const ContactOptions& contact) {
   if (!(tick > 0)) throw std::invalid_argument("held_tool: tick must be > 0 s");
@@ -84,7 +112,7 @@ HeldTool held_tool(const TissueModel<double>& model, const ToolSetting& tool, co
           fmt::format("held_tool: tool '{}' does not touch the surface before t = {} s", tool.shape.name, t_hold));
     const ToolPose p = pose_at(t);
     if (touches_reference_surface(model, tool.shape, p)) {
-      h.start = prev;
+      h.start = retracted(model, tool.shape, prev, h.held);
       h.t_touch = t;
       return h;
     }

@@ -51,10 +51,13 @@ double hold_start(const std::vector<Waypoint>& path);
 /// The scene's tool held where its path is at t_hold (s), for the
 /// reference: sampling the path at the haptic tick, the ramp starts at the
 /// last pose before the tool first comes within its radius of the
-/// undeformed surface (the first pose when it starts there). The axis is
-/// the path's where it gives one, else the tool's direction. Throws
-/// std::runtime_error when the path never touches the surface before
-/// t_hold.
+/// undeformed surface. A path that starts there (in contact, or inside the
+/// body) has its first pose moved back, a radius at a time, along the
+/// motion from the held pose to it (the axis for a tool that does not
+/// move) until it no longer touches, so that the ramp presses in from
+/// outside. The axis is the path's where it gives one, else the tool's
+/// direction. Throws std::runtime_error when the path never touches the
+/// surface before t_hold, or when 1000 radii back it still touches.
 HeldTool held_tool(const TissueModel<double>& model, const ToolSetting& tool, const std::vector<Waypoint>& path,
                    double tick, double t_hold, const ContactOptions& contact = {});
 

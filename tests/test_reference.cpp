@@ -139,6 +139,42 @@ TEST(Reference, FictitiousMassesChangeTheRouteNotTheAnswer) {
   EXPECT_LT(a.relax.steps, b.relax.steps);
 }
 
+// A 4 mm sphere whose path starts 0.5 R inside a nearly incompressible block and presses to 1.1 R: the ramp
+// starts from a pose retracted out of contact, so the relaxation presses in from outside and ends with a state
+// (or a stated stall), never a breakdown (a ramp starting inside pushes the surface half a radius in one step,
+// and an element inverts in its first steps).
+TEST(HeldTool, APathStartingInsideTheBodyIsRampedInFromOutside) {
+  ModelInput in = box_input(0.49);  // a 20 x 20 x 10 mm block of 1.67 mm cells
+  in.nodes.clear();
+  in.tets.clear();
+  box_mesh(in, 12, 12, 6, 0.02, 0.02, 0.01);
+  in.fixed.assign(in.nodes.size() / 3, 0);
+  for (size_t i = 0; i < in.fixed.size(); ++i) in.fixed[i] = in.nodes[3 * i + 2] == 0.0;
+  const TissueModel<double> m = build_model(in);
+  constexpr double R = 0.004;
+  const ToolSetting ball{{"probe", R, 0}, {0, 0, 1}};
+  const Vec3<double> top{0.01, 0.01, 0.01 + R};
+  const std::vector<Waypoint> deep{{0, top - Vec3<double>{0, 0, 0.5 * R}}, {0.2, top - Vec3<double>{0, 0, 1.1 * R}},
+                                   {0.5, top - Vec3<double>{0, 0, 1.1 * R}}};
+  const HeldTool h = held_tool(m, ball, deep, 1e-3, 0.2);
+  EXPECT_FALSE(touches_reference_surface(m, h.shape, h.start)) << "the ramp starts out of contact";
+  EXPECT_NEAR(h.start.tip.x, top.x, 1e-12);  // retracted along the path's motion: straight up
+  EXPECT_NEAR(h.start.tip.y, top.y, 1e-12);
+  EXPECT_GE(h.start.tip.z, top.z);
+  ReferenceOptions o;
+  o.relax.residual_tol = 1e-6;
+  o.relax.max_steps = 200000;
+  try {
+    const ReferenceSolution r = reference_solution(m, {}, o, &h);
+    EXPECT_GT(r.tool_force.z, 0.0) << "the box pushes the tool up";
+    EXPECT_GT(r.contact_nodes, 0);
+  } catch (const std::runtime_error& e) {  // a stall at the contact's floor is an answer; a breakdown is not
+    const std::string what = e.what();
+    EXPECT_EQ(what.find("inverted or degenerate"), std::string::npos) << what;
+    EXPECT_NE(what.find("relative residual"), std::string::npos) << what;
+  }
+}
+
 TEST(Reference, UnfinishedRelaxationIsReportedWithItsResidual) {
   const TissueModel<double> m = build_model(box_input());
   const HeldTool h = held_tool(m, kTool, press(), 1e-3, 0.15);
