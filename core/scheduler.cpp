@@ -232,13 +232,39 @@ void Scheduler::note_passed_through(const Reductions& r) {
   }
 }
 
+namespace {
+
+/// " (its centroid at (x, y, z) mm, D mm from tool 'a', inside tool 'b')": where a stop's element lies against
+/// the tools at the end of the tick (`to`: each tool's pose), telling a far-field blow-up from an inversion
+/// under a tool.
+std::string element_place(const TissueModel<double>& model, const SchedulerSettings& settings,
+                          const std::vector<ToolMotion>& motion, index_t e) {
+  if (e < 0 || e >= model.n_elems) return "";
+  Vec3<double> c{0, 0, 0};
+  for (int a = 0; a < 4; ++a) c = c + 0.25 * reference_position(model, model.elem_nodes[a * model.n_elems + e]);
+  std::string out = fmt::format(" (its centroid at ({:.4g}, {:.4g}, {:.4g}) mm", 1e3 * c.x, 1e3 * c.y, 1e3 * c.z);
+  for (std::size_t t = 0; t < settings.tools.size() && t < motion.size(); ++t) {
+    // the distance to the tool's capsule (its tip and shaft)
+    const ToolPose& p = motion[t].to;
+    const double l = settings.tools[t].shape.shaft;
+    const double s = l > 0 ? std::clamp(dot(c - p.tip, p.axis), 0.0, l) : 0.0;
+    const double d = norm(c - (p.tip + s * p.axis)) - settings.tools[t].shape.radius;
+    out += d <= 0 ? fmt::format(", inside tool '{}'", settings.tools[t].shape.name)
+                  : fmt::format(", {:.3g} mm from tool '{}'", 1e3 * d, settings.tools[t].shape.name);
+  }
+  return out + ")";
+}
+
+}  // namespace
+
 void Scheduler::check_health(const Reductions& r, long first_step) const {
   if (r.bad_elem >= 0) {
     const std::string fast = fast_tools(false, r);
     throw SimulationError(fmt::format(
-        "tick {} (TLED steps {}..{}): element {} has J = {:.4g} (inverted or degenerate); stopping. "
+        "tick {} (TLED steps {}..{}): element {}{} has J = {:.4g} (inverted or degenerate); stopping. "
         "Reduce the indentation or the time step{}",
-        tick_, first_step, total_steps_ - 1, r.bad_elem, r.bad_J, fast.empty() ? "" : ". " + fast));
+        tick_, first_step, total_steps_ - 1, r.bad_elem, element_place(model_, settings_, motion_, r.bad_elem),
+        r.bad_J, fast.empty() ? "" : ". " + fast));
   }
   if (!r.finite)
     throw SimulationError(fmt::format("tick {} (TLED steps {}..{}): non-finite displacement or force; stopping",

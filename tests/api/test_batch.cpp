@@ -163,7 +163,10 @@ TEST_P(BatchEquals, AFailingSceneStopsAloneAndResetsAlone) {
   EXPECT_FALSE(batch.failed(0));
   const std::string why = batch.failure(1);
   EXPECT_TRUE(why.find("element") != std::string::npos || why.find("non-finite") != std::string::npos) << why;
-  // the stop names the host's load as its likely cause: 1e9 N over a 2 cm block is far beyond any strain
+  // the stop says where its element lies against the tool, and names the host's load as its likely cause:
+  // 1e9 N over a 2 cm block is far beyond any strain
+  EXPECT_NE(why.find("(its centroid at ("), std::string::npos) << why;
+  EXPECT_NE(why.find("mm from tool 'tool0')"), std::string::npos) << why;  // the tool was not yet near
   EXPECT_NE(why.find("likely cause:\n    the loads set through the API (set_loads, on 1 node): their total force 1e+09 N"),
             std::string::npos)
       << why;
