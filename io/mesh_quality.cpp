@@ -52,7 +52,7 @@ QualityReport mesh_quality(const VolumeMesh& mesh, const std::vector<MaterialPar
   r.budget = budget;
   r.tick = tick;
   r.safety = safety;
-  std::vector<double> dt_e(r.n_tets), rho_V(r.n_tets), min_angle(r.n_tets);
+  std::vector<double> dt_e(r.n_tets), rho_V(r.n_tets), min_angle(r.n_tets), max_edge(r.n_tets);
   r.min_dihedral = 180;
   r.dt_crit = std::numeric_limits<double>::infinity();
   for (index_t e = 0; e < r.n_tets; ++e) {
@@ -64,6 +64,14 @@ QualityReport mesh_quality(const VolumeMesh& mesh, const std::vector<MaterialPar
     dt_e[e] = element_time_step(X, V, p);
     rho_V[e] = p.rho * V;
     r.total_mass += rho_V[e];
+    double lo = INFINITY, hi = 0;
+    for (int a = 0; a < 4; ++a)
+      for (int b = a + 1; b < 4; ++b) {
+        const double l = norm(X[a] - X[b]);
+        lo = std::min(lo, l);
+        hi = std::max(hi, l);
+      }
+    max_edge[e] = hi;
     double ang[6];
     tet_dihedral_angles(X, ang);
     min_angle[e] = kDegrees * *std::min_element(ang, ang + 6);
@@ -72,8 +80,13 @@ QualityReport mesh_quality(const VolumeMesh& mesh, const std::vector<MaterialPar
     if (dt_e[e] < r.dt_crit) {
       r.dt_crit = dt_e[e];
       r.dt_crit_elem = e;
+      r.worst_centroid = 0.25 * (X[0] + X[1] + X[2] + X[3]);
+      r.worst_min_edge = lo;
+      r.worst_max_edge = hi;
+      r.worst_dihedral = min_angle[e];
     }
   }
+  r.median_edge = median(max_edge);
   r.median_dihedral = median(min_angle);
   r.dt_median = median(dt_e);
   r.steps_unscaled = int(std::ceil(tick / (safety * r.dt_crit) * (1 - 1e-12)));
@@ -94,6 +107,12 @@ std::string QualityReport::summary() const {
         100 * budget, mass.steps, 100 * mass.added_mass / total_mass, mass.scaled_elems, mass.max_scale);
   else
     s += "; mass scaling would add nothing\n";
+  if (dt_crit_elem >= 0 && dt_ratio() < kDtRatioGoal)
+    s += fmt::format(
+        "  below the goal of {:.2f}: element {} at ({:.4g}, {:.4g}, {:.4g}) mm sets the step, its edges {:.3g} to "
+        "{:.3g} mm against a median element's longest edge of {:.3g} mm, its smallest dihedral {:.1f} deg\n",
+        kDtRatioGoal, dt_crit_elem, 1e3 * worst_centroid.x, 1e3 * worst_centroid.y, 1e3 * worst_centroid.z,
+        1e3 * worst_min_edge, 1e3 * worst_max_edge, 1e3 * median_edge, worst_dihedral);
   return s;
 }
 

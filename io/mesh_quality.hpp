@@ -19,6 +19,11 @@ namespace tissue::io {
 void tet_dihedral_angles(const Vec3<double> X[4], double angles[6]);
 
 /// What the mesh costs the solver.
+/// The dt_crit / median L/c the meshing aims at: at least 0.25, so that 4
+/// steps a tick need at most x16 density on the worst elements
+/// (docs/meshing.md).
+inline constexpr double kDtRatioGoal = 0.25;
+
 struct QualityReport {
   index_t n_tets = 0, n_nodes = 0;
   double min_dihedral = 0;      ///< smallest dihedral angle of any tet (degrees)
@@ -33,10 +38,16 @@ struct QualityReport {
   double tick = 0;              ///< haptic period used (s)
   double safety = 0;            ///< dt safety factor used
   double total_mass = 0;        ///< kg
+  /// The element that sets dt_crit: its centroid (m), its shortest and
+  /// longest edges and its smallest dihedral angle; the median element's
+  /// longest edge (m), for scale.
+  Vec3<double> worst_centroid = {0, 0, 0};
+  double worst_min_edge = 0, worst_max_edge = 0, worst_dihedral = 0, median_edge = 0;
 
   /// dt_crit / dt_median: 1 for a mesh of equal tets, -> 0 with a sliver.
   double dt_ratio() const { return dt_median > 0 ? dt_crit / dt_median : 0; }
-  /// A few lines for the user.
+  /// A few lines for the user; below kDtRatioGoal, where the worst
+  /// element lies and how it compares with the median.
   std::string summary() const;
 };
 

@@ -160,6 +160,34 @@ TEST(OrganMesher, AbsurdTargetIsRefusedNamingTheMemory) {
   }
 }
 
+// A mesh whose step is set by a tiny element: the report says where that element lies and how small it is
+TEST(MeshQuality, AStepFarBelowTheMedianNamesItsElement) {
+  VolumeMesh m;
+  // three corner tets of edge 10 mm, and one of edge 0.1 mm at (20, 0, 0) mm
+  const auto corner = [&](double x0, double a) {
+    const index_t b = m.n_nodes();
+    for (const Vec3<double>& p : {Vec3<double>{0, 0, 0}, Vec3<double>{a, 0, 0}, Vec3<double>{0, a, 0},
+                                  Vec3<double>{0, 0, a}})
+      m.nodes.insert(m.nodes.end(), {x0 + p.x, p.y, p.z});
+    m.tets.insert(m.tets.end(), {b, b + 1, b + 2, b + 3});
+  };
+  corner(0.0, 0.01);
+  corner(0.03, 0.01);
+  corner(0.06, 0.01);
+  corner(0.02, 0.0001);
+  const QualityReport q = quality(m);
+  EXPECT_EQ(q.dt_crit_elem, 3);
+  EXPECT_LT(q.dt_ratio(), kDtRatioGoal);
+  const std::string s = q.summary();
+  EXPECT_NE(s.find("below the goal of 0.25: element 3 at (20.03, 0.025, 0.025) mm sets the step, its edges 0.1 to "
+                   "0.141 mm against a median element's longest edge of 14.1 mm"),
+            std::string::npos)
+      << s;
+  // a mesh of equal tets meets the goal and says nothing more
+  m.tets.resize(12);
+  EXPECT_EQ(quality(m).summary().find("below the goal"), std::string::npos);
+}
+
 // a tiny largest volume is refused naming the option and its value, on either mesher
 TEST(OrganMesher, TinyMaxVolumeIsRefusedNamingTheOption) {
   for (Mesher mesher : {Mesher::TetGen, Mesher::Mesh3}) {
