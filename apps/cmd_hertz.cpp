@@ -53,29 +53,28 @@ std::string hertz_ratio_error(const std::string& text) {
   return "";
 }
 
-/// --core: the uniform core under the tool, in contact radii at the deepest press; "" when `text` is one.
-std::string hertz_core_error(const std::string& text) {
+/// A length in contact radii at the deepest press within [lo, hi] (--core, --block); "" when `text` is one,
+/// else the rule and `why`.
+std::string radii_error(const std::string& text, const char* what, double lo, double hi, const char* why) {
   if (std::string e = real_number_error(text, 0, INFINITY, true, true); !e.empty()) return e;
-  const double c = *scene::parse_real(text);
-  if (c < 0.25 || c > 5)
-    return fmt::format("a core of {} contact radii is outside [0.25, 5]: the core's uniform cells must hold the "
-                       "contact (below a quarter of its radius the contact falls on the graded cells, which a core "
-                       "of 1e-9 makes degenerate), and a core much wider than the contact spends its cells away "
-                       "from it",
-                       text);
+  const double v = *scene::parse_real(text);
+  if (v < lo || v > hi) return fmt::format("a {} of {} contact radii is outside [{}, {}]: {}", what, text, lo, hi, why);
   return "";
 }
 
-/// --block: the block's edge in contact radii at the deepest press; "" when `text` is one.
+/// --core: the uniform core under the tool.
+std::string hertz_core_error(const std::string& text) {
+  return radii_error(text, "core", 0.25, 5,
+                     "the core's uniform cells must hold the contact (below a quarter of its radius the contact falls "
+                     "on the graded cells, which a core of 1e-9 makes degenerate), and a core much wider than the "
+                     "contact spends its cells away from it");
+}
+
+/// --block: the block's edge.
 std::string hertz_block_error(const std::string& text) {
-  if (std::string e = real_number_error(text, 0, INFINITY, true, true); !e.empty()) return e;
-  const double b = *scene::parse_real(text);
-  if (b < 10 || b > 1000)
-    return fmt::format("a block of {} contact radii is outside [10, 1000]: it stands for Hertz's half-space, so its "
-                       "base and sides must lie far from the contact (10 radii at least), and beyond 1000 the graded "
-                       "cells stretch so far that the relaxation stalls",
-                       text);
-  return "";
+  return radii_error(text, "block", 10, 1000,
+                     "it stands for Hertz's half-space, so its base and sides must lie far from the contact (10 radii "
+                     "at least), and beyond 1000 the graded cells stretch so far that the relaxation stalls");
 }
 
 struct HertzArgs {
