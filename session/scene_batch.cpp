@@ -28,6 +28,12 @@ bool same_material(const MaterialParams& a, const MaterialParams& b) {
   return true;
 }
 
+/// One mesh: nodes, elements, element sets, supports and fibre directions.
+bool same_mesh(const ModelInput& a, const ModelInput& b) {
+  return a.nodes == b.nodes && a.tets == b.tets && a.elem_material == b.elem_material && a.fixed == b.fixed &&
+         a.fixed_axes == b.fixed_axes && a.fibre_dirs == b.fibre_dirs;
+}
+
 /// True when build_model would build the same model from both inputs. The
 /// settings and materials are compared before the mesh: a sweep's inputs
 /// differ there, and a batch compares each new input with every model built.
@@ -37,8 +43,7 @@ bool same_input(const ModelInput& a, const ModelInput& b) {
     return false;
   for (std::size_t k = 0; k < a.materials.size(); ++k)
     if (!same_material(a.materials[k], b.materials[k])) return false;
-  return a.nodes == b.nodes && a.tets == b.tets && a.elem_material == b.elem_material && a.fixed == b.fixed &&
-         a.fixed_axes == b.fixed_axes && a.fibre_dirs == b.fibre_dirs;
+  return same_mesh(a, b);
 }
 
 /// True when scenes of these models can share a group's launch (docs/batch.md,
@@ -50,16 +55,12 @@ bool same_input(const ModelInput& a, const ModelInput& b) {
 bool same_group(const ModelInput& a, const TissueModel<double>& ma, const ModelInput& b,
                 const TissueModel<double>& mb) {
   if (&ma == &mb) return true;
-  if (ma.dt != mb.dt || ma.n_nodes != mb.n_nodes || ma.n_elems != mb.n_elems || a.ianp != b.ianp ||
-      a.tick != b.tick || a.materials.size() != b.materials.size() || a.nodes != b.nodes || a.tets != b.tets ||
-      a.elem_material != b.elem_material || a.fixed != b.fixed || a.fixed_axes != b.fixed_axes ||
-      a.fibre_dirs != b.fibre_dirs)
-    return false;
+  if (ma.dt != mb.dt || a.ianp != b.ianp || a.tick != b.tick || a.materials.size() != b.materials.size()) return false;
   for (std::size_t k = 0; k < a.materials.size(); ++k)
     if ((a.materials[k].fibre_eta > 0) != (b.materials[k].fibre_eta > 0) ||
         a.materials[k].prony_terms != b.materials[k].prony_terms)
       return false;
-  return true;
+  return same_mesh(a, b);
 }
 
 /// MemAvailable of /proc/meminfo (bytes), -1 where unknown.
