@@ -64,34 +64,31 @@ inline void set_tick_result(TickResult& out, const TickReport& r, long ticks) {
 
 /// Values field f has for n_nodes nodes and n_elems elements.
 inline std::size_t field_size(Field f, std::size_t n_nodes, std::size_t n_elems) {
-  return (f == Field::Jacobian ? n_elems : n_nodes) * std::size_t(field_components(f));
+  return (field_per_element(f) ? n_elems : n_nodes) * std::size_t(field_components(f));
 }
 
 /// Writes field f of a download into out (x y z per node for vectors;
 /// positions add rest, the interleaved reference positions). out holds
-/// field_size values (checked by the caller).
+/// field_size values (checked by the caller). A stored field is the
+/// download's array of core/store.hpp's output list that names it.
 inline void copy_field(const Fields& s, std::span<const double> rest, Field f, std::span<double> out) {
   const std::size_t nn = rest.size() / 3;
-  auto nodal3 = [&](const std::vector<double>& soa, bool add_rest) {  // component-major -> x y z per node
-    for (std::size_t i = 0; i < nn; ++i)
-      for (std::size_t c = 0; c < 3; ++c) out[3 * i + c] = soa[c * nn + i] + (add_rest ? rest[3 * i + c] : 0.0);
+  const auto copy = [&](const std::vector<double>& v, int components, bool add_rest) {
+    if (components == 1) {
+      std::copy(v.begin(), v.end(), out.begin());
+      return;
+    }
+    for (std::size_t i = 0; i < nn; ++i)  // component-major -> x y z per node
+      for (std::size_t c = 0; c < 3; ++c) out[3 * i + c] = v[c * nn + i] + (add_rest ? rest[3 * i + c] : 0.0);
   };
   switch (f) {
-    case Field::Displacement:
-      nodal3(s.u, false);
-      break;
-    case Field::Position:
-      nodal3(s.u, true);
-      break;
-    case Field::Pressure:
-      std::copy(s.node_p.begin(), s.node_p.end(), out.begin());
-      break;
-    case Field::InternalForce:
-      nodal3(s.f, false);
-      break;
-    case Field::Jacobian:
-      std::copy(s.elem_J.begin(), s.elem_J.end(), out.begin());
-      break;
+#define TISSUE_OUTPUT_CASE(member, vtu, field, per, components, unit) \
+  case Field::field:                                                  \
+    return copy(s.member, components, false);
+    TISSUE_OUTPUT_ARRAYS(TISSUE_OUTPUT_CASE)
+#undef TISSUE_OUTPUT_CASE
+    case Field::Position:  // derived: X + u
+      return copy(s.u, 3, true);
   }
 }
 

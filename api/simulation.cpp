@@ -8,6 +8,7 @@
 #include <cmath>
 #include <optional>
 #include <stdexcept>
+#include <string_view>
 
 #include "api/facade.hpp"
 #include "backends/registry.hpp"
@@ -99,7 +100,27 @@ std::vector<std::string> available_backends() {
   return out;
 }
 
-int field_components(Field f) { return f == Field::Pressure || f == Field::Jacobian ? 1 : 3; }
+int field_components(Field f) {
+  switch (f) {
+#define TISSUE_FIELD_COMPONENTS(c_name, cpp_name, python, per, components, unit, what) \
+  case Field::cpp_name:                                                                \
+    return components;
+    TISSUE_FIELD_LIST(TISSUE_FIELD_COMPONENTS)
+#undef TISSUE_FIELD_COMPONENTS
+  }
+  throw std::invalid_argument(fmt::format("field {} is not a tissue::Field", int(f)));
+}
+
+bool field_per_element(Field f) {
+  switch (f) {
+#define TISSUE_FIELD_PER(c_name, cpp_name, python, per, components, unit, what) \
+  case Field::cpp_name:                                                         \
+    return std::string_view(#per) == "ELEMENT";
+    TISSUE_FIELD_LIST(TISSUE_FIELD_PER)
+#undef TISSUE_FIELD_PER
+  }
+  throw std::invalid_argument(fmt::format("field {} is not a tissue::Field", int(f)));
+}
 
 VolumeMeshResult mesh_surface(const std::string& path, const std::string& unit, int target_tets) {
   if (target_tets < 0)
@@ -238,8 +259,8 @@ void Simulation::read_field(Field f, std::span<double> out) {
   const std::size_t n = facade::field_size(f, n_nodes(), n_elements());
   if (out.size() != n)
     throw std::invalid_argument(fmt::format("{}: the field needs {} values ({} {} x {}), the buffer holds {}", name(), n,
-                                            f == Field::Jacobian ? n_elements() : n_nodes(),
-                                            f == Field::Jacobian ? "elements" : "nodes", field_components(f),
+                                            field_per_element(f) ? n_elements() : n_nodes(),
+                                            field_per_element(f) ? "elements" : "nodes", field_components(f),
                                             out.size()));
   facade::copy_field(impl_->session.fields(), impl_->rest, f, out);
 }

@@ -171,7 +171,7 @@ tissue_status tissue_tool_contact_count(const tissue_simulation* sim, int tool, 
 tissue_status tissue_read_field(tissue_simulation* sim, tissue_field field, double* out, size_t count) {
   if (sim == nullptr) return null_argument("tissue_read_field", "sim");
   if (out == nullptr) return null_argument("tissue_read_field", "out");
-  if (field < TISSUE_FIELD_DISPLACEMENT || field > TISSUE_FIELD_JACOBIAN)
+  if (field < 0 || field >= TISSUE_FIELD_COUNT)
     return fail(TISSUE_BAD_ARGUMENT, "tissue_read_field: field " + std::to_string(int(field)) + " is not a tissue_field");
   return guarded([&] { sim->sim.read_field(static_cast<tissue::Field>(field), {out, count}); });
 }
@@ -273,7 +273,7 @@ tissue_status tissue_batch_forces(const tissue_batch* batch, double* out, size_t
 tissue_status tissue_batch_read_field(tissue_batch* batch, int scene, tissue_field field, double* out, size_t count) {
   if (batch == nullptr) return null_argument("tissue_batch_read_field", "batch");
   if (out == nullptr) return null_argument("tissue_batch_read_field", "out");
-  if (field < TISSUE_FIELD_DISPLACEMENT || field > TISSUE_FIELD_JACOBIAN)
+  if (field < 0 || field >= TISSUE_FIELD_COUNT)
     return fail(TISSUE_BAD_ARGUMENT,
                 "tissue_batch_read_field: field " + std::to_string(int(field)) + " is not a tissue_field");
   return guarded([&] { batch->batch.read_field(scene, static_cast<tissue::Field>(field), {out, count}); });
@@ -282,7 +282,7 @@ tissue_status tissue_batch_read_field(tissue_batch* batch, int scene, tissue_fie
 tissue_status tissue_batch_device_field(tissue_batch* batch, int scene, tissue_field field, tissue_device_view* out) {
   if (batch == nullptr) return null_argument("tissue_batch_device_field", "batch");
   if (out == nullptr) return null_argument("tissue_batch_device_field", "out");
-  if (field < TISSUE_FIELD_DISPLACEMENT || field > TISSUE_FIELD_JACOBIAN)
+  if (field < 0 || field >= TISSUE_FIELD_COUNT)
     return fail(TISSUE_BAD_ARGUMENT,
                 "tissue_batch_device_field: field " + std::to_string(int(field)) + " is not a tissue_field");
   return guarded([&] {

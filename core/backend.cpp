@@ -35,10 +35,15 @@ void Backend::upload(const TissueModel<double>& m) {
   if (m.n_nodes <= 0 || m.n_elems <= 0)
     throw std::invalid_argument(fmt::format("upload: the model has {} nodes and {} elements (needs at least one of each)",
                                             m.n_nodes, m.n_elems));
-  if (m.X.size() != 3 * size_t(m.n_nodes) || m.elem_nodes.size() != 4 * size_t(m.n_elems) ||
-      m.node_elem_start.size() != size_t(m.n_nodes) + 1 || m.tris.size() != 3 * size_t(m.n_tris) ||
-      m.surf_nodes.size() != size_t(m.n_surf))
-    throw std::invalid_argument("upload: the model's arrays do not match its sizes (build it with build_model)");
+  // every array of the store's lists (core/store.hpp) at its declared shape
+#define TISSUE_STORE_CHECK(name, type, per, components, unit, what)                                               \
+  if (m.name.size() != store_entries(Per::per, m) * (components))                                                 \
+    throw std::invalid_argument(fmt::format("upload: the model's {} holds {} values; {} a {} needs {} (build it " \
+                                            "with build_model)",                                                  \
+                                            #name, m.name.size(), components, to_string(Per::per),                \
+                                            store_entries(Per::per, m) * (components)));
+  TISSUE_MODEL_ARRAYS(TISSUE_STORE_CHECK)
+#undef TISSUE_STORE_CHECK
   if (!(m.dt > 0) || !std::isfinite(m.dt))
     throw std::invalid_argument(fmt::format("upload: the model's time step {} s must be > 0", m.dt));
 #define TISSUE_LAW_CHECK(kind, name, len)                                                                    \

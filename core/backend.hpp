@@ -77,11 +77,14 @@ struct DeviceMemory {
 };
 
 /// Whole-store snapshot for output and tests (downloads; not for the tick loop).
+/// One std::vector<double> per output array of core/store.hpp
+/// (TISSUE_OUTPUT_ARRAYS), at the state's layout: u (3 x n_nodes) m, node_p
+/// (n_nodes) Pa, f, the internal nodal force minus the applied load
+/// (set_loads) (3 x n_nodes) N, elem_J (n_elems), J's last computed value.
 struct Fields {
-  std::vector<double> u;       ///< displacements (3 x n_nodes) m
-  std::vector<double> node_p;  ///< nodal pressure (n_nodes) Pa
-  std::vector<double> elem_J;  ///< J per element (n_elems), last computed value
-  std::vector<double> f;       ///< internal nodal force minus the applied load (set_loads) (3 x n_nodes) N
+#define TISSUE_OUTPUT_MEMBER(name, ...) std::vector<double> name;
+  TISSUE_OUTPUT_ARRAYS(TISSUE_OUTPUT_MEMBER)
+#undef TISSUE_OUTPUT_MEMBER
 };
 
 /// A tool's motion over the next advance() (m; axes unit or normalised).

@@ -655,36 +655,19 @@ GradientDeviation worst_gradient_deviation(const TissueModel<double>& m, Precisi
 template <class T>
 TissueModel<T> convert(const TissueModel<double>& m) {
   TissueModel<T> r;
-  auto cv = [](const std::vector<double>& v) { return std::vector<T>(v.begin(), v.end()); };
   r.n_nodes = m.n_nodes;
   r.n_elems = m.n_elems;
   r.n_tris = m.n_tris;
-  r.X = cv(m.X);
-  r.elem_nodes = m.elem_nodes;
-  r.dndx = cv(m.dndx);
-  r.volume = cv(m.volume);
-  r.mu = cv(m.mu);
-  r.K = cv(m.K);
+  r.n_surf = m.n_surf;
   r.n_visco = m.n_visco;
   r.n_prony = m.n_prony;
-#define TISSUE_LAW_CONVERT(kind, name, len) \
-  r.name.assign(m.name.begin(), m.name.end());  // element-wise to LawFieldTypes<T>::kind
+  // every array of core/store.hpp's lists and the law terms', element-wise to its type at T
+#define TISSUE_STORE_CONVERT(name, ...) r.name.assign(m.name.begin(), m.name.end());
+#define TISSUE_LAW_CONVERT(kind, name, len) TISSUE_STORE_CONVERT(name)
+  TISSUE_MODEL_ARRAYS(TISSUE_STORE_CONVERT)
   TISSUE_LAW_MODEL_FIELDS(TISSUE_LAW_CONVERT)
 #undef TISSUE_LAW_CONVERT
-  r.mass = cv(m.mass);
-  r.cd_A = cv(m.cd_A);
-  r.cd_B = cv(m.cd_B);
-  r.cd_C = cv(m.cd_C);
-  r.node_elem_start = m.node_elem_start;
-  r.node_elem = m.node_elem;
-  r.elem_slot = m.elem_slot;
-  r.tris = m.tris;
-  r.tri_elem = m.tri_elem;
-  r.n_surf = m.n_surf;
-  r.surf_nodes = m.surf_nodes;
-  r.surf_slot_start = m.surf_slot_start;
-  r.surf_slot = m.surf_slot;
-  r.node_flags = m.node_flags;
+#undef TISSUE_STORE_CONVERT
   r.dt = m.dt;
   r.dt_crit = m.dt_crit;
   r.dt_crit_elem = m.dt_crit_elem;

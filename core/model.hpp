@@ -17,6 +17,7 @@
 
 #include "core/hd.hpp"
 #include "core/material.hpp"
+#include "core/store.hpp"
 #include "core/tet.hpp"
 #include "core/vec.hpp"
 
@@ -106,12 +107,17 @@ struct TissueModel {
   index_t n_nodes = 0, n_elems = 0, n_tris = 0;
   index_t n_surf = 0;                ///< surface nodes (corners of surface triangles)
 
-  std::vector<T> X;                  ///< reference positions (3 x n_nodes) m
-  std::vector<index_t> elem_nodes;   ///< (4 x n_elems)
-  std::vector<T> dndx;               ///< shape gradients (12 x n_elems) 1/m
-  std::vector<T> volume;             ///< reference volume (n_elems) m^3
-  std::vector<T> mu;                 ///< shear modulus (n_elems) Pa
-  std::vector<T> K;                  ///< bulk modulus (n_elems) Pa
+  // X, elem_nodes, dndx, volume, node_elem_start, node_elem, elem_slot,
+  // tris, tri_elem, surf_nodes, surf_slot_start, surf_slot, node_flags (the
+  // mesh) and mu, K, mass, cd_A, cd_B, cd_C (the material): one std::vector
+  // each, declared in core/store.hpp with their shapes and units. Pass 3
+  // writes a corner's force to its node's slot elem_slot[a * n_elems + e]
+  // (node_elem[elem_slot[a * n_elems + e]] == 4 e + a), so that pass 4 sums
+  // contiguous slots; the contact stage gathers a surface node's
+  // triangles' proposals through surf_slot.
+#define TISSUE_STORE_MEMBER(name, type, per, components, unit, what) std::vector<typename StoreTypes<T>::type> name;
+  TISSUE_MODEL_ARRAYS(TISSUE_STORE_MEMBER)
+#undef TISSUE_STORE_MEMBER
   // Optional terms (core/material.hpp), present only when a set uses them:
   index_t n_visco = 0;               ///< viscoelastic elements (slots)
   int n_prony = 0;                   ///< Prony terms stored per slot: the most any set gives (0..kMaxProny);
@@ -121,21 +127,6 @@ struct TissueModel {
 #define TISSUE_LAW_MEMBER(kind, name, len) std::vector<typename LawFieldTypes<T>::kind> name;
   TISSUE_LAW_MODEL_FIELDS(TISSUE_LAW_MEMBER)
 #undef TISSUE_LAW_MEMBER
-  std::vector<T> mass;               ///< lumped nodal mass (n_nodes) kg
-  std::vector<T> cd_A, cd_B, cd_C;   ///< central-difference constants (n_nodes each)
-  std::vector<index_t> node_elem_start;  ///< CSR offsets into node_elem (n_nodes + 1)
-  std::vector<index_t> node_elem;        ///< incident (element * 4 + corner: incident_entry), sorted (nnz)
-  std::vector<index_t> elem_slot;        ///< position in node_elem of each (corner, element):
-                                         ///< node_elem[elem_slot[a * n_elems + e]] == 4 e + a (4 x n_elems).
-                                         ///< Pass 3 writes a corner's force to its node's slot, so that
-                                         ///< pass 4 sums contiguous slots.
-  std::vector<index_t> tris;         ///< outward surface triangles (3 x n_tris)
-  std::vector<index_t> tri_elem;     ///< tet owning each surface triangle (n_tris)
-  std::vector<index_t> surf_nodes;   ///< surface nodes, ascending (n_surf)
-  std::vector<index_t> surf_slot_start;  ///< CSR offsets into surf_slot per surface node (n_surf + 1)
-  std::vector<index_t> surf_slot;    ///< each surface node's (triangle, corner) slots 3 t + k, ascending
-                                     ///< (3 n_tris): the contact stage gathers its triangles' proposals
-  std::vector<std::uint8_t> node_flags;  ///< NodeFlag bits (n_nodes)
 
   double dt = 0;            ///< time step (s)
   double dt_crit = 0;       ///< critical step min_e L_e / c_e (s)

@@ -248,8 +248,11 @@ Reductions CpuBackend<T>::do_reduce() {
 
 template <class T>
 Fields CpuBackend<T>::do_download() {
-  auto cv = [](const std::vector<T>& v) { return std::vector<double>(v.begin(), v.end()); };
-  return {cv(state_.u), cv(state_.node_p), cv(state_.elem_J), cv(state_.f)};
+  Fields f;
+#define TISSUE_OUTPUT_COPY(name, ...) f.name.assign(state_.name.begin(), state_.name.end());
+  TISSUE_OUTPUT_ARRAYS(TISSUE_OUTPUT_COPY)
+#undef TISSUE_OUTPUT_COPY
+  return f;
 }
 
 template <class T>

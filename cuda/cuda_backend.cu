@@ -678,18 +678,20 @@ class CudaBackend final : public Backend {
       const std::ptrdiff_t d = static_cast<const char*>(p) - base;
       offsets.push_back(p && d >= 0 && std::size_t(d) < group_->arena().stride() ? d : -1);
     };
-    for (const StateView<T>& v : {store_.state(), store_.pressure_scratch()})  // (set 0 first: just uploaded)
-      for (const void* p : {(const void*)v.u_held, (const void*)v.held, (const void*)v.driven, (const void*)v.role,
-                            (const void*)v.elem_dv, (const void*)v.elem_J, (const void*)v.node_p, (const void*)v.f_slot,
-                            (const void*)v.f, (const void*)v.bad, (const void*)v.contact, (const void*)v.contact_tool,
-                            (const void*)v.contact_normal, (const void*)v.grasp_offset, (const void*)v.corner_dx,
-                            (const void*)v.corner_tool, (const void*)v.corner_blocked, (const void*)v.proposed})
-        add(p);
+    // the state's arrays (core/store.hpp's lists: what StateView::moved moves), both pass-array sets
+#define TISSUE_STATE_OFFSET(name, ...) add(v.name);
+    for (const StateView<T>& v : {store_.state(), store_.pressure_scratch()}) {  // (set 0 first: just uploaded)
+      TISSUE_STATE_ARRAYS(TISSUE_STATE_OFFSET)
+      TISSUE_PASS_ARRAYS(TISSUE_STATE_OFFSET)
+      TISSUE_DEVICE_STATE_ARRAYS(TISSUE_STATE_OFFSET)
+    }
+#undef TISSUE_STATE_OFFSET
     for (auto& b : store_.u.buf) add(b.data());
     const ModelView<T>& m = store_.model();  // the arrays that follow the scene's material (materials_moved)
-    for (const void* p : {(const void*)m.mu, (const void*)m.K, (const void*)m.mass, (const void*)m.cd_A,
-                          (const void*)m.cd_B, (const void*)m.cd_C, (const void*)m.node_divisor})
-      if (p) add(p);  // (the divisors are null without IANP: alike in every member of one mesh)
+#define TISSUE_MATERIAL_OFFSET(name, ...) add(m.name);
+    TISSUE_MATERIAL_ARRAYS(TISSUE_MATERIAL_OFFSET)
+#undef TISSUE_MATERIAL_OFFSET
+    if (m.node_divisor) add(m.node_divisor);  // (null without IANP: alike in every member of one mesh)
     if (const void* load = store_.load_space()) add(load);  // reserved in a group's slot
     const LawView<T>& w = store_.law();  // the law arrays (LawView::moved): null where no set uses them
 #define TISSUE_LAW_OFFSET(kind, name, len) \

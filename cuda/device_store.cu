@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <stdexcept>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -66,20 +67,40 @@ std::vector<Packed3<S>> packed_positions(const TissueModel<S>& m) {
   return X;
 }
 
-template <class T>
-__global__ void reset_nodes_kernel(index_t n, const std::uint8_t* flags, std::uint8_t* held, std::uint8_t* driven,
-                                   std::uint8_t* role) {
+/// held[a] = the node's fixed axes (Init::FixedAxes).
+__global__ void fixed_axes_kernel(index_t n, const std::uint8_t* flags, std::uint8_t* held) {
   const index_t a = thread_index();
-  if (a >= n) return;
-  held[a] = fixed_axes(flags[a]);
-  driven[a] = 0;
-  role[a] = kInner;
+  if (a < n) held[a] = fixed_axes(flags[a]);
 }
 
-template <class T>
-__global__ void reset_elems_kernel(index_t ne, T* elem_J) {
-  const index_t e = thread_index();
-  if (e < ne) elem_J[e] = T(1);
+template <class V>
+__global__ void fill_kernel(index_t n, V* v, V value) {
+  const index_t i = thread_index();
+  if (i < n) v[i] = value;
+}
+
+/// Sets a store array to its declared initial value (core/store.hpp Init).
+template <class V>
+void reset_array(DeviceArray<V>& a, Init init, const std::uint8_t* node_flags, cudaStream_t stream) {
+  if (a.size() == 0) return;
+  switch (init) {
+    case Init::Zero:
+      return a.fill_bytes(0, stream);
+    case Init::NoTool:  // -1
+    case Init::NoBad:   // every bit
+      return a.fill_bytes(0xff, stream);
+    case Init::Inner:
+      if constexpr (sizeof(V) == 1) return a.fill_bytes(kInner, stream);
+      break;
+    case Init::One:
+      if constexpr (std::is_arithmetic_v<V>) return launch(index_t(a.size()), stream, fill_kernel<V>, index_t(a.size()), a.data(), V(1));
+      break;
+    case Init::FixedAxes:
+      if constexpr (std::is_same_v<V, std::uint8_t>)
+        return launch(index_t(a.size()), stream, fixed_axes_kernel, index_t(a.size()), node_flags, a.data());
+      break;
+  }
+  throw std::logic_error("cuda store: an array's initial value does not suit its type (core/store.hpp)");
 }
 
 }  // namespace
@@ -142,12 +163,9 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   upload_array(pack_first_, packs.first, log, stream);
   upload_array(slot_of_, m.elem_slot, log, stream);
   upload_array(tris_, m.tris, log, stream);
-  upload_array(mu_, m.mu, log, stream);
-  upload_array(K_, m.K, log, stream);
-  upload_array(mass_, m.mass, log, stream);
-  upload_array(cd_A_, m.cd_A, log, stream);
-  upload_array(cd_B_, m.cd_B, log, stream);
-  upload_array(cd_C_, m.cd_C, log, stream);
+#define TISSUE_MATERIAL_UPLOAD(name, ...) upload_array(arrays_.name, m.name, log, stream);
+  TISSUE_MATERIAL_ARRAYS(TISSUE_MATERIAL_UPLOAD)
+#undef TISSUE_MATERIAL_UPLOAD
   upload_array(node_flags_, m.node_flags, log, stream);
   const std::vector<T> node_divisor = nodal_pressure_divisors(m);
   upload_array(node_divisor_, node_divisor, log, stream);
@@ -169,12 +187,9 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   model_.volume = keep_dndx ? volume_.data() : nullptr;
   model_.X_ref = keep_X_ref ? X_ref_.data() : nullptr;
   model_.grid_step = static_cast<T>(grid.step);
-  model_.mu = mu_.data();
-  model_.K = K_.data();
-  model_.mass = mass_.data();
-  model_.cd_A = cd_A_.data();
-  model_.cd_B = cd_B_.data();
-  model_.cd_C = cd_C_.data();
+#define TISSUE_MATERIAL_POINT(name, ...) model_.name = arrays_.name.data();
+  TISSUE_MATERIAL_ARRAYS(TISSUE_MATERIAL_POINT)
+#undef TISSUE_MATERIAL_POINT
   model_.node_elem_start = node_elem_start_.data();
   model_.node_elem = node_elem_.data();
   model_.pack_first = pack_first_.data();
@@ -192,18 +207,20 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   model_.dt = m.dt;
   model_.ianp = m.ianp;
 
+  // the state: each array of core/store.hpp's lists at its declared shape,
+  // in the lists' order (every scene of a group allocates the same arrays
+  // in the same order, so that they lie at one offset in every slot)
   for (auto& b : u.buf) b.allocate(n);
-  u_held_.allocate(n);
-  f_.allocate(n);
-  f_slot_.allocate(4 * size_t(ne));
-  model_.discard_slots = f_slot_.bytes() > half_l2_bytes();  // the whole mesh's slots (pass 3's streaming kernel: a region's)
-  elem_dv_[0].allocate(ne);
-  held_.allocate(n);
-  driven_.allocate(n);
-  role_.allocate(n);
-  elem_J_[0].allocate(ne);
-  node_p_[0].allocate(n);
-  bad_.allocate(1);
+#define TISSUE_STATE_ALLOCATE(name, type, per, components, ...)                                     \
+  static_assert((components) == 1 || (components) == 3, #name ": the device holds 1 or 3 per entry"); \
+  arrays_.name.allocate(store_entries(Per::per, m));
+#define TISSUE_PASS_ALLOCATE(name, type, per, components, ...) \
+  arrays_.name[0].allocate(store_entries(Per::per, m));
+  TISSUE_STATE_ARRAYS(TISSUE_STATE_ALLOCATE)
+  TISSUE_PASS_ARRAYS(TISSUE_PASS_ALLOCATE)
+  TISSUE_DEVICE_STATE_ARRAYS(TISSUE_STATE_ALLOCATE)
+#undef TISSUE_PASS_ALLOCATE
+  model_.discard_slots = arrays_.f_slot.bytes() > half_l2_bytes();  // the whole mesh's slots (pass 3's streaming kernel: a region's)
   load_.allocate(reserve_load_ ? std::size_t(m.n_nodes) : 0);  // a group's scene: its load's room in its slot
   load_on_ = false;
   // the law arrays (core/material.hpp's lists): state sized from the model,
@@ -218,17 +235,11 @@ void DeviceStore<T>::upload(const TissueModel<T>& m, const TissueModel<double>& 
   TISSUE_LAW_MODEL_FIELDS(TISSUE_LAW_POINT)
   TISSUE_LAW_STATE_FIELDS(TISSUE_LAW_POINT)
 #undef TISSUE_LAW_POINT
-  contact_.allocate(n);
-  contact_tool_.allocate(n);
-  contact_normal_.allocate(n);
-  grasp_offset_.allocate(n);
-  corner_dx_.allocate(3 * size_t(m.n_tris));
-  corner_tool_.allocate(3 * size_t(m.n_tris));
-  corner_blocked_.allocate(3 * size_t(m.n_tris));
-  proposed_.allocate(n);
-  elem_dv_[1].allocate(ne);  // (the second set last: set 0 where the state's one set was)
-  elem_J_[1].allocate(ne);
-  node_p_[1].allocate(n);
+#define TISSUE_SCRATCH_ALLOCATE(name, type, per, components, ...) \
+  arrays_.name[1].allocate(store_entries(Per::per, m));
+  TISSUE_PASS_ARRAYS(TISSUE_SCRATCH_ALLOCATE)  // (the scratch set last)
+#undef TISSUE_SCRATCH_ALLOCATE
+#undef TISSUE_STATE_ALLOCATE
   reset_state(stream);
 }
 
@@ -236,27 +247,17 @@ template <class T>
 void DeviceStore<T>::reset_state(cudaStream_t stream) {
   for (auto& b : u.buf) b.fill_bytes(0, stream);
   u.phase = 0;
-  u_held_.fill_bytes(0, stream);
-  f_.fill_bytes(0, stream);
-  f_slot_.fill_bytes(0, stream);
   pressures_ = 0;
-  for (int k = 0; k < 2; ++k) {
-    elem_dv_[k].fill_bytes(0, stream);
-    node_p_[k].fill_bytes(0, stream);
-    launch(model_.n_elems, stream, reset_elems_kernel<T>, model_.n_elems, elem_J_[k].data());
-  }
-  bad_.fill_bytes(0xff, stream);
+  const std::uint8_t* flags = model_.node_flags;
+#define TISSUE_STATE_RESET(name, type, per, components, init, ...) reset_array(arrays_.name, Init::init, flags, stream);
+#define TISSUE_PASS_RESET(name, type, per, components, init, ...) \
+  for (auto& set : arrays_.name) reset_array(set, Init::init, flags, stream);
+  TISSUE_STATE_ARRAYS(TISSUE_STATE_RESET)
+  TISSUE_PASS_ARRAYS(TISSUE_PASS_RESET)
+  TISSUE_DEVICE_STATE_ARRAYS(TISSUE_STATE_RESET)
+#undef TISSUE_PASS_RESET
+#undef TISSUE_STATE_RESET
   clear_law_state(stream);
-  contact_.fill_bytes(kNoContact, stream);
-  contact_tool_.fill_bytes(0xff, stream);  // -1
-  contact_normal_.fill_bytes(0, stream);
-  grasp_offset_.fill_bytes(0, stream);
-  corner_dx_.fill_bytes(0, stream);
-  corner_tool_.fill_bytes(0xff, stream);
-  corner_blocked_.fill_bytes(0, stream);
-  proposed_.fill_bytes(0, stream);
-  launch(model_.n_nodes, stream, reset_nodes_kernel<T>, model_.n_nodes, model_.node_flags, held_.data(),
-         driven_.data(), role_.data());
 }
 
 template <class T>
@@ -286,25 +287,14 @@ void DeviceStore<T>::set_load(std::span<const double> load, Transfers& log, cuda
 template <class T>
 StateView<T> DeviceStore<T>::state() {
   StateView<T> s;
-  s.u_held = u_held_.data();
-  s.held = held_.data();
-  s.driven = driven_.data();
-  s.role = role_.data();
-  s.elem_dv = elem_dv_[pressures_].data();
-  s.elem_J = elem_J_[pressures_].data();
-  s.node_p = node_p_[pressures_].data();
-  s.f_slot = f_slot_.data();
-  s.f = f_.data();
+#define TISSUE_STATE_POINT(name, ...) s.name = arrays_.name.data();
+#define TISSUE_PASS_POINT(name, ...) s.name = arrays_.name[pressures_].data();
+  TISSUE_STATE_ARRAYS(TISSUE_STATE_POINT)
+  TISSUE_PASS_ARRAYS(TISSUE_PASS_POINT)
+  TISSUE_DEVICE_STATE_ARRAYS(TISSUE_STATE_POINT)
+#undef TISSUE_PASS_POINT
+#undef TISSUE_STATE_POINT
   s.load = load_on_ ? load_.data() : nullptr;
-  s.bad = bad_.data();
-  s.contact = contact_.data();
-  s.contact_tool = contact_tool_.data();
-  s.contact_normal = contact_normal_.data();
-  s.grasp_offset = grasp_offset_.data();
-  s.corner_dx = corner_dx_.data();
-  s.corner_tool = corner_tool_.data();
-  s.corner_blocked = corner_blocked_.data();
-  s.proposed = proposed_.data();
   return s;
 }
 
@@ -312,19 +302,22 @@ template <class T>
 StateView<T> DeviceStore<T>::pressure_scratch() {
   StateView<T> s = state();
   const int k = pressures_ ^ 1;
-  s.elem_dv = elem_dv_[k].data();
-  s.elem_J = elem_J_[k].data();
-  s.node_p = node_p_[k].data();
+#define TISSUE_SCRATCH_POINT(name, ...) s.name = arrays_.name[k].data();
+  TISSUE_PASS_ARRAYS(TISSUE_SCRATCH_POINT)
+#undef TISSUE_SCRATCH_POINT
   return s;
 }
 
 template <class T>
 void DeviceStore<T>::copy_pressures_to_scratch(cudaStream_t stream) {
   const int from = pressures_, to = pressures_ ^ 1;
-  for (auto [dst, src] : {std::pair{&elem_dv_[to], &elem_dv_[from]}, std::pair{&elem_J_[to], &elem_J_[from]},
-                          std::pair{&node_p_[to], &node_p_[from]}})
-    if (src->bytes() > 0)
-      CUDA_CHECK(cudaMemcpyAsync(dst->data(), src->data(), src->bytes(), cudaMemcpyDeviceToDevice, stream));
+  const auto copy = [&](auto& set) {
+    if (set[from].bytes() > 0)
+      CUDA_CHECK(cudaMemcpyAsync(set[to].data(), set[from].data(), set[from].bytes(), cudaMemcpyDeviceToDevice, stream));
+  };
+#define TISSUE_PASS_COPY(name, ...) copy(arrays_.name);
+  TISSUE_PASS_ARRAYS(TISSUE_PASS_COPY)
+#undef TISSUE_PASS_COPY
 }
 
 template class DeviceStore<float>;

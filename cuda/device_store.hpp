@@ -100,14 +100,26 @@ class DeviceStore {
   DeviceArray<ReferencePoint<T>> X_ref_;  // empty when the gradients are stored
   DeviceArray<index_t> elem_nodes_, node_elem_start_, node_elem_, slot_of_, tris_, pack_first_;
   DeviceArray<index_t> surf_nodes_, surf_slot_start_, surf_slot_;
-  DeviceArray<T> dndx_, volume_, mu_, K_, mass_, cd_A_, cd_B_, cd_C_, node_divisor_;
+  DeviceArray<T> dndx_, volume_, node_divisor_;
   DeviceArray<std::uint8_t> node_flags_;
-  // state
-  DeviceArray<Packed3<T>> u_held_, f_slot_, f_, contact_normal_, grasp_offset_, corner_dx_;
-  DeviceArray<std::uint8_t> held_, driven_, role_, contact_, corner_blocked_, proposed_;
-  DeviceArray<signed char> contact_tool_, corner_tool_;
-  DeviceArray<T> elem_dv_[2], elem_J_[2], node_p_[2];  ///< the two pass-array sets (pressure_scratch())
-  int pressures_ = 0;                                   ///< the state's set
+  /// The arrays of core/store.hpp's lists, one DeviceArray each (a Packed3
+  /// per entry for vectors): the material's (read-only after upload), the
+  /// state's and the device's own; the pass arrays in two sets
+  /// (pressure_scratch()).
+  struct StoreArrays {
+#define TISSUE_DEVICE_ARRAY(name, type, per, components, ...) \
+  DeviceArray<device_element_t<T, typename StoreTypes<T>::type, components>> name;
+#define TISSUE_DEVICE_ARRAY_PAIR(name, type, per, components, ...) \
+  DeviceArray<device_element_t<T, typename StoreTypes<T>::type, components>> name[2];
+    TISSUE_MATERIAL_ARRAYS(TISSUE_DEVICE_ARRAY)
+    TISSUE_STATE_ARRAYS(TISSUE_DEVICE_ARRAY)
+    TISSUE_DEVICE_STATE_ARRAYS(TISSUE_DEVICE_ARRAY)
+    TISSUE_PASS_ARRAYS(TISSUE_DEVICE_ARRAY_PAIR)
+#undef TISSUE_DEVICE_ARRAY_PAIR
+#undef TISSUE_DEVICE_ARRAY
+  };
+  StoreArrays arrays_;
+  int pressures_ = 0;  ///< the pass arrays' set that is the state's
   /// The law terms' arrays, one per line of core/material.hpp's lists (empty when unused).
   struct LawArrays {
 #define TISSUE_LAW_DEVICE_ARRAY(kind, name, len) DeviceArray<typename LawFieldTypes<T>::kind> name;
@@ -119,7 +131,6 @@ class DeviceStore {
   DeviceArray<Packed3<T>> load_;  // applied load: empty when none (unless reserved)
   bool load_on_ = false;          // a load is set (state().load)
   bool reserve_load_ = false;     // set_reserve_load
-  DeviceArray<unsigned long long> bad_;
 };
 
 }  // namespace tissue::gpu

@@ -27,6 +27,7 @@
 
 #include "core/contact.hpp"
 #include "core/hd.hpp"
+#include "core/store.hpp"
 #include "core/tet.hpp"
 #include "core/vec.hpp"
 #include "cuda/gradients.hpp"
@@ -40,6 +41,19 @@ struct alignas(4 * sizeof(T)) Packed3 {
   TISSUE_HD Vec3<T> vec() const { return {x, y, z}; }
   TISSUE_HD static Packed3 of(Vec3<T> v) { return {v.x, v.y, v.z, T(0)}; }
 };
+
+/// A store array's element on the device (core/store.hpp): one Packed3 per
+/// entry for a 3-component array, else the declared type.
+template <class V, int Components>
+struct DeviceElement {
+  using type = V;
+};
+template <class V>
+struct DeviceElement<V, 3> {
+  using type = Packed3<V>;
+};
+template <class T, class Kind, int Components>
+using device_element_t = typename DeviceElement<Kind, Components>::type;
 
 /// Threads per block of the packed fused passes (cuda/tled.cuh): a block
 /// computes the slots of a window of nodes, one slot a thread.
@@ -76,12 +90,12 @@ struct ModelView {
   /// double (ReferencePoint).
   const ReferencePoint<T>* X_ref = nullptr;
   T grid_step = 0;
-  const T* mu = nullptr;                  ///< (n_elems) Pa
-  const T* K = nullptr;                   ///< (n_elems) Pa
-  const T* mass = nullptr;                ///< (n_nodes) kg
-  const T* cd_A = nullptr;                ///< central-difference constants (n_nodes each)
-  const T* cd_B = nullptr;
-  const T* cd_C = nullptr;
+  // mu, K (n_elems) Pa, mass (n_nodes) kg, cd_A, cd_B, cd_C (the central
+  // difference's constants, n_nodes each): core/store.hpp's material arrays
+#define TISSUE_MATERIAL_POINTER(name, type, per, components, unit, what) \
+  const device_element_t<T, typename StoreTypes<T>::type, components>* name = nullptr;
+  TISSUE_MATERIAL_ARRAYS(TISSUE_MATERIAL_POINTER)
+#undef TISSUE_MATERIAL_POINTER
   const index_t* node_elem_start = nullptr;  ///< (n_nodes + 1)
   const index_t* node_elem = nullptr;        ///< element * 4 + corner (nnz)
   /// The fused passes' windows over the slots (cuda/tled.cuh run_packed):
@@ -122,13 +136,10 @@ struct ModelView {
   /// arrays are read from the captured scene's copy for all).
   TISSUE_HD ModelView materials_moved(std::int64_t bytes) const {
     ModelView v = *this;
-    v.mu = moved_by(mu, bytes);
-    v.K = moved_by(K, bytes);
-    v.mass = moved_by(mass, bytes);
-    v.cd_A = moved_by(cd_A, bytes);
-    v.cd_B = moved_by(cd_B, bytes);
-    v.cd_C = moved_by(cd_C, bytes);
-    v.node_divisor = moved_by(node_divisor, bytes);
+#define TISSUE_MATERIAL_MOVE(name, ...) v.name = moved_by(name, bytes);
+    TISSUE_MATERIAL_ARRAYS(TISSUE_MATERIAL_MOVE)
+#undef TISSUE_MATERIAL_MOVE
+    v.node_divisor = moved_by(node_divisor, bytes);  // (derived from K and the volumes at upload)
     return v;
   }
 };
@@ -244,27 +255,21 @@ TISSUE_HD P* moved_by(P* p, std::int64_t bytes) {
 /// __restrict__/read-only: persistent kernels read what other blocks wrote.
 template <class T>
 struct StateView {
-  Packed3<T>* u_held = nullptr;        ///< target of held nodes (n_nodes) m
-  std::uint8_t* held = nullptr;        ///< axis mask: bit c = component c set from u_held, not integrated (n_nodes)
-  std::uint8_t* driven = nullptr;      ///< axis mask of the tool-driven components; 0 = not driven (n_nodes)
-  std::uint8_t* role = nullptr;        ///< NodeRole (n_nodes)
-  T* elem_dv = nullptr;                ///< pass 1: (J_e - 1) V_e per element (n_elems) m^3
-  T* elem_J = nullptr;                 ///< pass 1: J_e (n_elems)
-  T* node_p = nullptr;                 ///< pass 2: p_a (n_nodes) Pa
-  Packed3<T>* f_slot = nullptr;        ///< pass 3: f_a^e per node_elem slot (4 n_elems) N
-  Packed3<T>* f = nullptr;             ///< pass 4: internal force minus the applied load (n_nodes) N
+  // One pointer per state array the device holds (core/store.hpp:
+  // TISSUE_STATE_ARRAYS, TISSUE_PASS_ARRAYS, TISSUE_DEVICE_STATE_ARRAYS),
+  // a Packed3 per entry for vectors: u_held, held, driven, f_slot (per
+  // node_elem slot), f, contact, contact_tool, contact_normal, grasp_offset;
+  // elem_dv, elem_J, node_p (the pass arrays: one of the store's two sets);
+  // role, bad (the lowest bad element key, see bad_key; ~0 = none),
+  // corner_dx, corner_tool, corner_blocked (per triangle corner 3 t + k),
+  // proposed (the gather clears it).
+#define TISSUE_STATE_POINTER(name, type, per, components, init, unit, what) \
+  device_element_t<T, typename StoreTypes<T>::type, components>* name = nullptr;
+  TISSUE_STATE_ARRAYS(TISSUE_STATE_POINTER)
+  TISSUE_PASS_ARRAYS(TISSUE_STATE_POINTER)
+  TISSUE_DEVICE_STATE_ARRAYS(TISSUE_STATE_POINTER)
+#undef TISSUE_STATE_POINTER
   const Packed3<T>* load = nullptr;    ///< applied load R (Backend::set_loads; n_nodes) N; null = none
-  unsigned long long* bad = nullptr;   ///< lowest bad element key (see bad_key), ~0 = none
-  // contact (core/contact.hpp)
-  std::uint8_t* contact = nullptr;     ///< ContactKind after the last step (n_nodes)
-  signed char* contact_tool = nullptr; ///< the tool touched, -1 none (n_nodes)
-  Packed3<T>* contact_normal = nullptr;///< pushed nodes' contact normal (n_nodes)
-  Packed3<T>* grasp_offset = nullptr;  ///< grasped nodes' offset from the tool tip at the grasp (n_nodes) m
-  Packed3<T>* corner_dx = nullptr;     ///< the sweep's correction per (triangle, corner) slot 3 t + k (3 n_tris) m
-  signed char* corner_tool = nullptr;  ///< its tool, -1 none (3 n_tris)
-  std::uint8_t* corner_blocked = nullptr;  ///< ContactKind of a blocked penetration, 0 none (3 n_tris)
-  std::uint8_t* proposed = nullptr;    ///< 1: some triangle proposed a correction or a block for the node
-                                       ///< in this step's sweep; the gather clears it (n_nodes)
   /// Set only in a tick graph that checks its region first (one int): while
   /// it is non-zero the region must grow before this tick, and the step and
   /// reduction kernels do nothing. In a group's tick, the group's flag of
@@ -277,25 +282,12 @@ struct StateView {
   TISSUE_HD StateView moved(std::int64_t d) const {
     StateView v = *this;
     const std::int64_t b = d * slots.stride;
-    v.u_held = moved_by(u_held, b);
-    v.held = moved_by(held, b);
-    v.driven = moved_by(driven, b);
-    v.role = moved_by(role, b);
-    v.elem_dv = moved_by(elem_dv, b);
-    v.elem_J = moved_by(elem_J, b);
-    v.node_p = moved_by(node_p, b);
-    v.f_slot = moved_by(f_slot, b);
-    v.f = moved_by(f, b);
+#define TISSUE_STATE_MOVE(name, ...) v.name = moved_by(name, b);
+    TISSUE_STATE_ARRAYS(TISSUE_STATE_MOVE)
+    TISSUE_PASS_ARRAYS(TISSUE_STATE_MOVE)
+    TISSUE_DEVICE_STATE_ARRAYS(TISSUE_STATE_MOVE)
+#undef TISSUE_STATE_MOVE
     v.load = moved_by(load, b);
-    v.bad = moved_by(bad, b);
-    v.contact = moved_by(contact, b);
-    v.contact_tool = moved_by(contact_tool, b);
-    v.contact_normal = moved_by(contact_normal, b);
-    v.grasp_offset = moved_by(grasp_offset, b);
-    v.corner_dx = moved_by(corner_dx, b);
-    v.corner_tool = moved_by(corner_tool, b);
-    v.corner_blocked = moved_by(corner_blocked, b);
-    v.proposed = moved_by(proposed, b);
     v.skip = skip ? skip + d : skip;
     return v;
   }

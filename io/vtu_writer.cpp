@@ -26,14 +26,53 @@ void write_scalars(std::ostream& out, const std::vector<double>& v) {
     out << fmt::format("{:.9g}{}", v[i], (i % 8 == 7 || i + 1 == v.size()) ? "\n" : " ");
 }
 
+/// One output array of core/store.hpp (TISSUE_OUTPUT_ARRAYS) as the file writes it.
+struct OutputArray {
+  const std::vector<double>* values;
+  const char* name;
+  Per per;
+  int components;
+};
+
+std::vector<OutputArray> output_arrays(const Fields& f) {
+  return {
+#define TISSUE_OUTPUT_ENTRY(member, vtu, field, per, components, unit) {&f.member, vtu, Per::per, components},
+      TISSUE_OUTPUT_ARRAYS(TISSUE_OUTPUT_ENTRY)
+#undef TISSUE_OUTPUT_ENTRY
+  };
+}
+
+/// The arrays of `per` as a PointData or CellData section: the first vector
+/// and the first scalar are its default Vectors and Scalars.
+void write_section(std::ostream& out, const char* section, const std::vector<OutputArray>& arrays, Per per,
+                   index_t n) {
+  std::string defaults;
+  for (int components : {3, 1})
+    for (const OutputArray& a : arrays)
+      if (a.per == per && a.components == components) {
+        defaults += fmt::format(" {}=\"{}\"", components == 3 ? "Vectors" : "Scalars", a.name);
+        break;
+      }
+  out << "<" << section << defaults << ">\n";
+  for (const OutputArray& a : arrays) {
+    if (a.per != per) continue;
+    out << fmt::format("<DataArray type=\"Float64\" Name=\"{}\"{} format=\"ascii\">\n", a.name,
+                       a.components == 3 ? " NumberOfComponents=\"3\"" : "");
+    if (a.components == 3)
+      write_vec3(out, *a.values, n);
+    else
+      write_scalars(out, *a.values);
+    out << "</DataArray>\n";
+  }
+  out << "</" << section << ">\n";
+}
+
 }  // namespace
 
 void write_vtu(const std::string& path, const TissueModel<double>& m, const Fields& f) {
   const index_t n = m.n_nodes, ne = m.n_elems;
-  check_size(path, "displacement", f.u.size(), 3 * size_t(n));
-  check_size(path, "nodal_pressure", f.node_p.size(), size_t(n));
-  check_size(path, "internal_force", f.f.size(), 3 * size_t(n));
-  check_size(path, "J", f.elem_J.size(), size_t(ne));
+  const std::vector<OutputArray> arrays = output_arrays(f);
+  for (const OutputArray& a : arrays) check_size(path, a.name, a.values->size(), store_entries(a.per, m) * a.components);
   std::ostringstream out;
   out << "<?xml version=\"1.0\"?>\n"
          "<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n"
@@ -50,18 +89,9 @@ void write_vtu(const std::string& path, const TissueModel<double>& m, const Fiel
   out << "</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n";
   for (index_t e = 0; e < ne; ++e) out << "10" << ((e % 32 == 31 || e + 1 == ne) ? "\n" : " ");  // VTK_TETRA
   out << "</DataArray>\n</Cells>\n";
-  out << "<PointData Vectors=\"displacement\" Scalars=\"nodal_pressure\">\n"
-         "<DataArray type=\"Float64\" Name=\"displacement\" NumberOfComponents=\"3\" format=\"ascii\">\n";
-  write_vec3(out, f.u, n);
-  out << "</DataArray>\n<DataArray type=\"Float64\" Name=\"nodal_pressure\" format=\"ascii\">\n";
-  write_scalars(out, f.node_p);
-  out << "</DataArray>\n<DataArray type=\"Float64\" Name=\"internal_force\" NumberOfComponents=\"3\" "
-         "format=\"ascii\">\n";
-  write_vec3(out, f.f, n);
-  out << "</DataArray>\n</PointData>\n<CellData Scalars=\"J\">\n"
-         "<DataArray type=\"Float64\" Name=\"J\" format=\"ascii\">\n";
-  write_scalars(out, f.elem_J);
-  out << "</DataArray>\n</CellData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n";
+  write_section(out, "PointData", arrays, Per::Node, n);
+  write_section(out, "CellData", arrays, Per::Element, ne);
+  out << "</Piece>\n</UnstructuredGrid>\n</VTKFile>\n";
   write_file_atomic(path, out.str());
 }
 

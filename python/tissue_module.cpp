@@ -24,6 +24,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <tuple>
 #include <vector>
 
@@ -235,7 +236,7 @@ auto locked(Locked<T>& o, F&& f) {
 /// A new array the engine fills with the field.
 py::array_t<double> field_array(PySimulation& s, Field f) {
   const int c = tissue::field_components(f);
-  const py::ssize_t n = py::ssize_t(f == Field::Jacobian ? s.value.n_elements() : s.value.n_nodes());
+  const py::ssize_t n = py::ssize_t(tissue::field_per_element(f) ? s.value.n_elements() : s.value.n_nodes());
   py::array_t<double> a = c == 1 ? py::array_t<double>({n}) : py::array_t<double>({n, py::ssize_t(c)});
   double* out = a.mutable_data();
   const std::size_t size = std::size_t(a.size());
@@ -248,7 +249,7 @@ py::array_t<double> field_array(PySimulation& s, Field f) {
 py::array_t<double> batch_field(PyBatch& b, Field f) {
   const int c = tissue::field_components(f);
   const py::ssize_t n = py::ssize_t(b.value.size());
-  const py::ssize_t per = py::ssize_t(f == Field::Jacobian ? b.value.n_elements(0) : b.value.n_nodes(0));
+  const py::ssize_t per = py::ssize_t(tissue::field_per_element(f) ? b.value.n_elements(0) : b.value.n_nodes(0));
   py::array_t<double> a = c == 1 ? py::array_t<double>({n, per}) : py::array_t<double>({n, per, py::ssize_t(c)});
   double* out = a.mutable_data();
   const std::size_t size = std::size_t(a.size());
@@ -259,7 +260,7 @@ py::array_t<double> batch_field(PyBatch& b, Field f) {
 /// One scene's field as (nodes[, components]).
 py::array_t<double> scene_field(PyBatch& b, int scene, Field f) {
   const int c = tissue::field_components(f);
-  const py::ssize_t per = py::ssize_t(f == Field::Jacobian ? b.value.n_elements(scene) : b.value.n_nodes(scene));
+  const py::ssize_t per = py::ssize_t(tissue::field_per_element(f) ? b.value.n_elements(scene) : b.value.n_nodes(scene));
   py::array_t<double> a = c == 1 ? py::array_t<double>({per}) : py::array_t<double>({per, py::ssize_t(c)});
   double* out = a.mutable_data();
   const std::size_t size = std::size_t(a.size());
@@ -270,6 +271,44 @@ py::array_t<double> scene_field(PyBatch& b, int scene, Field f) {
 /// field(scene=None): every scene's (N, ...) or one scene's.
 py::array_t<double> any_field(PyBatch& b, std::optional<int> scene, Field f) {
   return scene ? scene_field(b, *scene, f) : batch_field(b, f);
+}
+
+/// One exported field (tissue/fields.h) as the Python methods present it.
+struct FieldMethod {
+  const char* name;
+  Field field;
+  std::string per;    ///< "nodes" or "elements"
+  int components;     ///< 3 or 1
+  std::string doc;    ///< "m: displacement u"
+};
+
+std::vector<FieldMethod> field_methods() {
+  std::vector<FieldMethod> out;
+#define TISSUE_FIELD_METHOD(c_name, cpp_name, python, per, components, unit, what)                       \
+  out.push_back({#python, Field::cpp_name, std::string_view(#per) == "ELEMENT" ? "elements" : "nodes", components, \
+                 std::string(unit) + ": " + what});
+  TISSUE_FIELD_LIST(TISSUE_FIELD_METHOD)
+#undef TISSUE_FIELD_METHOD
+  return out;
+}
+
+/// A Simulation's method per field: f() -> (n, components) or (n,).
+void bind_simulation_fields(py::class_<PySimulation>& cls) {
+  for (const FieldMethod& m : field_methods()) {
+    const Field f = m.field;
+    const std::string shape = "(n_" + m.per + (m.components == 1 ? ",)" : ", 3)");
+    cls.def(m.name, [f](PySimulation& s) { return field_array(s, f); }, (shape + " " + m.doc).c_str());
+  }
+}
+
+/// A Batch's method per field: f(scene=None) -> every scene's (N, n, ...) or one scene's.
+void bind_batch_fields(py::class_<PyBatch>& cls) {
+  for (const FieldMethod& m : field_methods()) {
+    const Field f = m.field;
+    cls.def(m.name, [f](PyBatch& b, std::optional<int> s) { return any_field(b, s, f); },
+            py::arg("scene") = py::none(),
+            ("(N, " + m.per + (m.components == 1 ? ")" : ", 3)") + " " + m.doc + "; or one scene's").c_str());
+  }
 }
 
 /// The module, its functions and the meshes mesh_surface makes.
@@ -368,11 +407,6 @@ void bind_simulation_steps(py::class_<PySimulation>& cls) {
         return locked(s, [](Simulation& x) { return x.viscous_stored_energy(); });
       }, "J stored in the Prony terms' branches after the last tick")
       .def("take_notes", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.take_notes(); }); })
-      .def("displacement", [](PySimulation& s) { return field_array(s, Field::Displacement); }, "(n_nodes, 3) m")
-      .def("positions", [](PySimulation& s) { return field_array(s, Field::Position); }, "(n_nodes, 3) X + u (m)")
-      .def("pressure", [](PySimulation& s) { return field_array(s, Field::Pressure); }, "(n_nodes,) Pa")
-      .def("internal_force", [](PySimulation& s) { return field_array(s, Field::InternalForce); }, "(n_nodes, 3) N")
-      .def("jacobian", [](PySimulation& s) { return field_array(s, Field::Jacobian); }, "(n_elements,) J = det F")
       .def("positions_f32", [](PySimulation& s) {
         if (s.value.positions_on_device())
           throw std::invalid_argument("positions_f32: the " + s.value.backend() +
@@ -458,6 +492,7 @@ void bind_simulation(py::module_& m) {
       .def("tool_radius", [](PySimulation& s, int tool) { return s.value.tool_radius(tool); }, py::arg("tool"))
       .def("tool_shaft", [](PySimulation& s, int tool) { return s.value.tool_shaft(tool); }, py::arg("tool"));
   bind_simulation_steps(cls);
+  bind_simulation_fields(cls);
 }
 
 // ---- device arrays: __cuda_array_interface__ (version 3) and DLPack ----
@@ -646,16 +681,6 @@ void bind_batch_steps(py::class_<PyBatch>& cls) {
            "(N, max_tools, 3) forces on the tools after the last tick (N)")
       .def("tips", [](PyBatch& b) { return tool_array(b, &tissue::Batch::read_tips); },
            "(N, max_tools, 3) the tools' tips after the last tick (m)")
-      .def("displacement", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Displacement); },
-           py::arg("scene") = py::none(), "(N, nodes, 3) m, or one scene's (nodes, 3)")
-      .def("positions", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Position); },
-           py::arg("scene") = py::none(), "(N, nodes, 3) X + u (m), or one scene's")
-      .def("pressure", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Pressure); },
-           py::arg("scene") = py::none(), "(N, nodes) Pa, or one scene's")
-      .def("internal_force", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::InternalForce); },
-           py::arg("scene") = py::none(), "(N, nodes, 3) N, or one scene's")
-      .def("jacobian", [](PyBatch& b, std::optional<int> s) { return any_field(b, s, Field::Jacobian); },
-           py::arg("scene") = py::none(), "(N, elements) J, or one scene's")
       .def("device_displacement",
            [](py::object self, std::optional<int> s) { return device_array(self, s, Field::Displacement); },
            py::arg("scene") = py::none(),
@@ -832,6 +857,7 @@ void bind_batch(py::module_& m) {
         locked(b, [&](tissue::Batch& x) { x.set_loads(scene, ids, f); });
       }, py::arg("scene"), py::arg("nodes"), py::arg("forces"));
   bind_batch_steps(cls);
+  bind_batch_fields(cls);
 }
 
 }  // namespace

@@ -24,6 +24,8 @@
 #include <string>
 #include <vector>
 
+#include "tissue/fields.h"
+
 namespace tissue {
 
 /// The library's version, "major.minor.patch".
@@ -92,17 +94,21 @@ struct TickResult {
   int region_nodes = 0, region_elements = 0;  ///< the deformation region in use
 };
 
-/// Per-node and per-element fields (all in SI units).
+/// Per-node and per-element fields (all in SI units), tissue/fields.h's
+/// list: Displacement (u, 3 per node, m), Position (X + u, 3 per node, m),
+/// Pressure (IANP nodal pressure, 1 per node, Pa), InternalForce (internal
+/// nodal force less the applied load of set_loads, 3 per node, N), Jacobian
+/// (J = det F, 1 per element, its last computed value).
 enum class Field {
-  Displacement,   ///< u, 3 per node (m)
-  Position,       ///< X + u, 3 per node (m)
-  Pressure,       ///< IANP nodal pressure, 1 per node (Pa)
-  InternalForce,  ///< internal nodal force less the applied load (set_loads), 3 per node (N)
-  Jacobian,       ///< J = det F, 1 per element (last computed value)
+#define TISSUE_FIELD_CPP_ENUM(c_name, cpp_name, python, per, components, unit, what) cpp_name,
+  TISSUE_FIELD_LIST(TISSUE_FIELD_CPP_ENUM)
+#undef TISSUE_FIELD_CPP_ENUM
 };
 
 /// Values per node (or element) of a field: 3 or 1.
 int field_components(Field f);
+/// Whether a field has one value (or vector) per element, not per node.
+bool field_per_element(Field f);
 
 class Simulation {
  public:

@@ -19,6 +19,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "tissue/fields.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -30,12 +32,15 @@ typedef enum tissue_status {
   TISSUE_UNSTABLE = 3      /* the simulation went unstable (NaN or an inverted element); tissue_reset to go on */
 } tissue_status;
 
+/* TISSUE_FIELD_DISPLACEMENT = 0 (3 per node, m), TISSUE_FIELD_POSITION = 1
+ * (3 per node, m), TISSUE_FIELD_PRESSURE = 2 (1 per node, Pa),
+ * TISSUE_FIELD_INTERNAL_FORCE = 3 (3 per node, N), TISSUE_FIELD_JACOBIAN = 4
+ * (1 per element): tissue/fields.h's list. */
 typedef enum tissue_field {
-  TISSUE_FIELD_DISPLACEMENT = 0,   /* 3 per node (m) */
-  TISSUE_FIELD_POSITION = 1,       /* 3 per node (m) */
-  TISSUE_FIELD_PRESSURE = 2,       /* 1 per node (Pa) */
-  TISSUE_FIELD_INTERNAL_FORCE = 3, /* 3 per node (N) */
-  TISSUE_FIELD_JACOBIAN = 4        /* 1 per element */
+#define TISSUE_FIELD_C_ENUM(c_name, cpp_name, python, per, components, unit, what) TISSUE_FIELD_##c_name,
+  TISSUE_FIELD_LIST(TISSUE_FIELD_C_ENUM)
+#undef TISSUE_FIELD_C_ENUM
+  TISSUE_FIELD_COUNT
 } tissue_field;
 
 typedef struct tissue_simulation tissue_simulation;
