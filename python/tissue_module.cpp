@@ -279,14 +279,16 @@ struct FieldMethod {
   Field field;
   std::string per;    ///< "nodes" or "elements"
   int components;     ///< 3 or 1
-  std::string doc;    ///< "m: displacement u"
+  const char* unit;   ///< "m"
+  const char* what;   ///< "displacement u"
+  std::string doc() const { return std::string(unit) + ": " + what; }
 };
 
 std::vector<FieldMethod> field_methods() {
   std::vector<FieldMethod> out;
 #define TISSUE_FIELD_METHOD(c_name, cpp_name, python, per, components, unit, what)                       \
   out.push_back({#python, Field::cpp_name, std::string_view(#per) == "ELEMENT" ? "elements" : "nodes", components, \
-                 std::string(unit) + ": " + what});
+                 unit, what});
   TISSUE_FIELD_LIST(TISSUE_FIELD_METHOD)
 #undef TISSUE_FIELD_METHOD
   return out;
@@ -297,7 +299,7 @@ void bind_simulation_fields(py::class_<PySimulation>& cls) {
   for (const FieldMethod& m : field_methods()) {
     const Field f = m.field;
     const std::string shape = "(n_" + m.per + (m.components == 1 ? ",)" : ", 3)");
-    cls.def(m.name, [f](PySimulation& s) { return field_array(s, f); }, (shape + " " + m.doc).c_str());
+    cls.def(m.name, [f](PySimulation& s) { return field_array(s, f); }, (shape + " " + m.doc()).c_str());
   }
 }
 
@@ -307,7 +309,7 @@ void bind_batch_fields(py::class_<PyBatch>& cls) {
     const Field f = m.field;
     cls.def(m.name, [f](PyBatch& b, std::optional<int> s) { return any_field(b, s, f); },
             py::arg("scene") = py::none(),
-            ("(N, " + m.per + (m.components == 1 ? ")" : ", 3)") + " " + m.doc + "; or one scene's").c_str());
+            ("(N, " + m.per + (m.components == 1 ? ")" : ", 3)") + " " + m.doc() + "; or one scene's").c_str());
   }
 }
 
@@ -316,6 +318,13 @@ void bind_module(py::module_& m) {
   m.doc() = "Tissue: nonlinear soft-tissue deformation (TLED, Neo-Hookean) with tool contact and haptic forces";
   m.attr("__version__") = tissue::version();
   m.def("available_backends", &tissue::available_backends, "Backends built in and usable on this machine");
+  m.def("fields", [] {
+    py::list out;
+    for (const FieldMethod& f : field_methods())
+      out.append(py::make_tuple(f.name, f.per, f.components, f.unit, f.what));
+    return out;
+  }, "The exported fields (tissue/fields.h): (method, 'nodes' | 'elements', components, unit, what) each; "
+     "Simulation and Batch have a method of each name");
 
   py::class_<tissue::VolumeMeshResult>(m, "VolumeMesh", "A tetrahedral mesh made by mesh_surface")
       .def_property_readonly("nodes", [](py::object self) {

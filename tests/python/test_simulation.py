@@ -374,3 +374,26 @@ def test_reoriented_tets_are_reported():
         "check the corner order the mesh was written with"]
     P = sim.rest_positions[sim.tetrahedra]
     assert (np.einsum("ij,ij->i", np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), P[:, 3] - P[:, 0]) > 0).all()
+
+
+def test_every_exported_field_has_its_method_at_its_declared_shape():
+    """tissue.fields() is the public field list (tissue/fields.h): each name
+    is a method of Simulation and of Batch whose array has the declared
+    entries and components."""
+    declared = tissue.fields()
+    assert [f[0] for f in declared] == ["displacement", "positions", "pressure", "internal_force", "jacobian"]
+    sim = block(backend="cpu", precision="double")
+    press(sim, 1e-3, hold=10)
+    batch = tissue.Batch(["@kidney", "@kidney"], backend="cpu", precision="float", depth="all")
+    batch.step()
+    for name, per, components, unit, what in declared:
+        assert per in ("nodes", "elements") and components in (1, 3) and unit and what
+        count = sim.n_nodes if per == "nodes" else sim.n_elements
+        a = getattr(sim, name)()
+        assert a.shape == ((count,) if components == 1 else (count, components)), name
+        assert np.isfinite(a).all() and a.any(), name  # pressed: every field has non-zero values
+        assert unit in getattr(tissue.Simulation, name).__doc__, name
+        b = getattr(batch, name)()
+        scene = getattr(batch, name)(1)
+        assert b.shape[0] == 2 and b.shape[1:] == scene.shape, name
+        np.testing.assert_array_equal(b[1], scene)
