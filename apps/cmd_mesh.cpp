@@ -46,6 +46,7 @@ struct MeshOptions {
   std::string surface, out, unit = "m";
   std::vector<std::string> inclusions;  ///< "file[:E=..,nu=..,rho=..]"
   bool no_repair = false;
+  bool no_wrap = false;
   io::OrganMeshOptions pipeline;
   double E = 3000, nu = 0.45, rho = 1000;
   double fix_fraction = 0.05;
@@ -315,6 +316,7 @@ scene::Scene make_scene(MeshOptions& o) {
     std::fflush(stdout);
   };
   o.pipeline.repair = !o.no_repair;
+  o.pipeline.wrap = !o.no_wrap;
   // materials first: refuse bad numbers before any work
   scene::Scene s;
   s.source = "tissue mesh";
@@ -419,6 +421,9 @@ void add_mesh_command(CLI::App& app, int& rc) {
           {"auto", io::Mesher::Auto}, {"tetgen", io::Mesher::TetGen}, {"cgal", io::Mesher::Mesh3}}))
       ->default_str("auto");
   cmd->add_flag("--no-repair", o->no_repair, "Refuse damaged surfaces instead of repairing them");
+  cmd->add_flag("--no-wrap", o->no_wrap,
+                "Mesh_3: mesh the repaired surface as it is, not its alpha wrap at half the target edge (grooves and "
+                "folds narrower than the elements then force smaller ones)");
   cmd->add_option("--remesh-edge", o->pipeline.remesh_edge,
                   "Remesh the surfaces to this edge length (m); 0 = auto (when finer than the target needs), -1 = never")
       ->default_val(0)

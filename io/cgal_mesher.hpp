@@ -14,7 +14,7 @@ struct Mesh3Options {
   double cell_size = 0;        ///< largest tet circumradius (m); 0 = from target_tets
   std::string cell_size_from;  ///< what set cell_size, for messages ("--max-volume 1e-15"); "" = the size itself
   int target_tets = 0;         ///< aim at this many tets (cell size iterated, up to kMesh3Rounds runs)
-  double sliver_bound = 12;    ///< dihedral angle (degrees) perturbation and exudation aim above
+  double sliver_bound = 18;    ///< dihedral angle (degrees) perturbation and exudation aim above
   double time_limit = 30;      ///< seconds for each of perturbation and exudation
   Progress progress;           ///< one line per run
 };
@@ -27,8 +27,9 @@ inline constexpr double kMesh3BytesPerTet = 2000;
 inline constexpr int kMesh3Rounds = 4;
 
 /// Meshes the closed surface with Mesh_3 (facets: angle >= 25 degrees, size
-/// <= cell size, distance to the input <= cell size / 10; cells: radius-edge
-/// <= 2, circumradius <= cell size), then perturbs and exudes slivers.
+/// <= cell size, no bound on their distance to the input, which follows
+/// from the surface's own resolution; cells: radius-edge <= 2, circumradius
+/// <= cell size), then perturbs and exudes slivers.
 /// Every tet positively oriented. Throws MeshError naming `source` for an
 /// open surface, bad options or an empty result.
 VolumeMesh mesh3_surface(const SurfaceMesh& surface, const Mesh3Options& options, const std::string& source);

@@ -150,6 +150,20 @@ OrganMesh mesh_organ(NamedSurface organ, std::vector<NamedSurface> inclusions, c
     out.target_edge = regular_tet_edge(volume / o.meshing.target_tets);
   else if (o.meshing.max_volume > 0)
     out.target_edge = regular_tet_edge(o.meshing.max_volume);
+  out.mesher = o.mesher != Mesher::Auto ? o.mesher
+                : inclusions.empty() && (o.meshing.target_tets > 0 || o.meshing.max_volume > 0) ? Mesher::Mesh3
+                                                                                               : Mesher::TetGen;
+  if (o.wrap && out.mesher == Mesher::Mesh3 && out.target_edge > 0 && inclusions.empty()) {
+    SurfaceSteps& steps = out.surfaces[0];
+    const index_t before = organ.surface.n_triangles();
+    steps.wrapped_alpha = kWrapAlpha * out.target_edge;
+    wrap_surface(organ.surface, steps.wrapped_alpha, kWrapOffset * out.target_edge, organ.source);
+    steps.wrap_volume_change = std::fabs(enclosed_volume(organ.surface)) / volume - 1;
+    say(o, fmt::format("wrapped {} at alpha {:.3g} mm (half the target edge): {} -> {} triangles, enclosed volume "
+                       "{:+.2f} %",
+                       organ.source, 1e3 * steps.wrapped_alpha, before, organ.surface.n_triangles(),
+                       100 * steps.wrap_volume_change));
+  }
   for (size_t k = 0; k < all.size(); ++k) {
     const double edge = o.remesh_edge < 0 ? 0 : o.remesh_edge > 0 ? o.remesh_edge
                                                                 : auto_edge(all[k]->surface, out.target_edge, k > 0);
@@ -158,9 +172,6 @@ OrganMesh mesh_organ(NamedSurface organ, std::vector<NamedSurface> inclusions, c
   }
   MeshingOptions m = o.meshing;
   m.regions.clear();
-  out.mesher = o.mesher != Mesher::Auto ? o.mesher
-                : inclusions.empty() && (m.target_tets > 0 || m.max_volume > 0) ? Mesher::Mesh3
-                                                                                : Mesher::TetGen;
   for (int attempt = 0;; ++attempt) {
     out.mesh = tetrahedralize(organ, inclusions, m, out.mesher);
     const double n = out.mesh.n_tets(), target = m.target_tets;

@@ -22,6 +22,7 @@
 #include <CGAL/Polygon_mesh_processing/shape_predicates.h>
 #include <CGAL/Polygon_mesh_processing/triangulate_hole.h>
 #include <CGAL/Surface_mesh.h>
+#include <CGAL/alpha_wrap_3.h>
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -350,6 +351,17 @@ index_t remesh_surface(SurfaceMesh& s, double edge_length, int passes, const std
   m.collect_garbage();
   if (!CGAL::is_closed(m)) throw MeshError(source + ": isotropic remeshing left the surface open");
   s = from_mesh(std::move(m));
+  return s.n_triangles();
+}
+
+index_t wrap_surface(SurfaceMesh& s, double alpha, double offset, const std::string& source) {
+  if (!(alpha > 0) || !(offset > 0) || !std::isfinite(alpha) || !std::isfinite(offset))
+    throw MeshError(fmt::format("{}: the alpha wrap's alpha {} m and offset {} m must be > 0", source, alpha, offset));
+  const Mesh m = to_mesh(s, source);
+  Mesh wrap;
+  CGAL::alpha_wrap_3(m, alpha, offset, wrap);
+  if (wrap.is_empty() || !CGAL::is_closed(wrap)) throw MeshError(source + ": the alpha wrap is empty or not closed");
+  s = from_mesh(std::move(wrap));
   return s.n_triangles();
 }
 

@@ -75,6 +75,16 @@ long count_self_intersections(const SurfaceMesh& surface, const std::string& sou
 index_t remesh_surface(SurfaceMesh& surface, double edge_length, int passes, const std::string& source,
                        const Progress& progress = {});
 
+/// Replaces a closed surface by its alpha wrap (CGAL alpha_wrap_3): the
+/// boundary of the union of balls of radius `alpha` (m, > 0) rolled over
+/// it, offset outward by `offset` (m, > 0). Grooves, folds and gaps
+/// narrower than about alpha close, so a mesher no longer has to resolve
+/// them; lobes thinner than about alpha / 2 lose their tips. The result is
+/// closed, manifold and free of self-intersections. Returns the number of
+/// triangles; throws MeshError naming `source` for bad sizes or a result
+/// that is not closed.
+index_t wrap_surface(SurfaceMesh& surface, double alpha, double offset, const std::string& source);
+
 /// Mean edge length of the surface (m).
 double mean_edge_length(const SurfaceMesh& surface);
 

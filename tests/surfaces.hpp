@@ -48,6 +48,27 @@ inline io::SurfaceMesh ellipsoid(std::array<double, 3> c, std::array<double, 3> 
   return s;
 }
 
+/// The ellipsoid of ellipsoid() with a groove cut across its top: along
+/// the plane x = c.x, `depth` (m) deep at its bottom and about `width` (m)
+/// wide (a Gaussian of that full width at half depth), fading out below the
+/// equator: the narrow fold of a real organ's surface, steeper than the
+/// elements a coarse target asks for. `levels` must resolve the width.
+inline io::SurfaceMesh grooved_ellipsoid(std::array<double, 3> c, std::array<double, 3> r, int levels, double depth,
+                                         double width) {
+  io::SurfaceMesh s = ellipsoid(c, r, levels);
+  const double sigma = width / 2.3548;  // full width at half maximum
+  for (index_t v = 0; v < s.n_vertices(); ++v) {
+    double* p = &s.vertices[3 * v];
+    const double x = p[0] - c[0], y = p[1] - c[1], z = p[2] - c[2];
+    const double rr = std::sqrt(x * x + y * y + z * z);
+    const double top = std::clamp(z / r[2] * 2, 0.0, 1.0);  // 0 below the equator, 1 above half the height
+    const double cut = depth * top * std::exp(-x * x / (2 * sigma * sigma));
+    const double k = (rr - cut) / rr;
+    p[0] = c[0] + x * k, p[1] = c[1] + y * k, p[2] = c[2] + z * k;
+  }
+  return s;
+}
+
 /// Appends the closed, outward box [lo, lo + side]^3 (12 triangles).
 inline void add_box(io::SurfaceMesh& s, double lo, double side) {
   static constexpr int kQuads[6][4] = {{0, 4, 6, 2}, {1, 3, 7, 5}, {0, 1, 5, 4},
