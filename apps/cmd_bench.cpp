@@ -32,7 +32,7 @@ void add_bench_command(CLI::App& app, int& rc) {
                   "Batch sizes: step that many kidneys together, every tool moving in contact (only the batch rows "
                   "run; docs/batch.md)")
       ->delimiter(',')
-      ->check(CLI::Range(1L, 1'000'000L));
+      ->check(whole_number(1, 1'000'000));
   cmd->add_flag("--quick", o->quick, "Smoke run on tiny meshes (CI)");
   cmd->callback([o, precision, &rc] {
     InterruptGuard interrupt;

@@ -140,6 +140,22 @@ void check_step_count(const ModelInput& in, const TissueModel<double>& m, double
   const MaterialParams p = step_params(in, m, e);  // the moduli the step was computed from
   const double c = wave_speed(p);
   const bool fibre_sets_it = fibre_wave_modulus(p.fibre_eta) > p.K + 4 * p.mu / 3;
+  // a tissue-like material with a tiny element: the mesh's size (its unit), not the material
+  const double E = 9 * p.mu / (3 + p.mu / p.K);
+  if (!fibre_sets_it && E >= 1e2 && E <= 1e7 && p.rho >= 100 && p.rho <= 1e4) {
+    double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    for (std::size_t a = 0; a < in.nodes.size() / 3; ++a)
+      for (int c3 = 0; c3 < 3; ++c3) lo[c3] = std::min(lo[c3], in.nodes[3 * a + c3]), hi[c3] = std::max(hi[c3], in.nodes[3 * a + c3]);
+    const double extent = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+    throw ModelError(fmt::format(
+        "{}: element {} is {:.4g} m small (its smallest altitude) in a body {:.4g} m across, so its stable step "
+        "is dt_crit = L / c = {:.4g} s at the wave speed {:.4g} m/s of its material ('{}', E = {:.4g} Pa, rho = "
+        "{:.4g} kg/m^3, soft tissue's): one {:.4g} s haptic tick would need {:.3g} TLED steps (the most is "
+        "{:.0e}). The mesh is far too small for an organ (5e-3..1 m across); check its unit: node coordinates "
+        "are metres",
+        in.source, e, m.dt_crit * c, extent, m.dt_crit, c, material_name(in, k), E, p.rho, in.tick, steps,
+        kMaxStepsPerTick));
+  }
   throw ModelError(fmt::format(
       "{}: element {} ({}: mu = {:.4g} Pa, K = {:.4g} Pa{}{}, rho = {:.4g} kg/m^3) has a wave speed {}, so its "
       "stable step is dt_crit = L / c = {:.4g} s (L = {:.4g} m, its smallest altitude{}): one {:.4g} s haptic tick "

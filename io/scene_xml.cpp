@@ -664,6 +664,7 @@ scene::Scene parse_scene(std::string_view xml, const std::string& source, const 
 }
 
 scene::Scene read_scene(const std::string& path) {
+  if (path.empty()) throw SceneError("the scene file's name is empty: give a scene file or @kidney");
   if (const std::string why = io::not_a_file(path); !why.empty()) throw SceneError(path + ": " + why + ", not a scene file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw SceneError(path + ": cannot open the scene file");

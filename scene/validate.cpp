@@ -44,6 +44,30 @@ void check_mesh(const Scene& s) {
     if (!std::isfinite(s.nodes[k]))
       fail(s, ln,
            fmt::format("mesh: node {} coordinate {} = {} is not a finite number", k / 3, "xyz"[k % 3], s.nodes[k]));
+  // one node far beyond the others on an axis (a stray coordinate: 1e308 for 0.02): named, before the
+  // mesh's size it would set misleads every later check
+  const std::size_t count = s.nodes.size() / 3;
+  for (int c = 0; c < 3 && count >= 3; ++c) {
+    std::size_t lo = 0, hi = 0;
+    for (std::size_t a = 1; a < count; ++a) {
+      if (s.nodes[3 * a + c] < s.nodes[3 * lo + c]) lo = a;
+      if (s.nodes[3 * a + c] > s.nodes[3 * hi + c]) hi = a;
+    }
+    double lo2 = INFINITY, hi2 = -INFINITY;  // the others' range on this axis
+    for (std::size_t a = 0; a < count; ++a) {
+      if (a != hi) hi2 = std::max(hi2, s.nodes[3 * a + c]);
+      if (a != lo) lo2 = std::min(lo2, s.nodes[3 * a + c]);
+    }
+    for (const auto [stray, gap] : {std::pair{hi, s.nodes[3 * hi + c] - hi2}, std::pair{lo, lo2 - s.nodes[3 * lo + c]}}) {
+      const double others = (stray == hi ? hi2 : s.nodes[3 * hi + c]) - (stray == lo ? lo2 : s.nodes[3 * lo + c]);
+      if (others > 0 && gap > kStrayNodeGap * others)
+        fail(s, ln,
+             fmt::format("mesh: node {} at ({:.4g}, {:.4g}, {:.4g}) m lies {:.4g} m beyond the other nodes on {} "
+                         "(they span {:.4g} m): more than {:g} x their span; check its coordinates",
+                         stray, s.nodes[3 * stray], s.nodes[3 * stray + 1], s.nodes[3 * stray + 2], gap, "xyz"[c],
+                         others, kStrayNodeGap));
+    }
+  }
   const index_t n = node_count(s);
   for (size_t k = 0; k < s.tets.size(); ++k)
     if (s.tets[k] < 0 || s.tets[k] >= n)
@@ -477,7 +501,10 @@ void check_solver(const Scene& s) {
   if (v.depth < kDepthAuto)
     fail(s, ln, fmt::format("solver: depth = {} must be >= 0 (or \"all\" or \"auto\")", v.depth));
   if (!(v.tick > 0)) fail(s, ln, fmt::format("solver: tick = {} s must be > 0", v.tick));
-  if (!(v.residual_tol > 0)) fail(s, ln, fmt::format("solver: residual-tol = {} must be > 0", v.residual_tol));
+  if (!(v.residual_tol > 0) || !(v.residual_tol < 1))
+    fail(s, ln, fmt::format("solver: residual-tol = {} must be in (0, 1): it bounds the free nodes' residual "
+                            "relative to the force on the held ones, which any state meets from 1 on",
+                            v.residual_tol));
   if (!(v.kinetic_tol > 0)) fail(s, ln, fmt::format("solver: kinetic-tol = {} must be > 0", v.kinetic_tol));
 }
 

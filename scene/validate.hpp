@@ -57,6 +57,9 @@ struct SceneError : std::runtime_error {
 /// typing mistake, and coordinates that overflow a float break the collision
 /// query.
 inline constexpr double kToolReach = 1000;
+/// A node lying beyond the other nodes on an axis by more than this many
+/// times their span there is refused as a stray coordinate, named.
+inline constexpr double kStrayNodeGap = 1000;
 
 /// The axis-aligned bounding box of xyz-interleaved node coordinates and its
 /// diagonal, the mesh size the tool reach is measured in.

@@ -156,6 +156,7 @@ TEST(Options, CommandsRefuseBadValues) {
   EXPECT_EQ(parse_error({"reference", "x.xml", "--safety", "1.5"}),
             "--safety: 1.5 is out of range: it must be in (0, 1)");
   EXPECT_EQ(parse_error({"bench", "--min-seconds", "nan"}), "--min-seconds: nan is not a finite number");
+  EXPECT_EQ(parse_error({"bench", "--batch", "1,2.5"}), "--batch: '2.5' is not a whole number");
   EXPECT_EQ(parse_error({"tradeoff", "x.xml", "--max-hold", "-1"}),
             "--max-hold: -1 is out of range: it must be in (0, 1000000]");
   EXPECT_EQ(parse_error({"tradeoff", "x.xml", "--meshes", "3000,-1"}),

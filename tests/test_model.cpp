@@ -480,6 +480,14 @@ TEST(ModelErrors, ExtremeMaterialNamesTheCauseOfTheStepLimit) {
   in.dt_safety = 1e-300;
   expect_model_error([&] { build_model(in); }, {"box", "dt safety factor 1e-300", "TLED steps", "about 0.9"});
   in.dt_safety = 0.9;
+  // a sound material in a body far too small for an organ: the size and its unit are named, not the material
+  ModelInput tiny = box_input(2, 1, 1, 0.02e-40, 0.01e-40, 0.01e-40);
+  tiny.materials = {material(kE, kNu, kRho)};
+  tiny.material_names = {"capsule"};
+  tiny.tick = 1e-3;
+  tiny.dt_safety = 0.9;
+  expect_model_error([&] { build_model(tiny); },
+                     {"box", "element", "in a body 2e-42 m across", "soft tissue's", "check its unit", "metres"});
   in.materials = {material(kE, kNu, 1e-30)};
   // without a tick (a model built for a relaxation) no such limit applies
   in.tick = 0;

@@ -156,6 +156,9 @@ TEST(SceneChecks, StopCausesNameTheParameter) {
   Scene e = box_scene();
   e.materials.front().a = 1e15;
   EXPECT_TRUE(one(stop_causes(e, load_model(e)), {"material 'brain'", "E = 1e+15 Pa", "far outside soft tissue's"}));
+  Scene u = box_scene();  // E from mu and K without their product, which underflows
+  u.materials.front().a = 1e-300;
+  EXPECT_TRUE(one(stop_causes(u, load_model(u)), {"material 'brain'", "E = 1e-300 Pa", "far outside soft tissue's"}));
   Scene r = box_scene();
   r.materials.front().rho = 1e-12;
   EXPECT_TRUE(one(stop_causes(r, load_model(r)), {"material 'brain'", "density rho = 1e-12 kg/m^3", "kg/m^3)"}));

@@ -93,6 +93,19 @@ TEST(SceneValidate, MeshCoordinateCountNotMultipleOfThree) {
   EXPECT_TRUE(rejects(s, {"organ.xml:2: ", "mesh", "35 node coordinates", "multiple of 3"}));
 }
 
+// one coordinate typed as 1e308 (or a node of another mesh): named, with how far it lies beyond the rest
+TEST(SceneValidate, AStrayNodeFarBeyondTheOthersIsNamed) {
+  Scene s = valid_scene();
+  s.nodes[3 * 5 + 2] = 1e308;
+  EXPECT_TRUE(rejects(s, {"organ.xml:2: ", "mesh: node 5 at", "1e+308", "beyond the other nodes on z", "check its coordinates"}));
+  s = valid_scene();
+  s.nodes[3 * 2] = -50.0;  // 50 m to the side of a mesh a few cm across
+  EXPECT_TRUE(rejects(s, {"mesh: node 2 at (-50,", "beyond the other nodes on x"}));
+  s = valid_scene();
+  s.nodes[3 * 2] *= 3;  // a node a little beyond the others is a mesh, not a stray
+  EXPECT_NO_THROW(validate(s));
+}
+
 TEST(SceneValidate, MeshCornerOutOfRange) {
   Scene s = valid_scene();
   s.tets[4 * 7 + 2] = 12;
@@ -427,7 +440,9 @@ TEST(SceneValidate, TickNonPositive) {
 TEST(SceneValidate, TolerancesNonPositive) {
   Scene s = valid_scene();
   s.solver.residual_tol = 0;
-  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "residual-tol = 0", "must be > 0"}));
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "residual-tol = 0", "must be in (0, 1)"}));
+  s.solver.residual_tol = 1e300;  // met by any state
+  EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "residual-tol = 1e+300", "must be in (0, 1)", "any state"}));
   s = valid_scene();
   s.solver.kinetic_tol = -1e-6;
   EXPECT_TRUE(rejects(s, {"organ.xml:16: ", "solver", "kinetic-tol = -1e-06", "must be > 0"}));

@@ -571,6 +571,7 @@ TEST(SceneXml, DirectoriesAreNamed) {
   EXPECT_TRUE(throws_with<io::PathCsvError>([&] { (void)io::read_path_csv("/dev/zero"); },
                                             {"/dev/zero: is a device or socket, not a path CSV file"}));
   EXPECT_TRUE(throws_with<SceneError>([&] { (void)read_scene("/dev/zero"); }, {"/dev/zero: is a device"}));
+  EXPECT_TRUE(throws_with<SceneError>([&] { (void)read_scene(""); }, {"the scene file's name is empty"}));
 }
 
 TEST(SceneXml, MissingFilesAreNamed) {
