@@ -382,11 +382,13 @@ void set_time_step(TissueModel<double>& m, double dt, double damping) {
   m.dt = dt;
   m.damping = damping;
   m.cd_A.resize(m.n_nodes);
-  m.cd_D.resize(m.n_nodes);
+  m.cd_B.resize(m.n_nodes);
+  m.cd_C.resize(m.n_nodes);
   for (index_t i = 0; i < m.n_nodes; ++i) {
     const auto k = central_difference_constants(m.mass[i], dt, damping);
     m.cd_A[i] = k.A;
-    m.cd_D[i] = k.D;
+    m.cd_B[i] = k.B;
+    m.cd_C[i] = k.C;
   }
   m.prony_decay.resize(m.prony_g.size());
   m.prony_gain.resize(m.prony_g.size());

@@ -109,7 +109,7 @@ struct TissueModel {
 
   // X, elem_nodes, dndx, volume, node_elem_start, node_elem, elem_slot,
   // tris, tri_elem, surf_nodes, surf_slot_start, surf_slot, node_flags (the
-  // mesh) and mu, K, mass, cd_A, cd_D (the material): one std::vector
+  // mesh) and mu, K, mass, cd_A, cd_B, cd_C (the material): one std::vector
   // each, declared in core/store.hpp with their shapes and units. Pass 3
   // writes a corner's force to its node's slot elem_slot[a * n_elems + e]
   // (node_elem[elem_slot[a * n_elems + e]] == 4 e + a), so that pass 4 sums

@@ -131,8 +131,9 @@ struct StoreTypes {
   ARRAY(mu, Scalar, Element, 1, "Pa", "shear modulus")                                          \
   ARRAY(K, Scalar, Element, 1, "Pa", "bulk modulus")                                            \
   ARRAY(mass, Scalar, Node, 1, "kg", "lumped nodal mass (with mass scaling's added mass)")      \
-  ARRAY(cd_A, Scalar, Node, 1, "s^2/kg", "central difference: u' = u + D (u - u_prev) + A (R - f)") \
-  ARRAY(cd_D, Scalar, Node, 1, "1", "central difference's D (core/tet.hpp CentralDifference)")
+  ARRAY(cd_A, Scalar, Node, 1, "s^2/kg", "central difference: u' = A (R - f) + B u + C u_prev") \
+  ARRAY(cd_B, Scalar, Node, 1, "1", "central difference's B")                                   \
+  ARRAY(cd_C, Scalar, Node, 1, "1", "central difference's C")
 
 /// Every model array of fixed shape (the law terms' arrays, whose lengths
 /// follow their terms, are core/material.hpp's TISSUE_LAW_MODEL_FIELDS).

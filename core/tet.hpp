@@ -300,25 +300,12 @@ TISSUE_HD T plain_element_forces(const Vec3<T> u[4], const T dN[12], T volume, T
   return plain_element_forces(deformation_gradient(u, dN), dN, volume, mu, K, f);
 }
 
-/// Per-node integration constants of the damped central difference for
-/// lumped mass m (kg), step dt (s) and mass-proportional damping alpha
-/// (1/s): u^{n+1} = A (R - f) + B u^n + C u^{n-1} with A = 1 / (m/dt^2 +
-/// alpha m/(2 dt)), B = 2 m/dt^2 A and C = (alpha m/(2 dt) - m/dt^2) A, taken
-/// in the increment form
-///
-///   u^{n+1} = u^n + D (u^n - u^{n-1}) + A (R - f),   D = -C = 1 - B.
-///
-/// B + C = 1 exactly in real numbers but not once B and C are rounded: the
-/// three-term form then adds (B + C - 1) u^n, about eps u^n, every step, a
-/// spring of stiffness eps m / dt^2 on every node that grows as the step
-/// shrinks. In float on a nu = 0.49 cube (3,072 tets, a load held 600 steps
-/// at 0.68 dt_crit) it put the float displacement 5.4e-5 of max |u| from
-/// double's; the increment form, whose only rounding is relative to the
-/// step's increment, 2.1e-6 (docs/accuracy.md, "Float").
+/// Per-node integration constants of the damped central difference,
+/// u^{n+1} = A (R - f) + B u^n + C u^{n-1}, for lumped mass m (kg), step
+/// dt (s) and mass-proportional damping alpha (1/s).
 template <class T>
 struct CentralDifference {
-  T A;  ///< s^2/kg: the out-of-balance force's weight
-  T D;  ///< the last step's increment's weight (1 undamped, < 1 damped)
+  T A, B, C;
 };
 
 template <class T>
@@ -326,13 +313,13 @@ TISSUE_HD CentralDifference<T> central_difference_constants(T m, T dt, T alpha) 
   const T inertia = m / (dt * dt);
   const T damp = alpha * m / (T(2) * dt);
   const T A = T(1) / (inertia + damp);
-  return {A, (inertia - damp) * A};
+  return {A, T(2) * inertia * A, (damp - inertia) * A};
 }
 
-/// One component of the central-difference update (the increment form).
+/// One component of the central-difference update.
 template <class T>
 TISSUE_HD T central_difference_update(const CentralDifference<T>& k, T residual, T u, T u_prev) {
-  return u + k.D * (u - u_prev) + k.A * residual;
+  return k.A * residual + k.B * u + k.C * u_prev;
 }
 
 /// Segment A->B against triangle (P0, P1, P2) (Moller-Trumbore). Returns the

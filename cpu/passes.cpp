@@ -147,7 +147,7 @@ void node_update_run(const TissueModel<T>& m, TissueState<T>& s, std::span<const
     }
     const auto load = [&](const T* v) { return Vec3<T>{v[a], v[n + a], v[2 * size_t(n) + a]}; };
     if (applied) f = f - load(applied);  // the out-of-balance force f - R
-    const Vec3<T> next = node_next(held[a], load(u_held), CentralDifference<T>{m.cd_A[a], m.cd_D[a]}, f,
+    const Vec3<T> next = node_next(held[a], load(u_held), CentralDifference<T>{m.cd_A[a], m.cd_B[a], m.cd_C[a]}, f,
                                    load(u), load(u_prev));
     for (int c = 0; c < 3; ++c) {
       f_out[c * n + a] = f[c];

@@ -428,7 +428,7 @@ __device__ __forceinline__ NodeTail<T> load_node_tail(const ModelView<T>& m, con
   if constexpr (kLoad) t.load = s.load[a].vec();
   t.held = s.held[a];
   t.u_held = s.u_held[a].vec();
-  t.cd = {__ldg(m.cd_A + a), __ldg(m.cd_D + a)};
+  t.cd = {__ldg(m.cd_A + a), __ldg(m.cd_B + a), __ldg(m.cd_C + a)};
   t.u = b.u[a].vec();
   t.u_prev = b.u_prev[a].vec();
   return t;

@@ -90,7 +90,7 @@ struct ModelView {
   /// double (ReferencePoint).
   const ReferencePoint<T>* X_ref = nullptr;
   T grid_step = 0;
-  // mu, K (n_elems) Pa, mass (n_nodes) kg, cd_A, cd_D (the central
+  // mu, K (n_elems) Pa, mass (n_nodes) kg, cd_A, cd_B, cd_C (the central
   // difference's constants, n_nodes each): core/store.hpp's material arrays
 #define TISSUE_MATERIAL_POINTER(name, type, per, components, unit, what) \
   const device_element_t<T, typename StoreTypes<T>::type, components>* name = nullptr;

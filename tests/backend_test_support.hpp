@@ -156,7 +156,7 @@ inline std::vector<double> reference_step(const TissueModel<double>& m, std::vec
     for (int c = 0; c < 3; ++c) {
       const size_t k = size_t(c) * n + a;
       next[k] = held[a] ? u_held[k]
-                        : central_difference_update(CentralDifference<double>{m.cd_A[a], m.cd_D[a]}, -f[k],
+                        : central_difference_update(CentralDifference<double>{m.cd_A[a], m.cd_B[a], m.cd_C[a]}, -f[k],
                                                     u[k], u_prev[k]);
     }
   u_prev = u;

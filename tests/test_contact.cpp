@@ -2595,7 +2595,7 @@ TYPED_TEST_SUITE(NodeRules, Scalars);
 
 TYPED_TEST(NodeRules, NodeNextHoldsMaskedComponents) {
   using T = TypeParam;
-  const CentralDifference<T> cd{T(0.5), T(1)};  // next = u + (u - u_prev) - 0.5 f
+  const CentralDifference<T> cd{T(0.5), T(2), T(-1)};  // next = -0.5 f + 2 u - u_prev
   const Vec3<T> f{1, -2, 4}, u{T(0.1), T(0.2), T(0.3)}, up{T(0.05), T(0.1), T(0.4)}, held{7, 8, 9};
   const Vec3<T> free{T(-0.5 + 0.2 - 0.05), T(1 + 0.4 - 0.1), T(-2 + 0.6 - 0.4)};
   for (std::uint8_t h = 0; h <= kAllAxes; ++h) {

@@ -292,7 +292,8 @@ TEST(Model, TimeStepAboveCriticalIsRefused) {
   EXPECT_EQ(m.damping, 3.0);
   const auto k = central_difference_constants(m.mass[0], m.dt, 3.0);
   EXPECT_DOUBLE_EQ(m.cd_A[0], k.A);
-  EXPECT_DOUBLE_EQ(m.cd_D[0], k.D);
+  EXPECT_DOUBLE_EQ(m.cd_B[0], k.B);
+  EXPECT_DOUBLE_EQ(m.cd_C[0], k.C);
 }
 
 // ---------------------------------------------------------------- mass scaling
@@ -719,7 +720,8 @@ TEST(Model, ConvertFloatKeepsSizesAndValues) {
   EXPECT_EQ(f.volume.size(), m.volume.size());
   EXPECT_EQ(f.mass.size(), m.mass.size());
   EXPECT_EQ(f.cd_A.size(), m.cd_A.size());
-  EXPECT_EQ(f.cd_D.size(), m.cd_D.size());
+  EXPECT_EQ(f.cd_B.size(), m.cd_B.size());
+  EXPECT_EQ(f.cd_C.size(), m.cd_C.size());
   EXPECT_EQ(f.mu.size(), m.mu.size());
   EXPECT_EQ(f.K.size(), m.K.size());
   EXPECT_EQ(f.elem_nodes, m.elem_nodes);

@@ -101,7 +101,7 @@ TEST(Store, ConvertCarriesEveryDeclaredModelArray) {
   TISSUE_LAW_MODEL_FIELDS(TISSUE_CHECK_LAW)
 #undef TISSUE_CHECK_LAW
 #undef TISSUE_CHECK_MODEL
-  EXPECT_EQ(arrays, 18 + 6);
+  EXPECT_EQ(arrays, 19 + 6);
   EXPECT_EQ(f.n_surf, m.n_surf);
   EXPECT_EQ(f.n_visco, m.n_visco);
   EXPECT_EQ(f.n_prony, m.n_prony);
@@ -136,7 +136,7 @@ TEST(Store, UploadRefusesAnyModelArrayOffItsDeclaredShape) {
 #define TISSUE_REFUSE(name, type, per, components, unit, what) refuse(&TissueModel<double>::name, #name, Per::per);
   TISSUE_MODEL_ARRAYS(TISSUE_REFUSE)
 #undef TISSUE_REFUSE
-  EXPECT_EQ(arrays, 18);
+  EXPECT_EQ(arrays, 19);
   backend->upload(good);  // and a good model still goes up after the refusals
 }
 
@@ -216,6 +216,6 @@ TEST(Store, AGroupMovesTheMaterialsArraysNotTheMeshes) {
       << #name;
   TISSUE_MATERIAL_ARRAYS(TISSUE_MOVED)
 #undef TISSUE_MOVED
-  EXPECT_EQ(moved, 5);
+  EXPECT_EQ(moved, 6);
   EXPECT_EQ(reinterpret_cast<const char*>(w.node_divisor) - reinterpret_cast<const char*>(m.node_divisor), 1 << 20);
 }
