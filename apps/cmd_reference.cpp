@@ -68,12 +68,13 @@ int run_reference(const ReferenceArgs& a) {
       "  residual reached    {:.3g} (relative free-node residual; wanted <= {:.3g}{}), relative kinetic {:.3g}\n"
       "  force on the tool   ({:.6g}, {:.6g}, {:.6g}) N, |F| = {:.6g} N, {} nodes in contact\n"
       "  max displacement    {:.6g} mm\n"
-      "  strain energy       {:.6g} J\n",
+      "  strain energy       {}\n",
       ref.relax.steps, ref.dt, ref.relax.wall, ref.relax.damping, ref.relax.restarts, ref.relax.why,
       ref.relax.residual, a.tol,
       ref.relax.at_contact_floor ? "; stopped at the contact's floor, a zero-force node going in and out" : "",
       ref.relax.kinetic, force.x, force.y, force.z, norm(force), ref.contact_nodes, 1e3 * ref.max_disp,
-      ref.strain_energy);
+      ref.strain_energy >= 0 ? fmt::format("{:.6g} J", ref.strain_energy)
+                             : std::string("not measured (the run stopped before the relaxation measured it)"));
   if (!a.json.empty()) {
     io::write_file_atomic(
         a.json,
@@ -83,7 +84,7 @@ int run_reference(const ReferenceArgs& a) {
             "\"force\": [{}, {}, {}], \"max_disp\": {}, \"strain_energy\": {}, \"converged\": {}}}\n",
             s.source, model.n_nodes, model.n_elems, ref.contact_nodes, t_hold, ref.relax.steps, ref.dt, ref.relax.wall,
             ref.relax.residual, ref.relax.kinetic, ref.relax.damping, force.x, force.y, force.z, ref.max_disp,
-            ref.strain_energy, ref.relax.converged));
+            ref.strain_energy >= 0 ? fmt::format("{}", ref.strain_energy) : std::string("null"), ref.relax.converged));
     fmt::print("wrote {}\n", a.json);
   }
   if (folder) {
