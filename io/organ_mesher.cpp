@@ -154,9 +154,17 @@ OrganMesh mesh_organ(NamedSurface organ, std::vector<NamedSurface> inclusions, c
                 : inclusions.empty() && (o.meshing.target_tets > 0 || o.meshing.max_volume > 0) ? Mesher::Mesh3
                                                                                                : Mesher::TetGen;
   if (o.wrap && out.mesher == Mesher::Mesh3 && out.target_edge > 0 && inclusions.empty()) {
+    // the tets the size asks for must fit before the wrap, whose surface grows as the size shrinks
+    const bool by_count = o.meshing.target_tets > 0;
+    check_tet_memory(by_count ? double(o.meshing.target_tets) : volume / o.meshing.max_volume, kMesh3BytesPerTet,
+                     by_count ? fmt::format("a target of {} tets", o.meshing.target_tets)
+                              : fmt::format("--max-volume {:g} m^3", o.meshing.max_volume),
+                     organ.source);
     SurfaceSteps& steps = out.surfaces[0];
     const index_t before = organ.surface.n_triangles();
     steps.wrapped_alpha = kWrapAlpha * out.target_edge;
+    say(o, fmt::format("wrapping {} at alpha {:.3g} mm ({} triangles in)", organ.source, 1e3 * steps.wrapped_alpha,
+                       before));
     wrap_surface(organ.surface, steps.wrapped_alpha, kWrapOffset * out.target_edge, organ.source);
     steps.wrap_volume_change = std::fabs(enclosed_volume(organ.surface)) / volume - 1;
     say(o, fmt::format("wrapped {} at alpha {:.3g} mm (half the target edge): {} -> {} triangles, enclosed volume "

@@ -17,8 +17,8 @@ not validate, a backend that cannot run, an unstable simulation), with a
 message naming the file, element, node or value.
 """
 from ._tissue import (Batch, DeviceArray, MaterialChange, Simulation, TickResult, ToolResult, VolumeMesh, __version__,
-                      available_backends, mesh_surface)
+                      available_backends, fields, mesh_surface)
 from .meshes import box_mesh, box_node
 
-__all__ = ["Batch", "DeviceArray", "MaterialChange", "Simulation", "TickResult", "ToolResult", "VolumeMesh", "available_backends", "mesh_surface",
+__all__ = ["Batch", "DeviceArray", "MaterialChange", "Simulation", "TickResult", "ToolResult", "VolumeMesh", "available_backends", "fields", "mesh_surface",
            "box_mesh", "box_node", "__version__"]
