@@ -40,8 +40,8 @@ void change_material(scene::Scene& s, const MaterialChange& c) {
     if (c.youngs_modulus || c.poisson_ratio) {
       if (m.form != scene::Material::Form::YoungPoisson) {  // the material's (E, nu), from its (mu, K)
         const MaterialParams p = m.params();
-        m.a = 9 * p.K * p.mu / (3 * p.K + p.mu);
-        m.b = (3 * p.K - 2 * p.mu) / (2 * (3 * p.K + p.mu));
+        m.a = youngs_modulus(p);
+        m.b = poisson_ratio(p);
         m.form = scene::Material::Form::YoungPoisson;
       }
       m.a = c.youngs_modulus.value_or(m.a);

@@ -141,21 +141,16 @@ void check_step_count(const ModelInput& in, const TissueModel<double>& m, double
   const double c = wave_speed(p);
   const bool fibre_sets_it = fibre_wave_modulus(p.fibre_eta) > p.K + 4 * p.mu / 3;
   // a tissue-like material with a tiny element: the mesh's size (its unit), not the material
-  const double E = 9 * p.mu / (3 + p.mu / p.K);
-  if (!fibre_sets_it && E >= 1e2 && E <= 1e7 && p.rho >= 100 && p.rho <= 1e4) {
-    double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
-    for (std::size_t a = 0; a < in.nodes.size() / 3; ++a)
-      for (int c3 = 0; c3 < 3; ++c3) lo[c3] = std::min(lo[c3], in.nodes[3 * a + c3]), hi[c3] = std::max(hi[c3], in.nodes[3 * a + c3]);
-    const double extent = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+  const double E = youngs_modulus(p);
+  if (!fibre_sets_it && E >= 1e2 && E <= 1e7 && p.rho >= 100 && p.rho <= 1e4)
     throw ModelError(fmt::format(
         "{}: element {} is {:.4g} m small (its smallest altitude) in a body {:.4g} m across, so its stable step "
         "is dt_crit = L / c = {:.4g} s at the wave speed {:.4g} m/s of its material ('{}', E = {:.4g} Pa, rho = "
         "{:.4g} kg/m^3, soft tissue's): one {:.4g} s haptic tick would need {:.3g} TLED steps (the most is "
         "{:.0e}). The mesh is far too small for an organ (5e-3..1 m across); check its unit: node coordinates "
         "are metres",
-        in.source, e, m.dt_crit * c, extent, m.dt_crit, c, material_name(in, k), E, p.rho, in.tick, steps,
-        kMaxStepsPerTick));
-  }
+        in.source, e, m.dt_crit * c, largest_extent(m), m.dt_crit, c, material_name(in, k), E, p.rho, in.tick,
+        steps, kMaxStepsPerTick));
   throw ModelError(fmt::format(
       "{}: element {} ({}: mu = {:.4g} Pa, K = {:.4g} Pa{}{}, rho = {:.4g} kg/m^3) has a wave speed {}, so its "
       "stable step is dt_crit = L / c = {:.4g} s (L = {:.4g} m, its smallest altitude{}): one {:.4g} s haptic tick "
@@ -353,14 +348,18 @@ MassScaling choose_mass_scaling(const std::vector<double>& dt_e, const std::vect
   return r;
 }
 
+double largest_extent(const TissueModel<double>& m) {
+  double L = 0;
+  for (int c = 0; c < 3; ++c) {
+    const auto axis = m.X.begin() + std::ptrdiff_t(c) * m.n_nodes;
+    const auto [lo, hi] = std::minmax_element(axis, axis + m.n_nodes);
+    L = std::max(L, *hi - *lo);
+  }
+  return L;
+}
+
 double lowest_mode_estimate(const TissueModel<double>& m) {
-  double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
-  for (index_t i = 0; i < m.n_nodes; ++i)
-    for (int c = 0; c < 3; ++c) {
-      lo[c] = std::min(lo[c], m.X[c * m.n_nodes + i]);
-      hi[c] = std::max(hi[c], m.X[c * m.n_nodes + i]);
-    }
-  const double L = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+  const double L = largest_extent(m);
   double vol = 0, mu_v = 0;
   for (index_t e = 0; e < m.n_elems; ++e) {
     vol += m.volume[e];

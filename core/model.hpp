@@ -161,6 +161,15 @@ Vec3<T> reference_position(const TissueModel<T>& m, index_t a) {
 /// (V < 0) are reoriented by swapping corners 1 and 2 and counted.
 TissueModel<double> build_model(const ModelInput& in);
 
+/// Young's modulus E (Pa) and Poisson's ratio nu of a material, from its
+/// mu and K: E = 9 K mu / (3 K + mu), nu = (3 K - 2 mu) / (2 (3 K + mu)),
+/// written without the product K mu, which underflows for moduli near 1e-300.
+inline double youngs_modulus(const MaterialParams& p) { return 9 * p.mu / (3 + p.mu / p.K); }
+inline double poisson_ratio(const MaterialParams& p) { return (3 - 2 * p.mu / p.K) / (2 * (3 + p.mu / p.K)); }
+
+/// The largest side of the model's bounding box (m).
+double largest_extent(const TissueModel<double>& m);
+
 /// Dilatational wave speed c = sqrt((lambda + 2 mu) / rho) of a material
 /// (m/s), lambda = K - 2 mu / 3.
 double wave_speed(const MaterialParams& p);

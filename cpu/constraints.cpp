@@ -41,16 +41,6 @@ void hold_halo(const TissueModel<T>& m, TissueState<T>& s, index_t a) {
 }  // namespace
 
 template <class T>
-void init_constraints(const TissueModel<T>& m, TissueState<T>& s) {
-  const index_t n = m.n_nodes;
-  for (index_t a = 0; a < n; ++a) {
-    s.held[a] = model_axes(m, a);
-    s.driven[a] = 0;
-    set_all(s.u_held, n, a, T(0), T(0), T(0));
-  }
-}
-
-template <class T>
 void install_region(const TissueModel<T>& m, TissueState<T>& s, Region region) {
   const index_t n = m.n_nodes, ne = m.n_elems;
   for (index_t a = 0; a < n; ++a) {
@@ -108,7 +98,6 @@ void drive_nodes(const TissueModel<T>& m, TissueState<T>& s, std::vector<index_t
 }
 
 #define TISSUE_CPU_CONSTRAINTS(T)                                                                                    \
-  template void init_constraints(const TissueModel<T>&, TissueState<T>&);                                            \
   template void install_region(const TissueModel<T>&, TissueState<T>&, Region);                                      \
   template void release_driven(const TissueModel<T>&, TissueState<T>&, std::vector<index_t>&);                       \
   template void drive_nodes(const TissueModel<T>&, TissueState<T>&, std::vector<index_t>&, std::span<const index_t>, \

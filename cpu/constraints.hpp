@@ -37,9 +37,4 @@ void drive_nodes(const TissueModel<T>& m, TissueState<T>& s, std::vector<index_t
 template <class T>
 void release_driven(const TissueModel<T>& m, TissueState<T>& s, std::vector<index_t>& driven_list);
 
-/// Held masks and targets of fixed nodes from the model (upload): held =
-/// the model's fixed axes, u_held = 0, nothing driven.
-template <class T>
-void init_constraints(const TissueModel<T>& m, TissueState<T>& s);
-
 }  // namespace tissue::cpu

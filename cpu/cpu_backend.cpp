@@ -56,13 +56,12 @@ void CpuBackend<T>::do_upload(const TissueModel<double>& model) {
   energy_.fresh = energy_.synced = false;
   contact_.reset();
   model_ = convert<T>(model);
-  state_.resize(model_);
+  state_.resize(model_);  // held = the fixed axes, u_held = 0, nothing driven (core/store.hpp's initial values)
   node_divisor_ = nodal_pressure_divisors(model_);
   all_elems_.resize(model_.n_elems);
   std::iota(all_elems_.begin(), all_elems_.end(), 0);
   driven_list_.clear();
   driven_list_.reserve(64);
-  init_constraints(model_, state_);
   state_.region = flood_fill(model_, std::span<const index_t>{}, kDepthAll);
   slices_.parts = 0;
   cpu::element_pressure(model_, state_, all_elems_, all_elems_part_);

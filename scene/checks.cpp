@@ -147,7 +147,7 @@ std::vector<std::string> stop_causes(const Scene& s, const TissueModel<double>& 
   double softest_E = INFINITY;
   for (const Material& mat : s.materials) {
     const MaterialParams p = mat.params();
-    const double E = 9 * p.mu / (3 + p.mu / p.K);  // from any pair of constants (no K mu product to underflow)
+    const double E = youngs_modulus(p);  // from any pair of constants
     softest_E = std::min(softest_E, E);
     if (E < kTissueE[0] || E > kTissueE[1])
       out.push_back(fmt::format("{}: Young's modulus E = {:.4g} Pa is far outside soft tissue's 1e3..1e6 Pa (check "

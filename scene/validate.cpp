@@ -5,7 +5,10 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <numeric>
 #include <string_view>
+#include <tuple>
+#include <vector>
 
 #include "scene/constraints.hpp"
 #include "scene/fibre_field.hpp"
@@ -47,26 +50,21 @@ void check_mesh(const Scene& s) {
   // one node far beyond the others on an axis (a stray coordinate: 1e308 for 0.02): named, before the
   // mesh's size it would set misleads every later check
   const std::size_t count = s.nodes.size() / 3;
-  for (int c = 0; c < 3 && count >= 3; ++c) {
-    std::size_t lo = 0, hi = 0;
-    for (std::size_t a = 1; a < count; ++a) {
-      if (s.nodes[3 * a + c] < s.nodes[3 * lo + c]) lo = a;
-      if (s.nodes[3 * a + c] > s.nodes[3 * hi + c]) hi = a;
-    }
-    double lo2 = INFINITY, hi2 = -INFINITY;  // the others' range on this axis
-    for (std::size_t a = 0; a < count; ++a) {
-      if (a != hi) hi2 = std::max(hi2, s.nodes[3 * a + c]);
-      if (a != lo) lo2 = std::min(lo2, s.nodes[3 * a + c]);
-    }
-    for (const auto [stray, gap] : {std::pair{hi, s.nodes[3 * hi + c] - hi2}, std::pair{lo, lo2 - s.nodes[3 * lo + c]}}) {
-      const double others = (stray == hi ? hi2 : s.nodes[3 * hi + c]) - (stray == lo ? lo2 : s.nodes[3 * lo + c]);
+  const auto at = [&](std::size_t a, int c) { return s.nodes[3 * a + c]; };
+  for (int c = 0; c < 3 && count >= 4; ++c) {
+    std::vector<std::size_t> order(count);  // the two lowest and the two highest on this axis
+    std::iota(order.begin(), order.end(), std::size_t(0));
+    const auto below = [&](std::size_t p, std::size_t q) { return at(p, c) < at(q, c); };
+    std::nth_element(order.begin(), order.begin() + 1, order.end(), below);
+    std::nth_element(order.begin() + 2, order.end() - 2, order.end(), below);
+    const std::size_t lo = order[0], lo2 = order[1], hi2 = order[count - 2], hi = order[count - 1];
+    for (const auto& [stray, gap, others] : {std::tuple{hi, at(hi, c) - at(hi2, c), at(hi2, c) - at(lo, c)},
+                                            std::tuple{lo, at(lo2, c) - at(lo, c), at(hi, c) - at(lo2, c)}})
       if (others > 0 && gap > kStrayNodeGap * others)
         fail(s, ln,
              fmt::format("mesh: node {} at ({:.4g}, {:.4g}, {:.4g}) m lies {:.4g} m beyond the other nodes on {} "
                          "(they span {:.4g} m): more than {:g} x their span; check its coordinates",
-                         stray, s.nodes[3 * stray], s.nodes[3 * stray + 1], s.nodes[3 * stray + 2], gap, "xyz"[c],
-                         others, kStrayNodeGap));
-    }
+                         stray, at(stray, 0), at(stray, 1), at(stray, 2), gap, "xyz"[c], others, kStrayNodeGap));
   }
   const index_t n = node_count(s);
   for (size_t k = 0; k < s.tets.size(); ++k)

@@ -13,8 +13,8 @@
 namespace tissue::viewer {
 
 void young_poisson(const MaterialParams& m, double* E, double* nu) {
-  *E = 9 * m.K * m.mu / (3 * m.K + m.mu);
-  *nu = (3 * m.K - 2 * m.mu) / (2 * (3 * m.K + m.mu));
+  *E = youngs_modulus(m);
+  *nu = poisson_ratio(m);
 }
 
 scene::Scene with_params(scene::Scene s, const LiveParams& p) {
