@@ -16,21 +16,25 @@
 //                           so a held strain relaxes as G(t) = 1 - sum_i g_i (1 - exp(-t / tau_i)).
 //
 // mu is the instantaneous shear modulus; a viscoelastic set relaxes to
-// mu (1 - sum g_i). A kernel is instantiated for the terms a scene has
-// (LawTerms): a Neo-Hookean scene runs the Neo-Hookean kernel and carries
-// no fibre or Prony data. Elements of a set without a term run it with
-// neutral parameters (eta = 0, g_i = 0), so a warp never branches on the law.
+// mu (1 - sum g_i). Each optional term is its own header under core/laws/
+// and an entry of the type list AllLawTerms below. A kernel is
+// instantiated for the terms a scene has (LawTerms<...>, picked by
+// for_law_terms): a Neo-Hookean scene runs the Neo-Hookean kernel and
+// carries no fibre or Prony data. Elements of a set without a term run it
+// with neutral parameters (eta = 0, g_i = 0), so a warp never branches on
+// the law.
 #pragma once
 
-#include <cmath>
+#include <cstddef>
+#include <type_traits>
 
 #include "core/cube_root.hpp"
+#include "core/laws/element_law.hpp"
+#include "core/laws/fibre.hpp"
+#include "core/laws/prony.hpp"
 #include "core/vec.hpp"
 
 namespace tissue {
-
-/// Most Prony terms a viscoelastic set may give.
-inline constexpr int kMaxProny = 4;
 
 // ---- the law terms' store, written once ----------------------------------
 // Every array the optional terms keep, one line each: X(kind, name, len).
@@ -67,114 +71,53 @@ struct LawFieldTypes {
   using Real = double;
 };
 
-/// The terms a kernel instantiation computes (compile time).
-template <bool Fibre, bool Visco>
+/// The terms a kernel instantiation computes (compile time): a list of
+/// term types (core/laws/), each with in(model) (does a model use it),
+/// pk2(point, law) (its share of the PK2 stress), energy(C, J^(-2/3), law)
+/// (its strain energy density) and kState (it advances per-step state).
+template <class... Term>
 struct LawTerms {
-  static constexpr bool fibre = Fibre, visco = Visco;
-};
-using NeoHookeanTerms = LawTerms<false, false>;
+  template <class X>
+  static constexpr bool has = (std::is_same_v<X, Term> || ...);
+  static constexpr bool any = sizeof...(Term) > 0;
+  static constexpr bool stateful = (Term::kState || ...);
 
-/// Symmetric 3x3 as six components (xx, yy, zz, xy, yz, xz): the Prony state.
-inline constexpr int kSymComponents = 6;
-
-template <class T>
-TISSUE_HD T sym_component(const Mat3<T>& S, int c) {
-  const int i[6] = {0, 1, 2, 0, 1, 0}, j[6] = {0, 1, 2, 1, 2, 2};
-  return S(i[c], j[c]);
-}
-
-/// The per-element inputs and state of the optional terms. Only the fields
-/// of the instantiated terms are read.
-template <class T>
-struct ElementLaw {
-  Vec3<T> a = {T(0), T(0), T(0)};  ///< unit fibre direction in the reference configuration
-  T eta = T(0);                    ///< fibre stiffness (Pa); 0 = no fibres
-  T decay[kMaxProny] = {};         ///< d_i = exp(-dt / tau_i); unused terms: 0 (with gain 0)
-  T gain[kMaxProny] = {};          ///< g_i (1 - d_i); 0 = no such term
-  T q[kMaxProny][kSymComponents] = {};  ///< in: q_i^(n-1); out: q_i^n (Pa)
-};
-
-/// The fibre term's PK2 stress (tension only), from C, C^-1, J^(-2/3).
-template <class T>
-TISSUE_HD Mat3<T> fibre_pk2(const Mat3<T>& C, const Mat3<T>& Ci, T j23, Vec3<T> a, T eta) {
-  const T I4 = dot(a, C * a);
-  const T I4b = j23 * I4;
-  const T s = I4b > T(1) ? T(2) * eta * (I4b - T(1)) * j23 : T(0);  // a select: tension only
-  const T t = -s * I4 / T(3);
-  Mat3<T> S;
-  TISSUE_UNROLL
-  for (int i = 0; i < 3; ++i)
-    TISSUE_UNROLL
-    for (int j = 0; j < 3; ++j) S(i, j) = s * a[i] * a[j] + t * Ci(i, j);
-  return S;
-}
-
-/// The fibre term's strain energy density eta/2 (I4b - 1)^2 in tension, else 0.
-template <class T>
-TISSUE_HD T fibre_energy(const Mat3<T>& C, T j23, Vec3<T> a, T eta) {
-  const T e = j23 * dot(a, C * a) - T(1);
-  return e > T(0) ? eta / T(2) * e * e : T(0);
-}
-
-/// Advances the Prony state with this step's isochoric stress and returns
-/// sum_i q_i^n.
-template <class T>
-TISSUE_HD Mat3<T> prony_update(const Mat3<T>& S_iso, ElementLaw<T>& law) {
-  T sum[kSymComponents] = {};
-  TISSUE_UNROLL
-  for (int i = 0; i < kMaxProny; ++i)
-    TISSUE_UNROLL
-    for (int c = 0; c < kSymComponents; ++c) {
-      law.q[i][c] = law.decay[i] * law.q[i][c] + law.gain[i] * sym_component(S_iso, c);
-      sum[c] += law.q[i][c];
-    }
-  return {{sum[0], sum[3], sum[5], sum[3], sum[1], sum[4], sum[5], sum[4], sum[2]}};
-}
-
-/// The Neo-Hookean isochoric PK2 stress S_iso = a (I - I1/3 C^-1) from C,
-/// C^-1 and a = mu J^(-2/3): what the Prony terms relax.
-template <class T>
-TISSUE_HD Mat3<T> isochoric_pk2(const Mat3<T>& C, const Mat3<T>& Ci, T a) {
-  Mat3<T> S = (-a * trace(C) / T(3)) * Ci;
-  S(0, 0) += a;
-  S(1, 1) += a;
-  S(2, 2) += a;
-  return S;
-}
-
-/// The Prony terms' viscous power and stored energy, per unit reference
-/// volume, at an element's current state (docs/materials.md, energy):
-/// term i's Maxwell branch still carries h_i = g_i S_iso - q_i (what has
-/// not relaxed yet); with the branch's shear modulus g_i mu and viscosity
-/// g_i mu tau_i, it dissipates h_i:h_i / (2 g_i mu tau_i) (W/m^3) and
-/// stores h_i:h_i / (4 g_i mu) (J/m^3). The linear standard solid's exact
-/// energies, taken as the finite-strain definition (S in PK2, the
-/// reference volume). g[i] = 0: no term i.
-struct PronyEnergy {
-  double power = 0;   ///< W/m^3
-  double stored = 0;  ///< J/m^3
-};
-
-/// Computed in R (double on the GPU; the cpu's lanes use their own T, so
-/// that they vectorise); branch-free.
-template <class T, class R>
-TISSUE_HD PronyEnergy prony_energy(const Mat3<T>& S_iso, const T q[kMaxProny][kSymComponents], const R g[kMaxProny],
-                                   const R tau[kMaxProny], R mu) {
-  R power = R(0), stored = R(0);
-  TISSUE_UNROLL
-  for (int i = 0; i < kMaxProny; ++i) {
-    R hh = R(0);
-    TISSUE_UNROLL
-    for (int c = 0; c < kSymComponents; ++c) {
-      const R h = g[i] * R(sym_component(S_iso, c)) - R(q[i][c]);
-      hh += (c < 3 ? R(1) : R(2)) * h * h;  // the off-diagonal components count twice
-    }
-    const bool on = g[i] > R(0);
-    const R gm = on ? g[i] * mu : R(1);  // (no division by zero for an unused term)
-    power += on ? hh / (R(2) * gm * tau[i]) : R(0);
-    stored += on ? hh / (R(4) * gm) : R(0);
+  /// S += each term's stress, in list order.
+  template <class T>
+  TISSUE_HD static void add_pk2(Mat3<T>& S, const LawPoint<T>& p, ElementLaw<T>& law) {
+    ((S = S + Term::pk2(p, law)), ...);
   }
-  return {double(power), double(stored)};
+  /// The terms' strain energy density (J/m^3).
+  template <class T>
+  TISSUE_HD static T energy(const Mat3<T>& C, T j23, const ElementLaw<T>& law) {
+    return (T(0) + ... + Term::energy(C, j23, law));
+  }
+};
+using NeoHookeanTerms = LawTerms<>;
+
+/// Every optional term, in the order their stresses add: a new law is its
+/// header in core/laws/ and an entry here.
+using AllLawTerms = LawTerms<PronyTerm, FibreTerm>;
+
+namespace detail {
+template <class Model, class F, class... Chosen>
+void for_law_terms(const Model&, F&& f, LawTerms<Chosen...>, LawTerms<>) {
+  f(LawTerms<Chosen...>{});
+}
+template <class Model, class F, class... Chosen, class Next, class... Rest>
+void for_law_terms(const Model& m, F&& f, LawTerms<Chosen...>, LawTerms<Next, Rest...>) {
+  if (Next::in(m))
+    for_law_terms(m, f, LawTerms<Chosen..., Next>{}, LawTerms<Rest...>{});
+  else
+    for_law_terms(m, f, LawTerms<Chosen...>{}, LawTerms<Rest...>{});
+}
+}  // namespace detail
+
+/// Calls f(LawTerms<the terms of Terms that model m uses>{}): the one
+/// instantiation a pass runs (every subset of Terms is compiled).
+template <class Terms = AllLawTerms, class Model, class F>
+void for_law_terms(const Model& m, F&& f) {
+  detail::for_law_terms(m, f, LawTerms<>{}, Terms{});
 }
 
 /// The strain energy density (J/m^3) of the optional elastic terms, from
@@ -183,20 +126,7 @@ TISSUE_HD PronyEnergy prony_energy(const Mat3<T>& S_iso, const T q[kMaxProny][kS
 /// viscoelastic set reports its instantaneous elastic energy here).
 template <class Terms, class T>
 TISSUE_HD T extra_energy(const Mat3<T>& C, T j23, const ElementLaw<T>& law) {
-  if constexpr (Terms::fibre) return fibre_energy(C, j23, law.a, law.eta);
-  return T(0);
-}
-
-/// Stable-step stiffness added by the fibre term to the P-wave modulus
-/// lambda + 2 mu (Pa): 16 eta / 9 at rest along the fibre, taken as 4 eta
-/// to cover the stiffening of stretched fibres (docs/materials.md).
-inline double fibre_wave_modulus(double eta) { return 4 * eta; }
-
-/// The Prony constants of one term for step dt (s): decay d = exp(-dt /
-/// tau) and gain g (1 - d).
-inline void prony_constants(double g, double tau, double dt, double* decay, double* gain) {
-  *decay = std::exp(-dt / tau);
-  *gain = g * -std::expm1(-dt / tau);
+  return Terms::energy(C, j23, law);
 }
 
 }  // namespace tissue

@@ -160,7 +160,8 @@ TISSUE_HD Mat3<T> neo_hookean_pk2(const Mat3<T>& F, T J, T mu, T K) {
 }
 
 /// The same plus the optional terms of core/material.hpp that Terms
-/// instantiates (the Prony state in law advances). A Neo-Hookean scene
+/// instantiates, added in their list order (the Prony state in law
+/// advances). A Neo-Hookean scene
 /// never calls it: its kernels are neo_hookean_pk2's alone.
 template <class Terms, class T>
 TISSUE_HD Mat3<T> law_pk2(const Mat3<T>& F, T J, T mu, T K, ElementLaw<T>& law) {
@@ -168,11 +169,7 @@ TISSUE_HD Mat3<T> law_pk2(const Mat3<T>& F, T J, T mu, T K, ElementLaw<T>& law) 
   const Mat3<T> C = transpose(F) * F;  // the compiler shares these with neo_hookean_pk2's
   const Mat3<T> Ci = inverse(C, J * J);
   const T cbrt_J = cube_root(J);
-  const T j23 = T(1) / (cbrt_J * cbrt_J);
-  if constexpr (Terms::visco) {
-    S = S + T(-1) * prony_update(isochoric_pk2(C, Ci, mu / (cbrt_J * cbrt_J)), law);  // a = mu J^(-2/3)
-  }
-  if constexpr (Terms::fibre) S = S + fibre_pk2(C, Ci, j23, law.a, law.eta);
+  Terms::add_pk2(S, LawPoint<T>{C, Ci, T(1) / (cbrt_J * cbrt_J), mu / (cbrt_J * cbrt_J)}, law);
   return S;
 }
 
@@ -234,7 +231,7 @@ TISSUE_HD T ianp_element_forces(const Mat3<T>& F, const T dN[12], T volume, T mu
   const bool ok = (J > T(0)) & (Jbar > T(0));  // & not &&: no branch
   const T Js = ok ? J : T(1), Jbars = ok ? Jbar : T(1);
   const Mat3<T> Fbar = cube_root(Jbars / Js) * F;
-  if constexpr (Terms::visco) {
+  if constexpr (Terms::stateful) {
     ElementLaw<T> next = law;
     element_nodal_forces(Fbar, law_pk2<Terms>(Fbar, Jbars, mu, K, next), volume, dN, f);
     keep_state_unless_bad(ok, next, law);
@@ -273,7 +270,7 @@ TISSUE_HD T plain_element_forces(const Mat3<T>& F, const T dN[12], T volume, T m
                                  ElementLaw<T>& law) {
   const T J = det(F);
   const bool ok = J > T(0);
-  if constexpr (Terms::visco) {
+  if constexpr (Terms::stateful) {
     ElementLaw<T> next = law;
     element_nodal_forces(F, law_pk2<Terms>(F, ok ? J : T(1), mu, K, next), volume, dN, f);
     keep_state_unless_bad(ok, next, law);

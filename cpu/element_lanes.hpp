@@ -214,14 +214,14 @@ template <class Terms, class T>
 void gather_law_lanes(const TissueModel<T>& m, const T* q, const index_t* elems, int count, LawLanes<T>& w) {
   const std::size_t ne = m.n_elems, nv = m.n_visco;
   const int np = m.n_prony;
-  if constexpr (Terms::fibre) {
+  if constexpr (Terms::template has<FibreTerm>) {
     for (int l = 0; l < kLanes; ++l) {
       const bool in = l < count;
       for (int c = 0; c < 3; ++c) w.a[c][l] = in ? m.fibre[c * ne + elems[l]] : T(0);
       w.eta[l] = in ? m.fibre[3 * ne + elems[l]] : T(0);
     }
   }
-  if constexpr (Terms::visco) {
+  if constexpr (Terms::template has<PronyTerm>) {
     // a full batch whose slots are consecutive (build_model numbers them in element order, so a run of
     // viscoelastic elements has them): its rows are contiguous and copy as vectors
     const index_t v0 = m.visco_slot[elems[0]];
@@ -267,7 +267,7 @@ void gather_law_lanes(const TissueModel<T>& m, const T* q, const index_t* elems,
 /// Writes the advanced Prony state of the batch's viscoelastic lanes back.
 template <class Terms, class T>
 void scatter_law_lanes(const TissueModel<T>& m, T* q, const LawLanes<T>& w) {
-  if constexpr (Terms::visco) {
+  if constexpr (Terms::template has<PronyTerm>) {
     const std::size_t nv = m.n_visco;
     if (w.run) {
       for (int k = 0; k < m.n_prony * kSymComponents; ++k) {

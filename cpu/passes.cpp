@@ -56,7 +56,7 @@ void for_each_batch(const Run& run, std::span<const index_t> idx, std::size_t gr
 template <class T, bool kIanp, class Terms, class Run>
 void element_forces_impl(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems,
                          BadElementFlag& bad, const Run& run) {
-  constexpr bool kLaw = Terms::fibre || Terms::visco;
+  constexpr bool kLaw = Terms::any;
   const T* p = kIanp ? s.node_p.data() : nullptr;
   T* fs = s.f_slot.data();
   T* q = s.visco_q.data();
@@ -83,14 +83,7 @@ void element_forces_impl(const TissueModel<T>& m, TissueState<T>& s, std::span<c
 template <class T, bool kIanp, class Run>
 void element_forces_terms(const TissueModel<T>& m, TissueState<T>& s, std::span<const index_t> elems,
                           BadElementFlag& bad, const Run& run) {
-  if (m.has_fibre() && m.has_visco())
-    element_forces_impl<T, kIanp, LawTerms<true, true>>(m, s, elems, bad, run);
-  else if (m.has_fibre())
-    element_forces_impl<T, kIanp, LawTerms<true, false>>(m, s, elems, bad, run);
-  else if (m.has_visco())
-    element_forces_impl<T, kIanp, LawTerms<false, true>>(m, s, elems, bad, run);
-  else
-    element_forces_impl<T, kIanp, NeoHookeanTerms>(m, s, elems, bad, run);
+  for_law_terms(m, [&](auto terms) { element_forces_impl<T, kIanp, decltype(terms)>(m, s, elems, bad, run); });
 }
 
 template <class T, class Run>

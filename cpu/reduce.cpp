@@ -65,7 +65,7 @@ ElementEnergies energy_sums(const TissueModel<T>& m, const TissueState<T>& s, En
     gather_force_lanes(m, energy.elem_F.data(), node_p, elems.data() + k, count, b);
     if (m.has_fibre()) {  // the fibre term's energy (core/material.hpp)
       LawLanes<T> w;
-      gather_law_lanes<LawTerms<true, false>>(m, static_cast<const T*>(nullptr), elems.data() + k, count, w);
+      gather_law_lanes<LawTerms<FibreTerm>>(m, static_cast<const T*>(nullptr), elems.data() + k, count, w);
       if (m.ianp)
         lanes_energy_fibre<T, true>(b, w);
       else
@@ -79,7 +79,7 @@ ElementEnergies energy_sums(const TissueModel<T>& m, const TissueState<T>& s, En
     if (!m.has_visco()) continue;
     // the Prony terms' power and stored energy from the same F and pbar
     LawLanes<T> w;
-    gather_law_lanes<LawTerms<false, true>>(m, s.visco_q.data(), elems.data() + k, count, w);
+    gather_law_lanes<LawTerms<PronyTerm>>(m, s.visco_q.data(), elems.data() + k, count, w);
     alignas(64) T g[kMaxProny][kLanes], tau[kMaxProny][kLanes], power[kLanes], stored[kLanes];
     for (int i = 0; i < kMaxProny; ++i)
       for (int l = 0; l < kLanes; ++l) {

@@ -196,7 +196,7 @@ __device__ void add_element_energy(const ModelView<T>& m, const T* node_p, const
   if (w.fibre) {  // the fibre term's energy (core/material.hpp)
     ElementLaw<T> law;
     load_fibre(w.fibre, m.n_elems, e, law);
-    p.energy += double(element_strain_energy<LawTerms<true, false>>(F, J, Jbar, d.V, d.mu, d.K, law));
+    p.energy += double(element_strain_energy<LawTerms<FibreTerm>>(F, J, Jbar, d.V, d.mu, d.K, law));
   } else {
     p.energy += double(element_strain_energy(F, J, Jbar, d.V, d.mu, d.K));
   }

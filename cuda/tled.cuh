@@ -192,7 +192,7 @@ __device__ __forceinline__ index_t load_law(const ModelView<T>& m, const LawView
 template <class T>
 __device__ __forceinline__ T law_element_forces(const ModelView<T>& m, const LawView<T>& w, const ElementData<T>& d,
                                                 const Vec3<T> ue[4], bool ianp, T pbar, Vec3<T> f[4]) {
-  using All = LawTerms<true, true>;
+  using All = AllLawTerms;
   ElementLaw<T> law;
   const index_t v = load_law(m, w, d.e, law);
   const Mat3<T> F = deformation_gradient(ue, d.dN);

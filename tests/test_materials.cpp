@@ -15,6 +15,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "backends/registry.hpp"
@@ -78,8 +79,35 @@ ElementLaw<double> fibre_law(Vec3<double> a) {
   return law;
 }
 
+// The instantiation a pass runs is the model's subset of AllLawTerms, in
+// the list's order (every subset is compiled: core/material.hpp).
+TEST(Material, ForLawTermsPicksTheTermsTheModelUses) {
+  struct Uses {
+    bool fibre, visco;
+    bool has_fibre() const { return fibre; }
+    bool has_visco() const { return visco; }
+  };
+  const auto picked = [](Uses m) {
+    std::string name;
+    for_law_terms(m, [&](auto terms) {
+      using Terms = decltype(terms);
+      if constexpr (std::is_same_v<Terms, NeoHookeanTerms>) name = "neo-hookean";
+      if constexpr (std::is_same_v<Terms, LawTerms<FibreTerm>>) name = "fibre";
+      if constexpr (std::is_same_v<Terms, LawTerms<PronyTerm>>) name = "prony";
+      if constexpr (std::is_same_v<Terms, LawTerms<PronyTerm, FibreTerm>>) name = "prony+fibre";
+      EXPECT_EQ(Terms::any, (!std::is_same_v<Terms, NeoHookeanTerms>));
+      EXPECT_EQ(Terms::stateful, (Terms::template has<PronyTerm>));
+    });
+    return name;
+  };
+  EXPECT_EQ(picked({false, false}), "neo-hookean");
+  EXPECT_EQ(picked({true, false}), "fibre");
+  EXPECT_EQ(picked({false, true}), "prony");
+  EXPECT_EQ(picked({true, true}), "prony+fibre");
+}
+
 TEST(Material, FibreStressMatchesThePrincipalStretchClosedForm) {
-  using Fibre = LawTerms<true, false>;
+  using Fibre = LawTerms<FibreTerm>;
   for (const auto& l : {std::array<double, 3>{1.2, 0.93, 0.93}, std::array<double, 3>{1.05, 1.0, 0.97},
                         std::array<double, 3>{0.8, 1.1, 1.1}}) {
     SCOPED_TRACE(testing::Message() << "stretch " << l[0] << " " << l[1] << " " << l[2]);
@@ -101,7 +129,7 @@ TEST(Material, FibreAcrossTheStretchIsInactive) {
   // stretched along x with lateral contraction, fibre along y: I4b < 1
   const double l[3] = {1.2, 0.93, 0.93};
   ElementLaw<double> law = fibre_law({0, 1, 0});
-  const Mat3<double> s = code_sigma<LawTerms<true, false>>(diag<double>(l), law);
+  const Mat3<double> s = code_sigma<LawTerms<FibreTerm>>(diag<double>(l), law);
   const Closed iso{{l[0], l[1], l[2]}, 0};
   for (int i = 0; i < 3; ++i) EXPECT_NEAR(s(i, i), iso.sigma(i), 1e-9 * kMu);
 }
@@ -109,7 +137,7 @@ TEST(Material, FibreAcrossTheStretchIsInactive) {
 TEST(Material, StressIsTheDerivativeOfTheEnergy) {
   // S = 2 dW/dC: compare S : dC / 2 with the change of W along a random-ish
   // symmetric perturbation of F, by central differences
-  using Fibre = LawTerms<true, false>;
+  using Fibre = LawTerms<FibreTerm>;
   const Mat3<double> F = {{1.15, 0.08, -0.03, 0.02, 0.95, 0.05, -0.04, 0.01, 1.02}};
   const Mat3<double> dF = {{0.3, -0.2, 0.1, 0.4, 0.2, -0.1, 0.05, 0.3, -0.25}};
   ElementLaw<double> law = fibre_law({0.6, 0.8, 0});
@@ -129,7 +157,7 @@ TEST(Material, StressIsTheDerivativeOfTheEnergy) {
 }
 
 TEST(Material, HeldStrainRelaxesAlongThePronySeries) {
-  using Visco = LawTerms<false, true>;
+  using Visco = LawTerms<PronyTerm>;
   const double l[3] = {1.1, 0.96, 0.96}, dt = 1e-3;
   ElementLaw<double> law;
   for (int i = 0; i < 2; ++i) prony_constants(kG[i], kTau[i], dt, &law.decay[i], &law.gain[i]);
@@ -234,7 +262,7 @@ TEST(MaterialScene, EachHalfStressesAsItsPerElementDirectionPredicts) {
     for (int a = 0; a < 4; ++a) cx += m.X[m.elem_nodes[a * m.n_elems + e]] / 4;
     const Closed& expect = cx < kL / 2 ? across : along;
     (cx < kL / 2 ? n_across : n_along)++;
-    const Mat3<double> sigma = code_sigma<LawTerms<true, false>>(diag<double>(l), law);
+    const Mat3<double> sigma = code_sigma<LawTerms<FibreTerm>>(diag<double>(l), law);
     for (int i = 0; i < 3; ++i) EXPECT_NEAR(sigma(i, i), expect.sigma(i), 1e-9 * kMu) << "element " << e;
   }
   EXPECT_EQ(n_along, m.n_elems / 2);
