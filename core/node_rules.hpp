@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <type_traits>
 
 #include "core/contact.hpp"
 #include "core/cube_root.hpp"
@@ -27,15 +28,42 @@ namespace tissue {
 /// u_held, the others by the damped central difference with the
 /// out-of-balance force f = f_int - R (R: the applied load, Backend::set_loads;
 /// 0 without).
+///
+/// Double takes the three-term form u' = A (R - f) + B u + C u_prev. Float
+/// takes the increment form u' = u + (A (R - f) - C (u - u_prev)) (B + C = 1
+/// exactly, so both are the same update), compensated: the low bits that
+/// rounding u + increment to u's spacing drops are kept per node in carry
+/// and added to the next step's increment (Kahan summation). Uncompensated,
+/// the rounded B and C act as a spring of about eps m / dt^2 on every node
+/// and u' is rounded to u's spacing every step: float drifted 4e-5 to 1e-4
+/// of max |u| from double on nu 0.49 cubes; compensated, 1e-6
+/// (docs/accuracy.md, section 7). carry is zero in held components and in
+/// double.
 template <class T>
 TISSUE_HD Vec3<T> node_next(std::uint8_t h, Vec3<T> u_held, const CentralDifference<T>& cd, Vec3<T> f, Vec3<T> u,
-                            Vec3<T> u_prev) {
-  if (h == kAllAxes) return u_held;
-  Vec3<T> next = {central_difference_update(cd, -f.x, u.x, u_prev.x), central_difference_update(cd, -f.y, u.y, u_prev.y),
-                  central_difference_update(cd, -f.z, u.z, u_prev.z)};
-  if (h & 1) next.x = u_held.x;
-  if (h & 2) next.y = u_held.y;
-  if (h & 4) next.z = u_held.z;
+                            Vec3<T> u_prev, Vec3<T>& carry) {
+  if (h == kAllAxes) {
+    carry = {T(0), T(0), T(0)};
+    return u_held;
+  }
+  Vec3<T> next;
+  if constexpr (std::is_same_v<T, float>) {
+    for (int c = 0; c < 3; ++c) {
+      const T step = cd.A * -f[c] - cd.C * (u[c] - u_prev[c]);
+      const T y = step - carry[c];
+      const T t = u[c] + y;
+      carry[c] = (t - u[c]) - y;
+      next[c] = t;
+    }
+  } else {
+    next = {central_difference_update(cd, -f.x, u.x, u_prev.x), central_difference_update(cd, -f.y, u.y, u_prev.y),
+            central_difference_update(cd, -f.z, u.z, u_prev.z)};
+  }
+  for (int c = 0; c < 3; ++c)
+    if (h >> c & 1) {
+      next[c] = u_held[c];
+      carry[c] = T(0);
+    }
   return next;
 }
 

@@ -146,15 +146,16 @@ struct StoreTypes {
 
 /// Held on the host and the device alike.
 #define TISSUE_STATE_ARRAYS(ARRAY)                                                                                       \
-  ARRAY(u_held, Scalar, Node, 3, Zero, "m", "target of held nodes: fixed, tool-driven, halo")                             \
+  ARRAY(u_held, Scalar, Node, 3, Zero, "m", "target of held nodes: fixed, tool-driven, halo")                            \
   ARRAY(held, Mask, Node, 1, FixedAxes, "", "axis mask: bit c = component c set from u_held, not integrated")            \
-  ARRAY(driven, Mask, Node, 1, Zero, "", "axis mask of the components a tool drives; 0 = not driven")                     \
-  ARRAY(f_slot, Scalar, Corner, 3, Zero, "N", "pass 3: element corner forces, one per node_elem entry")                   \
+  ARRAY(driven, Mask, Node, 1, Zero, "", "axis mask of the components a tool drives; 0 = not driven")                    \
+  ARRAY(f_slot, Scalar, Corner, 3, Zero, "N", "pass 3: element corner forces, one per node_elem entry")                  \
   ARRAY(f, Scalar, Node, 3, Zero, "N", "pass 4: internal nodal force minus the applied load")                            \
-  ARRAY(contact, Mask, Node, 1, Zero, "", "ContactKind of each node after the last step")                                 \
-  ARRAY(contact_tool, Tool, Node, 1, NoTool, "", "the tool a node touches, -1 none")                                      \
+  ARRAY(contact, Mask, Node, 1, Zero, "", "ContactKind of each node after the last step")                                \
+  ARRAY(contact_tool, Tool, Node, 1, NoTool, "", "the tool a node touches, -1 none")                                     \
   ARRAY(contact_normal, Scalar, Node, 3, Zero, "1", "contact normal of pushed nodes, unit, out of the tool")             \
-  ARRAY(grasp_offset, Scalar, Node, 3, Zero, "m", "grasped nodes: position minus the tool tip when the grasp started")
+  ARRAY(grasp_offset, Scalar, Node, 3, Zero, "m", "grasped nodes: position minus the tool tip when the grasp started")   \
+  ARRAY(u_carry, Scalar, Node, 3, Zero, "m", "float: the low bits u^(n+1) lost to rounding, carried into the next step")
 
 /// The pass arrays of passes 1-2: on the host and the device, where they
 /// come in two sets (the state's and a scratch set into which the

@@ -74,6 +74,7 @@ template <class T>
 void CpuBackend<T>::do_set_displacements(std::span<const double> u) {
   const index_t n = model_.n_nodes;
   for (std::size_t k = 0; k < u.size(); ++k) state_.u[k] = state_.u_prev[k] = state_.u_next[k] = T(u[k]);
+  std::fill(state_.u_carry.begin(), state_.u_carry.end(), T(0));
   state_.clear_law_state();  // a new initial state: no Prony history
   energy_.fresh = energy_.synced = false;
   if (contact_) contact_->surface_moved();

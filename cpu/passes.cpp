@@ -132,6 +132,7 @@ void node_update_run(const TissueModel<T>& m, TissueState<T>& s, std::span<const
   const T* applied = s.load.empty() ? nullptr : s.load.data();
   T* f_out = s.f.data();
   T* u_next = s.u_next.data();
+  T* carry = s.u_carry.data();
   for_each_index(run, nodes, kNodeGrain, [&](index_t a) {
     Vec3<T> f = {0, 0, 0};
     for (index_t k = start[a]; k < start[a + 1]; ++k) {  // in the node's list order: slot 4 e + corner
@@ -140,11 +141,13 @@ void node_update_run(const TissueModel<T>& m, TissueState<T>& s, std::span<const
     }
     const auto load = [&](const T* v) { return Vec3<T>{v[a], v[n + a], v[2 * size_t(n) + a]}; };
     if (applied) f = f - load(applied);  // the out-of-balance force f - R
+    Vec3<T> lost = load(carry);
     const Vec3<T> next = node_next(held[a], load(u_held), CentralDifference<T>{m.cd_A[a], m.cd_B[a], m.cd_C[a]}, f,
-                                   load(u), load(u_prev));
+                                   load(u), load(u_prev), lost);
     for (int c = 0; c < 3; ++c) {
       f_out[c * n + a] = f[c];
       u_next[c * n + a] = next[c];
+      carry[c * n + a] = lost[c];
     }
   });
 }

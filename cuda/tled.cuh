@@ -416,7 +416,7 @@ __device__ __forceinline__ SlotElement<T> load_slot_element(const ModelView<T>& 
 /// slots' arithmetic instead of following the node's sum.
 template <class T>
 struct NodeTail {
-  Vec3<T> load, u_held, u, u_prev;
+  Vec3<T> load, u_held, u, u_prev, carry;  // carry: float's compensation (core node_next), 0 in double
   CentralDifference<T> cd;
   std::uint8_t held;
 };
@@ -431,6 +431,10 @@ __device__ __forceinline__ NodeTail<T> load_node_tail(const ModelView<T>& m, con
   t.cd = {__ldg(m.cd_A + a), __ldg(m.cd_B + a), __ldg(m.cd_C + a)};
   t.u = b.u[a].vec();
   t.u_prev = b.u_prev[a].vec();
+  if constexpr (std::is_same_v<T, float>)
+    t.carry = s.u_carry[a].vec();
+  else
+    t.carry = {T(0), T(0), T(0)};
   return t;
 }
 
@@ -441,7 +445,9 @@ __device__ __forceinline__ void node_update_with(const StateView<T>& s, const St
                                                  Vec3<T> f, const NodeTail<T>& t) {
   if constexpr (kLoad) f = f - t.load;
   s.f[a] = Packed3<T>::of(f);
-  b.u_next[a] = Packed3<T>::of(node_next(t.held, t.u_held, t.cd, f, t.u, t.u_prev));
+  Vec3<T> carry = t.carry;
+  b.u_next[a] = Packed3<T>::of(node_next(t.held, t.u_held, t.cd, f, t.u, t.u_prev, carry));
+  if constexpr (std::is_same_v<T, float>) s.u_carry[a] = Packed3<T>::of(carry);
 }
 
 template <class T, bool kLoad>

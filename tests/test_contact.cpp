@@ -2599,19 +2599,36 @@ TYPED_TEST(NodeRules, NodeNextHoldsMaskedComponents) {
   const Vec3<T> f{1, -2, 4}, u{T(0.1), T(0.2), T(0.3)}, up{T(0.05), T(0.1), T(0.4)}, held{7, 8, 9};
   const Vec3<T> free{T(-0.5 + 0.2 - 0.05), T(1 + 0.4 - 0.1), T(-2 + 0.6 - 0.4)};
   for (std::uint8_t h = 0; h <= kAllAxes; ++h) {
-    const Vec3<T> next = node_next(h, held, cd, f, u, up);
+    Vec3<T> carry{T(1e-9), T(1e-9), T(1e-9)};
+    const Vec3<T> next = node_next(h, held, cd, f, u, up, carry);
     for (int c = 0; c < 3; ++c) {
-      if (h >> c & 1)
+      if (h >> c & 1) {
         EXPECT_EQ(next[c], held[c]) << "mask " << int(h) << " component " << c;
-      else
+        EXPECT_EQ(carry[c], T(0)) << "a held component carries nothing";
+      } else {
         EXPECT_NEAR(double(next[c]), double(free[c]), tol<T>(2)) << "mask " << int(h) << " component " << c;
+      }
     }
   }
   // the constants of a real node: m = 2e-6 kg, dt = 1e-4 s, alpha = 10 / s
   const CentralDifference<T> real = central_difference_constants(T(2e-6), T(1e-4), T(10));
   const double inertia = 2e-6 / 1e-8, damp = 10 * 2e-6 / 2e-4, A = 1 / (inertia + damp);
-  const Vec3<T> n = node_next(0, held, real, f, u, up);
+  Vec3<T> carry{0, 0, 0};
+  const Vec3<T> n = node_next(0, held, real, f, u, up, carry);
   EXPECT_NEAR(double(n.x), A * (-1) + 2 * inertia * A * 0.1 + (damp - inertia) * A * 0.05, 1e3 * tol<T>(1));
+}
+
+// Increments below half of u's spacing: float's compensated update keeps
+// them (u = 1 moves by 1e-8 a step, a sixth of float's ulp at 1, which
+// u + increment alone rounds away every step); double adds them exactly
+// enough either way.
+TYPED_TEST(NodeRules, NodeNextKeepsIncrementsBelowTheSpacingOfU) {
+  using T = TypeParam;
+  const CentralDifference<T> cd{T(1), T(1), T(0)};  // next = u - f: no inertia, B + C = 1
+  const Vec3<T> f{T(-1e-8), T(-1e-8), T(-1e-8)}, held{0, 0, 0};
+  Vec3<T> u{1, 1, 1}, carry{0, 0, 0};
+  for (int step = 0; step < 1000; ++step) u = node_next(0, held, cd, f, u, u, carry);
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(double(u[c]), 1 + 1e-5, 1.2e-7) << "component " << c;
 }
 
 TYPED_TEST(NodeRules, HaloTargetAndFreePart) {
