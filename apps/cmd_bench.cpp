@@ -28,6 +28,11 @@ void add_bench_command(CLI::App& app, int& rc) {
                   "dt-safety values of the haptic-tick rows, compared in one run (default: the kidney scene's)")
       ->delimiter(',')
       ->check(real_number(0, 1, true, true));
+  cmd->add_option("--scene", o->scenes,
+                  "Scene files whose haptic-tick rows run beside the kidney's, each pressed along its first "
+                  "tool's scripted path")
+      ->delimiter(',')
+      ->check(CLI::ExistingFile);
   cmd->add_option("--batch", o->batch,
                   "Batch sizes: step that many kidneys together, every tool moving in contact (only the batch rows "
                   "run; docs/batch.md)")

@@ -20,6 +20,7 @@
 #include "core/box_mesh.hpp"
 #include "core/scheduler.hpp"
 #include "io/kidney.hpp"
+#include "io/scene_xml.hpp"
 #include "scene/validate.hpp"
 #include "session/engine.hpp"
 #include "session/scene_batch.hpp"
@@ -289,8 +290,28 @@ void bench_contact_chains(Context& c, Precision p) {
   c.emit(r);
 }
 
-void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_safety, const std::string& law) {
-  scene::Scene s = kidney_with_law(law);
+/// A scene of the haptic-tick rows: the kidney with a bench law, or a
+/// --scene file.
+struct TickScene {
+  std::string mesh, law;
+  scene::Scene scene;
+};
+
+std::vector<TickScene> tick_scenes(const BenchOptions& o) {
+  std::vector<TickScene> out;
+  for (const std::string& law : o.laws) out.push_back({"kidney", law, kidney_with_law(law)});
+  for (const std::string& path : o.scenes) {
+    scene::Scene s = io::read_scene(path);
+    if (s.tools.empty() || s.tools.front().path.size() < 2)
+      throw std::invalid_argument("bench --scene " + path +
+                                  ": its first tool has no scripted path (the haptic-tick rows press along it)");
+    out.push_back({path.substr(path.find_last_of('/') + 1), "scene", std::move(s)});
+  }
+  return out;
+}
+
+void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_safety, const TickScene& ts) {
+  scene::Scene s = ts.scene;
   s.solver.dt_safety = dt_safety.value_or(s.solver.dt_safety);
   s.solver.backend = c.o.backend;
   s.solver.precision = p;
@@ -307,7 +328,7 @@ void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_saf
     sched.tick(dev);
     if (sched.in_contact()) lat.push_back(since(t0));
   }
-  if (lat.empty()) throw std::runtime_error("bench: the kidney tool path never touched the kidney");
+  if (lat.empty()) throw std::runtime_error("bench: the tool path of " + ts.mesh + " never touched it");
   std::sort(lat.begin(), lat.end());
   // the reduction alone, where the path ended (the region as the ticks left it, the tool there): one call of
   // the backend's reduce() -- on the cuda backend its passes 1-2 and reduction kernel as launches of their
@@ -321,8 +342,9 @@ void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_saf
   }
   std::sort(red.begin(), red.end());
   Row r = c.row("haptic_tick", *b);
-  r.add("mesh", std::string("kidney"));
-  r.add("law", law);
+  r.add("mesh", ts.mesh);
+  r.add("law", ts.law);
+  r.add("elements", long(engine.model->n_elems));
   r.add("depth", depth == kDepthAll ? std::string("all") : std::to_string(depth));
   r.add("dt_safety", s.solver.dt_safety);
   r.add("steps_per_tick", long(sched.steps_per_tick()));
@@ -609,10 +631,11 @@ std::vector<std::string> run_bench(const BenchOptions& o) {
     if (!stopped()) bench_contact_chains(c, p);
     std::vector<std::optional<double>> safeties(o.tick_dt_safety.begin(), o.tick_dt_safety.end());
     if (safeties.empty()) safeties.emplace_back();  // the scene's own
+    const std::vector<TickScene> ticks = tick_scenes(o);
     for (int depth : {5, kDepthAll})
       for (const std::optional<double>& safety : safeties)
-        for (const std::string& law : o.laws)
-          if (!stopped()) bench_tick(c, p, depth, safety, law);
+        for (const TickScene& ts : ticks)
+          if (!stopped()) bench_tick(c, p, depth, safety, ts);
   }
   if (!o.json_path.empty()) {
     io::AtomicTextFile f(o.json_path);

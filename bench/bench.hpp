@@ -36,6 +36,10 @@ struct BenchOptions {
   /// found between the sizes, and on the cpu the machine's scaling limit is
   /// measured in the same run (arithmetic_scaling).
   std::vector<long> batch;
+  /// Scene files (--scene) whose haptic-tick rows run beside the kidney's:
+  /// each pressed along its first tool's scripted path, with its own
+  /// materials, mesh and solver settings (the rows' law is "scene").
+  std::vector<std::string> scenes;
 };
 
 /// How many times faster `threads` threads run a pure-arithmetic loop (no

@@ -777,5 +777,44 @@ TEST(Bench, ToolRowTimesTheContactStage) {
   EXPECT_NEAR(stage, 1e6 * (1 / with_tool - 1 / whole), 1e6 * 1e-5 * (1 / with_tool + 1 / whole));
 }
 
+// tissue bench --scene: a scene file's haptic-tick rows beside the
+// kidney's, named by the file and with its element count; a scene whose
+// first tool has no path is refused naming the file.
+TEST(Bench, SceneFilesGetHapticTickRowsOfTheirOwn) {
+  TempDir t;
+  std::ofstream(t.file("block.xml")) << kBlock;
+  bench::BenchOptions o;
+  o.quick = true;
+  o.precisions = {Precision::Float};
+  o.sizes = {};
+  o.scenes = {t.file("block.xml")};
+  std::vector<std::string> meshes;
+  for (const std::string& row : bench::run_bench(o)) {
+    if (row.find("\"haptic_tick\"") == std::string::npos) continue;
+    const size_t k = row.find("\"mesh\": \"");
+    ASSERT_NE(k, std::string::npos) << row;
+    meshes.push_back(row.substr(k + 9, row.find('"', k + 9) - (k + 9)));
+    if (meshes.back() == "block.xml") {
+      EXPECT_NE(row.find("\"law\": \"scene\""), std::string::npos) << row;
+      EXPECT_NE(row.find("\"elements\": 6"), std::string::npos) << row;
+    }
+  }
+  const std::vector<std::string> want = {"kidney", "block.xml", "kidney", "block.xml"};  // depth 5, then all
+  EXPECT_EQ(meshes, want);
+  std::string pathless = kBlock;
+  pathless.erase(pathless.find("    <waypoint"), pathless.find("  </tool>") - pathless.find("    <waypoint"));
+  const std::string scripted = "device=\"scripted\"";
+  pathless.replace(pathless.find(scripted), scripted.size(), "device=\"mouse\"");
+  std::ofstream(t.file("pathless.xml")) << pathless;
+  o.scenes = {t.file("pathless.xml")};
+  try {
+    bench::run_bench(o);
+    ADD_FAILURE() << "a scene without a tool path was benched";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("pathless.xml: its first tool has no scripted path"), std::string::npos)
+        << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace tissue::app
