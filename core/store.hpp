@@ -146,16 +146,15 @@ struct StoreTypes {
 
 /// Held on the host and the device alike.
 #define TISSUE_STATE_ARRAYS(ARRAY)                                                                                       \
-  ARRAY(u_held, Scalar, Node, 3, Zero, "m", "target of held nodes: fixed, tool-driven, halo")                            \
+  ARRAY(u_held, Scalar, Node, 3, Zero, "m", "target of held nodes: fixed, tool-driven, halo")                             \
   ARRAY(held, Mask, Node, 1, FixedAxes, "", "axis mask: bit c = component c set from u_held, not integrated")            \
-  ARRAY(driven, Mask, Node, 1, Zero, "", "axis mask of the components a tool drives; 0 = not driven")                    \
-  ARRAY(f_slot, Scalar, Corner, 3, Zero, "N", "pass 3: element corner forces, one per node_elem entry")                  \
+  ARRAY(driven, Mask, Node, 1, Zero, "", "axis mask of the components a tool drives; 0 = not driven")                     \
+  ARRAY(f_slot, Scalar, Corner, 3, Zero, "N", "pass 3: element corner forces, one per node_elem entry")                   \
   ARRAY(f, Scalar, Node, 3, Zero, "N", "pass 4: internal nodal force minus the applied load")                            \
-  ARRAY(contact, Mask, Node, 1, Zero, "", "ContactKind of each node after the last step")                                \
-  ARRAY(contact_tool, Tool, Node, 1, NoTool, "", "the tool a node touches, -1 none")                                     \
+  ARRAY(contact, Mask, Node, 1, Zero, "", "ContactKind of each node after the last step")                                 \
+  ARRAY(contact_tool, Tool, Node, 1, NoTool, "", "the tool a node touches, -1 none")                                      \
   ARRAY(contact_normal, Scalar, Node, 3, Zero, "1", "contact normal of pushed nodes, unit, out of the tool")             \
-  ARRAY(grasp_offset, Scalar, Node, 3, Zero, "m", "grasped nodes: position minus the tool tip when the grasp started")   \
-  ARRAY(u_carry, Scalar, Node, 3, Zero, "m", "float: the low bits u^(n+1) lost to rounding, carried into the next step")
+  ARRAY(grasp_offset, Scalar, Node, 3, Zero, "m", "grasped nodes: position minus the tool tip when the grasp started")
 
 /// The pass arrays of passes 1-2: on the host and the device, where they
 /// come in two sets (the state's and a scratch set into which the
@@ -167,12 +166,14 @@ struct StoreTypes {
   ARRAY(node_p, Scalar, Node, 1, Zero, "Pa", "pass 2: IANP nodal pressure p_a")
 
 /// Held on the host only: the displacements (the device keeps them as a
-/// ring of three rotating buffers, cuda/device_store.hpp BufferRing) and
-/// the host passes' F (the device's pass 3 recomputes it).
-#define TISSUE_HOST_STATE_ARRAYS(ARRAY)                                                  \
-  ARRAY(u, Scalar, Node, 3, Zero, "m", "displacement u^n")                               \
-  ARRAY(u_prev, Scalar, Node, 3, Zero, "m", "u^(n-1)")                                   \
-  ARRAY(u_next, Scalar, Node, 3, Zero, "m", "u^(n+1), written by pass 4")                \
+/// ring of three rotating buffers, cuda/device_store.hpp BufferRing, and
+/// float's carried bits in their spare fourth lane, cuda/tled.cuh
+/// pack_carry) and the host passes' F (the device's pass 3 recomputes it).
+#define TISSUE_HOST_STATE_ARRAYS(ARRAY)                                                       \
+  ARRAY(u, Scalar, Node, 3, Zero, "m", "displacement u^n")                                    \
+  ARRAY(u_prev, Scalar, Node, 3, Zero, "m", "u^(n-1)")                                        \
+  ARRAY(u_next, Scalar, Node, 3, Zero, "m", "u^(n+1), written by pass 4")                     \
+  ARRAY(u_carry, Scalar, Node, 3, Zero, "m", "float: the low bits u^(n+1) lost to rounding")  \
   ARRAY(elem_F, Scalar, Element, 9, Zero, "1", "pass 1: deformation gradient F, k = 3 i + j")
 
 /// Held on the device only (the cpu's contact stage and region keep their

@@ -84,6 +84,7 @@ bool ContactStage<T>::begin_step(TissueState<T>& s, const ContactTools<T>& tools
     for (index_t a : grasped_[t]) {
       const Vec3<T> X = {m_.X[a], m_.X[n + a], m_.X[2 * size_t(n) + a]};
       put(s.u_next, n, a, corner_position(s, tools, k, s.u_next.data(), a) - X);
+      put(s.u_carry, n, a, Vec3<T>{0, 0, 0});  // a position set by contact carries no rounding (as on cuda)
       touched_.push_back(a);
     }
   }
@@ -159,6 +160,7 @@ void ContactStage<T>::finish_step(TissueState<T>& s, const ContactTools<T>& tool
       const Vec3<T> dx = free_part(s.held[a], acc.dx);  // a roller's held component does not move
       const Vec3<T> u1 = at(s.u_next, n, a) + dx, normal = unit_or(dx, Vec3<T>{0, 0, 0});
       put(s.u_next, n, a, u1);
+      put(s.u_carry, n, a, Vec3<T>{0, 0, 0});
       put(s.contact_normal, n, a, normal);
       const Vec3<T> x = Vec3<T>{m_.X[a], m_.X[n + a], m_.X[2 * size_t(n) + a]} + u1;
       const Vec3<T> w = tool_motion_at(tools.tool[acc.tool], tools.steps, k, x);

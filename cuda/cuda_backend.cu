@@ -97,7 +97,6 @@ __global__ void set_displacements_kernel(index_t n, const double* src, const std
   b.u_prev[a] = u;
   b.u[a] = u;
   b.u_next[a] = u;
-  s.u_carry[a] = {T(0), T(0), T(0), T(0)};
   if (s.role[a] == kHalo) {  // held at the new u, except driven and fixed components
     const std::uint8_t keep = s.driven[a] | fixed_axes(flags[a]);
     Packed3<T> held_at = s.u_held[a];

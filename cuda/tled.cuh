@@ -414,6 +414,41 @@ __device__ __forceinline__ SlotElement<T> load_slot_element(const ModelView<T>& 
 /// constants and displacements. Pass 4 loads them with the node; the fused
 /// force pass right after its wait, so that their round trip overlaps the
 /// slots' arithmetic instead of following the node's sum.
+/// Float's carried bits (core node_next's carry) ride in the spare fourth
+/// lane of the displacement they belong to, so that they cost no memory
+/// traffic: each component as a multiple of 1/1024 of the spacing of u at
+/// that component, 10 bits signed, the three in bits 0-29 (bit 30 clear:
+/// never an Inf or NaN pattern). |carry| is at most half a spacing, so
+/// nothing saturates; the quantum drops at most 1/2048 of a spacing a step.
+/// A lane written by anything else (Packed3::of, a set displacement, a
+/// contact's correction) is 0: no carry.
+__device__ __forceinline__ float spacing_of(float v) {
+  const int e = __float_as_int(v) & 0x7f800000;
+  return e > (23 << 23) ? __int_as_float(e - (23 << 23)) : 0.0f;  // 2^(exponent - 23); 0 below 2^-103
+}
+
+__device__ __forceinline__ float pack_carry(Vec3<float> u, Vec3<float> carry) {
+  unsigned bits = 0;
+#pragma unroll
+  for (int c = 0; c < 3; ++c) {
+    const float s = spacing_of(u[c]);
+    const int q = s > 0.0f ? min(max(__float2int_rn(carry[c] * (1024.0f / s)), -511), 511) : 0;
+    bits |= (unsigned(q) & 0x3ffu) << (10 * c);
+  }
+  return __uint_as_float(bits);
+}
+
+__device__ __forceinline__ Vec3<float> unpack_carry(Vec3<float> u, float w) {
+  const unsigned bits = __float_as_uint(w);
+  Vec3<float> carry;
+#pragma unroll
+  for (int c = 0; c < 3; ++c) {
+    const int q = int(bits >> (10 * c) & 0x3ffu);
+    carry[c] = float(q >= 512 ? q - 1024 : q) * (spacing_of(u[c]) * (1.0f / 1024.0f));
+  }
+  return carry;
+}
+
 template <class T>
 struct NodeTail {
   Vec3<T> load, u_held, u, u_prev, carry;  // carry: float's compensation (core node_next), 0 in double
@@ -429,10 +464,11 @@ __device__ __forceinline__ NodeTail<T> load_node_tail(const ModelView<T>& m, con
   t.held = s.held[a];
   t.u_held = s.u_held[a].vec();
   t.cd = {__ldg(m.cd_A + a), __ldg(m.cd_B + a), __ldg(m.cd_C + a)};
-  t.u = b.u[a].vec();
+  const Packed3<T> u = b.u[a];
+  t.u = u.vec();
   t.u_prev = b.u_prev[a].vec();
   if constexpr (std::is_same_v<T, float>)
-    t.carry = s.u_carry[a].vec();
+    t.carry = unpack_carry(t.u, u.w);
   else
     t.carry = {T(0), T(0), T(0)};
   return t;
@@ -446,8 +482,9 @@ __device__ __forceinline__ void node_update_with(const StateView<T>& s, const St
   if constexpr (kLoad) f = f - t.load;
   s.f[a] = Packed3<T>::of(f);
   Vec3<T> carry = t.carry;
-  b.u_next[a] = Packed3<T>::of(node_next(t.held, t.u_held, t.cd, f, t.u, t.u_prev, carry));
-  if constexpr (std::is_same_v<T, float>) s.u_carry[a] = Packed3<T>::of(carry);
+  Packed3<T> next = Packed3<T>::of(node_next(t.held, t.u_held, t.cd, f, t.u, t.u_prev, carry));
+  if constexpr (std::is_same_v<T, float>) next.w = pack_carry(next.vec(), carry);
+  b.u_next[a] = next;
 }
 
 template <class T, bool kLoad>

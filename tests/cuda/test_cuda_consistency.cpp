@@ -62,7 +62,10 @@ struct ConsistencyScene {
   std::vector<Waypoint> path;
   double duration = 0;  ///< s simulated
   bool expect_equilibrium = true;  ///< the held indentation settles within the run (checked on the cpu)
-  int float_equilibrium_ticks = 1; ///< allowed difference of the first equilibrium tick in float
+  /// allowed difference of the first equilibrium tick in float: where a slowly decaying residual crosses its
+  /// tolerance, which the backends' different float rounding (fma, approximate division, the carried update
+  /// bits' quantum on the device) moves by a tick or two (measured: the box at depth 3, cpu 381, cuda 379)
+  int float_equilibrium_ticks = 2;
   /// worst |du| / max |u| and |dF| / max |F| allowed, double and float
   double tol_double = 1e-9, tol_float = 1e-3;
   double tol_edge = 1e-3;  ///< float force on ticks whose contact counts differ by one node
@@ -104,7 +107,6 @@ ConsistencyScene kidney_scene(int depth) {
   for (Waypoint& w : s.path) w.p = w.p + 3e-6 * back;
   s.duration = s.path.back().t;
   s.expect_equilibrium = false;  // whether the kidney settles within its hold is the scene's business
-  s.float_equilibrium_ticks = 2;
   s.tol_float = 1e-2;
   s.tol_edge = 0.1;
   return s;
