@@ -30,8 +30,8 @@ namespace tissue {
 /// 0 without).
 ///
 /// Double takes the three-term form u' = A (R - f) + B u + C u_prev. Float
-/// takes the increment form u' = u + (A (R - f) - C (u - u_prev)) (B + C = 1
-/// exactly, so both are the same update), compensated: the low bits that
+/// takes the increment form u' = u + (A (R - f) - C (u - u_prev)) (in exact
+/// arithmetic B + C = 1, so both are the same update), compensated: the low bits that
 /// rounding u + increment to u's spacing drops are kept per node in carry
 /// and added to the next step's increment (Kahan summation). Uncompensated,
 /// the rounded B and C act as a spring of about eps m / dt^2 on every node

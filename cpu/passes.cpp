@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <type_traits>
 #include <utility>
 
 #include "core/node_rules.hpp"
@@ -141,13 +142,14 @@ void node_update_run(const TissueModel<T>& m, TissueState<T>& s, std::span<const
     }
     const auto load = [&](const T* v) { return Vec3<T>{v[a], v[n + a], v[2 * size_t(n) + a]}; };
     if (applied) f = f - load(applied);  // the out-of-balance force f - R
-    Vec3<T> lost = load(carry);
+    constexpr bool kCarry = std::is_same_v<T, float>;  // double carries nothing: no load, no store
+    Vec3<T> lost = kCarry ? load(carry) : Vec3<T>{0, 0, 0};
     const Vec3<T> next = node_next(held[a], load(u_held), CentralDifference<T>{m.cd_A[a], m.cd_B[a], m.cd_C[a]}, f,
                                    load(u), load(u_prev), lost);
     for (int c = 0; c < 3; ++c) {
       f_out[c * n + a] = f[c];
       u_next[c * n + a] = next[c];
-      carry[c * n + a] = lost[c];
+      if constexpr (kCarry) carry[c * n + a] = lost[c];
     }
   });
 }
