@@ -259,6 +259,10 @@ void Batch::set_material(int scene, const MaterialChange& change) {
   impl_->update(i);
 }
 
+void Batch::set_tool_friction(int scene, int tool, double mu) { impl_->at(scene).set_tool_friction(tool, mu); }
+
+double Batch::tool_friction(int scene, int tool) const { return impl_->at(scene).tool_friction(tool); }
+
 void Batch::set_tool_pose(int scene, int tool, const Vector3& tip, const Vector3& axis) {
   impl_->at(scene).set_tool_pose(tool, vec(tip), vec(axis));
 }

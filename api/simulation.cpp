@@ -232,6 +232,10 @@ double Simulation::tool_shaft(int tool) const {
   return impl_->session.scene().tools[tool].shaft;
 }
 
+double Simulation::tool_friction(int tool) const { return impl_->session.tool_friction(tool); }
+
+void Simulation::set_tool_friction(int tool, double mu) { impl_->session.set_tool_friction(tool, mu); }
+
 TickResult Simulation::step(long ticks) {
   if (ticks < 1) throw std::invalid_argument(fmt::format("{}: step({}): the tick count must be >= 1", name(), ticks));
   for (long k = 0; k < ticks; ++k) impl_->tick();

@@ -131,6 +131,16 @@ tissue_status tissue_set_grasp(tissue_simulation* sim, int tool, int down) {
   return guarded([&] { sim->sim.set_grasp(tool, down != 0); });
 }
 
+tissue_status tissue_set_tool_friction(tissue_simulation* sim, int tool, double mu) {
+  if (sim == nullptr) return null_argument("tissue_set_tool_friction", "sim");
+  return guarded([&] { sim->sim.set_tool_friction(tool, mu); });
+}
+
+double tissue_tool_friction(const tissue_simulation* sim, int tool) {
+  if (sim == nullptr || tool < 0 || tool >= sim->sim.n_tools()) return std::nan("");
+  return sim->sim.tool_friction(tool);
+}
+
 tissue_status tissue_set_loads(tissue_simulation* sim, const int32_t* nodes, const double* forces, size_t count) {
   if (sim == nullptr) return null_argument("tissue_set_loads", "sim");
   if (count > 0 && nodes == nullptr) return null_argument("tissue_set_loads", "nodes");
@@ -219,6 +229,11 @@ tissue_status tissue_batch_set_tool_pose(tissue_batch* batch, int scene, int too
     const tissue::Vector3 a = axis == nullptr ? tissue::Vector3{0, 0, 0} : tissue::Vector3{axis[0], axis[1], axis[2]};
     batch->batch.set_tool_pose(scene, tool, {tip[0], tip[1], tip[2]}, a);
   });
+}
+
+tissue_status tissue_batch_set_tool_friction(tissue_batch* batch, int scene, int tool, double mu) {
+  if (batch == nullptr) return null_argument("tissue_batch_set_tool_friction", "batch");
+  return guarded([&] { batch->batch.set_tool_friction(scene, tool, mu); });
 }
 
 tissue_status tissue_batch_set_tool_poses(tissue_batch* batch, const double* tips, const double* axes, size_t count) {

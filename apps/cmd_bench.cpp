@@ -38,6 +38,11 @@ void add_bench_command(CLI::App& app, int& rc) {
                   "run; docs/batch.md)")
       ->delimiter(',')
       ->check(whole_number(1, 1'000'000));
+  cmd->add_option("--friction", o->friction,
+                  "Friction coefficients of the contact-step and haptic-tick rows' tools, a set of rows each "
+                  "(default: frictionless contact steps, the scenes' own tools)")
+      ->delimiter(',')
+      ->check(real_number(0, 1e6));
   cmd->add_flag("--quick", o->quick, "Smoke run on tiny meshes (CI)");
   cmd->callback([o, precision, &rc] {
     InterruptGuard interrupt;

@@ -228,7 +228,7 @@ void bench_tled(Context& c, const std::string& mesh, Precision p, const std::str
   c.emit(w);
 }
 
-void bench_contact(Context& c, long want_tris, Precision p, double radius = 0.002) {
+void bench_contact(Context& c, long want_tris, Precision p, double mu, double radius = 0.002) {
   // a flat slab of N x N x 1 cells (4 (N^2 + 2N) surface triangles), a sphere (2 mm; 10 mm: a large
   // instrument, hundreds of triangles in reach) pressed 0.5 mm (at most a quarter of the slab) into its
   // top and sliding slowly; the region is one ring around the contact so that a step's time is mostly
@@ -238,7 +238,7 @@ void bench_contact(Context& c, long want_tris, Precision p, double radius = 0.00
   const TissueModel<double> m = box_model(N, N, 1, 0.1, 0.1, 0.1 / N, true);
   auto b = create_backend(c.o.backend, p);
   b->upload(m);
-  const ToolShape tool{"probe", radius, 0};
+  const ToolShape tool{"probe", radius, 0, mu};
   b->set_tools(std::span<const ToolShape>(&tool, 1));
   const double top = 0.1 / N;
   const double press = std::min(5e-4, 0.25 * top);  // the 100k slab is 0.63 mm thick: a quarter of it
@@ -271,6 +271,7 @@ void bench_contact(Context& c, long want_tris, Precision p, double radius = 0.00
   Row r = c.row("contact_step", *b);
   r.add("surface_triangles", long(m.n_tris));
   r.add("tool_radius_mm", 1e3 * radius);
+  r.add("friction", mu);
   r.add("region_elements", long(reg.n_elems));
   r.add("steps", long(lat.size()));
   r.add("latency_us_p50", 1e6 * lat[lat.size() / 2]);
@@ -310,8 +311,11 @@ std::vector<TickScene> tick_scenes(const BenchOptions& o) {
   return out;
 }
 
-void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_safety, const TickScene& ts) {
+void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_safety, std::optional<double> mu,
+                const TickScene& ts) {
   scene::Scene s = ts.scene;
+  if (mu)
+    for (scene::Tool& t : s.tools) t.friction = *mu;
   s.solver.dt_safety = dt_safety.value_or(s.solver.dt_safety);
   s.solver.backend = c.o.backend;
   s.solver.precision = p;
@@ -347,6 +351,7 @@ void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_saf
   r.add("elements", long(engine.model->n_elems));
   r.add("depth", depth == kDepthAll ? std::string("all") : std::to_string(depth));
   r.add("dt_safety", s.solver.dt_safety);
+  r.add("friction", s.tools.front().friction);
   r.add("steps_per_tick", long(sched.steps_per_tick()));
   r.add("ticks_in_contact", long(lat.size()));
   r.add("tick_ms_p50", 1e3 * lat[lat.size() / 2]);
@@ -625,17 +630,22 @@ std::vector<std::string> run_bench(const BenchOptions& o) {
     for (const std::string& mesh : o.sizes)
       for (const std::string& law : o.laws)
         if (!stopped()) bench_tled(c, mesh, p, law);
-    for (long tris : {10'000L, 100'000L})
-      if (!stopped()) bench_contact(c, tris, p);
-    if (!stopped() && !c.o.quick) bench_contact(c, 100'000L, p, 0.010);  // a large instrument
+    std::vector<std::optional<double>> frictions(o.friction.begin(), o.friction.end());
+    if (frictions.empty()) frictions.emplace_back();  // frictionless contact steps, the scenes' own tools
+    for (const std::optional<double>& mu : frictions) {
+      for (long tris : {10'000L, 100'000L})
+        if (!stopped()) bench_contact(c, tris, p, mu.value_or(0));
+      if (!stopped() && !c.o.quick) bench_contact(c, 100'000L, p, mu.value_or(0), 0.010);  // a large instrument
+    }
     if (!stopped()) bench_contact_chains(c, p);
     std::vector<std::optional<double>> safeties(o.tick_dt_safety.begin(), o.tick_dt_safety.end());
     if (safeties.empty()) safeties.emplace_back();  // the scene's own
     const std::vector<TickScene> ticks = tick_scenes(o);
     for (int depth : {5, kDepthAll})
       for (const std::optional<double>& safety : safeties)
-        for (const TickScene& ts : ticks)
-          if (!stopped()) bench_tick(c, p, depth, safety, ts);
+        for (const std::optional<double>& mu : frictions)
+          for (const TickScene& ts : ticks)
+            if (!stopped()) bench_tick(c, p, depth, safety, mu, ts);
   }
   if (!o.json_path.empty()) {
     io::AtomicTextFile f(o.json_path);

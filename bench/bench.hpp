@@ -40,6 +40,10 @@ struct BenchOptions {
   /// each pressed along its first tool's scripted path, with its own
   /// materials, mesh and solver settings (the rows' law is "scene").
   std::vector<std::string> scenes;
+  /// Friction coefficients (--friction) of the contact-step and haptic-tick
+  /// rows' tools, one set of those rows per value (empty: frictionless
+  /// contact steps and each scene's own tools).
+  std::vector<double> friction;
 };
 
 /// How many times faster `threads` threads run a pure-arithmetic loop (no

@@ -215,6 +215,15 @@ void Backend::set_tools(std::span<const ToolShape> tools, const ContactOptions& 
   grasping_.assign(tools.size(), 0);
 }
 
+void Backend::set_tool_friction(int tool, double friction) {
+  require_upload("set_tool_friction");
+  if (tool < 0 || tool >= n_tools())
+    throw std::invalid_argument(fmt::format("set_tool_friction: tool {} of {} (set_tools first)", tool, n_tools()));
+  if (const std::string e = tool_friction_error(shapes_[std::size_t(tool)].name, friction); !e.empty())
+    throw std::invalid_argument("set_tool_friction: " + e);
+  shapes_[std::size_t(tool)].friction = friction;
+}
+
 void Backend::move_tools(std::span<const ToolMotion> motion) {
   require_upload("move_tools");
   if (motion.size() != shapes_.size())
@@ -256,6 +265,7 @@ ContactTools<double> Backend::contact_tools(int steps) const {
     s.grasping = grasping_[t];
     s.grasp_tip = grasp_pose_[t].tip;
     s.grasp_axis = grasp_pose_[t].axis;
+    s.friction = shapes_[t].friction;
   }
   return c;
 }

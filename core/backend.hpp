@@ -185,6 +185,9 @@ class Backend {
   void set_tools(std::span<const ToolShape> tools, const ContactOptions& options = {});
   int n_tools() const { return static_cast<int>(shapes_.size()); }
   const std::vector<ToolShape>& tools() const { return shapes_; }
+  /// Tool `tool`'s Coulomb coefficient from the next advance() on (finite,
+  /// >= 0; 0 = frictionless), keeping its contacts and grasp.
+  void set_tool_friction(int tool, double friction);
 
   /// The tools' motion over the next advance() (one per tool): the pose is
   /// interpolated linearly across its steps (core interpolate_pose), and

@@ -45,7 +45,10 @@
 //     its free components (a roller's held component stays) and is in
 //     contact with the tool of its largest proposal, with the contact normal
 //     n = the unit free part of dx (out of the tool).
-//     Frictionless: only the normal is constrained. It leaves the step
+//     Friction (core/node_rules.hpp coulomb_slip): the node's tangential
+//     motion relative to the tool over the step is removed up to mu |dx|
+//     (all of it: the node sticks; part: it slides, the tool's tangential
+//     impulse mu times its normal one). It leaves the step
 //     with the tool's normal velocity and half of its own tangential
 //     velocity relative to the tool (core/node_rules.hpp contact_previous).
 // The contact never pulls: a node that the tissue carries out of the tool
@@ -54,8 +57,10 @@
 //
 // Reaction on a tool: each pushing contact node is held in its normal n by
 // the force (f . n) n, f its internal force, clamped at zero (a contact
-// cannot pull); a grasped node by its whole internal force f. The force on
-// the tool is minus their sum (contact_reaction).
+// cannot pull), and along the tool by f's tangential part f_t up to
+// mu (f . n) (f_t: stuck; mu (f . n) f_t / |f_t|: sliding); a grasped node
+// by its whole internal force f. The force on the tool is minus their sum
+// (contact_reaction).
 #pragma once
 
 #include <cstdint>
@@ -69,7 +74,7 @@ namespace tissue {
 /// What a surface node's contact is (one byte per node).
 enum ContactKind : std::uint8_t {
   kNoContact = 0,
-  kPushed = 1,          ///< moved onto a tool's surface this step (frictionless)
+  kPushed = 1,          ///< moved onto a tool's surface this step (held along it by friction up to mu)
   kGrasped = 2,         ///< stuck to a grasping tool
   kRigidContact = 3,    ///< inside a tool but held by the scene (fixed): a rigid support under the tool
   kOutsideRegion = 4,   ///< inside a tool but not an inner node of the region: it cannot move
@@ -84,6 +89,7 @@ struct ToolStep {
   int substeps;               ///< contact checks per TLED step (>= 1)
   int grasping;               ///< 1 = its grasped nodes follow it
   Vec3<T> grasp_tip, grasp_axis;  ///< the pose when the grasp started
+  T friction;                 ///< Coulomb's mu at its pushed nodes (0: frictionless; coulomb_slip)
 };
 
 /// Every tool over one advance(); what the contact stage reads.
@@ -111,7 +117,7 @@ ContactTools<T> contact_tools_as(const ContactTools<double>& d) {
   for (int t = 0; t < d.n_tools; ++t) {
     const ToolStep<double>& s = d.tool[t];
     c.tool[t] = {v(s.tip0), v(s.axis0), v(s.tip1), v(s.axis1), T(s.radius), T(s.shaft), s.substeps, s.grasping,
-                 v(s.grasp_tip), v(s.grasp_axis)};
+                 v(s.grasp_tip), v(s.grasp_axis), T(s.friction)};
   }
   return c;
 }
@@ -704,15 +710,22 @@ TISSUE_HD Vec3<T> grasped_position(Vec3<T> tip, Vec3<T> axis, Vec3<T> axis0, Vec
 }
 
 /// Force the tool exerts on one contact node with internal force f (N):
-/// pushed: (f . n)+ n; grasped: f; otherwise zero. `held` masks components
-/// that a scene constraint holds (their force is the support's, not the tool's).
+/// pushed: (f . n)+ n plus, for a tool of friction coefficient mu > 0,
+/// f's tangential part f_t clamped to the Coulomb cone, |f_t| <= mu (f . n)+
+/// (continuous from stick to slide); grasped: f; otherwise zero. `fixed`
+/// masks components that a scene constraint holds (their force is the
+/// support's, not the tool's).
 template <class T>
-TISSUE_HD Vec3<T> contact_reaction(std::uint8_t kind, Vec3<T> f, Vec3<T> n, std::uint8_t fixed) {
+TISSUE_HD Vec3<T> contact_reaction(std::uint8_t kind, Vec3<T> f, Vec3<T> n, std::uint8_t fixed, T mu = T(0)) {
   const Vec3<T> fm = {(fixed & 1) ? T(0) : f.x, (fixed & 2) ? T(0) : f.y, (fixed & 4) ? T(0) : f.z};
   if (kind == kGrasped) return fm;
   if (kind != kPushed) return {T(0), T(0), T(0)};
   const T fn = dot(fm, n);
-  return (fn > T(0) ? fn : T(0)) * n;
+  if (!(fn > T(0))) return {T(0), T(0), T(0)};
+  if (!(mu > T(0))) return fn * n;
+  const Vec3<T> ft = fm - fn * n;
+  const T t = norm(ft), cap = mu * fn;
+  return fn * n + (t > cap ? cap / t : T(1)) * ft;
 }
 
 }  // namespace tissue

@@ -88,6 +88,28 @@ TISSUE_HD Vec3<T> free_part(std::uint8_t h, Vec3<T> dx) {
   return {(h & 1) ? T(0) : dx.x, (h & 2) ? T(0) : dx.y, (h & 4) ? T(0) : dx.z};
 }
 
+/// Coulomb friction at a pushed node (core/contact.hpp, docs/contact.md
+/// "Friction"): u1 is its displacement after the step's contact correction
+/// dx along the contact normal n (dx = push n, push >= 0), u_now its
+/// displacement before the step, w the tool's motion at the node over the
+/// step (tool_motion_at), h its held axes. The node's tangential motion
+/// relative to the tool, s, is removed up to mu push: all of it when
+/// |s| <= mu push (it sticks: it moves with the tool), else mu push of it
+/// (it slides). The correction of an explicit step is the impulse of the
+/// force that makes it (A f, A = the node's cd_A), so this is Coulomb's law
+/// on that force, |f_t| <= mu f_n, with no state kept from step to step; a
+/// node held by the tool at rest has A f_n = push and A f_t = |s|, the
+/// quasi-static forces contact_reaction reports. Returns the new u1 (mu = 0:
+/// u1 itself, the frictionless rule).
+template <class T>
+TISSUE_HD Vec3<T> coulomb_slip(std::uint8_t h, Vec3<T> u_now, Vec3<T> u1, Vec3<T> n, Vec3<T> w, T push, T mu) {
+  if (!(mu > T(0))) return u1;
+  const Vec3<T> rel = u1 - u_now - w;
+  const Vec3<T> slip = free_part(h, rel - dot(rel, n) * n);
+  const T s = norm(slip), cap = mu * push;
+  return u1 - (s > cap ? cap / s : T(1)) * slip;
+}
+
 /// A contact node keeps this fraction of its tangential velocity relative
 /// to the tool per TLED step (contact_previous).
 inline constexpr double kContactTangentialKeep = 0.5;
@@ -98,10 +120,11 @@ inline constexpr double kContactTangentialKeep = 0.5;
 /// to the tool (w: the tool's motion at the node over the step,
 /// tool_motion_at), in its free components (h: held axes). The
 /// central-difference state carries the velocity as u^{n+1} - u^n, so the
-/// contact sets u^n (returned). Frictionless still: tangential forces move
-/// the node along the tool in every step and the equilibrium is the
-/// frictionless one; the halving is a viscous damping of the contact
-/// nodes' sliding. Measured on the kidney held 5 mm in (docs/contact.md):
+/// contact sets u^n (returned). A node that coulomb_slip stuck has no
+/// tangential velocity relative to the tool; on a frictionless tool the
+/// tangential forces move the node along the tool in every step and the
+/// equilibrium is the frictionless one; the halving is a viscous damping
+/// of the contact nodes' sliding. Measured on the kidney held 5 mm in (docs/contact.md):
 /// moving only u^{n+1} turned every correction into velocity (a corner
 /// that face contact lifted flew on); resetting the normal velocity alone
 /// left sliding nodes pumping energy into the faceted contact (remeshed to

@@ -118,6 +118,11 @@ std::vector<std::string> Scheduler::take_notes() {
   return out;
 }
 
+void Scheduler::set_tool_friction(int t, double friction) {
+  backend_.set_tool_friction(t, friction);
+  settings_.tools[std::size_t(t)].shape.friction = friction;
+}
+
 void Scheduler::set_loads(std::span<const index_t> nodes, std::span<const double> force) {
   backend_.set_loads(nodes, force);
   if (region_.whole()) return;

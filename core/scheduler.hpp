@@ -140,6 +140,10 @@ class Scheduler {
   /// nodes as well as the contacts, so that they move.
   void set_loads(std::span<const index_t> nodes, std::span<const double> force);
 
+  /// Tool t's Coulomb coefficient from the next tick on (Backend::set_tool_friction:
+  /// finite, >= 0); its contacts and grasp stay.
+  void set_tool_friction(int t, double friction);
+
   /// Notices since the last call (a tool pressing a rigid support, naming
   /// its nodes; a tool starting inside the body; a tool moving more than
   /// half the surface's median edge per TLED step in contact; a tool whose

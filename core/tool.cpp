@@ -17,6 +17,14 @@ std::string tool_shape_error(const ToolShape& t, double body_extent) {
         t.name, t.radius, body_extent);
   if (!std::isfinite(t.shaft) || !(t.shaft >= 0))
     return fmt::format("tool '{}': shaft-length = {} m must be finite and >= 0 (0 = a sphere)", t.name, t.shaft);
+  if (const std::string e = tool_friction_error(t.name, t.friction); !e.empty()) return e;
+  return {};
+}
+
+std::string tool_friction_error(const std::string& name, double friction) {
+  if (!std::isfinite(friction) || !(friction >= 0))
+    return fmt::format("tool '{}': friction = {} must be finite and >= 0 (Coulomb's mu; 0 = frictionless)", name,
+                       friction);
   return {};
 }
 

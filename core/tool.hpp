@@ -28,14 +28,19 @@ struct ToolShape {
   std::string name = "probe";  ///< for messages
   double radius = 2e-3;        ///< r: tip sphere and shaft radius (m), > 0
   double shaft = 0;            ///< l: shaft length (m), >= 0; 0 = a sphere
+  double friction = 0;         ///< mu: Coulomb coefficient of its pushed contacts, >= 0; 0 = frictionless
 };
 
 /// The rule a tool's shape keeps, as the message of the first part it breaks
 /// ("" when it keeps it): the radius finite and > 0 and at most half the
 /// body's largest extent body_extent (m; 0 = not checked), the shaft
-/// length finite and >= 0. The scene's checks, the Scheduler and
+/// length finite and >= 0, the friction coefficient finite and >= 0. The scene's checks, the Scheduler and
 /// Backend::set_tools all report this one message, each with its context.
 std::string tool_shape_error(const ToolShape& t, double body_extent = 0);
+
+/// The friction coefficient's part of that rule ("" when `friction` keeps
+/// it), for a live change of one tool's coefficient.
+std::string tool_friction_error(const std::string& name, double friction);
 
 /// A tool's pose: tip position and the unit shaft axis (tip -> handle).
 struct ToolPose {

@@ -158,13 +158,16 @@ void ContactStage<T>::finish_step(TissueState<T>& s, const ContactTools<T>& tool
     if (s.contact[a] == kGrasped || acc.kind == kNoContact) continue;
     if (acc.kind == kPushed) {
       const Vec3<T> dx = free_part(s.held[a], acc.dx);  // a roller's held component does not move
-      const Vec3<T> u1 = at(s.u_next, n, a) + dx, normal = unit_or(dx, Vec3<T>{0, 0, 0});
+      const Vec3<T> normal = unit_or(dx, Vec3<T>{0, 0, 0}), u_now = at(s.u, n, a);
+      const ToolStep<T>& tool = tools.tool[acc.tool];
+      const Vec3<T> X = {m_.X[a], m_.X[n + a], m_.X[2 * size_t(n) + a]};
+      Vec3<T> u1 = at(s.u_next, n, a) + dx;
+      const Vec3<T> w = tool_motion_at(tool, tools.steps, k, X + u1);
+      u1 = coulomb_slip(s.held[a], u_now, u1, normal, w, norm(dx), tool.friction);
       put(s.u_next, n, a, u1);
       put(s.u_carry, n, a, Vec3<T>{0, 0, 0});
       put(s.contact_normal, n, a, normal);
-      const Vec3<T> x = Vec3<T>{m_.X[a], m_.X[n + a], m_.X[2 * size_t(n) + a]} + u1;
-      const Vec3<T> w = tool_motion_at(tools.tool[acc.tool], tools.steps, k, x);
-      put(s.u, n, a, contact_previous(s.held[a], at(s.u, n, a), u1, normal, w));
+      put(s.u, n, a, contact_previous(s.held[a], u_now, u1, normal, w));
     }
     s.contact[a] = acc.kind;
     s.contact_tool[a] = acc.tool;
@@ -239,7 +242,7 @@ std::vector<index_t> ContactStage<T>::candidates(const TissueState<T>& s, const 
 
 template <class T>
 void reduce_contacts(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<index_t>& touched,
-                     ToolReduction out[kMaxTools]) {
+                     const T friction[kMaxTools], ToolReduction out[kMaxTools]) {
   const index_t n = m.n_nodes;
   for (int t = 0; t < kMaxTools; ++t) out[t] = ToolReduction{};
   for (index_t a : touched) {
@@ -248,7 +251,8 @@ void reduce_contacts(const TissueModel<T>& m, const TissueState<T>& s, const std
     ToolReduction& r = out[t];
     const std::uint8_t kind = s.contact[a];
     const Vec3<T> f = at(s.f, n, a);
-    const Vec3<T> react = contact_reaction(kind, f, at(s.contact_normal, n, a), fixed_axes(m.node_flags[a]));
+    const Vec3<T> react =
+        contact_reaction(kind, f, at(s.contact_normal, n, a), fixed_axes(m.node_flags[a]), friction[t]);
     r.reaction = r.reaction + Vec3<double>{double(react.x), double(react.y), double(react.z)};
     r.contact += (kind == kPushed || kind == kGrasped) ? 1 : 0;
     r.grasped += kind == kGrasped ? 1 : 0;
@@ -263,8 +267,8 @@ void reduce_contacts(const TissueModel<T>& m, const TissueState<T>& s, const std
 template class ContactStage<float>;
 template class ContactStage<double>;
 template void reduce_contacts(const TissueModel<float>&, const TissueState<float>&, const std::vector<index_t>&,
-                              ToolReduction[kMaxTools]);
+                              const float[kMaxTools], ToolReduction[kMaxTools]);
 template void reduce_contacts(const TissueModel<double>&, const TissueState<double>&, const std::vector<index_t>&,
-                              ToolReduction[kMaxTools]);
+                              const double[kMaxTools], ToolReduction[kMaxTools]);
 
 }  // namespace tissue::cpu

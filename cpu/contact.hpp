@@ -130,9 +130,10 @@ class ContactStage {
 };
 
 /// Per-tool contact reductions (core ToolReduction) over the touched nodes:
-/// reaction = sum of core contact_reaction with the internal force s.f.
+/// reaction = sum of core contact_reaction with the internal force s.f and
+/// each tool's friction coefficient (the last advance's).
 template <class T>
 void reduce_contacts(const TissueModel<T>& m, const TissueState<T>& s, const std::vector<index_t>& touched,
-                     ToolReduction out[kMaxTools]);
+                     const T friction[kMaxTools], ToolReduction out[kMaxTools]);
 
 }  // namespace tissue::cpu

@@ -177,6 +177,7 @@ static_assert(kMaxParts >= ThreadTeam::kMaxSize, "a contact part per team member
 template <class T>
 void CpuBackend<T>::do_advance(int steps, const ContactTools<double>& tools) {
   const ContactTools<T> t = contact_tools_as<T>(tools);
+  for (int k = 0; k < kMaxTools; ++k) friction_[k] = k < t.n_tools ? t.tool[k].friction : T(0);
   // reduce() may have run passes 1-2 at this u already
   const bool have_pressure = take_passes(energy_, state_);
   energy_.fresh = false;  // u moves
@@ -240,7 +241,7 @@ Reductions CpuBackend<T>::do_reduce() {
   r.front_disp = front_displacement(model_, state_);
   r.bad_elem = bad_.take(&r.bad_J);
   if (r.bad_elem < 0) r.bad_J = 1;
-  reduce_contacts(model_, state_, contact_->touched(), r.tools);
+  reduce_contacts(model_, state_, contact_->touched(), friction_, r.tools);
   for (const ToolReduction& t : r.tools)
     r.finite = r.finite && std::isfinite(t.reaction.x + t.reaction.y + t.reaction.z);
   return r;

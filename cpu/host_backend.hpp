@@ -91,6 +91,7 @@ class CpuBackend final : public Backend {
   std::vector<index_t> all_elems_;    ///< 0..n_elems-1: pass 1 over every element
   std::vector<index_t> driven_list_;  ///< currently driven nodes
   std::unique_ptr<ContactStage<T>> contact_;
+  T friction_[kMaxTools] = {};        ///< each tool's friction coefficient in the last advance (the reaction's)
   EnergyScratch<T> energy_;           ///< reduce's passes 1-2, taken by the next step
   BadElementFlag bad_;
   PassPartitioners parts_;            ///< the one-pass calls' TBB loops

@@ -357,10 +357,13 @@ __device__ void merge_loaded_node(const StateView<T>& s, const ContactTools<T>& 
   s.contact_tool[a] = acc.tool;
   if (acc.kind != kPushed) return;
   const Vec3<T> dx = free_part(held, acc.dx);  // a roller's held component does not move
-  const Vec3<T> u1 = u_free + dx, normal = unit_or(dx, Vec3<T>{T(0), T(0), T(0)});
+  const Vec3<T> normal = unit_or(dx, Vec3<T>{T(0), T(0), T(0)});
+  const ToolStep<T>& tool = tools.tool[acc.tool];
+  Vec3<T> u1 = u_free + dx;
+  const Vec3<T> w = tool_motion_at(tool, tools.steps, k, n.X + u1);
+  u1 = coulomb_slip(held, u_now, u1, normal, w, norm(dx), tool.friction);
   u_next[a] = Packed3<T>::of(u1);
   s.contact_normal[a] = Packed3<T>::of(normal);
-  const Vec3<T> w = tool_motion_at(tools.tool[acc.tool], tools.steps, k, n.X + u1);
   u[a] = Packed3<T>::of(contact_previous(held, u_now, u1, normal, w));
 }
 

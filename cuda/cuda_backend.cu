@@ -221,6 +221,9 @@ class SceneGroup final : public BackendGroup {
     return results_host_[k];
   }
 
+  /// Slot k's entry of the tools' array (what its steps read in a group tick).
+  const ContactTools<T>* device_tools(int k) const { return tools_dev_.data() + k; }
+
   void count_alone() { ticks_alone_.fetch_add(1, std::memory_order_relaxed); }
   std::int64_t ticks_together() const override { return ticks_together_.load(); }
   std::int64_t ticks_alone() const override { return ticks_alone_.load(); }
@@ -282,8 +285,8 @@ class CudaBackend final : public Backend {
     scratch.skip = skip;
     stepper_.enqueue_steps(store_.model(), s, r, store_.u.current(), key.steps, tools,
                            static_cast<StepStart>(key.start), st);
-    reducer_.enqueue(store_.model(), s, scratch, r, region_.front(), store_.u.at(store_.u.phase + key.steps), st,
-                     false);
+    reducer_.enqueue(store_.model(), s, scratch, r, region_.front(), store_.u.at(store_.u.phase + key.steps), tools,
+                     st, false);
   }
   const Reductions* result_device() const { return reducer_.result(); }
 
@@ -353,6 +356,7 @@ class CudaBackend final : public Backend {
     reducer_.set_law(store_.law());
     stepper_.set_law(store_.law());
     contact_.allocate(n, m.n_surf);
+    reduce_tools_ = nullptr;
     driven_list_.allocate(n);
     drive_dev_.allocate(n * (3 * sizeof(T) + sizeof(index_t) + 1));
     if (drive_pending_) drive_copied_.sync();  // before its staging is freed
@@ -481,6 +485,7 @@ class CudaBackend final : public Backend {
       stepper_.advance(store_.model(), store_.state(), region_.view(), store_.u, k, dtools, start, stream());
       start = StepStart::kPass1;
       done += k;
+      reduce_tools_ = dtools;
     }
   }
 
@@ -514,7 +519,7 @@ class CudaBackend final : public Backend {
   Reductions do_reduce() override {
     const bool passes = prepare_reduction(region_.view());
     const Reductions out = reducer_.run(store_.model(), store_.state(), store_.pressure_scratch(), region_.view(),
-                                        region_.front(), store_.u.current(), log_, stream());
+                                        region_.front(), store_.u.current(), reduce_tools_, log_, stream());
     pressures_fresh_ = passes;
     return out;
   }
@@ -606,12 +611,13 @@ class CudaBackend final : public Backend {
           stepper_.enqueue_steps(store_.model(), s, r, store_.u.current(), steps, dtools, steps_start, st);
           // the reduction and the check write their answers into mapped host memory themselves: the
           // graph has no copy nodes, and its answers are read once the stream is done
-          reducer_.enqueue(store_.model(), s, scratch, r, region_.front(), store_.u.at(store_.u.phase + steps), st,
-                           true);
+          reducer_.enqueue(store_.model(), s, scratch, r, region_.front(), store_.u.at(store_.u.phase + steps), dtools,
+                           st, true);
         },
         stream());
     if (check) contact_.reach_host()[0] = 0;  // the check kernel writes 1 when the region must grow
     CUDA_CHECK(cudaGraphLaunch(exec, stream()));
+    reduce_tools_ = dtools;
     launched_ = {true, check, steps, tool_bytes, start, passes};
   }
 
@@ -720,6 +726,7 @@ class CudaBackend final : public Backend {
                   {store_.u.phase, steps, static_cast<int>(start), store_.pressure_set(),
                    store_.state().load ? 1 : 0, tool_bytes},
                   tools);
+    reduce_tools_ = tool_bytes > 0 ? group_->device_tools(slot_) : nullptr;
     launched_ = {false, false, steps, tool_bytes, start, passes, true};
   }
 
@@ -792,6 +799,9 @@ class CudaBackend final : public Backend {
   RegionFill region_;
   Reducer<T> reducer_;
   DeviceContact<T> contact_;
+  /// The tools the last advance read on the device (null: none): reduce()'s
+  /// contact reactions take their friction coefficients.
+  const ContactTools<T>* reduce_tools_ = nullptr;
   Stepper<T> stepper_;
   CudaGradients gradients_ = CudaGradients::Auto;  ///< set_cuda_gradients: for the next upload
   std::vector<index_t> seeds_;

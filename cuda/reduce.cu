@@ -106,11 +106,13 @@ __device__ ContactPartial block_reduce(ContactPartial c, unsigned used) {
 /// tool put the whole struct in local memory: 176 bytes of stack, and the
 /// reduction kernel took 19 us on the kidney on an H100).
 template <class T>
-__device__ unsigned accumulate_contact(const ModelView<T>& m, const StateView<T>& s, index_t a, ContactPartial& p) {
+__device__ unsigned accumulate_contact(const ModelView<T>& m, const StateView<T>& s, const ContactTools<T>* tools,
+                                       index_t a, ContactPartial& p) {
   const int t = s.contact_tool[a];
   const std::uint8_t kind = s.contact[a];
   if (t < 0 || t >= kMaxTools || kind == kNoContact) return 0;
-  const Vec3<T> r = contact_reaction(kind, s.f[a].vec(), s.contact_normal[a].vec(), fixed_axes(m.node_flags[a]));
+  const T mu = kind == kPushed && tools && t < tools->n_tools ? tools->tool[t].friction : T(0);
+  const Vec3<T> r = contact_reaction(kind, s.f[a].vec(), s.contact_normal[a].vec(), fixed_axes(m.node_flags[a]), mu);
 #pragma unroll
   for (int k = 0; k < kMaxTools; ++k) {
     if (k != t) continue;
@@ -313,8 +315,8 @@ __device__ void combine_columns(P& p, const int* words, int lane, int blocks, Ta
 template <class T, bool kRecomputed, int kMinBlocks>
 __global__ void __launch_bounds__(kReduceBlock, kMinBlocks)
     reduce_kernel(ModelView<T> m, StateView<T> s, RegionView r, FrontView front, StepBuffers<T> b,
-                  const T* energy_node_p, LawView<T> w, int* partial, int* contact, unsigned* touched_tools,
-                  unsigned* done, Reductions* out, Reductions* host_out) {
+                  const T* energy_node_p, LawView<T> w, const ContactTools<T>* tools, int* partial, int* contact,
+                  unsigned* touched_tools, unsigned* done, Reductions* out, Reductions* host_out) {
   if (const std::int64_t d = slots_moved(s.slots)) {  // a group's launch: this block row's scene (no host_out)
     m = m.materials_moved(d * s.slots.stride);
     w = w.moved(d * s.slots.stride);
@@ -325,6 +327,7 @@ __global__ void __launch_bounds__(kReduceBlock, kMinBlocks)
     touched_tools = s.slot_moved(touched_tools, d);
     done = s.slot_moved(done, d);
     out = s.slot_moved(out, d);
+    tools = s.tools_moved(tools, d);
     s = s.moved(d);
   }
   if (skipped(s)) return;  // every block: the count stays at 0
@@ -342,7 +345,7 @@ __global__ void __launch_bounds__(kReduceBlock, kMinBlocks)
     else if (i < nn + ne)
       add_element_energy<T, kRecomputed>(m, energy_node_p, b.u, r.elem(i - nn), w, p);
     else
-      mine |= accumulate_contact(m, s, m.surf_nodes[i - nn - ne], c);
+      mine |= accumulate_contact(m, s, tools, m.surf_nodes[i - nn - ne], c);
   }
   p = block_reduce(p);
   unsigned used = 0;  // the tools any thread of the block met: the same in every thread
@@ -408,16 +411,17 @@ void Reducer<T>::allocate(cudaStream_t stream) {
 
 template <class T>
 Reductions Reducer<T>::run(const ModelView<T>& m, const StateView<T>& s, const StateView<T>& scratch,
-                           const RegionView& r, FrontView front, StepBuffers<T> b, Transfers& log,
-                           cudaStream_t stream) {
-  enqueue(m, s, scratch, r, front, b, stream);
+                           const RegionView& r, FrontView front, StepBuffers<T> b, const ContactTools<T>* tools,
+                           Transfers& log, cudaStream_t stream) {
+  enqueue(m, s, scratch, r, front, b, tools, stream);
   log.to_host(result_host_.data(), result_.data(), sizeof(Reductions), stream);
   return result_host_[0];
 }
 
 template <class T>
 void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const StateView<T>& scratch,
-                         const RegionView& r, FrontView front, StepBuffers<T> b, cudaStream_t stream, bool to_host) {
+                         const RegionView& r, FrontView front, StepBuffers<T> b, const ContactTools<T>* tools,
+                         cudaStream_t stream, bool to_host) {
   if (runs_passes(m, r)) {  // nodal pressures at the current u, into the scratch set
     // as the steps run them (the same bits either way)
     enqueue_pressures(m, scratch, r, static_cast<const Packed3<T>*>(b.u), stream);
@@ -431,7 +435,7 @@ void Reducer<T>::enqueue(const ModelView<T>& m, const StateView<T>& s, const Sta
     const auto kernel = launch_scenes > 1 ? reduce_kernel<T, decltype(recomputed)::value, kGroupReduceBlocks>
                                           : reduce_kernel<T, decltype(recomputed)::value, 1>;
     launch_blocks(blocks, kReduceBlock, stream, kernel, m, s, r, front, b,
-                  static_cast<const T*>(scratch.node_p), law_, partial_.data(), contact_partial_.data(), touched_.data(), done_.data(),
+                  static_cast<const T*>(scratch.node_p), law_, tools, partial_.data(), contact_partial_.data(), touched_.data(), done_.data(),
                   result_.data(), to_host ? result_host_.device() : nullptr);
   });
 }

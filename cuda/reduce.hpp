@@ -66,7 +66,9 @@ class Reducer {
   static bool runs_passes(const ModelView<T>& m, const RegionView& r) { return m.ianp && r.n_elems > 0; }
 
   /// Reduces over region r with the current buffers b, and the tools'
-  /// contact over the surface; clears the bad flag; one download.
+  /// contact over the surface (`tools`: the last advance's, whose friction
+  /// coefficients the reactions use; null: no tools); clears the bad flag;
+  /// one download.
   /// For IANP the energy needs the nodal pressures at the current u: passes
   /// 1 and 2 run again over the region into `scratch` (the state view s
   /// with the scratch set of pass arrays: DeviceStore::pressure_scratch;
@@ -74,13 +76,15 @@ class Reducer {
   /// the region must already be the state's (the caller's copy), so that
   /// the next steps can take the set as theirs.
   Reductions run(const ModelView<T>& m, const StateView<T>& s, const StateView<T>& scratch, const RegionView& r,
-                 FrontView front, StepBuffers<T> b, Transfers& log, cudaStream_t stream);
+                 FrontView front, StepBuffers<T> b, const ContactTools<T>* tools, Transfers& log,
+                 cudaStream_t stream);
 
   /// run()'s kernels without the download: the result stays in device
   /// memory (result()) and, with to_host, the kernel also writes it into
   /// result_host() (mapped): no copy, readable once the stream has finished.
   void enqueue(const ModelView<T>& m, const StateView<T>& s, const StateView<T>& scratch, const RegionView& r,
-               FrontView front, StepBuffers<T> b, cudaStream_t stream, bool to_host = false);
+               FrontView front, StepBuffers<T> b, const ContactTools<T>* tools, cudaStream_t stream,
+               bool to_host = false);
   const Reductions* result() const { return result_.data(); }
   /// The device arrays its kernel writes (a scene group checks that they lie in the scene's slot).
   std::vector<const void*> device_arrays() const {

@@ -213,6 +213,16 @@ std::future<void> HapticLoop::post(std::function<void(Engine&)> task) {
   return done;
 }
 
+void HapticLoop::set_friction(double mu) {
+  if (const std::string e = tool_friction_error("every tool", mu); !e.empty()) throw std::invalid_argument(e);
+  post([this, mu](Engine& e) {
+    for (int t = 0; t < e.scheduler->n_tools(); ++t) e.scheduler->set_tool_friction(t, mu);
+    params_.friction = mu;
+    local_.params = params_;
+    publish();
+  });
+}
+
 std::string HapticLoop::status() const {
   std::lock_guard lk(req_mutex_);
   return status_;

@@ -66,6 +66,9 @@ struct LiveParams {
   double fibre_eta = -1;   ///< fibre stiffness (Pa; 0 = none); a set without a direction gets x
   int prony_terms = -1;    ///< Prony terms (0 = elastic), with prony_g / prony_tau
   double prony_g[kMaxProny] = {}, prony_tau[kMaxProny] = {};
+  /// Every tool's Coulomb friction coefficient (docs/contact.md); < 0: the
+  /// scene's. Changed live by HapticLoop::set_friction, without a rebuild.
+  double friction = -1;
 };
 
 /// Builds the Engine the loop runs (session/engine.hpp: the model, a backend
@@ -187,6 +190,12 @@ class HapticLoop {
   /// Requests new parameters; applied between ticks (immediately when
   /// stopped). A failed rebuild keeps the running simulation; status() says why.
   void request_params(const LiveParams& params);
+
+  /// Every tool's friction coefficient from the next tick on (between two
+  /// ticks, no rebuild: the contacts stay), and in the parameters a later
+  /// rebuild uses. Throws std::invalid_argument (at once) for a value that
+  /// is not finite and >= 0.
+  void set_friction(double mu);
 
   /// Runs task(simulation) on the haptic thread between two ticks (on the
   /// calling thread when stopped). The future carries its exception.

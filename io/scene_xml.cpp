@@ -393,13 +393,14 @@ Constraint Reader::read_selection(pugi::xml_node n) const {
 }
 
 scene::Tool Reader::read_tool(pugi::xml_node n) const {
-  check_attributes(n, {"name", "radius", "shaft-length", "direction", "device", "path"});
+  check_attributes(n, {"name", "radius", "shaft-length", "friction", "direction", "device", "path"});
   check_children(n, {"waypoint"});
   scene::Tool t;
   t.line = line(n);
   if (n.attribute("name")) t.name = n.attribute("name").value();
   t.radius = real_or(n, "radius", t.radius);
   t.shaft = real_or(n, "shaft-length", t.shaft);
+  t.friction = real_or(n, "friction", t.friction);
   if (n.attribute("direction")) {
     double d[3];
     triple(n, "direction", d);
@@ -625,6 +626,7 @@ void write_tool(pugi::xml_node root, const scene::Tool& t) {
   set(n, "name", t.name);
   set(n, "radius", num(t.radius));
   if (t.shaft != 0) set(n, "shaft-length", num(t.shaft));
+  if (t.friction != 0) set(n, "friction", num(t.friction));
   set(n, "direction", triple_text(t.direction));
   set(n, "device", t.device);
   if (!t.path_file.empty()) {

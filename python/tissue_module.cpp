@@ -499,7 +499,13 @@ void bind_simulation(py::module_& m) {
         locked(s, [&](Simulation& x) { x.follow_scene_path(tool); });
       }, py::arg("tool"))
       .def("tool_radius", [](PySimulation& s, int tool) { return s.value.tool_radius(tool); }, py::arg("tool"))
-      .def("tool_shaft", [](PySimulation& s, int tool) { return s.value.tool_shaft(tool); }, py::arg("tool"));
+      .def("tool_shaft", [](PySimulation& s, int tool) { return s.value.tool_shaft(tool); }, py::arg("tool"))
+      .def("tool_friction", [](PySimulation& s, int tool) { return s.value.tool_friction(tool); }, py::arg("tool"),
+           "The tool's Coulomb friction coefficient mu (0 = frictionless)")
+      .def("set_tool_friction", [](PySimulation& s, int tool, double mu) {
+        locked(s, [&](Simulation& x) { x.set_tool_friction(tool, mu); });
+      }, py::arg("tool"), py::arg("mu"),
+           "The tool's Coulomb friction coefficient from the next tick on (finite, >= 0), contacts kept");
   bind_simulation_steps(cls);
   bind_simulation_fields(cls);
 }
@@ -815,6 +821,12 @@ void bind_batch(py::module_& m) {
         const tissue::Vector3 a = axis.is_none() ? tissue::Vector3{0, 0, 0} : vector3(axis, "axis");
         locked(b, [&](tissue::Batch& x) { x.set_tool_pose(scene, tool, t, a); });
       }, py::arg("scene"), py::arg("tool"), py::arg("tip"), py::arg("axis") = py::none())
+      .def("tool_friction", [](PyBatch& b, int scene, int tool) { return b.value.tool_friction(scene, tool); },
+           py::arg("scene"), py::arg("tool"))
+      .def("set_tool_friction", [](PyBatch& b, int scene, int tool, double mu) {
+        locked(b, [&](tissue::Batch& x) { x.set_tool_friction(scene, tool, mu); });
+      }, py::arg("scene"), py::arg("tool"), py::arg("mu"),
+           "One scene's tool's Coulomb friction coefficient from its next tick on")
       .def("set_tool_poses", [](PyBatch& b, py::handle tips, py::handle axes) {
         const std::size_t n = b.value.size(), t = std::size_t(b.value.max_tools());
         if (py::hasattr(tips, "__cuda_array_interface__") && axes.is_none()) {  // a device array: one copy

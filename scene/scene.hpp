@@ -97,6 +97,7 @@ struct Tool {
   std::string name = "probe";
   double radius = 2e-3;             ///< tip and shaft radius (m): the loaded patch, physical
   double shaft = 0;                 ///< shaft length (m) from the tip along the direction; 0 = a sphere
+  double friction = 0;              ///< Coulomb's mu at its contacts (>= 0); 0 = frictionless
   Vec3<double> direction = {0, 0, 1};  ///< shaft axis, tip -> handle, used when the device has no orientation
   std::string device = "scripted";  ///< "scripted" | "mouse" | "phantom"
   std::string path_file;            ///< CSV t,x,y,z[,grasp][,ax,ay,az] (io/path_csv) relative to the scene file;

@@ -433,7 +433,7 @@ void check_tool(const Scene& s, const Tool& t) {
   const std::string what = fmt::format("tool '{}'", t.name);
   const MeshBox b = mesh_box(s.nodes);
   const double ext = b.largest_extent();  // a tool wider than the body cannot touch it as a tool
-  if (const std::string e = tool_shape_error({t.name, t.radius, t.shaft}, ext); !e.empty()) fail(s, t.line, e);
+  if (const std::string e = tool_shape_error({t.name, t.radius, t.shaft, t.friction}, ext); !e.empty()) fail(s, t.line, e);
   if (ext > 0 && t.radius < kMinToolRadius * ext)
     fail(s, t.line,
          fmt::format("{}: radius = {} m is below {:g} of the body's largest extent ({:.4g} m), the smallest "
@@ -577,7 +577,7 @@ SchedulerSettings scheduler_settings(const Scene& scene) {
   check_tools(scene);
   SchedulerSettings st;
   st.tools.clear();
-  for (const Tool& t : scene.tools) st.tools.push_back({{t.name, t.radius, t.shaft}, t.direction});
+  for (const Tool& t : scene.tools) st.tools.push_back({{t.name, t.radius, t.shaft, t.friction}, t.direction});
   st.depth = scene.solver.depth;
   st.tick = scene.solver.tick;
   st.residual_tol = scene.solver.residual_tol;

@@ -50,6 +50,19 @@ void Session::check_tool(int tool) const {
                                             n_tools(), n_tools() == 1 ? "" : "s", n_tools() - 1));
 }
 
+void Session::set_tool_friction(int tool, double friction) {
+  check_tool(tool);
+  if (const std::string e = tool_friction_error(scene().tools[std::size_t(tool)].name, friction); !e.empty())
+    throw std::invalid_argument(fmt::format("{}: set_tool_friction: {}", name(), e));
+  scheduler().set_tool_friction(tool, friction);
+  settings_.tools[std::size_t(tool)].shape.friction = friction;  // kept by restart()
+}
+
+double Session::tool_friction(int tool) const {
+  check_tool(tool);
+  return settings_.tools[std::size_t(tool)].shape.friction;
+}
+
 void Session::set_tool_pose(int tool, Vec3<double> tip, Vec3<double> axis) {
   check_tool_pose(tool, tip, axis);
   device(tool).set_pose(tip, axis);

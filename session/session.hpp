@@ -92,6 +92,12 @@ class Session {
   HostDevice& device(int tool) { return devices_.at(std::size_t(tool)); }
   /// Throws std::invalid_argument naming the scene when tool is not one of its tools.
   void check_tool(int tool) const;
+  /// Tool `tool`'s Coulomb coefficient from the next tick on, also across
+  /// restart() (the scene's `friction` until then). Throws std::invalid_argument naming the scene
+  /// and the tool for a tool that does not exist or a coefficient that is
+  /// not finite and >= 0.
+  void set_tool_friction(int tool, double friction);
+  double tool_friction(int tool) const;
   /// The host drives tool `tool` to this pose from the next tick on (HostDevice::set_pose). Throws
   /// std::invalid_argument, naming the tool and the value, for a tool that does not exist, a pose that is
   /// not finite, or a tip farther from the mesh than a scene's waypoints may be (scene::kToolReach).

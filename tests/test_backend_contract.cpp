@@ -4,7 +4,8 @@
 // reference, zero force at rest and under rigid motion, the region, the
 // inverted-element flag, the reductions, identical errors for bad input (the
 // checks live once, in Backend), and the tool contact of core/contact.hpp:
-// no penetration, frictionless reaction that never pulls, the equilibrium
+// no penetration, a reaction that never pulls, Coulomb friction (stick,
+// slide), the equilibrium
 // balance of tool and supports, grasping, several tools, small tools caught
 // by faces, fast tools sub-stepped, rigid supports reported, the region
 // seeded by contact candidates, a tool that starts inside the surface.
@@ -15,6 +16,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <memory>
 #include <string>
 #include <vector>
@@ -448,6 +450,84 @@ TEST_P(Contract, ContactNeverPullsAndEndsWhenTheToolWithdraws) {
   EXPECT_EQ(rep.contact_nodes, 0);
   EXPECT_EQ(norm(rep.force), 0.0);
   EXPECT_TRUE(b->contacts().empty());
+}
+
+/// What a sphere of 8 mm pressed 0.8 mm into the slab (a shallow press: the
+/// contact's slopes stay below 0.32) and dragged 4 mm along +x at 10 mm/s
+/// (from t = 0.3 to 0.7 s) feels, with friction coefficient mu.
+struct Drag {
+  double ratio_early = 0;    ///< -F_x / F_z on the tool after 0.1 mm of drag
+  double node_dx_early = 0;  ///< x displacement of the contact node nearest the tool's axis then (m)
+  double ratio_end = 0;      ///< -F_x / F_z at the end of the drag (4 mm)
+  double node_dx = 0;        ///< that node's x displacement at the end (m)
+  double support_gap = 0;    ///< |F_tool - sum of the supports' reactions| / |F_tool| at the end
+};
+
+Drag drag_sphere(Backend& b, const TissueModel<double>& m, double mu) {
+  const double r = 0.008;
+  ToolSetting tool = sphere(r);
+  tool.shape.friction = mu;
+  Scheduler sched(b, m, tools_settings({tool}));
+  const Vec3<double> touch{0.014, 0.02, kTop + r};
+  const Vec3<double> down{0, 0, -0.0008}, along{0.004, 0, 0};
+  ScriptedDevice dev({{0.0, touch + Vec3<double>{0, 0, 0.002}},
+                      {0.1, touch + down},
+                      {0.3, touch + down},
+                      {0.7, touch + down + along},
+                      {1.0, touch + down + along}});
+  const index_t n = m.n_nodes;
+  // the x displacement of the contact node nearest the tool's axis
+  const auto nearest_dx = [&](const Fields& f, Vec3<double> tool_tip) {
+    double nearest = INFINITY, dx = 0;
+    for (const ContactNode& c : b.contacts()) {
+      const Vec3<double> x = Vec3<double>{m.X[c.node], m.X[n + c.node], m.X[2 * n + c.node]} + node_u(f.u, n, c.node);
+      const double off = std::hypot(x.x - tool_tip.x, x.y - tool_tip.y);
+      if (off < nearest) nearest = off, dx = f.u[c.node];
+    }
+    return dx;
+  };
+  Drag d;
+  TickReport rep;
+  while (sched.time() < 0.31 - 1e-9) rep = sched.tick(dev);
+  d.ratio_early = -rep.force.x / rep.force.z;
+  d.node_dx_early = nearest_dx(b.download(), rep.tool);
+  while (sched.time() < 0.7 - 1e-9) rep = sched.tick(dev);
+  d.ratio_end = -rep.force.x / rep.force.z;
+  const Fields f = b.download();
+  d.node_dx = nearest_dx(f, rep.tool);
+  Vec3<double> support{0, 0, 0};
+  for (index_t a = 0; a < n; ++a)
+    if (m.node_flags[a] & kFixed) support = support + node_u(f.f, n, a);
+  d.support_gap = norm(rep.force - support) / norm(rep.force);
+  return d;
+}
+
+// Coulomb friction (core/node_rules.hpp coulomb_slip, core/contact.hpp
+// contact_reaction): a sphere dragged along the surface first carries the
+// tissue with it, below mu times the normal force, then slides, adding mu
+// times the normal force to what the frictionless drag feels (the tissue
+// heaped before a moving tool: a few per cent of it, on this coarse mesh);
+// a rougher one stays stuck; the supports feel what the tool feels.
+TEST_P(Contract, ADraggedSphereSlidesAtMuTimesTheNormalForceAndSticksBelowIt) {
+  const auto m = slab(12);  // 3.3 mm cells
+  const Drag smooth = drag_sphere(*make(m), m, 0.0), sliding = drag_sphere(*make(m), m, 0.3),
+             sticking = drag_sphere(*make(m), m, 5.0);
+  std::printf("[measured] drag -F_x/F_z at 0.1 mm and 4 mm: mu 0 %.4f %.4f, mu 0.3 %.4f %.4f, mu 5 %.4f %.4f; nearest "
+              "contact node's dx (mm) %.4f %.4f, %.4f %.4f, %.4f %.4f; support gaps %.3g %.3g %.3g\n",
+              smooth.ratio_early, smooth.ratio_end, sliding.ratio_early, sliding.ratio_end, sticking.ratio_early,
+              sticking.ratio_end, 1e3 * smooth.node_dx_early, 1e3 * smooth.node_dx, 1e3 * sliding.node_dx_early,
+              1e3 * sliding.node_dx, 1e3 * sticking.node_dx_early, 1e3 * sticking.node_dx, smooth.support_gap,
+              sliding.support_gap, sticking.support_gap);
+  EXPECT_LT(std::fabs(smooth.ratio_end), 0.03) << "frictionless: only the heap before the moving tool";
+  EXPECT_NEAR(sliding.ratio_end - smooth.ratio_end, 0.3, 0.015) << "sliding: mu N more than frictionless";
+  EXPECT_LT(sliding.ratio_early, 0.3) << "sticking: below the cone";
+  EXPECT_GT(sliding.node_dx_early, 0.7e-4) << "the node under the tool moved with it (0.1 mm)";
+  EXPECT_LT(sliding.node_dx, 1e-3) << "then slid: the tool went on 4 mm";
+  EXPECT_GT(sticking.ratio_end, 1.0) << "mu 5: still stuck after 4 mm, the shear keeps growing";
+  EXPECT_GT(sticking.node_dx, 0.0039) << "a stuck node moves with the tool (4 mm)";
+  EXPECT_LT(std::fabs(smooth.node_dx), 0.2e-3) << "a frictionless tool slides over the tissue";
+  for (const Drag* d : {&smooth, &sliding, &sticking})
+    EXPECT_LT(d->support_gap, 0.05) << "the supports balance the tool's force, tangential part included";
 }
 
 TEST_P(Contract, GraspedTissueFollowsTheToolAndPullsBack) {

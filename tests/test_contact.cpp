@@ -2557,6 +2557,36 @@ TYPED_TEST(Reaction, PushedGraspedAndOthers) {
   }
 }
 
+TYPED_TEST(Reaction, FrictionClampsTheTangentialForceToTheCoulombCone) {
+  using T = TypeParam;
+  const Vec3<T> n{0, 0, 1};
+  // f_n = 2, f_t = (0.6, 0.8): |f_t| = 1 -- inside the cone of mu 0.5 (it sticks: all of f), on it for
+  // mu = 0.5 exactly, and beyond it for mu 0.25 (it slides: mu f_n = 0.5 along f_t)
+  const Vec3<T> f{T(0.6), T(0.8), 2};
+  EXPECT_LE(dist(contact_reaction<T>(kPushed, f, n, 0, T(0.6)), f), tol<T>(4));
+  EXPECT_LE(dist(contact_reaction<T>(kPushed, f, n, 0, T(0.5)), f), tol<T>(4));
+  EXPECT_LE(dist(contact_reaction<T>(kPushed, f, n, 0, T(0.25)), Vec3<T>{T(0.3), T(0.4), 2}), tol<T>(4));
+  // frictionless: the normal part alone, the same bits as without a coefficient
+  const Vec3<T> r0 = contact_reaction<T>(kPushed, f, n, 0, T(0)), r = contact_reaction<T>(kPushed, f, n, 0);
+  EXPECT_TRUE(r0.x == r.x && r0.y == r.y && r0.z == r.z);
+  // a node pulled into the tool feels nothing along it either; a grasp keeps its whole force
+  const Vec3<T> pulled = contact_reaction<T>(kPushed, Vec3<T>{1, 0, -1}, n, 0, T(10));
+  EXPECT_TRUE(pulled.x == T(0) && pulled.y == T(0) && pulled.z == T(0));
+  EXPECT_LE(dist(contact_reaction<T>(kGrasped, f, n, 0, T(0.25)), f), 0.0);
+  // random: within the cone, continuous in mu, and its normal part is (f . n)+
+  Rng rng(92);
+  for (int it = 0; it < 1000; ++it) {
+    const Vec3<T> fr = as<T>(rng.vec()), nr = as<T>(rng.unit());
+    const T mu = T(rng.uni(0, 2));
+    const Vec3<T> got = contact_reaction<T>(kPushed, fr, nr, 0, mu);
+    const double fn = std::max(0.0, double(dot(L(fr), L(nr))));
+    const double gn = double(dot(L(got), L(nr)));
+    const double gt = double(norm(L(got) - dot(L(got), L(nr)) * L(nr)));
+    EXPECT_NEAR(gn, fn, tol<T>(4));
+    EXPECT_LE(gt, double(mu) * fn + tol<T>(8));
+  }
+}
+
 TEST(ContactToolsAs, ConvertsEveryField) {
   ContactTools<double> d{};
   d.n_tools = 2;
@@ -2566,6 +2596,7 @@ TEST(ContactToolsAs, ConvertsEveryField) {
   d.tool[1] = one_tool<double>({-1, -2, -3}, {1, 0, 0}, {0.1, 0.2, 0.3}, {0, 0, -1}, 1e-3, 0, 3).tool[0];
   d.tool[1].grasping = 1;
   d.tool[1].grasp_tip = {9, 8, 7};
+  d.tool[1].friction = 0.35;
   const ContactTools<float> f = contact_tools_as<float>(d);
   EXPECT_EQ(f.n_tools, 2);
   EXPECT_EQ(f.steps, 5);
@@ -2577,6 +2608,7 @@ TEST(ContactToolsAs, ConvertsEveryField) {
     EXPECT_EQ(b.shaft, float(a.shaft));
     EXPECT_EQ(b.substeps, a.substeps);
     EXPECT_EQ(b.grasping, a.grasping);
+    EXPECT_EQ(b.friction, float(a.friction));
     using P = std::pair<Vec3<double>, Vec3<float>>;
     for (const P& p : {P{a.tip0, b.tip0}, P{a.tip1, b.tip1}, P{a.axis0, b.axis0}, P{a.axis1, b.axis1},
                        P{a.grasp_tip, b.grasp_tip}, P{a.grasp_axis, b.grasp_axis}}) {
@@ -2592,6 +2624,28 @@ TEST(ContactToolsAs, ConvertsEveryField) {
 template <class T>
 class NodeRules : public ::testing::Test {};
 TYPED_TEST_SUITE(NodeRules, Scalars);
+
+TYPED_TEST(NodeRules, CoulombSlipSticksWithinTheConeAndSlidesByMuTimesThePushBeyondIt) {
+  using T = TypeParam;
+  const Vec3<T> n{0, 0, 1}, u_now{T(1e-3), 0, 0}, w{T(2e-4), 0, 0};  // the tool moved 0.2 mm along x
+  // the node ends 0.1 mm along x and 0.05 mm along y from where the tool carries it, pushed 0.1 mm
+  const Vec3<T> u1 = u_now + w + Vec3<T>{T(1e-4), T(5e-5), T(1e-4)};
+  const T push = T(1e-4), slip = std::sqrt(T(1.25e-8));
+  // mu 2: within the cone (|slip| <= 2 push): it sticks, moving with the tool (its normal part stays)
+  const Vec3<T> stuck = coulomb_slip<T>(0, u_now, u1, n, w, push, T(2));
+  EXPECT_LE(dist(stuck, u_now + w + Vec3<T>{0, 0, T(1e-4)}), tol<T>(8) * T(1e-3));
+  // mu 0.5: it slides, the slip shortened by mu push = 0.05 mm along itself
+  const Vec3<T> slid = coulomb_slip<T>(0, u_now, u1, n, w, push, T(0.5));
+  const T keep = (slip - T(5e-5)) / slip;
+  EXPECT_LE(dist(slid, u_now + w + Vec3<T>{keep * T(1e-4), keep * T(5e-5), T(1e-4)}), tol<T>(8) * T(1e-3));
+  // frictionless: unchanged, the same bits
+  const Vec3<T> same = coulomb_slip<T>(0, u_now, u1, n, w, push, T(0));
+  EXPECT_TRUE(same.x == u1.x && same.y == u1.y && same.z == u1.z);
+  // a held component (y) does not move
+  const Vec3<T> roller = coulomb_slip<T>(2, u_now, u1, n, w, push, T(2));
+  EXPECT_EQ(roller.y, u1.y);
+  EXPECT_LE(std::fabs(roller.x - (u_now.x + w.x)), tol<T>(8) * T(1e-3));
+}
 
 TYPED_TEST(NodeRules, NodeNextHoldsMaskedComponents) {
   using T = TypeParam;

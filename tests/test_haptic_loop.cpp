@@ -246,6 +246,22 @@ TEST(HapticLoop, ParameterChangesAreAppliedBetweenTicksOrRefused) {
   EXPECT_TRUE(loop.snapshot().region.whole());
 }
 
+TEST(HapticLoop, FrictionChangesBetweenTicksWithoutARebuild) {
+  ScriptedDevice dev = press_device();
+  HapticLoop loop(dev, box_factory(false), LiveParams{});
+  loop.start();
+  ASSERT_TRUE(wait_for(loop, [](const HapticSnapshot& s) { return s.tick >= 10; }));
+  loop.set_friction(0.35);
+  ASSERT_TRUE(wait_for(loop, [](const HapticSnapshot& s) { return s.params.friction == 0.35; }));
+  double got = -1;
+  loop.post([&](Engine& sim) { got = sim.backend->tools().at(0).friction; }).get();
+  EXPECT_EQ(got, 0.35);
+  EXPECT_EQ(loop.snapshot().sim_version, 1) << "no rebuild";
+  EXPECT_THROW(loop.set_friction(-1), std::invalid_argument);
+  EXPECT_THROW(loop.set_friction(NAN), std::invalid_argument);
+  loop.stop();
+}
+
 /// Records the times it is read at.
 struct ClockProbe : Device {
   std::vector<double> t;

@@ -354,6 +354,17 @@ TEST(SceneValidate, ShaftFarLongerThanTheMesh) {
   EXPECT_NO_THROW(validate(s));
 }
 
+TEST(SceneValidate, FrictionMustBeFiniteAndNotNegative) {
+  Scene s = valid_scene();
+  s.tools[0].friction = -0.2;
+  EXPECT_TRUE(rejects(s, {"organ.xml:15: ", "tool 'probe': friction = -0.2 must be finite and >= 0"}));
+  s.tools[0].friction = INFINITY;
+  EXPECT_TRUE(rejects(s, {"tool 'probe': friction = inf"}));
+  s.tools[0].friction = 0.4;
+  EXPECT_NO_THROW(validate(s));
+  EXPECT_EQ(scheduler_settings(s).tools.at(0).shape.friction, 0.4);
+}
+
 // radius="1e-300" was accepted and pressed nothing: the radius must be at
 // least a millionth of the body's largest extent.
 TEST(SceneValidate, RadiusFarBelowTheBody) {

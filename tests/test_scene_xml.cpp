@@ -108,6 +108,7 @@ void expect_same_scene(const Scene& a, const Scene& b) {
     EXPECT_EQ(x.name, y.name);
     EXPECT_EQ(x.radius, y.radius);
     EXPECT_EQ(x.shaft, y.shaft);
+    EXPECT_EQ(x.friction, y.friction);
     for (int c = 0; c < 3; ++c) EXPECT_EQ(x.direction[c], y.direction[c]);
     EXPECT_EQ(x.device, y.device);
     EXPECT_EQ(x.path_file, y.path_file);
@@ -167,6 +168,7 @@ Scene rich_scene() {
   probe.name = "probe";
   probe.radius = 1.5e-3;
   probe.shaft = 0.025;
+  probe.friction = 0.35;
   probe.direction = {0.1, 0, 1};
   probe.path = press_path({0.015, 0.01, 0.017}, {0, 0, -1}, 3e-3, 1e-2);
   probe.path[2].grasp = true;

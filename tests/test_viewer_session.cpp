@@ -41,6 +41,16 @@ TEST(ViewerSession, EditsMakeTheKidneyViscoelasticAndFibred) {
   EXPECT_FALSE(scene::load_model(with_params(s.scene, keep)).has_visco());
 }
 
+TEST(ViewerSession, FrictionEditsReachEveryToolAndRebuildsKeepThem) {
+  const Session s = make_session(io::default_kidney_scene(), "", "", "");
+  EXPECT_EQ(s.params.friction, 0.0);  // the kidney's probe is frictionless
+  LiveParams p = s.params;
+  p.friction = 0.4;
+  for (const scene::Tool& t : with_params(s.scene, p).tools) EXPECT_EQ(t.friction, 0.4);
+  p.friction = -1;  // the scene's
+  for (const scene::Tool& t : with_params(s.scene, p).tools) EXPECT_EQ(t.friction, 0.0);
+}
+
 TEST(ViewerSession, BadEditsNameTheSceneAndTheMaterial) {
   const Session s = make_session(io::default_kidney_scene(), "", "", "");
   LiveParams p = s.params;

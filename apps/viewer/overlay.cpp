@@ -172,6 +172,16 @@ bool Overlay::edit_region_and_precision() {
   return changed;
 }
 
+std::optional<double> Overlay::edit_friction(const HapticSnapshot& s) {
+  if (friction_sent_ && std::fabs(s.params.friction - *friction_sent_) < 1e-12) friction_sent_.reset();
+  double mu = friction_sent_.value_or(std::max(s.params.friction, 0.0));
+  const double lo = 0, hi = 1.5;
+  if (!ImGui::SliderScalar("tool friction", ImGuiDataType_Double, &mu, &lo, &hi, "mu %.2f")) return std::nullopt;
+  friction_sent_ = mu;
+  edit_.friction = mu;
+  return mu;
+}
+
 OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, const std::string& status, int w, int h,
                              const DisplayState& display) {
   OverlayActions act;
@@ -199,6 +209,7 @@ OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, con
   ImGui::Separator();
   const bool material = edit_material(f);
   const bool region = edit_region_and_precision();
+  act.friction = edit_friction(s);
   editing_ = editing_ || material || region;
   if (ImGui::Button("Apply (rebuild)")) {
     act.apply = edit_;

@@ -2,7 +2,8 @@
 // reach the vertex buffer), how fast (TLED steps/s, haptic rate, tick
 // percentiles and jitter, late ticks), what the tool feels (force, contact,
 // region size), and controls for E, nu, region depth and precision that the
-// haptic loop applies between ticks; the field the surface is coloured by
+// haptic loop applies between ticks (the tools' friction live, without a
+// rebuild); the field the surface is coloured by
 // with its legend, and each tool's force over the last seconds. Uses Debian's libimgui (core) with the
 // GLFW and OpenGL 3 backends compiled from libimgui-dev's example sources;
 // without a GLFW window (EGL) it feeds ImGui the display size itself.
@@ -37,6 +38,7 @@ struct OverlayActions {
   std::optional<LiveParams> apply;  ///< rebuild with these parameters
   bool reset = false;               ///< rebuild with the running parameters (tissue at rest)
   std::optional<FieldKind> field;   ///< colour the surface by this field from now on
+  std::optional<double> friction;   ///< every tool's friction coefficient, live (HapticLoop::set_friction)
 };
 
 class Overlay {
@@ -62,10 +64,13 @@ class Overlay {
   bool edit_material(const OverlayFacts& f);
   /// The region and precision controls on edit_; true when one changed.
   bool edit_region_and_precision();
+  /// The tools' friction slider (applied live, no rebuild): the new value when it moved.
+  std::optional<double> edit_friction(const HapticSnapshot& s);
 
   bool glfw_ = false;
   bool editing_ = false;  ///< the controls hold the user's values, not the running ones
   LiveParams edit_;
+  std::optional<double> friction_sent_;  ///< the slider's last value until the snapshot carries it
   float rect_[4] = {0, 0, 0, 0};
 };
 

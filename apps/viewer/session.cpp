@@ -34,6 +34,8 @@ scene::Scene with_params(scene::Scene s, const LiveParams& p) {
       for (int i = 0; i < std::min(p.prony_terms, kMaxProny); ++i) m.prony.push_back({p.prony_g[i], p.prony_tau[i], m.line});
     }
   }
+  if (p.friction >= 0)
+    for (scene::Tool& t : s.tools) t.friction = p.friction;
   s.solver.depth = p.depth;
   s.solver.precision = p.precision;
   return s;
@@ -70,6 +72,10 @@ Session make_session(scene::Scene scene, const std::string& backend, const std::
       s.params.prony_tau[i] = m.prony[i].tau;
     }
   }
+  // the tools' friction, edited live for all of them; tools that differ: the scene's until then
+  s.params.friction = scene.tools.empty() ? 0 : scene.tools.front().friction;
+  for (const scene::Tool& t : scene.tools)
+    if (t.friction != s.params.friction) s.params.friction = -1;
   const double inf = std::numeric_limits<double>::infinity();
   s.bounds = {{inf, inf, inf}, {-inf, -inf, -inf}};
   for (size_t i = 0; i + 2 < scene.nodes.size(); i += 3)

@@ -429,6 +429,7 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
           overlay->draw(facts, snap, loop.status(), v.camera.width, v.camera.height, {&v.field, &v.forces});
       if (act.apply) loop.request_params(*act.apply);
       if (act.field) field = *act.field;
+      if (act.friction) loop.set_friction(*act.friction);
       if (act.reset) loop.request_params(snap.params);
     }
     if (win) v.ctx->swap_buffers();

@@ -157,6 +157,24 @@ int main(void) {
   CHECK(u[3 * id(1, 1, 2) + 2] < -2e-4); /* the top centre went down */
   CHECK(u[3 * id(1, 1, 0) + 2] == 0.0);  /* the base is fixed */
 
+  /* Friction set live: the tool dragged 0.5 mm along x is held back by the tissue, at most mu N. */
+  CHECK(tissue_tool_friction(sim, 0) == 0.0);
+  CHECK(tissue_set_tool_friction(sim, 0, 0.5) == TISSUE_OK);
+  CHECK(tissue_tool_friction(sim, 0) == 0.5);
+  for (int k = 1; k <= 100; ++k) {
+    const double tip[3] = {0.005 + k * 5e-6, 0.005, 0.01 + 3e-3 - 5e-4};
+    CHECK(tissue_set_tool_pose(sim, 0, tip, NULL) == TISSUE_OK);
+    CHECK(tissue_step(sim, 1) == TISSUE_OK);
+  }
+  CHECK(tissue_tool_force(sim, 0, f) == TISSUE_OK);
+  CHECK(f[2] > 1e-4 && f[0] < -0.05 * f[2] && -f[0] <= 0.5 * f[2] * (1 + 1e-9));
+  CHECK(tissue_set_tool_friction(sim, 0, -1.0) == TISSUE_BAD_ARGUMENT);
+  CHECK(contains(tissue_last_error(), "friction = -1"));
+  CHECK(tissue_set_tool_friction(sim, 2, 0.1) == TISSUE_BAD_ARGUMENT);
+  CHECK(contains(tissue_last_error(), "tool 2"));
+  CHECK(isnan(tissue_tool_friction(sim, 2)) && isnan(tissue_tool_friction(NULL, 0)));
+  CHECK(tissue_set_tool_friction(NULL, 0, 0.1) == TISSUE_BAD_ARGUMENT);
+
   /* Misuse: a status and a message, never a crash. */
   CHECK(tissue_read_field(sim, TISSUE_FIELD_DISPLACEMENT, u, 7) == TISSUE_BAD_ARGUMENT);
   CHECK(contains(tissue_last_error(), "holds 7"));

@@ -397,3 +397,36 @@ def test_every_exported_field_has_its_method_at_its_declared_shape():
         scene = getattr(batch, name)(1)
         assert b.shape[0] == 2 and b.shape[1:] == scene.shape, name
         np.testing.assert_array_equal(b[1], scene)
+
+
+def test_friction_changes_live_and_the_drag_slides_at_mu():
+    """An 8 mm sphere pressed 0.8 mm into the block and dragged along x at 10 mm/s: frictionless, it feels
+    little tangential force (the tissue heaped before it); with mu = 0.4 set while it drags, the tissue holds
+    it back by 0.4 of the normal force more."""
+    sim = block(E=3000.0, n=(12, 12, 6), size=(0.04, 0.04, 0.02), radius=8e-3, backend="cpu", precision="double",
+                depth="all")
+    assert sim.tool_friction(0) == 0.0
+    depth = 0.8e-3
+    press(sim, depth, ramp=100, hold=100, centre=(0.014, 0.02, 0.02))
+    r = sim.tool_radius(0)
+
+    def drag(ticks, start):
+        f = None
+        for k in range(ticks):
+            sim.set_tool_pose(0, [start + 1e-5 * (k + 1), 0.02, 0.02 + r - depth])
+            f = sim.step().tools[0].force
+        return -f[0] / f[2], start + 1e-5 * ticks
+
+    frictionless, x = drag(150, 0.014)
+    assert abs(frictionless) < 0.05
+    sim.set_tool_friction(0, 0.4)
+    assert sim.tool_friction(0) == 0.4
+    sliding, x = drag(250, x)
+    assert sliding - frictionless == pytest.approx(0.4, abs=0.03)  # the force on the tool points back
+    for bad in (-0.1, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="friction"):
+            sim.set_tool_friction(0, bad)
+    with pytest.raises(ValueError, match="tool 3 does not exist"):
+        sim.set_tool_friction(3, 0.2)
+    sim.reset()
+    assert sim.tool_friction(0) == 0.4  # kept across reset, as loads are

@@ -150,6 +150,9 @@ class Batch {
   /// device memory.
   void set_tool_poses_from_device(std::uintptr_t tips, std::size_t count, bool single = false);
   void set_grasp(int scene, int tool, bool down);
+  /// One scene's tool's Coulomb coefficient (Simulation::set_tool_friction).
+  void set_tool_friction(int scene, int tool, double mu);
+  double tool_friction(int scene, int tool) const;
   /// A new scripted path for a tool, followed from the next tick on.
   void set_tool_path(int scene, int tool, const std::vector<PathPoint>& path);
   /// Hands the tool back to its scripted path.

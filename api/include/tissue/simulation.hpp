@@ -160,6 +160,15 @@ class Simulation {
   /// The tool's shape: radius and shaft length (m).
   double tool_radius(int tool) const;
   double tool_shaft(int tool) const;
+  /// The tool's Coulomb friction coefficient mu at its contacts (the
+  /// scene's `friction`, 0 = frictionless): a contact node sticks to the
+  /// tool while its tangential force is at most mu times its normal force,
+  /// and slides with mu times it beyond (docs/contact.md, "Friction").
+  /// set_tool_friction changes it from the next tick on, keeping the
+  /// contacts, also across reset(); throws std::invalid_argument naming
+  /// the tool for a value that is not finite and >= 0.
+  double tool_friction(int tool) const;
+  void set_tool_friction(int tool, double mu);
 
   // --- loads ---
   /// Constant external forces (dead loads) from the next tick on: x y z

@@ -84,6 +84,10 @@ double tissue_tick_seconds(const tissue_simulation* sim);
  * (the scene's shaft direction). From the first call the host drives it. */
 tissue_status tissue_set_tool_pose(tissue_simulation* sim, int tool, const double tip[3], const double axis[3]);
 tissue_status tissue_set_grasp(tissue_simulation* sim, int tool, int down);
+/* The tool's Coulomb friction coefficient (>= 0; 0 = frictionless) from
+ * the next tick on; tissue_tool_friction reads it (NaN for a bad tool). */
+tissue_status tissue_set_tool_friction(tissue_simulation* sim, int tool, double mu);
+double tissue_tool_friction(const tissue_simulation* sim, int tool);
 /* Constant external forces from the next tick on: x y z (N) per node of
  * nodes (count nodes, 3 count forces); replaces the scene's loads; count 0
  * removes every load (nodes and forces may then be NULL). */
@@ -127,6 +131,8 @@ tissue_status tissue_batch_set_material(tissue_batch* batch, int scene, const ch
                                         double poisson_ratio, double density);
 tissue_status tissue_batch_set_tool_pose(tissue_batch* batch, int scene, int tool, const double tip[3],
                                          const double axis[3]);
+/* One scene's tool's Coulomb friction coefficient from its next tick on. */
+tissue_status tissue_batch_set_tool_friction(tissue_batch* batch, int scene, int tool, double mu);
 /* Every scene's tool tips (and axes, or NULL) at once: count = size x
  * max_tools x 3 values, row-major. */
 tissue_status tissue_batch_set_tool_poses(tissue_batch* batch, const double* tips, const double* axes, size_t count);
