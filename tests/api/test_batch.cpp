@@ -225,6 +225,42 @@ TEST_P(BatchEquals, ScenesOfOneMeshWithDifferentMaterialsRunTogetherAndEqualEach
   EXPECT_GT(mag(batch.last(1).tools[0].force), mag(batch.last(0).tools[0].force)) << "stiffer, deeper";
 }
 
+// Blocks of one mesh whose tools have friction coefficients of their own (set live, per scene), pressed and then
+// dragged sideways: on cuda one group whose reductions read each slot's coefficient; each equals its scene
+// alone, and the drag's tangential force grows with the coefficient.
+TEST_P(BatchEquals, ScenesWithTheirOwnFrictionRunTogetherAndEqualEachAlone) {
+  const std::vector<double> mu = {0, 0.2, 0.5, 5};
+  std::vector<BatchScene> list;
+  std::vector<Simulation> alone;
+  for (std::size_t i = 0; i < mu.size(); ++i) {
+    list.push_back(mesh(block(3000)));
+    alone.push_back(Simulation::from_mesh(block(3000), options()));
+  }
+  Batch batch = Batch::load(list, options());
+  for (std::size_t i = 0; i < mu.size(); ++i) {
+    batch.set_tool_friction(int(i), 0, mu[i]);
+    alone[i].set_tool_friction(0, mu[i]);
+    EXPECT_EQ(batch.tool_friction(int(i), 0), mu[i]);
+  }
+  const int ticks = 90;
+  for (long k = 1; k <= ticks; ++k) {
+    const double x = 0.01 + (k > 40 ? 2e-5 * double(k - 40) : 0.0);  // pressed 1 mm, then dragged 1 mm along x
+    for (std::size_t i = 0; i < mu.size(); ++i) {
+      batch.set_tool_pose(int(i), 0, press_pose(k, 1e-3, x));
+      alone[i].set_tool_pose(0, press_pose(k, 1e-3, x));
+    }
+    EXPECT_EQ(batch.step(), mu.size());
+    for (Simulation& s : alone) s.step();
+  }
+  if (GetParam().backend == "cuda") EXPECT_EQ(batch.ticks_together(), std::int64_t(mu.size()) * ticks);
+  for (std::size_t i = 0; i < mu.size(); ++i) expect_same_scene(batch, int(i), alone[i], "scene " + std::to_string(i));
+  for (std::size_t i = 1; i < mu.size(); ++i)
+    EXPECT_LT(batch.last(int(i)).tools[0].force[0], batch.last(int(i - 1)).tools[0].force[0])
+        << "the tissue holds a rougher tool back harder (scene " << i << ")";
+  EXPECT_THROW(batch.set_tool_friction(0, 0, -1), std::invalid_argument);
+  EXPECT_THROW(batch.set_tool_friction(9, 0, 0.1), std::invalid_argument);
+}
+
 // Blocks of one model, two of them under loads of their own set by the host: on cuda one group (the loaded and
 // the unloaded scenes in graphs of their own kind), every tick run in it; each equals its scene alone.
 TEST_P(BatchEquals, LoadedScenesRunInTheirGroupAndEqualEachAlone) {
