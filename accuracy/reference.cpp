@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 
 #include "backends/registry.hpp"
@@ -48,26 +49,7 @@ double hold_start(const std::vector<Waypoint>& path) {
   return start;
 }
 
-bool touches_reference_surface(const TissueModel<double>& m, const ToolShape& shape, const ToolPose& pose) {
-  const index_t n = m.n_nodes, nt = m.n_tris;
-  const Capsule<double> cap{pose.tip, pose.tip + shape.shaft * pose.axis, shape.radius};
-  for (index_t t = 0; t < nt; ++t) {
-    Vec3<double> P[3];
-    for (int k = 0; k < 3; ++k) {
-      const index_t a = m.tris[k * nt + t];
-      P[k] = {m.X[a], m.X[n + a], m.X[2 * size_t(n) + a]};
-    }
-    double w[3];
-    Vec3<double> c;
-    if (norm(triangle_deepest_point(cap, P, w, c) - c) < shape.radius) return true;
-  }
-  return false;
-}
-
 namespace {
-
-/// How far (in tool radii) held_tool retracts a start in contact.
-constexpr int kMaxRetractSteps = 1000;
 
 /// A pose the relaxation's ramp can start from: `start` itself when it does
 /// not touch the undeformed surface, else `start` moved back, a radius at a
@@ -76,14 +58,10 @@ constexpr int kMaxRetractSteps = 1000;
 /// tissue would otherwise have its contact push the surface nodes a press
 /// deep in one step, inverting the elements under the tool.
 ToolPose retracted(const TissueModel<double>& model, const ToolShape& shape, ToolPose start, const ToolPose& held) {
-  if (!touches_reference_surface(model, shape, start)) return start;
   const Vec3<double> away = start.tip - held.tip;
   const Vec3<double> dir = norm(away) > 1e-9 * shape.radius ? (1 / norm(away)) * away : unit_or(held.axis, {0, 0, 1});
-  const double step = shape.radius;
-  for (int k = 0; k < kMaxRetractSteps; ++k) {
-    start.tip = start.tip + step * dir;
-    if (!touches_reference_surface(model, shape, start)) return start;
-  }
+  if (const std::optional<ToolPose> out = retracted_from_reference_surface(model, shape, start, dir, shape.radius))
+    return *out;
   throw std::runtime_error(fmt::format(
       "held_tool: tool '{}' starts in contact with the tissue and still touches it {} radii back along ({:.3g}, "
       "{:.3g}, {:.3g}); start its path outside the body",

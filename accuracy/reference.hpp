@@ -61,8 +61,5 @@ double hold_start(const std::vector<Waypoint>& path);
 HeldTool held_tool(const TissueModel<double>& model, const ToolSetting& tool, const std::vector<Waypoint>& path,
                    double tick, double t_hold, const ContactOptions& contact = {});
 
-/// True when the capsule of `shape` at `pose` reaches within its radius of
-/// the model's undeformed surface.
-bool touches_reference_surface(const TissueModel<double>& model, const ToolShape& shape, const ToolPose& pose);
 
 }  // namespace tissue::accuracy

@@ -66,6 +66,28 @@ bool inside_surface(const TissueModel<double>& m, std::span<const double> u, Vec
 
 bool inside_reference_surface(const TissueModel<double>& m, Vec3<double> p) { return inside_surface(m, {}, p); }
 
+bool touches_reference_surface(const TissueModel<double>& m, const ToolShape& shape, const ToolPose& pose) {
+  const index_t nt = m.n_tris;
+  const Capsule<double> cap{pose.tip, pose.tip + shape.shaft * pose.axis, shape.radius};
+  for (index_t t = 0; t < nt; ++t) {
+    const Vec3<double> P[3] = {reference_position(m, m.tris[t]), reference_position(m, m.tris[nt + t]),
+                               reference_position(m, m.tris[2 * std::size_t(nt) + t])};
+    double w[3];
+    Vec3<double> c;
+    if (norm(triangle_deepest_point(cap, P, w, c) - c) < shape.radius) return true;
+  }
+  return false;
+}
+
+std::optional<ToolPose> retracted_from_reference_surface(const TissueModel<double>& m, const ToolShape& shape,
+                                                         ToolPose pose, Vec3<double> dir, double step) {
+  for (int k = 0; k <= kMaxRetractSteps; ++k) {
+    if (!touches_reference_surface(m, shape, pose)) return pose;
+    pose.tip = pose.tip + step * dir;
+  }
+  return std::nullopt;
+}
+
 /// The median length of the model's surface edges (m).
 double median_surface_edge(const TissueModel<double>& m) {
   const index_t nt = m.n_tris;
@@ -99,6 +121,7 @@ Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, Schedul
   }
   backend_.set_tools(shapes, settings_.contact);
   prev_.assign(settings_.tools.size(), ToolPose{});
+  entering_.assign(settings_.tools.size(), 0);
   motion_.assign(settings_.tools.size(), ToolMotion{});
   rigid_reported_.assign(settings_.tools.size(), 0);
   last_contact_.assign(settings_.tools.size(), 0);
@@ -321,15 +344,32 @@ void Scheduler::begin_tick(std::span<Device* const> devices) {
     if (!(std::isfinite(in.tip.x) && std::isfinite(in.tip.y) && std::isfinite(in.tip.z)))
       throw SimulationError(fmt::format("tick {}: the device of tool '{}' reported a non-finite position", tick_,
                                         settings_.tools[t].shape.name));
-    const ToolPose pose{in.tip, unit_or(in.axis, settings_.tools[t].axis)};
+    ToolPose pose{in.tip, unit_or(in.axis, settings_.tools[t].axis)};
+    const ToolShape& shape = settings_.tools[t].shape;
     if (!has_prev_) {
       prev_[t] = pose;
       const double gap = nearest_surface_node(model_, pose.tip);
-      if (inside_reference_surface(model_, pose.tip) && gap > settings_.tools[t].shape.radius)
+      if (inside_reference_surface(model_, pose.tip) && gap > shape.radius)
         notes_.push_back(fmt::format(
             "tool '{}' starts inside the body, {:.3g} mm from its nearest surface node: contact acts on the surface, "
             "so the tool feels nothing until its surface meets the tissue's",
-            settings_.tools[t].shape.name, 1e3 * (gap - settings_.tools[t].shape.radius)));
+            shape.name, 1e3 * (gap - shape.radius)));
+      else if (const std::optional<ToolPose> out = retracted_from_reference_surface(
+                   model_, shape, pose, pose.axis, 0.05 * shape.radius);
+               out && norm(out->tip - pose.tip) > kEntryDepth * shape.radius) {
+        prev_[t] = *out;
+        entering_[t] = 1;
+        notes_.push_back(fmt::format(
+            "tool '{}' starts in contact with the tissue: it is brought in from {:.3g} mm back along its axis at "
+            "{:.3g} mm/s, its device's pose reached in {:.3g} s",
+            shape.name, 1e3 * norm(out->tip - pose.tip), 1e3 * kEntrySpeed, norm(out->tip - pose.tip) / kEntrySpeed));
+      }
+    }
+    if (entering_[t]) {  // at most kEntrySpeed toward the device's pose, until it is reached
+      const Vec3<double> gap = pose.tip - prev_[t].tip;
+      const double reach = kEntrySpeed * settings_.tick;
+      if (norm(gap) > reach) pose.tip = prev_[t].tip + (reach / norm(gap)) * gap;
+      else entering_[t] = 0;
     }
     motion_[t] = {prev_[t], pose, in.grasp};
     rep.tools[t].tip = pose.tip;

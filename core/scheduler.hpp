@@ -28,6 +28,7 @@
 #pragma once
 
 #include <array>
+#include <optional>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -44,6 +45,17 @@ struct ToolSetting {
   ToolShape shape;
   Vec3<double> axis = {0, 0, 1};  ///< shaft direction (unit) when the device has no orientation
 };
+
+/// How fast a tool whose first pose already presses the tissue (deeper than
+/// kEntryDepth) is brought in to its device's pose (m/s): from a pose
+/// retracted along its axis out of contact, at the speed of a scene's
+/// scripted press (a tool that appears inside the tissue would have its
+/// contact push the surface a press deep in one step, and the elements under
+/// it invert).
+inline constexpr double kEntrySpeed = 0.025;
+/// A first pose that touches the tissue by less than this many radii (along
+/// the tool's axis) starts where it is: a press begun at the surface.
+inline constexpr double kEntryDepth = 0.1;
 
 struct SchedulerSettings {
   int depth = 5;               ///< region rings from the contact; kDepthAll = whole mesh;
@@ -176,6 +188,7 @@ class Scheduler {
   bool has_prev_ = false;
   bool in_contact_ = false;
   std::vector<ToolPose> prev_;  ///< each tool's pose at the end of the last tick
+  std::vector<char> entering_;  ///< 1: the tool started in contact and is brought in (kEntrySpeed)
   std::vector<ToolMotion> motion_;
   std::vector<index_t> rigid_reported_;  ///< per tool: rigid count last reported (0 = none)
   std::vector<index_t> last_contact_;    ///< per tool: contact nodes at the end of the last tick
@@ -202,6 +215,20 @@ bool inside_reference_surface(const TissueModel<double>& m, Vec3<double> p);
 /// The same for the surface displaced by u (3 x n_nodes, components in
 /// blocks of n_nodes, as Fields::u).
 bool inside_surface(const TissueModel<double>& m, std::span<const double> u, Vec3<double> p);
+
+/// True when the capsule of `shape` at `pose` reaches within its radius of
+/// the model's undeformed surface.
+bool touches_reference_surface(const TissueModel<double>& model, const ToolShape& shape, const ToolPose& pose);
+
+/// Most steps retracted_from_reference_surface takes.
+inline constexpr int kMaxRetractSteps = 1000;
+
+/// `pose` moved back along the unit direction `dir`, `step` metres at a
+/// time, until its capsule no longer touches the undeformed surface
+/// (`pose` itself when it does not); none when it still touches after
+/// kMaxRetractSteps steps.
+std::optional<ToolPose> retracted_from_reference_surface(const TissueModel<double>& model, const ToolShape& shape,
+                                                         ToolPose pose, Vec3<double> dir, double step);
 
 /// Largest extent of the model's reference bounding box (m).
 double body_extent(const TissueModel<double>& m);

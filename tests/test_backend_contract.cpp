@@ -8,7 +8,8 @@
 // slide), the equilibrium
 // balance of tool and supports, grasping, several tools, small tools caught
 // by faces, fast tools sub-stepped, rigid supports reported, the region
-// seeded by contact candidates, a tool that starts inside the surface.
+// seeded by contact candidates, a tool that starts in contact (brought in)
+// and a deep press from a start inside a nearly incompressible block.
 // The cuda backend's own stage-by-stage comparison with the cpu is
 // tests/cuda/test_cuda_stages.cpp.
 #include <fmt/format.h>
@@ -967,20 +968,65 @@ TEST_P(Contract, ATickInTwoHalvesGivesTheBitsOfOneCall) {
   }
 }
 
-TEST_P(Contract, AToolStartingInsideTheSurfaceIsInContactFromTheFirstTick) {
+// A tool whose first pose already presses the tissue is brought in from
+// out of contact along its axis at kEntrySpeed (the Scheduler's entry), named
+// in a note, and then follows its device.
+TEST_P(Contract, AToolStartingInContactIsBroughtInFromOutsideAndNoted) {
   const auto m = slab(8);
   auto b = make(m);
   const double r = 0.004;
   Scheduler sched(*b, m, tools_settings({sphere(r, 0.02)}));
-  ScriptedDevice dev(std::vector<Waypoint>{{0.0, {0.0203, 0.0196, kTop + r - 0.0015}}});  // 1.5 mm deep, held
+  const Vec3<double> held{0.0203, 0.0196, kTop + r - 0.0015};  // 1.5 mm deep, held
+  ScriptedDevice dev(std::vector<Waypoint>{{0.0, held}});
   const TickReport first = sched.tick(dev);
-  EXPECT_GT(first.contact_nodes, 0);
+  EXPECT_EQ(first.contact_nodes, 0) << "it starts out of contact";
+  EXPECT_GT(first.tools[0].tip.z, held.z + 1.5e-3) << "retracted along its axis (+z)";
+  const std::vector<std::string> notes = sched.take_notes();
+  ASSERT_EQ(notes.size(), 1u);
+  EXPECT_NE(notes[0].find("tool 'probe' starts in contact with the tissue: it is brought in from 1.6 mm back"),
+            std::string::npos)
+      << notes[0];
   TickReport rep = first;
-  while (sched.time() < 0.1) rep = sched.tick(dev);
+  while (sched.time() < 0.1 - 1e-9) rep = sched.tick(dev);  // 1.6 mm at 25 mm/s: there at 64 ms
+  EXPECT_EQ(rep.tools[0].tip.z, held.z) << "it follows its device once in";
+  EXPECT_GT(rep.contact_nodes, 0);
   EXPECT_GT(rep.force.z, 0);
-  EXPECT_TRUE(sched.take_notes().empty()) << "not embedded: it touches the surface";
+  EXPECT_TRUE(sched.take_notes().empty());
 }
 
+/// The force on a 4 mm sphere held 1.1 radii deep in a nearly incompressible
+/// block (nu 0.49, 20 x 20 x 10 mm, 1.67 mm cells) after a path that starts
+/// `start` deep (0: at the surface) and presses to 1.1 R over 0.2 s.
+Vec3<double> deep_press(Backend& b, double start) {
+  ModelInput in;
+  box_mesh(in, 12, 12, 6, 0.02, 0.02, 0.01);
+  const double E = 3000, nu = 0.49;
+  in.materials = {{E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu)), 1000}};
+  in.fixed.assign(in.nodes.size() / 3, 0);
+  for (size_t i = 0; i < in.fixed.size(); ++i) in.fixed[i] = in.nodes[3 * i + 2] == 0.0;
+  in.source = "nu 0.49 block";
+  const TissueModel<double> m = build_model(in);
+  b.upload(m);
+  const double R = 0.004;
+  Scheduler sched(b, m, tools_settings({sphere(R)}));
+  const Vec3<double> top{0.01, 0.01, 0.01 + R};
+  ScriptedDevice dev(std::vector<Waypoint>{{0.0, top - Vec3<double>{0, 0, start}},
+                                           {0.2, top - Vec3<double>{0, 0, 1.1 * R}},
+                                           {0.45, top - Vec3<double>{0, 0, 1.1 * R}}});
+  TickReport rep;
+  while (sched.time() < 0.45 - 1e-9) rep = sched.tick(dev);  // a stop throws, naming the element
+  return rep.force;
+}
+
+// Extremes end well: a press to 1.1 radii into a nu 0.49 block runs to its
+// end, and so does the same press from a start half a radius inside the
+// block (brought in from outside: it would otherwise push the surface half a
+// radius in one step and invert elements two radii away), to the same force.
+TEST_P(Contract, APressBeyondTheRadiusFromAStartInsideTheBlockEndsAsOneFromOutside) {
+  const Vec3<double> outside = deep_press(*make(), 0.0), inside = deep_press(*make(), 0.002);
+  EXPECT_GT(outside.z, 0.1);
+  EXPECT_LT(norm(inside - outside), 0.01 * norm(outside)) << "inside " << inside.z << " N, outside " << outside.z;
+}
 
 TEST_P(Contract, AToolCrossingTheSurfaceAt100MetresPerSecondPushesItAndIsNamed) {
   // a 2 mm sphere from 90 mm above the slab's top to 10 mm under it in one 1 ms tick of 4 TLED steps

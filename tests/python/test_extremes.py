@@ -1,10 +1,7 @@
 """Extreme presses end well: a nearly incompressible block (nu = 0.49)
 pressed by a 4 mm sphere to half its radius and beyond its radius runs to
 the end with a finite force; a path that starts half a radius inside the
-block either runs or stops naming an element under the tool (its distance
-from the tool below one radius), never a far-field blow-up."""
-import re
-
+block is brought in from outside and runs, never a far-field blow-up."""
 import numpy as np
 
 import tissue.distributed as td
@@ -29,12 +26,8 @@ def test_presses_to_half_and_beyond_the_radius_run_to_the_end(tmp_path):
     assert np.linalg.norm(deep.force[-1, 0]) > 2 * np.linalg.norm(half.force[-1, 0])
 
 
-def test_a_start_inside_the_block_runs_or_stops_under_the_tool(tmp_path):
+def test_a_start_inside_the_block_is_brought_in_and_runs(tmp_path):
+    # the Scheduler brings a tool whose first pose touches the tissue in from outside (core kEntrySpeed)
     r = press(tmp_path, "inside", press=1e-6, start_gap=-0.5 * R)
-    if r.failure is None:
-        assert np.all(np.isfinite(r.force))
-        return
-    m = re.search(r"element \d+ \(its centroid at \([^)]*\) mm, (?:inside tool 'probe'|([0-9.e+-]+) mm from tool "
-                  r"'probe')\)", r.failure)
-    assert m, r.failure
-    assert m.group(1) is None or float(m.group(1)) < 1e3 * R, "the element lies under the tool: " + r.failure
+    assert r.failure is None, r.failure
+    assert np.all(np.isfinite(r.force)) and np.linalg.norm(r.force[-1, 0]) > 0
