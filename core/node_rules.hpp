@@ -90,7 +90,8 @@ TISSUE_HD Vec3<T> free_part(std::uint8_t h, Vec3<T> dx) {
 
 /// Coulomb friction at a pushed node (core/contact.hpp, docs/contact.md
 /// "Friction"): u1 is its displacement after the step's contact correction
-/// dx along the contact normal n (dx = push n, push >= 0), u_now its
+/// dx along the contact normal n (dx = push n, push >= 0; |dx| is taken
+/// only when mu > 0, so the frictionless step pays nothing), u_now its
 /// displacement before the step, w the tool's motion at the node over the
 /// step (tool_motion_at), h its held axes. The node's tangential motion
 /// relative to the tool, s, is removed up to mu push: all of it when
@@ -102,11 +103,11 @@ TISSUE_HD Vec3<T> free_part(std::uint8_t h, Vec3<T> dx) {
 /// quasi-static forces contact_reaction reports. Returns the new u1 (mu = 0:
 /// u1 itself, the frictionless rule).
 template <class T>
-TISSUE_HD Vec3<T> coulomb_slip(std::uint8_t h, Vec3<T> u_now, Vec3<T> u1, Vec3<T> n, Vec3<T> w, T push, T mu) {
+TISSUE_HD Vec3<T> coulomb_slip(std::uint8_t h, Vec3<T> u_now, Vec3<T> u1, Vec3<T> n, Vec3<T> w, Vec3<T> dx, T mu) {
   if (!(mu > T(0))) return u1;
   const Vec3<T> rel = u1 - u_now - w;
   const Vec3<T> slip = free_part(h, rel - dot(rel, n) * n);
-  const T s = norm(slip), cap = mu * push;
+  const T s = norm(slip), cap = mu * norm(dx);
   return u1 - (s > cap ? cap / s : T(1)) * slip;
 }
 

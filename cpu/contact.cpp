@@ -163,7 +163,7 @@ void ContactStage<T>::finish_step(TissueState<T>& s, const ContactTools<T>& tool
       const Vec3<T> X = {m_.X[a], m_.X[n + a], m_.X[2 * size_t(n) + a]};
       Vec3<T> u1 = at(s.u_next, n, a) + dx;
       const Vec3<T> w = tool_motion_at(tool, tools.steps, k, X + u1);
-      u1 = coulomb_slip(s.held[a], u_now, u1, normal, w, norm(dx), tool.friction);
+      u1 = coulomb_slip(s.held[a], u_now, u1, normal, w, dx, tool.friction);
       put(s.u_next, n, a, u1);
       put(s.u_carry, n, a, Vec3<T>{0, 0, 0});
       put(s.contact_normal, n, a, normal);

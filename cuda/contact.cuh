@@ -361,7 +361,7 @@ __device__ void merge_loaded_node(const StateView<T>& s, const ContactTools<T>& 
   const ToolStep<T>& tool = tools.tool[acc.tool];
   Vec3<T> u1 = u_free + dx;
   const Vec3<T> w = tool_motion_at(tool, tools.steps, k, n.X + u1);
-  u1 = coulomb_slip(held, u_now, u1, normal, w, norm(dx), tool.friction);
+  u1 = coulomb_slip(held, u_now, u1, normal, w, dx, tool.friction);
   u_next[a] = Packed3<T>::of(u1);
   s.contact_normal[a] = Packed3<T>::of(normal);
   u[a] = Packed3<T>::of(contact_previous(held, u_now, u1, normal, w));

@@ -2630,7 +2630,8 @@ TYPED_TEST(NodeRules, CoulombSlipSticksWithinTheConeAndSlidesByMuTimesThePushBey
   const Vec3<T> n{0, 0, 1}, u_now{T(1e-3), 0, 0}, w{T(2e-4), 0, 0};  // the tool moved 0.2 mm along x
   // the node ends 0.1 mm along x and 0.05 mm along y from where the tool carries it, pushed 0.1 mm
   const Vec3<T> u1 = u_now + w + Vec3<T>{T(1e-4), T(5e-5), T(1e-4)};
-  const T push = T(1e-4), slip = std::sqrt(T(1.25e-8));
+  const Vec3<T> push = T(1e-4) * n;  // the correction dx, 0.1 mm along n
+  const T slip = std::sqrt(T(1.25e-8));
   // mu 2: within the cone (|slip| <= 2 push): it sticks, moving with the tool (its normal part stays)
   const Vec3<T> stuck = coulomb_slip<T>(0, u_now, u1, n, w, push, T(2));
   EXPECT_LE(dist(stuck, u_now + w + Vec3<T>{0, 0, T(1e-4)}), tol<T>(8) * T(1e-3));
