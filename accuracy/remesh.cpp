@@ -97,6 +97,10 @@ scene::Scene remesh_scene(const scene::Scene& scene, int target_tets) {
 
 scene::Scene remesh_scene(const scene::Scene& scene, int target_tets, const KidneySurfacing& surfacing) {
   if (target_tets < 1) throw std::invalid_argument(fmt::format("remesh: target tet count {} must be >= 1", target_tets));
+  if (!scene.bodies.empty())
+    throw std::invalid_argument(fmt::format("remesh: {}: a scene of {} bodies; re-meshing takes a scene of one mesh "
+                                            "(converge each body in a scene of its own)",
+                                            scene.source, scene.bodies.size()));
   const bool custom = surfacing.frequency != 0 || surfacing.focus != 1.0;
   if (custom && scene.source != "@kidney")
     throw std::invalid_argument(fmt::format("remesh: {}: a surface frequency or focus applies to @kidney only",

@@ -215,6 +215,9 @@ std::size_t Batch::n_nodes(int scene) const {
 std::size_t Batch::n_elements(int scene) const {
   return std::size_t(impl_->at(scene).model().n_elems);
 }
+std::vector<BodyRange> Batch::bodies(int scene) const {
+  return facade::body_ranges(impl_->at(scene).scene(), n_nodes(scene), n_elements(scene));
+}
 int Batch::n_tools(int scene) const {
   return impl_->at(scene).n_tools();
 }

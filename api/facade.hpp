@@ -43,6 +43,17 @@ std::vector<T> interleave(const std::vector<T>& soa, std::size_t components) {
 /// moves it. Throws std::invalid_argument for counts that do not divide.
 scene::Scene mesh_scene(const MeshScene& m);
 
+/// The scene's bodies as the facade gives them: its <body>s, or one body
+/// "body" of all n_nodes and n_elems.
+inline std::vector<BodyRange> body_ranges(const scene::Scene& s, std::size_t n_nodes, std::size_t n_elems) {
+  if (s.bodies.empty()) return {{"body", 0, n_nodes, 0, n_elems}};
+  std::vector<BodyRange> out;
+  for (const scene::Body& b : s.bodies)
+    out.push_back({b.name, std::size_t(b.first_node), std::size_t(b.n_nodes), std::size_t(b.first_element),
+                   std::size_t(b.n_elements)});
+  return out;
+}
+
 /// Writes the facade's view of a tick report after `ticks` ticks into out,
 /// reusing its tool list (the tick loop allocates nothing once it has the
 /// scene's tool count).

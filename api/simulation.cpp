@@ -190,6 +190,9 @@ std::string Simulation::precision() const { return to_string(impl_->session.back
 std::string Simulation::device_name() const { return impl_->session.backend().device_name(); }
 std::size_t Simulation::n_nodes() const { return std::size_t(impl_->session.model().n_nodes); }
 std::size_t Simulation::n_elements() const { return std::size_t(impl_->session.model().n_elems); }
+std::vector<BodyRange> Simulation::bodies() const {
+  return facade::body_ranges(impl_->session.scene(), n_nodes(), n_elements());
+}
 std::size_t Simulation::n_surface_triangles() const { return std::size_t(impl_->session.model().n_tris); }
 int Simulation::n_tools() const { return impl_->session.n_tools(); }
 double Simulation::tick_seconds() const { return impl_->session.settings().tick; }

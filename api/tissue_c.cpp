@@ -17,6 +17,7 @@
 
 struct tissue_simulation {
   tissue::Simulation sim;
+  std::vector<tissue::BodyRange> bodies = sim.bodies();  ///< tissue_body_name's strings live here
 };
 
 struct tissue_batch {
@@ -114,6 +115,26 @@ size_t tissue_node_count(const tissue_simulation* sim) { return sim ? sim->sim.n
 size_t tissue_element_count(const tissue_simulation* sim) { return sim ? sim->sim.n_elements() : 0; }
 int tissue_tool_count(const tissue_simulation* sim) { return sim ? sim->sim.n_tools() : 0; }
 double tissue_tick_seconds(const tissue_simulation* sim) { return sim ? sim->sim.tick_seconds() : 0; }
+
+int tissue_body_count(const tissue_simulation* sim) { return sim ? int(sim->bodies.size()) : 0; }
+const char* tissue_body_name(const tissue_simulation* sim, int body) {
+  if (sim == nullptr || body < 0 || std::size_t(body) >= sim->bodies.size()) return nullptr;
+  return sim->bodies[std::size_t(body)].name.c_str();
+}
+tissue_status tissue_body_range(const tissue_simulation* sim, int body, size_t* first_node, size_t* n_nodes,
+                                size_t* first_element, size_t* n_elements) {
+  if (sim == nullptr) return null_argument("tissue_body_range", "sim");
+  if (body < 0 || std::size_t(body) >= sim->bodies.size())
+    return fail(TISSUE_BAD_ARGUMENT, "tissue_body_range: body " + std::to_string(body) + " is out of range (the scene has " +
+                                         std::to_string(sim->bodies.size()) + " bodies)");
+  g_error.clear();
+  const tissue::BodyRange& b = sim->bodies[std::size_t(body)];
+  if (first_node) *first_node = b.first_node;
+  if (n_nodes) *n_nodes = b.n_nodes;
+  if (first_element) *first_element = b.first_element;
+  if (n_elements) *n_elements = b.n_elements;
+  return TISSUE_OK;
+}
 double tissue_time(const tissue_simulation* sim) { return sim ? sim->sim.time() : 0; }
 double tissue_dissipated_energy(const tissue_simulation* sim) { return sim ? sim->sim.dissipated_energy() : 0; }
 

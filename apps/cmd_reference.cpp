@@ -89,7 +89,7 @@ int run_reference(const ReferenceArgs& a) {
   }
   if (folder) {
     const std::string path_vtu = folder->file("reference.vtu");
-    io::write_vtu(path_vtu, model, ref.fields);
+    io::write_vtu(path_vtu, model, ref.fields, s.bodies);
     fmt::print("wrote {}\n", path_vtu);
   }
   return ref.relax.interrupted ? InterruptGuard::exit_code() : 0;

@@ -154,6 +154,12 @@ int run_scene(const RunOptions& o) {
   const long n_ticks = tick_count(o, path_duration, settings.tick);
   for (const std::string& w : scene::scene_warnings(s, model)) fmt::print(stderr, "warning: {}\n", w);
   fmt::print("{}\n", work_plan(s, model, n_ticks));  // before the backend is built and the ticks start
+  if (!s.bodies.empty()) {
+    std::string list;
+    for (const scene::Body& b : s.bodies)
+      list += fmt::format("{}'{}' ({} nodes, {} tets)", list.empty() ? "" : ", ", b.name, b.n_nodes, b.n_elements);
+    fmt::print("bodies: {}\n", list);
+  }
   std::fflush(stdout);
   check_work(s, model, n_ticks, o.force);
 
@@ -177,7 +183,7 @@ int run_scene(const RunOptions& o) {
   if (folder) {
     log.emplace(folder->file("ticks.csv"), sched.n_tools());
     if (o.frames > 0) {
-      frames.emplace(folder->path());
+      frames.emplace(folder->path(), s.bodies);
       frame_every = std::max(1L, n_ticks / o.frames);
     }
   }

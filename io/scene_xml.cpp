@@ -3,11 +3,13 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cctype>
 #include <filesystem>
 #include <fstream>
 #include <initializer_list>
 #include <limits>
 #include <pugixml.hpp>
+#include <span>
 #include <sstream>
 
 #include "io/atomic_file.hpp"
@@ -87,6 +89,12 @@ class Reader {
 
   // -- one reader per element kind
   void read_mesh(pugi::xml_node n, scene::Scene& s) const;
+  void read_body(pugi::xml_node n, scene::Scene& s) const;
+  /// A <body>'s local ids made the scene's: each checked against the
+  /// body's count (an error naming the body, what, and n's line), then
+  /// shifted by first.
+  void body_ids(pugi::xml_node n, const scene::Body& b, const char* what, index_t count, index_t first,
+                std::vector<index_t>& ids) const;
   std::vector<double> read_node_text(pugi::xml_node n) const;
   std::vector<index_t> read_element_text(pugi::xml_node n) const;
   Material read_material(pugi::xml_node n) const;
@@ -251,6 +259,69 @@ void Reader::read_mesh(pugi::xml_node n, scene::Scene& s) const {
   if (elems.next_sibling("elements")) fail_at(line(elems.next_sibling("elements")), "<mesh> has a second <elements>");
   s.nodes = read_node_text(nodes);
   s.tets = read_element_text(elems);
+}
+
+void Reader::body_ids(pugi::xml_node n, const scene::Body& b, const char* what, index_t count, index_t first,
+                      std::vector<index_t>& ids) const {
+  for (index_t& i : ids) {
+    if (i < 0 || i >= count)
+      fail(n, fmt::format("body '{}': {} {} is out of range (its mesh has {} {}s, ids 0..{}; ids in a <body> are "
+                          "its own mesh's)",
+                          b.name, what, i, count, what, count - 1));
+    i += first;
+  }
+}
+
+void Reader::read_body(pugi::xml_node n, scene::Scene& s) const {
+  check_attributes(n, {"name"});
+  check_children(n, {"mesh", "element-set", "fixed", "load"});
+  scene::Body b;
+  b.line = line(n);
+  b.name = required(n, "name");
+  for (const scene::Body& other : s.bodies)
+    if (other.name == b.name)
+      fail(n, fmt::format("body '{}' is defined twice (first at line {}); body names must be unique", b.name,
+                          other.line));
+  const pugi::xml_node mesh = n.child("mesh");
+  if (!mesh) fail(n, fmt::format("body '{}' has no <mesh>; a body needs one", b.name));
+  if (mesh.next_sibling("mesh"))
+    fail_at(line(mesh.next_sibling("mesh")), fmt::format("body '{}' has a second <mesh>; a body has one", b.name));
+  scene::Scene own;
+  read_mesh(mesh, own);
+  b.mesh_file = own.mesh_file;
+  b.mesh_line = own.mesh_line;
+  b.first_node = static_cast<index_t>(s.nodes.size() / 3);
+  b.first_element = static_cast<index_t>(s.tets.size() / 4);
+  b.n_nodes = static_cast<index_t>(own.nodes.size() / 3);
+  b.n_elements = static_cast<index_t>(own.tets.size() / 4);
+  if (own.nodes.size() % 3 == 0 && own.tets.size() % 4 == 0)  // else scene validation names the count
+    for (size_t k = 0; k < own.tets.size(); ++k)
+      if (own.tets[k] < 0 || own.tets[k] >= b.n_nodes)
+        fail(mesh, fmt::format("body '{}': element {} corner {} refers to node {}, out of range (its mesh has {} "
+                               "nodes, ids 0..{})",
+                               b.name, k / 4, k % 4, own.tets[k], b.n_nodes, b.n_nodes - 1));
+  const int index = static_cast<int>(s.bodies.size());
+  s.nodes.insert(s.nodes.end(), own.nodes.begin(), own.nodes.end());
+  for (index_t v : own.tets) s.tets.push_back(v + b.first_node);
+  for (pugi::xml_node c : n.children("element-set")) {
+    scene::ElementSet es = read_set(c);
+    body_ids(c, b, "element", b.n_elements, b.first_element, es.elements);
+    es.body = index;
+    s.sets.push_back(std::move(es));
+  }
+  for (pugi::xml_node c : n.children("fixed")) {
+    Constraint f = read_fixed(c);
+    body_ids(c, b, "node", b.n_nodes, b.first_node, f.nodes);
+    f.body = index;
+    s.constraints.push_back(std::move(f));
+  }
+  for (pugi::xml_node c : n.children("load")) {
+    scene::Load l = read_load(c);
+    body_ids(c, b, "node", b.n_nodes, b.first_node, l.where.nodes);
+    l.where.body = index;
+    s.loads.push_back(std::move(l));
+  }
+  s.bodies.push_back(std::move(b));
 }
 
 Material Reader::read_material(pugi::xml_node n) const {
@@ -503,18 +574,34 @@ scene::Scene Reader::read() {
   if (root.attribute("version") && scene::trim(root.attribute("version").value()) != "1")
     fail(root, fmt::format("version = '{}' is not supported; this reader knows version 1",
                            root.attribute("version").value()));
-  check_children(root, {"mesh", "material", "element-set", "fixed", "load", "tool", "solver"});
+  check_children(root, {"mesh", "body", "material", "element-set", "fixed", "load", "tool", "solver"});
 
   scene::Scene s;
   s.source = source_;
-  const pugi::xml_node mesh = root.child("mesh");
-  if (!mesh) fail(root, "no <mesh>; a scene needs one");
-  if (mesh.next_sibling("mesh")) fail_at(line(mesh.next_sibling("mesh")), "a second <mesh>; a scene has one");
-  read_mesh(mesh, s);
-  for (pugi::xml_node n : root.children("material")) s.materials.push_back(read_material(n));
-  for (pugi::xml_node n : root.children("element-set")) s.sets.push_back(read_set(n));
-  for (pugi::xml_node n : root.children("fixed")) s.constraints.push_back(read_fixed(n));
-  for (pugi::xml_node n : root.children("load")) s.loads.push_back(read_load(n));
+  const pugi::xml_node mesh = root.child("mesh"), body = root.child("body");
+  if (body) {  // several bodies: each holds its mesh, element sets, supports and loads
+    if (mesh)
+      fail_at(line(mesh), "a <mesh> beside <body> elements; a scene has either one <mesh> or <body>s each with "
+                          "its own <mesh>");
+    for (const char* inner : {"element-set", "fixed", "load"})
+      if (const pugi::xml_node c = root.child(inner))
+        fail_at(line(c), fmt::format("<{}> outside a <body>; in a scene of bodies it goes inside the <body> whose "
+                                     "mesh it refers to",
+                                     inner));
+    for (pugi::xml_node n : root.children("body")) read_body(n, s);
+  } else {
+    if (!mesh) fail(root, "no <mesh>; a scene needs one (or <body>s, each with its own <mesh>)");
+    if (mesh.next_sibling("mesh"))
+      fail_at(line(mesh.next_sibling("mesh")),
+              "a second <mesh>; a scene has one (for several bodies, give each its <body>)");
+    read_mesh(mesh, s);
+    for (pugi::xml_node n : root.children("material")) s.materials.push_back(read_material(n));
+    for (pugi::xml_node n : root.children("element-set")) s.sets.push_back(read_set(n));
+    for (pugi::xml_node n : root.children("fixed")) s.constraints.push_back(read_fixed(n));
+    for (pugi::xml_node n : root.children("load")) s.loads.push_back(read_load(n));
+  }
+  if (body)
+    for (pugi::xml_node n : root.children("material")) s.materials.push_back(read_material(n));
   for (pugi::xml_node n : root.children("tool")) s.tools.push_back(read_tool(n));
   if (const pugi::xml_node n = root.child("solver")) {
     if (n.next_sibling("solver")) fail_at(line(n.next_sibling("solver")), "a second <solver>; a scene has one");
@@ -545,20 +632,43 @@ void set(pugi::xml_node n, const char* name, const std::string& value) {
   n.append_attribute(name) = value.c_str();
 }
 
-void write_mesh(pugi::xml_node root, const scene::Scene& s, const std::string& mesh_file) {
-  pugi::xml_node mesh = root.append_child("mesh");
-  if (!mesh_file.empty()) {
-    set(mesh, "file", mesh_file);
+/// A <mesh> under `parent`: `file` when given, else inline; nodes xyz, tets
+/// less `first` (a body's local ids).
+void write_mesh(pugi::xml_node parent, std::span<const double> nodes, std::span<const index_t> tets, index_t first,
+                const std::string& file) {
+  pugi::xml_node mesh = parent.append_child("mesh");
+  if (!file.empty()) {
+    set(mesh, "file", file);
     return;
   }
   std::string text = "\n";
-  for (size_t i = 0; i + 2 < s.nodes.size(); i += 3)
-    text += fmt::format("      {} {} {}\n", s.nodes[i], s.nodes[i + 1], s.nodes[i + 2]);
+  for (size_t i = 0; i + 2 < nodes.size(); i += 3)
+    text += fmt::format("      {} {} {}\n", nodes[i], nodes[i + 1], nodes[i + 2]);
   mesh.append_child("nodes").text() = (text + "    ").c_str();
   text = "\n";
-  for (size_t e = 0; e + 3 < s.tets.size(); e += 4)
-    text += fmt::format("      {} {} {} {}\n", s.tets[e], s.tets[e + 1], s.tets[e + 2], s.tets[e + 3]);
+  for (size_t e = 0; e + 3 < tets.size(); e += 4)
+    text += fmt::format("      {} {} {} {}\n", tets[e] - first, tets[e + 1] - first, tets[e + 2] - first,
+                        tets[e + 3] - first);
   mesh.append_child("elements").text() = (text + "    ").c_str();
+}
+
+std::span<const double> body_nodes(const scene::Scene& s, const scene::Body& b) {
+  return std::span<const double>(s.nodes).subspan(3 * size_t(b.first_node), 3 * size_t(b.n_nodes));
+}
+std::span<const index_t> body_tets(const scene::Scene& s, const scene::Body& b) {
+  return std::span<const index_t>(s.tets).subspan(4 * size_t(b.first_element), 4 * size_t(b.n_elements));
+}
+
+/// The mesh file of body k beside a scene whose single mesh would be `file`:
+/// the body's own, else "<stem of file>-<body name>.node" (characters other
+/// than letters, digits, '-' and '_' in the name become '_').
+std::string body_mesh_file(const scene::Body& b, const std::string& file) {
+  if (!b.mesh_file.empty()) return b.mesh_file;
+  std::string name = b.name;
+  for (char& c : name)
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '_') c = '_';
+  const fs::path p(file);
+  return (p.parent_path() / (p.stem().string() + "-" + name + ".node")).string();
 }
 
 void write_material(pugi::xml_node root, const Material& m) {
@@ -594,22 +704,28 @@ void write_material(pugi::xml_node root, const Material& m) {
   }
 }
 
-void write_selection(pugi::xml_node n, const Constraint& c);
+/// A selection's attributes; node ids less `first` (a body's local ids).
+void write_selection(pugi::xml_node n, const Constraint& c, index_t first);
 
-void write_constraint(pugi::xml_node root, const Constraint& c) { write_selection(root.append_child("fixed"), c); }
+void write_constraint(pugi::xml_node root, const Constraint& c, index_t first) {
+  write_selection(root.append_child("fixed"), c, first);
+}
 
-void write_load(pugi::xml_node root, const scene::Load& l) {
+void write_load(pugi::xml_node root, const scene::Load& l, index_t first) {
   pugi::xml_node n = root.append_child("load");
   set(n, "force", triple_text(l.force));
   if (l.each) set(n, "distribute", "each");
-  write_selection(n, l.where);
+  write_selection(n, l.where, first);
 }
 
-void write_selection(pugi::xml_node n, const Constraint& c) {
+void write_selection(pugi::xml_node n, const Constraint& c, index_t first) {
   switch (c.kind) {
-    case Constraint::Kind::Nodes:
-      set(n, "nodes", id_list(c.nodes));
+    case Constraint::Kind::Nodes: {
+      std::vector<index_t> ids = c.nodes;
+      for (index_t& i : ids) i -= first;
+      set(n, "nodes", id_list(ids));
       break;
+    }
     case Constraint::Kind::Box:
       set(n, "box-min", triple_text(c.lo));
       set(n, "box-max", triple_text(c.hi));
@@ -682,16 +798,36 @@ std::string format_scene(const scene::Scene& s, const std::string& mesh_file) {
   decl.append_attribute("encoding") = "UTF-8";
   pugi::xml_node root = doc.append_child("tissue-scene");
   root.append_attribute("version") = "1";
-  write_mesh(root, s, mesh_file);
-  for (const Material& m : s.materials) write_material(root, m);
-  for (const scene::ElementSet& es : s.sets) {
-    pugi::xml_node n = root.append_child("element-set");
+  const auto write_set = [](pugi::xml_node parent, const scene::ElementSet& es, index_t first) {
+    pugi::xml_node n = parent.append_child("element-set");
     set(n, "name", es.name);
     set(n, "material", es.material);
-    set(n, "elements", es.all ? "all" : id_list(es.elements));
+    std::vector<index_t> ids = es.elements;
+    for (index_t& e : ids) e -= first;
+    set(n, "elements", es.all ? "all" : id_list(ids));
+  };
+  if (s.bodies.empty()) {
+    write_mesh(root, s.nodes, s.tets, 0, mesh_file);
+    for (const Material& m : s.materials) write_material(root, m);
+    for (const scene::ElementSet& es : s.sets) write_set(root, es, 0);
+    for (const Constraint& c : s.constraints) write_constraint(root, c, 0);
+    for (const scene::Load& l : s.loads) write_load(root, l, 0);
+  } else {
+    for (size_t k = 0; k < s.bodies.size(); ++k) {
+      const scene::Body& b = s.bodies[k];
+      pugi::xml_node body = root.append_child("body");
+      set(body, "name", b.name);
+      write_mesh(body, body_nodes(s, b), body_tets(s, b), b.first_node,
+                 mesh_file.empty() ? std::string() : body_mesh_file(b, mesh_file));
+      for (const scene::ElementSet& es : s.sets)
+        if (es.body == int(k)) write_set(body, es, b.first_element);
+      for (const Constraint& c : s.constraints)
+        if (c.body == int(k)) write_constraint(body, c, b.first_node);
+      for (const scene::Load& l : s.loads)
+        if (l.where.body == int(k)) write_load(body, l, b.first_node);
+    }
+    for (const Material& m : s.materials) write_material(root, m);
   }
-  for (const Constraint& c : s.constraints) write_constraint(root, c);
-  for (const scene::Load& l : s.loads) write_load(root, l);
   for (const scene::Tool& t : s.tools) write_tool(root, t);
   write_solver(root, s.solver);
   std::ostringstream out;
@@ -704,7 +840,13 @@ void write_scene(const scene::Scene& s, const std::string& path, bool inline_mes
   std::string mesh_file;
   if (!inline_mesh) {
     mesh_file = s.mesh_file.empty() ? fs::path(path).stem().string() + ".node" : s.mesh_file;
-    write_tetgen((dir / mesh_file).string(), s.nodes, s.tets);
+    if (s.bodies.empty()) write_tetgen((dir / mesh_file).string(), s.nodes, s.tets);
+    for (const scene::Body& b : s.bodies) {
+      const auto tets = body_tets(s, b);
+      std::vector<index_t> local(tets.begin(), tets.end());
+      for (index_t& v : local) v -= b.first_node;
+      write_tetgen((dir / body_mesh_file(b, mesh_file)).string(), body_nodes(s, b), local);
+    }
   }
   for (const scene::Tool& t : s.tools)
     if (!t.path_file.empty() && !t.path.empty()) write_path_csv((dir / t.path_file).string(), t.path);

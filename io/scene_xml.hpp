@@ -34,14 +34,17 @@ scene::Scene parse_scene(std::string_view xml, const std::string& source, const 
 /// Writes the scene as XML to `path`, numbers with round-trip precision, so
 /// that read_scene(path) gives the same scene (up to source lines). With
 /// inline_mesh the mesh goes into the XML; otherwise into a TetGen .node/.ele
-/// pair beside it, named Scene::mesh_file if set, else "<stem of path>.node".
+/// pair beside it, named Scene::mesh_file if set, else "<stem of path>.node"
+/// (a scene of bodies: one pair per body, its Body::mesh_file if set, else
+/// "<stem>-<body name>.node"; each body's ids are its own mesh's again).
 /// A tool with a path_file gets its path written to that CSV, and a material
 /// with a fibre file its rows to that CSV (both relative to path's folder). Each file is written whole under "<name>.part" and renamed
 /// (io/atomic_file.hpp). Throws std::runtime_error when a file cannot be written.
 void write_scene(const scene::Scene& scene, const std::string& path, bool inline_mesh);
 
 /// The XML text write_scene writes (no files touched). mesh_file: "" puts the
-/// mesh inline, otherwise <mesh file="mesh_file"/> is written.
+/// mesh inline, otherwise <mesh file="mesh_file"/> is written (with bodies,
+/// each body's file as write_scene names it from mesh_file).
 std::string format_scene(const scene::Scene& scene, const std::string& mesh_file);
 
 }  // namespace tissue::io

@@ -6,11 +6,13 @@
 // (io/atomic_file.hpp): a reader never sees a truncated frame or .pvd.
 #pragma once
 
+#include <span>
 #include <string>
 #include <vector>
 
 #include "core/backend.hpp"
 #include "core/model.hpp"
+#include "scene/scene.hpp"
 
 namespace tissue::io {
 
@@ -19,9 +21,15 @@ namespace tissue::io {
 /// m), "nodal_pressure" (Pa) and "internal_force" (3 components, N), CellData
 /// "J" (det F). The fields' sizes must match the model (u, f: 3 x n_nodes
 /// component-major as in core/backend.hpp; node_p: n_nodes; elem_J:
-/// n_elems). Throws std::runtime_error naming the path on a size mismatch or
-/// a write failure.
-void write_vtu(const std::string& path, const TissueModel<double>& model, const Fields& fields);
+/// n_elems). The file holds one <Piece>, or, for a scene of bodies, one per
+/// body in body order, each with its own nodes and elements (connectivity
+/// counted from its first node) and a CellData "body" (Int32, the body's
+/// index in `bodies`), so that ParaView's Threshold on "body" shows one.
+/// Throws std::runtime_error naming the path on a size mismatch, bodies
+/// that do not tile the model's nodes and elements in order, or a write
+/// failure.
+void write_vtu(const std::string& path, const TissueModel<double>& model, const Fields& fields,
+               std::span<const scene::Body> bodies = {});
 
 /// A numbered series of frames, frame_0000.vtu, frame_0001.vtu, ... in one
 /// directory (created if missing), and series.pvd listing them with their
@@ -30,8 +38,8 @@ void write_vtu(const std::string& path, const TissueModel<double>& model, const 
 class VtuSeries {
  public:
   /// Creates `directory` (and parents); throws std::runtime_error naming it
-  /// when that fails.
-  explicit VtuSeries(std::string directory);
+  /// when that fails. Every frame holds one piece per body (write_vtu).
+  explicit VtuSeries(std::string directory, std::vector<scene::Body> bodies = {});
 
   /// Writes the next frame (write_vtu) at simulated time `time` (s, not
   /// before the previous frame's) and updates series.pvd. Returns the
@@ -47,6 +55,7 @@ class VtuSeries {
   void write_pvd() const;
 
   std::string directory_;
+  std::vector<scene::Body> bodies_;
   std::vector<double> times_;       ///< (frames) s
   std::vector<std::string> files_;  ///< frame file names, relative to directory_
 };

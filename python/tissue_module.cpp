@@ -349,6 +349,24 @@ void bind_module(py::module_& m) {
 
 /// What a tick gives back: TickResult and ToolResult.
 void bind_results(py::module_& m) {
+  py::class_<tissue::BodyRange>(m, "Body",
+                                "One body of a scene: its nodes and elements, consecutive ranges of the scene's")
+      .def_readonly("name", &tissue::BodyRange::name)
+      .def_readonly("first_node", &tissue::BodyRange::first_node)
+      .def_readonly("n_nodes", &tissue::BodyRange::n_nodes)
+      .def_readonly("first_element", &tissue::BodyRange::first_element)
+      .def_readonly("n_elements", &tissue::BodyRange::n_elements)
+      .def_property_readonly("nodes", [](const tissue::BodyRange& b) {
+        return py::slice(py::ssize_t(b.first_node), py::ssize_t(b.first_node + b.n_nodes), 1);
+      }, "slice of its rows in a per-node field: sim.displacement()[body.nodes]")
+      .def_property_readonly("elements", [](const tissue::BodyRange& b) {
+        return py::slice(py::ssize_t(b.first_element), py::ssize_t(b.first_element + b.n_elements), 1);
+      }, "slice of its rows in a per-element field")
+      .def("__repr__", [](const tissue::BodyRange& b) {
+        return "<tissue.Body '" + b.name + "': nodes " + std::to_string(b.first_node) + ".." +
+               std::to_string(b.first_node + b.n_nodes) + ", elements " + std::to_string(b.first_element) + ".." +
+               std::to_string(b.first_element + b.n_elements) + ">";
+      });
   py::class_<tissue::ToolResult>(m, "ToolResult", "One tool at the end of a tick")
       .def_property_readonly("tip", [](const tissue::ToolResult& t) { return numpy3(t.tip); })
       .def_property_readonly("axis", [](const tissue::ToolResult& t) { return numpy3(t.axis); })
@@ -474,6 +492,8 @@ void bind_simulation(py::module_& m) {
       .def_property_readonly("steps_per_tick", [](PySimulation& s) { return s.value.steps_per_tick(); })
       .def_property_readonly("dt", [](PySimulation& s) { return s.value.dt(); })
       .def_property_readonly("warnings", [](PySimulation& s) { return s.value.warnings(); })
+      .def_property_readonly("bodies", [](PySimulation& s) { return s.value.bodies(); },
+                             "the scene's bodies (tissue.Body), scene order; a scene of one mesh is one body")
       .def_property_readonly("ticks",
                              [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.ticks(); }); })
       .def_property_readonly("time", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.time(); }); })
@@ -810,6 +830,8 @@ void bind_batch(py::module_& m) {
            "When the scene's scripted tool paths end (s); 0 without paths")
       .def("warnings", [](PyBatch& b, int scene) { return locked(b, [&](tissue::Batch& x) { return x.warnings(scene); }); },
            py::arg("scene"))
+      .def("bodies", [](PyBatch& b, int scene) { return b.value.bodies(scene); }, py::arg("scene"),
+           "the scene's bodies (tissue.Body)")
       .def("set_material", [](PyBatch& b, int scene, std::string material, std::optional<double> E,
                               std::optional<double> nu, std::optional<double> rho) {
         locked(b, [&](tissue::Batch& x) { x.set_material(scene, {material, E, nu, rho}); });

@@ -17,7 +17,8 @@ namespace {
 /// The material of element e (its set's), or nullptr.
 const Material* material_of(const Scene& s, index_t e) {
   for (const ElementSet& es : s.sets) {
-    bool in = es.all;
+    const Body* b = es.body >= 0 && std::size_t(es.body) < s.bodies.size() ? &s.bodies[std::size_t(es.body)] : nullptr;
+    bool in = es.all && (!b || (e >= b->first_element && e < b->first_element + b->n_elements));
     for (size_t k = 0; !in && k < es.elements.size(); ++k) in = es.elements[k] == e;
     if (!in) continue;
     for (const Material& m : s.materials)
@@ -116,11 +117,16 @@ void unsupported_piece_warnings(const Scene& s, const TissueModel<double>& m, st
           lo[c] = std::min(lo[c], m.X[size_t(c) * m.n_nodes + a]);
           hi[c] = std::max(hi[c], m.X[size_t(c) * m.n_nodes + a]);
         }
-    out.push_back(fmt::format("{}: piece {} of the {} disconnected pieces of the mesh ({} element(s) from element "
+    std::string body;  // in a scene of bodies, the body the piece belongs to
+    for (const Body& b : s.bodies)
+      if (first[p] >= b.first_element && first[p] < b.first_element + b.n_elements)
+        body = elems[p] == b.n_elements ? fmt::format(" (all of body '{}')", b.name)
+                                        : fmt::format(" (of body '{}')", b.name);
+    out.push_back(fmt::format("{}: piece {} of the {} disconnected pieces of the mesh{} ({} element(s) from element "
                               "{}, box ({:.4g}, {:.4g}, {:.4g}) .. ({:.4g}, {:.4g}, {:.4g}) m) has no fixed node: "
                               "nothing holds it against the tool, so it is pushed away as a rigid body; fix a node "
                               "of it, or join it to the body",
-                              s.source, p + 1, n, elems[p], first[p], lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]));
+                              s.source, p + 1, n, body, elems[p], first[p], lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]));
   }
 }
 

@@ -41,17 +41,23 @@ double selection_tolerance(std::span<const double> nodes) {
   return 1e-9 * extent;
 }
 
-std::vector<index_t> constrained_nodes(const Constraint& c, std::span<const double> nodes, double tol) {
-  const auto n = static_cast<index_t>(nodes.size() / 3);
+std::vector<index_t> constrained_nodes(const Constraint& c, std::span<const double> nodes, double tol,
+                                       std::span<const Body> bodies) {
+  index_t lo = 0, hi = static_cast<index_t>(nodes.size() / 3);
+  if (c.body >= 0 && std::size_t(c.body) < bodies.size()) {
+    const Body& b = bodies[std::size_t(c.body)];
+    lo = std::max(lo, b.first_node);
+    hi = std::min(hi, b.first_node + b.n_nodes);
+  }
   std::vector<index_t> out;
   if (c.kind == Constraint::Kind::Nodes) {
     for (index_t i : c.nodes)
-      if (i >= 0 && i < n) out.push_back(i);
+      if (i >= lo && i < hi) out.push_back(i);
     std::sort(out.begin(), out.end());
     out.erase(std::unique(out.begin(), out.end()), out.end());
     return out;
   }
-  for (index_t i = 0; i < n; ++i) {
+  for (index_t i = lo; i < hi; ++i) {
     const double* x = nodes.data() + 3 * size_t(i);
     if (c.kind == Constraint::Kind::Box ? in_box(x, c, tol) : above_plane(x, c, tol)) out.push_back(i);
   }

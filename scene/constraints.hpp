@@ -18,9 +18,12 @@ namespace tissue::scene {
 double selection_tolerance(std::span<const double> nodes);
 
 /// Ids of the nodes `c` fixes, ascending and unique. nodes: (n_nodes x 3) m,
-/// xyz interleaved; tol in m. Node-list ids outside [0, n_nodes) are skipped
-/// (scene validation reports them). A plane with a zero normal selects none.
-std::vector<index_t> constrained_nodes(const Constraint& c, std::span<const double> nodes, double tol);
+/// xyz interleaved; tol in m. A selection of a body (c.body >= 0, an index
+/// into `bodies`) picks among that body's nodes only. Node-list ids outside
+/// [0, n_nodes) or outside the body are skipped (scene validation reports
+/// them). A plane with a zero normal selects none.
+std::vector<index_t> constrained_nodes(const Constraint& c, std::span<const double> nodes, double tol,
+                                       std::span<const Body> bodies = {});
 
 /// The constraint in words, for messages: "fixed nodes", "fixed box
 /// min (x, y, z) max (x, y, z)" or "fixed plane point (..) normal (..)".

@@ -1,5 +1,6 @@
-// The scene model: one tissue object (mesh + element sets with materials),
-// constraints, tools and solver settings, in SI units. io/scene_xml reads and
+// The scene model: the tissue (one mesh, or several bodies each with its own
+// mesh), element sets with materials, constraints, loads, tools and solver
+// settings, in SI units. io/scene_xml reads and
 // writes it; scene/validate checks it and turns it into a core ModelInput.
 #pragma once
 
@@ -64,23 +65,27 @@ struct Material {
   MaterialParams params() const;
 };
 
-/// Elements carrying one material. `elements` empty with all = true: every element.
+/// Elements carrying one material. `elements` empty with all = true: every
+/// element (of its body, when body >= 0).
 struct ElementSet {
   std::string name;
   std::string material;             ///< Material::name
   bool all = false;
-  std::vector<index_t> elements;    ///< element ids
+  std::vector<index_t> elements;    ///< element ids of the whole scene (a <body>'s local ids plus its first_element)
   int line = 0;                     ///< source line, for messages (0 = unknown)
+  int body = -1;                    ///< index into Scene::bodies it belongs to; -1 = the scene's (single-mesh form)
 };
 
 /// Fixed nodes: by id list, by an axis-aligned box, or by the side of a plane.
 struct Constraint {
   enum class Kind { Nodes, Box, Plane };
   Kind kind = Kind::Nodes;
-  std::vector<index_t> nodes;       ///< Kind::Nodes
+  std::vector<index_t> nodes;       ///< Kind::Nodes: node ids of the whole scene (a <body>'s local ids plus
+                                    ///< its first_node)
   double lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};   ///< Kind::Box (m)
   double point[3] = {0, 0, 0}, normal[3] = {0, 0, 1};  ///< Kind::Plane: fixes nodes with (x - point).normal >= 0
   int line = 0;                     ///< source line, for messages (0 = unknown)
+  int body = -1;                    ///< index into Scene::bodies whose nodes alone it selects; -1 = every node
 };
 
 /// A constant external force (a dead load: Backend::set_loads) on the nodes
@@ -123,13 +128,27 @@ struct Solver {
   int line = 0;                     ///< source line of <solver>, for messages (0 = unknown / defaults)
 };
 
+/// One body of a scene of several (docs/scene-format.md, "Bodies"): its
+/// nodes and elements are contiguous ranges of the scene's, in body order,
+/// and its elements use only its own nodes. The solver sees one mesh of
+/// several pieces; the bodies name the pieces for input and output.
+struct Body {
+  std::string name;
+  std::string mesh_file;            ///< its <mesh file=...> as named in the scene ("" = inline)
+  int line = 0;                     ///< source line of <body>, for messages (0 = unknown)
+  int mesh_line = 0;                ///< source line of its <mesh>
+  index_t first_node = 0, n_nodes = 0;
+  index_t first_element = 0, n_elements = 0;
+};
+
 /// A whole scene as read from a file, before validation (scene/validate.hpp).
 struct Scene {
   std::string source = "<scene>";   ///< file name, for messages
   std::string mesh_file;            ///< external mesh (resolved relative to the scene file), if any
   int mesh_line = 0;                ///< source line of <mesh>, for messages
-  std::vector<double> nodes;        ///< (n_nodes x 3) m
-  std::vector<index_t> tets;        ///< (n_elems x 4)
+  std::vector<double> nodes;        ///< (n_nodes x 3) m; with bodies, theirs one after the other
+  std::vector<index_t> tets;        ///< (n_elems x 4); with bodies, theirs one after the other (scene node ids)
+  std::vector<Body> bodies;         ///< empty = the single-mesh form (one <mesh>, no <body>)
   std::vector<Material> materials;
   std::vector<ElementSet> sets;
   std::vector<Constraint> constraints;

@@ -75,6 +75,61 @@ void check_mesh(const Scene& s) {
                        k / 4, k % 4, s.tets[k], n, n - 1));
 }
 
+// ---- bodies ----------------------------------------------------------------
+
+/// "body 'name'" of index k (k in range).
+std::string body_name(const Scene& s, int k) { return fmt::format("body '{}'", s.bodies[std::size_t(k)].name); }
+
+/// A scene of bodies: names non-empty and unique, node and element ranges
+/// contiguous in body order and covering the mesh, each body with an
+/// element, its elements using only its own nodes, and every set,
+/// constraint and load naming a body that exists.
+void check_bodies(const Scene& s) {
+  if (s.bodies.empty()) return;
+  index_t node = 0, elem = 0;
+  std::map<std::string, int> names;
+  for (int k = 0; k < int(s.bodies.size()); ++k) {
+    const Body& b = s.bodies[std::size_t(k)];
+    if (b.name.empty()) fail(s, b.line, fmt::format("body {}: the name is empty; every body needs a name", k));
+    if (const auto [it, fresh] = names.emplace(b.name, k); !fresh)
+      fail(s, b.line, fmt::format("body '{}' is defined twice (first {}); body names must be unique", b.name,
+                                  location(s, s.bodies[std::size_t(it->second)].line)));
+    if (b.first_node != node || b.n_nodes < 0 || b.first_element != elem || b.n_elements < 0)
+      fail(s, b.line,
+           fmt::format("{}: nodes {}+{} and elements {}+{} do not follow the bodies before it (nodes from {}, "
+                       "elements from {}); bodies hold consecutive ranges of the scene's nodes and elements",
+                       body_name(s, k), b.first_node, b.n_nodes, b.first_element, b.n_elements, node, elem));
+    if (b.n_elements == 0)
+      fail(s, b.mesh_line ? b.mesh_line : b.line,
+           fmt::format("{}: its mesh has no elements; a body needs at least one tetrahedron", body_name(s, k)));
+    node += b.n_nodes;
+    elem += b.n_elements;
+  }
+  if (node != node_count(s) || elem != elem_count(s))
+    fail(s, s.bodies.back().line,
+         fmt::format("the bodies hold {} nodes and {} elements, the scene's mesh {} and {}; every node and "
+                     "element belongs to one body",
+                     node, elem, node_count(s), elem_count(s)));
+  for (int k = 0; k < int(s.bodies.size()); ++k) {
+    const Body& b = s.bodies[std::size_t(k)];
+    for (index_t e = b.first_element; e < b.first_element + b.n_elements; ++e)
+      for (int c = 0; c < 4; ++c)
+        if (const index_t v = s.tets[4 * std::size_t(e) + c]; v < b.first_node || v >= b.first_node + b.n_nodes)
+          fail(s, b.mesh_line ? b.mesh_line : b.line,
+               fmt::format("{}: element {} corner {} is node {} of the scene, outside the body's nodes {}..{}; a "
+                           "body's elements use its own nodes",
+                           body_name(s, k), e - b.first_element, c, v, b.first_node, b.first_node + b.n_nodes - 1));
+  }
+  const auto check_ref = [&](int body, int line, std::string_view what) {
+    if (body < -1 || body >= int(s.bodies.size()))
+      fail(s, line, fmt::format("{} belongs to body {}, which does not exist (the scene has {} bodies)", what, body,
+                                s.bodies.size()));
+  };
+  for (const ElementSet& es : s.sets) check_ref(es.body, es.line, fmt::format("element-set '{}'", es.name));
+  for (const Constraint& c : s.constraints) check_ref(c.body, c.line, "a <fixed>");
+  for (const Load& l : s.loads) check_ref(l.where.body, l.where.line, "a <load>");
+}
+
 // ---- materials -------------------------------------------------------------
 
 void check_young_poisson(const Scene& s, const Material& m, const std::string& what) {
@@ -196,31 +251,44 @@ std::string known_materials(const Scene& s) {
   return out;
 }
 
+/// The body holding element e (-1 in the single-mesh form).
+int body_of_element(const Scene& s, index_t e) {
+  for (int k = 0; k < int(s.bodies.size()); ++k)
+    if (e < s.bodies[std::size_t(k)].first_element + s.bodies[std::size_t(k)].n_elements) return k;
+  return -1;
+}
+
 /// Assigns the set's elements to `owner` (set index per element, -1 = none).
 void claim_elements(const Scene& s, size_t set, std::vector<int>& owner) {
   const ElementSet& es = s.sets[set];
-  const index_t ne = elem_count(s);
-  const std::string what = fmt::format("element-set '{}'", es.name);
+  index_t lo = 0, ne = elem_count(s);  // the elements it may name: its body's, or all
+  if (es.body >= 0) {
+    lo = s.bodies[std::size_t(es.body)].first_element;
+    ne = lo + s.bodies[std::size_t(es.body)].n_elements;
+  }
+  const std::string what = es.body >= 0 ? fmt::format("{}: element-set '{}'", body_name(s, es.body), es.name)
+                                        : fmt::format("element-set '{}'", es.name);
   if (es.all && !es.elements.empty())
     fail(s, es.line, what + ": give either all elements or an element list, not both");
   if (!es.all && es.elements.empty())
     fail(s, es.line, what + ": the element list is empty; a set needs at least one element (or \"all\")");
   auto claim = [&](index_t e) {
-    if (e < 0 || e >= ne)
+    if (e < lo || e >= ne)
       fail(s, es.line,
-           fmt::format("{}: element {} is out of range (the mesh has {} elements, ids 0..{})", what, e, ne, ne - 1));
-    if (owner[e] == int(set)) fail(s, es.line, fmt::format("{}: element {} is listed twice", what, e));
+           fmt::format("{}: element {} is out of range (the {} has {} elements, ids 0..{})", what, e - lo,
+                       es.body >= 0 ? "body" : "mesh", ne - lo, ne - lo - 1));
+    if (owner[e] == int(set)) fail(s, es.line, fmt::format("{}: element {} is listed twice", what, e - lo));
     if (owner[e] >= 0) {
       const ElementSet& other = s.sets[owner[e]];
       fail(s, es.line,
            fmt::format("{}: element {} is already in element-set '{}' ({}); an element belongs to "
                        "exactly one set",
-                       what, e, other.name, location(s, other.line)));
+                       what, e - lo, other.name, location(s, other.line)));
     }
     owner[e] = int(set);
   };
   if (es.all)
-    for (index_t e = 0; e < ne; ++e) claim(e);
+    for (index_t e = lo; e < ne; ++e) claim(e);
   else
     for (index_t e : es.elements) claim(e);
 }
@@ -241,10 +309,14 @@ std::vector<index_t> resolve_sets(const Scene& s, const std::map<std::string, in
   for (index_t e = 0; e < ne; ++e) {
     if (owner[e] < 0) {
       const auto missing = std::count(owner.begin(), owner.end(), -1);
-      fail(s, s.mesh_line,
-           fmt::format("element {} (nodes {} {} {} {}) is in no element-set{}; every element needs "
+      const int b = body_of_element(s, e);
+      const index_t node0 = b >= 0 ? s.bodies[std::size_t(b)].first_node : 0;
+      fail(s, b >= 0 ? s.bodies[std::size_t(b)].line : s.mesh_line,
+           fmt::format("{}element {} (nodes {} {} {} {}) is in no element-set{}; every element needs "
                        "a material (list it in a set, or use elements=\"all\")",
-                       e, s.tets[4 * e], s.tets[4 * e + 1], s.tets[4 * e + 2], s.tets[4 * e + 3],
+                       b >= 0 ? body_name(s, b) + ": " : "", b >= 0 ? e - s.bodies[std::size_t(b)].first_element : e,
+                       s.tets[4 * e] - node0, s.tets[4 * e + 1] - node0, s.tets[4 * e + 2] - node0,
+                       s.tets[4 * e + 3] - node0,
                        missing > 1 ? fmt::format(" (nor are {} others)", missing - 1) : ""));
     }
     mat[e] = materials.at(s.sets[owner[e]].material);
@@ -264,15 +336,21 @@ std::string selection_rule(const std::string& noun) {
 
 void check_constraint(const Scene& s, const Constraint& c, const std::string& noun = "fixed") {
   const std::string what = describe_as(c, noun);
-  const index_t n = node_count(s);
+  index_t lo = 0, n = node_count(s);  // the nodes it may name: its body's, or all
+  if (c.body >= 0) {
+    lo = s.bodies[std::size_t(c.body)].first_node;
+    n = lo + s.bodies[std::size_t(c.body)].n_nodes;
+  }
   switch (c.kind) {
     case Constraint::Kind::Nodes:
       if (c.nodes.empty())
         fail(s, c.line, noun + " nodes: the node list is empty; " + selection_rule(noun));
       for (index_t i : c.nodes)
-        if (i < 0 || i >= n)
+        if (i < lo || i >= n)
           fail(s, c.line,
-               fmt::format("{} nodes: node {} is out of range (the mesh has {} nodes, ids 0..{})", noun, i, n, n - 1));
+               fmt::format("{}{} nodes: node {} is out of range (the {} has {} nodes, ids 0..{})",
+                           c.body >= 0 ? body_name(s, c.body) + ": " : "", noun, i - lo,
+                           c.body >= 0 ? "body" : "mesh", n - lo, n - lo - 1));
       break;
     case Constraint::Kind::Box:
       for (int k = 0; k < 3; ++k) {
@@ -303,10 +381,11 @@ std::vector<std::uint8_t> resolve_constraints(const Scene& s) {
   std::vector<std::uint8_t> fixed(n, 0);
   for (const Constraint& c : s.constraints) {
     check_constraint(s, c);
-    const std::vector<index_t> sel = constrained_nodes(c, s.nodes, tol);
+    const std::vector<index_t> sel = constrained_nodes(c, s.nodes, tol, s.bodies);
     if (sel.empty())
       fail(s, c.line,
-           fmt::format("{} selects no node of the mesh; a constraint must fix at least one node", describe(c)));
+           fmt::format("{} selects no node of the {}; a constraint must fix at least one node", describe(c),
+                       c.body >= 0 ? body_name(s, c.body) : "mesh"));
     for (index_t i : sel) fixed[i] = 1;
   }
   return fixed;
@@ -319,9 +398,11 @@ std::vector<index_t> selected_load_nodes(const Scene& s, const Load& l, double t
   const Constraint& c = l.where;
   check_constraint(s, c, "load");
   for (int k = 0; k < 3; ++k) check_finite(s, c.line, "load", fmt::format("force {}", "xyz"[k]), l.force[k]);
-  std::vector<index_t> sel = constrained_nodes(c, s.nodes, tol);
+  std::vector<index_t> sel = constrained_nodes(c, s.nodes, tol, s.bodies);
   if (sel.empty())
-    fail(s, c.line, fmt::format("{} selects no node of the mesh; {}", describe_as(c, "load"), selection_rule("load")));
+    fail(s, c.line,
+         fmt::format("{} selects no node of the {}; {}", describe_as(c, "load"),
+                     c.body >= 0 ? body_name(s, c.body) : "mesh", selection_rule("load")));
   return sel;
 }
 
@@ -538,6 +619,7 @@ void validate(const Scene& scene) {
 
 ModelInput to_model_input(const Scene& scene) {
   check_mesh(scene);
+  check_bodies(scene);
   const auto materials = check_materials(scene);
   ModelInput in;
   in.elem_material = resolve_sets(scene, materials);
@@ -563,7 +645,19 @@ ModelInput to_model_input(const Scene& scene) {
 }
 
 TissueModel<double> load_model(const Scene& scene) {
-  TissueModel<double> m = build_model(to_model_input(scene));
+  const ModelInput in = to_model_input(scene);
+  TissueModel<double> m;
+  try {
+    m = build_model(in);
+  } catch (const ModelError& e) {  // the core names scene-wide ids: say where each body's lie
+    if (scene.bodies.empty()) throw;
+    std::string where;
+    for (const Body& b : scene.bodies)
+      where += fmt::format("{}body '{}' nodes {}..{}, elements {}..{}", where.empty() ? "" : "; ", b.name,
+                           b.first_node, b.first_node + b.n_nodes - 1, b.first_element,
+                           b.first_element + b.n_elements - 1);
+    throw ModelError(fmt::format("{} (node and element ids of the whole scene: {})", e.what(), where));
+  }
   try {
     align_time_step(m, scene.solver.tick);  // whole steps per haptic tick
   } catch (const ModelError& e) {

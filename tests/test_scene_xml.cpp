@@ -742,6 +742,170 @@ TEST(SceneXml, FibreFileErrorsNameTheCsvLine) {
 
 // ---- TetGen .node/.ele -----------------------------------------------------
 
+// ---- bodies ----------------------------------------------------------------
+
+/// Two bodies: "a" one tetrahedron held at nodes 0 and 1; "b" two tetrahedra
+/// sharing a face, 3 m along x, in two sets, its base held by a box that
+/// spans a's base too, and a point load on its node 4.
+std::string bodies_xml(const std::string& a_extra = "", const std::string& b_sets =
+                           R"(<element-set name="first" material="m" elements="0"/>
+    <element-set name="second" material="m" elements="1"/>)",
+                       const std::string& b_elements = "0 1 2 3  1 2 3 4") {
+  return fmt::format(R"(<tissue-scene>
+  <material name="m" E="3000" nu="0.45" rho="1000"/>
+  <body name="a">
+    <mesh><nodes>0 0 0  1 0 0  0 1 0  0 0 1</nodes><elements>0 1 2 3</elements></mesh>
+    <element-set material="m" elements="all"/>
+    <fixed nodes="0 1"/>{}
+  </body>
+  <body name="b">
+    <mesh><nodes>3 0 0  4 0 0  3 1 0  3 0 1  4 1 1</nodes><elements>{}</elements></mesh>
+    {}
+    <fixed box-min="-10 -10 -0.1" box-max="10 10 0.1"/>
+    <load nodes="4" force="0 0 1" distribute="each"/>
+  </body>
+  <tool radius="0.2"><waypoint t="0" x="0.2" y="0.2" z="2"/></tool>
+</tissue-scene>)",
+                     a_extra, b_elements, b_sets);
+}
+
+void expect_same_bodies(const Scene& x, const Scene& y) {
+  ASSERT_EQ(x.bodies.size(), y.bodies.size());
+  for (size_t k = 0; k < x.bodies.size(); ++k) {
+    const scene::Body &a = x.bodies[k], &b = y.bodies[k];
+    EXPECT_EQ(a.name, b.name);
+    EXPECT_EQ(a.first_node, b.first_node);
+    EXPECT_EQ(a.n_nodes, b.n_nodes);
+    EXPECT_EQ(a.first_element, b.first_element);
+    EXPECT_EQ(a.n_elements, b.n_elements);
+  }
+  for (size_t k = 0; k < x.sets.size(); ++k) EXPECT_EQ(x.sets[k].body, y.sets[k].body);
+  for (size_t k = 0; k < x.constraints.size(); ++k) EXPECT_EQ(x.constraints[k].body, y.constraints[k].body);
+  ASSERT_EQ(x.loads.size(), y.loads.size());
+  for (size_t k = 0; k < x.loads.size(); ++k) {
+    EXPECT_EQ(x.loads[k].where.body, y.loads[k].where.body);
+    EXPECT_EQ(x.loads[k].where.nodes, y.loads[k].where.nodes);
+  }
+}
+
+// The bodies become one mesh, each body's ids shifted by the counts before
+// it; a body's box selects its own nodes only; "all" is the body's elements.
+TEST(SceneXml, BodiesAreOneMeshWithTheirOwnIdsShifted) {
+  const Scene s = parse_scene(bodies_xml(), "two.xml", "");
+  ASSERT_EQ(s.bodies.size(), 2u);
+  EXPECT_EQ(s.bodies[0].name, "a");
+  EXPECT_EQ(s.bodies[1].name, "b");
+  EXPECT_EQ(s.bodies[1].first_node, 4);
+  EXPECT_EQ(s.bodies[1].n_nodes, 5);
+  EXPECT_EQ(s.bodies[1].first_element, 1);
+  EXPECT_EQ(s.bodies[1].n_elements, 2);
+  EXPECT_EQ(s.nodes.size(), 27u);
+  EXPECT_EQ(s.tets, (std::vector<index_t>{0, 1, 2, 3, 4, 5, 6, 7, 5, 6, 7, 8}));
+  ASSERT_EQ(s.sets.size(), 3u);
+  EXPECT_TRUE(s.sets[0].all);
+  EXPECT_EQ(s.sets[0].body, 0);
+  EXPECT_EQ(s.sets[1].elements, std::vector<index_t>{1});
+  EXPECT_EQ(s.sets[2].elements, std::vector<index_t>{2});
+  EXPECT_EQ(s.sets[2].body, 1);
+  EXPECT_EQ(s.constraints[0].nodes, (std::vector<index_t>{0, 1}));
+  EXPECT_EQ(s.constraints[1].body, 1);
+  EXPECT_EQ(s.loads.at(0).where.nodes, std::vector<index_t>{8});
+  const ModelInput in = scene::to_model_input(s);
+  // a's nodes 0 1 by id; of b, the box catches the three at z = 0 -- not a's node 2, also at z = 0
+  EXPECT_EQ(in.fixed, (std::vector<std::uint8_t>{1, 1, 0, 0, 1, 1, 1, 0, 0}));
+  EXPECT_EQ(in.elem_material, (std::vector<index_t>{0, 0, 0}));
+  const TissueModel<double> m = scene::load_model(s);
+  const scene::SceneLoads loads = scene::resolve_loads(s, m);
+  EXPECT_EQ(loads.nodes, std::vector<index_t>{8});
+}
+
+TEST(SceneXml, BodiesRoundTripInlineAndInTheirOwnMeshFiles) {
+  const Scene s = parse_scene(bodies_xml(), "two.xml", "");
+  const Scene back = parse_scene(format_scene(s, ""), "back.xml", "");
+  expect_same_scene(s, back);
+  expect_same_bodies(s, back);
+  EXPECT_EQ(format_scene(back, ""), format_scene(s, ""));
+  // the written ids are each body's own again
+  EXPECT_NE(format_scene(s, "").find("<fixed nodes=\"0 1\""), std::string::npos) << format_scene(s, "");
+  EXPECT_NE(format_scene(s, "").find("<load force=\"0 0 1\" distribute=\"each\" nodes=\"4\""), std::string::npos)
+      << format_scene(s, "");
+
+  TempDir dir;
+  write_scene(s, dir.file("two.xml"), false);
+  EXPECT_TRUE(fs::exists(dir.file("two-a.node")));
+  EXPECT_TRUE(fs::exists(dir.file("two-b.ele")));
+  const Scene r = read_scene(dir.file("two.xml"));
+  EXPECT_EQ(r.bodies.at(1).mesh_file, "two-b.node");
+  expect_same_scene(s, r);
+  expect_same_bodies(s, r);
+  EXPECT_NO_THROW(scene::validate(r));
+}
+
+TEST(SceneXml, BodyErrorsNameTheBodyItsOwnIdsAndTheLine) {
+  const std::string xml = bodies_xml();
+  const int b_line = line_of(xml, "<body name=\"b\"");
+  EXPECT_TRUE(xml_error(bodies_xml("", R"(<element-set material="m" elements="0 2"/>)"),
+                        {fmt::format("scene.xml:{}: ", b_line + 2), "body 'b': element 2 is out of range",
+                         "its mesh has 2 elements"}));
+  EXPECT_TRUE(xml_error(bodies_xml("\n    <fixed nodes=\"4\"/>"),
+                        {"body 'a': node 4 is out of range", "its mesh has 4 nodes, ids 0..3"}));
+  EXPECT_TRUE(xml_error(bodies_xml("", "", "0 1 2 3  1 2 3 5"),
+                        {fmt::format("scene.xml:{}: ", b_line + 1),
+                         "body 'b': element 1 corner 3 refers to node 5, out of range (its mesh has 5 nodes"}));
+  EXPECT_TRUE(xml_error(bodies_xml("\n    <load box-min=\"0 0 0\" box-max=\"1 1 1\" force=\"1 0 0\" bogus=\"1\"/>"),
+                        {"<load>: unknown attribute 'bogus'"}));
+  EXPECT_TRUE(xml_error(fmt::format("<tissue-scene>{}<body name=\"x\">{}</body></tissue-scene>", kTet, kTet),
+                        {"a <mesh> beside <body> elements"}));
+  EXPECT_TRUE(xml_error(fmt::format("<tissue-scene><body name=\"x\">{}</body>\n<fixed nodes=\"0\"/></tissue-scene>",
+                                    kTet),
+                        {"scene.xml:5: ", "<fixed> outside a <body>"}));
+  EXPECT_TRUE(xml_error(fmt::format("<tissue-scene><body name=\"x\">{}</body>\n<body name=\"x\">{}</body>"
+                                    "</tissue-scene>",
+                                    kTet, kTet),
+                        {"scene.xml:5: ", "body 'x' is defined twice (first at line 1)"}));
+  EXPECT_TRUE(xml_error("<tissue-scene>\n<body name=\"x\"/></tissue-scene>",
+                        {"scene.xml:2: ", "body 'x' has no <mesh>"}));
+  EXPECT_TRUE(xml_error(fmt::format("<tissue-scene>\n<body>{}</body></tissue-scene>", kTet),
+                        {"scene.xml:2: ", "<body>: missing required attribute 'name'"}));
+  EXPECT_TRUE(xml_error(fmt::format("<tissue-scene><body name=\"x\">{}<tool/></body></tissue-scene>", kTet),
+                        {"unknown element <tool> in <body>"}));
+  // validation: an element left out of every set names the body and its own ids; a box of a body
+  // that holds none of its nodes says whose
+  const Scene unset = parse_scene(bodies_xml("", R"(<element-set material="m" elements="1"/>)"), "scene.xml", "");
+  EXPECT_TRUE(throws_with<SceneError>([&] { scene::validate(unset); },
+                                      {"body 'b': element 0 (nodes 0 1 2 3) is in no element-set"}));
+  const Scene far = parse_scene(bodies_xml("\n    <fixed box-min=\"3 -1 -1\" box-max=\"5 2 2\"/>"), "scene.xml", "");
+  EXPECT_TRUE(throws_with<SceneError>([&] { scene::validate(far); }, {"selects no node of the body 'a'"}));
+}
+
+// A scene of bodies built in code is held to the same rules: the ranges
+// tile the mesh in order, and a body's elements use its own nodes.
+TEST(SceneValidate, BodiesBuiltInCodeMustTileTheMesh) {
+  const Scene good = parse_scene(bodies_xml(), "two.xml", "");
+  EXPECT_NO_THROW(scene::validate(good));
+  Scene gap = good;
+  gap.bodies[1].first_node = 5;
+  EXPECT_TRUE(throws_with<SceneError>([&] { scene::validate(gap); }, {"body 'b'", "do not follow the bodies before it"}));
+  Scene short_ = good;
+  short_.bodies[1].n_nodes = 4;
+  EXPECT_TRUE(throws_with<SceneError>([&] { scene::validate(short_); }, {"the bodies hold 8 nodes", "9"}));
+  Scene crossing = good;
+  crossing.tets[4] = 3;  // b's first element uses a's node 3
+  EXPECT_TRUE(throws_with<SceneError>([&] { scene::validate(crossing); },
+                                      {"body 'b': element 0 corner 0 is node 3 of the scene, outside the body's "
+                                       "nodes 4..8"}));
+  Scene named = good;
+  named.bodies[1].name = "a";
+  EXPECT_TRUE(throws_with<SceneError>([&] { scene::validate(named); }, {"body 'a' is defined twice"}));
+  Scene stray = good;
+  stray.constraints[0].body = 2;
+  EXPECT_TRUE(throws_with<SceneError>([&] { scene::validate(stray); }, {"belongs to body 2, which does not exist"}));
+  Scene outside = good;
+  outside.constraints[0].nodes = {0, 5};  // a's selection naming b's node
+  EXPECT_TRUE(throws_with<SceneError>([&] { scene::validate(outside); },
+                                      {"body 'a': fixed nodes: node 5 is out of range (the body has 4 nodes"}));
+}
+
 TEST(TetgenFiles, ReadsOneBasedFilesWithCommentsAttributesAndMarkers) {
   TempDir dir;
   dir.write("organ.node", R"(# a unit tet and its mirror

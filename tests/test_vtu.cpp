@@ -126,6 +126,72 @@ TEST(WriteVtu, ParsesWithCountsArraysAndValues) {
   EXPECT_DOUBLE_EQ(J[4], 1.04);
 }
 
+/// Two boxes as one model: the first box's nodes and elements, then the
+/// second's (shifted 5 cm along x), as the reader merges a scene's bodies.
+tissue::TissueModel<double> two_box_model(std::vector<tissue::scene::Body>& bodies) {
+  tissue::ModelInput in, a, b;
+  tissue::box_mesh(a, 2, 1, 1, 0.02, 0.01, 0.01);
+  tissue::box_mesh(b, 1, 1, 1, 0.01, 0.01, 0.01);
+  for (size_t i = 0; i < b.nodes.size(); i += 3) b.nodes[i] += 0.05;
+  in.nodes = a.nodes;
+  in.nodes.insert(in.nodes.end(), b.nodes.begin(), b.nodes.end());
+  in.tets = a.tets;
+  const index_t na = index_t(a.nodes.size() / 3);
+  for (index_t v : b.tets) in.tets.push_back(v + na);
+  in.materials = {{1000.0, 10000.0, 1000.0}};
+  bodies = {{.name = "a", .n_nodes = na, .n_elements = index_t(a.tets.size() / 4)},
+            {.name = "b", .first_node = na, .n_nodes = index_t(b.nodes.size() / 3),
+             .first_element = index_t(a.tets.size() / 4), .n_elements = index_t(b.tets.size() / 4)}};
+  return tissue::build_model(in);
+}
+
+// One <Piece> per body, each with its own points, connectivity counted from
+// its first node, its part of every field and its "body" index per cell.
+TEST(WriteVtu, ABodyIsAPiece) {
+  TempDir t;
+  std::vector<tissue::scene::Body> bodies;
+  const auto m = two_box_model(bodies);
+  const auto f = marked_fields(m);
+  write_vtu(t.file("two.vtu"), m, f, bodies);
+  pugi::xml_document doc;
+  ASSERT_TRUE(doc.load_file(t.file("two.vtu").c_str()));
+  std::vector<pugi::xml_node> pieces;
+  for (pugi::xml_node p : doc.child("VTKFile").child("UnstructuredGrid").children("Piece")) pieces.push_back(p);
+  ASSERT_EQ(pieces.size(), 2u);
+  for (int k = 0; k < 2; ++k) {
+    const tissue::scene::Body& b = bodies[k];
+    const pugi::xml_node piece = pieces[k];
+    ASSERT_EQ(piece.attribute("NumberOfPoints").as_int(), b.n_nodes);
+    ASSERT_EQ(piece.attribute("NumberOfCells").as_int(), b.n_elements);
+    const auto points = numbers(piece.child("Points").child("DataArray"));
+    ASSERT_EQ(points.size(), 3u * b.n_nodes);
+    for (index_t i = 0; i < b.n_nodes; ++i)
+      for (int c = 0; c < 3; ++c) EXPECT_DOUBLE_EQ(points[3 * i + c], m.X[c * m.n_nodes + b.first_node + i]);
+    const auto conn = numbers(named_array(piece.child("Cells"), "connectivity"));
+    ASSERT_EQ(conn.size(), 4u * b.n_elements);
+    for (index_t e = 0; e < b.n_elements; ++e)
+      for (int a = 0; a < 4; ++a)
+        EXPECT_EQ(conn[4 * e + a], m.elem_nodes[a * m.n_elems + b.first_element + e] - b.first_node);
+    const auto u = numbers(named_array(piece.child("PointData"), "displacement"));
+    ASSERT_EQ(u.size(), 3u * b.n_nodes);
+    EXPECT_DOUBLE_EQ(u[3 * 1 + 2], 1e-3 * (b.first_node + 1) + 2e-5);  // its node 1, z
+    const auto J = numbers(named_array(piece.child("CellData"), "J"));
+    ASSERT_EQ(J.size(), size_t(b.n_elements));
+    EXPECT_DOUBLE_EQ(J[0], 1.0 + 0.01 * b.first_element);
+    const auto body = numbers(named_array(piece.child("CellData"), "body"));
+    ASSERT_EQ(body.size(), size_t(b.n_elements));
+    for (double v : body) EXPECT_EQ(v, double(k));
+  }
+  // bodies that do not tile the model are refused, naming the file
+  bodies[1].first_node += 1;
+  try {
+    write_vtu(t.file("bad.vtu"), m, f, bodies);
+    FAIL() << "expected an error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("body 'b' does not follow"), std::string::npos) << e.what();
+  }
+}
+
 TEST(WriteVtu, WrongFieldSizeNamesPathAndField) {
   TempDir t;
   const auto m = box_model();

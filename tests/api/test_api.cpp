@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -15,9 +16,11 @@
 #include "core/box_mesh.hpp"
 #include "core/scheduler.hpp"
 #include "io/kidney.hpp"
+#include "io/scene_xml.hpp"
 #include "scene/validate.hpp"
 #include "tissue/simulation.hpp"
 #include "tests/api/api_test_support.hpp"
+#include "tests/temp_dir.hpp"
 
 namespace {
 
@@ -215,6 +218,137 @@ TEST(Facade, CudaRunsTheKidneyAsTheCpuDoes) {
   double dx = 0;
   for (std::size_t i = 0; i < xg.size(); ++i) dx = std::max(dx, std::fabs(xg[i] - xc[i]));
   EXPECT_LT(dx, 1e-5);  // m
+}
+
+/// Two 20 x 20 x 10 mm blocks of 6 x 6 x 3 cells (E 3 kPa, nu 0.4), the
+/// second 30 mm along x from the first, each held at its base by a box that
+/// spans both bases but selects its own body's nodes: the bodies "left" and
+/// "right" of one scene, or (alone = 0 or 1) that block alone as a
+/// single-mesh scene. A 4 mm sphere parked above between them; cpu, double, damping and
+/// dt fixed so that the two scenes step alike. Written (one TetGen pair per
+/// body) into dir; returns the scene file.
+std::string blocks_scene(const tissue::testing_support::TempDir& dir, int alone = -1) {
+  namespace sc = tissue::scene;
+  sc::Scene s;
+  s.materials.push_back({.name = "tissue", .form = sc::Material::Form::YoungPoisson, .a = 3000, .b = 0.4, .rho = 1000});
+  for (int k = 0; k < 2; ++k) {
+    if (alone >= 0 && k != alone) continue;
+    tissue::ModelInput in;
+    tissue::box_mesh(in, 6, 6, 3, 0.02, 0.02, 0.01);
+    for (std::size_t i = 0; i < in.nodes.size(); i += 3) in.nodes[i] += 0.03 * k;
+    const int body = alone >= 0 ? -1 : int(s.bodies.size());
+    sc::Body b;
+    b.name = k == 0 ? "left" : "right";
+    b.first_node = tissue::index_t(s.nodes.size() / 3);
+    b.first_element = tissue::index_t(s.tets.size() / 4);
+    b.n_nodes = tissue::index_t(in.nodes.size() / 3);
+    b.n_elements = tissue::index_t(in.tets.size() / 4);
+    s.nodes.insert(s.nodes.end(), in.nodes.begin(), in.nodes.end());
+    for (tissue::index_t v : in.tets) s.tets.push_back(v + b.first_node);
+    s.sets.push_back({.name = b.name, .material = "tissue", .all = true, .elements = {}, .line = 0, .body = body});
+    sc::Constraint base;
+    base.kind = sc::Constraint::Kind::Box;
+    base.lo[0] = base.lo[1] = base.lo[2] = -1;
+    base.hi[0] = base.hi[1] = 1;
+    base.hi[2] = 1e-4;
+    base.body = body;
+    s.constraints.push_back(base);
+    if (alone < 0) s.bodies.push_back(b);
+  }
+  sc::Tool t;
+  t.radius = 4e-3;
+  t.path = {{0, {0.025, 0.01, 0.03}}, {1, {0.025, 0.01, 0.03}}};  // parked for a second
+  s.tools.push_back(t);
+  s.solver.precision = tissue::Precision::Double;
+  s.solver.damping = 30;
+  s.solver.mass_scaling = 0;
+  const std::string path = dir.file(alone < 0 ? "blocks.xml" : alone == 0 ? "left.xml" : "right.xml");
+  tissue::io::write_scene(s, path, false);
+  return path;
+}
+
+/// Presses block k's top centre 1 mm deep over 200 ticks and holds 300;
+/// returns the tool force of every tick.
+std::vector<tissue::Vector3> press_block(Simulation& sim, int k) {
+  std::vector<tissue::Vector3> out;
+  for (int t = 1; t <= 500; ++t) {
+    const double s = std::min(1.0, t / 200.0);
+    sim.set_tool_pose(0, {0.01 + 0.03 * k, 0.01, 0.014 - s * 1e-3});
+    out.push_back(sim.step().tools[0].force);
+  }
+  return out;
+}
+
+// A scene of two bodies is each body's scene side by side: pressing one
+// gives, tick by tick and bit for bit on the cpu, the force and field of
+// that body alone, while the other stays exactly at rest (its region is
+// never seeded); the bodies' ranges name the nodes of each.
+TEST(Facade, EachOfTwoBodiesPressesAsItDoesAlone) {
+  tissue::testing_support::TempDir dir;
+  const std::string both = blocks_scene(dir);
+  EXPECT_TRUE(std::filesystem::exists(dir.file("blocks-left.node")));
+  EXPECT_TRUE(std::filesystem::exists(dir.file("blocks-right.ele")));
+  for (int k = 0; k < 2; ++k) {
+    Simulation two = Simulation::load(both, {"cpu", "double", "auto"});
+    Simulation one = Simulation::load(blocks_scene(dir, k), {"cpu", "double", "auto"});
+    EXPECT_TRUE(two.warnings().empty()) << two.warnings().front();
+    const std::vector<tissue::BodyRange> bodies = two.bodies();
+    ASSERT_EQ(bodies.size(), 2u);
+    EXPECT_EQ(bodies[0].name, "left");
+    EXPECT_EQ(bodies[1].name, "right");
+    EXPECT_EQ(bodies[1].first_node, bodies[0].n_nodes);
+    EXPECT_EQ(bodies[1].first_element, bodies[0].n_elements);
+    ASSERT_EQ(bodies[k].n_nodes, one.n_nodes());
+    ASSERT_EQ(bodies[k].n_elements, one.n_elements());
+    ASSERT_EQ(two.steps_per_tick(), one.steps_per_tick());
+    ASSERT_EQ(one.bodies().size(), 1u);
+    EXPECT_EQ(one.bodies()[0].name, "body");
+
+    const std::vector<tissue::Vector3> f2 = press_block(two, k), f1 = press_block(one, k);
+    for (std::size_t t = 0; t < f1.size(); ++t)
+      for (int c = 0; c < 3; ++c) ASSERT_EQ(f2[t][c], f1[t][c]) << "body " << k << " tick " << t + 1;
+    EXPECT_GT(f1.back()[2], 1e-3) << "the press reached block " << k;
+    const std::vector<double> u2 = two.field(tissue::Field::Displacement), u1 = one.field(tissue::Field::Displacement);
+    const std::size_t first = 3 * bodies[k].first_node;
+    for (std::size_t i = 0; i < u1.size(); ++i) ASSERT_EQ(u2[first + i], u1[i]) << "body " << k << " value " << i;
+    const tissue::BodyRange& other = bodies[1 - k];
+    for (std::size_t i = 3 * other.first_node; i < 3 * (other.first_node + other.n_nodes); ++i)
+      ASSERT_EQ(u2[i], 0.0) << "the untouched body moved, value " << i;
+  }
+}
+
+// On the GPU the two-body scene presses as on the cpu (the consistency
+// tolerance of the backends) and the untouched body stays at rest.
+TEST(Facade, CudaRunsTwoBodiesAsTheCpuDoes) {
+  const std::vector<std::string> b = tissue::available_backends();
+  if (std::find(b.begin(), b.end(), "cuda") == b.end()) GTEST_SKIP() << "no usable cuda backend here";
+  tissue::testing_support::TempDir dir;
+  const std::string both = blocks_scene(dir);
+  Simulation gpu = Simulation::load(both, {"cuda", "double", "auto"});
+  Simulation cpu = Simulation::load(both, {"cpu", "double", "auto"});
+  const std::vector<tissue::Vector3> fg = press_block(gpu, 1), fc = press_block(cpu, 1);
+  double peak = 0, worst = 0;
+  for (std::size_t t = 0; t < fc.size(); ++t) {
+    peak = std::max(peak, std::hypot(fc[t][0], fc[t][1], fc[t][2]));
+    worst = std::max(worst, std::hypot(fg[t][0] - fc[t][0], fg[t][1] - fc[t][1], fg[t][2] - fc[t][2]));
+  }
+  EXPECT_GT(peak, 1e-3);
+  EXPECT_LT(worst, 1e-6 * peak) << "peak " << peak;
+  const std::vector<double> u = gpu.field(tissue::Field::Displacement);
+  const tissue::BodyRange left = gpu.bodies()[0];
+  for (std::size_t i = 0; i < 3 * left.n_nodes; ++i) ASSERT_EQ(u[i], 0.0) << "the untouched body moved, value " << i;
+}
+
+// A body that nothing holds is warned about by name.
+TEST(Facade, AnUnsupportedBodyIsNamed) {
+  tissue::testing_support::TempDir dir;
+  tissue::scene::Scene s = tissue::io::read_scene(blocks_scene(dir));
+  s.constraints.pop_back();  // the right block's base
+  const std::string path = dir.file("loose.xml");
+  tissue::io::write_scene(s, path, true);
+  const Simulation sim = Simulation::load(path, {"cpu", "double", ""});
+  ASSERT_EQ(sim.warnings().size(), 1u);
+  EXPECT_NE(sim.warnings()[0].find("(all of body 'right')"), std::string::npos) << sim.warnings()[0];
 }
 
 TEST(Facade, ReportsTheVersionAndBackends) {

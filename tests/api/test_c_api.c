@@ -137,6 +137,18 @@ int main(void) {
   CHECK(tissue_element_count(sim) == NT);
   CHECK(tissue_tool_count(sim) == 1);
   CHECK(fabs(tissue_tick_seconds(sim) - 1e-3) < 1e-12);
+  /* a mesh is one body, "body", of every node and element */
+  CHECK(tissue_body_count(sim) == 1);
+  CHECK(tissue_body_name(sim, 0) != NULL && strcmp(tissue_body_name(sim, 0), "body") == 0);
+  CHECK(tissue_body_name(sim, 1) == NULL);
+  {
+    size_t first = 99, count = 0, first_e = 99, count_e = 0;
+    CHECK(tissue_body_range(sim, 0, &first, &count, &first_e, &count_e) == TISSUE_OK);
+    CHECK(first == 0 && count == NN && first_e == 0 && count_e == NT);
+    CHECK(tissue_body_range(sim, 0, NULL, NULL, NULL, &count_e) == TISSUE_OK);
+    CHECK(tissue_body_range(sim, 1, &first, NULL, NULL, NULL) == TISSUE_BAD_ARGUMENT);
+    CHECK(strstr(tissue_last_error(), "body 1 is out of range") != NULL);
+  }
 
   /* Press the top centre 0.5 mm over 100 ticks, hold 300. */
   for (int k = 1; k <= 400; ++k) {

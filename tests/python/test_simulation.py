@@ -430,3 +430,42 @@ def test_friction_changes_live_and_the_drag_slides_at_mu():
         sim.set_tool_friction(3, 0.2)
     sim.reset()
     assert sim.tool_friction(0) == 0.4  # kept across reset, as loads are
+
+
+def two_blocks_scene(path):
+    """Two 20 x 20 x 10 mm blocks 30 mm apart along x as the bodies "left" and "right", each held at its base."""
+    nodes, tets = tissue.box_mesh(6, 6, 3, (0.02, 0.02, 0.01))
+    bodies = []
+    for k, name in enumerate(["left", "right"]):
+        xyz = "\n".join(f"{float(x) + 0.03 * k!r} {float(y)!r} {float(z)!r}" for x, y, z in nodes)
+        ids = "\n".join(" ".join(str(int(v)) for v in t) for t in tets)
+        bodies.append(f"""<body name="{name}">
+    <mesh><nodes>{xyz}</nodes><elements>{ids}</elements></mesh>
+    <element-set material="soft" elements="all"/>
+    <fixed box-min="-1 -1 -1" box-max="1 1 0.0001"/>
+  </body>""")
+    path.write_text(f"""<tissue-scene>
+  <material name="soft" E="3000" nu="0.4" rho="1000"/>
+  {bodies[0]}
+  {bodies[1]}
+  <tool radius="0.004"><waypoint t="0" x="0.025" y="0.01" z="0.03"/><waypoint t="1" x="0.025" y="0.01" z="0.03"/></tool>
+</tissue-scene>""")
+    return str(path)
+
+
+def test_bodies_name_their_ranges_and_only_the_pressed_one_moves(tmp_path):
+    sim = tissue.Simulation.load(two_blocks_scene(tmp_path / "two.xml"), backend="cpu", precision="double")
+    left, right = sim.bodies
+    assert (left.name, right.name) == ("left", "right")
+    assert left.nodes == slice(0, 196, 1) and right.nodes == slice(196, 392, 1)
+    assert right.elements == slice(left.n_elements, sim.n_elements, 1)
+    assert "right" in repr(right)
+    f = press(sim, 1e-3, centre=(0.04, 0.01, 0.01))[-1]
+    assert f[2] > 1e-3
+    u = sim.displacement()
+    assert u[left.nodes].shape == (196, 3) and not u[left.nodes].any()  # the untouched body rests exactly
+    top = tissue.box_node(6, 6, 3, 3, 3)
+    assert u[right.nodes][top, 2] == pytest.approx(-1e-3, abs=2e-4)
+    assert sim.jacobian()[right.elements].min() > 0.5
+    one = block()
+    assert [(b.name, b.n_nodes) for b in one.bodies] == [("body", one.n_nodes)]

@@ -108,6 +108,8 @@ class Batch {
   /// of its tools (0 for tools without a path).
   double path_end(int scene) const;
   const std::vector<std::string>& warnings(int scene) const;
+  /// The scene's bodies (Simulation::bodies).
+  std::vector<BodyRange> bodies(int scene) const;
 
   /// Replaces a scene's material parameters (MaterialChange) and starts
   /// that scene again at rest; the others are untouched. Throws

@@ -94,6 +94,16 @@ struct TickResult {
   int region_nodes = 0, region_elements = 0;  ///< the deformation region in use
 };
 
+/// One body of a scene (docs/scene-format.md, "Bodies"): its nodes and
+/// elements are consecutive ranges of the simulation's, so a body's part of
+/// a per-node field is nodes [first_node, first_node + n_nodes). A scene of
+/// one <mesh> is one body named "body" holding everything.
+struct BodyRange {
+  std::string name;
+  std::size_t first_node = 0, n_nodes = 0;
+  std::size_t first_element = 0, n_elements = 0;
+};
+
 /// Per-node and per-element fields (all in SI units), tissue/fields.h's
 /// list: Displacement (u, 3 per node, m), Position (X + u, 3 per node, m),
 /// Pressure (IANP nodal pressure, 1 per node, Pa), InternalForce (internal
@@ -138,6 +148,8 @@ class Simulation {
   double dt() const;                   ///< TLED step (s)
   /// Warnings found when the scene was loaded (a body with no support, ...).
   const std::vector<std::string>& warnings() const;
+  /// The scene's bodies, in the scene's order (at least one).
+  std::vector<BodyRange> bodies() const;
 
   /// The reference mesh (views valid for the Simulation's life).
   std::span<const double> rest_positions() const;          ///< 3 per node (m)

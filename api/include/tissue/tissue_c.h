@@ -79,6 +79,15 @@ size_t tissue_node_count(const tissue_simulation* sim);
 size_t tissue_element_count(const tissue_simulation* sim);
 int tissue_tool_count(const tissue_simulation* sim);
 double tissue_tick_seconds(const tissue_simulation* sim);
+/* The scene's bodies (docs/scene-format.md, "Bodies"; a scene of one mesh
+ * is one body "body"): how many (0 for NULL); a body's name (valid while
+ * sim lives; NULL for a bad index); and its ranges: its nodes are
+ * first_node .. first_node + n_nodes - 1 of every per-node field, its
+ * elements likewise. Any range pointer may be NULL. */
+int tissue_body_count(const tissue_simulation* sim);
+const char* tissue_body_name(const tissue_simulation* sim, int body);
+tissue_status tissue_body_range(const tissue_simulation* sim, int body, size_t* first_node, size_t* n_nodes,
+                                size_t* first_element, size_t* n_elements);
 
 /* The pose the tool reaches at the end of the next tick; axis may be NULL
  * (the scene's shaft direction). From the first call the host drives it. */
