@@ -6,6 +6,8 @@
 #include <stdexcept>
 
 #include "apps/viewer/field_view.hpp"
+#include "apps/viewer/surface_rings.hpp"
+#include "core/box_mesh.hpp"
 
 namespace tissue::viewer {
 namespace {
@@ -95,6 +97,41 @@ TEST(FieldView, ForceHistoryKeepsItsWindowAndStartsOverOnARebuild) {
   h.add(0.0, {0.5, 0.5});                         // time went back: the tissue was rebuilt
   EXPECT_EQ(h.size(), 1u);
   EXPECT_NEAR(h.latest(1), 0.5, 1e-6);
+}
+
+// The smooth shading's rings: every surface triangle once at each of its
+// corners, and the area-weighted normal they give points out of the body
+// (along the face normal on a flat face, between the faces at an edge).
+TEST(SurfaceRings, EachNodesTrianglesGiveItsOutwardNormal) {
+  ModelInput in;
+  box_mesh(in, 3, 2, 2, 0.03, 0.02, 0.02);
+  in.materials = {{1000.0, 10000.0, 1000.0}};
+  const TissueModel<double> m = build_model(in);
+  const SurfaceRings r = surface_rings(m);
+  ASSERT_EQ(r.range.size(), 2u * m.n_nodes);
+  ASSERT_EQ(r.corners.size(), 2u * 3 * m.n_tris);
+  const auto X = [&](index_t a) { return Vec3<double>{m.X[a], m.X[m.n_nodes + a], m.X[2 * size_t(m.n_nodes) + a]}; };
+  const Vec3<double> centre{0.015, 0.01, 0.01};
+  double area = 0;
+  int surface = 0;
+  for (index_t a = 0; a < m.n_nodes; ++a) {
+    const int first = r.range[2 * a], count = r.range[2 * a + 1];
+    Vec3<double> n{0, 0, 0};
+    for (int k = first; k < first + count; ++k) {
+      const Vec3<double> x = X(a), b = X(r.corners[2 * k]), c = X(r.corners[2 * k + 1]);
+      n = n + cross(b - x, c - x);
+      area += norm(cross(b - x, c - x)) / 6;  // a third of each triangle's area, at each corner
+    }
+    if (count == 0) continue;
+    ++surface;
+    EXPECT_GT(dot(n, X(a) - centre), 0) << "node " << a << " normal points into the box";
+    const Vec3<double> d = X(a) - centre;  // on a face's interior the normal is the face's
+    if (std::fabs(std::fabs(d.z) - 0.01) < 1e-12 && std::fabs(d.x) < 0.0149 && std::fabs(d.y) < 0.0099) {
+      EXPECT_NEAR(std::fabs(n.z) / norm(n), 1.0, 1e-12) << "node " << a;
+    }
+  }
+  EXPECT_EQ(surface, 4 * 3 * 3 - 2);  // the 4 x 3 x 3 grid nodes less the 2 interior ones
+  EXPECT_NEAR(area, 2 * (0.03 * 0.02 + 0.03 * 0.02 + 0.02 * 0.02), 1e-15);
 }
 
 }  // namespace

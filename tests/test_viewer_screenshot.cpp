@@ -225,6 +225,39 @@ TEST_F(ViewerPictures, ScriptedPressDeformsTheOrganWhereTheToolTouches) {
   EXPECT_EQ(difference(pressed, again, 0, 0, 0).changed, 0);
 }
 
+/// Steps in brightness between horizontally neighbouring organ pixels (all
+/// four of a row's pixels organ, so the silhouette does not count): pairs
+/// whose green channel, the lit part of the organ's colour, differs by more
+/// than 3 of 255 where the pixels on either side continue the same slope
+/// by less.
+long shading_steps(const Picture& p) {
+  long steps = 0;
+  for (int y = 0; y < p.h; ++y)
+    for (int x = 1; x + 2 < p.w; ++x) {
+      const unsigned char *a = p.at(x - 1, y), *b = p.at(x, y), *c = p.at(x + 1, y), *d = p.at(x + 2, y);
+      if (!is_organ(a) || !is_organ(b) || !is_organ(c) || !is_organ(d)) continue;
+      const int jump = std::abs(int(c[1]) - int(b[1]));
+      if (jump > 3 && std::abs(int(b[1]) - int(a[1])) < jump && std::abs(int(d[1]) - int(c[1])) < jump) ++steps;
+    }
+  return steps;
+}
+
+// Smooth shading (the default) lights the organ by per-vertex normals made
+// from the deformed surface: the brightness runs on across the faces,
+// where flat shading steps at every edge between them.
+TEST_F(ViewerPictures, SmoothShadingDoesNotStepAtTheFaces) {
+  const std::string plain = "--device scripted --ticks 300 --hide tool,region,overlay" + kLocal;
+  const Picture smooth = render("smooth", plain);
+  const Picture flat = render("flat", plain + " --shading flat");
+  if (HasFailure()) return;
+  expect_shows_organ(smooth);
+  expect_shows_organ(flat);
+  const long s = shading_steps(smooth), f = shading_steps(flat);
+  std::printf("brightness steps inside the organ: smooth %ld, flat %ld\n", s, f);
+  EXPECT_GT(f, 300) << "flat shading shows its faces";
+  EXPECT_LT(s, f / 5) << "smooth shading shows them too";
+}
+
 TEST_F(ViewerPictures, TheMouseWheelPushesTheToolIntoTheTissue) {
   const std::string plain = "--device mouse --ticks 250 --hide tool,region,overlay" + kLocal;
   const Picture rest = render("mouse_rest", plain);

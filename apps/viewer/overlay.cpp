@@ -206,6 +206,8 @@ OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, con
   if (ImGui::Combo("surface", &field, "organ\0|u| displacement\0pressure\0J = det F\0"))
     act.field = static_cast<FieldKind>(field);
   if (shown != FieldKind::None) legend(*display.field);
+  bool smooth = display.smooth;
+  if (ImGui::Checkbox("smooth shading", &smooth)) act.smooth = smooth;
   ImGui::Separator();
   const bool material = edit_material(f);
   const bool region = edit_region_and_precision();

@@ -31,6 +31,7 @@ struct OverlayFacts {
 struct DisplayState {
   const NodeField* field = nullptr;     ///< null or kind None: the organ's colour, no legend
   const ForceHistory* forces = nullptr; ///< null: no plot
+  bool smooth = true;                   ///< the surface is shaded smoothly (per-vertex normals)
 };
 
 /// What the user asked for in this frame.
@@ -39,6 +40,7 @@ struct OverlayActions {
   bool reset = false;               ///< rebuild with the running parameters (tissue at rest)
   std::optional<FieldKind> field;   ///< colour the surface by this field from now on
   std::optional<double> friction;   ///< every tool's friction coefficient, live (HapticLoop::set_friction)
+  std::optional<bool> smooth;       ///< shade the surface smoothly (true) or flat from now on
 };
 
 class Overlay {

@@ -17,35 +17,59 @@ const char* kVertexShader = R"(#version 330 core
 layout(location = 0) in vec3 a_pos;
 layout(location = 1) in vec2 a_role;  // (inner, halo) in 0..1
 layout(location = 2) in vec3 a_field; // the field's colour at the node
+layout(location = 3) in ivec2 a_ring; // (first, count) of the node's surface triangles in u_corners
 uniform mat4 u_mvp;
 uniform mat4 u_mv;
+uniform int u_smooth;
+uniform samplerBuffer u_pos;       // the position buffer itself, one float per texel
+uniform isamplerBuffer u_corners;  // per (triangle, corner): the other two corners, outward order
 out vec3 v_view;
 out vec2 v_role;
 out vec3 v_field;
+out vec3 v_normal;
+vec3 node(int i) {
+  return vec3(texelFetch(u_pos, 3 * i).r, texelFetch(u_pos, 3 * i + 1).r, texelFetch(u_pos, 3 * i + 2).r);
+}
 void main() {
   v_view = (u_mv * vec4(a_pos, 1.0)).xyz;
   v_role = a_role;
   v_field = a_field;
+  vec3 n = vec3(0.0);  // the area-weighted normal of the node's triangles, from the deformed positions
+  if (u_smooth != 0)
+    for (int k = 0; k < a_ring.y; ++k) {
+      ivec2 bc = texelFetch(u_corners, a_ring.x + k).rg;
+      n += cross(node(bc.x) - a_pos, node(bc.y) - a_pos);
+    }
+  v_normal = mat3(u_mv) * n;
   gl_Position = u_mvp * vec4(a_pos, 1.0);
 }
 )";
 
-// Flat normal from the derivatives of the view-space position, turned to the
-// viewer (two-sided); a key light above-right of the eye, a fill light from
+// The vertex's smooth normal, or (flat shading, and the glyphs) the normal
+// from the derivatives of the view-space position turned to the viewer
+// (two-sided); a key light above-right of the eye, a fill light from
 // the eye, a little specular. Region tint: inner warm, halo blue. With a
 // field shown, the field's colour replaces the organ's (and the tint).
 const char* kFragmentShader = R"(#version 330 core
 in vec3 v_view;
 in vec2 v_role;
 in vec3 v_field;
+in vec3 v_normal;
 uniform vec3 u_color;
 uniform float u_tint;
 uniform float u_field;
+uniform int u_smooth;
 out vec4 frag;
 void main() {
-  vec3 n = normalize(cross(dFdx(v_view), dFdy(v_view)));
   vec3 v = normalize(-v_view);
-  if (dot(n, v) < 0.0) n = -n;
+  vec3 n;
+  if (u_smooth != 0 && dot(v_normal, v_normal) > 0.0) {
+    n = normalize(v_normal);         // outward; seen from inside the body, the inner side's
+    if (!gl_FrontFacing) n = -n;
+  } else {
+    n = normalize(cross(dFdx(v_view), dFdy(v_view)));
+    if (dot(n, v) < 0.0) n = -n;
+  }
   vec3 L = normalize(vec3(0.35, 0.55, 1.0));
   float key = max(dot(n, L), 0.0);
   float fill = max(dot(n, v), 0.0);
@@ -142,6 +166,11 @@ Renderer::Renderer(const TissueModel<double>& model) : n_nodes_(model.n_nodes) {
   u_color_ = glGetUniformLocation(program_, "u_color");
   u_tint_ = glGetUniformLocation(program_, "u_tint");
   u_field_ = glGetUniformLocation(program_, "u_field");
+  u_smooth_ = glGetUniformLocation(program_, "u_smooth");
+  glUseProgram(program_);
+  glUniform1i(glGetUniformLocation(program_, "u_pos"), 0);      // texture unit 0
+  glUniform1i(glGetUniformLocation(program_, "u_corners"), 1);  // texture unit 1
+  glUseProgram(0);
 
   // the tissue: positions of all nodes (reference until the first upload), surface triangles
   std::vector<float> xyz(3 * size_t(n_nodes_));
@@ -168,6 +197,24 @@ Renderer::Renderer(const TissueModel<double>& model) : n_nodes_(model.n_nodes) {
   glBufferData(GL_ARRAY_BUFFER, 3 * size_t(n_nodes_), nullptr, GL_DYNAMIC_DRAW);
   glVertexAttribPointer(2, 3, GL_UNSIGNED_BYTE, GL_TRUE, 3, nullptr);
   glEnableVertexAttribArray(2);
+  const SurfaceRings rings = surface_rings(model);
+  glGenBuffers(1, &vbo_ring_);
+  glBindBuffer(GL_ARRAY_BUFFER, vbo_ring_);
+  glBufferData(GL_ARRAY_BUFFER, rings.range.size() * sizeof(std::int32_t), rings.range.data(), GL_STATIC_DRAW);
+  glVertexAttribIPointer(3, 2, GL_INT, 2 * sizeof(std::int32_t), nullptr);
+  glEnableVertexAttribArray(3);
+  glGenBuffers(1, &tbo_corners_);
+  glBindBuffer(GL_TEXTURE_BUFFER, tbo_corners_);
+  glBufferData(GL_TEXTURE_BUFFER, std::max<std::size_t>(rings.corners.size(), 2) * sizeof(std::int32_t),
+               rings.corners.empty() ? nullptr : rings.corners.data(), GL_STATIC_DRAW);
+  glBindBuffer(GL_TEXTURE_BUFFER, 0);
+  glGenTextures(1, &tex_pos_);
+  glBindTexture(GL_TEXTURE_BUFFER, tex_pos_);
+  glTexBuffer(GL_TEXTURE_BUFFER, GL_R32F, vbo_pos_);
+  glGenTextures(1, &tex_corners_);
+  glBindTexture(GL_TEXTURE_BUFFER, tex_corners_);
+  glTexBuffer(GL_TEXTURE_BUFFER, GL_RG32I, tbo_corners_);
+  glBindTexture(GL_TEXTURE_BUFFER, 0);
   glGenBuffers(1, &ibo_);
   glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, ibo_);
   glBufferData(GL_ELEMENT_ARRAY_BUFFER, idx.size() * sizeof(unsigned), idx.data(), GL_STATIC_DRAW);
@@ -195,8 +242,10 @@ Renderer::~Renderer() {
     glDeleteBuffers(1, &m->ibo);
   }
   glDeleteVertexArrays(1, &vao_);
-  const unsigned buffers[4] = {vbo_pos_, vbo_role_, vbo_field_, ibo_};
-  glDeleteBuffers(4, buffers);
+  const unsigned textures[2] = {tex_pos_, tex_corners_};
+  glDeleteTextures(2, textures);
+  const unsigned buffers[6] = {vbo_pos_, vbo_role_, vbo_field_, vbo_ring_, tbo_corners_, ibo_};
+  glDeleteBuffers(6, buffers);
   glDeleteProgram(program_);
 }
 
@@ -212,6 +261,7 @@ Renderer::Mesh Renderer::make_mesh(const std::vector<float>& xyz, const std::vec
   glEnableVertexAttribArray(0);
   glVertexAttrib2f(1, 0, 0);  // no region role on glyphs
   glVertexAttrib3f(2, 0, 0, 0);  // nor a field
+  glVertexAttribI2i(3, 0, 0);    // nor a ring (they are shaded flat)
   glGenBuffers(1, &m.ibo);
   glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, m.ibo);
   glBufferData(GL_ELEMENT_ARRAY_BUFFER, idx.size() * sizeof(unsigned), idx.data(), GL_STATIC_DRAW);
@@ -253,6 +303,7 @@ void Renderer::draw_glyph(const Mesh& mesh, const Mat4& view_proj, const Mat4& v
   glUniform3fv(u_color_, 1, rgb);
   glUniform1f(u_tint_, 0);
   glUniform1f(u_field_, 0);
+  glUniform1i(u_smooth_, 0);
   glBindVertexArray(mesh.vao);
   glDrawElements(GL_TRIANGLES, mesh.count, GL_UNSIGNED_INT, nullptr);
 }
@@ -272,6 +323,12 @@ void Renderer::draw(const Camera& camera, const Glyphs& g) {
   glUniform3fv(u_color_, 1, kOrgan);
   glUniform1f(u_tint_, 1);
   glUniform1f(u_field_, field_shown_ ? 1.0f : 0.0f);
+  glUniform1i(u_smooth_, shading_ == Shading::Smooth ? 1 : 0);
+  glActiveTexture(GL_TEXTURE0);
+  glBindTexture(GL_TEXTURE_BUFFER, tex_pos_);
+  glActiveTexture(GL_TEXTURE1);
+  glBindTexture(GL_TEXTURE_BUFFER, tex_corners_);
+  glActiveTexture(GL_TEXTURE0);
   glBindVertexArray(vao_);
   glDrawElements(GL_TRIANGLES, n_indices_, GL_UNSIGNED_INT, nullptr);
   if (!g.show_tool) {

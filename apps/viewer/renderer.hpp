@@ -2,9 +2,14 @@
 // with OpenGL 3.3 core. The tissue is one vertex buffer of the deformed
 // positions X + u of all nodes (n_nodes x 3 floats, what
 // Backend::write_positions writes) drawn through an index buffer of the
-// surface triangles; flat normals come from screen-space derivatives of the
-// position in the fragment shader, so no normal buffer has to follow the
-// deformation. A second per-node buffer holds the region role (outside,
+// surface triangles. Smooth shading: the vertex shader forms each node's
+// normal from the deformed positions themselves, summing the area-weighted
+// normals of its surface triangles (the position buffer read again as a
+// texture buffer, the triangles' other corners from a static ring list:
+// surface_rings), so no normal buffer has to follow the deformation and
+// both the host and the CUDA-interop position paths get it for nothing;
+// flat shading takes the normal from screen-space derivatives of the
+// position in the fragment shader. A second per-node buffer holds the region role (outside,
 // inner, halo) that tints the active region; it changes only when the
 // region does. A third holds a colour per node when a field is shown.
 #pragma once
@@ -14,6 +19,7 @@
 #include <vector>
 
 #include "apps/viewer/camera.hpp"
+#include "apps/viewer/surface_rings.hpp"
 #include "core/model.hpp"
 #include "core/region.hpp"
 
@@ -38,6 +44,9 @@ struct Glyphs {
   double metres_per_newton = 0.05; ///< arrow length per newton
 };
 
+/// How the tissue is shaded.
+enum class Shading { Smooth, Flat };
+
 class Renderer {
  public:
   /// Creates the buffers for the model's surface (GL context current).
@@ -56,6 +65,9 @@ class Renderer {
   /// Colours the surface by a field: RGB bytes per node (3 x n_nodes,
   /// apps/viewer/field_view.hpp); empty: the organ's own colour.
   void upload_field_colours(std::span<const std::uint8_t> rgb);
+  /// Smooth (per-vertex normals, the default) or flat (per-face) shading.
+  void set_shading(Shading s) { shading_ = s; }
+  Shading shading() const { return shading_; }
 
   /// Clears to the background and draws tissue and glyphs into the bound
   /// framebuffer (viewport = camera size).
@@ -76,10 +88,12 @@ class Renderer {
   index_t n_nodes_ = 0;
   int n_indices_ = 0;
   unsigned program_ = 0;
-  unsigned vao_ = 0, vbo_pos_ = 0, vbo_role_ = 0, vbo_field_ = 0, ibo_ = 0;
+  unsigned vao_ = 0, vbo_pos_ = 0, vbo_role_ = 0, vbo_field_ = 0, vbo_ring_ = 0, ibo_ = 0;
+  unsigned tbo_corners_ = 0, tex_pos_ = 0, tex_corners_ = 0;  ///< the ring list and the texture views
   bool field_shown_ = false;
+  Shading shading_ = Shading::Smooth;
   Mesh sphere_, cylinder_, cone_;
-  int u_mvp_ = -1, u_mv_ = -1, u_color_ = -1, u_tint_ = -1, u_field_ = -1;
+  int u_mvp_ = -1, u_mv_ = -1, u_color_ = -1, u_tint_ = -1, u_field_ = -1, u_smooth_ = -1;
 };
 
 /// An offscreen render target of the given size (4x multisampled colour and

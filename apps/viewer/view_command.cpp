@@ -42,6 +42,7 @@ void add_view_options(CLI::App& cmd_app, int& rc) {
   cmd->add_option("--field", o->field,
                   "Colour the surface by a field, with a legend: none, displacement (|u|), pressure, J")
       ->default_val("none");
+  cmd->add_option("--shading", o->shading, "smooth (per-vertex normals) | flat (per face)")->default_val("smooth");
   cmd->add_option("--hide", o->hide, "Leave out of the picture: comma list of tool, region, overlay");
   cmd->add_option("--mouse-events", o->mouse_events,
                   "With --screenshot and --device mouse: '<tick> wheel <n>; <tick> drag <x0>,<y0> <x1>,<y1>; "

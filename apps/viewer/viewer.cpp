@@ -34,6 +34,14 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+/// --shading: smooth | flat.
+Shading parse_shading(const std::string& name) {
+  if (name == "smooth") return Shading::Smooth;
+  if (name == "flat") return Shading::Flat;
+  throw std::invalid_argument(fmt::format("--shading '{}': expected smooth (per-vertex normals) or flat (per face)",
+                                          name));
+}
+
 /// What to leave out of the picture (--hide).
 struct Hidden {
   bool tool = false, region = false, overlay = false;
@@ -214,6 +222,7 @@ std::unique_ptr<Viewer> make_viewer(const ViewOptions& o, scene::Scene scene) {
   v->ctx = std::make_unique<GlContext>(context_kind(o), o.width, o.height, "tissue view: " + o.scene);
   v->mesh = mesh_of(*v->loop);
   v->renderer = std::make_unique<Renderer>(v->mesh);
+  v->renderer->set_shading(parse_shading(o.shading));
   v->positions = make_position_source(*v->renderer, v->session.scene.solver.backend);
   const Bounds& b = v->session.bounds;
   // From the tool's side, a little to its left and above, so that the dent
@@ -276,7 +285,9 @@ int run_picture(const ViewOptions& o, Viewer& v) {
   const OverlayFacts facts = facts_of(loop, v.mesh, v.session, *v.ctx, *v.positions);
   for (int frame = 0; frame < (overlay ? 2 : 1); ++frame) {  // ImGui lays windows out on the first frame
     v.renderer->draw(v.camera, glyphs_of(snap, v.arrow_scale, !hide.tool));
-    if (overlay) overlay->draw(facts, snap, loop.status(), o.width, o.height, {&v.field, &v.forces});
+    if (overlay)
+      overlay->draw(facts, snap, loop.status(), o.width, o.height,
+                    {&v.field, &v.forces, v.renderer->shading() == Shading::Smooth});
   }
   write_png(o.screenshot, o.width, o.height, target.read_rgb());
 
@@ -426,10 +437,12 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
     v.renderer->draw(v.camera, glyphs_of(snap, v.arrow_scale, !hide.tool));
     if (overlay) {
       const OverlayActions act =
-          overlay->draw(facts, snap, loop.status(), v.camera.width, v.camera.height, {&v.field, &v.forces});
+          overlay->draw(facts, snap, loop.status(), v.camera.width, v.camera.height,
+                        {&v.field, &v.forces, v.renderer->shading() == Shading::Smooth});
       if (act.apply) loop.request_params(*act.apply);
       if (act.field) field = *act.field;
       if (act.friction) loop.set_friction(*act.friction);
+      if (act.smooth) v.renderer->set_shading(*act.smooth ? Shading::Smooth : Shading::Flat);
       if (act.reset) loop.request_params(snap.params);
     }
     if (win) v.ctx->swap_buffers();
@@ -458,6 +471,7 @@ int run_view(const ViewOptions& o, scene::Scene scene) {
         fmt::format("--width {} --height {}: each must lie in 16..8192 pixels", o.width, o.height));
   parse_hide(o.hide);  // option errors before the scene is built
   parse_field_kind(o.field);
+  parse_shading(o.shading);
   if (!o.gl.empty()) parse_context_kind(o.gl);
   if (!o.mouse_events.empty()) parse_mouse_events(o.mouse_events);
   std::unique_ptr<Viewer> v = make_viewer(o, std::move(scene));

@@ -21,6 +21,7 @@ struct ViewOptions {
   std::string gl;                        ///< window | hidden | egl; "": window, or hidden / egl for pictures
   std::string hide;                      ///< comma-separated: tool, region, overlay
   std::string field = "none";            ///< surface colour: none | displacement | pressure | J (field_view.hpp)
+  std::string shading = "smooth";        ///< smooth (per-vertex normals) | flat (per-face)
   std::string mouse_events;              ///< scripted mouse input for pictures (mouse_controller.hpp)
   double seconds = 0;                    ///< close after this long (0: when the window closes; required without one)
   bool repeat = false;                   ///< scripted device: play the path over and over
