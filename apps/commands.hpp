@@ -22,6 +22,7 @@ void add_locking_command(CLI::App& app, int& rc);    ///< apps/cmd_locking.cpp
 void add_hertz_command(CLI::App& app, int& rc);      ///< apps/cmd_hertz.cpp
 void add_converge_command(CLI::App& app, int& rc);   ///< apps/cmd_converge.cpp
 void add_palpate_command(CLI::App& app, int& rc);    ///< apps/cmd_palpate.cpp
+void add_cut_command(CLI::App& app, int& rc);        ///< apps/cmd_cut.cpp
 void add_python_commands(CLI::App& app, int& rc);    ///< apps/python_forward.cpp: sweep and fit
 
 /// What the command is doing now, in words ("reading the scene x.xml"):

@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
   tissue::app::add_hertz_command(app, rc);
   tissue::app::add_converge_command(app, rc);
   tissue::app::add_palpate_command(app, rc);
+  tissue::app::add_cut_command(app, rc);
   tissue::app::add_python_commands(app, rc);
   return tissue::app::run_command_line(app, argc, argv, rc, "tissue");
 }

@@ -66,31 +66,6 @@ void fixed_load_warnings(const Scene& s, const TissueModel<double>& m, std::vect
   }
 }
 
-/// The mesh's pieces: elements joined through shared nodes. Returns the piece
-/// of each node (-1 for a node of no element) and the number of pieces.
-index_t mesh_pieces(const TissueModel<double>& m, std::vector<index_t>& piece) {
-  std::vector<index_t> parent(m.n_nodes);
-  std::iota(parent.begin(), parent.end(), 0);
-  auto root = [&](index_t a) {
-    while (parent[a] != a) a = parent[a] = parent[parent[a]];
-    return a;
-  };
-  for (index_t e = 0; e < m.n_elems; ++e)
-    for (int c = 1; c < 4; ++c) {
-      const index_t a = root(m.elem_nodes[e]), b = root(m.elem_nodes[size_t(c) * m.n_elems + e]);
-      if (a != b) parent[std::max(a, b)] = std::min(a, b);
-    }
-  piece.assign(m.n_nodes, -1);
-  std::vector<index_t> id(m.n_nodes, -1);
-  index_t n = 0;
-  for (index_t e = 0; e < m.n_elems; ++e)  // pieces numbered by their lowest element
-    for (int c = 0; c < 4; ++c) {
-      const index_t a = m.elem_nodes[size_t(c) * m.n_elems + e], r = root(a);
-      if (id[r] < 0) id[r] = n++;
-      piece[a] = id[r];
-    }
-  return n;
-}
 
 /// A warning for each piece of a mesh of several that no constraint holds
 /// (the body as a whole is held): the tool pushes that piece away as a rigid
@@ -131,6 +106,30 @@ void unsupported_piece_warnings(const Scene& s, const TissueModel<double>& m, st
 }
 
 }  // namespace
+
+index_t mesh_pieces(const TissueModel<double>& m, std::vector<index_t>& piece) {
+  std::vector<index_t> parent(m.n_nodes);
+  std::iota(parent.begin(), parent.end(), 0);
+  auto root = [&](index_t a) {
+    while (parent[a] != a) a = parent[a] = parent[parent[a]];
+    return a;
+  };
+  for (index_t e = 0; e < m.n_elems; ++e)
+    for (int c = 1; c < 4; ++c) {
+      const index_t a = root(m.elem_nodes[e]), b = root(m.elem_nodes[size_t(c) * m.n_elems + e]);
+      if (a != b) parent[std::max(a, b)] = std::min(a, b);
+    }
+  piece.assign(m.n_nodes, -1);
+  std::vector<index_t> id(m.n_nodes, -1);
+  index_t n = 0;
+  for (index_t e = 0; e < m.n_elems; ++e)  // pieces numbered by their lowest element
+    for (int c = 0; c < 4; ++c) {
+      const index_t a = m.elem_nodes[size_t(c) * m.n_elems + e], r = root(a);
+      if (id[r] < 0) id[r] = n++;
+      piece[a] = id[r];
+    }
+  return n;
+}
 
 StepCost nominal_step_cost(const std::string& backend) {
   if (backend == "cuda") return {1.5e-5, 1e-10};

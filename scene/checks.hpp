@@ -47,6 +47,11 @@ inline constexpr double kMaxDampingPerMode = 100;
 /// (the built-in kidney needs 3, typical meshes 1..20).
 inline constexpr double kManyStepsPerTick = 100;
 
+/// The mesh's pieces: elements joined through shared nodes. Returns the
+/// number of pieces and, in `piece`, each node's (-1 for a node of no
+/// element), numbered by their lowest element.
+index_t mesh_pieces(const TissueModel<double>& m, std::vector<index_t>& piece);
+
 /// What a run of `ticks` haptic ticks of `model` costs.
 struct WorkEstimate {
   double steps_per_tick = 0;  ///< TLED steps per tick (tick / dt)

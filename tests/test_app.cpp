@@ -427,6 +427,30 @@ TEST(Program, BadInputsGetClearErrors) {
   EXPECT_NE(word.find("'simulate' is not a command; the commands are mesh, run"), std::string::npos) << word;
 }
 
+// `tissue cut` cuts the block through, reports the methods' rows and writes
+// a scene that validates and runs; a bad blade is an error naming the rule.
+TEST(Program, CutWritesASceneThatRuns) {
+  TempDir t;
+  std::ofstream(t.file("block.xml")) << kBlock;
+  const std::vector<std::string> blade = {"--edge", "0,2,0", "--sweep", "0,0,2"};
+  std::vector<std::string> args = {"cut", t.file("block.xml"), "--origin", "0.01,-1,-1", "-o", t.file("cut.xml")};
+  args.insert(args.end(), blade.begin(), blade.end());
+  ASSERT_EQ(run_tissue(t, "cut", args), 0) << slurp(t.file("cut.err"));
+  EXPECT_NE(slurp(t.file("cut.out")).find("snap-split"), std::string::npos) << slurp(t.file("cut.out"));
+  const scene::Scene cut = io::read_scene(t.file("cut.xml"));
+  EXPECT_GT(cut.tets.size() / 4, 6u) << "the cube's six tets split";
+  EXPECT_NO_THROW(scene::validate(cut));
+  EXPECT_EQ(run_tissue(t, "run", {"run", t.file("cut.xml"), "--ticks", "5", "--quiet"}), 0) << slurp(t.file("run.err"));
+  args = {"cut", t.file("block.xml"), "--origin", "0.01,-1"};
+  args.insert(args.end(), blade.begin(), blade.end());
+  EXPECT_EQ(run_tissue(t, "short", args), 1);
+  EXPECT_NE(slurp(t.file("short.err")).find("--origin takes three numbers"), std::string::npos) << slurp(t.file("short.err"));
+  args = {"cut", t.file("block.xml"), "--origin", "5,-1,-1"};
+  args.insert(args.end(), blade.begin(), blade.end());
+  EXPECT_EQ(run_tissue(t, "far", args), 1);
+  EXPECT_NE(slurp(t.file("far.err")).find("crosses no element"), std::string::npos) << slurp(t.file("far.err"));
+}
+
 // `tissue run` prints what the run will cost before it builds the backend;
 // the kidney at nu = 0.49999 (217 steps per tick, half a minute or more)
 // is refused unless --force, naming its material.
