@@ -190,3 +190,16 @@ def test_device_arrays_are_the_fields_where_they_lie(precision):
         batch.set_tool_poses(torch.zeros((n, batch.max_tools, 3), dtype=torch.int32, device="cuda"))
     with pytest.raises(ValueError, match=r"shape \(6, 1, 3\)"):
         batch.set_tool_poses(torch.zeros((n + 1, batch.max_tools, 3), dtype=torch.float64, device="cuda"))
+
+
+def test_a_batch_names_each_scenes_bodies(tmp_path):
+    from test_simulation import two_blocks_scene
+
+    two = two_blocks_scene(tmp_path / "two.xml")
+    batch = tissue.Batch([two, block_scene(tmp_path)], backend="cpu", precision="double")
+    left, right = batch.bodies(0)
+    assert (left.name, right.name) == ("left", "right")
+    assert right.nodes == slice(left.n_nodes, batch.n_nodes(0), 1)
+    assert [b.name for b in batch.bodies(1)] == ["body"]
+    with pytest.raises(ValueError, match="scene 2"):
+        batch.bodies(2)
