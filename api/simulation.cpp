@@ -17,6 +17,7 @@
 #include "io/kidney.hpp"
 #include "io/mesh_quality.hpp"
 #include "io/organ_mesher.hpp"
+#include "core/cut.hpp"
 #include "io/scene_xml.hpp"
 #include "io/surface_import.hpp"
 #include "scene/checks.hpp"
@@ -141,6 +142,30 @@ VolumeMeshResult mesh_surface(const std::string& path, const std::string& unit, 
   const io::QualityReport q = io::mesh_quality(r.mesh, {params}, std::vector<index_t>(r.mesh.n_tets(), 0), solver.tick,
                                                solver.dt_safety, solver.mass_scaling);
   return {r.mesh.nodes, {r.mesh.tets.begin(), r.mesh.tets.end()}, q.summary()};
+}
+
+CutMeshResult cut_mesh(std::span<const double> nodes, std::span<const std::int32_t> tets, const Vector3& origin,
+                       const Vector3& edge, const Vector3& sweep, const std::string& method) {
+  CutOptions o;
+  if (method == "snap")
+    o.method = CutMethod::Snap;
+  else if (method == "split")
+    o.method = CutMethod::Split;
+  else if (method != "snap-split")
+    throw std::invalid_argument(fmt::format("cut_mesh: method '{}': expected snap-split, snap or split", method));
+  const CutResult r = tissue::cut_along(nodes, tets, {facade::vec(origin), facade::vec(edge), facade::vec(sweep)}, o);
+  CutMeshResult out;
+  out.nodes = r.nodes;
+  out.tets.assign(r.tets.begin(), r.tets.end());
+  for (const auto& [a, b] : r.from) out.node_from.insert(out.node_from.end(), {a, b});
+  out.weight = r.weight;
+  out.element_from.assign(r.element_from.begin(), r.element_from.end());
+  out.pieces_split = r.split;
+  out.nodes_snapped = r.snapped;
+  out.nodes_copied = r.copies;
+  out.faces_opened = r.cut_faces;
+  out.left_whole = r.unresolved;
+  return out;
 }
 
 struct Simulation::Impl {

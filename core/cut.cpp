@@ -112,7 +112,7 @@ struct Tets {
 
 }  // namespace
 
-CutResult cut_mesh(std::span<const double> nodes, std::span<const index_t> tets, const CutSurface& cut,
+CutResult cut_along(std::span<const double> nodes, std::span<const index_t> tets, const CutSurface& cut,
                    const CutOptions& o) {
   if (nodes.size() % 3 != 0 || tets.size() % 4 != 0 || tets.empty())
     throw CutError(fmt::format("cut: {} coordinates and {} corner ids are not a mesh of x y z per node and 4 ids "

@@ -93,7 +93,7 @@ struct CutResult {
 /// tetrahedron) along `cut`. Throws CutError for a blade edge or sweep of
 /// zero length or along one another, options out of range, or a cut
 /// surface that crosses no element.
-CutResult cut_mesh(std::span<const double> nodes, std::span<const index_t> tets, const CutSurface& cut,
+CutResult cut_along(std::span<const double> nodes, std::span<const index_t> tets, const CutSurface& cut,
                    const CutOptions& options = {});
 
 }  // namespace tissue

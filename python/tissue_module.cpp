@@ -47,10 +47,11 @@ py::array_t<T> owned(std::vector<T>&& v, py::ssize_t cols) {
   return py::array_t<T>({n / cols, cols}, heap->data(), free_it);
 }
 
-/// A read-only (n / cols, cols) view of memory `owner` keeps alive.
+/// A read-only (n / cols, cols) view of memory `owner` keeps alive ((n,) for cols = 1).
 template <class T>
 py::array_t<T> view(std::span<const T> s, py::ssize_t cols, py::handle owner) {
-  py::array_t<T> a({py::ssize_t(s.size()) / cols, cols}, s.data(), owner);
+  py::array_t<T> a = cols == 1 ? py::array_t<T>({py::ssize_t(s.size())}, s.data(), owner)
+                               : py::array_t<T>({py::ssize_t(s.size()) / cols, cols}, s.data(), owner);
   a.attr("setflags")(py::arg("write") = false);
   return a;
 }
@@ -340,6 +341,41 @@ void bind_module(py::module_& m) {
         return "<tissue.VolumeMesh " + std::to_string(r.nodes.size() / 3) + " nodes, " +
                std::to_string(r.tets.size() / 4) + " tets>";
       });
+  py::class_<tissue::CutMeshResult>(m, "CutMesh", "A mesh cut where a blade sweeps (cut_mesh; docs/cutting.md)")
+      .def_property_readonly("nodes", [](py::object self) {
+        return view<double>(self.cast<tissue::CutMeshResult&>().nodes, 3, self);
+      }, "(n_nodes, 3) positions (m)")
+      .def_property_readonly("tets", [](py::object self) {
+        return view<std::int32_t>(self.cast<tissue::CutMeshResult&>().tets, 4, self);
+      }, "(n_tets, 4) node ids")
+      .def_property_readonly("node_from", [](py::object self) {
+        return view<std::int32_t>(self.cast<tissue::CutMeshResult&>().node_from, 2, self);
+      }, "(n_nodes, 2): the input nodes each lies between (the same twice: kept or copied)")
+      .def_property_readonly("weight", [](py::object self) {
+        return view<double>(self.cast<tissue::CutMeshResult&>().weight, 1, self);
+      }, "(n_nodes,): each node's place between them, (1 - w) X_a + w X_b")
+      .def_property_readonly("element_from", [](py::object self) {
+        return view<std::int32_t>(self.cast<tissue::CutMeshResult&>().element_from, 1, self);
+      }, "(n_tets,): the input element each is (part of)")
+      .def_readonly("elements_split", &tissue::CutMeshResult::pieces_split)
+      .def_readonly("nodes_snapped", &tissue::CutMeshResult::nodes_snapped)
+      .def_readonly("nodes_copied", &tissue::CutMeshResult::nodes_copied)
+      .def_readonly("faces_opened", &tissue::CutMeshResult::faces_opened)
+      .def_readonly("left_whole", &tissue::CutMeshResult::left_whole)
+      .def("__repr__", [](const tissue::CutMeshResult& r) {
+        return "<tissue.CutMesh " + std::to_string(r.nodes.size() / 3) + " nodes, " + std::to_string(r.tets.size() / 4) +
+               " tets, " + std::to_string(r.faces_opened) + " faces opened>";
+      });
+  m.def("cut_mesh", [](py::handle nodes, py::handle tets, py::handle origin, py::handle edge, py::handle sweep,
+                       const std::string& method) {
+    const std::vector<double> x = flat<double>(nodes, 3, "nodes");
+    const std::vector<std::int32_t> t = node_ids(tets, 4, "tets");
+    const tissue::Vector3 o = vector3(origin, "origin"), e = vector3(edge, "edge"), w = vector3(sweep, "sweep");
+    py::gil_scoped_release free;
+    return tissue::cut_mesh(x, t, o, e, w, method);
+  }, py::arg("nodes"), py::arg("tets"), py::arg("origin"), py::arg("edge"), py::arg("sweep"),
+        py::arg("method") = "snap-split",
+        "Cut a tetrahedral mesh where a blade sweeps: the parallelogram origin + s edge + t sweep (m)");
   m.def("mesh_surface", [](const std::string& path, const std::string& unit, int target_tets) {
     py::gil_scoped_release free;
     return tissue::mesh_surface(path, unit, target_tets);

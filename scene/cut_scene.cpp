@@ -12,7 +12,7 @@ Scene cut_scene(const Scene& scene, const CutSurface& cut, const CutOptions& opt
   if (!scene.bodies.empty())
     throw SceneError(fmt::format("{}: a scene of {} bodies; cutting takes a scene of one mesh", scene.source,
                                  scene.bodies.size()));
-  CutResult r = cut_mesh(scene.nodes, scene.tets, cut, options);
+  CutResult r = cut_along(scene.nodes, scene.tets, cut, options);
   Scene s = scene;
   s.nodes = r.nodes;
   s.tets = r.tets;

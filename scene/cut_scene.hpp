@@ -8,7 +8,7 @@
 
 namespace tissue::scene {
 
-/// The scene with its mesh cut along `cut` (core cut_mesh). An element
+/// The scene with its mesh cut along `cut` (core cut_along). An element
 /// set's list carries over to the pieces of its elements; a <fixed> or
 /// <load> node list to the copies of its nodes and to the nodes made on an
 /// edge between two of them; box and plane selections are geometric and

@@ -128,7 +128,7 @@ CutSurface through_x(double x0) { return {{x0, -0.01, -0.01}, {0, 0.04, 0}, {0, 
 TEST(Cut, ABlockCutThroughAlongItsOwnFacesFallsIntoTwoPieces) {
   const Mesh m = block();
   for (CutMethod method : {CutMethod::Snap, CutMethod::Split, CutMethod::SnapSplit}) {
-    const CutResult r = cut_mesh(m.nodes, m.tets, through_x(0.01), {.method = method});
+    const CutResult r = cut_along(m.nodes, m.tets, through_x(0.01), {.method = method});
     expect_sound(m, r);
     EXPECT_EQ(pieces(r.tets, r.from.size()), 2);
     EXPECT_EQ(r.n_elements(), index_t(m.tets.size() / 4)) << "nothing to split: the plane holds faces already";
@@ -141,13 +141,13 @@ TEST(Cut, ABlockCutThroughAlongItsOwnFacesFallsIntoTwoPieces) {
 TEST(Cut, ACutBetweenTheNodesSplitsOrSnapsAndTheBlockFallsApart) {
   const Mesh m = block();
   const CutSurface cut = through_x(0.012);  // 2 mm past the nodes at x = 10 mm (0.4 of their 5 mm edges)
-  const CutResult split = cut_mesh(m.nodes, m.tets, cut, {.method = CutMethod::Split});
+  const CutResult split = cut_along(m.nodes, m.tets, cut, {.method = CutMethod::Split});
   expect_sound(m, split);
   EXPECT_EQ(pieces(split.tets, split.from.size()), 2);
   EXPECT_EQ(split.snapped, 0);
   EXPECT_GT(split.split, 0);
   EXPECT_GT(split.edge_nodes, 0);
-  const CutResult hybrid = cut_mesh(m.nodes, m.tets, cut, {.method = CutMethod::SnapSplit});
+  const CutResult hybrid = cut_along(m.nodes, m.tets, cut, {.method = CutMethod::SnapSplit});
   expect_sound(m, hybrid);
   EXPECT_EQ(pieces(hybrid.tets, hybrid.from.size()), 2);
   // of the 15 nodes at x = 10 mm: the 3 inside and the 8 on the faces (sliding along them); the 4 on the block's
@@ -155,7 +155,7 @@ TEST(Cut, ACutBetweenTheNodesSplitsOrSnapsAndTheBlockFallsApart) {
   EXPECT_EQ(hybrid.snapped, 3 + 8);
   EXPECT_LT(hybrid.split, split.split) << "snapping leaves fewer elements to split";
   // snapping alone cannot move the nodes on the block's edges: the elements there stay whole and join the halves
-  const CutResult snap = cut_mesh(m.nodes, m.tets, cut, {.method = CutMethod::Snap});
+  const CutResult snap = cut_along(m.nodes, m.tets, cut, {.method = CutMethod::Snap});
   expect_sound(m, snap);
   EXPECT_GT(snap.unresolved, 0);
   EXPECT_EQ(snap.split, 0);
@@ -166,7 +166,7 @@ TEST(Cut, APartialIncisionOpensWhatItReachesAndTheBlockStaysWhole) {
   const Mesh m = block();
   // the plane x = 10 mm from y = -10 mm to y = 5 mm: the faces of the first row of cells, up to the nodes at 5 mm
   const CutSurface cut{{0.01, -0.01, -0.01}, {0, 0.015, 0}, {0, 0, 0.03}};
-  const CutResult r = cut_mesh(m.nodes, m.tets, cut, {.method = CutMethod::SnapSplit});
+  const CutResult r = cut_along(m.nodes, m.tets, cut, {.method = CutMethod::SnapSplit});
   expect_sound(m, r);
   EXPECT_EQ(pieces(r.tets, r.from.size()), 1);
   EXPECT_EQ(r.cut_faces, 2 * 2) << "the first row's two cells, two triangles each";
@@ -178,7 +178,7 @@ TEST(Cut, AnObliqueCutByEveryMethodLeavesAConformingMesh) {
   const Mesh m = block();
   const CutSurface cut{{0.011, -0.01, -0.01}, {0.003, 0.04, 0}, {0.002, 0, 0.03}};
   for (CutMethod method : {CutMethod::Split, CutMethod::SnapSplit}) {
-    const CutResult r = cut_mesh(m.nodes, m.tets, cut, {.method = method});
+    const CutResult r = cut_along(m.nodes, m.tets, cut, {.method = method});
     expect_sound(m, r);
     EXPECT_EQ(pieces(r.tets, r.from.size()), 2) << "method " << int(method);
     EXPECT_EQ(r.unresolved, 0);
@@ -273,7 +273,7 @@ TEST(Cut, BadBladesAreClearErrors) {
   const Mesh m = block();
   const auto message = [&](const CutSurface& c, CutOptions o = {}) {
     try {
-      (void)cut_mesh(m.nodes, m.tets, c, o);
+      (void)cut_along(m.nodes, m.tets, c, o);
     } catch (const CutError& e) {
       return std::string(e.what());
     }

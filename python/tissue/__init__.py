@@ -16,9 +16,9 @@ Errors raise ValueError (a bad argument) or RuntimeError (a scene that does
 not validate, a backend that cannot run, an unstable simulation), with a
 message naming the file, element, node or value.
 """
-from ._tissue import (Batch, DeviceArray, MaterialChange, Simulation, TickResult, ToolResult, VolumeMesh, __version__,
-                      available_backends, fields, mesh_surface)
+from ._tissue import (Batch, Body, CutMesh, DeviceArray, MaterialChange, Simulation, TickResult, ToolResult, VolumeMesh,
+                      __version__, available_backends, cut_mesh, fields, mesh_surface)
 from .meshes import box_mesh, box_node
 
-__all__ = ["Batch", "DeviceArray", "MaterialChange", "Simulation", "TickResult", "ToolResult", "VolumeMesh", "available_backends", "fields", "mesh_surface",
-           "box_mesh", "box_node", "__version__"]
+__all__ = ["Batch", "Body", "CutMesh", "DeviceArray", "MaterialChange", "Simulation", "TickResult", "ToolResult",
+           "VolumeMesh", "available_backends", "cut_mesh", "fields", "mesh_surface", "box_mesh", "box_node", "__version__"]

@@ -469,3 +469,31 @@ def test_bodies_name_their_ranges_and_only_the_pressed_one_moves(tmp_path):
     assert sim.jacobian()[right.elements].min() > 0.5
     one = block()
     assert [(b.name, b.n_nodes) for b in one.bodies] == [("body", one.n_nodes)]
+
+
+def test_cut_mesh_separates_a_block_that_then_presses_as_two(tmp_path):
+    nodes, tets = tissue.box_mesh(4, 4, 2, (0.02, 0.02, 0.01))
+    cut = tissue.cut_mesh(nodes, tets, origin=[0.012, -0.01, -0.01], edge=[0, 0.04, 0], sweep=[0, 0, 0.03])
+    assert cut.nodes.shape[1] == 3 and cut.tets.shape[1] == 4
+    assert cut.node_from.shape == (len(cut.nodes), 2) and cut.weight.shape == (len(cut.nodes),)
+    assert cut.element_from.shape == (len(cut.tets),) and cut.element_from.max() < len(tets)
+    assert cut.faces_opened > 0 and cut.nodes_copied > 0 and cut.left_whole == 0
+    # each node where its origin says, and the volume kept (the block's faces are flat)
+    a, b = nodes[cut.node_from[:, 0]], nodes[cut.node_from[:, 1]]
+    moved = cut.node_from[:, 0] != cut.node_from[:, 1]
+    np.testing.assert_allclose(cut.nodes[moved], (a + cut.weight[:, None] * (b - a))[moved], atol=1e-15)
+    P = cut.nodes[cut.tets]
+    vol = np.einsum("ij,ij->i", np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), P[:, 3] - P[:, 0]) / 6
+    assert vol.min() > 0 and vol.sum() == pytest.approx(0.02 * 0.02 * 0.01, rel=1e-12)
+    # the cut block runs: its base held, a press on the right half moves that half alone
+    base = np.flatnonzero(cut.nodes[:, 2] < 1e-9)
+    sim = tissue.Simulation.from_mesh(cut.nodes, cut.tets, E=3000.0, nu=0.4, fixed=base, tool_radii=[3e-3],
+                                      backend="cpu", precision="double", depth="all")
+    press(sim, 1e-3, centre=(0.016, 0.01, 0.01))
+    u = sim.displacement()
+    left = cut.nodes[:, 0] < 0.012 - 1e-9
+    assert np.abs(u[~left]).max() > 5e-4 and np.abs(u[left]).max() == 0
+    with pytest.raises(ValueError, match="edge has zero length"):
+        tissue.cut_mesh(nodes, tets, origin=[0.01, 0, 0], edge=[0, 0, 0], sweep=[0, 0, 0.01])
+    with pytest.raises(ValueError, match="method 'chop'"):
+        tissue.cut_mesh(nodes, tets, origin=[0.01, 0, 0], edge=[0, 0.01, 0], sweep=[0, 0, 0.01], method="chop")

@@ -72,6 +72,28 @@ struct VolumeMeshResult {
 /// sizing).
 VolumeMeshResult mesh_surface(const std::string& path, const std::string& unit = "m", int target_tets = 0);
 
+/// A tetrahedral mesh cut where a blade sweeps (cut_mesh; docs/cutting.md).
+struct CutMeshResult {
+  std::vector<double> nodes;            ///< x y z per node (m)
+  std::vector<std::int32_t> tets;       ///< four node ids per tetrahedron, positively oriented
+  std::vector<std::int32_t> node_from;  ///< per node the two input nodes it lies between (the same one twice: a kept
+                                        ///< or copied node)
+  std::vector<double> weight;           ///< per node its place between them: (1 - w) X_a + w X_b
+  std::vector<std::int32_t> element_from;  ///< per element the input element it is (part of)
+  int pieces_split = 0, nodes_snapped = 0, nodes_copied = 0, faces_opened = 0, left_whole = 0;
+};
+
+/// Cuts a mesh (x y z per node, 4 ids per tetrahedron) where a blade sweeps:
+/// the parallelogram origin + s edge + t sweep, s, t in [0, 1] (m). method:
+/// "snap-split" (the default), "snap" or "split" (docs/cutting.md: snap
+/// nodes near the cut onto it, split what it still crosses, open the faces
+/// on it by copying their nodes; no element is deleted). Throws
+/// std::invalid_argument naming the rule for a zero-length blade, a blade
+/// moving along its edge, a cut that crosses no element, an unknown method
+/// or a mesh whose ids are out of range.
+CutMeshResult cut_mesh(std::span<const double> nodes, std::span<const std::int32_t> tets, const Vector3& origin,
+                       const Vector3& edge, const Vector3& sweep, const std::string& method = "snap-split");
+
 /// One tool at the end of a tick.
 struct ToolResult {
   Vector3 tip = {};                   ///< m
