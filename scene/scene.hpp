@@ -73,7 +73,7 @@ struct ElementSet {
   bool all = false;
   std::vector<index_t> elements;    ///< element ids of the whole scene (a <body>'s local ids plus its first_element)
   int line = 0;                     ///< source line, for messages (0 = unknown)
-  int body = -1;                    ///< index into Scene::bodies it belongs to; -1 = the scene's (single-mesh form)
+  int body = -1;                    ///< index into Scene::bodies it belongs to; -1 in the single-mesh form
 };
 
 /// Fixed nodes: by id list, by an axis-aligned box, or by the side of a plane.
@@ -85,7 +85,8 @@ struct Constraint {
   double lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};   ///< Kind::Box (m)
   double point[3] = {0, 0, 0}, normal[3] = {0, 0, 1};  ///< Kind::Plane: fixes nodes with (x - point).normal >= 0
   int line = 0;                     ///< source line, for messages (0 = unknown)
-  int body = -1;                    ///< index into Scene::bodies whose nodes alone it selects; -1 = every node
+  int body = -1;                    ///< index into Scene::bodies whose nodes alone it selects; -1 in the single-mesh
+                                    ///< form
 };
 
 /// A constant external force (a dead load: Backend::set_loads) on the nodes

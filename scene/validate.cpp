@@ -121,7 +121,11 @@ void check_bodies(const Scene& s) {
                            body_name(s, k), e - b.first_element, c, v, b.first_node, b.first_node + b.n_nodes - 1));
   }
   const auto check_ref = [&](int body, int line, std::string_view what) {
-    if (body < -1 || body >= int(s.bodies.size()))
+    if (body < 0)
+      fail(s, line, fmt::format("{} belongs to no body; in a scene of bodies each element set, <fixed> and <load> "
+                                "belongs to one (its body's ids)",
+                                what));
+    if (body >= int(s.bodies.size()))
       fail(s, line, fmt::format("{} belongs to body {}, which does not exist (the scene has {} bodies)", what, body,
                                 s.bodies.size()));
   };

@@ -8,8 +8,8 @@
 //   bodies:      (a scene of <body>s) names non-empty and unique; node and
 //                element ranges consecutive in body order and covering the
 //                mesh; each body with an element, its elements using only
-//                its own nodes; sets, constraints and loads naming a body
-//                that exists, and only its elements or nodes;
+//                its own nodes; every set, constraint and load naming a
+//                body that exists, and only its elements or nodes;
 //   materials:   names unique and non-empty; numbers finite; rho > 0;
 //                (E, nu): E > 0 and -1 < nu < 0.5; (mu, K): mu > 0, K > 0;
 //                Lame (lambda, mu): mu > 0 and K = lambda + 2 mu / 3 > 0;

@@ -900,6 +900,8 @@ TEST(SceneValidate, BodiesBuiltInCodeMustTileTheMesh) {
   Scene stray = good;
   stray.constraints[0].body = 2;
   EXPECT_TRUE(throws_with<SceneError>([&] { scene::validate(stray); }, {"belongs to body 2, which does not exist"}));
+  stray.constraints[0].body = -1;  // the writer writes each body's own: one of none would be lost
+  EXPECT_TRUE(throws_with<SceneError>([&] { scene::validate(stray); }, {"a <fixed> belongs to no body"}));
   Scene outside = good;
   outside.constraints[0].nodes = {0, 5};  // a's selection naming b's node
   EXPECT_TRUE(throws_with<SceneError>([&] { scene::validate(outside); },
