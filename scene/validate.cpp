@@ -8,6 +8,7 @@
 #include <numeric>
 #include <string_view>
 #include <tuple>
+#include <utility>
 #include <vector>
 
 #include "scene/constraints.hpp"
@@ -76,6 +77,15 @@ void check_mesh(const Scene& s) {
 }
 
 // ---- bodies ----------------------------------------------------------------
+
+/// The ids [lo, hi) a set or selection of `body` may name: its body's
+/// range (first, count members of Body), or all `total` (body -1).
+std::pair<index_t, index_t> ids_of(const Scene& s, int body, index_t Body::*first, index_t Body::*count,
+                                   index_t total) {
+  if (body < 0) return {0, total};
+  const Body& b = s.bodies[std::size_t(body)];
+  return {b.*first, b.*first + b.*count};
+}
 
 /// "body 'name'" of index k (k in range).
 std::string body_name(const Scene& s, int k) { return fmt::format("body '{}'", s.bodies[std::size_t(k)].name); }
@@ -265,11 +275,8 @@ int body_of_element(const Scene& s, index_t e) {
 /// Assigns the set's elements to `owner` (set index per element, -1 = none).
 void claim_elements(const Scene& s, size_t set, std::vector<int>& owner) {
   const ElementSet& es = s.sets[set];
-  index_t lo = 0, ne = elem_count(s);  // the elements it may name: its body's, or all
-  if (es.body >= 0) {
-    lo = s.bodies[std::size_t(es.body)].first_element;
-    ne = lo + s.bodies[std::size_t(es.body)].n_elements;
-  }
+  const std::pair<index_t, index_t> range = ids_of(s, es.body, &Body::first_element, &Body::n_elements, elem_count(s));
+  const index_t lo = range.first, ne = range.second;  // plain names: lambdas below capture them
   const std::string what = es.body >= 0 ? fmt::format("{}: element-set '{}'", body_name(s, es.body), es.name)
                                         : fmt::format("element-set '{}'", es.name);
   if (es.all && !es.elements.empty())
@@ -340,11 +347,8 @@ std::string selection_rule(const std::string& noun) {
 
 void check_constraint(const Scene& s, const Constraint& c, const std::string& noun = "fixed") {
   const std::string what = describe_as(c, noun);
-  index_t lo = 0, n = node_count(s);  // the nodes it may name: its body's, or all
-  if (c.body >= 0) {
-    lo = s.bodies[std::size_t(c.body)].first_node;
-    n = lo + s.bodies[std::size_t(c.body)].n_nodes;
-  }
+  const std::pair<index_t, index_t> range = ids_of(s, c.body, &Body::first_node, &Body::n_nodes, node_count(s));
+  const index_t lo = range.first, n = range.second;
   switch (c.kind) {
     case Constraint::Kind::Nodes:
       if (c.nodes.empty())
