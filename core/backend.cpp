@@ -77,6 +77,7 @@ void Backend::upload(const TissueModel<double>& m) {
   n_elems_ = m.n_elems;
   uploaded_ = true;
   pass3_forces_ = false;
+  body_spec_ = {};  // a new model: its bodies are set again (do_upload dropped the old lists)
   shapes_.clear();
   motion_.clear();
   grasp_pose_.clear();
@@ -213,6 +214,22 @@ void Backend::set_tools(std::span<const ToolShape> tools, const ContactOptions& 
   motion_.assign(tools.size(), ToolMotion{});
   grasp_pose_.assign(tools.size(), ToolPose{});
   grasping_.assign(tools.size(), 0);
+}
+
+void Backend::set_body_contact(const BodyContactSpec& spec) {
+  require_upload("set_body_contact");
+  check_body_contact(spec, n_nodes_);
+  do_set_body_contact(spec);
+  body_spec_ = spec;
+}
+
+std::vector<BodyContactNode> Backend::body_contacts() {
+  require_upload("body_contacts");
+  return do_body_contacts();
+}
+
+void Backend::do_set_body_contact(const BodyContactSpec& spec) {
+  if (!spec.empty()) throw std::invalid_argument(fmt::format("set_body_contact: the {} backend has no contact between bodies", name()));
 }
 
 void Backend::set_tool_friction(int tool, double friction) {

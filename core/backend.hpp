@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "core/body_contact.hpp"
 #include "core/contact.hpp"
 #include "core/model.hpp"
 #include "core/region.hpp"
@@ -105,6 +106,14 @@ struct ContactNode {
   int tool = -1;
   std::uint8_t kind = kNoContact;  ///< ContactKind
   Vec3<double> normal = {};        ///< contact normal of a pushed node (unit, out of the tool)
+};
+
+/// One surface node touching another body after the last step
+/// (Backend::body_contacts: tests, reports).
+struct BodyContactNode {
+  index_t node = -1;
+  index_t tri = -1;   ///< the other body's surface triangle it was inside
+  double gap = 0;     ///< how far inside it was before the step's correction (m)
 };
 
 /// Scenes of one model that a device backend steps as one: each pass of a
@@ -195,6 +204,18 @@ class Backend {
   /// that turns on grasps the nodes in contact with that tool now; one that
   /// turns off releases them. After the advance the tools rest at `to`.
   void move_tools(std::span<const ToolMotion> motion);
+
+  /// Contact between the bodies of the mesh (core/body_contact.hpp) from the
+  /// next advance on: every pair of spec.pairs, each TLED step, before the
+  /// tools' contact. An empty spec turns it off. std::invalid_argument for a
+  /// bad spec; a backend that cannot run it with its settings says why.
+  void set_body_contact(const BodyContactSpec& spec);
+  const BodyContactSpec& body_contact() const { return body_spec_; }
+  /// The surface nodes inside another body after the last step, before its
+  /// correction (ascending node id).
+  std::vector<BodyContactNode> body_contacts();
+  /// How many times the candidate lists were built (tests, reports).
+  virtual long body_list_builds() const { return 0; }
 
   /// The pending tool motion as the steps of an advance of `steps` steps
   /// see it (core/contact.hpp ContactTools: poses, substeps, grasps): what
@@ -322,6 +343,9 @@ class Backend {
   virtual std::optional<Reductions> do_finish_tick();
   virtual Fields do_download() = 0;
   virtual void do_write_positions(float* dst) = 0;
+  /// spec checked against the mesh (check_body_contact). Default: refuses a non-empty spec.
+  virtual void do_set_body_contact(const BodyContactSpec& spec);
+  virtual std::vector<BodyContactNode> do_body_contacts() { return {}; }
 
  private:
   void require_upload(const char* what) const;
@@ -340,6 +364,7 @@ class Backend {
   std::vector<ToolPose> grasp_pose_;    ///< pose when each tool's grasp started
   std::vector<std::uint8_t> grasping_;  ///< per tool
   std::vector<index_t> loaded_;         ///< set_loads' nodes
+  BodyContactSpec body_spec_;           ///< set_body_contact's
   bool tick_pending_ = false;           ///< start_tick called, finish_tick not yet
   bool pending_steps_ = false;          ///< the pending tick takes steps (else it is a reduction alone)
   std::optional<Reductions> pending_;   ///< the default do_start_tick's result

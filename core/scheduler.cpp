@@ -120,6 +120,12 @@ Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, Schedul
     shapes.push_back(t.shape);
   }
   backend_.set_tools(shapes, settings_.contact);
+  if (!settings_.body_contact.empty() && settings_.depth != kDepthAll)
+    throw std::invalid_argument(fmt::format("depth {}: bodies that touch each other need the whole mesh (depth all): "
+                                            "a region of rings does not reach across to the other body",
+                                            settings_.depth == kDepthAuto ? std::string("auto")
+                                                                          : std::to_string(settings_.depth)));
+  backend_.set_body_contact(settings_.body_contact);
   prev_.assign(settings_.tools.size(), ToolPose{});
   entering_.assign(settings_.tools.size(), 0);
   motion_.assign(settings_.tools.size(), ToolMotion{});

@@ -68,6 +68,7 @@ struct SchedulerSettings {
   double force_floor = 1e-9;   ///< N
   std::vector<ToolSetting> tools = {ToolSetting{}};  ///< one per device (at most kMaxTools)
   ContactOptions contact;      ///< face contact, contact check spacing
+  BodyContactSpec body_contact;  ///< bodies that touch each other (empty: none); needs depth kDepthAll
 };
 
 /// One tool in one tick.

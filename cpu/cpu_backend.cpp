@@ -55,6 +55,7 @@ template <class T>
 void CpuBackend<T>::do_upload(const TissueModel<double>& model) {
   energy_.fresh = energy_.synced = false;
   contact_.reset();
+  body_.reset();
   model_ = convert<T>(model);
   state_.resize(model_);  // held = the fixed axes, u_held = 0, nothing driven (core/store.hpp's initial values)
   node_divisor_ = nodal_pressure_divisors(model_);
@@ -182,6 +183,7 @@ void CpuBackend<T>::do_advance(int steps, const ContactTools<double>& tools) {
   const bool have_pressure = take_passes(energy_, state_);
   energy_.fresh = false;  // u moves
   const std::span<const index_t> elems = state_.region.elems, nodes = state_.region.nodes;
+  if (body_) body_->refresh(state_);
   const int members = team_slices().parts;
   ThreadTeam& team = *team_;
   bool sweeping = false;  // written by one barrier's last(), read by every member after it
@@ -202,6 +204,7 @@ void CpuBackend<T>::do_advance(int steps, const ContactTools<double>& tools) {
       cpu::node_update(model_, state_, my_nodes);
       if (t.n_tools > 0) contact_->check_region(state_, my_nodes, r);  // its nodes' u_next in this core's cache
       if (!team.barrier([&] {
+            if (body_) body_->step(state_);  // before the tools': a rigid tool has the last word
             sweeping = contact_->begin_step(state_, t, k, members);
             if (!sweeping) rotate(state_);
           }))
@@ -215,6 +218,17 @@ void CpuBackend<T>::do_advance(int steps, const ContactTools<double>& tools) {
         return;
     }
   });
+}
+
+template <class T>
+void CpuBackend<T>::do_set_body_contact(const BodyContactSpec& spec) {
+  body_.reset();
+  if (!spec.empty()) body_ = std::make_unique<BodyStage<T>>(model_, spec, state_);
+}
+
+template <class T>
+std::vector<BodyContactNode> CpuBackend<T>::do_body_contacts() {
+  return body_ ? body_->contacts() : std::vector<BodyContactNode>{};
 }
 
 template <class T>

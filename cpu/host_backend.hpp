@@ -18,6 +18,7 @@
 #include "core/backend.hpp"
 #include "core/state.hpp"
 #include "cpu/bad_element.hpp"
+#include "cpu/body_contact.hpp"
 #include "cpu/contact.hpp"
 #include "cpu/partition.hpp"
 #include "cpu/passes.hpp"
@@ -79,6 +80,11 @@ class CpuBackend final : public Backend {
   Reductions do_reduce() override;
   Fields do_download() override;
   void do_write_positions(float* dst) override;
+  void do_set_body_contact(const BodyContactSpec& spec) override;
+  std::vector<BodyContactNode> do_body_contacts() override;
+
+ public:
+  long body_list_builds() const override { return body_ ? body_->builds() : 0; }
 
  private:
   /// Creates team_ (default_team_size() or set_team_size's members) and
@@ -91,6 +97,7 @@ class CpuBackend final : public Backend {
   std::vector<index_t> all_elems_;    ///< 0..n_elems-1: pass 1 over every element
   std::vector<index_t> driven_list_;  ///< currently driven nodes
   std::unique_ptr<ContactStage<T>> contact_;
+  std::unique_ptr<BodyStage<T>> body_;  ///< contact between bodies; null when off
   T friction_[kMaxTools] = {};        ///< each tool's friction coefficient in the last advance (the reaction's)
   EnergyScratch<T> energy_;           ///< reduce's passes 1-2, taken by the next step
   BadElementFlag bad_;

@@ -27,6 +27,7 @@
 #include <string>
 #include <vector>
 
+#include "cuda/body_contact.hpp"
 #include "cuda/contact.hpp"
 #include "cuda/device_store.hpp"
 #include "cuda/launch.cuh"
@@ -356,6 +357,15 @@ class CudaBackend final : public Backend {
     reducer_.set_law(store_.law());
     stepper_.set_law(store_.law());
     contact_.allocate(n, m.n_surf);
+    body_.clear();
+    stepper_.set_body({});
+    surface_ = {};  // what the bodies' lists are built from: the surface and the reference positions
+    surface_.n_nodes = model.n_nodes;
+    surface_.n_tris = model.n_tris;
+    surface_.n_surf = model.n_surf;
+    surface_.X = model.X;
+    surface_.tris = model.tris;
+    surface_.surf_nodes = model.surf_nodes;
     reduce_tools_ = nullptr;
     driven_list_.allocate(n);
     drive_dev_.allocate(n * (3 * sizeof(T) + sizeof(index_t) + 1));
@@ -476,6 +486,7 @@ class CudaBackend final : public Backend {
   /// Steps in chunks of at most the stepper's graph length; each chunk's
   /// slice of the tools' motion is one small upload.
   void do_advance(int steps, const ContactTools<double>& tools) override {
+    refresh_body();
     const int chunk = Stepper<T>::kMaxGraphSteps;
     StepStart start = take_pressures();
     for (int done = 0; done < steps;) {
@@ -552,8 +563,42 @@ class CudaBackend final : public Backend {
     stream_.sync();  // the caller (a GL interop unmap) may use dst right away
   }
 
+  void do_set_body_contact(const BodyContactSpec& spec) override {
+    if (spec.empty()) {
+      body_.clear();
+      stepper_.set_body({});
+      return;
+    }
+    if (stepper_.mode() == CudaStepMode::Grid || stepper_.mode() == CudaStepMode::Cluster)
+      stepper_.set_body({nullptr, 1});  // (refuses, naming the modes)
+    body_.set(surface_, spec, positions(), log_, stream());
+    stepper_.set_body(body_.steps());
+  }
+  std::vector<BodyContactNode> do_body_contacts() override { return body_.contacts(log_, stream()); }
+
+ public:
+  long body_list_builds() const override { return body_.builds(); }
+
  private:
   cudaStream_t stream() const { return stream_.get(); }
+
+  /// X + u of every node, xyz (downloads u).
+  std::vector<double> positions() {
+    const Fields f = do_download();
+    const index_t n = surface_.n_nodes;
+    std::vector<double> x(3 * std::size_t(n));
+    for (index_t a = 0; a < n; ++a)
+      for (int c = 0; c < 3; ++c) x[3 * size_t(a) + c] = surface_.X[c * size_t(n) + a] + f.u[c * size_t(n) + a];
+    return x;
+  }
+
+  /// Before steps: rebuilds the bodies' lists when the last steps flagged a
+  /// node beyond their reach (the flag is read once the stream is done).
+  void refresh_body() {
+    if (!body_.active()) return;
+    stream_.sync();
+    if (body_.stale()) body_.rebuild(surface_, positions(), log_, stream());
+  }
 
   /// Whether a tick of `steps` steps runs as one graph: the Graph mode,
   /// something moves, and one graph holds the steps.
@@ -587,6 +632,7 @@ class CudaBackend final : public Backend {
   /// tick_graph's first half: stages the tools, launches the graph on the
   /// backend's stream and returns without waiting.
   void launch_tick_graph(int steps, const ContactTools<double>& tools, bool check) {
+    refresh_body();
     const RegionView r = region_.view();
     const std::size_t tool_bytes = tools.n_tools > 0 ? contact_.stage(contact_tools_as<T>(tools)) : 0;
     const ContactTools<T>* dtools = tools.n_tools > 0 ? contact_.device_tools() : nullptr;
@@ -669,7 +715,7 @@ class CudaBackend final : public Backend {
   /// without run in graphs of different keys.
   bool group_takes(int steps) {
     const RegionView r = region_.view();
-    return in_group_layout_ && tick_graph_runs(steps) && !r.nodes && !r.elems;
+    return in_group_layout_ && tick_graph_runs(steps) && !r.nodes && !r.elems && !body_.active();
   }
 
   /// Whether every array a group tick's kernels touch per scene (the state,
@@ -799,6 +845,8 @@ class CudaBackend final : public Backend {
   RegionFill region_;
   Reducer<T> reducer_;
   DeviceContact<T> contact_;
+  DeviceBodyContact<T> body_;     ///< contact between bodies (inactive: none)
+  TissueModel<double> surface_;   ///< the mesh's surface and reference positions (the bodies' lists)
   /// The tools the last advance read on the device (null: none): reduce()'s
   /// contact reactions take their friction coefficients.
   const ContactTools<T>* reduce_tools_ = nullptr;

@@ -99,6 +99,9 @@ template <class T>
 void Stepper<T>::set_mode(CudaStepMode mode) {
   if (mode == CudaStepMode::Grid && limits_.grid_blocks == 0)
     throw std::invalid_argument("cuda step mode 'grid': this device does not support cooperative launches");
+  if ((mode == CudaStepMode::Grid || mode == CudaStepMode::Cluster) && body_.rows > 0)
+    throw std::invalid_argument("cuda step mode 'grid' or 'cluster' has no contact between bodies; use auto, graph "
+                                "or launch");
   if (mode == CudaStepMode::Cluster && limits_.cluster_size == 0)
     throw std::invalid_argument("cuda step mode 'cluster': this device has no thread-block clusters (needs sm_90+)");
   mode_ = mode;
@@ -177,11 +180,12 @@ void Stepper<T>::launch_steps(const ModelView<T>& m, const StateView<T>& s, cons
     }
     const bool beside_check = k == 0 && start == StepStart::kPass3BesideCheck;
     if (!beside_check && fuses_forces(r)) {
-      forces_and_update(m, s, r, b, stream, /*early=*/!tools);
+      forces_and_update(m, s, r, b, stream, /*early=*/!tools && body_.rows == 0);
     } else {
       element_forces(m, s, r, b.u, stream, beside_check);
       node_update(m, s, r, b, stream);
     }
+    if (body_.rows > 0) enqueue_body_step(m, s, body_, b, stream);  // bodies first: a rigid tool has the last word
     if (tools) {  // the contact stage over the surface (cuda/contact.cuh)
       launch_chained(m.n_tris, stream, sweep_triangles_kernel<T>, m, s, tools, k,
                      static_cast<const Packed3<T>*>(b.u_next));
@@ -190,6 +194,7 @@ void Stepper<T>::launch_steps(const ModelView<T>& m, const StateView<T>& s, cons
     }
     b = b.rotated();
   }
+  if (body_.rows > 0 && steps > 0) enqueue_body_check(m, s, body_, b.u, stream);  // the lists' reach, at the new u
 }
 
 template <class T>

@@ -26,6 +26,7 @@
 #include <map>
 #include <utility>
 
+#include "cuda/body_contact.hpp"
 #include "cuda/cuda_backend.hpp"
 #include "core/contact.hpp"
 #include "cuda/device_store.hpp"
@@ -128,6 +129,15 @@ class Stepper {
     law_ = law;
     graphs_.clear();
   }
+  /// Contact between bodies in every step from now on (rows 0: none); the
+  /// Graph and Launch modes run it (set_mode refuses the others while it is on).
+  void set_body(BodySteps<T> body) {
+    if (body.rows > 0 && (mode_ == CudaStepMode::Grid || mode_ == CudaStepMode::Cluster))
+      throw std::invalid_argument("cuda step mode 'grid' or 'cluster' has no contact between bodies; use auto, graph "
+                                  "or launch");
+    body_ = body;
+    graphs_.clear();
+  }
   CudaStepMode mode() const { return mode_; }
   /// The mode advance() uses for a region of this size (Auto resolved).
   CudaStepMode choose(const RegionView& r) const;
@@ -223,6 +233,7 @@ class Stepper {
   CudaStepMode mode_ = CudaStepMode::Auto;
   PersistentLimits limits_;
   LawView<T> law_;
+  BodySteps<T> body_;  ///< contact between bodies (rows 0: none)
   /// the tools' buffer is the backend's one device array
   std::map<GraphKey, GraphExec> graphs_;
 };

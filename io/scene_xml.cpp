@@ -574,7 +574,7 @@ scene::Scene Reader::read() {
   if (root.attribute("version") && scene::trim(root.attribute("version").value()) != "1")
     fail(root, fmt::format("version = '{}' is not supported; this reader knows version 1",
                            root.attribute("version").value()));
-  check_children(root, {"mesh", "body", "material", "element-set", "fixed", "load", "tool", "solver"});
+  check_children(root, {"mesh", "body", "material", "element-set", "fixed", "load", "tool", "contact", "solver"});
 
   scene::Scene s;
   s.source = source_;
@@ -603,6 +603,25 @@ scene::Scene Reader::read() {
   if (body)
     for (pugi::xml_node n : root.children("material")) s.materials.push_back(read_material(n));
   for (pugi::xml_node n : root.children("tool")) s.tools.push_back(read_tool(n));
+  for (pugi::xml_node n : root.children("contact")) {
+    if (!body) fail(n, "<contact> names bodies that touch; a scene of one <mesh> has none (give each its <body>)");
+    check_attributes(n, {"bodies", "friction"});
+    check_children(n, {});
+    check_no_text(n);
+    scene::BodyContact c;
+    c.line = line(n);
+    if (!n.attribute("bodies")) fail(n, "<contact> needs bodies=\"a b\": the two bodies that touch");
+    std::istringstream names(n.attribute("bodies").value());
+    std::vector<std::string> got;
+    for (std::string w; names >> w;) got.push_back(w);
+    if (got.size() != 2)
+      fail(n, fmt::format("<contact> bodies = '{}' names {} bodies; it names two", n.attribute("bodies").value(),
+                          got.size()));
+    c.a = got[0];
+    c.b = got[1];
+    c.friction = real_or(n, "friction", c.friction);
+    s.contacts.push_back(c);
+  }
   if (const pugi::xml_node n = root.child("solver")) {
     if (n.next_sibling("solver")) fail_at(line(n.next_sibling("solver")), "a second <solver>; a scene has one");
     s.solver = read_solver(n);
@@ -829,6 +848,11 @@ std::string format_scene(const scene::Scene& s, const std::string& mesh_file) {
     for (const Material& m : s.materials) write_material(root, m);
   }
   for (const scene::Tool& t : s.tools) write_tool(root, t);
+  for (const scene::BodyContact& c : s.contacts) {
+    pugi::xml_node n = root.append_child("contact");
+    set(n, "bodies", c.a + " " + c.b);
+    if (c.friction != 0) set(n, "friction", num(c.friction));
+  }
   write_solver(root, s.solver);
   std::ostringstream out;
   doc.save(out, "  ", pugi::format_indent, pugi::encoding_utf8);

@@ -142,6 +142,13 @@ struct Body {
   index_t first_element = 0, n_elements = 0;
 };
 
+/// Two bodies that may touch each other (<contact bodies="a b">; core/body_contact.hpp).
+struct BodyContact {
+  std::string a, b;                 ///< body names
+  double friction = 0;              ///< Coulomb's mu between them (>= 0); 0 = frictionless
+  int line = 0;                     ///< source line, for messages (0 = unknown)
+};
+
 /// A whole scene as read from a file, before validation (scene/validate.hpp).
 struct Scene {
   std::string source = "<scene>";   ///< file name, for messages
@@ -155,6 +162,7 @@ struct Scene {
   std::vector<Constraint> constraints;
   std::vector<Load> loads;
   std::vector<Tool> tools;
+  std::vector<BodyContact> contacts;  ///< which bodies touch (a scene of bodies only)
   Solver solver;                    ///< defaults when the file has no <solver>
 };
 

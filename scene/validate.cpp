@@ -563,6 +563,44 @@ void check_tools(const Scene& s) {
   }
 }
 
+// ---- bodies that touch ------------------------------------------------------
+
+/// The body named `name` (its index), or a failure at `line` naming the contact and the bodies there are.
+int contact_body(const Scene& s, int line, const std::string& name) {
+  std::string names;
+  for (std::size_t k = 0; k < s.bodies.size(); ++k) {
+    if (s.bodies[k].name == name) return int(k);
+    names += (k ? ", " : "") + s.bodies[k].name;
+  }
+  fail(s, line, fmt::format("contact: no body '{}' (the bodies are {})", name, names));
+  return -1;
+}
+
+void check_contacts(const Scene& s) {
+  for (std::size_t i = 0; i < s.contacts.size(); ++i) {
+    const BodyContact& c = s.contacts[i];
+    if (s.bodies.empty()) fail(s, c.line, "contact: a scene of one <mesh> has no bodies to touch");
+    const int a = contact_body(s, c.line, c.a), b = contact_body(s, c.line, c.b);
+    if (a == b)
+      fail(s, c.line, fmt::format("contact: bodies = '{} {}' names one body twice; a body against itself (a fold) "
+                                  "is not modelled",
+                                  c.a, c.b));
+    check_finite(s, c.line, "contact", "friction", c.friction);
+    if (!(c.friction >= 0)) fail(s, c.line, fmt::format("contact: friction = {} must be >= 0 (Coulomb's mu)", c.friction));
+    for (std::size_t j = 0; j < i; ++j) {
+      const BodyContact& d = s.contacts[j];
+      if ((d.a == c.a && d.b == c.b) || (d.a == c.b && d.b == c.a))
+        fail(s, c.line, fmt::format("contact: bodies '{}' and '{}' are already paired ({})", c.a, c.b,
+                                    location(s, d.line)));
+    }
+  }
+  if (!s.contacts.empty() && s.solver.depth >= 0)
+    fail(s, s.solver.line,
+         fmt::format("solver: depth = {}: a scene whose bodies touch (<contact>) computes the whole mesh (a region "
+                     "of rings does not reach across to the other body); use depth=\"all\" or \"auto\"",
+                     s.solver.depth));
+}
+
 // ---- solver ----------------------------------------------------------------
 
 void check_solver(const Scene& s) {
@@ -636,6 +674,7 @@ ModelInput to_model_input(const Scene& scene) {
   check_loads(scene);  // the <load>s' rules, with file:line, before any work
   check_tools(scene);
   check_solver(scene);
+  check_contacts(scene);
   in.nodes = scene.nodes;
   in.tets = scene.tets;
   for (const Material& m : scene.materials) {
@@ -681,6 +720,14 @@ SchedulerSettings scheduler_settings(const Scene& scene) {
   st.tools.clear();
   for (const Tool& t : scene.tools) st.tools.push_back({{t.name, t.radius, t.shaft, t.friction}, t.direction});
   st.depth = scene.solver.depth;
+  check_contacts(scene);
+  if (!scene.contacts.empty()) {
+    for (const Body& b : scene.bodies) st.body_contact.first_node.push_back(b.first_node);
+    st.body_contact.first_node.push_back(index_t(scene.nodes.size() / 3));
+    for (const BodyContact& c : scene.contacts)
+      st.body_contact.pairs.push_back({contact_body(scene, c.line, c.a), contact_body(scene, c.line, c.b), c.friction});
+    if (st.depth == kDepthAuto) st.depth = kDepthAll;  // auto, in a scene whose bodies touch: the whole mesh
+  }
   st.tick = scene.solver.tick;
   st.residual_tol = scene.solver.residual_tol;
   st.kinetic_tol = scene.solver.kinetic_tol;

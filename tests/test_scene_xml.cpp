@@ -880,6 +880,52 @@ TEST(SceneXml, BodyErrorsNameTheBodyItsOwnIdsAndTheLine) {
 
 // A scene of bodies built in code is held to the same rules: the ranges
 // tile the mesh in order, and a body's elements use its own nodes.
+// ---- bodies that touch -------------------------------------------------------
+
+std::string with(const std::string& xml, const std::string& extra) {
+  std::string s = xml;
+  s.insert(s.rfind("</tissue-scene>"), extra + "\n");
+  return s;
+}
+
+TEST(SceneXml, AContactPairsTwoBodiesAndTheWholeMeshRuns) {
+  const Scene s = parse_scene(with(bodies_xml(), R"(  <contact bodies="a b" friction="0.2"/>)"), "two.xml", "");
+  ASSERT_EQ(s.contacts.size(), 1u);
+  EXPECT_EQ(s.contacts[0].a, "a");
+  EXPECT_EQ(s.contacts[0].b, "b");
+  EXPECT_EQ(s.contacts[0].friction, 0.2);
+  const SchedulerSettings st = scene::scheduler_settings(s);
+  EXPECT_EQ(st.depth, kDepthAll);  // auto, in a scene whose bodies touch
+  EXPECT_EQ(st.body_contact.first_node, (std::vector<index_t>{0, 4, 9}));
+  ASSERT_EQ(st.body_contact.pairs.size(), 1u);
+  EXPECT_EQ(st.body_contact.pairs[0].a, 0);
+  EXPECT_EQ(st.body_contact.pairs[0].b, 1);
+  EXPECT_EQ(st.body_contact.pairs[0].friction, 0.2);
+  // written and read back
+  const Scene back = parse_scene(format_scene(s, ""), "back.xml", "");
+  ASSERT_EQ(back.contacts.size(), 1u);
+  EXPECT_EQ(back.contacts[0].b, "b");
+  EXPECT_EQ(back.contacts[0].friction, 0.2);
+}
+
+TEST(SceneXml, ContactErrorsNameTheBodiesAndTheRule) {
+  const std::string xml = bodies_xml();
+  const auto invalid = [](const std::string& text, std::initializer_list<std::string> parts) {
+    return throws_with<SceneError>([&] { scene::validate(parse_scene(text, "scene.xml", "")); }, parts);
+  };
+  EXPECT_NO_THROW(scene::validate(parse_scene(with(xml, R"(<contact bodies="a b"/>)"), "scene.xml", "")));
+  EXPECT_TRUE(invalid(with(xml, R"(<contact bodies="a c"/>)"), {"contact: no body 'c'", "the bodies are a, b"}));
+  EXPECT_TRUE(invalid(with(xml, R"(<contact bodies="a a"/>)"), {"names one body twice", "not modelled"}));
+  EXPECT_TRUE(xml_error(with(xml, R"(<contact bodies="a"/>)"), {"names 1 bodies; it names two"}));
+  EXPECT_TRUE(invalid(with(xml, R"(<contact bodies="a b" friction="-1"/>)"), {"friction = -1 must be >= 0"}));
+  EXPECT_TRUE(invalid(with(xml, "<contact bodies=\"a b\"/>\n<contact bodies=\"b a\"/>"), {"already paired"}));
+  EXPECT_TRUE(xml_error(with(xml, R"(<contact bodies="a b" mu="1"/>)"), {"unknown attribute 'mu'"}));
+  EXPECT_TRUE(invalid(with(xml, "<contact bodies=\"a b\"/>\n<solver depth=\"3\"/>"),
+                        {"depth = 3", "computes the whole mesh"}));
+  EXPECT_TRUE(xml_error(fmt::format("<tissue-scene>{}<contact bodies=\"a b\"/></tissue-scene>", kTet),
+                        {"a scene of one <mesh> has none"}));
+}
+
 TEST(SceneValidate, BodiesBuiltInCodeMustTileTheMesh) {
   const Scene good = parse_scene(bodies_xml(), "two.xml", "");
   EXPECT_NO_THROW(scene::validate(good));

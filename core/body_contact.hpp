@@ -1,0 +1,218 @@
+// Contact between bodies (docs/contact.md, "Bodies touching each other"),
+// written once for every backend: the host builds the candidate lists
+// (build_body_lists), the cpu backend runs the per-step rule in loops over
+// them, the cuda backend in two kernels.
+//
+// The rule, per TLED step, after the step's free displacement update and
+// before the tools' contact stage (a tool is rigid and has the last word):
+//  1. every surface node p of a body that touches another (a row) finds,
+//     among its candidate triangles of the bodies it touches, the one whose
+//     closest point q is nearest (ties: the one whose plane p lies furthest
+//     from); p is inside when it lies behind that triangle's plane
+//     (dot(p - q, N) < 0, N the triangle's outward normal) and |p - q| is at
+//     most the contact's reach (the lists' skin: a node further in has passed
+//     through, and is left alone);
+//  2. the gap g = q - p is closed between the node and the triangle's
+//     corners in proportion to their inverse masses: with the barycentric
+//     weights w_k of q and W = 1/m_p + sum_k w_k^2 / m_k,
+//       dx_p = (1/m_p) C / W,   dx_k = -(1/m_k) w_k C / W,
+//     so that p and q meet and sum m dx = 0 (no momentum made). C = g minus
+//     the relative tangential motion of p and q over the step, up to
+//     mu |g| (Coulomb: stick, or slide with the tangential share mu); a node
+//     that cannot move (fixed, halo or outside the region, grasped) has
+//     1/m = 0, and a pair where nothing can move is skipped;
+//  3. each contact's correction is scaled by one over the most contacts any
+//     of its nodes takes part in (a node between several contacts is not
+//     moved by each in full, which would overshoot and push the bodies apart
+//     with energy the contact made; both sides scale alike, so no momentum
+//     is made either), and each node sums, in list order, its own scaled
+//     correction and its shares as a corner of other rows' triangles; a
+//     roller's held component stays.
+// The corrections close the gap where the step left one and never pull:
+// bodies that separate by themselves are not touched.
+//
+// Candidate lists (Verlet lists): a row's candidates are the triangles of
+// the bodies it touches whose box comes within the skin of the node when
+// the lists are built; they hold while no listed node has moved more than a
+// quarter of the skin since (body_lists_stale), checked after every advance.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "core/contact.hpp"
+#include "core/vec.hpp"
+
+namespace tissue {
+
+template <class T> struct TissueModel;
+
+/// Which bodies touch: the bodies as node ranges of the one mesh, and the
+/// pairs that may touch, each with its Coulomb coefficient.
+struct BodyContactSpec {
+  std::vector<index_t> first_node;  ///< per body, then n_nodes: ascending, first 0
+  struct Pair {
+    int a = 0, b = 0;               ///< body indices, a != b
+    double friction = 0;            ///< mu (>= 0)
+  };
+  std::vector<Pair> pairs;
+  double skin = 0;                  ///< m (> 0): list reach; 0 = the median surface edge
+  bool empty() const { return pairs.empty(); }
+  int n_bodies() const { return first_node.empty() ? 0 : int(first_node.size()) - 1; }
+};
+
+/// Host-built candidate lists of one mesh (the arrays both backends read).
+struct BodyLists {
+  double skin = 0;                      ///< m: the lists' reach (and the deepest correction)
+  std::vector<index_t> node;            ///< rows: the touching bodies' surface nodes, ascending
+  std::vector<index_t> cand_start;      ///< (rows + 1)
+  std::vector<index_t> cand_tri;        ///< candidate triangles of each row, ascending
+  std::vector<double> cand_mu;          ///< each candidate's Coulomb coefficient
+  std::vector<index_t> cand_rows;       ///< 3 per candidate: the rows of its triangle's corners
+  std::vector<index_t> corner_start;    ///< (rows + 1): the candidates whose triangle has the row's node as a corner
+  std::vector<index_t> corner_cand;     ///< index into cand_tri, ascending per row
+  std::vector<index_t> corner_row;      ///< the row that candidate belongs to
+  std::vector<std::uint8_t> corner_slot;  ///< the node's corner (0..2) of that triangle
+  std::vector<double> x_built;          ///< 3 per row: the node's position when built (m)
+  index_t rows() const { return index_t(node.size()); }
+};
+
+/// The surface nodes of the spec's touching bodies and their candidate
+/// triangles at positions x (3 per node, xyz; X + u). The surface's triangles
+/// are those of m; a triangle belongs to the body of its first corner.
+/// std::invalid_argument for a bad spec (names the body or pair and the rule).
+template <class T>
+BodyLists build_body_lists(const TissueModel<T>& m, const BodyContactSpec& spec, const std::vector<double>& x);
+
+/// Whether any row's node, at pos(a) (m, Vec3<double>), has moved more than
+/// a quarter of the skin since the lists were built.
+template <class Pos>
+bool body_lists_stale(const BodyLists& lists, Pos pos) {
+  const double limit = 0.25 * lists.skin;
+  for (index_t r = 0; r < lists.rows(); ++r) {
+    const Vec3<double> x = pos(lists.node[r]);
+    const Vec3<double> d = {x.x - lists.x_built[3 * std::size_t(r)], x.y - lists.x_built[3 * std::size_t(r) + 1],
+                            x.z - lists.x_built[3 * std::size_t(r) + 2]};
+    if (dot(d, d) > limit * limit) return true;
+  }
+  return false;
+}
+
+/// The spec checked against a mesh of n_nodes nodes (std::invalid_argument naming what is wrong).
+void check_body_contact(const BodyContactSpec& spec, index_t n_nodes);
+
+/// One row's contact over one step: the candidate it touches (-1: none),
+/// the correction per unit inverse mass c (= C / W) and q's weights.
+template <class T>
+struct BodyHit {
+  index_t cand = -1;
+  T gap = T(0);                     ///< |q - p| before the correction (m)
+  Vec3<T> c = {T(0), T(0), T(0)};
+  T w[3] = {T(0), T(0), T(0)};
+};
+
+/// Rule 1 and 2 for one row. pos(a), prev(a): node a's position after the
+/// free update and at the step's start; inv_mass(a): 1/m or 0 (immovable);
+/// tri(t, k): corner k of triangle t.
+template <class T, class Pos, class Prev, class InvMass, class Tri>
+TISSUE_HD BodyHit<T> body_row_hit(index_t p, index_t first, index_t last, const index_t* cand_tri, const T* cand_mu,
+                                  T reach, Pos pos, Prev prev, InvMass inv_mass, Tri tri) {
+  BodyHit<T> hit;
+  const Vec3<T> xp = pos(p);
+  T best = reach, best_side = T(0);
+  index_t best_cand = -1;
+  Vec3<T> best_q{};
+  T best_w[3] = {T(0), T(0), T(0)};
+  for (index_t j = first; j < last; ++j) {
+    const index_t t = cand_tri[j];
+    const Vec3<T> P0 = pos(tri(t, 0)), P1 = pos(tri(t, 1)), P2 = pos(tri(t, 2));
+    T w[3];
+    const Vec3<T> q = closest_on_triangle(xp, P0, P1, P2, w);
+    const Vec3<T> N = unit_or(cross(P1 - P0, P2 - P0), Vec3<T>{T(0), T(0), T(0)});
+    const T d = norm(q - xp), side = dot(xp - q, N);
+    // nearest; of equally near (a shared edge or corner), the one p lies furthest from the plane of
+    const bool nearer = d < best * (T(1) - T(64) * std::numeric_limits<T>::epsilon());
+    const bool tie = !nearer && d <= best * (T(1) + T(64) * std::numeric_limits<T>::epsilon());
+    if (nearer || (tie && std::fabs(side) > std::fabs(best_side))) {
+      best = d;
+      best_side = side;
+      best_cand = j;
+      best_q = q;
+      for (int k = 0; k < 3; ++k) best_w[k] = w[k];
+    }
+  }
+  if (best_cand < 0 || !(best_side < T(0)) || !(best > T(0))) return hit;  // outside, or exactly on
+  const index_t t = cand_tri[best_cand];
+  const index_t c[3] = {tri(t, 0), tri(t, 1), tri(t, 2)};
+  const T ip = inv_mass(p);
+  T W = ip;
+  for (int k = 0; k < 3; ++k) W += best_w[k] * best_w[k] * inv_mass(c[k]);
+  if (!(W > T(0))) return hit;  // nothing here can move
+  const Vec3<T> g = best_q - xp, n = T(1) / best * g;
+  Vec3<T> C = g;
+  const T mu = cand_mu[best_cand];
+  if (mu > T(0)) {
+    Vec3<T> dq{T(0), T(0), T(0)};
+    for (int k = 0; k < 3; ++k) dq = dq + best_w[k] * (pos(c[k]) - prev(c[k]));
+    const Vec3<T> rel = (xp - prev(p)) - dq, rel_t = rel - dot(rel, n) * n;
+    const T slip = norm(rel_t), cap = mu * best;
+    C = C - (slip <= cap ? rel_t : (cap / slip) * rel_t);
+  }
+  hit.cand = best_cand;
+  hit.gap = best;
+  hit.c = T(1) / W * C;
+  for (int k = 0; k < 3; ++k) hit.w[k] = best_w[k];
+  return hit;
+}
+
+/// Rule 3, first: how many contacts row `row`'s node takes part in (its own
+/// hit, and each hit of another row whose triangle has it as a corner of
+/// weight > 0: the corner entries first..last).
+template <class T, class Hits>
+TISSUE_HD int body_row_count(index_t row, index_t first, index_t last, const index_t* corner_cand,
+                             const index_t* corner_row, const std::uint8_t* corner_slot, Hits hits) {
+  int count = hits(row).cand >= 0 ? 1 : 0;
+  for (index_t e = first; e < last; ++e) {
+    const BodyHit<T>& h = hits(corner_row[e]);
+    count += h.cand == corner_cand[e] && h.w[corner_slot[e]] > T(0) ? 1 : 0;
+  }
+  return count;
+}
+
+/// Rule 3, second: a row's hit scaled by one over the most contacts any of
+/// its nodes takes part in (counts by row; cand_rows: the rows of each
+/// candidate triangle's corners, 3 a candidate). Both sides of a contact
+/// scale alike, so it still makes no momentum, and no node moves by more
+/// than the mean of its contacts' full corrections.
+template <class T>
+TISSUE_HD void body_scale_hit(BodyHit<T>& h, index_t row, const index_t* cand_rows, const int* counts) {
+  if (h.cand < 0) return;
+  int most = counts[row];
+  for (int k = 0; k < 3; ++k) {
+    const int c = h.w[k] > T(0) ? counts[cand_rows[3 * h.cand + k]] : 0;
+    most = c > most ? c : most;
+  }
+  if (most > 1) h.c = (T(1) / T(most)) * h.c;
+}
+
+/// Rule 3, last: row `row`'s node's move, from its own (scaled) hit and its
+/// shares of the hits whose triangle has it as a corner, summed in list order.
+template <class T, class Hits>
+TISSUE_HD Vec3<T> body_row_move(index_t row, T inv_mass, index_t first, index_t last, const index_t* corner_cand,
+                                const index_t* corner_row, const std::uint8_t* corner_slot, Hits hits) {
+  Vec3<T> sum{T(0), T(0), T(0)};
+  if (!(inv_mass > T(0))) return sum;
+  const BodyHit<T>& own = hits(row);
+  if (own.cand >= 0) sum = own.c;
+  for (index_t e = first; e < last; ++e) {
+    const BodyHit<T>& h = hits(corner_row[e]);
+    if (h.cand != corner_cand[e]) continue;
+    const T w = h.w[corner_slot[e]];
+    if (w > T(0)) sum = sum - w * h.c;
+  }
+  return inv_mass * sum;
+}
+
+}  // namespace tissue

@@ -1,0 +1,371 @@
+// Contact between bodies (core/body_contact.hpp; docs/contact.md, "Bodies
+// touching each other") on every backend and precision: a soft block
+// loaded on a stiffer one carries its load through the interface to the
+// supports (balance to 1e-6 of the load in double), nothing sinks in beyond
+// the stated tolerance, a block let go onto another does not bounce off
+// with energy the contact made, a tool pushing one block into another
+// deforms both without inverting anything, friction holds a sheared pair
+// together, and the cuda backend runs the same contact as the cpu.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "backends/registry.hpp"
+#include "core/body_contact.hpp"
+#include "core/box_mesh.hpp"
+#include "core/device.hpp"
+#include "core/scheduler.hpp"
+#include "tests/backend_test_support.hpp"
+
+namespace tissue {
+namespace {
+
+using namespace tissue::test;
+
+/// Two blocks, the second on top of the first: the lower kL x kL x kL/2
+/// (n x n x n/2 cells, E_lower, its bottom fixed), the upper 0.6 kL square
+/// and kL/2 high (m x m x m/2 cells, E_upper, free) centred on it, its
+/// bottom face `gap` above the lower's top (0: touching; < 0: sunk in).
+struct Stack {
+  TissueModel<double> model;
+  index_t first_upper = 0;  ///< the upper block's first node
+  std::vector<index_t> upper_top;  ///< its top face's nodes
+  BodyContactSpec spec(double friction = 0) const {
+    BodyContactSpec s;
+    s.first_node = {0, first_upper, model.n_nodes};
+    s.pairs = {{0, 1, friction}};
+    return s;
+  }
+};
+
+Stack stack(int n, int m, double E_lower, double E_upper, double gap, std::optional<double> damping = {}) {
+  ModelInput lower, upper;
+  box_mesh(lower, n, n, n / 2, kL, kL, kL / 2);
+  box_mesh(upper, m, m, m / 2, 0.6 * kL, 0.6 * kL, kL / 2);
+  ModelInput in = lower;
+  const index_t first = index_t(lower.nodes.size() / 3);
+  for (std::size_t i = 0; i < upper.nodes.size(); i += 3) {
+    in.nodes.push_back(upper.nodes[i] + 0.2 * kL);
+    in.nodes.push_back(upper.nodes[i + 1] + 0.2 * kL);
+    in.nodes.push_back(upper.nodes[i + 2] + kL / 2 + gap);
+  }
+  for (index_t v : upper.tets) in.tets.push_back(v + first);
+  const double nu = 0.45;
+  const auto law = [&](double E) { return MaterialParams{E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu)), 1000}; };
+  in.materials = {law(E_lower), law(E_upper)};
+  in.elem_material.assign(lower.tets.size() / 4, 0);
+  in.elem_material.resize(in.tets.size() / 4, 1);
+  in.fixed.assign(in.nodes.size() / 3, 0);
+  for (index_t a = 0; a < first; ++a) in.fixed[a] = in.nodes[3 * size_t(a) + 2] == 0.0;
+  in.damping = damping;
+  in.source = "stack";
+  Stack s;
+  s.model = build_model(in);
+  s.first_upper = first;
+  const double top = kL + gap;
+  for (index_t a = first; a < s.model.n_nodes; ++a)
+    if (std::fabs(s.model.X[2 * s.model.n_nodes + a] - top) < 1e-12) s.upper_top.push_back(a);
+  return s;
+}
+
+/// The load as Backend::set_loads takes it: the loaded nodes and their forces (xyz).
+void load(Backend& b, const std::vector<index_t>& nodes, double total) {
+  std::vector<double> f;
+  for (std::size_t k = 0; k < nodes.size(); ++k) f.insert(f.end(), {0.0, 0.0, -total / double(nodes.size())});
+  b.set_loads(nodes, f);
+}
+
+/// Sum of the internal forces on the fixed nodes: the supports' reaction.
+Vec3<double> support(const TissueModel<double>& m, const Fields& f) {
+  Vec3<double> s{0, 0, 0};
+  for (index_t a = 0; a < m.n_nodes; ++a)
+    if (m.node_flags[a] & kFixed) s = s + node_u(f.f, m.n_nodes, a);
+  return s;
+}
+
+/// Deformed position of node a.
+Vec3<double> at(const TissueModel<double>& m, const Fields& f, index_t a) {
+  const index_t n = m.n_nodes;
+  return {m.X[a] + f.u[a], m.X[n + a] + f.u[n + a], m.X[2 * n + a] + f.u[2 * n + a]};
+}
+
+/// How far a node of one block lies inside the other across the interface
+/// (m; <= 0: none), measured apart from the contact's own search: each
+/// upper node over a lower top triangle (by its vertical projection, the
+/// deformed triangle's normal pointing up) is compared with that
+/// triangle's height there, and each lower node under an upper bottom
+/// triangle (normal down) with its height.
+double sunk(const Stack& s, const Fields& f) {
+  const TissueModel<double>& m = s.model;
+  const index_t nt = m.n_tris;
+  double worst = -1;
+  for (index_t t = 0; t < nt; ++t) {
+    const Vec3<double> P0 = at(m, f, m.tris[t]), P1 = at(m, f, m.tris[nt + t]), P2 = at(m, f, m.tris[2 * nt + t]);
+    const Vec3<double> N = cross(P1 - P0, P2 - P0);
+    const bool lower = m.tris[t] < s.first_upper;
+    // a lower block's top face (normal up) or an upper block's bottom face (normal down)
+    if (!(lower ? N.z > 0.9 * norm(N) : N.z < -0.9 * norm(N))) continue;
+    const index_t first = lower ? s.first_upper : 0, last = lower ? m.n_nodes : s.first_upper;
+    for (index_t a = first; a < last; ++a) {
+      const Vec3<double> p = at(m, f, a);
+      // barycentric weights of p's (x, y) in the triangle's projection
+      const double d = (P1.y - P2.y) * (P0.x - P2.x) + (P2.x - P1.x) * (P0.y - P2.y);
+      const double w0 = ((P1.y - P2.y) * (p.x - P2.x) + (P2.x - P1.x) * (p.y - P2.y)) / d;
+      const double w1 = ((P2.y - P0.y) * (p.x - P2.x) + (P0.x - P2.x) * (p.y - P2.y)) / d;
+      const double w2 = 1 - w0 - w1;
+      if (w0 < 0 || w1 < 0 || w2 < 0) continue;
+      const double z = w0 * P0.z + w1 * P1.z + w2 * P2.z;
+      if (std::fabs(p.z - z) > 0.25 * kL) continue;  // a node of the far face
+      worst = std::max(worst, lower ? z - p.z : p.z - z);
+    }
+  }
+  return worst;
+}
+
+class BodyContact : public ::testing::TestWithParam<BackendKind> {
+ protected:
+  void SetUp() override { SKIP_UNLESS_USABLE(GetParam().backend); }
+  bool is_float() const { return GetParam().precision == Precision::Float; }
+  std::unique_ptr<Backend> make(const TissueModel<double>& m) const {
+    auto b = create_backend(GetParam().backend, GetParam().precision);
+    b->upload(m);
+    return b;
+  }
+};
+
+INSTANTIATE_TEST_SUITE_P(Backends, BodyContact, ::testing::ValuesIn(all_backend_kinds()), backend_kind_name);
+
+TEST_P(BodyContact, ALoadedStackCarriesItsLoadThroughTheInterfaceToTheSupports) {
+  const Stack s = stack(6, 5, 3e4, 3e3, 0);
+  auto b = make(s.model);
+  b->set_body_contact(s.spec());
+  const double F = 0.02;  // N: ~0.05 strain in the upper block
+  load(*b, s.upper_top, F);
+  const int steps = int(std::lround(1e-3 / s.model.dt));
+  Reductions r;
+  for (double t = 0; t < 4.0; t += steps * s.model.dt) {
+    b->advance(steps);
+    r = b->reduce();
+    ASSERT_TRUE(r.finite);
+    ASSERT_EQ(r.bad_elem, -1);
+  }
+  const Fields f = b->download();
+  const Vec3<double> react = support(s.model, f);
+  // the load pushes down on the upper block; the supports hold the stack up with all of it
+  // (measured after 4 s: 1.5e-5 of the load in double, the damped approach to rest not yet over)
+  EXPECT_NEAR(react.z, F, (is_float() ? 2e-3 : 1e-4) * F) << "support reaction " << react.z << " N for a load of " << F;
+  EXPECT_LT(std::hypot(react.x, react.y), (is_float() ? 2e-3 : 1e-4) * F);
+  // the interface holds: nothing has sunk in beyond the tolerance (measured: 4.6e-3 of an
+  // upper edge, at the corner of the upper block's bottom, where the stress is singular)
+  const double edge = 0.6 * kL / 5;
+  EXPECT_LT(sunk(s, f), 1e-2 * edge) << "sunk " << sunk(s, f) << " m";
+  // and it is loaded: the upper block's bottom moved down with the lower's top, which carries the load
+  EXPECT_GT(-f.u[2 * s.model.n_nodes + s.upper_top.front()], 0.0);
+  EXPECT_FALSE(b->body_contacts().empty());
+}
+
+TEST_P(BodyContact, WithoutContactTheUpperBlockSinksThrough) {  // the check above can fail
+  const Stack s = stack(6, 5, 3e4, 3e3, 0);
+  auto b = make(s.model);
+  load(*b, s.upper_top, 0.02);
+  const int steps = int(std::lround(1e-3 / s.model.dt));
+  for (int k = 0; k < 100; ++k) b->advance(steps);
+  EXPECT_GT(sunk(s, b->download()), 1e-3 * 0.6 * kL / 5);
+  EXPECT_TRUE(b->body_contacts().empty());
+}
+
+TEST_P(BodyContact, ABlockLoadedOntoAnotherGainsNoEnergy) {
+  // undamped, from rest: the upper block is pushed onto the lower by a constant load. Its
+  // energy -- kinetic plus strain less the load's work, 0 at the start -- may only fall in
+  // contact (an inelastic one) and stays within the central difference's own wobble of 0
+  // otherwise; a contact that overshot would push the block off with energy it made
+  const Stack s = stack(6, 5, 3e4, 3e3, 0, 0.0);
+  auto b = make(s.model);
+  b->set_body_contact(s.spec());
+  const double F = 0.02;
+  load(*b, s.upper_top, F);
+  const int steps = int(std::lround(1e-3 / s.model.dt));
+  double most = 0, most_kinetic = 0;
+  for (int k = 0; k < 200; ++k) {
+    b->advance(steps);
+    const Reductions r = b->reduce();
+    ASSERT_TRUE(r.finite);
+    ASSERT_EQ(r.bad_elem, -1);
+    if (r.strain_energy < 0) GTEST_SKIP() << "this backend does not compute the strain energy";
+    const Fields f = b->download();
+    double work = 0;
+    for (index_t a : s.upper_top) work += -F / double(s.upper_top.size()) * f.u[2 * s.model.n_nodes + a];
+    most = std::max(most, r.kinetic + r.strain_energy - work);
+    most_kinetic = std::max(most_kinetic, r.kinetic);
+    if (k == 199) {
+      EXPECT_LT(sunk(s, f), 1e-2 * 0.6 * kL / 5) << "sunk " << sunk(s, f) << " m";
+    }
+  }
+  ASSERT_GT(most_kinetic, 0.0);
+  EXPECT_LT(most, 0.02 * most_kinetic) << "energy rose to " << most << " J (most kinetic " << most_kinetic << " J)";
+}
+
+TEST_P(BodyContact, FrictionSlowsTheSlideOfAShearedPair) {
+  // the upper block pressed down and pulled sideways by a tenth of the press: with mu = 0.5
+  // its bottom slides less over the lower's top than with mu = 0. (It does not stick: each
+  // step removes only the scaled share of the step's slip, docs/contact.md.)
+  const auto slip = [&](double mu) {
+    const Stack s = stack(6, 5, 3e4, 3e3, 0);
+    auto b = make(s.model);
+    b->set_body_contact(s.spec(mu));
+    const double F = 0.02;
+    std::vector<double> f;
+    for (std::size_t k = 0; k < s.upper_top.size(); ++k)
+      f.insert(f.end(), {0.1 * F / double(s.upper_top.size()), 0.0, -F / double(s.upper_top.size())});
+    b->set_loads(s.upper_top, f);
+    const int steps = int(std::lround(1e-3 / s.model.dt));
+    for (int k = 0; k < 300; ++k) b->advance(steps);
+    const Fields out = b->download();
+    // the upper bottom's mean x motion against the lower top's under it
+    const index_t n = s.model.n_nodes;
+    double upper = 0, lower = 0;
+    int nu = 0, nl = 0;
+    for (index_t a = 0; a < n; ++a) {
+      const double x = s.model.X[a], y = s.model.X[n + a], z = s.model.X[2 * n + a];
+      if (std::fabs(z - kL / 2) > 1e-12 || x < 0.2 * kL || x > 0.8 * kL || y < 0.2 * kL || y > 0.8 * kL) continue;
+      (a >= s.first_upper ? upper : lower) += out.u[a];
+      ++(a >= s.first_upper ? nu : nl);
+    }
+    return std::pair<double, double>{upper / nu - lower / nl, upper / nu};
+  };
+  const auto held = slip(0.5), slid = slip(0.0);
+  EXPECT_GT(held.second, 0.0);
+  EXPECT_GT(slid.first, 0.5 * slid.second) << "slip " << slid.first << " m of " << slid.second;
+  EXPECT_LT(held.first, 0.8 * slid.first) << "slip " << held.first << " m with mu 0.5, " << slid.first << " m with 0";
+}
+
+TEST_P(BodyContact, AToolPushingOneBlockIntoAnotherDeformsBothAndInvertsNothing) {
+  const Stack s = stack(6, 5, 3e3, 3e3, 0);
+  auto b = make(s.model);
+  SchedulerSettings st;
+  st.depth = kDepthAll;
+  st.body_contact = s.spec();
+  st.tools = {ToolSetting{{"probe", 0.003, 0, 0}, {0, 0, 1}}};
+  Scheduler sched(*b, s.model, st);
+  // a sphere pressed down 3 mm into the middle of the upper block's top, then held
+  ScriptedDevice dev(press_path({0.5 * kL, 0.5 * kL, kL + 0.003}, {0, 0, -1}, 0.003, 0.003, 0.05, 0.1, 0.5, 0.05));
+  TickReport rep;
+  while (sched.time() < 0.6) {
+    rep = sched.tick(dev);
+    ASSERT_TRUE(std::isfinite(rep.force.z));
+  }
+  const Fields f = b->download();
+  double lower_most = 0;
+  for (index_t a = 0; a < s.first_upper; ++a) lower_most = std::max(lower_most, std::fabs(f.u[2 * s.model.n_nodes + a]));
+  EXPECT_GT(rep.force.z, 0.0);
+  EXPECT_GT(lower_most, 1e-4) << "the lower block did not deform";
+  for (double J : f.elem_J) EXPECT_GT(J, 0.0);
+  // a 3 mm press through a 10 mm block: the interface under it takes a much higher pressure
+  // (measured: 4.9e-2 of an upper edge sunk in at the press's end)
+  EXPECT_LT(sunk(s, f), 0.1 * 0.6 * kL / 5) << "sunk " << sunk(s, f) << " m";
+}
+
+TEST_P(BodyContact, BadSpecsAreNamed) {
+  const Stack s = stack(4, 3, 3e4, 3e3, 0);
+  auto b = make(s.model);
+  BodyContactSpec bad = s.spec();
+  bad.pairs = {{0, 0, 0}};
+  EXPECT_THROW(b->set_body_contact(bad), std::invalid_argument);
+  bad = s.spec(-1);
+  EXPECT_THROW(b->set_body_contact(bad), std::invalid_argument);
+  bad = s.spec();
+  bad.first_node = {0, s.model.n_nodes};
+  EXPECT_THROW(b->set_body_contact(bad), std::invalid_argument);
+  bad = s.spec();
+  bad.pairs.push_back({1, 0, 0});
+  try {
+    b->set_body_contact(bad);
+    ADD_FAILURE() << "a pair given twice was taken";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("the same bodies as pair 0"), std::string::npos) << e.what();
+  }
+}
+
+TEST(BodyContactLists, EveryNodeNearTheOtherBodyHasItsTrianglesAndTheCornerListsInvertThem) {
+  const Stack s = stack(4, 3, 3e4, 3e3, 0);
+  const index_t n = s.model.n_nodes, nt = s.model.n_tris;
+  std::vector<double> x(3 * std::size_t(n));
+  for (index_t a = 0; a < n; ++a)
+    for (int c = 0; c < 3; ++c) x[3 * size_t(a) + c] = s.model.X[c * n + a];
+  const BodyLists L = build_body_lists(s.model, s.spec(0.3), x);
+  ASSERT_EQ(L.rows(), s.model.n_surf);
+  // brute force: every (surface node, other body's triangle) pair whose box comes within the skin
+  for (index_t r = 0; r < L.rows(); ++r) {
+    const index_t a = L.node[r];
+    const bool upper = a >= s.first_upper;
+    std::vector<index_t> want;
+    for (index_t t = 0; t < nt; ++t) {
+      if ((s.model.tris[t] >= s.first_upper) == upper) continue;
+      bool in = true;
+      for (int c = 0; c < 3 && in; ++c) {
+        double lo = 1e9, hi = -1e9;
+        for (int k = 0; k < 3; ++k) {
+          lo = std::min(lo, x[3 * size_t(s.model.tris[k * nt + t]) + c]);
+          hi = std::max(hi, x[3 * size_t(s.model.tris[k * nt + t]) + c]);
+        }
+        in = x[3 * size_t(a) + c] >= lo - L.skin && x[3 * size_t(a) + c] <= hi + L.skin;
+      }
+      if (in) want.push_back(t);
+    }
+    const std::vector<index_t> got(L.cand_tri.begin() + L.cand_start[r], L.cand_tri.begin() + L.cand_start[r + 1]);
+    EXPECT_EQ(got, want) << "node " << a;
+    for (index_t j = L.cand_start[r]; j < L.cand_start[r + 1]; ++j) EXPECT_EQ(L.cand_mu[j], 0.3);
+  }
+  // each corner entry names a candidate with the row's node at that corner, and every such pair is listed once
+  std::size_t listed = 0;
+  for (index_t r = 0; r < L.rows(); ++r)
+    for (index_t e = L.corner_start[r]; e < L.corner_start[r + 1]; ++e) {
+      const index_t j = L.corner_cand[e];
+      EXPECT_EQ(s.model.tris[L.corner_slot[e] * nt + L.cand_tri[j]], L.node[r]);
+      EXPECT_TRUE(j >= L.cand_start[L.corner_row[e]] && j < L.cand_start[L.corner_row[e] + 1]);
+      ++listed;
+    }
+  EXPECT_EQ(listed, 3 * L.cand_tri.size());
+  EXPECT_FALSE(body_lists_stale(L, [&](index_t a) { return Vec3<double>{x[3 * a], x[3 * a + 1], x[3 * a + 2]}; }));
+  EXPECT_TRUE(body_lists_stale(L, [&](index_t a) {
+    return Vec3<double>{x[3 * a] + 0.3 * L.skin, x[3 * a + 1], x[3 * a + 2]};
+  }));
+}
+
+TEST(BodyContactAcrossBackends, CudaRunsTheCpusContact) {
+  SKIP_UNLESS_USABLE("cuda");
+  const Stack s = stack(6, 5, 3e4, 3e3, 0);
+  for (Precision p : {Precision::Double, Precision::Float}) {
+    auto cpu = create_backend("cpu", p), cuda = create_backend("cuda", p);
+    std::vector<Fields> out;
+    std::vector<std::vector<BodyContactNode>> touching;
+    for (Backend* b : {cpu.get(), cuda.get()}) {
+      b->upload(s.model);
+      b->set_body_contact(s.spec(0.2));
+      load(*b, s.upper_top, 0.02);
+      const int steps = int(std::lround(1e-3 / s.model.dt));
+      for (int k = 0; k < 200; ++k) b->advance(steps);
+      out.push_back(b->download());
+      touching.push_back(b->body_contacts());
+    }
+    const double scale = max_abs(out[0].u);
+    ASSERT_GT(scale, 0.0);
+    EXPECT_LT(max_diff(out[0].u, out[1].u), (p == Precision::Double ? 1e-9 : 1e-3) * scale) << to_string(p);
+    if (p == Precision::Double) {
+      ASSERT_EQ(touching[0].size(), touching[1].size());
+      for (std::size_t i = 0; i < touching[0].size(); ++i) {
+        EXPECT_EQ(touching[0][i].node, touching[1][i].node);
+        EXPECT_EQ(touching[0][i].tri, touching[1][i].tri);
+      }
+    }
+  }
+}
+
+}  // namespace
+}  // namespace tissue
