@@ -37,6 +37,7 @@
 // quarter of the skin since (body_lists_stale), checked after every advance.
 #pragma once
 
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
@@ -113,12 +114,33 @@ struct BodyHit {
   T w[3] = {T(0), T(0), T(0)};
 };
 
+/// A candidate triangle after the step's free update: its corners, and
+/// the ball about their centroid m (radius^2 r2) that holds it.
+template <class T>
+struct BodyTri {
+  Vec3<T> p[3];
+  Vec3<T> m;
+  T r2;
+};
+
+/// Triangle t's BodyTri from pos(a) (the position after the free update)
+/// and tri(t, k) (corner k of triangle t).
+template <class T, class Pos, class Tri>
+TISSUE_HD BodyTri<T> body_tri(index_t t, Pos pos, Tri tri) {
+  BodyTri<T> g;
+  for (int k = 0; k < 3; ++k) g.p[k] = pos(tri(t, k));
+  g.m = T(1) / T(3) * (g.p[0] + g.p[1] + g.p[2]);
+  g.r2 = std::fmax(dot(g.p[0] - g.m, g.p[0] - g.m), std::fmax(dot(g.p[1] - g.m, g.p[1] - g.m), dot(g.p[2] - g.m, g.p[2] - g.m)));
+  return g;
+}
+
 /// Rule 1 and 2 for one row. pos(a), prev(a): node a's position after the
 /// free update and at the step's start; inv_mass(a): 1/m or 0 (immovable);
-/// tri(t, k): corner k of triangle t.
-template <class T, class Pos, class Prev, class InvMass, class Tri>
+/// tri(t, k): corner k of triangle t; geom(t): body_tri(t, pos, tri), or
+/// the same read from where it was computed once for the step.
+template <class T, class Pos, class Prev, class InvMass, class Tri, class Geom>
 TISSUE_HD BodyHit<T> body_row_hit(index_t p, index_t first, index_t last, const index_t* cand_tri, const T* cand_mu,
-                                  T reach, Pos pos, Prev prev, InvMass inv_mass, Tri tri) {
+                                  T reach, Pos pos, Prev prev, InvMass inv_mass, Tri tri, Geom geom) {
   BodyHit<T> hit;
   const Vec3<T> xp = pos(p);
   T best = reach, best_side = T(0);
@@ -127,7 +149,14 @@ TISSUE_HD BodyHit<T> body_row_hit(index_t p, index_t first, index_t last, const 
   T best_w[3] = {T(0), T(0), T(0)};
   for (index_t j = first; j < last; ++j) {
     const index_t t = cand_tri[j];
-    const Vec3<T> P0 = pos(tri(t, 0)), P1 = pos(tri(t, 1)), P2 = pos(tri(t, 2));
+    // Skipped when it cannot be as near as the best so far: every point of
+    // it lies within r of its centroid m, so it is further than `best`
+    // (with a margin past the tie window) when |p - m| > r + 1.01 best,
+    // which |p - m|^2 > 2 (r^2 + (1.01 best)^2) implies.
+    const BodyTri<T> g = geom(t);
+    const T near = T(1.01) * best;
+    if (dot(xp - g.m, xp - g.m) > T(2) * (g.r2 + near * near)) continue;
+    const Vec3<T> P0 = g.p[0], P1 = g.p[1], P2 = g.p[2];
     T w[3];
     const Vec3<T> q = closest_on_triangle(xp, P0, P1, P2, w);
     const Vec3<T> N = unit_or(cross(P1 - P0, P2 - P0), Vec3<T>{T(0), T(0), T(0)});

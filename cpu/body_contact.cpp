@@ -1,5 +1,7 @@
 #include "cpu/body_contact.hpp"
 
+#include <algorithm>
+
 #include "core/node_rules.hpp"
 
 namespace tissue::cpu {
@@ -11,6 +13,12 @@ Vec3<T> at(const std::vector<T>& v, index_t n, index_t a) {
 }
 
 }  // namespace
+
+template <class T>
+T BodyStage<T>::inverse_mass(const TissueState<T>& s, index_t a) const {
+  const bool still = s.held[a] == kAllAxes || s.region.role[a] != kInner || s.contact[a] == kGrasped;
+  return still ? T(0) : T(1) / m_.mass[a];
+}
 
 template <class T>
 BodyStage<T>::BodyStage(const TissueModel<T>& m, const BodyContactSpec& spec, const TissueState<T>& s)
@@ -29,6 +37,12 @@ void BodyStage<T>::build(const TissueState<T>& s) {
   hits_.assign(std::size_t(lists_.rows()), BodyHit<T>{});
   moves_.assign(std::size_t(lists_.rows()), Vec3<T>{});
   counts_.assign(std::size_t(lists_.rows()), 0);
+  tris_.assign(lists_.cand_tri.begin(), lists_.cand_tri.end());
+  std::sort(tris_.begin(), tris_.end());
+  tris_.erase(std::unique(tris_.begin(), tris_.end()), tris_.end());
+  tri_slot_.assign(std::size_t(m_.n_tris), -1);
+  for (std::size_t i = 0; i < tris_.size(); ++i) tri_slot_[std::size_t(tris_[i])] = index_t(i);
+  geom_.resize(tris_.size());
   ++builds_;
 }
 
@@ -43,29 +57,61 @@ void BodyStage<T>::refresh(const TissueState<T>& s) {
 }
 
 template <class T>
-void BodyStage<T>::step(TissueState<T>& s) {
-  const index_t n = m_.n_nodes, nt = m_.n_tris, rows = lists_.rows();
+void BodyStage<T>::geometry(const TissueState<T>& s, int part, int parts) {
+  const index_t n = m_.n_nodes, nt = m_.n_tris;
+  const auto pos = [&](index_t a) { return at(m_.X, n, a) + at(s.u_next, n, a); };
+  const auto tri = [&](index_t t, int k) { return m_.tris[k * nt + t]; };
+  const std::size_t k = tris_.size(), first = k * std::size_t(part) / std::size_t(parts),
+                    last = k * std::size_t(part + 1) / std::size_t(parts);
+  for (std::size_t i = first; i < last; ++i) geom_[i] = body_tri<T>(tris_[i], pos, tri);
+}
+
+template <class T>
+void BodyStage<T>::hits(const TissueState<T>& s, int part, int parts) {
+  const index_t n = m_.n_nodes, nt = m_.n_tris;
   const auto pos = [&](index_t a) { return at(m_.X, n, a) + at(s.u_next, n, a); };
   const auto prev = [&](index_t a) { return at(m_.X, n, a) + at(s.u, n, a); };
-  const auto inv_mass = [&](index_t a) {
-    const bool still = s.held[a] == kAllAxes || s.region.role[a] != kInner || s.contact[a] == kGrasped;
-    return still ? T(0) : T(1) / m_.mass[a];
-  };
   const auto tri = [&](index_t t, int k) { return m_.tris[k * nt + t]; };
+  const auto geom = [&](index_t t) -> const BodyTri<T>& { return geom_[std::size_t(tri_slot_[std::size_t(t)])]; };
+  const auto inv_mass = [&](index_t a) { return inverse_mass(s, a); };
+  // the parts split the candidates, not the rows: most rows have none
+  const std::vector<index_t>& start = lists_.cand_start;
+  const long total = start.back();
+  const auto row_at = [&](long c) { return index_t(std::lower_bound(start.begin(), start.end() - 1, index_t(c)) - start.begin()); };
+  const index_t first = part == 0 ? 0 : row_at(total * part / parts),
+                last = part + 1 == parts ? lists_.rows() : row_at(total * (part + 1) / parts);
   const T reach = T(lists_.skin);
+  for (index_t r = first; r < last; ++r)
+    hits_[r] = body_row_hit<T>(lists_.node[r], start[r], start[r + 1], lists_.cand_tri.data(), cand_mu_.data(), reach,
+                               pos, prev, inv_mass, tri, geom);
+}
+
+template <class T>
+void BodyStage<T>::finish(TissueState<T>& s) {
+  const index_t n = m_.n_nodes, rows = lists_.rows();
+  const auto inv_mass = [&](index_t a) { return inverse_mass(s, a); };
+  // Rule 3 as scatters from the rows that hit, in ascending row order: the
+  // same counts and, for each node, the same terms summed in the same order
+  // as the gathers over corner entries (body_row_count, body_row_move) that
+  // cuda runs, at the cost of the hits rather than of every corner entry.
+  for (index_t r = 0; r < rows; ++r) counts_[r] = hits_[r].cand >= 0 ? 1 : 0;
   for (index_t r = 0; r < rows; ++r)
-    hits_[r] = body_row_hit<T>(lists_.node[r], lists_.cand_start[r], lists_.cand_start[r + 1], lists_.cand_tri.data(),
-                               cand_mu_.data(), reach, pos, prev, inv_mass, tri);
-  const auto hits = [&](index_t r) -> const BodyHit<T>& { return hits_[r]; };
-  for (index_t r = 0; r < rows; ++r)
-    counts_[r] = body_row_count<T>(r, lists_.corner_start[r], lists_.corner_start[r + 1], lists_.corner_cand.data(),
-                                   lists_.corner_row.data(), lists_.corner_slot.data(), hits);
+    if (const BodyHit<T>& h = hits_[r]; h.cand >= 0)
+      for (int k = 0; k < 3; ++k)
+        if (h.w[k] > T(0)) ++counts_[lists_.cand_rows[3 * size_t(h.cand) + k]];
   for (index_t r = 0; r < rows; ++r) body_scale_hit(hits_[r], r, lists_.cand_rows.data(), counts_.data());
+  for (index_t r = 0; r < rows; ++r) moves_[r] = hits_[r].cand >= 0 ? hits_[r].c : Vec3<T>{};
+  for (index_t r = 0; r < rows; ++r)
+    if (const BodyHit<T>& h = hits_[r]; h.cand >= 0)
+      for (int k = 0; k < 3; ++k)
+        if (const T w = h.w[k]; w > T(0)) {
+          const index_t c = lists_.cand_rows[3 * size_t(h.cand) + k];
+          moves_[c] = moves_[c] - w * h.c;
+        }
   for (index_t r = 0; r < rows; ++r) {
     const index_t a = lists_.node[r];
-    moves_[r] = free_part(s.held[a], body_row_move<T>(r, inv_mass(a), lists_.corner_start[r], lists_.corner_start[r + 1],
-                                                      lists_.corner_cand.data(), lists_.corner_row.data(),
-                                                      lists_.corner_slot.data(), hits));
+    const T im = inv_mass(a);
+    moves_[r] = im > T(0) ? free_part(s.held[a], im * moves_[r]) : Vec3<T>{};
   }
   for (index_t r = 0; r < rows; ++r) {
     const Vec3<T> d = moves_[r];

@@ -21,14 +21,21 @@ class BodyStage {
 
   /// Rebuilds the lists when a listed node at the current u has moved too far since they were built.
   void refresh(const TissueState<T>& s);
-  /// The step's contact: moves the touching nodes in s.u_next.
-  void step(TissueState<T>& s);
+  /// The step's contact, in three phases after the free update (each
+  /// phase reads what every part of the one before wrote: a barrier
+  /// between them): the candidate triangles' geometry and the rows' hits,
+  /// each split into `parts` (run part 0..parts-1, one per team member),
+  /// then finish() on one thread moves the touching nodes in s.u_next.
+  void geometry(const TissueState<T>& s, int part, int parts);
+  void hits(const TissueState<T>& s, int part, int parts);
+  void finish(TissueState<T>& s);
   /// The rows inside another body at the last step (ascending node).
   std::vector<BodyContactNode> contacts() const;
   long builds() const { return builds_; }
 
  private:
   void build(const TissueState<T>& s);
+  T inverse_mass(const TissueState<T>& s, index_t a) const;  ///< 1/m, or 0 where the node cannot move
   const TissueModel<T>& m_;
   BodyContactSpec spec_;
   BodyLists lists_;
@@ -36,6 +43,9 @@ class BodyStage {
   std::vector<BodyHit<T>> hits_;
   std::vector<Vec3<T>> moves_;
   std::vector<int> counts_;
+  std::vector<index_t> tris_;        ///< the candidates' triangles, each once (ascending)
+  std::vector<index_t> tri_slot_;    ///< per surface triangle its place in tris_ (-1: none)
+  std::vector<BodyTri<T>> geom_;     ///< tris_'s geometry at the step's free update
   long builds_ = 0;
 };
 

@@ -203,8 +203,14 @@ void CpuBackend<T>::do_advance(int steps, const ContactTools<double>& tools) {
       team.barrier();
       cpu::node_update(model_, state_, my_nodes);
       if (t.n_tools > 0) contact_->check_region(state_, my_nodes, r);  // its nodes' u_next in this core's cache
+      if (body_) {  // the bodies' contact, before the tools': a rigid tool has the last word
+        if (!team.barrier()) return;
+        body_->geometry(state_, r, members);
+        if (!team.barrier()) return;
+        body_->hits(state_, r, members);
+      }
       if (!team.barrier([&] {
-            if (body_) body_->step(state_);  // before the tools': a rigid tool has the last word
+            if (body_) body_->finish(state_);
             sweeping = contact_->begin_step(state_, t, k, members);
             if (!sweeping) rotate(state_);
           }))

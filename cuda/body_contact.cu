@@ -25,8 +25,9 @@ __global__ void body_hits_kernel(ModelView<T> m, StateView<T> s, const BodyView<
   const auto prev = [&](index_t a) { return m.X[a].vec() + u[a].vec(); };
   const auto inv_mass = [&](index_t a) { return inverse_mass(m, s, a); };
   const auto tri = [&](index_t t, int k) { return m.tris[k * m.n_tris + t]; };
+  const auto geom = [&](index_t t) { return body_tri<T>(t, pos, tri); };
   v.hits[r] = body_row_hit<T>(v.node[r], v.cand_start[r], v.cand_start[r + 1], v.cand_tri, v.cand_mu, v.reach, pos,
-                              prev, inv_mass, tri);
+                              prev, inv_mass, tri, geom);
 }
 
 template <class T>
