@@ -12,7 +12,7 @@
 // - an inclusion without its own material is ten times stiffer than the
 //   tissue (a tumour), with the tissue's nu and rho.
 //
-// A built-in scene (@kidney, @kidney-visco) is written as built, its
+// A built-in scene (@kidney, @kidney-visco, @kidney-fat) is written as built, its
 // material's numbers from --E, --nu and --rho where given; the meshing
 // options, which cannot apply to its built-in mesh, are refused by name.
 #include <fmt/format.h>
@@ -387,6 +387,13 @@ scene::Scene builtin_mesh_scene(const CLI::App& cmd, const MeshOptions& o) {
         "of the options only -o, --E, --nu and --rho apply to it (the last three set its material)",
         o.surface, ignored, n_ignored == 1 ? "applies" : "apply"));
   scene::Scene s = *io::builtin_scene(o.surface);
+  if (s.materials.size() > 1)
+    for (const char* opt : {"--E", "--nu", "--rho"})
+      if (cmd.get_option(opt)->count() > 0)
+        throw std::invalid_argument(fmt::format(
+            "{}: {} sets the material of a built-in scene of one; {} has {} (edit their numbers in the scene "
+            "XML that -o writes)",
+            o.surface, opt, o.surface, s.materials.size()));
   for (scene::Material& m : s.materials) {  // the built-in materials are given as E and nu
     if (cmd.get_option("--E")->count() > 0) m.a = o.E;
     if (cmd.get_option("--nu")->count() > 0) m.b = o.nu;
@@ -406,8 +413,8 @@ void add_mesh_command(CLI::App& app, int& rc) {
   m.min_dihedral = io::kDefaultMinDihedral;
   m.optimise = io::kDefaultOptimise;
   cmd->add_option("surface", o->surface,
-                  "Surface file, or @kidney / @kidney-visco to write a built-in kidney scene (with -o, --E, --nu "
-                  "and --rho only)")
+                  "Surface file, or @kidney / @kidney-visco / @kidney-fat to write a built-in kidney scene (with -o, "
+                  "--E, --nu and --rho only; @kidney-fat takes -o alone)")
       ->required();
   cmd->add_option("-o,--output", o->out, "Scene XML to write")->required()->check(output_file());  // before the meshing
   cmd->add_option("--unit", o->unit, "Length unit of the surface file(s): m, cm or mm")->default_val("m");

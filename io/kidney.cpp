@@ -6,6 +6,8 @@
 #include <array>
 #include <cmath>
 #include <map>
+#include <numbers>
+#include <set>
 #include <stdexcept>
 #include <utility>
 
@@ -193,13 +195,18 @@ Vec3<double> kidney_hilum_centre() {
   return surface_point_along(kidney_surface(KidneyScene::frequency), {0, -1, 0});
 }
 
-scene::Scene default_kidney_scene() {
+namespace {
+
+/// The default kidney scene; *max_volume (if given) receives the largest
+/// tet volume TetGen was asked for (m^3).
+scene::Scene kidney_scene(double* max_volume) {
   using K = KidneyScene;
   const SurfaceMesh surface = kidney_surface(K::frequency);
   MeshingOptions meshing;
   meshing.quality = K::quality;
   meshing.target_tets = K::target_tets;
   VolumeMesh mesh = tetrahedralize_surface(surface, meshing, "built-in kidney");
+  if (max_volume) *max_volume = mesh.max_volume;
 
   scene::Scene s;
   s.source = "@kidney";
@@ -261,6 +268,142 @@ scene::Scene default_kidney_scene() {
   return s;
 }
 
+}  // namespace
+
+scene::Scene default_kidney_scene() {
+  return kidney_scene(nullptr);
+}
+
+namespace {
+
+/// The fat layer's surface (kidney_fat_surface); its first n_outer
+/// triangles are the outer side, and `rim` receives each rim edge's two
+/// kidney vertices (a, b: the patch lies left of a -> b seen from outside).
+SurfaceMesh fat_layer(index_t* n_outer, std::vector<std::pair<Vec3<double>, Vec3<double>>>* rim) {
+  using F = KidneyFatScene;
+  const SurfaceMesh sphere = geodesic_sphere(KidneyScene::frequency);
+  const SurfaceMesh kidney = kidney_surface(KidneyScene::frequency);
+  const double cos_cap = std::cos(F::cap_angle * std::numbers::pi / 180);
+  std::vector<index_t> patch;
+  for (index_t t = 0; t < sphere.n_triangles(); ++t)
+    if (std::min({vertex(sphere, sphere.triangles[3 * t]).y, vertex(sphere, sphere.triangles[3 * t + 1]).y,
+                  vertex(sphere, sphere.triangles[3 * t + 2]).y}) >= cos_cap)
+      patch.push_back(t);
+  SurfaceMesh out;
+  std::map<index_t, std::pair<index_t, index_t>> ids;  // kidney vertex -> (inner, outer) vertex of the layer
+  const auto add = [&](Vec3<double> x) {
+    out.vertices.insert(out.vertices.end(), {x.x, x.y, x.z});
+    return index_t(out.vertices.size() / 3 - 1);
+  };
+  for (index_t t : patch)
+    for (int c = 0; c < 3; ++c) {
+      const index_t v = kidney.triangles[3 * t + c];
+      if (ids.count(v)) continue;
+      const Vec3<double> x = vertex(kidney, v);
+      const index_t inner = add(x);
+      ids[v] = {inner, add((1 + F::thickness / norm(x)) * x)};
+    }
+  const auto tri = [&](index_t a, index_t b, index_t c) { out.triangles.insert(out.triangles.end(), {a, b, c}); };
+  std::set<std::pair<index_t, index_t>> edges;  // the patch's directed edges
+  for (index_t t : patch) {
+    const index_t* v = &kidney.triangles[3 * t];
+    tri(ids[v[0]].second, ids[v[1]].second, ids[v[2]].second);  // outer: outward as the kidney's
+    for (int c = 0; c < 3; ++c) edges.insert({v[c], v[(c + 1) % 3]});
+  }
+  if (n_outer) *n_outer = out.n_triangles();
+  for (index_t t : patch) {
+    const index_t* v = &kidney.triangles[3 * t];
+    tri(ids[v[0]].first, ids[v[2]].first, ids[v[1]].first);  // inner: reversed, facing the kidney
+  }
+  for (const auto& [a, b] : edges)
+    if (!edges.count({b, a})) {  // a rim edge
+      tri(ids[a].first, ids[b].first, ids[b].second);
+      tri(ids[a].first, ids[b].second, ids[a].second);
+      if (rim) rim->push_back({vertex(kidney, a), vertex(kidney, b)});
+    }
+  // A closed surface of a ball's topology: V - E + F = 2 with every edge in two triangles.
+  const index_t n_edges = 3 * out.n_triangles() / 2;
+  if (out.n_vertices() - n_edges + out.n_triangles() != 2)
+    throw std::logic_error("kidney_fat_surface: the layer's surface is not closed with a ball's topology");
+  return out;
+}
+
+}  // namespace
+
+SurfaceMesh kidney_fat_surface() {
+  return fat_layer(nullptr, nullptr);
+}
+
+scene::Scene kidney_fat_scene() {
+  using K = KidneyScene;
+  using F = KidneyFatScene;
+  double kidney_volume = 0;
+  scene::Scene s = kidney_scene(&kidney_volume);
+  s.source = "@kidney-fat";
+  const index_t kidney_nodes = index_t(s.nodes.size() / 3), kidney_elements = index_t(s.tets.size() / 4);
+  s.bodies.push_back({"kidney", "", 0, 0, 0, kidney_nodes, 0, kidney_elements});
+  for (scene::ElementSet& es : s.sets) es.body = 0;
+  for (scene::Constraint& c : s.constraints) c.body = 0;
+
+  index_t n_outer = 0;
+  std::vector<std::pair<Vec3<double>, Vec3<double>>> rim;
+  const SurfaceMesh surface = fat_layer(&n_outer, &rim);
+  MeshingOptions meshing;
+  meshing.quality = K::quality;
+  meshing.max_volume = F::size_ratio * kidney_volume;
+  const VolumeMesh fat = tetrahedralize_surface(surface, meshing, "built-in kidney's fat");
+  s.nodes.insert(s.nodes.end(), fat.nodes.begin(), fat.nodes.end());
+  for (index_t v : fat.tets) s.tets.push_back(v + kidney_nodes);
+  s.bodies.push_back({"fat", "", 0, 0, kidney_nodes, fat.n_nodes(), kidney_elements, fat.n_tets()});
+
+  scene::Material m;
+  m.name = "fat";
+  m.form = scene::Material::Form::YoungPoisson;
+  m.a = F::E;
+  m.b = F::nu;
+  m.rho = F::rho;
+  s.materials.push_back(m);
+  scene::ElementSet all;
+  all.name = "fat";
+  all.material = "fat";
+  all.all = true;
+  all.body = 1;
+  s.sets.push_back(all);
+
+  // The rim is held: every node of the layer on a wall, which lies in the
+  // plane through the centre and a rim edge's kidney vertices, between their rays.
+  scene::Constraint held;
+  held.kind = scene::Constraint::Kind::Nodes;
+  held.body = 1;
+  for (index_t i = 0; i < fat.n_nodes(); ++i) {
+    const Vec3<double> x = fat.node(i);
+    for (const auto& [a, b] : rim) {
+      const Vec3<double> n = unit(cross(a, b));
+      if (std::fabs(dot(x, n)) < 1e-10 && dot(cross(a, x), n) >= -1e-12 && dot(cross(x, b), n) >= -1e-12) {
+        held.nodes.push_back(i + kidney_nodes);
+        break;
+      }
+    }
+  }
+  s.constraints.push_back(std::move(held));
+  s.contacts.push_back({"kidney", "fat", 0, 0});
+
+  // The probe presses through the layer: aimed at where the ray along +y
+  // leaves the layer's outer side, along that triangle's inward normal.
+  SurfaceMesh outer = surface;
+  outer.triangles.resize(3 * std::size_t(n_outer));
+  const Vec3<double> touch = surface_point_along(outer, {0, 1, 0});
+  const index_t t = surface_triangle_along(outer, {0, 1, 0});
+  const Vec3<double> c0 = vertex(outer, outer.triangles[3 * t]), c1 = vertex(outer, outer.triangles[3 * t + 1]),
+                     c2 = vertex(outer, outer.triangles[3 * t + 2]);
+  const Vec3<double> outward = unit(cross(c1 - c0, c2 - c0));
+  for (scene::Tool& tool : s.tools) {
+    tool.direction = outward;
+    tool.path = press_path(touch + K::tool_radius * outward, -1.0 * outward, K::press_depth, K::approach);
+  }
+  return s;
+}
+
 scene::Scene viscoelastic_kidney_scene() {
   scene::Scene s = default_kidney_scene();
   s.source = "@kidney-visco";
@@ -280,11 +423,12 @@ scene::Scene viscoelastic_kidney_scene() {
 std::optional<scene::Scene> builtin_scene(const std::string& name) {
   if (name == "@kidney") return default_kidney_scene();
   if (name == "@kidney-visco") return viscoelastic_kidney_scene();
+  if (name == "@kidney-fat") return kidney_fat_scene();
   return std::nullopt;
 }
 
 bool is_builtin_scene(const std::string& name) {
-  return name == "@kidney" || name == "@kidney-visco";
+  return name == "@kidney" || name == "@kidney-visco" || name == "@kidney-fat";
 }
 
 }  // namespace tissue::io

@@ -115,7 +115,34 @@ inline constexpr double kKidneyViscoHold = 3.0;
 /// held kKidneyViscoHold seconds, to feel and measure the relaxation.
 scene::Scene viscoelastic_kidney_scene();
 
-/// The built-in scene of a name ("@kidney", "@kidney-visco"), or nullopt.
+/// Construction constants of "@kidney-fat": a layer of fat over the
+/// kidney's lateral side, pressed through by the probe (docs/kidney.md,
+/// "The kidney in its fat").
+struct KidneyFatScene {
+  static constexpr double cap_angle = 40;      ///< degrees: the layer covers the unit-sphere cap within this of +y
+  static constexpr double thickness = 0.005;   ///< m, along the rays from the kidney's centre
+  static constexpr double size_ratio = 0.25;   ///< the layer's largest tet volume over the kidney's
+  static constexpr double E = 2000, nu = 0.45, rho = 900;  ///< fat (Pa, -, kg/m^3): softer than the organ
+};
+
+/// The closed surface of the fat layer (m): the kidney surface's triangles
+/// (KidneyScene::frequency) whose three vertices lie within cap_angle of +y
+/// on the unit sphere, those same triangles moved out `thickness` along
+/// the rays from the centre, and the walls joining the two along the
+/// patch's rim (each wall quad lies in a plane through the centre).
+/// Outward oriented; its inner side coincides with the kidney's surface.
+SurfaceMesh kidney_fat_surface();
+
+/// "@kidney-fat": two bodies, the built-in kidney (its mesh, material,
+/// hilum support) and a fat layer (kidney_fat_surface, TetGen, tets up
+/// to size_ratio of the kidney's largest; Neo-Hookean E = 2 kPa, nu = 0.45,
+/// rho = 900 kg/m^3) lying on its lateral side, its rim walls fixed (held
+/// by the tissue around it), frictionless contact between them; the probe
+/// presses through the layer along the kidney's press axis, KidneyScene::
+/// press_depth below the layer's outer surface; depth all (body contact).
+scene::Scene kidney_fat_scene();
+
+/// The built-in scene of a name ("@kidney", "@kidney-visco", "@kidney-fat"), or nullopt.
 std::optional<scene::Scene> builtin_scene(const std::string& name);
 /// Whether builtin_scene knows the name (without building the scene).
 bool is_builtin_scene(const std::string& name);
