@@ -7,6 +7,7 @@
 #include "apps/interrupt.hpp"
 #include "apps/options.hpp"
 #include "bench/bench.hpp"
+#include "io/kidney.hpp"
 
 namespace tissue::app {
 
@@ -29,10 +30,13 @@ void add_bench_command(CLI::App& app, int& rc) {
       ->delimiter(',')
       ->check(real_number(0, 1, true, true));
   cmd->add_option("--scene", o->scenes,
-                  "Scene files whose haptic-tick rows run beside the kidney's, each pressed along its first "
-                  "tool's scripted path")
+                  "Scene files (or built-in scenes: @kidney-fat) whose haptic-tick rows run beside the kidney's, "
+                  "each pressed along its first tool's scripted path; a scene of bodies in contact also gives "
+                  "the contact's cost per step")
       ->delimiter(',')
-      ->check(CLI::ExistingFile);
+      ->check(CLI::Validator(
+          [](std::string& v) { return io::is_builtin_scene(v) ? std::string() : CLI::ExistingFile(v); },
+          "FILE|@SCENE"));
   cmd->add_option("--batch", o->batch,
                   "Batch sizes: step that many kidneys together, every tool moving in contact (only the batch rows "
                   "run; docs/batch.md)")

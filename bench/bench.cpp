@@ -5,12 +5,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <optional>
 #include <cstring>
 #include <ctime>
 #include <fstream>
 #include <memory>
 #include <numeric>
+#include <optional>
 #include <stdexcept>
 #include <thread>
 #include <tbb/task_arena.h>
@@ -302,7 +302,8 @@ std::vector<TickScene> tick_scenes(const BenchOptions& o) {
   std::vector<TickScene> out;
   for (const std::string& law : o.laws) out.push_back({"kidney", law, kidney_with_law(law)});
   for (const std::string& path : o.scenes) {
-    scene::Scene s = io::read_scene(path);
+    std::optional<scene::Scene> builtin = io::builtin_scene(path);
+    scene::Scene s = builtin ? std::move(*builtin) : io::read_scene(path);
     if (s.tools.empty() || s.tools.front().path.size() < 2)
       throw std::invalid_argument("bench --scene " + path +
                                   ": its first tool has no scripted path (the haptic-tick rows press along it)");
@@ -314,26 +315,46 @@ std::vector<TickScene> tick_scenes(const BenchOptions& o) {
 void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_safety, std::optional<double> mu,
                 const TickScene& ts) {
   scene::Scene s = ts.scene;
-  if (mu)
+  if (!s.contacts.empty() && depth != kDepthAll) return;  // bodies in contact compute the whole mesh
+  if (mu) {
     for (scene::Tool& t : s.tools) t.friction = *mu;
+    for (scene::BodyContact& bc : s.contacts) bc.friction = *mu;
+  }
   s.solver.dt_safety = dt_safety.value_or(s.solver.dt_safety);
   s.solver.backend = c.o.backend;
   s.solver.precision = p;
   SchedulerSettings st = scene::scheduler_settings(s);
   st.depth = depth;
+  // the ticks in contact along the scene's scripted press, sorted
+  const auto press = [&](Scheduler& sched) {
+    ScriptedDevice dev(s.tools.front().path);
+    std::vector<double> lat;
+    const long n = std::lround((c.o.quick ? 0.3 : dev.duration()) / st.tick);
+    for (long k = 0; k < n; ++k) {
+      const auto t0 = Clock::now();
+      sched.tick(dev);
+      if (sched.in_contact()) lat.push_back(since(t0));
+    }
+    if (lat.empty()) throw std::runtime_error("bench: the tool path of " + ts.mesh + " never touched it");
+    std::sort(lat.begin(), lat.end());
+    return lat;
+  };
+  // a scene of bodies in contact also runs with its contact off, in the same run: the difference of the
+  // medians per TLED step is what the body contact costs (the bodies then pass through each other, so the
+  // tools' stage differs a little too)
+  std::vector<double> apart;
+  if (!s.contacts.empty()) {
+    scene::Scene off = s;
+    off.contacts.clear();
+    SchedulerSettings st_off = st;
+    st_off.body_contact = {};
+    Engine e = build_engine(off, st_off);
+    apart = press(*e.scheduler);
+  }
   Engine engine = build_engine(s, st);
   const std::unique_ptr<Backend>& b = engine.backend;
   Scheduler& sched = *engine.scheduler;
-  ScriptedDevice dev(s.tools.front().path);
-  std::vector<double> lat;
-  const long n = std::lround((c.o.quick ? 0.3 : dev.duration()) / st.tick);
-  for (long k = 0; k < n; ++k) {
-    const auto t0 = Clock::now();
-    sched.tick(dev);
-    if (sched.in_contact()) lat.push_back(since(t0));
-  }
-  if (lat.empty()) throw std::runtime_error("bench: the tool path of " + ts.mesh + " never touched it");
-  std::sort(lat.begin(), lat.end());
+  const std::vector<double> lat = press(sched);
   // the reduction alone, where the path ended (the region as the ticks left it, the tool there): one call of
   // the backend's reduce() -- on the cuda backend its passes 1-2 and reduction kernel as launches of their
   // own, a copy down and the wait, where a tick runs the same kernels inside its graph and writes the answer
@@ -358,6 +379,15 @@ void bench_tick(Context& c, Precision p, int depth, std::optional<double> dt_saf
   r.add("tick_ms_p99", 1e3 * lat[lat.size() * 99 / 100]);
   r.add("tick_ms_max", 1e3 * lat.back());
   r.add("reduce_ms_p50", 1e3 * red[red.size() / 2]);
+  if (!s.contacts.empty()) {
+    r.add("bodies", long(s.bodies.size()));
+    r.add("body_pairs", long(s.contacts.size()));
+    r.add("body_friction", s.contacts.front().friction);
+    r.add("tick_ms_p50_bodies_apart", 1e3 * apart[apart.size() / 2]);
+    r.add("body_contact_ms_per_step",
+          1e3 * (lat[lat.size() / 2] - apart[apart.size() / 2]) / double(sched.steps_per_tick()));
+    r.add("body_list_builds", b->body_list_builds());
+  }
   c.emit(r);
 }
 
