@@ -9,6 +9,7 @@
 #include <numbers>
 #include <set>
 #include <stdexcept>
+#include <string>
 #include <utility>
 
 #include "core/device.hpp"
@@ -197,6 +198,25 @@ Vec3<double> kidney_hilum_centre() {
 
 namespace {
 
+/// A Neo-Hookean material given as E (Pa), nu and rho (kg/m^3), and an
+/// element set of that name holding every element of `body` (-1: of the
+/// single-mesh form) made of it.
+void add_material(scene::Scene& s, const std::string& name, double E, double nu, double rho, int body) {
+  scene::Material m;
+  m.name = name;
+  m.form = scene::Material::Form::YoungPoisson;
+  m.a = E;
+  m.b = nu;
+  m.rho = rho;
+  s.materials.push_back(m);
+  scene::ElementSet all;
+  all.name = name;
+  all.material = name;
+  all.all = true;
+  all.body = body;
+  s.sets.push_back(all);
+}
+
 /// The default kidney scene; *max_volume (if given) receives the largest
 /// tet volume TetGen was asked for (m^3).
 scene::Scene kidney_scene(double* max_volume) {
@@ -212,18 +232,8 @@ scene::Scene kidney_scene(double* max_volume) {
   s.source = "@kidney";
   s.nodes = std::move(mesh.nodes);
   s.tets = std::move(mesh.tets);
-  scene::Material kidney;
-  kidney.name = "kidney";  // the organ's name; its numbers are brain tissue's (docs/kidney.md, "Material")
-  kidney.form = scene::Material::Form::YoungPoisson;
-  kidney.a = K::E;
-  kidney.b = K::nu;
-  kidney.rho = K::rho;
-  s.materials.push_back(kidney);
-  scene::ElementSet all;
-  all.name = "kidney";
-  all.material = "kidney";
-  all.all = true;
-  s.sets.push_back(all);
+  // the organ's name; its numbers are brain tissue's (docs/kidney.md, "Material")
+  add_material(s, "kidney", K::E, K::nu, K::rho, -1);
 
   // The hilum: nodes within fix_radius of the surface point along -y.
   const Vec3<double> hilum = surface_point_along(surface, {0, -1, 0});
@@ -356,19 +366,7 @@ scene::Scene kidney_fat_scene() {
   for (index_t v : fat.tets) s.tets.push_back(v + kidney_nodes);
   s.bodies.push_back({"fat", "", 0, 0, kidney_nodes, fat.n_nodes(), kidney_elements, fat.n_tets()});
 
-  scene::Material m;
-  m.name = "fat";
-  m.form = scene::Material::Form::YoungPoisson;
-  m.a = F::E;
-  m.b = F::nu;
-  m.rho = F::rho;
-  s.materials.push_back(m);
-  scene::ElementSet all;
-  all.name = "fat";
-  all.material = "fat";
-  all.all = true;
-  all.body = 1;
-  s.sets.push_back(all);
+  add_material(s, "fat", F::E, F::nu, F::rho, 1);
 
   // The rim is held: every node of the layer on a wall, which lies in the
   // plane through the centre and a rim edge's kidney vertices, between their rays.
