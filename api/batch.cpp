@@ -218,6 +218,10 @@ std::size_t Batch::n_elements(int scene) const {
 std::vector<BodyRange> Batch::bodies(int scene) const {
   return facade::body_ranges(impl_->at(scene).scene(), n_nodes(scene), n_elements(scene));
 }
+std::vector<BodyContact> Batch::body_contacts(int scene) const {
+  Session& s = impl_->at(scene);
+  return facade::body_contacts(s.backend(), s.model(), bodies(scene));
+}
 int Batch::n_tools(int scene) const {
   return impl_->at(scene).n_tools();
 }

@@ -4,6 +4,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <span>
 #include <stdexcept>
@@ -51,6 +52,30 @@ inline std::vector<BodyRange> body_ranges(const scene::Scene& s, std::size_t n_n
   for (const scene::Body& b : s.bodies)
     out.push_back({b.name, std::size_t(b.first_node), std::size_t(b.n_nodes), std::size_t(b.first_element),
                    std::size_t(b.n_elements)});
+  return out;
+}
+
+/// The backend's body contacts after its last step in the facade's terms:
+/// each triangle's corners from the model's tris (3 x n_tris, corner k of
+/// triangle t at k n_tris + t), each node's body from the ranges (bodies
+/// ascending by first_node, as body_ranges gives them).
+inline std::vector<BodyContact> body_contacts(Backend& backend, const TissueModel<double>& m,
+                                              const std::vector<BodyRange>& bodies) {
+  const auto body_of = [&](index_t node) {
+    const auto after = std::upper_bound(bodies.begin(), bodies.end(), std::size_t(node),
+                                        [](std::size_t a, const BodyRange& b) { return a < b.first_node; });
+    return int(after - bodies.begin()) - 1;
+  };
+  std::vector<BodyContact> out;
+  for (const BodyContactNode& c : backend.body_contacts()) {
+    BodyContact b;
+    b.node = std::int32_t(c.node);
+    for (int k = 0; k < 3; ++k) b.triangle[k] = std::int32_t(m.tris[std::size_t(k) * m.n_tris + c.tri]);
+    b.body = body_of(c.node);
+    b.other_body = body_of(b.triangle[0]);
+    b.depth = c.gap;
+    out.push_back(b);
+  }
   return out;
 }
 

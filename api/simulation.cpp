@@ -218,6 +218,9 @@ std::size_t Simulation::n_elements() const { return std::size_t(impl_->session.m
 std::vector<BodyRange> Simulation::bodies() const {
   return facade::body_ranges(impl_->session.scene(), n_nodes(), n_elements());
 }
+std::vector<BodyContact> Simulation::body_contacts() const {
+  return facade::body_contacts(impl_->session.backend(), impl_->session.model(), bodies());
+}
 std::size_t Simulation::n_surface_triangles() const { return std::size_t(impl_->session.model().n_tris); }
 int Simulation::n_tools() const { return impl_->session.n_tools(); }
 double Simulation::tick_seconds() const { return impl_->session.settings().tick; }

@@ -135,6 +135,35 @@ tissue_status tissue_body_range(const tissue_simulation* sim, int body, size_t* 
   if (n_elements) *n_elements = b.n_elements;
   return TISSUE_OK;
 }
+tissue_status tissue_body_contact_count(const tissue_simulation* sim, int32_t* count) {
+  if (sim == nullptr) return null_argument("tissue_body_contact_count", "sim");
+  if (count == nullptr) return null_argument("tissue_body_contact_count", "count");
+  return guarded([&] { *count = int32_t(sim->sim.body_contacts().size()); });
+}
+tissue_status tissue_body_contacts(const tissue_simulation* sim, int32_t* nodes, int32_t* triangles, int32_t* bodies,
+                                   double* depths, size_t capacity, size_t* written) {
+  if (written) *written = 0;
+  if (sim == nullptr) return null_argument("tissue_body_contacts", "sim");
+  return guarded([&] {
+    const std::vector<tissue::BodyContact> contacts = sim->sim.body_contacts();
+    if (contacts.size() > capacity)
+      throw std::invalid_argument("tissue_body_contacts: capacity " + std::to_string(capacity) + " is below the " +
+                                  std::to_string(contacts.size()) +
+                                  " contacts after the last tick (tissue_body_contact_count)");
+    for (std::size_t i = 0; i < contacts.size(); ++i) {
+      const tissue::BodyContact& c = contacts[i];
+      if (nodes) nodes[i] = c.node;
+      if (triangles)
+        for (std::size_t k = 0; k < 3; ++k) triangles[3 * i + k] = c.triangle[k];
+      if (bodies) {
+        bodies[2 * i] = c.body;
+        bodies[2 * i + 1] = c.other_body;
+      }
+      if (depths) depths[i] = c.depth;
+    }
+    if (written) *written = contacts.size();
+  });
+}
 double tissue_time(const tissue_simulation* sim) { return sim ? sim->sim.time() : 0; }
 double tissue_dissipated_energy(const tissue_simulation* sim) { return sim ? sim->sim.dissipated_energy() : 0; }
 

@@ -274,6 +274,41 @@ py::array_t<double> any_field(PyBatch& b, std::optional<int> scene, Field f) {
   return scene ? scene_field(b, *scene, f) : batch_field(b, f);
 }
 
+/// Body contacts as a dict of new arrays: "node" (n,) int32, "triangle"
+/// (n, 3) int32, "body" and "other_body" (n,) int32, "depth" (n,) float64.
+py::dict body_contact_arrays(const std::vector<tissue::BodyContact>& contacts) {
+  const py::ssize_t n = py::ssize_t(contacts.size());
+  py::array_t<std::int32_t> node({n}), triangle({n, py::ssize_t(3)}), body({n}), other({n});
+  py::array_t<double> depth({n});
+  auto nd = node.mutable_unchecked<1>();
+  auto tr = triangle.mutable_unchecked<2>();
+  auto bd = body.mutable_unchecked<1>();
+  auto ot = other.mutable_unchecked<1>();
+  auto dp = depth.mutable_unchecked<1>();
+  for (py::ssize_t i = 0; i < n; ++i) {
+    const tissue::BodyContact& c = contacts[std::size_t(i)];
+    nd(i) = c.node;
+    for (py::ssize_t k = 0; k < 3; ++k) tr(i, k) = c.triangle[std::size_t(k)];
+    bd(i) = c.body;
+    ot(i) = c.other_body;
+    dp(i) = c.depth;
+  }
+  py::dict d;
+  d["node"] = node;
+  d["triangle"] = triangle;
+  d["body"] = body;
+  d["other_body"] = other;
+  d["depth"] = depth;
+  return d;
+}
+
+constexpr const char* kBodyContactsDoc =
+    "The surface nodes inside another body after the last tick (its last TLED step, before that step's "
+    "correction; a scene's <contact bodies>), ascending node id: a dict of new arrays, 'node' (n,) int32, "
+    "'triangle' (n, 3) int32 (the other body's surface triangle it was inside: its corners' node ids), 'body' and "
+    "'other_body' (n,) int32 (the node's and the triangle's, indices into bodies), 'depth' (n,) float64 (m, how "
+    "far inside); n = 0 before the first step and for a scene without body contact";
+
 /// One exported field (tissue/fields.h) as the Python methods present it.
 struct FieldMethod {
   const char* name;
@@ -530,6 +565,9 @@ void bind_simulation(py::module_& m) {
       .def_property_readonly("warnings", [](PySimulation& s) { return s.value.warnings(); })
       .def_property_readonly("bodies", [](PySimulation& s) { return s.value.bodies(); },
                              "the scene's bodies (tissue.Body), scene order; a scene of one mesh is one body")
+      .def("body_contacts", [](PySimulation& s) {
+        return body_contact_arrays(locked(s, [](Simulation& x) { return x.body_contacts(); }));
+      }, kBodyContactsDoc)
       .def_property_readonly("ticks",
                              [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.ticks(); }); })
       .def_property_readonly("time", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.time(); }); })
@@ -868,6 +906,9 @@ void bind_batch(py::module_& m) {
            py::arg("scene"))
       .def("bodies", [](PyBatch& b, int scene) { return b.value.bodies(scene); }, py::arg("scene"),
            "the scene's bodies (tissue.Body)")
+      .def("body_contacts", [](PyBatch& b, int scene) {
+        return body_contact_arrays(locked(b, [&](tissue::Batch& x) { return x.body_contacts(scene); }));
+      }, py::arg("scene"), "One scene's body contacts (Simulation.body_contacts)")
       .def("set_material", [](PyBatch& b, int scene, std::string material, std::optional<double> E,
                               std::optional<double> nu, std::optional<double> rho) {
         locked(b, [&](tissue::Batch& x) { x.set_material(scene, {material, E, nu, rho}); });

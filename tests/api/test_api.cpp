@@ -6,8 +6,10 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <filesystem>
+#include <set>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -19,6 +21,7 @@
 #include "io/scene_xml.hpp"
 #include "scene/validate.hpp"
 #include "tissue/simulation.hpp"
+#include "tissue/tissue_c.h"
 #include "tests/api/api_test_support.hpp"
 #include "tests/temp_dir.hpp"
 
@@ -26,6 +29,7 @@ namespace {
 
 using tissue::Simulation;
 using tissue::test::block;
+using tissue::test::fat_press_tip;
 using tissue::test::thrown;
 
 /// Presses the block's top centre `depth` deep over 200 ticks, holds for
@@ -303,6 +307,7 @@ TEST(Facade, EachOfTwoBodiesPressesAsItDoesAlone) {
     ASSERT_EQ(two.steps_per_tick(), one.steps_per_tick());
     ASSERT_EQ(one.bodies().size(), 1u);
     EXPECT_EQ(one.bodies()[0].name, "body");
+    EXPECT_TRUE(two.body_contacts().empty());  // two bodies, no <contact bodies>
 
     const std::vector<tissue::Vector3> f2 = press_block(two, k), f1 = press_block(one, k);
     for (std::size_t t = 0; t < f1.size(); ++t)
@@ -337,6 +342,96 @@ TEST(Facade, CudaRunsTwoBodiesAsTheCpuDoes) {
   const std::vector<double> u = gpu.field(tissue::Field::Displacement);
   const tissue::BodyRange left = gpu.bodies()[0];
   for (std::size_t i = 0; i < 3 * left.n_nodes; ++i) ASSERT_EQ(u[i], 0.0) << "the untouched body moved, value " << i;
+}
+
+// "@kidney-fat" pressed through its layer: each body contact is a surface
+// node of one body inside a surface triangle of the other, both ways, as
+// deep as the press pushes it; the C interface gives the same contacts, and
+// a capacity below their count is refused naming both; the bare kidney, one
+// body, has none.
+TEST(Facade, BodyContactsAreANodeInsideTheOtherBodysTriangle) {
+  Simulation sim = Simulation::load("@kidney-fat", {"cpu", "", ""});
+  tissue_simulation* c = nullptr;
+  ASSERT_EQ(tissue_open_scene("@kidney-fat", "cpu", nullptr, nullptr, &c), TISSUE_OK) << tissue_last_error();
+  EXPECT_TRUE(sim.body_contacts().empty());  // before the first step
+  const tissue::ToolResult first = sim.step().tools[0];
+  ASSERT_EQ(tissue_step(c, 1), TISSUE_OK);
+  for (int k = 1; k <= 24; ++k) {
+    const tissue::Vector3 tip = fat_press_tip(first, k);
+    sim.set_tool_pose(0, tip);
+    sim.step();
+    ASSERT_EQ(tissue_set_tool_pose(c, 0, tip.data(), nullptr), TISSUE_OK);
+    ASSERT_EQ(tissue_step(c, 1), TISSUE_OK);
+  }
+  ASSERT_GT(sim.last().tools[0].contact_nodes, 0) << "the probe reached the layer";
+
+  const std::vector<tissue::BodyContact> contacts = sim.body_contacts();
+  ASSERT_FALSE(contacts.empty());
+  const std::vector<tissue::BodyRange> bodies = sim.bodies();
+  ASSERT_EQ(bodies.size(), 2u);
+  const auto in = [&](std::int32_t node, int body) {
+    return body >= 0 && body < int(bodies.size()) && std::size_t(node) >= bodies[std::size_t(body)].first_node &&
+           std::size_t(node) < bodies[std::size_t(body)].first_node + bodies[std::size_t(body)].n_nodes;
+  };
+  std::set<std::array<std::int32_t, 3>> surface;  // corner ids, sorted
+  const std::span<const std::int32_t> tris = sim.surface_triangles();
+  for (std::size_t t = 0; t < tris.size(); t += 3) {
+    std::array<std::int32_t, 3> v = {tris[t], tris[t + 1], tris[t + 2]};
+    std::sort(v.begin(), v.end());
+    surface.insert(v);
+  }
+  int ways[2] = {0, 0};
+  double deepest = 0;
+  for (std::size_t i = 0; i < contacts.size(); ++i) {
+    const tissue::BodyContact& b = contacts[i];
+    ASSERT_TRUE(in(b.node, b.body)) << "contact " << i << ": node " << b.node << " body " << b.body;
+    ASSERT_NE(b.body, b.other_body) << "contact " << i;
+    std::array<std::int32_t, 3> v = b.triangle;
+    for (std::int32_t corner : v) ASSERT_TRUE(in(corner, b.other_body)) << "contact " << i << ": corner " << corner;
+    std::sort(v.begin(), v.end());
+    ASSERT_EQ(surface.count(v), 1u) << "contact " << i << ": not a surface triangle";
+    ASSERT_TRUE(std::isfinite(b.depth) && b.depth >= 0) << "contact " << i << ": depth " << b.depth;
+    if (i > 0) {
+      ASSERT_LT(contacts[i - 1].node, b.node) << "ascending node ids";
+    }
+    ++ways[b.body];
+    deepest = std::max(deepest, b.depth);
+  }
+  EXPECT_GT(ways[0], 0) << "kidney nodes inside the fat";
+  EXPECT_GT(ways[1], 0) << "fat nodes inside the kidney";
+  // measured 1.5e-4 m where the probe pinches the layer (at rest, rounding leaves nodes ~3e-9 m inside)
+  EXPECT_GT(deepest, 1e-5);
+
+  std::int32_t count = -1;
+  ASSERT_EQ(tissue_body_contact_count(c, &count), TISSUE_OK);
+  ASSERT_EQ(std::size_t(count), contacts.size());
+  const std::size_t n = std::size_t(count);
+  std::vector<std::int32_t> nodes(n), corners(3 * n), owners(2 * n);
+  std::vector<double> depths(n);
+  std::size_t written = 0;
+  ASSERT_EQ(tissue_body_contacts(c, nodes.data(), corners.data(), owners.data(), depths.data(), n, &written),
+            TISSUE_OK);
+  ASSERT_EQ(written, n);
+  for (std::size_t i = 0; i < n; ++i) {
+    EXPECT_EQ(nodes[i], contacts[i].node) << i;
+    for (std::size_t k = 0; k < 3; ++k) EXPECT_EQ(corners[3 * i + k], contacts[i].triangle[k]) << i;
+    EXPECT_EQ(owners[2 * i], contacts[i].body) << i;
+    EXPECT_EQ(owners[2 * i + 1], contacts[i].other_body) << i;
+    EXPECT_EQ(depths[i], contacts[i].depth) << i;
+  }
+  written = 99;
+  EXPECT_EQ(tissue_body_contacts(c, nodes.data(), corners.data(), owners.data(), depths.data(), n - 1, &written),
+            TISSUE_BAD_ARGUMENT);
+  EXPECT_EQ(written, 0u);
+  EXPECT_NE(std::string(tissue_last_error()).find("capacity " + std::to_string(n - 1) + " is below the " +
+                                                  std::to_string(n) + " contacts"),
+            std::string::npos)
+      << tissue_last_error();
+  tissue_close(c);
+
+  Simulation kidney = Simulation::load("@kidney", {"cpu", "", ""});
+  kidney.step(3);
+  EXPECT_TRUE(kidney.body_contacts().empty());
 }
 
 // A body that nothing holds is warned about by name.

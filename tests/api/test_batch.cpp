@@ -460,6 +460,33 @@ TEST(Batch, ArraysHaveTheBatchLayout) {
   EXPECT_EQ(J.size(), 2 * batch.n_elements(0));
 }
 
+// A scene of touching bodies in a batch, beside a scene without them:
+// its body contacts are the Simulation's, the other scene has none.
+TEST(Batch, BodyContactsOfASceneAreTheSimulations) {
+  Batch batch = Batch::load({BatchScene{"@kidney-fat", {}, {}}, BatchScene{"@kidney", {}, {}}}, {"cpu", "", ""});
+  Simulation sim = Simulation::load("@kidney-fat", {"cpu", "", ""});
+  const tissue::ToolResult first = sim.step().tools[0];
+  batch.step();
+  for (int k = 1; k <= 24; ++k) {
+    sim.set_tool_pose(0, tissue::test::fat_press_tip(first, k));
+    sim.step();
+    batch.set_tool_pose(0, 0, tissue::test::fat_press_tip(first, k));
+    batch.step();
+  }
+  const std::vector<tissue::BodyContact> alone = sim.body_contacts(), in_batch = batch.body_contacts(0);
+  ASSERT_FALSE(alone.empty());
+  ASSERT_EQ(in_batch.size(), alone.size());
+  for (std::size_t i = 0; i < alone.size(); ++i) {
+    EXPECT_EQ(in_batch[i].node, alone[i].node) << i;
+    EXPECT_EQ(in_batch[i].triangle, alone[i].triangle) << i;
+    EXPECT_EQ(in_batch[i].body, alone[i].body) << i;
+    EXPECT_EQ(in_batch[i].other_body, alone[i].other_body) << i;
+    EXPECT_EQ(in_batch[i].depth, alone[i].depth) << i;
+  }
+  EXPECT_TRUE(batch.body_contacts(1).empty());
+  EXPECT_NE(thrown([&] { batch.body_contacts(2); }).find("scene 2 does not exist"), std::string::npos);
+}
+
 TEST(Batch, MisuseIsAClearError) {
   Batch batch = Batch::load({mesh(block(3000)), mesh(fine_block(3000))}, {"cpu", "float", "all"});
   EXPECT_NE(thrown([&] { batch.set_tool_pose(2, 0, {0, 0, 0}); }).find("scene 2 does not exist"), std::string::npos);

@@ -1,7 +1,7 @@
 /* The C interface (tissue/tissue_c.h) from a C program: a host's mesh,
- * a press, the force and a field, and every misuse answered by a status and
- * a message (no crash). Exit 0 when every check passes; each failure is
- * printed. */
+ * a press, the force and a field, the body contacts of a scene of two
+ * bodies, and every misuse answered by a status and a message (no crash).
+ * Exit 0 when every check passes; each failure is printed. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -117,6 +117,90 @@ static void batch_checks(const char* backend) {
   tissue_batch_close(NULL);
 }
 
+/* "@kidney-fat" after its probe has pressed 2.5 mm into the fat layer (its
+ * scripted path touches at 100 ticks): every body contact is a node of one
+ * body inside a triangle of the other, its depth finite and >= 0; NULL
+ * arrays are skipped; a capacity below the count is refused naming both,
+ * with nothing written; the bare kidney, one body, has none. */
+static void body_contact_checks(void) {
+  tissue_simulation* sim = NULL;
+  if (tissue_open_scene("@kidney-fat", "cpu", NULL, NULL, &sim) != TISSUE_OK) {
+    fprintf(stderr, "tissue_open_scene(@kidney-fat): %s\n", tissue_last_error());
+    ++failures;
+    return;
+  }
+  int32_t count = -1;
+  CHECK(tissue_body_contact_count(sim, &count) == TISSUE_OK && count == 0); /* before the first tick */
+  CHECK(tissue_body_count(sim) == 2);
+  CHECK(tissue_step(sim, 150) == TISSUE_OK);
+  CHECK(tissue_body_contact_count(sim, &count) == TISSUE_OK);
+  CHECK(count > 0);
+  if (count <= 0) {
+    tissue_close(sim);
+    return;
+  }
+  const size_t n = (size_t)count;
+  int32_t* nodes = malloc(n * sizeof *nodes);
+  int32_t* triangles = malloc(3 * n * sizeof *triangles);
+  int32_t* bodies = malloc(2 * n * sizeof *bodies);
+  double* depths = malloc(n * sizeof *depths);
+  double* again = malloc(n * sizeof *again);
+  CHECK(nodes && triangles && bodies && depths && again);
+  size_t written = 0;
+  CHECK(tissue_body_contacts(sim, nodes, triangles, bodies, depths, n, &written) == TISSUE_OK && written == n);
+  size_t first[2] = {0, 0}, size[2] = {0, 0};
+  for (int b = 0; b < 2; ++b) CHECK(tissue_body_range(sim, b, &first[b], &size[b], NULL, NULL) == TISSUE_OK);
+  int bad = 0;
+  double deepest = 0;
+  for (size_t i = 0; i < written; ++i) {
+    const int32_t own = bodies[2 * i], other = bodies[2 * i + 1];
+    if (own < 0 || own > 1 || other < 0 || other > 1 || own == other) {
+      ++bad;
+      continue;
+    }
+    if ((size_t)nodes[i] < first[own] || (size_t)nodes[i] >= first[own] + size[own]) ++bad;
+    for (int k = 0; k < 3; ++k) {
+      const size_t corner = (size_t)triangles[3 * i + k];
+      if (corner < first[other] || corner >= first[other] + size[other]) ++bad;
+    }
+    if (!isfinite(depths[i]) || depths[i] < 0) ++bad;
+    if (depths[i] > deepest) deepest = depths[i];
+  }
+  CHECK(bad == 0);
+  CHECK(deepest > 1e-5); /* the probe pushes the layer into the kidney */
+  /* NULL arrays are skipped */
+  CHECK(tissue_body_contacts(sim, NULL, NULL, NULL, again, n, &written) == TISSUE_OK && written == n);
+  CHECK(memcmp(again, depths, n * sizeof *depths) == 0);
+  CHECK(tissue_body_contacts(sim, NULL, NULL, NULL, NULL, n, NULL) == TISSUE_OK);
+  /* misuse */
+  written = 99;
+  again[0] = -1;
+  CHECK(tissue_body_contacts(sim, NULL, NULL, NULL, again, n - 1, &written) == TISSUE_BAD_ARGUMENT);
+  CHECK(written == 0 && again[0] == -1);
+  CHECK(contains(tissue_last_error(), "capacity") && contains(tissue_last_error(), "is below the"));
+  CHECK(tissue_body_contacts(NULL, nodes, triangles, bodies, depths, n, &written) == TISSUE_BAD_ARGUMENT);
+  CHECK(contains(tissue_last_error(), "tissue_body_contacts: sim is NULL"));
+  CHECK(tissue_body_contact_count(sim, NULL) == TISSUE_BAD_ARGUMENT);
+  CHECK(contains(tissue_last_error(), "tissue_body_contact_count: count is NULL"));
+  CHECK(tissue_body_contact_count(NULL, &count) == TISSUE_BAD_ARGUMENT);
+  free(nodes);
+  free(triangles);
+  free(bodies);
+  free(depths);
+  free(again);
+  tissue_close(sim);
+
+  tissue_simulation* kidney = NULL;
+  CHECK(tissue_open_scene("@kidney", "cpu", NULL, NULL, &kidney) == TISSUE_OK);
+  if (kidney == NULL) return;
+  CHECK(tissue_step(kidney, 3) == TISSUE_OK);
+  count = -1;
+  CHECK(tissue_body_contact_count(kidney, &count) == TISSUE_OK && count == 0);
+  written = 99;
+  CHECK(tissue_body_contacts(kidney, NULL, NULL, NULL, NULL, 0, &written) == TISSUE_OK && written == 0);
+  tissue_close(kidney);
+}
+
 int main(void) {
   double nodes[3 * NN];
   int32_t tets[4 * NT];
@@ -229,6 +313,7 @@ int main(void) {
   mesh.n_tets = -1;
   CHECK(tissue_open_mesh(&mesh, "cpu", NULL, &none) == TISSUE_BAD_ARGUMENT);
 
+  body_contact_checks();
   batch_checks("cpu");
   batch_checks("cuda"); /* skipped where no GPU is usable */
 

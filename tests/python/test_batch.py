@@ -203,3 +203,16 @@ def test_a_batch_names_each_scenes_bodies(tmp_path):
     assert [b.name for b in batch.bodies(1)] == ["body"]
     with pytest.raises(ValueError, match="scene 2"):
         batch.bodies(2)
+
+
+def test_a_batch_gives_each_scenes_body_contacts():
+    batch = tissue.Batch(["@kidney-fat", "@kidney"], backend="cpu")
+    sim = tissue.Simulation.load("@kidney-fat", backend="cpu")
+    kidney_press(batch, [sim], 150)
+    alone, together = sim.body_contacts(), batch.body_contacts(0)
+    assert len(alone["node"]) > 0
+    for k in alone:
+        np.testing.assert_array_equal(together[k], alone[k])
+    assert len(batch.body_contacts(1)["node"]) == 0
+    with pytest.raises(ValueError, match="scene 2"):
+        batch.body_contacts(2)

@@ -4,6 +4,7 @@ Checks that can fail: the reference mesh is a zero-copy read-only view, a
 host's mesh presses back with the force a Neo-Hookean body must give (it
 doubles with E; the Hertz closed form bounds a sphere's press on a block),
 fields have their shapes and meanings, a meshed surface keeps its volume,
+body contacts name a node of one body inside the other's triangle,
 misuse raises ValueError / RuntimeError naming the value, Python threads
 sharing a simulation take turns, and Ctrl-C stops a long step.
 """
@@ -469,6 +470,44 @@ def test_bodies_name_their_ranges_and_only_the_pressed_one_moves(tmp_path):
     assert sim.jacobian()[right.elements].min() > 0.5
     one = block()
     assert [(b.name, b.n_nodes) for b in one.bodies] == [("body", one.n_nodes)]
+
+
+def test_body_contacts_are_a_node_inside_the_other_bodys_triangle(tmp_path):
+    sim = tissue.Simulation.load("@kidney-fat", backend="cpu")
+    c = sim.body_contacts()
+    assert set(c) == {"node", "triangle", "body", "other_body", "depth"}
+    assert len(c["node"]) == 0  # before the first step
+    sim.step(150)  # the scripted probe touches the layer at 100 ticks and is 2.5 mm in at 150
+    c = sim.body_contacts()
+    n = len(c["node"])
+    assert n > 0
+    assert c["node"].shape == (n,) and c["node"].dtype == np.int32
+    assert c["triangle"].shape == (n, 3) and c["triangle"].dtype == np.int32
+    assert c["body"].dtype == np.int32 and c["other_body"].dtype == np.int32
+    assert c["depth"].shape == (n,) and c["depth"].dtype == np.float64
+    assert (np.diff(c["node"]) > 0).all()  # ascending node ids
+    bodies = sim.bodies
+    first = np.array([b.first_node for b in bodies])
+    end = first + np.array([b.n_nodes for b in bodies])
+    assert (c["body"] != c["other_body"]).all()
+    assert ((first[c["body"]] <= c["node"]) & (c["node"] < end[c["body"]])).all()
+    other = c["other_body"][:, None]
+    assert ((first[other] <= c["triangle"]) & (c["triangle"] < end[other])).all()
+    surface = {tuple(sorted(t)) for t in sim.surface_triangles.tolist()}
+    assert all(tuple(sorted(t)) in surface for t in c["triangle"].tolist())
+    assert np.isfinite(c["depth"]).all() and (c["depth"] >= 0).all()
+    assert set(c["body"].tolist()) == {0, 1}  # both ways: kidney nodes in the fat, fat nodes in the kidney
+    assert c["depth"].max() > 1e-5  # the probe pushes the layer into the kidney
+    # a new copy each call, equal while no tick runs
+    again = sim.body_contacts()
+    assert again["node"] is not c["node"] and all((again[k] == c[k]).all() for k in c)
+    # no contact: one body, or two bodies without <contact bodies>
+    kidney = tissue.Simulation.load("@kidney", backend="cpu")
+    kidney.step(3)
+    assert kidney.body_contacts()["triangle"].shape == (0, 3)
+    two = tissue.Simulation.load(two_blocks_scene(tmp_path / "two.xml"), backend="cpu")
+    two.step(3)
+    assert len(two.body_contacts()["node"]) == 0
 
 
 def test_cut_mesh_separates_a_block_that_then_presses_as_two(tmp_path):

@@ -110,6 +110,9 @@ class Batch {
   const std::vector<std::string>& warnings(int scene) const;
   /// The scene's bodies (Simulation::bodies).
   std::vector<BodyRange> bodies(int scene) const;
+  /// The scene's surface nodes inside another body after its last tick
+  /// (Simulation::body_contacts).
+  std::vector<BodyContact> body_contacts(int scene) const;
 
   /// Replaces a scene's material parameters (MaterialChange) and starts
   /// that scene again at rest; the others are untouched. Throws

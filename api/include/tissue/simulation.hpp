@@ -126,6 +126,19 @@ struct BodyRange {
   std::size_t first_element = 0, n_elements = 0;
 };
 
+/// One surface node inside another body after the last tick
+/// (Simulation::body_contacts; docs/contact.md, "Bodies touching each
+/// other"): a scene's <contact bodies="a b"> keeps each body's surface
+/// nodes out of the other's triangles every TLED step, and these are the
+/// nodes its last step found inside, before that step's correction.
+struct BodyContact {
+  std::int32_t node = -1;                     ///< the surface node
+  std::array<std::int32_t, 3> triangle = {};  ///< the other body's surface triangle it was inside: its corners' node ids
+  int body = -1;                              ///< the node's body (index into bodies())
+  int other_body = -1;                        ///< the triangle's body (index into bodies())
+  double depth = 0;                           ///< how far inside it was, before the correction (m, >= 0)
+};
+
 /// Per-node and per-element fields (all in SI units), tissue/fields.h's
 /// list: Displacement (u, 3 per node, m), Position (X + u, 3 per node, m),
 /// Pressure (IANP nodal pressure, 1 per node, Pa), InternalForce (internal
@@ -172,6 +185,11 @@ class Simulation {
   const std::vector<std::string>& warnings() const;
   /// The scene's bodies, in the scene's order (at least one).
   std::vector<BodyRange> bodies() const;
+  /// The surface nodes inside another body after the last tick (its last
+  /// TLED step, before that step's correction), ascending node id; empty
+  /// before the first step and for a scene without <contact bodies>. Read
+  /// from the backend on each call (a download on the cuda backend).
+  std::vector<BodyContact> body_contacts() const;
 
   /// The reference mesh (views valid for the Simulation's life).
   std::span<const double> rest_positions() const;          ///< 3 per node (m)

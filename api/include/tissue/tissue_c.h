@@ -88,6 +88,20 @@ int tissue_body_count(const tissue_simulation* sim);
 const char* tissue_body_name(const tissue_simulation* sim, int body);
 tissue_status tissue_body_range(const tissue_simulation* sim, int body, size_t* first_node, size_t* n_nodes,
                                 size_t* first_element, size_t* n_elements);
+/* The surface nodes inside another body after the last tick
+ * (tissue::Simulation::body_contacts; a scene's <contact bodies="a b">):
+ * how many (0 before the first tick and for a scene without body contact),
+ * and per contact, in ascending node id: the node; the other body's
+ * surface triangle it was inside, as its 3 corner node ids (3 per contact);
+ * the node's body and the triangle's (2 per contact, indices as in
+ * tissue_body_range); and how far inside it was before the step's
+ * correction (m, >= 0). capacity is the contacts the arrays hold (nodes and
+ * depths capacity values, triangles 3 capacity, bodies 2 capacity); one
+ * below the count is TISSUE_BAD_ARGUMENT naming both, with nothing written.
+ * Any array pointer, and written, may be NULL; written receives the count. */
+tissue_status tissue_body_contact_count(const tissue_simulation* sim, int32_t* count);
+tissue_status tissue_body_contacts(const tissue_simulation* sim, int32_t* nodes, int32_t* triangles, int32_t* bodies,
+                                   double* depths, size_t capacity, size_t* written);
 
 /* The pose the tool reaches at the end of the next tick; axis may be NULL
  * (the scene's shaft direction). From the first call the host drives it. */
