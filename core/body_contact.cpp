@@ -1,5 +1,7 @@
 #include "core/body_contact.hpp"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -52,6 +54,22 @@ std::uint64_t cell_key(std::int64_t i, std::int64_t j, std::int64_t k) {
   return (b(i) << 42) | (b(j) << 21) | b(k);
 }
 
+/// A face on a symmetry plane: its normal lies along an axis that each of its corners holds, a roller at one
+/// corner at least (a fully fixed face is a support, and stays touchable). It is a cut of the model, not a
+/// surface another body can touch.
+template <class T> bool on_symmetry_plane(const TissueModel<T>& m, index_t t, const Vec3<double>& normal) {
+  std::uint8_t held = kAllAxes;
+  bool roller = false;
+  for (int k = 0; k < 3; ++k) {
+    const std::uint8_t f = m.node_flags[m.tris[k * m.n_tris + t]];
+    held &= fixed_axes(f);
+    roller = roller || !(f & kFixed);
+  }
+  for (int c = 0; c < 3; ++c)
+    if ((held >> c & 1) && roller && std::fabs(normal[c]) > 0.999 * norm(normal)) return true;
+  return false;
+}
+
 }  // namespace
 
 template <class T>
@@ -59,6 +77,10 @@ BodyLists build_body_lists(const TissueModel<T>& m, const BodyContactSpec& spec,
   check_body_contact(spec, m.n_nodes);
   BodyLists L;
   if (spec.empty()) return L;
+  if (m.node_flags.size() != std::size_t(m.n_nodes))
+    throw std::invalid_argument(fmt::format("body contact: the model has {} node flags for its {} nodes (the lists "
+                                            "leave out faces on symmetry planes by their corners' supports)",
+                                            m.node_flags.size(), m.n_nodes));
   const index_t nt = m.n_tris;
   const int nb = spec.n_bodies();
   // which bodies each body touches, and with what mu (-1: not)
@@ -95,6 +117,8 @@ BodyLists build_body_lists(const TissueModel<T>& m, const BodyContactSpec& spec,
   std::vector<double> lo(3 * std::size_t(nt)), hi(3 * std::size_t(nt));
   for (index_t t = 0; t < nt; ++t) {
     if (!touches[tri_body[t]]) continue;
+    const Vec3<double> x0 = P(m.tris[t]);
+    if (on_symmetry_plane(m, t, cross(P(m.tris[nt + t]) - x0, P(m.tris[2 * nt + t]) - x0))) continue;
     for (int c = 0; c < 3; ++c) {
       double a = P(m.tris[t])[c], b = a;
       for (int k = 1; k < 3; ++k) {

@@ -21,8 +21,9 @@
 //     mu |g| (Coulomb: stick, or slide with the tangential share mu); a node
 //     that cannot move (fixed, halo or outside the region, grasped) has
 //     1/m = 0, and a pair where nothing can move is skipped;
-//  3. each contact's correction is scaled by one over the most contacts any
-//     of its nodes takes part in (a node between several contacts is not
+//  3. each contact's correction is scaled by one over the most any of its
+//     nodes takes part in contacts, a corner by its weight (body_row_count:
+//     a node between several contacts is not
 //     moved by each in full, which would overshoot and push the bodies apart
 //     with energy the contact made; both sides scale alike, so no momentum
 //     is made either), and each node sums, in list order, its own scaled
@@ -196,34 +197,46 @@ TISSUE_HD BodyHit<T> body_row_hit(index_t p, index_t first, index_t last, const 
   return hit;
 }
 
-/// Rule 3, first: how many contacts row `row`'s node takes part in (its own
-/// hit, and each hit of another row whose triangle has it as a corner of
-/// weight > 0: the corner entries first..last).
+/// Rule 3, first: how much row `row`'s node takes part in contacts: 1 for
+/// its own hit, and w for each hit of another row whose triangle has it as
+/// a corner of weight w > 0 (the corner entries first..last, in order).
+/// Weighted, so that a corner of vanishing weight counts for nothing: a node
+/// whose nearest point moves between two triangles of a shared corner or
+/// edge changes no count by a jump.
 template <class T, class Hits>
-TISSUE_HD int body_row_count(index_t row, index_t first, index_t last, const index_t* corner_cand,
-                             const index_t* corner_row, const std::uint8_t* corner_slot, Hits hits) {
-  int count = hits(row).cand >= 0 ? 1 : 0;
+TISSUE_HD T body_row_count(index_t row, index_t first, index_t last, const index_t* corner_cand,
+                           const index_t* corner_row, const std::uint8_t* corner_slot, Hits hits) {
+  T count = hits(row).cand >= 0 ? T(1) : T(0);
   for (index_t e = first; e < last; ++e) {
     const BodyHit<T>& h = hits(corner_row[e]);
-    count += h.cand == corner_cand[e] && h.w[corner_slot[e]] > T(0) ? 1 : 0;
+    const T w = h.w[corner_slot[e]];
+    if (h.cand == corner_cand[e] && w > T(0)) count += w;
   }
   return count;
 }
 
-/// Rule 3, second: a row's hit scaled by one over the most contacts any of
-/// its nodes takes part in (counts by row; cand_rows: the rows of each
-/// candidate triangle's corners, 3 a candidate). Both sides of a contact
-/// scale alike, so it still makes no momentum, and no node moves by more
-/// than the mean of its contacts' full corrections.
+/// Rule 3, second: a row's hit scaled by one over the most any of its nodes
+/// takes part in contacts (counts by row; cand_rows: the rows of each
+/// candidate triangle's corners, 3 a candidate): its own node's count, and
+/// each corner's, whole from weight 1/4 up and below it blended towards 1 as
+/// the weight falls to 0 (1 + 4 w (count - 1)), so that a corner leaving the
+/// hit changes no scale by a jump. Both sides of a contact scale alike, so
+/// it still makes no momentum, and no node moves by more than about the
+/// weighted mean of its contacts' full corrections (a blend over all weights,
+/// 1 + w (count - 1), let corners of middling weight overshoot: a sheared
+/// pair's friction then pushed the upper block back against its pull).
 template <class T>
-TISSUE_HD void body_scale_hit(BodyHit<T>& h, index_t row, const index_t* cand_rows, const int* counts) {
+TISSUE_HD void body_scale_hit(BodyHit<T>& h, index_t row, const index_t* cand_rows, const T* counts) {
   if (h.cand < 0) return;
-  int most = counts[row];
+  constexpr T full = T(0.25);  // a corner of at least this weight weighs in with its whole count
+  T most = counts[row];
   for (int k = 0; k < 3; ++k) {
-    const int c = h.w[k] > T(0) ? counts[cand_rows[3 * h.cand + k]] : 0;
+    if (!(h.w[k] > T(0))) continue;
+    const T lean = h.w[k] < full ? h.w[k] / full : T(1);
+    const T c = T(1) + lean * (counts[cand_rows[3 * h.cand + k]] - T(1));
     most = c > most ? c : most;
   }
-  if (most > 1) h.c = (T(1) / T(most)) * h.c;
+  if (most > T(1)) h.c = (T(1) / most) * h.c;
 }
 
 /// Rule 3, last: row `row`'s node's move, from its own (scaled) hit and its

@@ -36,7 +36,7 @@ void BodyStage<T>::build(const TissueState<T>& s) {
   cand_mu_.assign(lists_.cand_mu.begin(), lists_.cand_mu.end());
   hits_.assign(std::size_t(lists_.rows()), BodyHit<T>{});
   moves_.assign(std::size_t(lists_.rows()), Vec3<T>{});
-  counts_.assign(std::size_t(lists_.rows()), 0);
+  counts_.assign(std::size_t(lists_.rows()), T(0));
   tris_.assign(lists_.cand_tri.begin(), lists_.cand_tri.end());
   std::sort(tris_.begin(), tris_.end());
   tris_.erase(std::unique(tris_.begin(), tris_.end()), tris_.end());
@@ -94,11 +94,11 @@ void BodyStage<T>::finish(TissueState<T>& s) {
   // same counts and, for each node, the same terms summed in the same order
   // as the gathers over corner entries (body_row_count, body_row_move) that
   // cuda runs, at the cost of the hits rather than of every corner entry.
-  for (index_t r = 0; r < rows; ++r) counts_[r] = hits_[r].cand >= 0 ? 1 : 0;
+  for (index_t r = 0; r < rows; ++r) counts_[r] = hits_[r].cand >= 0 ? T(1) : T(0);
   for (index_t r = 0; r < rows; ++r)
     if (const BodyHit<T>& h = hits_[r]; h.cand >= 0)
       for (int k = 0; k < 3; ++k)
-        if (h.w[k] > T(0)) ++counts_[lists_.cand_rows[3 * size_t(h.cand) + k]];
+        if (h.w[k] > T(0)) counts_[lists_.cand_rows[3 * size_t(h.cand) + k]] += h.w[k];
   for (index_t r = 0; r < rows; ++r) body_scale_hit(hits_[r], r, lists_.cand_rows.data(), counts_.data());
   for (index_t r = 0; r < rows; ++r) moves_[r] = hits_[r].cand >= 0 ? hits_[r].c : Vec3<T>{};
   for (index_t r = 0; r < rows; ++r)

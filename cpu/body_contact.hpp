@@ -42,7 +42,7 @@ class BodyStage {
   std::vector<T> cand_mu_;
   std::vector<BodyHit<T>> hits_;
   std::vector<Vec3<T>> moves_;
-  std::vector<int> counts_;
+  std::vector<T> counts_;
   std::vector<index_t> tris_;        ///< the candidates' triangles, each once (ascending)
   std::vector<index_t> tri_slot_;    ///< per surface triangle its place in tris_ (-1: none)
   std::vector<BodyTri<T>> geom_;     ///< tris_'s geometry at the step's free update

@@ -38,7 +38,7 @@ struct BodyView {
   const std::uint8_t* corner_slot = nullptr;
   const Packed3<T>* x_built = nullptr;  ///< (rows)
   BodyHit<T>* hits = nullptr;           ///< (rows): the current step's
-  int* counts = nullptr;                ///< (rows): the current step's contacts per node
+  T* counts = nullptr;                  ///< (rows): the current step's weighted contacts per node
   int* stale = nullptr;                 ///< mapped host memory: 1 = rebuild before the next steps
 };
 
@@ -82,7 +82,7 @@ class DeviceBodyContact {
   index_t rows_ = 0;
   long builds_ = 0;
   DeviceArray<index_t> node_, cand_start_, cand_tri_, cand_rows_, corner_start_, corner_cand_, corner_row_;
-  DeviceArray<int> counts_;
+  DeviceArray<T> counts_;
   DeviceArray<T> cand_mu_;
   DeviceArray<std::uint8_t> corner_slot_;
   DeviceArray<Packed3<T>> x_built_;

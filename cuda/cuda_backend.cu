@@ -366,6 +366,7 @@ class CudaBackend final : public Backend {
     surface_.X = model.X;
     surface_.tris = model.tris;
     surface_.surf_nodes = model.surf_nodes;
+    surface_.node_flags = model.node_flags;  // a face on a symmetry plane is no candidate
     reduce_tools_ = nullptr;
     driven_list_.allocate(n);
     drive_dev_.allocate(n * (3 * sizeof(T) + sizeof(index_t) + 1));
