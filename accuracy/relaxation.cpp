@@ -10,6 +10,7 @@ namespace tissue::accuracy {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+constexpr int kBodyOmegaSpan = 50;  ///< steps a lowest-mode estimate spans with bodies in contact (measured_omega)
 
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
@@ -142,16 +143,68 @@ bool ramp_drive(Backend& b, const Drive& drive, const std::vector<double>& start
   return true;
 }
 
-/// The lowest mode's frequency (rad/s) measured over two steps from the current state (a Rayleigh quotient
-/// of the free components; nodes on a tool are held by it, so theirs are left out). Takes two steps.
-double measured_omega(Backend& b, const TissueModel<double>& m, std::vector<std::uint8_t> mask, Fields& last) {
+/// The lowest mode's frequency (rad/s) measured from the current state over `span` steps (a Rayleigh
+/// quotient of the free components; nodes on a tool are held by it, so theirs are left out). Takes span + 1
+/// steps. A download's f is the force at the previous download's u, so u0 pairs with the next f.
+double measured_omega(Backend& b, const TissueModel<double>& m, std::vector<std::uint8_t> mask, int span,
+                      Fields& last) {
+  // With bodies, a body contact's node and its triangle's corners are left out at every step: a node
+  // entering or leaving contact is moved by the contact's projection, not by its stiffness. Over one step
+  // du is the velocity, which weighs each mode by its frequency, so a contact's chatter outweighed the
+  // creep of the lowest mode (measured: 11 times its frequency, and each raised damping raised the next
+  // estimate); over `span` steps the creep grows and the chatter does not.
+  const auto leave_out_bodies = [&] {
+    for (const BodyContactNode& c : b.body_contacts()) {
+      mask[c.node] = 0;
+      for (int k = 0; k < 3; ++k) mask[m.tris[k * m.n_tris + c.tri]] = 0;
+    }
+  };
+  leave_out_bodies();
   const Fields d0 = b.download();
   b.advance(1);
-  const Fields d1 = b.download();
+  leave_out_bodies();
+  const Fields f0 = b.download();
+  for (int k = 1; k < span; ++k) {
+    b.advance(1);
+    leave_out_bodies();
+  }
+  const Fields d1 = span > 1 ? b.download() : f0;
   b.advance(1);
+  leave_out_bodies();
   last = b.download();
   for (const ContactNode& c : b.contacts()) mask[c.node] = 0;
-  return std::sqrt(rayleigh_omega2(d0.u, d1.u, d1.f, last.f, m.mass, mask));
+  return std::sqrt(rayleigh_omega2(d0.u, d1.u, f0.f, last.f, m.mass, mask));
+}
+
+/// With bodies in contact: the free residual squared (N^2) over the free components of the nodes no body
+/// contact of the last step touches, plus the squared net force of the nodes it touches (a node inside
+/// another body and the corners of the triangle it is inside) along each axis none of them holds (along a
+/// held one, a roller's reaction takes a share the internal forces do not show).
+double body_free_force2(Backend& b, const TissueModel<double>& m, const std::vector<std::uint8_t>& free_mask) {
+  const Fields f = b.download();
+  const index_t n = m.n_nodes, nt = m.n_tris;
+  std::vector<std::uint8_t> touched(n, 0);
+  std::uint8_t held = 0;
+  for (const BodyContactNode& c : b.body_contacts())
+    for (int k = -1; k < 3; ++k) {
+      const index_t a = k < 0 ? c.node : m.tris[k * nt + c.tri];
+      touched[a] = 1;
+      held |= std::uint8_t(~free_mask[a] & kAllAxes);
+    }
+  double rest2 = 0, net2 = 0;
+  for (int c = 0; c < 3; ++c) {
+    double net = 0;
+    for (index_t a = 0; a < n; ++a) {
+      if (!(free_mask[a] >> c & 1)) continue;
+      const double v = f.f[c * std::size_t(n) + a];
+      if (touched[a])
+        net += v;
+      else
+        rest2 += v * v;
+    }
+    if (!(held >> c & 1)) net2 += net * net;
+  }
+  return rest2 + net2;
 }
 
 }  // namespace
@@ -167,7 +220,8 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
   const auto t0 = Clock::now();
   TissueModel<double> m = model;
   if (o.mass_scaling) {
-    m.mass = relaxation_masses(m, m.dt, tool ? std::min(o.mass_safety, o.contact_mass_safety) : o.mass_safety);
+    const bool contact = tool || !o.bodies.empty();
+    m.mass = relaxation_masses(m, m.dt, contact ? std::min(o.mass_safety, o.contact_mass_safety) : o.mass_safety);
     m.total_mass = 0;
     for (double x : m.mass) m.total_mass += x;
   }
@@ -177,6 +231,7 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
   const auto load = [&](std::span<const double> u) {
     b.upload(m);
     if (tool) b.set_tools(std::span<const ToolShape>(&tool->shape, 1), tool->contact);
+    if (!o.bodies.empty()) b.set_body_contact(o.bodies);
     if (!u.empty()) b.set_displacements(u);
   };
   load(u0);
@@ -202,7 +257,7 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
     const Reductions r = b.reduce();
     check_health(r, steps - o.check_every, steps - 1, 1.0);
     const double held = std::max(std::sqrt(r.held_force2), o.force_floor);
-    out.residual = std::sqrt(r.free_force2) / held;
+    out.residual = std::sqrt(o.bodies.empty() ? r.free_force2 : body_free_force2(b, m, free_mask)) / held;
     out.kinetic = r.kinetic / std::max(0.5 * held * r.max_disp, 1e-300);
     out.last = r;
     out.history.push_back(out.residual);
@@ -219,7 +274,7 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
     const long stall = std::max(10L * o.check_every, std::lround(o.stall_periods * period / m.dt));
     if (steps - best_step > stall) {
       out.stalled = true;
-      if (tool && out.residual <= o.contact_floor * o.residual_tol && out.kinetic <= o.kinetic_tol)
+      if ((tool || !o.bodies.empty()) && out.residual <= o.contact_floor * o.residual_tol && out.kinetic <= o.kinetic_tol)
         out.converged = out.at_contact_floor = true;
       out.why = out.converged
                     ? fmt::format("converged at the contact's floor after {} steps: the residual stalled within {:g} x "
@@ -248,8 +303,9 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
     if (o.adapt_damping && out.residual > o.adapt_above && steps - last_adapt >= o.adapt_every) {
       last_adapt = steps;
       Fields now;
-      const double omega = measured_omega(b, m, free_mask, now);
-      steps += 2;
+      const int span = o.bodies.empty() ? 1 : kBodyOmegaSpan;
+      const double omega = measured_omega(b, m, free_mask, span, now);
+      steps += span + 1;
       if (omega > 0 && std::fabs(2 * omega - alpha) > 0.1 * alpha) {  // restart there with alpha = 2 omega
         alpha = 2 * omega;
         set_time_step(m, m.dt, alpha);

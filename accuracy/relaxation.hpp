@@ -78,6 +78,11 @@ struct RelaxOptions {
                                 ///< rounding goes in and out of the contact set, each time leaving its
                                 ///< rounding-size force in the residual (at_contact_floor = true)
   double force_floor = 1e-12;   ///< N, denominator floor of the relative residual
+  BodyContactSpec bodies;       ///< contact between the model's bodies (Backend::set_body_contact), set again
+                                ///< after every upload. A node inside another body, and the corners of the
+                                ///< triangle it is inside, carry the contact's force: the residual then counts
+                                ///< the free components of the other nodes, plus the net force of those (the
+                                ///< two sides' contact forces cancel at equilibrium)
   std::function<bool()> stop;   ///< asked at every convergence check; true ends the relaxation there
                                 ///< (RelaxResult::interrupted: a signal, apps/interrupt.hpp)
 };

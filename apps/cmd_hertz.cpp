@@ -8,7 +8,6 @@
 #include "accuracy/hertz.hpp"
 #include "apps/commands.hpp"
 #include "apps/options.hpp"
-#include "io/atomic_file.hpp"
 #include "io/tetgen_mesher.hpp"
 #include "scene/text.hpp"
 
@@ -86,20 +85,17 @@ struct HertzArgs {
 
 int run_hertz_command(HertzArgs& a) {
   if (a.quick) a.options.levels = {6, 8};
-  std::string json = "[";
+  std::vector<std::string> json;
   std::vector<accuracy::HertzStudy> studies;
   for (std::size_t k = 0; k < a.nus.size(); ++k) {
     accuracy::HertzOptions o = a.options;
     o.nu = a.nus[k];
+    o.upper.nu = a.nus[k];  // two spheres: one Poisson's ratio for both
     studies.push_back(accuracy::run_hertz(o));
     fmt::print("{}\n", accuracy::hertz_table(studies.back()));
-    json += (k ? ",\n" : "\n") + accuracy::hertz_json(studies.back());
+    json.push_back(accuracy::hertz_json(studies.back()));
   }
-  json += "]\n";
-  if (!a.json.empty()) {
-    io::write_file_atomic(a.json, json);  // whole or not at all
-    fmt::print("wrote {}\n", a.json);
-  }
+  write_json_output(a.json, json_array(json) + "\n");
   return 0;
 }
 
@@ -108,7 +104,8 @@ int run_hertz_command(HertzArgs& a) {
 void add_hertz_command(CLI::App& app, int& rc) {
   auto args = std::make_shared<HertzArgs>();
   auto* cmd = app.add_subcommand(
-      "hertz", "Verify the tool contact against Hertz: a rigid sphere pressed into a block, refined under the tool");
+      "hertz", "Verify the contact against Hertz: a rigid sphere pressed into a block, or (--spheres) two elastic "
+                "spheres pressed together through the body contact, refined under the contact");
   cmd->add_option("--nu", args->nus, "Poisson's ratios to run")
       ->capture_default_str()
       ->check(real_number(-1, 0.5, true, true));  // 0.5 is incompressible: K would be infinite
@@ -131,6 +128,17 @@ void add_hertz_command(CLI::App& app, int& rc) {
   cmd->add_option("--block", args->options.block, "block edge L / contact radius at the deepest press")
       ->capture_default_str()
       ->check(CLI::Validator([](std::string& t) { return hertz_block_error(t); }, "[10, 1000]"));
+  auto* spheres = cmd->add_flag("--spheres", args->options.spheres,
+                "two elastic spheres pressed together through the body contact (E and --radius the lower, "
+                "--upper-E and --upper-radius the upper; ratios are delta / R*)");
+  cmd->add_option("--upper-E", args->options.upper.E, "the upper sphere's Young's modulus (Pa), with --spheres")
+      ->capture_default_str()
+      ->check(positive_real())
+      ->needs(spheres);
+  cmd->add_option("--upper-radius", args->options.upper.R, "the upper sphere's radius (m), with --spheres")
+      ->capture_default_str()
+      ->check(real_number(1e-6, 1))
+      ->needs(spheres);
   cmd->add_option("--backend", args->options.backend, "cpu | cuda (relaxes in double)")->capture_default_str();
   cmd->add_option("--json", args->json, "write the studies as JSON (scripts/plot hertz draws them)")
       ->check(output_file());

@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 
 #include <string>
+#include <vector>
 
 #include "scene/scene.hpp"
 #include "scene/text.hpp"
@@ -46,6 +47,12 @@ scene::Scene load_scene_arg(const std::string& arg);
 /// Refuses a scene with <load>s (file:line of the first) for a command that
 /// cannot apply them.
 void refuse_loads(const scene::Scene& s, const std::string& command);
+
+/// JSON values as an array, one a line ("[\n  a,\n  b\n]").
+std::string json_array(const std::vector<std::string>& values);
+/// Writes a command's --json output whole or not at all and says so on
+/// stdout ("wrote F"); nothing for an empty path (the option not given).
+void write_json_output(const std::string& path, const std::string& text);
 
 using scene::parse_depth;      // scene/text.hpp
 using scene::parse_precision;  // scene/text.hpp

@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "apps/commands.hpp"
+#include "io/atomic_file.hpp"
 #include "io/kidney.hpp"
 #include "io/surface_import.hpp"
 #include "io/scene_xml.hpp"
@@ -57,6 +58,18 @@ scene::Scene load_scene_arg(const std::string& arg) {
   set_activity(fmt::format("reading the scene {}", arg));
   if (auto builtin = io::builtin_scene(arg)) return *builtin;
   return io::read_scene(arg);
+}
+
+std::string json_array(const std::vector<std::string>& values) {
+  std::string out = "[";
+  for (std::size_t k = 0; k < values.size(); ++k) out += (k ? ",\n  " : "\n  ") + values[k];
+  return out + "\n]";
+}
+
+void write_json_output(const std::string& path, const std::string& text) {
+  if (path.empty()) return;
+  io::write_file_atomic(path, text);
+  fmt::print("wrote {}\n", path);
 }
 
 void refuse_loads(const scene::Scene& s, const std::string& command) {

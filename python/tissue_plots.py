@@ -104,15 +104,22 @@ def hertz(data, title=None):
                       label=f"{lv.get('tets', '?')} tets (h = {1e3 * lv.get('h_contact', 0):.2f} mm)")
             if closed is None or len(pts) > len(closed[0]):
                 closed = (d, [_need(p, "hertz", "hertz point") for p in pts])
-        left.plot(*closed, "k--", lw=1.5, label="Hertz: 4/3 E/(1-nu^2) sqrt(R) d^1.5")
+        upper = study.get("upper")
+        if upper:  # two elastic spheres: the effective modulus and radius
+            left.plot(*closed, "k--", lw=1.5, label="Hertz: 4/3 E* sqrt(R*) d^1.5")
+            left.set_ylabel("force between the spheres (N)")
+            left.set_title(f"E = {E} Pa on E = {upper.get('E', '?')} Pa, nu = {nu}, "
+                           f"R = {1e3 * R:g} and {1e3 * upper.get('R', 0):g} mm")
+        else:
+            left.plot(*closed, "k--", lw=1.5, label="Hertz: 4/3 E/(1-nu^2) sqrt(R) d^1.5")
+            left.set_ylabel("force on the sphere (N)")
+            left.set_title(f"E = {E} Pa, nu = {nu}, R = {1e3 * R:g} mm")
         left.set_xlabel("indentation d (mm)")
-        left.set_ylabel("force on the sphere (N)")
-        left.set_title(f"E = {E} Pa, nu = {nu}, R = {1e3 * R:g} mm")
         left.legend(fontsize=8)
         left.grid(alpha=0.3)
         h = [1e3 * lv["h_contact"] for lv in levels]
         right.loglog(h, [_need(lv, "max_error", "hertz level") for lv in levels], "s-", color="tab:red")
-        right.set_xlabel("edge under the sphere h (mm)")
+        right.set_xlabel("edge under the contact h (mm)")
         right.set_ylabel("largest |F / F_Hertz - 1|")
         right.set_title("error against mesh size")
         right.grid(True, which="both", alpha=0.3)

@@ -128,5 +128,76 @@ TEST(HertzStudy, NearlyIncompressibleTissueConvergesToo) {
   EXPECT_GT(s.levels[1].points[0].force, 0.0);
 }
 
+TEST(HertzPair, TheForceOfTwoSpheresHasTheRigidSphereAndTheFlatAsItsLimits) {
+  const double E1 = 3000, nu = 0.45, R = 0.005, delta = 2.5e-4;
+  // a rigid flat (E2, R2 infinite) under an elastic sphere is the rigid sphere on an elastic flat
+  EXPECT_NEAR(hertz_force_pair(E1, nu, R, INFINITY, 0.3, INFINITY, delta), hertz_force(E1, nu, R, delta), 1e-15);
+  // by hand: E* = 1 / (0.7975 / 3000 + 0.7975 / 6000) = 2507.8 Pa, R* = 2.5 mm, delta = 0.125 mm:
+  // F = 4/3 * 2507.8 * 0.05 * 1.3975e-6 = 2.3365e-4 N
+  EXPECT_NEAR(hertz_force_pair(E1, nu, R, 6000, nu, R, 1.25e-4), 2.3365e-4, 1e-8);
+  // two equal spheres: E* halves, R* halves
+  EXPECT_NEAR(hertz_force_pair(E1, nu, R, E1, nu, R, delta),
+              4.0 / 3.0 * (E1 / (1 - nu * nu) / 2) * std::sqrt(R / 2) * std::pow(delta, 1.5), 1e-15);
+}
+
+TEST(HertzPair, IsTwoGradedQuarterBlocksMeetingAtTheOriginEachWithItsCap) {
+  const int n = 6;
+  const double L = 0.04, core = 0.0012, R1 = 0.005, R2 = 0.008, cap = 0.0016;
+  const HertzPairMesh pm = hertz_pair(n, L, core, 3, {3000, 0.45, R1}, {6000, 0.45, R2}, cap);
+  const TissueModel<double> m = build_model(pm.in);  // throws on an inverted tet: the mirrored block keeps its orientation
+  const index_t per = (n + 1) * (n + 1) * (n + 1);
+  ASSERT_EQ(m.n_nodes, 2 * per);
+  ASSERT_EQ(pm.first_upper, per);
+  EXPECT_EQ(m.n_elems, 2 * 6 * n * n * n);
+  ASSERT_EQ(pm.in.materials.size(), 2u);
+  EXPECT_NEAR(pm.in.materials[1].mu, 6000 / (2 * 1.45), 1e-9);
+  EXPECT_EQ(pm.upper_far.size(), std::size_t((n + 1) * (n + 1)));
+  const index_t N = m.n_nodes;
+  int lower_top = 0, upper_bottom = 0, at_origin = 0;
+  for (index_t a = 0; a < N; ++a) {
+    const double x = m.X[a], y = m.X[N + a], z = m.X[2 * N + a], r = std::hypot(x, y);
+    const bool upper = a >= per;
+    if (r < 1e-12 && std::fabs(z) < 1e-15) ++at_origin;
+    if (r > cap) continue;
+    // within the cap each face is its sphere: the lower one's top below z = 0, the upper one's bottom above
+    const double R = upper ? R2 : R1, h = R - std::sqrt(R * R - r * r);
+    if (!upper && std::fabs(z + h) < 1e-12) ++lower_top;
+    if (upper && std::fabs(z - h) < 1e-12) ++upper_bottom;
+    EXPECT_EQ(pm.in.fixed[a] != 0, !upper && std::fabs(z + L + h) < 1e-9 * L) << "node " << a;
+  }
+  EXPECT_EQ(at_origin, 2);  // the two bodies touch at one point, node on node
+  EXPECT_GT(lower_top, 4);
+  EXPECT_GT(upper_bottom, 4);
+  for (index_t a : pm.upper_far) EXPECT_GT(m.X[2 * N + a], L - 1e-12);
+  EXPECT_THROW(hertz_pair(n, L, core, 3, {3000, 0.45, R1}, {6000, 0.45, R2}, R1), std::invalid_argument);
+}
+
+TEST(HertzPair, TwoElasticSpheresConvergeToHertzThroughTheBodyContact) {
+  // the CI-sized study of `tissue hertz --spheres`: a sphere of 6 kPa on one of 3 kPa, both R = 5 mm
+  HertzOptions o;
+  o.spheres = true;
+  o.upper = {6000, 0.45, 0.005};
+  o.ratios = {0.05, 0.1};
+  o.levels = {6, 8, 12};
+  o.verbose = false;
+  const HertzStudy s = run_hertz(o);
+  ASSERT_EQ(s.levels.size(), 3u);
+  for (std::size_t j = 0; j < 2; ++j)
+    for (std::size_t k = 0; k < 3; ++k) {
+      const HertzPoint& p = s.levels[k].points.at(j);
+      EXPECT_NEAR(p.hertz, hertz_force_pair(3000, 0.45, 0.005, 6000, 0.45, 0.005, p.delta), 1e-15);
+      EXPECT_GT(p.contact_nodes, 0);
+      EXPECT_GT(p.error, 0.0);  // node-to-surface contact on linear tets is stiff, never soft
+      EXPECT_LT(p.balance, 2e-3) << "the base must carry what the upper face presses";
+      EXPECT_LE(p.spread, 2e-3);
+      if (k > 0) {
+        EXPECT_LT(p.error, s.levels[k - 1].points[j].error) << s.levels[k].cells << " cells: the error must fall";
+      }
+    }
+  // measured (cpu): 6 cells +22.4 / +32.6 %, 8 cells +12.6 / +18.6 %, 12 cells +5.5 / +8.5 % at
+  // delta/R* 0.05 / 0.1, balance 1.3e-4 at worst (the finer study, within 5 %: docs/contact.md, 4c)
+  EXPECT_LT(s.levels[2].max_error, 0.095);
+}
+
 }  // namespace
 }  // namespace tissue::accuracy
