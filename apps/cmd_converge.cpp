@@ -10,7 +10,6 @@
 #include "accuracy/convergence.hpp"
 #include "apps/commands.hpp"
 #include "apps/options.hpp"
-#include "io/atomic_file.hpp"
 #include "scene/text.hpp"
 
 namespace tissue::app {
@@ -95,15 +94,12 @@ int run_converge(const ConvergeArgs& a) {
     }
   }
   if (!a.json.empty()) {
-    std::string j = fmt::format("{{\"backend\": \"{}\", \"residual_tol\": {}, \"limit\": {}, \"order\": {}, "
-                                "\"monotone\": {}, \"rows\": [",
-                                a.backend, a.tol, lim.value, lim.order, lim.monotone);
-    bool first = true;
-    for (const auto& r : res.rows) j += (first ? (first = false, "\n") : ",\n") + row_json(r, true);
-    for (const auto& r : uniform) j += (first ? (first = false, "\n") : ",\n") + row_json(r, false);
-    j += "]}\n";
-    io::write_file_atomic(a.json, j);  // whole or not at all
-    fmt::print("wrote {}\n", a.json);
+    std::vector<std::string> rows;
+    for (const auto& r : res.rows) rows.push_back(row_json(r, true));
+    for (const auto& r : uniform) rows.push_back(row_json(r, false));
+    write_json_output(a.json, fmt::format("{{\"backend\": \"{}\", \"residual_tol\": {}, \"limit\": {}, \"order\": {}, "
+                                          "\"monotone\": {}, \"rows\": {}}}\n",
+                                          a.backend, a.tol, lim.value, lim.order, lim.monotone, json_array(rows)));
   }
   return 0;
 }

@@ -14,7 +14,6 @@
 #include "apps/commands.hpp"
 #include "apps/options.hpp"
 #include "core/cut.hpp"
-#include "io/atomic_file.hpp"
 #include "io/mesh_quality.hpp"
 #include "io/scene_xml.hpp"
 #include "scene/checks.hpp"
@@ -87,7 +86,7 @@ int run_cut(const CutArgs& a) {
   fmt::print("{:<11} {:>7} {:>6} {:>7} {:>6} {:>6} {:>6} {:>10} {:>6} {:>12} {:>9} {:>9} {:>9} {:>10}\n", "method",
              "+elems", "split", "snapped", "+edge", "copies", "faces", "unresolved", "pieces", "volume", "dt ratio",
              "dihedral", "cut ms", "rebuild ms");
-  std::string json = "[";
+  std::vector<std::string> rows;
   for (std::size_t k = 0; k < methods.size(); ++k) {
     set_activity(fmt::format("cutting {} ({})", s.source, methods[k]));
     CutResult r;
@@ -103,25 +102,21 @@ int run_cut(const CutArgs& a) {
     fmt::print("{:<11} {:>7} {:>6} {:>7} {:>6} {:>6} {:>6} {:>10} {:>6} {:>+12.2e} {:>9.3f} {:>9.2f} {:>9.2f} {:>10.2f}\n",
                methods[k], after.elements - before.elements, r.split, r.snapped, r.edge_nodes, r.copies, r.cut_faces,
                r.unresolved, after.pieces, volume, ratio, after.min_dihedral, cut_ms, rebuild_ms);
-    json += fmt::format(
-        "{}\n  {{\"bench\": \"cut\", \"scene\": \"{}\", \"method\": \"{}\", \"snap\": {}, \"touch\": {}, \"keep\": {}, \"nodes\": {}, \"elements\": "
+    rows.push_back(fmt::format(
+        "{{\"bench\": \"cut\", \"scene\": \"{}\", \"method\": \"{}\", \"snap\": {}, \"touch\": {}, \"keep\": {}, \"nodes\": {}, \"elements\": "
         "{}, \"new_elements\": {}, \"split\": {}, \"snapped\": {}, \"edge_nodes\": {}, \"copies\": {}, \"cut_faces\": "
         "{}, \"unresolved\": {}, \"pieces\": {}, \"volume_change\": {:.3e}, \"dt_crit_before\": {:.6g}, "
         "\"dt_crit_after\": {:.6g}, \"dt_ratio\": {:.4f}, \"min_dihedral_before\": {:.3f}, \"min_dihedral_after\": "
         "{:.3f}, \"cut_ms\": {:.3f}, \"rebuild_ms\": {:.3f}}}",
-        k ? "," : "", s.source, methods[k], a.snap, a.touch, a.keep, after.nodes, after.elements, after.elements - before.elements,
+        s.source, methods[k], a.snap, a.touch, a.keep, after.nodes, after.elements, after.elements - before.elements,
         r.split, r.snapped, r.edge_nodes, r.copies, r.cut_faces, r.unresolved, after.pieces, volume, before.dt_crit,
-        after.dt_crit, ratio, before.min_dihedral, after.min_dihedral, cut_ms, rebuild_ms);
+        after.dt_crit, ratio, before.min_dihedral, after.min_dihedral, cut_ms, rebuild_ms));
     if (!a.out.empty()) {
       io::write_scene(cut_s, a.out, true);
       fmt::print("wrote {}\n", a.out);
     }
   }
-  json += "\n]\n";
-  if (!a.json.empty()) {
-    io::write_file_atomic(a.json, json);
-    fmt::print("wrote {}\n", a.json);
-  }
+  write_json_output(a.json, json_array(rows) + "\n");
   return 0;
 }
 

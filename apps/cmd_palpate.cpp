@@ -9,7 +9,6 @@
 #include "accuracy/palpation.hpp"
 #include "apps/commands.hpp"
 #include "apps/options.hpp"
-#include "io/atomic_file.hpp"
 
 namespace tissue::app {
 namespace {
@@ -26,21 +25,16 @@ int run_palpate(const PalpateArgs& a) {
              1e3 * a.o.press, 1e3 * a.o.tool_radius, 1e3 * a.o.scan, 1e3 * a.o.tumour_radius, 1e3 * a.o.tumour_depth,
              a.o.stiffness_ratio, s.tets, s.tumour_tets, s.nodes);
   fmt::print("   x (mm)   |F_z| tumour (N)   tumour as tissue (N)   ratio\n");
-  std::string rows;
+  std::vector<std::string> rows;
   for (std::size_t k = 0; k < s.with.size(); ++k) {
     const double fw = std::fabs(s.with[k].force.z), fo = std::fabs(s.without[k].force.z);
     fmt::print("  {:7.2f}   {:16.5g}   {:20.5g}   {:5.3f}\n", 1e3 * s.with[k].x, fw, fo, fw / fo);
-    rows += fmt::format("{}  {{\"x\": {}, \"force_tumour\": {}, \"force_baseline\": {}}}", k ? ",\n" : "\n",
-                        s.with[k].x, fw, fo);
+    rows.push_back(fmt::format("{{\"x\": {}, \"force_tumour\": {}, \"force_baseline\": {}}}", s.with[k].x, fw, fo));
   }
-  if (!a.json.empty()) {
-    io::write_file_atomic(
-        a.json, fmt::format("{{\"press\": {}, \"tool_radius\": {}, \"tumour_radius\": {}, \"tumour_depth\": {}, "
-                            "\"stiffness_ratio\": {}, \"E\": {}, \"nu\": {}, \"tets\": {}, \"points\": [{}\n]}}\n",
-                            a.o.press, a.o.tool_radius, a.o.tumour_radius, a.o.tumour_depth, a.o.stiffness_ratio,
-                            a.o.E, a.o.nu, s.tets, rows));
-    fmt::print("wrote {}\n", a.json);
-  }
+  write_json_output(a.json, fmt::format("{{\"press\": {}, \"tool_radius\": {}, \"tumour_radius\": {}, \"tumour_depth\": {}, "
+                                        "\"stiffness_ratio\": {}, \"E\": {}, \"nu\": {}, \"tets\": {}, \"points\": {}}}\n",
+                                        a.o.press, a.o.tool_radius, a.o.tumour_radius, a.o.tumour_depth,
+                                        a.o.stiffness_ratio, a.o.E, a.o.nu, s.tets, json_array(rows)));
   return 0;
 }
 

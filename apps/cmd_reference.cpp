@@ -12,7 +12,6 @@
 #include "apps/commands.hpp"
 #include "apps/interrupt.hpp"
 #include "apps/options.hpp"
-#include "io/atomic_file.hpp"
 #include "io/output_dir.hpp"
 #include "io/vtu_writer.hpp"
 #include "scene/checks.hpp"
@@ -76,7 +75,7 @@ int run_reference(const ReferenceArgs& a) {
       ref.strain_energy >= 0 ? fmt::format("{:.6g} J", ref.strain_energy)
                              : std::string("not measured (the run stopped before the relaxation measured it)"));
   if (!a.json.empty()) {
-    io::write_file_atomic(
+    write_json_output(
         a.json,
         fmt::format(
             "{{\"scene\": \"{}\", \"nodes\": {}, \"tets\": {}, \"contact_nodes\": {}, \"t_hold\": {}, \"steps\": {}, "
@@ -85,7 +84,6 @@ int run_reference(const ReferenceArgs& a) {
             s.source, model.n_nodes, model.n_elems, ref.contact_nodes, t_hold, ref.relax.steps, ref.dt, ref.relax.wall,
             ref.relax.residual, ref.relax.kinetic, ref.relax.damping, force.x, force.y, force.z, ref.max_disp,
             ref.strain_energy >= 0 ? fmt::format("{}", ref.strain_energy) : std::string("null"), ref.relax.converged));
-    fmt::print("wrote {}\n", a.json);
   }
   if (folder) {
     const std::string path_vtu = folder->file("reference.vtu");

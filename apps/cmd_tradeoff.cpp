@@ -6,7 +6,6 @@
 #include <memory>
 
 #include "accuracy/tradeoff.hpp"
-#include "io/atomic_file.hpp"
 #include "apps/commands.hpp"
 #include "apps/interrupt.hpp"
 #include "apps/options.hpp"
@@ -60,10 +59,7 @@ int run_tradeoff_command(TradeoffArgs& a) {
   if (res.interrupted)
     fmt::print("stopped by {}: the rows below are the settings done before it\n", InterruptGuard::signal_name());
   fmt::print("{}", accuracy::tradeoff_table(res));
-  if (!a.json.empty()) {
-    io::write_file_atomic(a.json, accuracy::tradeoff_json(res));
-    fmt::print("wrote {}\n", a.json);
-  }
+  if (!a.json.empty()) write_json_output(a.json, accuracy::tradeoff_json(res));
   return res.interrupted ? InterruptGuard::exit_code() : 0;
 }
 
