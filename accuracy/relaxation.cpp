@@ -10,7 +10,7 @@ namespace tissue::accuracy {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-constexpr int kBodyOmegaSpan = 50;  ///< steps a lowest-mode estimate spans with bodies in contact (measured_omega)
+constexpr int kContactOmegaSpan = 50;  ///< steps a lowest-mode estimate spans with contact (measured_omega)
 
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
@@ -148,31 +148,31 @@ bool ramp_drive(Backend& b, const Drive& drive, const std::vector<double>& start
 /// steps. A download's f is the force at the previous download's u, so u0 pairs with the next f.
 double measured_omega(Backend& b, const TissueModel<double>& m, std::vector<std::uint8_t> mask, int span,
                       Fields& last) {
-  // With bodies, a body contact's node and its triangle's corners are left out at every step: a node
-  // entering or leaving contact is moved by the contact's projection, not by its stiffness. Over one step
-  // du is the velocity, which weighs each mode by its frequency, so a contact's chatter outweighed the
-  // creep of the lowest mode (measured: 11 times its frequency, and each raised damping raised the next
-  // estimate); over `span` steps the creep grows and the chatter does not.
-  const auto leave_out_bodies = [&] {
+  // A tool's contact nodes, and a body contact's node and its triangle's corners, are left out at every
+  // step: a node entering or leaving contact is moved by the contact's projection, not by its stiffness.
+  // Over one step du is the velocity, which weighs each mode by its frequency, so a contact's chatter
+  // outweighed the creep of the lowest mode (two spheres: 11 times its frequency, and each raised damping
+  // raised the next estimate); over `span` steps the creep grows and the chatter does not.
+  const auto leave_out_contacts = [&] {
+    for (const ContactNode& c : b.contacts()) mask[c.node] = 0;
     for (const BodyContactNode& c : b.body_contacts()) {
       mask[c.node] = 0;
       for (int k = 0; k < 3; ++k) mask[m.tris[k * m.n_tris + c.tri]] = 0;
     }
   };
-  leave_out_bodies();
+  leave_out_contacts();
   const Fields d0 = b.download();
   b.advance(1);
-  leave_out_bodies();
+  leave_out_contacts();
   const Fields f0 = b.download();
   for (int k = 1; k < span; ++k) {
     b.advance(1);
-    leave_out_bodies();
+    leave_out_contacts();
   }
   const Fields d1 = span > 1 ? b.download() : f0;
   b.advance(1);
-  leave_out_bodies();
+  leave_out_contacts();
   last = b.download();
-  for (const ContactNode& c : b.contacts()) mask[c.node] = 0;
   return std::sqrt(rayleigh_omega2(d0.u, d1.u, f0.f, last.f, m.mass, mask));
 }
 
@@ -303,7 +303,7 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
     if (o.adapt_damping && out.residual > o.adapt_above && steps - last_adapt >= o.adapt_every) {
       last_adapt = steps;
       Fields now;
-      const int span = o.bodies.empty() ? 1 : kBodyOmegaSpan;
+      const int span = o.bodies.empty() && tool == nullptr ? 1 : kContactOmegaSpan;
       const double omega = measured_omega(b, m, free_mask, span, now);
       steps += span + 1;
       if (omega > 0 && std::fabs(2 * omega - alpha) > 0.1 * alpha) {  // restart there with alpha = 2 omega
