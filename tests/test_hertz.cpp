@@ -189,7 +189,9 @@ TEST(HertzPair, TwoElasticSpheresConvergeToHertzThroughTheBodyContact) {
       EXPECT_GT(p.contact_nodes, 0);
       EXPECT_GT(p.error, 0.0);  // node-to-surface contact on linear tets is stiff, never soft
       EXPECT_LT(p.balance, 2e-3) << "the base must carry what the upper face presses";
-      EXPECT_LE(p.spread, 2e-3);
+      // relaxed to the tolerance, not settled into a cycle of contact nodes whose mean stands in for it
+      // (the 12-cell mesh at 0.05 cycled while the lowest-mode estimate took the contact's chatter in)
+      EXPECT_EQ(p.spread, 0.0) << s.levels[k].cells << " cells, delta/R* " << p.delta / 0.0025;
       if (k > 0) {
         EXPECT_LT(p.error, s.levels[k - 1].points[j].error) << s.levels[k].cells << " cells: the error must fall";
       }
