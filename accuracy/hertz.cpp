@@ -209,9 +209,9 @@ HertzStudy run_hertz(const HertzOptions& o) {
       }
       if (!r.converged && !(cycling && spread <= kCycleSpread))
         throw std::runtime_error(fmt::format(
-            "hertz: {} cells, delta/R = {}: the relaxation stopped after {} steps at residual {:.3g}, kinetic {:.3g}: "
+            "hertz: {} cells, delta/R{} = {}: the relaxation stopped after {} steps at residual {:.3g}, kinetic {:.3g}: "
             "it {}{}",
-            n, ratio, r.steps, r.residual, r.kinetic, r.why,
+            n, o.spheres ? "*" : "", ratio, r.steps, r.residual, r.kinetic, r.why,
             cycling ? fmt::format("; the force then varied by {:.3g} of it over {} steps (the most taken is {:g})",
                                   spread, kCycleSteps, kCycleSpread)
                     : std::string()));
@@ -238,9 +238,9 @@ HertzStudy run_hertz(const HertzOptions& o) {
       tool.start = tool.held;
       if (o.verbose)
         fmt::print(stderr,
-                   "  hertz{} nu {} {:3} cells ({} tets): delta/R {:.3f}  F {:.5g} N  Hertz {:.5g} N  error {:+.2f} %  "
+                   "  hertz{} nu {} {:3} cells ({} tets): delta/R{} {:.3f}  F {:.5g} N  Hertz {:.5g} N  error {:+.2f} %  "
                    "({} steps, {:.1f} s{})\n",
-                   o.spheres ? " spheres" : "", o.nu, n, m.n_elems, ratio, p.force, p.hertz, 100 * p.error, r.steps,
+                   o.spheres ? " spheres" : "", o.nu, n, m.n_elems, o.spheres ? "*" : "", ratio, p.force, p.hertz, 100 * p.error, r.steps,
                    r.wall,
                    o.spheres ? fmt::format(", balance {:.2g}, spread {:.2g}, residual {:.2g}", p.balance, p.spread,
                                            r.residual)

@@ -179,23 +179,26 @@ double measured_omega(Backend& b, const TissueModel<double>& m, std::vector<std:
 /// With bodies in contact: the free residual squared (N^2) over the free components of the nodes no body
 /// contact of the last step touches, plus the squared net force of the nodes it touches (a node inside
 /// another body and the corners of the triangle it is inside) along each axis none of them holds (along a
-/// held one, a roller's reaction takes a share the internal forces do not show).
+/// held one, a roller's reaction takes a share the internal forces do not show). A tool's contact nodes are
+/// held by the tool and left out; one among the touched nodes leaves their net unchecked (the tool carries a
+/// share of it).
 double body_free_force2(Backend& b, const TissueModel<double>& m, const std::vector<std::uint8_t>& free_mask) {
   const Fields f = b.download();
   const index_t n = m.n_nodes, nt = m.n_tris;
-  std::vector<std::uint8_t> touched(n, 0);
+  std::vector<std::uint8_t> touched(n, 0), on_tool(n, 0);
+  for (const ContactNode& c : b.contacts()) on_tool[c.node] = 1;
   std::uint8_t held = 0;
   for (const BodyContactNode& c : b.body_contacts())
     for (int k = -1; k < 3; ++k) {
       const index_t a = k < 0 ? c.node : m.tris[k * nt + c.tri];
       touched[a] = 1;
-      held |= std::uint8_t(~free_mask[a] & kAllAxes);
+      held |= on_tool[a] ? kAllAxes : std::uint8_t(~free_mask[a] & kAllAxes);
     }
   double rest2 = 0, net2 = 0;
   for (int c = 0; c < 3; ++c) {
     double net = 0;
     for (index_t a = 0; a < n; ++a) {
-      if (!(free_mask[a] >> c & 1)) continue;
+      if (!(free_mask[a] >> c & 1) || on_tool[a]) continue;
       const double v = f.f[c * std::size_t(n) + a];
       if (touched[a])
         net += v;
@@ -231,8 +234,8 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
   const auto load = [&](std::span<const double> u) {
     b.upload(m);
     if (tool) b.set_tools(std::span<const ToolShape>(&tool->shape, 1), tool->contact);
-    if (!o.bodies.empty()) b.set_body_contact(o.bodies);
     if (!u.empty()) b.set_displacements(u);
+    if (!o.bodies.empty()) b.set_body_contact(o.bodies);  // its lists built where the bodies are
   };
   load(u0);
   const std::vector<double> start = drive_start(m, drive, u0);

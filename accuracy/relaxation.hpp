@@ -10,7 +10,8 @@
 // Underwood 1983): once the fast modes have died, the step-to-step change of
 // u is dominated by the slowest mode, and its Rayleigh quotient
 //     omega^2 = (du . df) / (du . M du)   over free components,
-// du = u^{n+1} - u^n, df = f(u^{n+1}) - f(u^n), estimates omega_1. When the
+// du = u^{n+k} - u^n, df = f(u^{n+k}) - f(u^n), estimates omega_1 (k = 1,
+// or 50 with contact, leaving out each step's contact nodes). When the
 // estimate moves alpha by more than 10%, the model is re-uploaded with the
 // new alpha and the current displacements (velocity restarts at zero).
 #pragma once
@@ -135,7 +136,7 @@ RelaxResult relax(Backend& backend, const TissueModel<double>& model, const Driv
 std::vector<double> relaxation_masses(const TissueModel<double>& model, double dt, double safety);
 
 /// Rayleigh-quotient estimate of omega^2 (rad^2/s^2) from two displacement
-/// states one step apart and the internal forces at them (3 x n_nodes each),
+/// states (one step apart, or more) and the internal forces at them (3 x n_nodes each),
 /// over the components `free_mask` marks (n_nodes, bit c = component c
 /// free), with lumped masses (n_nodes, kg). Returns 0 when du is zero.
 double rayleigh_omega2(std::span<const double> u0, std::span<const double> u1, std::span<const double> f0,

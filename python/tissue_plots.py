@@ -108,8 +108,8 @@ def hertz(data, title=None):
         if upper:  # two elastic spheres: the effective modulus and radius
             left.plot(*closed, "k--", lw=1.5, label="Hertz: 4/3 E* sqrt(R*) d^1.5")
             left.set_ylabel("force between the spheres (N)")
-            left.set_title(f"E = {E} Pa on E = {upper.get('E', '?')} Pa, nu = {nu}, "
-                           f"R = {1e3 * R:g} and {1e3 * upper.get('R', 0):g} mm")
+            left.set_title(f"E = {upper.get('E', '?')} Pa on E = {E} Pa, nu = {nu}, "
+                           f"R = {1e3 * upper.get('R', 0):g} on {1e3 * R:g} mm")
         else:
             left.plot(*closed, "k--", lw=1.5, label="Hertz: 4/3 E/(1-nu^2) sqrt(R) d^1.5")
             left.set_ylabel("force on the sphere (N)")
