@@ -299,6 +299,49 @@ TEST_P(BodyContact, BadSpecsAreNamed) {
   }
 }
 
+TEST(BodyContactRule, CountsWeighCornersByTheirWeightAndAHitScalesByItsMostSharedNode) {
+  // three hits: row 0 on candidate 0 (corners rows 3, 4, 5), row 1 on candidate 1 (corners 4, 3, 5),
+  // row 2 on candidate 2 (corners 4, 5, 3); rows 3-5 hit nothing themselves
+  std::vector<BodyHit<double>> hits(6);
+  hits[0] = {0, 0.0, {1, 0, 0}, {0.5, 0.1, 0.4}};
+  hits[1] = {1, 0.0, {0, 2, 0}, {0.3, 0.3, 0.4}};
+  hits[2] = {2, 0.0, {0, 0, 3}, {0.0, 0.8, 0.2}};
+  const std::vector<index_t> cand_rows = {3, 4, 5, 4, 3, 5, 4, 5, 3};
+  // each row's corner entries (candidate, its row, the corner), ascending by row as the lists give them
+  const std::vector<index_t> start = {0, 0, 0, 0, 3, 6, 9};
+  const std::vector<index_t> corner_cand = {0, 1, 2, 0, 1, 2, 0, 1, 2};
+  const std::vector<index_t> corner_row = {0, 1, 2, 0, 1, 2, 0, 1, 2};
+  const std::vector<std::uint8_t> corner_slot = {0, 1, 2, 1, 0, 0, 2, 2, 1};
+  const auto hit = [&](index_t r) -> const BodyHit<double>& { return hits[r]; };
+  std::vector<double> counts(6);
+  for (index_t r = 0; r < 6; ++r)
+    counts[r] = body_row_count<double>(r, start[r], start[r + 1], corner_cand.data(), corner_row.data(),
+                                       corner_slot.data(), hit);
+  EXPECT_DOUBLE_EQ(counts[0], 1.0);              // its own hit only
+  EXPECT_DOUBLE_EQ(counts[3], 0.5 + 0.3 + 0.2);  // a corner of all three, by its weight in each
+  EXPECT_DOUBLE_EQ(counts[4], 0.1 + 0.3 + 0.0);  // weight 0 in the third counts for nothing
+  EXPECT_DOUBLE_EQ(counts[5], 0.4 + 0.4 + 0.8);
+  // a corner of weight >= 1/4 weighs in with its whole count, below it blended towards 1 (1 + 4 w (count - 1))
+  BodyHit<double> h = hits[0];
+  body_scale_hit(h, 0, cand_rows.data(), counts.data());
+  const double most = std::max({1.0, counts[3], 1 + 4 * 0.1 * (counts[4] - 1), counts[5]});
+  EXPECT_DOUBLE_EQ(h.c[0], 1.0 / most);
+  // a corner shared by many contacts weighs in as far as the hit leans on it: as its weight falls to 0
+  // the scale goes continuously to what the other nodes give, and a corner of weight 0 is left out
+  counts[3] = 100;
+  h = hits[2];
+  body_scale_hit(h, 2, cand_rows.data(), counts.data());
+  EXPECT_DOUBLE_EQ(h.c[2], 3.0 / (1 + 4 * 0.2 * (counts[3] - 1)));
+  hits[2].w[2] = 1e-9;
+  h = hits[2];
+  body_scale_hit(h, 2, cand_rows.data(), counts.data());
+  EXPECT_NEAR(h.c[2], 3.0 / counts[5], 1e-6);
+  hits[2].w[2] = 0;
+  h = hits[2];
+  body_scale_hit(h, 2, cand_rows.data(), counts.data());
+  EXPECT_DOUBLE_EQ(h.c[2], 3.0 / counts[5]);
+}
+
 TEST(BodyContactLists, AFaceOnASymmetryPlaneIsNoCandidateButASupportIs) {
   // the lower block's top held in z, a roller at each node: a plane of symmetry, which the upper
   // block's bottom lying on it must not touch; held in full, it is a support and stays touchable
