@@ -49,6 +49,9 @@ double cap_height(double R, double r, double cap) {
   return r <= cap ? h : h + (r - cap) * cap / std::sqrt(R * R - cap * cap);
 }
 
+/// The radius Hertz's formula takes: the rigid sphere's, or the two spheres' R* (1/R* = 1/R_1 + 1/R_2).
+double effective_radius(const HertzOptions& o) { return o.spheres ? 1 / (1 / o.R + 1 / o.upper.R) : o.R; }
+
 /// Sum of the z internal forces over `nodes` (N).
 double force_z(const Fields& f, index_t n_nodes, const std::vector<index_t>& nodes) {
   double s = 0;
@@ -59,9 +62,8 @@ double force_z(const Fields& f, index_t n_nodes, const std::vector<index_t>& nod
 }  // namespace
 
 double hertz_force_pair(double E1, double nu1, double R1, double E2, double nu2, double R2, double delta) {
-  const double Es = 1 / ((1 - nu1 * nu1) / E1 + (1 - nu2 * nu2) / E2);
-  const double Rs = 1 / (1 / R1 + 1 / R2);
-  return 4.0 / 3.0 * Es * std::sqrt(Rs) * std::pow(delta, 1.5);
+  // the rigid sphere's formula with E / (1 - nu^2) = E* and R = R*
+  return hertz_force(1 / ((1 - nu1 * nu1) / E1 + (1 - nu2 * nu2) / E2), 0.0, 1 / (1 / R1 + 1 / R2), delta);
 }
 
 HertzPairMesh hertz_pair(int n, double L, double core, double p, const HertzSphere& lower, const HertzSphere& upper,
@@ -144,7 +146,7 @@ HertzStudy run_hertz(const HertzOptions& o) {
       throw std::invalid_argument("hertz: indentation ratios must be positive and ascending");
   HertzStudy study;
   study.options = o;
-  const double R_eff = o.spheres ? 1 / (1 / o.R + 1 / o.upper.R) : o.R;
+  const double R_eff = effective_radius(o);
   const double a_max = std::sqrt(R_eff * R_eff * o.ratios.back());
   study.L = o.block * a_max;
   study.device = create_backend(o.backend, Precision::Double)->device_name();
@@ -254,7 +256,7 @@ HertzStudy run_hertz(const HertzOptions& o) {
 
 std::string hertz_table(const HertzStudy& s) {
   const HertzOptions& o = s.options;
-  const double R_eff = o.spheres ? 1 / (1 / o.R + 1 / o.upper.R) : o.R;
+  const double R_eff = effective_radius(o);
   const std::string what =
       o.spheres ? fmt::format("two elastic spheres, R = {} mm (E = {} Pa, nu = {}) on R = {} mm (E = {} Pa, nu = {}), "
                               "R* = {:.4g} mm",

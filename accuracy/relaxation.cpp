@@ -222,8 +222,8 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
     throw std::invalid_argument("relax: tolerances must be > 0 and check/adapt intervals >= 1");
   const auto t0 = Clock::now();
   TissueModel<double> m = model;
+  const bool contact = tool != nullptr || !o.bodies.empty();  // a tool's or the bodies'
   if (o.mass_scaling) {
-    const bool contact = tool || !o.bodies.empty();
     m.mass = relaxation_masses(m, m.dt, contact ? std::min(o.mass_safety, o.contact_mass_safety) : o.mass_safety);
     m.total_mass = 0;
     for (double x : m.mass) m.total_mass += x;
@@ -277,7 +277,7 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
     const long stall = std::max(10L * o.check_every, std::lround(o.stall_periods * period / m.dt));
     if (steps - best_step > stall) {
       out.stalled = true;
-      if ((tool || !o.bodies.empty()) && out.residual <= o.contact_floor * o.residual_tol && out.kinetic <= o.kinetic_tol)
+      if (contact && out.residual <= o.contact_floor * o.residual_tol && out.kinetic <= o.kinetic_tol)
         out.converged = out.at_contact_floor = true;
       out.why = out.converged
                     ? fmt::format("converged at the contact's floor after {} steps: the residual stalled within {:g} x "
@@ -306,7 +306,7 @@ RelaxResult relax(Backend& b, const TissueModel<double>& model, const Drive& dri
     if (o.adapt_damping && out.residual > o.adapt_above && steps - last_adapt >= o.adapt_every) {
       last_adapt = steps;
       Fields now;
-      const int span = o.bodies.empty() && tool == nullptr ? 1 : kContactOmegaSpan;
+      const int span = contact ? kContactOmegaSpan : 1;
       const double omega = measured_omega(b, m, free_mask, span, now);
       steps += span + 1;
       if (omega > 0 && std::fabs(2 * omega - alpha) > 0.1 * alpha) {  // restart there with alpha = 2 omega
