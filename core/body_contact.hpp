@@ -16,11 +16,15 @@
 //     corners in proportion to their inverse masses: with the barycentric
 //     weights w_k of q and W = 1/m_p + sum_k w_k^2 / m_k,
 //       dx_p = (1/m_p) C / W,   dx_k = -(1/m_k) w_k C / W,
-//     so that p and q meet and sum m dx = 0 (no momentum made). C = g minus
-//     the relative tangential motion of p and q over the step, up to
-//     mu |g| (Coulomb: stick, or slide with the tangential share mu); a node
-//     that cannot move (fixed, halo or outside the region, grasped) has
-//     1/m = 0, and a pair where nothing can move is skipped;
+//     so that p and q meet and sum m dx = 0 (no momentum made). With
+//     friction mu, C = g minus p's tangential offset s from its anchor, up
+//     to mu |g| (Coulomb: stick, or slide with the tangential share mu). The
+//     anchor is the point of the other surface p sticks to, carried from
+//     step to step as a triangle and weights (a material point): where p
+//     was sent the step it came into contact or last slid; in its first
+//     step in contact s is the step's relative tangential motion of p and
+//     q. A node that cannot move (fixed, halo or outside the region,
+//     grasped) has 1/m = 0, and a pair where nothing can move is skipped;
 //  3. each contact's correction is scaled by one over the most any of its
 //     nodes takes part in contacts, a corner by its weight (body_row_count:
 //     a node between several contacts is not
@@ -105,6 +109,32 @@ bool body_lists_stale(const BodyLists& lists, Pos pos) {
 /// The spec checked against a mesh of n_nodes nodes (std::invalid_argument naming what is wrong).
 void check_body_contact(const BodyContactSpec& spec, index_t n_nodes);
 
+/// A row's stick anchor (rule 2): the point of another body's surface its
+/// node sticks to, as triangle `tri` and the weights w[0], w[1], 1 - w[0] -
+/// w[1] of its corners (a material point: it moves with that surface).
+/// tri -1: none (no contact at the last step, or no friction). Carried
+/// across steps and list rebuilds (the rows do not change); a new initial
+/// state (set_displacements) clears it.
+template <class T>
+struct BodyAnchor {
+  index_t tri = -1;
+  T w[2] = {T(0), T(0)};
+};
+
+/// The weights of y's projection onto the plane of P0 P1 P2 (outside the
+/// triangle too: negative weights); false for a degenerate triangle.
+template <class T>
+TISSUE_HD bool plane_weights(Vec3<T> y, Vec3<T> P0, Vec3<T> P1, Vec3<T> P2, T w[3]) {
+  const Vec3<T> e1 = P1 - P0, e2 = P2 - P0, d = y - P0;
+  const T a = dot(e1, e1), b = dot(e1, e2), c = dot(e2, e2), den = a * c - b * b;
+  if (!(den > T(0))) return false;
+  const T p = dot(d, e1), q = dot(d, e2);
+  w[1] = (c * p - b * q) / den;
+  w[2] = (a * q - b * p) / den;
+  w[0] = T(1) - w[1] - w[2];
+  return true;
+}
+
 /// One row's contact over one step: the candidate it touches (-1: none),
 /// the correction per unit inverse mass c (= C / W) and q's weights.
 template <class T>
@@ -138,10 +168,13 @@ TISSUE_HD BodyTri<T> body_tri(index_t t, Pos pos, Tri tri) {
 /// Rule 1 and 2 for one row. pos(a), prev(a): node a's position after the
 /// free update and at the step's start; inv_mass(a): 1/m or 0 (immovable);
 /// tri(t, k): corner k of triangle t; geom(t): body_tri(t, pos, tri), or
-/// the same read from where it was computed once for the step.
+/// the same read from where it was computed once for the step. was: the
+/// row's anchor from the step before; now receives this step's.
 template <class T, class Pos, class Prev, class InvMass, class Tri, class Geom>
 TISSUE_HD BodyHit<T> body_row_hit(index_t p, index_t first, index_t last, const index_t* cand_tri, const T* cand_mu,
-                                  T reach, Pos pos, Prev prev, InvMass inv_mass, Tri tri, Geom geom) {
+                                  T reach, Pos pos, Prev prev, InvMass inv_mass, Tri tri, Geom geom,
+                                  const BodyAnchor<T>& was, BodyAnchor<T>& now) {
+  now = BodyAnchor<T>{};
   BodyHit<T> hit;
   const Vec3<T> xp = pos(p);
   T best = reach, best_side = T(0);
@@ -184,11 +217,33 @@ TISSUE_HD BodyHit<T> body_row_hit(index_t p, index_t first, index_t last, const 
   Vec3<T> C = g;
   const T mu = cand_mu[best_cand];
   if (mu > T(0)) {
-    Vec3<T> dq{T(0), T(0), T(0)};
-    for (int k = 0; k < 3; ++k) dq = dq + best_w[k] * (pos(c[k]) - prev(c[k]));
-    const Vec3<T> rel = (xp - prev(p)) - dq, rel_t = rel - dot(rel, n) * n;
+    Vec3<T> rel;
+    if (was.tri >= 0) {  // p's offset from the point it sticks to
+      const T wa[3] = {was.w[0], was.w[1], T(1) - was.w[0] - was.w[1]};
+      Vec3<T> a{T(0), T(0), T(0)};
+      for (int k = 0; k < 3; ++k) a = a + wa[k] * pos(tri(was.tri, k));
+      rel = xp - a;
+    } else {  // its first step in contact: the step's relative motion
+      Vec3<T> dq{T(0), T(0), T(0)};
+      for (int k = 0; k < 3; ++k) dq = dq + best_w[k] * (pos(c[k]) - prev(c[k]));
+      rel = (xp - prev(p)) - dq;
+    }
+    const Vec3<T> rel_t = rel - dot(rel, n) * n;
     const T slip = norm(rel_t), cap = mu * best;
-    C = C - (slip <= cap ? rel_t : (cap / slip) * rel_t);
+    const bool stick = slip <= cap;
+    const Vec3<T> back = stick ? rel_t : (cap / slip) * rel_t;
+    C = C - back;
+    if (stick && was.tri >= 0) {
+      now = was;
+    } else {  // anchored where p is sent: q less what friction takes back
+      const BodyTri<T> g3 = geom(t);
+      T wn[3];
+      if (!plane_weights(best_q - back, g3.p[0], g3.p[1], g3.p[2], wn))
+        for (int k = 0; k < 3; ++k) wn[k] = best_w[k];
+      now.tri = t;
+      now.w[0] = wn[0];
+      now.w[1] = wn[1];
+    }
   }
   hit.cand = best_cand;
   hit.gap = best;

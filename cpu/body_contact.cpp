@@ -35,6 +35,7 @@ void BodyStage<T>::build(const TissueState<T>& s) {
   lists_ = build_body_lists(m_, spec_, x);
   cand_mu_.assign(lists_.cand_mu.begin(), lists_.cand_mu.end());
   hits_.assign(std::size_t(lists_.rows()), BodyHit<T>{});
+  if (anchors_.size() != std::size_t(lists_.rows())) anchors_.assign(std::size_t(lists_.rows()), BodyAnchor<T>{});
   moves_.assign(std::size_t(lists_.rows()), Vec3<T>{});
   counts_.assign(std::size_t(lists_.rows()), T(0));
   tris_.assign(lists_.cand_tri.begin(), lists_.cand_tri.end());
@@ -81,9 +82,11 @@ void BodyStage<T>::hits(const TissueState<T>& s, int part, int parts) {
   const index_t first = part == 0 ? 0 : row_at(total * part / parts),
                 last = part + 1 == parts ? lists_.rows() : row_at(total * (part + 1) / parts);
   const T reach = T(lists_.skin);
-  for (index_t r = first; r < last; ++r)
+  for (index_t r = first; r < last; ++r) {
+    const BodyAnchor<T> was = anchors_[r];
     hits_[r] = body_row_hit<T>(lists_.node[r], start[r], start[r + 1], lists_.cand_tri.data(), cand_mu_.data(), reach,
-                               pos, prev, inv_mass, tri, geom);
+                               pos, prev, inv_mass, tri, geom, was, anchors_[r]);
+  }
 }
 
 template <class T>

@@ -31,6 +31,8 @@ class BodyStage {
   void finish(TissueState<T>& s);
   /// The rows inside another body at the last step (ascending node).
   std::vector<BodyContactNode> contacts() const;
+  /// Forgets every stick anchor (a new initial state).
+  void clear_anchors() { anchors_.assign(anchors_.size(), BodyAnchor<T>{}); }
   long builds() const { return builds_; }
 
  private:
@@ -41,6 +43,7 @@ class BodyStage {
   BodyLists lists_;
   std::vector<T> cand_mu_;
   std::vector<BodyHit<T>> hits_;
+  std::vector<BodyAnchor<T>> anchors_;  ///< per row, carried across steps and rebuilds
   std::vector<Vec3<T>> moves_;
   std::vector<T> counts_;
   std::vector<index_t> tris_;        ///< the candidates' triangles, each once (ascending)

@@ -26,8 +26,11 @@ __global__ void body_hits_kernel(ModelView<T> m, StateView<T> s, const BodyView<
   const auto inv_mass = [&](index_t a) { return inverse_mass(m, s, a); };
   const auto tri = [&](index_t t, int k) { return m.tris[k * m.n_tris + t]; };
   const auto geom = [&](index_t t) { return body_tri<T>(t, pos, tri); };
+  const BodyAnchor<T> was = v.anchors[r];
+  BodyAnchor<T> now;
   v.hits[r] = body_row_hit<T>(v.node[r], v.cand_start[r], v.cand_start[r + 1], v.cand_tri, v.cand_mu, v.reach, pos,
-                              prev, inv_mass, tri, geom);
+                              prev, inv_mass, tri, geom, was, now);
+  v.anchors[r] = now;
 }
 
 template <class T>
@@ -116,6 +119,7 @@ void DeviceBodyContact<T>::set(const TissueModel<double>& mesh, const BodyContac
   clear();
   if (spec.empty()) return;
   spec_ = spec;
+  anchors_.allocate(0);  // a new contact: no anchors carried
   if (stale_.size() == 0) stale_.allocate(1);
   view_.allocate(1);
   rebuild(mesh, x, log, stream);
@@ -144,6 +148,10 @@ void DeviceBodyContact<T>::rebuild(const TissueModel<double>& mesh, const std::v
   upload_array(x_built_, built, log, stream);
   hits_.allocate(std::max<std::size_t>(std::size_t(rows_), 1));
   hits_.fill_bytes(0xff, stream);  // cand -1 everywhere until the first step
+  if (anchors_.size() != std::max<std::size_t>(std::size_t(rows_), 1)) {  // the rows, and so the anchors, outlast a rebuild
+    anchors_.allocate(std::max<std::size_t>(std::size_t(rows_), 1));
+    clear_anchors(stream);
+  }
   counts_.allocate(std::max<std::size_t>(std::size_t(rows_), 1));
   BodyView<T> v;
   v.rows = rows_;
@@ -160,6 +168,7 @@ void DeviceBodyContact<T>::rebuild(const TissueModel<double>& mesh, const std::v
   v.corner_slot = corner_slot_.data();
   v.x_built = x_built_.data();
   v.hits = hits_.data();
+  v.anchors = anchors_.data();
   v.counts = counts_.data();
   v.stale = stale_.device();
   stale_host()[0] = 0;

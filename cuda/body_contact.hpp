@@ -38,6 +38,7 @@ struct BodyView {
   const std::uint8_t* corner_slot = nullptr;
   const Packed3<T>* x_built = nullptr;  ///< (rows)
   BodyHit<T>* hits = nullptr;           ///< (rows): the current step's
+  BodyAnchor<T>* anchors = nullptr;     ///< (rows): the stick anchors, carried across steps and rebuilds
   T* counts = nullptr;                  ///< (rows): the current step's weighted contacts per node
   int* stale = nullptr;                 ///< mapped host memory: 1 = rebuild before the next steps
 };
@@ -68,6 +69,8 @@ class DeviceBodyContact {
   void clear();
   /// Whether the last steps flagged a rebuild (read after the stream is done).
   bool stale() const { return stale_.size() > 0 && stale_host()[0] != 0; }
+  /// Forgets every stick anchor (a new initial state).
+  void clear_anchors(cudaStream_t stream) { anchors_.fill_bytes(0xff, stream); }  // tri -1
   /// Rebuilds at positions x and clears the flag.
   void rebuild(const TissueModel<double>& mesh, const std::vector<double>& x, Transfers& log, cudaStream_t stream);
   BodySteps<T> steps() const { return {view_.data(), rows_}; }
@@ -87,6 +90,7 @@ class DeviceBodyContact {
   DeviceArray<std::uint8_t> corner_slot_;
   DeviceArray<Packed3<T>> x_built_;
   DeviceArray<BodyHit<T>> hits_;
+  DeviceArray<BodyAnchor<T>> anchors_;
   DeviceArray<BodyView<T>> view_;
   PinnedArray<int> stale_;
 };

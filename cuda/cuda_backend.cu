@@ -388,6 +388,7 @@ class CudaBackend final : public Backend {
     launch(n, stream(), set_displacements_kernel<T>, n, scratch_.data(), store_.model().node_flags, store_.state(),
            store_.u.current());
     store_.clear_law_state(stream());  // a new initial state: no Prony history
+    body_.clear_anchors(stream());
     pass1_all();
   }
 

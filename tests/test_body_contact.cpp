@@ -5,7 +5,8 @@
 // the stated tolerance, a block let go onto another does not bounce off
 // with energy the contact made, a tool pushing one block into another
 // deforms both without inverting anything, friction holds a sheared pair
-// together, and the cuda backend runs the same contact as the cpu.
+// together below mu and lets it slide above (passing mu times the press to
+// the supports), and the cuda backend runs the same contact as the cpu.
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
@@ -190,65 +191,109 @@ TEST_P(BodyContact, ABlockLoadedOntoAnotherGainsNoEnergy) {
   // undamped, from rest: the upper block is pushed onto the lower by a constant load. Its
   // energy -- kinetic plus strain less the load's work, 0 at the start -- may only fall in
   // contact (an inelastic one) and stays within the central difference's own wobble of 0
-  // otherwise; a contact that overshot would push the block off with energy it made
-  const Stack s = stack(6, 5, 3e4, 3e3, 0, 0.0);
-  auto b = make(s.model);
-  b->set_body_contact(s.spec());
-  const double F = 0.02;
-  load(*b, s.upper_top, F);
-  const int steps = int(std::lround(1e-3 / s.model.dt));
-  double most = 0, most_kinetic = 0;
-  for (int k = 0; k < 200; ++k) {
-    b->advance(steps);
-    const Reductions r = b->reduce();
-    ASSERT_TRUE(r.finite);
-    ASSERT_EQ(r.bad_elem, -1);
-    if (r.strain_energy < 0) GTEST_SKIP() << "this backend does not compute the strain energy";
-    const Fields f = b->download();
-    double work = 0;
-    for (index_t a : s.upper_top) work += -F / double(s.upper_top.size()) * f.u[2 * s.model.n_nodes + a];
-    most = std::max(most, r.kinetic + r.strain_energy - work);
-    most_kinetic = std::max(most_kinetic, r.kinetic);
-    if (k == 199) {
-      EXPECT_LT(sunk(s, f), 1e-2 * 0.6 * kL / 5) << "sunk " << sunk(s, f) << " m";
-    }
-  }
-  ASSERT_GT(most_kinetic, 0.0);
-  EXPECT_LT(most, 0.02 * most_kinetic) << "energy rose to " << most << " J (most kinetic " << most_kinetic << " J)";
-}
-
-TEST_P(BodyContact, FrictionSlowsTheSlideOfAShearedPair) {
-  // the upper block pressed down and pulled sideways by a tenth of the press: with mu = 0.5
-  // its bottom slides less over the lower's top than with mu = 0. (It does not stick: each
-  // step removes only the scaled share of the step's slip, docs/contact.md.)
-  const auto slip = [&](double mu) {
-    const Stack s = stack(6, 5, 3e4, 3e3, 0);
+  // otherwise; a contact that overshot would push the block off with energy it made. So
+  // too pulled sideways by a tenth of the load, sticking (mu 0.5) and sliding (mu 0.05)
+  for (const auto& [mu, shear] : {std::pair{0.0, 0.0}, std::pair{0.5, 0.1}, std::pair{0.05, 0.1}}) {
+    SCOPED_TRACE(fmt::format("mu {} pulled sideways by {} of the load", mu, shear));
+    const Stack s = stack(6, 5, 3e4, 3e3, 0, 0.0);
     auto b = make(s.model);
     b->set_body_contact(s.spec(mu));
     const double F = 0.02;
+    const double fx = shear * F / double(s.upper_top.size()), fz = -F / double(s.upper_top.size());
     std::vector<double> f;
-    for (std::size_t k = 0; k < s.upper_top.size(); ++k)
-      f.insert(f.end(), {0.1 * F / double(s.upper_top.size()), 0.0, -F / double(s.upper_top.size())});
+    for (std::size_t k = 0; k < s.upper_top.size(); ++k) f.insert(f.end(), {fx, 0.0, fz});
     b->set_loads(s.upper_top, f);
     const int steps = int(std::lround(1e-3 / s.model.dt));
-    for (int k = 0; k < 300; ++k) b->advance(steps);
-    const Fields out = b->download();
-    // the upper bottom's mean x motion against the lower top's under it
+    const index_t n = s.model.n_nodes;
+    double most = 0, most_kinetic = 0;
+    for (int k = 0; k < 200; ++k) {
+      b->advance(steps);
+      const Reductions r = b->reduce();
+      ASSERT_TRUE(r.finite);
+      ASSERT_EQ(r.bad_elem, -1);
+      if (r.strain_energy < 0) GTEST_SKIP() << "this backend does not compute the strain energy";
+      const Fields u = b->download();
+      double work = 0;
+      for (index_t a : s.upper_top) work += fx * u.u[a] + fz * u.u[2 * n + a];
+      most = std::max(most, r.kinetic + r.strain_energy - work);
+      most_kinetic = std::max(most_kinetic, r.kinetic);
+      if (k == 199) {
+        EXPECT_LT(sunk(s, u), 1e-2 * 0.6 * kL / 5) << "sunk " << sunk(s, u) << " m";
+      }
+    }
+    ASSERT_GT(most_kinetic, 0.0);
+    EXPECT_LT(most, 0.02 * most_kinetic) << "energy rose to " << most << " J (most kinetic " << most_kinetic << " J)";
+  }
+}
+
+/// The upper block of a stack pressed down by F and pulled sideways by
+/// `shear` F (its top face loaded), with friction mu: how far its bottom has
+/// slid over the lower block's top (mean x displacements over the interface)
+/// at each of `at` (s), and the supports' sideways and vertical reactions at
+/// the last.
+struct Sheared {
+  std::vector<double> slip;  ///< m, one per time asked
+  Vec3<double> react;        ///< N: the supports' reaction at the last time
+};
+
+template <class Make>
+Sheared shear_pair(Make make, double mu, double shear, const std::vector<double>& at) {
+  const Stack s = stack(6, 5, 3e4, 3e3, 0);
+  auto b = make(s.model);
+  b->set_body_contact(s.spec(mu));
+  const double F = 0.02;
+  std::vector<double> f;
+  for (std::size_t k = 0; k < s.upper_top.size(); ++k)
+    f.insert(f.end(), {shear * F / double(s.upper_top.size()), 0.0, -F / double(s.upper_top.size())});
+  b->set_loads(s.upper_top, f);
+  const int steps = int(std::lround(1e-3 / s.model.dt));
+  Sheared out;
+  int ticks = 0;
+  for (double t : at) {
+    for (; ticks < int(std::lround(t / 1e-3)); ++ticks) b->advance(steps);
+    const Fields u = b->download();
     const index_t n = s.model.n_nodes;
     double upper = 0, lower = 0;
     int nu = 0, nl = 0;
     for (index_t a = 0; a < n; ++a) {
       const double x = s.model.X[a], y = s.model.X[n + a], z = s.model.X[2 * n + a];
       if (std::fabs(z - kL / 2) > 1e-12 || x < 0.2 * kL || x > 0.8 * kL || y < 0.2 * kL || y > 0.8 * kL) continue;
-      (a >= s.first_upper ? upper : lower) += out.u[a];
+      (a >= s.first_upper ? upper : lower) += u.u[a];
       ++(a >= s.first_upper ? nu : nl);
     }
-    return std::pair<double, double>{upper / nu - lower / nl, upper / nu};
-  };
-  const auto held = slip(0.5), slid = slip(0.0);
-  EXPECT_GT(held.second, 0.0);
-  EXPECT_GT(slid.first, 0.5 * slid.second) << "slip " << slid.first << " m of " << slid.second;
-  EXPECT_LT(held.first, 0.8 * slid.first) << "slip " << held.first << " m with mu 0.5, " << slid.first << " m with 0";
+    out.slip.push_back(upper / nu - lower / nl);
+    out.react = support(s.model, u);
+  }
+  return out;
+}
+
+TEST_P(BodyContact, FrictionHoldsAShearedPairBelowMuAndLetsItSlideAbove) {
+  // pulled sideways by a tenth of the press: with mu 0.5 the pair sticks (its slip stops
+  // once the blocks have sheared), with mu 0.05 it slides, the supports feeling mu times the
+  // press sideways, and without friction it slides faster still. (Read by 0.3 s: near 0.6 mm
+  // of slip the upper block's edge reaches a node of the lower's top outside the dent the
+  // load makes, and catches on it, with or without friction.)
+  const auto make_backend = [&](const TissueModel<double>& m) { return make(m); };
+  const std::vector<double> at = {0.15, 0.3};
+  const Sheared held = shear_pair(make_backend, 0.5, 0.1, at), slid = shear_pair(make_backend, 0.05, 0.1, at),
+                free = shear_pair(make_backend, 0.0, 0.1, at);
+  RecordProperty("slip_mm_held", fmt::format("{:.6g} {:.6g}", 1e3 * held.slip[0], 1e3 * held.slip[1]));
+  RecordProperty("slip_mm_mu_0_05", fmt::format("{:.4g} {:.4g}", 1e3 * slid.slip[0], 1e3 * slid.slip[1]));
+  RecordProperty("slip_mm_frictionless", fmt::format("{:.4g} {:.4g}", 1e3 * free.slip[0], 1e3 * free.slip[1]));
+  const double ratio = -slid.react.x / slid.react.z;
+  RecordProperty("sliding_support_ratio", fmt::format("{:.4g}", ratio));
+  // stick: measured on the cpu 3.61 um of shear at 0.15 s, 1.1e-8 m more by 0.3 s (double),
+  // against 236 um more with mu 0.05
+  const double slid_more = slid.slip[1] - slid.slip[0];
+  ASSERT_GT(slid_more, 1e-4) << "mu 0.05 under a pull of 0.1: slip " << slid.slip[0] << " then " << slid.slip[1];
+  EXPECT_LT(std::fabs(held.slip[1] - held.slip[0]), 1e-3 * slid_more)
+      << "mu 0.5 under a pull of 0.1: slip " << held.slip[0] << " then " << held.slip[1] << " m";
+  EXPECT_LT(std::fabs(held.slip[1]), 0.02 * slid.slip[1]);
+  // slide: the interface passes mu times the press to the supports (measured 0.0496)
+  EXPECT_NEAR(ratio, 0.05, 0.05 * 0.05) << "sliding with mu 0.05, the supports' sideways reaction over the vertical";
+  // and held, the supports take the whole pull
+  EXPECT_NEAR(-held.react.x / held.react.z, 0.1, 1e-2 * 0.1);
+  EXPECT_GT(free.slip[0], 1.5 * slid.slip[0]) << "frictionless " << free.slip[0] << " m, mu 0.05 " << slid.slip[0];
 }
 
 TEST_P(BodyContact, AToolPushingOneBlockIntoAnotherDeformsBothAndInvertsNothing) {
