@@ -5,8 +5,10 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "core/device.hpp"
 #include "io/kidney.hpp"
 #include "scene/validate.hpp"
+#include "session/engine.hpp"
 
 namespace tissue::accuracy {
 
@@ -44,6 +46,66 @@ Extrapolation richardson(const std::vector<double>& h, const std::vector<double>
   return e;
 }
 
+SlopeJump largest_slope_jump(const PressCurve& c, double window, double from) {
+  if (c.depth.size() != c.force.size()) throw std::invalid_argument("largest_slope_jump: as many depths as forces");
+  if (!(window > 0)) throw std::invalid_argument("largest_slope_jump: the window must be > 0");
+  SlopeJump out;
+  const std::size_t n = c.depth.size();
+  if (n < 5) return out;
+  const double start = c.depth.front(), end = c.depth.back(), floor = from * std::fabs(c.force.back());
+  // least-squares slope of the points [i, j)
+  const auto slope = [&](std::size_t i, std::size_t j) {
+    double sd = 0, sf = 0, sdd = 0, sdf = 0;
+    const double m = double(j - i);
+    for (std::size_t k = i; k < j; ++k) {
+      sd += c.depth[k];
+      sf += c.force[k];
+      sdd += c.depth[k] * c.depth[k];
+      sdf += c.depth[k] * c.force[k];
+    }
+    const double den = m * sdd - sd * sd;
+    return den > 0 ? (m * sdf - sd * sf) / den : NAN;
+  };
+  std::size_t lo = 0, hi = 0;  // the windows: [lo, i] before, [i, hi) after
+  for (std::size_t i = 0; i < n; ++i) {
+    const double d = c.depth[i];
+    if (d - window < start || d + window > end) continue;
+    while (c.depth[lo] < d - window) ++lo;
+    if (hi < i) hi = i;
+    while (hi < n && c.depth[hi] <= d + window) ++hi;
+    if (std::fabs(c.force[lo]) < floor || i - lo < 2 || hi - i < 3) continue;
+    const double before = slope(lo, i + 1), after = slope(i, hi);
+    if (!(std::fabs(before) > 0) || !std::isfinite(after)) continue;
+    const double jump = (after - before) / std::fabs(before);
+    if (std::isnan(out.depth) || std::fabs(jump) > std::fabs(out.jump)) out = {jump, d};
+  }
+  return out;
+}
+
+PressCurve slow_press(const scene::Scene& scene, const HeldTool& held, double speed) {
+  if (!(speed > 0) || !std::isfinite(speed))
+    throw std::runtime_error(fmt::format("slow press: the speed {} m/s must be finite and > 0", speed));
+  scene::Scene s = scene;
+  const Vec3<double> travel = held.held.tip - held.start.tip;
+  const double length = norm(travel), T = length / speed;
+  if (!(length > 0)) throw std::runtime_error(s.source + ": slow press: the held pose is the start pose");
+  const Vec3<double> dir = (1.0 / length) * travel;
+  s.tools.front().path = {{0.0, held.start.tip, false, held.start.axis}, {T, held.held.tip, false, held.held.axis}};
+  Engine e = build_engine(s);
+  ScriptedDevice device(s.tools.front().path);
+  PressCurve c;
+  double touched = NAN;
+  for (TickReport rep; rep.time < T - 1e-9;) {
+    rep = e.scheduler->tick(device);
+    if (rep.contact_nodes == 0 && std::isnan(touched)) continue;
+    const double along = speed * rep.time;
+    if (std::isnan(touched)) touched = along;
+    c.depth.push_back(along - touched);
+    c.force.push_back(-dot(rep.force, dir));
+  }
+  return c;
+}
+
 namespace {
 
 /// Mean edge of the undeformed surface triangles whose centroid lies within
@@ -68,7 +130,8 @@ double edge_near_axis(const TissueModel<double>& m, const HeldTool& tool, double
 }  // namespace
 
 ConvergenceResult kidney_convergence(const scene::Scene& scene, const std::vector<ConvergenceLevel>& levels,
-                                     const ReferenceOptions& options, void (*progress)(const ConvergenceRow&)) {
+                                     const ReferenceOptions& options, void (*progress)(const ConvergenceRow&),
+                                     double curve_speed) {
   if (scene.tools.empty() || scene.tools.front().path.empty())
     throw std::invalid_argument(scene.source + ": the convergence study needs a scripted tool to hold");
   ConvergenceResult out;
@@ -93,6 +156,11 @@ ConvergenceResult kidney_convergence(const scene::Scene& scene, const std::vecto
       row.wall = ref.relax.wall;
       h.push_back(row.edge_under_tool);
       f.push_back(norm(row.force));
+      if (curve_speed > 0) try {
+          row.slope_jump = largest_slope_jump(slow_press(s, held, curve_speed), kCurveWindow);
+        } catch (const std::exception& e) {
+          row.curve_failed = e.what();
+        }
     } catch (const std::exception& e) {
       row.failed = e.what();
     }

@@ -4,6 +4,7 @@
 // distance from it; optionally uniform re-meshes as comparison rows.
 #include <fmt/format.h>
 
+#include <cmath>
 #include <limits>
 #include <memory>
 
@@ -18,6 +19,7 @@ namespace {
 struct ConvergeArgs {
   std::string scene = "@kidney", backend = "cpu", json;
   double tol = 1e-7;
+  double curve_speed = accuracy::kCurveSpeed;
   int levels = 5;
   std::vector<int> uniform;
 };
@@ -31,15 +33,21 @@ void print_row(const accuracy::ConvergenceRow& r) {
              "{} steps {:.1f} s\n",
              r.name, r.nodes, r.tets, 1e3 * r.edge_under_tool, norm(r.force), r.residual,
              r.at_contact_floor ? " (contact floor)" : "", r.steps, r.wall);
+  if (!r.curve_failed.empty())
+    fmt::print("  {:<10} slow press failed: {}\n", r.name, r.curve_failed);
+  else if (!std::isnan(r.slope_jump.depth))
+    fmt::print("  {:<10} slow press: largest slope jump {:+.1f} % at {:.2f} mm\n", r.name, 100 * r.slope_jump.jump,
+               1e3 * r.slope_jump.depth);
 }
 
 std::string row_json(const accuracy::ConvergenceRow& r, bool in_limit) {
   return fmt::format(
       "{{\"mesh\": \"{}\", \"nodes\": {}, \"tets\": {}, \"edge_under_tool\": {}, \"force\": [{}, {}, {}], "
       "\"force_norm\": {}, \"rel_err\": {}, \"residual\": {}, \"steps\": {}, \"wall_s\": {}, \"in_limit\": {}, "
-      "\"failed\": \"{}\"}}",
+      "\"failed\": \"{}\", \"slope_jump\": {}, \"slope_jump_depth\": {}, \"curve_failed\": \"{}\"}}",
       r.name, r.nodes, r.tets, r.edge_under_tool, r.force.x, r.force.y, r.force.z, norm(r.force), r.rel_err,
-      r.residual, r.steps, r.wall, in_limit, r.failed);
+      r.residual, r.steps, r.wall, in_limit, r.failed, std::isnan(r.slope_jump.depth) ? "null" : fmt::format("{}", r.slope_jump.jump),
+      std::isnan(r.slope_jump.depth) ? "null" : fmt::format("{}", r.slope_jump.depth), r.curve_failed);
 }
 
 /// The smallest --tol: the relaxation runs in double, and a node's force is
@@ -72,7 +80,11 @@ int run_converge(const ConvergeArgs& a) {
   o.relax.residual_tol = a.tol;
   fmt::print("tool force at the held indentation, meshes refined under the tool ({} backend, residual {:.1g}):\n",
              a.backend, a.tol);
-  const accuracy::ConvergenceResult res = accuracy::kidney_convergence(s, levels, o, print_row);
+  if (a.curve_speed > 0)
+    fmt::print("and each mesh pressed at {:g} mm/s with the scene's own solver, its force-depth curve's largest "
+               "change of slope over {:g} mm either side\n",
+               1e3 * a.curve_speed, 1e3 * accuracy::kCurveWindow);
+  const accuracy::ConvergenceResult res = accuracy::kidney_convergence(s, levels, o, print_row, a.curve_speed);
   const accuracy::Extrapolation& lim = res.limit;
   fmt::print("extrapolated |F| = {:.5f} N ({}, order {:.2f} in the edge under the tool)\n", lim.value,
              lim.monotone ? "Richardson over the last three" : "not monotone: the finest value", lim.order);
@@ -85,7 +97,7 @@ int run_converge(const ConvergeArgs& a) {
     for (int n : a.uniform) u.push_back({fmt::format("uniform {}", n), n, {}});
     // (one level at a time: the study's extrapolation needs three; these rows only compare)
     for (const auto& level : u) {
-      accuracy::ConvergenceResult one = accuracy::kidney_convergence(s, {level}, o, nullptr);
+      accuracy::ConvergenceResult one = accuracy::kidney_convergence(s, {level}, o, nullptr, a.curve_speed);
       accuracy::ConvergenceRow r = one.rows.front();
       if (r.failed.empty()) r.rel_err = norm(r.force) / lim.value - 1;
       print_row(r);
@@ -119,6 +131,10 @@ void add_converge_command(CLI::App& app, int& rc) {
       ->capture_default_str();
   cmd->add_option("--uniform", a->uniform, "also these uniform re-mesh tet counts, as comparison rows")
       ->check(whole_number(100, std::numeric_limits<int>::max()));  // fewer than 100 tets keep no kidney shape
+  cmd->add_option("--curve-speed", a->curve_speed,
+                  "also press each mesh at this speed (m/s) for its force-depth curve's largest slope jump; 0 = not")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 0.1));  // faster than 10 cm/s is no longer quasi-static on the kidney
   cmd->add_option("--json", a->json, "write the rows as JSON")->check(output_file());
   cmd->callback([a, &rc] { rc = run_converge(*a); });
 }

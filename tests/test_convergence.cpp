@@ -1,8 +1,11 @@
 // The kidney convergence study's parts (accuracy/convergence.hpp): the
 // focused surface (a conformal map of the sphere, checked against its
 // closed-form scale factors) and Richardson extrapolation (checked on
-// values of a known power law). The study itself relaxes meshes of up to
-// 130,000 tets: it runs as `tissue converge` (docs/contact.md section 5).
+// values of a known power law), the largest change of slope along a
+// force-depth curve (on curves whose kinks are known) and the slow press
+// that gives the curve (the built-in kidney's, against its relaxed force).
+// The study itself relaxes meshes of up to 130,000 tets: it runs as
+// `tissue converge` (docs/contact.md section 5).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -154,4 +157,75 @@ TEST(KidneyConvergence, FocusedRemeshRefinesUnderTheProbeOnly) {
   scene::Scene other = base;
   other.source = "box.xml";
   EXPECT_THROW(accuracy::remesh_scene(other, 1000, {0, 0.5}), std::invalid_argument);
+}
+
+// The largest change of slope along a force-depth curve, on curves whose
+// kinks are known: two straight pieces, a smooth power law, a first touch.
+TEST(SlopeJump, FindsAKinkOfKnownSizeWhereItIs) {
+  accuracy::PressCurve c;
+  for (int k = 0; k <= 2500; ++k) {  // 2 um apart, as a 2 mm/s press read at 1 kHz
+    const double d = 2e-6 * k;
+    c.depth.push_back(d);
+    // slope 10 N/m, then 13 from 2 mm (+30 %), then 13 x 0.58 from 3.25 mm (-42 %)
+    c.force.push_back(1e-3 + (d < 2e-3 ? 10 * d : d < 3.25e-3 ? 0.02 + 13 * (d - 2e-3)
+                                                               : 0.02 + 13 * 1.25e-3 + 13 * 0.58 * (d - 3.25e-3)));
+  }
+  const accuracy::SlopeJump j = accuracy::largest_slope_jump(c, 2.5e-4);
+  EXPECT_NEAR(j.jump, -0.42, 1e-9);
+  EXPECT_NEAR(j.depth, 3.25e-3, 2.1e-6);
+  // without the second kink, the first
+  c.force.resize(1626);
+  c.depth.resize(1626);
+  const accuracy::SlopeJump first = accuracy::largest_slope_jump(c, 2.5e-4);
+  EXPECT_NEAR(first.jump, 0.30, 1e-9);
+  EXPECT_NEAR(first.depth, 2e-3, 2.1e-6);
+}
+
+TEST(SlopeJump, ASmoothCurveHasOnlyItsOwnCurvatureAndTheFirstTouchIsNoKink) {
+  // F = d^1.5 (Hertz): over windows w either side of d the slopes differ by about w / (2 d);
+  // the largest where the force first reaches a tenth of its last, d = 5 mm x 0.1^(2/3)
+  accuracy::PressCurve c;
+  for (int k = 0; k <= 2500; ++k) {
+    const double d = 2e-6 * k;
+    c.depth.push_back(d);
+    c.force.push_back(std::pow(d, 1.5));
+  }
+  const accuracy::SlopeJump j = accuracy::largest_slope_jump(c, 2.5e-4);
+  const double d0 = 5e-3 * std::pow(0.1, 2.0 / 3.0);
+  EXPECT_GT(j.jump, 0.0);
+  EXPECT_NEAR(j.depth, d0, 2.5e-4 + 4e-6);
+  EXPECT_NEAR(j.jump, 2.5e-4 / (2 * d0), 0.25 * 2.5e-4 / (2 * d0));
+  // a press that first touches, at rest before: the rise from 0 is not counted
+  accuracy::PressCurve touch;
+  for (int k = 0; k <= 2500; ++k) {
+    const double d = 2e-6 * k;
+    touch.depth.push_back(d);
+    touch.force.push_back(d < 1e-3 ? 0.0 : 10 * (d - 1e-3));
+  }
+  EXPECT_NEAR(accuracy::largest_slope_jump(touch, 2.5e-4).jump, 0.0, 1e-9);
+  EXPECT_THROW(accuracy::largest_slope_jump(touch, 0), std::invalid_argument);
+  touch.force.pop_back();
+  EXPECT_THROW(accuracy::largest_slope_jump(touch, 2.5e-4), std::invalid_argument);
+}
+
+// The built-in kidney pressed slowly with its own solver: the curve ends at
+// the relaxed reference force (0.09505 N, `tissue converge`'s default row,
+// relaxed by another route), and its kinks, where nodes enter contact, are
+// felt (measured: +59.9 % at 2.00 mm, docs/contact.md section 5).
+TEST(SlowPress, TheDefaultKidneyEndsAtItsRelaxedForceAndItsMeshIsFelt) {
+  const scene::Scene s = io::default_kidney_scene();
+  const TissueModel<double> model = scene::load_model(s);
+  const auto& path = s.tools.front().path;
+  const accuracy::HeldTool held = accuracy::held_tool(model, scene::scheduler_settings(s).tools.front(), path,
+                                                      s.solver.tick, accuracy::hold_start(path));
+  const accuracy::PressCurve c = accuracy::slow_press(s, held, accuracy::kCurveSpeed);
+  ASSERT_GT(c.depth.size(), 2000u);
+  EXPECT_NEAR(c.depth.back(), 5e-3, 5e-5);
+  EXPECT_NEAR(c.force.back(), 0.09505, 0.03 * 0.09505);
+  for (std::size_t k = 100; k < c.force.size(); ++k) ASSERT_GT(c.force[k], c.force[k - 100]) << "at tick " << k;
+  const accuracy::SlopeJump j = accuracy::largest_slope_jump(c, accuracy::kCurveWindow);
+  RecordProperty("largest_slope_jump", std::to_string(j.jump));
+  RecordProperty("at_mm", std::to_string(1e3 * j.depth));
+  EXPECT_GT(std::fabs(j.jump), 0.3);
+  EXPECT_THROW(accuracy::slow_press(s, held, 0), std::runtime_error);
 }
