@@ -8,7 +8,8 @@
 //  1. every surface node p of a body that touches another (a row) finds,
 //     among its candidate triangles of the bodies it touches, the one whose
 //     closest point q is nearest (ties: the one whose plane p lies furthest
-//     from); p is inside when it lies behind that triangle's plane
+//     from, then the first; each compared past 64 double epsilons of p's
+//     coordinates, so that roundings do not decide); p is inside when it lies behind that triangle's plane
 //     (dot(p - q, N) < 0, N the triangle's outward normal) and |p - q| is at
 //     most the contact's reach (the lists' skin: a node further in has passed
 //     through, and is left alone);
@@ -177,6 +178,11 @@ TISSUE_HD BodyHit<T> body_row_hit(index_t p, index_t first, index_t last, const 
   now = BodyAnchor<T>{};
   BodyHit<T> hit;
   const Vec3<T> xp = pos(p);
+  // what double's rounding can move p's distances and sides by: 64 epsilons of its coordinates.
+  // (Float's contact gaps are a few roundings of its positions: a window of its own would
+  // swallow them, so float keeps this double-sized one, and its roundings can still flip ties.)
+  const T tiny = T(64 * std::numeric_limits<double>::epsilon() *
+                   (std::fabs(double(xp.x)) + std::fabs(double(xp.y)) + std::fabs(double(xp.z))));
   T best = reach, best_side = T(0);
   index_t best_cand = -1;
   Vec3<T> best_q{};
@@ -195,10 +201,12 @@ TISSUE_HD BodyHit<T> body_row_hit(index_t p, index_t first, index_t last, const 
     const Vec3<T> q = closest_on_triangle(xp, P0, P1, P2, w);
     const Vec3<T> N = unit_or(cross(P1 - P0, P2 - P0), Vec3<T>{T(0), T(0), T(0)});
     const T d = norm(q - xp), side = dot(xp - q, N);
-    // nearest; of equally near (a shared edge or corner), the one p lies furthest from the plane of
-    const bool nearer = d < best * (T(1) - T(64) * std::numeric_limits<T>::epsilon());
-    const bool tie = !nearer && d <= best * (T(1) + T(64) * std::numeric_limits<T>::epsilon());
-    if (nearer || (tie && std::fabs(side) > std::fabs(best_side))) {
+    // nearest; of equally near (a shared edge or corner), the one p lies furthest from the plane of;
+    // of those, the first (coplanar faces): each compared past what rounding can change, so that
+    // the backends' roundings pick the same
+    const bool nearer = d < best * (T(1) - T(64) * std::numeric_limits<T>::epsilon()) - tiny;
+    const bool tie = !nearer && d <= best * (T(1) + T(64) * std::numeric_limits<T>::epsilon()) + tiny;
+    if (nearer || (tie && std::fabs(side) > std::fabs(best_side) + tiny)) {
       best = d;
       best_side = side;
       best_cand = j;
