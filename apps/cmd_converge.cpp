@@ -41,13 +41,14 @@ void print_row(const accuracy::ConvergenceRow& r) {
 }
 
 std::string row_json(const accuracy::ConvergenceRow& r, bool in_limit) {
+  const bool curve = !std::isnan(r.slope_jump.depth);
   return fmt::format(
       "{{\"mesh\": \"{}\", \"nodes\": {}, \"tets\": {}, \"edge_under_tool\": {}, \"force\": [{}, {}, {}], "
       "\"force_norm\": {}, \"rel_err\": {}, \"residual\": {}, \"steps\": {}, \"wall_s\": {}, \"in_limit\": {}, "
       "\"failed\": \"{}\", \"slope_jump\": {}, \"slope_jump_depth\": {}, \"curve_failed\": \"{}\"}}",
       r.name, r.nodes, r.tets, r.edge_under_tool, r.force.x, r.force.y, r.force.z, norm(r.force), r.rel_err,
-      r.residual, r.steps, r.wall, in_limit, r.failed, std::isnan(r.slope_jump.depth) ? "null" : fmt::format("{}", r.slope_jump.jump),
-      std::isnan(r.slope_jump.depth) ? "null" : fmt::format("{}", r.slope_jump.depth), r.curve_failed);
+      r.residual, r.steps, r.wall, in_limit, r.failed, curve ? fmt::format("{}", r.slope_jump.jump) : "null",
+      curve ? fmt::format("{}", r.slope_jump.depth) : "null", r.curve_failed);
 }
 
 /// The smallest --tol: the relaxation runs in double, and a node's force is

@@ -9,8 +9,9 @@
 //     among its candidate triangles of the bodies it touches, the one whose
 //     closest point q is nearest (ties: the one whose plane p lies furthest
 //     from, then the first; each compared past 64 double epsilons of p's
-//     coordinates, so that roundings do not decide); p is inside when it lies behind that triangle's plane
-//     (dot(p - q, N) < 0, N the triangle's outward normal) and |p - q| is at
+//     coordinates, so that roundings do not decide); p is inside when it
+//     lies behind that triangle's plane (dot(p - q, N) < 0, N the
+//     triangle's outward normal) and |p - q| is at
 //     most the contact's reach (the lists' skin: a node further in has passed
 //     through, and is left alone);
 //  2. the gap g = q - p is closed between the node and the triangle's
