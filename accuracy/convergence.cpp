@@ -82,7 +82,8 @@ SlopeJump largest_slope_jump(const PressCurve& c, double window, double from) {
   return out;
 }
 
-PressCurve slow_press(const scene::Scene& scene, const HeldTool& held, double speed) {
+PressCurve slow_press(const scene::Scene& scene, const HeldTool& held, double speed,
+                      std::shared_ptr<const TissueModel<double>> model) {
   if (!(speed > 0) || !std::isfinite(speed))
     throw std::runtime_error(fmt::format("slow press: the speed {} m/s must be finite and > 0", speed));
   scene::Scene s = scene;
@@ -91,7 +92,7 @@ PressCurve slow_press(const scene::Scene& scene, const HeldTool& held, double sp
   if (!(length > 0)) throw std::runtime_error(s.source + ": slow press: the held pose is the start pose");
   const Vec3<double> dir = (1.0 / length) * travel;
   s.tools.front().path = {{0.0, held.start.tip, false, held.start.axis}, {T, held.held.tip, false, held.held.axis}};
-  Engine e = build_engine(s);
+  Engine e = build_engine(s, std::nullopt, std::move(model));
   ScriptedDevice device(s.tools.front().path);
   PressCurve c;
   double touched = NAN;
@@ -141,7 +142,8 @@ ConvergenceResult kidney_convergence(const scene::Scene& scene, const std::vecto
     row.name = level.name;
     try {
       const scene::Scene s = level.target_tets > 0 ? remesh_scene(scene, level.target_tets, level.surfacing) : scene;
-      const TissueModel<double> model = scene::load_model(s);
+      const auto built = std::make_shared<const TissueModel<double>>(scene::load_model(s));
+      const TissueModel<double>& model = *built;
       row.nodes = model.n_nodes;
       row.tets = model.n_elems;
       const auto& path = s.tools.front().path;
@@ -157,7 +159,7 @@ ConvergenceResult kidney_convergence(const scene::Scene& scene, const std::vecto
       h.push_back(row.edge_under_tool);
       f.push_back(norm(row.force));
       if (curve_speed > 0) try {
-          row.slope_jump = largest_slope_jump(slow_press(s, held, curve_speed), kCurveWindow);
+          row.slope_jump = largest_slope_jump(slow_press(s, held, curve_speed, built), kCurveWindow);
         } catch (const std::exception& e) {
           row.curve_failed = e.what();
         }

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cmath>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -51,9 +52,11 @@ SlopeJump largest_slope_jump(const PressCurve& c, double window, double from = 0
 
 /// The scene's first tool pressed at `speed` (m/s) from where its path
 /// first touches to its held pose (held_tool), with the scene's own solver
-/// settings, the force read every tick. Throws std::runtime_error when a
+/// settings, the force read every tick. `model`: the scene's, when the
+/// caller has built it (null: built here). Throws std::runtime_error when a
 /// tick stops (naming it) or `speed` is not > 0.
-PressCurve slow_press(const scene::Scene& s, const HeldTool& held, double speed);
+PressCurve slow_press(const scene::Scene& s, const HeldTool& held, double speed,
+                      std::shared_ptr<const TissueModel<double>> model = nullptr);
 
 /// The press curve's window and speed in `tissue converge`: slopes over
 /// 0.25 mm either side, the probe at 2 mm/s (quasi-static on the kidney:

@@ -182,8 +182,7 @@ TISSUE_HD BodyHit<T> body_row_hit(index_t p, index_t first, index_t last, const 
   // what double's rounding can move p's distances and sides by: 64 epsilons of its coordinates.
   // (Float's contact gaps are a few roundings of its positions: a window of its own would
   // swallow them, so float keeps this double-sized one, and its roundings can still flip ties.)
-  const T tiny = T(64 * std::numeric_limits<double>::epsilon() *
-                   (std::fabs(double(xp.x)) + std::fabs(double(xp.y)) + std::fabs(double(xp.z))));
+  const T tiny = T(64 * std::numeric_limits<double>::epsilon()) * (std::fabs(xp.x) + std::fabs(xp.y) + std::fabs(xp.z));
   T best = reach, best_side = T(0);
   index_t best_cand = -1;
   Vec3<T> best_q{};
@@ -245,9 +244,8 @@ TISSUE_HD BodyHit<T> body_row_hit(index_t p, index_t first, index_t last, const 
     if (stick && was.tri >= 0) {
       now = was;
     } else {  // anchored where p is sent: q less what friction takes back
-      const BodyTri<T> g3 = geom(t);
       T wn[3];
-      if (!plane_weights(best_q - back, g3.p[0], g3.p[1], g3.p[2], wn))
+      if (!plane_weights(best_q - back, pos(c[0]), pos(c[1]), pos(c[2]), wn))
         for (int k = 0; k < 3; ++k) wn[k] = best_w[k];
       now.tri = t;
       now.w[0] = wn[0];

@@ -148,8 +148,9 @@ void DeviceBodyContact<T>::rebuild(const TissueModel<double>& mesh, const std::v
   upload_array(x_built_, built, log, stream);
   hits_.allocate(std::max<std::size_t>(std::size_t(rows_), 1));
   hits_.fill_bytes(0xff, stream);  // cand -1 everywhere until the first step
-  if (anchors_.size() != std::max<std::size_t>(std::size_t(rows_), 1)) {  // the rows, and so the anchors, outlast a rebuild
-    anchors_.allocate(std::max<std::size_t>(std::size_t(rows_), 1));
+  // the rows, and so the anchors, outlast a rebuild: allocated (and cleared) only for a new contact
+  if (const std::size_t want = std::max<std::size_t>(std::size_t(rows_), 1); anchors_.size() != want) {
+    anchors_.allocate(want);
     clear_anchors(stream);
   }
   counts_.allocate(std::max<std::size_t>(std::size_t(rows_), 1));
