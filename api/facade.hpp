@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/backend.hpp"
+#include "core/cut.hpp"
 #include "core/scheduler.hpp"
 #include "core/vec.hpp"
 #include "scene/scene.hpp"
@@ -43,6 +44,10 @@ std::vector<T> interleave(const std::vector<T>& soa, std::size_t components) {
 /// nodes, and each tool parked above the body (one waypoint) until the host
 /// moves it. Throws std::invalid_argument for counts that do not divide.
 scene::Scene mesh_scene(const MeshScene& m);
+
+/// The cut options of a method name ("snap-split", "snap", "split");
+/// throws std::invalid_argument naming the name otherwise.
+CutOptions cut_options(const std::string& method);
 
 /// The scene's bodies as the facade gives them: its <body>s, or one body
 /// "body" of all n_nodes and n_elems.

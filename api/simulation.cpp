@@ -144,15 +144,24 @@ VolumeMeshResult mesh_surface(const std::string& path, const std::string& unit, 
   return {r.mesh.nodes, {r.mesh.tets.begin(), r.mesh.tets.end()}, q.summary()};
 }
 
-CutMeshResult cut_mesh(std::span<const double> nodes, std::span<const std::int32_t> tets, const Vector3& origin,
-                       const Vector3& edge, const Vector3& sweep, const std::string& method) {
+namespace facade {
+
+CutOptions cut_options(const std::string& method) {
   CutOptions o;
   if (method == "snap")
     o.method = CutMethod::Snap;
   else if (method == "split")
     o.method = CutMethod::Split;
   else if (method != "snap-split")
-    throw std::invalid_argument(fmt::format("cut_mesh: method '{}': expected snap-split, snap or split", method));
+    throw std::invalid_argument(fmt::format("cut: method '{}': expected snap-split, snap or split", method));
+  return o;
+}
+
+}  // namespace facade
+
+CutMeshResult cut_mesh(std::span<const double> nodes, std::span<const std::int32_t> tets, const Vector3& origin,
+                       const Vector3& edge, const Vector3& sweep, const std::string& method) {
+  const CutOptions o = facade::cut_options(method);
   const CutResult r = tissue::cut_along(nodes, tets, {facade::vec(origin), facade::vec(edge), facade::vec(sweep)}, o);
   CutMeshResult out;
   out.nodes = r.nodes;
@@ -177,12 +186,20 @@ struct Simulation::Impl {
   std::vector<std::int32_t> tets, tris;
 
   explicit Impl(scene::Scene s) : session(std::move(s)) {
+    warnings = scene::scene_warnings(session.scene(), session.model());
+    mesh_changed();
+    set_tick_result(last, session.last(), 0);
+  }
+
+  std::uint64_t mesh_version = 0;
+
+  /// The interleaved copies of the model's mesh (after loading, each cut and a reset after one).
+  void mesh_changed() {
+    ++mesh_version;
     const TissueModel<double>& model = session.model();
-    warnings = scene::scene_warnings(session.scene(), model);
     rest = interleave(model.X, 3);
     tets = interleave(model.elem_nodes, 4);
     tris = interleave(model.tris, 3);
-    set_tick_result(last, session.last(), 0);
   }
 
   void tick() {
@@ -229,6 +246,7 @@ double Simulation::dt() const { return impl_->session.model().dt; }
 const std::vector<std::string>& Simulation::warnings() const { return impl_->warnings; }
 
 std::span<const double> Simulation::rest_positions() const { return impl_->rest; }
+std::uint64_t Simulation::mesh_version() const { return impl_->mesh_version; }
 std::span<const std::int32_t> Simulation::tetrahedra() const { return impl_->tets; }
 std::span<const std::int32_t> Simulation::surface_triangles() const { return impl_->tris; }
 
@@ -283,8 +301,39 @@ Vector3 Simulation::force(int tool) const {
 long Simulation::ticks() const { return impl_->session.scheduler().ticks(); }
 double Simulation::time() const { return impl_->session.scheduler().time(); }
 
+CutStats Simulation::cut(const Vector3& origin, const Vector3& edge, const Vector3& sweep, const std::string& method) {
+  if (!finite3(origin) || !finite3(edge) || !finite3(sweep))
+    throw std::invalid_argument(fmt::format("{}: cut: origin, edge and sweep must be finite (m)", name()));
+  SessionCut c;
+  try {
+    c = impl_->session.cut({vec(origin), vec(edge), vec(sweep)}, facade::cut_options(method));
+  } catch (const CutError& e) {
+    throw std::invalid_argument(fmt::format("{}: {}", name(), e.what()));
+  } catch (const scene::SceneError& e) {
+    throw std::invalid_argument(e.what());
+  } catch (const ModelError& e) {
+    throw std::invalid_argument(fmt::format("{}: the cut mesh is refused: {}", name(), e.what()));
+  }
+  impl_->mesh_changed();
+  CutStats out;
+  out.nodes_before = std::size_t(c.nodes_before);
+  out.elements_before = std::size_t(c.elements_before);
+  out.nodes = n_nodes();
+  out.elements = n_elements();
+  out.pieces_split = c.cut.split;
+  out.nodes_snapped = c.cut.snapped;
+  out.nodes_copied = c.cut.copies;
+  out.faces_opened = c.cut.cut_faces;
+  out.left_whole = c.cut.unresolved;
+  out.dt_before = c.dt_before;
+  out.dt_after = c.dt_after;
+  return out;
+}
+
 void Simulation::reset() {
+  const bool cut = impl_->session.was_cut();
   impl_->session.restart();
+  if (cut) impl_->mesh_changed();
   set_tick_result(impl_->last, impl_->session.last(), 0);
 }
 

@@ -210,6 +210,19 @@ tissue_status tissue_reset(tissue_simulation* sim) {
   return guarded([&] { sim->sim.reset(); });
 }
 
+tissue_status tissue_cut(tissue_simulation* sim, const double origin[3], const double edge[3], const double sweep[3],
+                         const char* method) {
+  if (sim == nullptr) return null_argument("tissue_cut", "sim");
+  if (origin == nullptr) return null_argument("tissue_cut", "origin");
+  if (edge == nullptr) return null_argument("tissue_cut", "edge");
+  if (sweep == nullptr) return null_argument("tissue_cut", "sweep");
+  return guarded([&] {
+    const std::string m = text(method);
+    sim->sim.cut({origin[0], origin[1], origin[2]}, {edge[0], edge[1], edge[2]}, {sweep[0], sweep[1], sweep[2]},
+                 m.empty() ? "snap-split" : m);
+  });
+}
+
 tissue_status tissue_tool_force(const tissue_simulation* sim, int tool, double force[3]) {
   if (sim == nullptr) return null_argument("tissue_tool_force", "sim");
   if (force == nullptr) return null_argument("tissue_tool_force", "force");

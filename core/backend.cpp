@@ -85,17 +85,37 @@ void Backend::upload(const TissueModel<double>& m) {
   loaded_.clear();
 }
 
+namespace {
+
+/// Refuses a motion array that is not 3 x n finite values, naming the call, the node and the value.
+void check_motion(const char* call, const char* what, std::span<const double> values, index_t n) {
+  if (values.size() != 3 * std::size_t(n))
+    throw std::invalid_argument(fmt::format("{}: {} {} values for {} nodes (need 3 x n_nodes = {})", call,
+                                            values.size(), what, n, 3 * size_t(n)));
+  for (std::size_t k = 0; k < values.size(); ++k)
+    if (!std::isfinite(values[k]))
+      throw std::invalid_argument(
+          fmt::format("{}: node {}: {} {} = {} is not finite", call, k % n, what, "xyz"[k / n], values[k]));
+}
+
+}  // namespace
+
 void Backend::set_displacements(std::span<const double> u) {
   require_upload("set_displacements");
-  const index_t n = n_nodes_;
-  if (u.size() != 3 * std::size_t(n))
-    throw std::invalid_argument(
-        fmt::format("set_displacements: {} values for {} nodes (need 3 x n_nodes = {})", u.size(), n, 3 * size_t(n)));
-  for (std::size_t k = 0; k < u.size(); ++k)
-    if (!std::isfinite(u[k]))
-      throw std::invalid_argument(
-          fmt::format("set_displacements: node {}: displacement {} = {} is not finite", k % n, "xyz"[k / n], u[k]));
-  do_set_displacements(u);
+  check_motion("set_displacements", "displacement", u, n_nodes_);
+  do_set_motion(u, u);
+}
+
+void Backend::set_motion(std::span<const double> u, std::span<const double> u_prev) {
+  require_upload("set_motion");
+  check_motion("set_motion", "displacement", u, n_nodes_);
+  check_motion("set_motion", "previous displacement", u_prev, n_nodes_);
+  do_set_motion(u, u_prev);
+}
+
+std::vector<double> Backend::previous_displacements() {
+  require_upload("previous_displacements");
+  return do_previous_displacements();
 }
 
 RegionSizes Backend::build_region(std::span<const index_t> seeds, int depth) {

@@ -153,6 +153,14 @@ class Backend {
   /// Halo nodes are held at the new u (they are held "at their current
   /// displacement"); fixed and driven nodes keep their targets.
   void set_displacements(std::span<const double> u);
+  /// Replaces the motion: u^n = u and u^{n-1} = u_prev (3 x n_nodes each,
+  /// m), so the velocity (u - u_prev) / dt carries over; otherwise as
+  /// set_displacements (which is set_motion(u, u)). A remesh (a cut) carries
+  /// the state over through it. Throws std::invalid_argument naming the node
+  /// for a size that is not 3 x n_nodes or a value that is not finite.
+  void set_motion(std::span<const double> u, std::span<const double> u_prev);
+  /// u^{n-1} (3 x n_nodes, m), with download()'s u the motion set_motion takes.
+  std::vector<double> previous_displacements();
 
   /// Flood-fills the region from seeds for depth rings (kDepthAll = whole
   /// mesh), holds the new halo at its current displacement, freezes nodes
@@ -304,7 +312,8 @@ class Backend {
 
  protected:
   virtual void do_upload(const TissueModel<double>& model) = 0;
-  virtual void do_set_displacements(std::span<const double> u) = 0;
+  virtual void do_set_motion(std::span<const double> u, std::span<const double> u_prev) = 0;
+  virtual std::vector<double> do_previous_displacements() = 0;
   virtual RegionSizes do_build_region(std::span<const index_t> seeds, int depth) = 0;
   virtual Region do_region() = 0;
   /// Region roles (NodeRole) of the given nodes (the driven-node check).

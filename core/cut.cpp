@@ -1,5 +1,7 @@
 #include "core/cut.hpp"
 
+#include "core/contact.hpp"
+
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -403,6 +405,128 @@ CutResult cut_along(std::span<const double> nodes, std::span<const index_t> tets
   r.weight = std::move(weight);
   r.element_from = std::move(elem_from);
   return r;
+}
+
+DeformedCut cut_deformed(std::span<const double> X, std::span<const index_t> tets, std::span<const double> u,
+                         std::span<const double> u_prev, const CutSurface& cut, const CutOptions& o) {
+  const std::size_t n = X.size() / 3;
+  if (X.size() % 3 != 0 || u.size() != 3 * n || u_prev.size() != 3 * n)
+    throw CutError(fmt::format("cut: {} reference coordinates, {} displacements and {} previous ones are not 3 per "
+                               "node each",
+                               X.size(), u.size(), u_prev.size()));
+  const auto field = [n](std::span<const double> f, std::size_t a) { return V{f[a], f[n + a], f[2 * n + a]}; };
+  const auto ref = [&](std::size_t a) { return V{X[3 * a], X[3 * a + 1], X[3 * a + 2]}; };
+  std::vector<double> x(X.size());
+  for (std::size_t a = 0; a < n; ++a) {
+    const V p = ref(a) + field(u, a);
+    x[3 * a] = p.x, x[3 * a + 1] = p.y, x[3 * a + 2] = p.z;
+  }
+  DeformedCut out;
+  out.cut = cut_along(x, tets, cut, o);
+  CutResult& r = out.cut;
+  const std::size_t m = std::size_t(r.n_nodes());
+  const auto now = [&](std::size_t a) { return V{x[3 * a], x[3 * a + 1], x[3 * a + 2]}; };
+  const auto placed = [&](std::size_t i) { return V{r.nodes[3 * i], r.nodes[3 * i + 1], r.nodes[3 * i + 2]}; };
+
+  // each input node's elements, for the snapped ones' new place
+  std::vector<index_t> start(n + 1, 0), star(tets.size());
+  for (index_t v : tets) ++start[std::size_t(v) + 1];
+  std::partial_sum(start.begin(), start.end(), start.begin());
+  {
+    std::vector<index_t> fill(start.begin(), start.end() - 1);
+    for (std::size_t k = 0; k < tets.size(); ++k) star[std::size_t(fill[std::size_t(tets[k])]++)] = index_t(k / 4);
+  }
+  // an input node's reference place and motion after the cut: its own, or (snapped) the field at its new place,
+  // from the element of its star that holds it (the one whose smallest barycentric weight is largest)
+  struct Place { V X, u, u_prev; };
+  std::vector<Place> kept(n);
+  std::vector<std::uint8_t> known(n, 0);
+  // the boundary faces (in one element only), by node: a surface node's new place is taken back onto the
+  // reference surface, so that the reference mesh keeps the old one's boundary and volume
+  std::vector<std::vector<std::array<index_t, 3>>> boundary(n);
+  {
+    const std::vector<index_t> all(tets.begin(), tets.end());
+    const std::vector<FaceRef> faces = all_faces(all);
+    for (std::size_t f = 0; f < faces.size(); ++f) {
+      const bool twice = (f > 0 && faces[f - 1].key == faces[f].key) ||
+                         (f + 1 < faces.size() && faces[f + 1].key == faces[f].key);
+      if (twice) continue;
+      for (index_t v : faces[f].key) boundary[std::size_t(v)].push_back(faces[f].key);
+    }
+  }
+  const auto kept_place = [&](std::size_t k, V p) -> const Place& {
+    if (known[k]) return kept[k];
+    known[k] = 1;
+    if (norm(p - now(k)) == 0) return kept[k] = {ref(k), field(u, k), field(u_prev, k)};
+    if (!boundary[k].empty()) {  // the nearest point of its boundary faces, as they are now
+      double nearest = INFINITY;
+      Place at{ref(k), field(u, k), field(u_prev, k)};
+      for (const std::array<index_t, 3>& f : boundary[k]) {
+        double w[3];
+        const V q = closest_on_triangle(p, now(std::size_t(f[0])), now(std::size_t(f[1])), now(std::size_t(f[2])), w);
+        if (!(norm(q - p) < nearest)) continue;
+        nearest = norm(q - p);
+        at = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
+        for (int j = 0; j < 3; ++j) {
+          at.X = at.X + w[j] * ref(std::size_t(f[j]));
+          at.u = at.u + w[j] * field(u, std::size_t(f[j]));
+          at.u_prev = at.u_prev + w[j] * field(u_prev, std::size_t(f[j]));
+        }
+      }
+      return kept[k] = at;
+    }
+    double best = -INFINITY;
+    Place at{ref(k), field(u, k), field(u_prev, k)};
+    for (index_t s = start[k]; s < start[k + 1]; ++s) {
+      const std::size_t e = std::size_t(star[std::size_t(s)]);
+      const index_t* c = &tets[4 * e];
+      const double v = volume(now(c[0]), now(c[1]), now(c[2]), now(c[3]));
+      double w[4];
+      for (int j = 0; j < 4; ++j) {
+        V corner[4] = {now(c[0]), now(c[1]), now(c[2]), now(c[3])};
+        corner[j] = p;
+        w[j] = volume(corner[0], corner[1], corner[2], corner[3]) / v;
+      }
+      const double least = std::min({w[0], w[1], w[2], w[3]});
+      if (!(least > best)) continue;
+      best = least;
+      // a place a rounding (or a surface node's slide over a curved face) outside the star: its nearest
+      // point in the element, so that the reference mesh stays inside the old one and keeps its volume
+      double sum = 0;
+      for (double& wj : w) sum += (wj = std::max(wj, 0.0));
+      for (double& wj : w) wj /= sum;
+      at = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
+      for (int j = 0; j < 4; ++j) {
+        at.X = at.X + w[j] * ref(std::size_t(c[j]));
+        at.u = at.u + w[j] * field(u, std::size_t(c[j]));
+        at.u_prev = at.u_prev + w[j] * field(u_prev, std::size_t(c[j]));
+      }
+    }
+    return kept[k] = at;
+  };
+  std::vector<Place> place(m);
+  for (std::size_t i = 0; i < m; ++i) {
+    const auto [a, b] = r.from[i];
+    if (a == b) {
+      place[i] = kept_place(std::size_t(a), placed(i));
+      continue;
+    }
+    // an edge node: between its ends as they are after the snap (each end's own kept place)
+    const Place pa = kept_place(std::size_t(a), placed(std::size_t(a)));
+    const Place pb = kept_place(std::size_t(b), placed(std::size_t(b)));
+    const double w = r.weight[i];
+    place[i] = {(1 - w) * pa.X + w * pb.X, (1 - w) * pa.u + w * pb.u, (1 - w) * pa.u_prev + w * pb.u_prev};
+  }
+  out.u.resize(3 * m);
+  out.u_prev.resize(3 * m);
+  for (std::size_t i = 0; i < m; ++i) {
+    for (int c = 0; c < 3; ++c) {
+      out.u[c * m + i] = place[i].u[c];
+      out.u_prev[c * m + i] = place[i].u_prev[c];
+      r.nodes[3 * i + std::size_t(c)] = place[i].X[c];
+    }
+  }
+  return out;
 }
 
 }  // namespace tissue

@@ -96,4 +96,26 @@ struct CutResult {
 CutResult cut_along(std::span<const double> nodes, std::span<const index_t> tets, const CutSurface& cut,
                    const CutOptions& options = {});
 
+/// A cut made where the tissue is now: cut_along on the deformed positions
+/// x = X + u, its nodes then taken back to the reference configuration
+/// through the elements' own maps, which are affine (linear tetrahedra):
+/// every node of the cut mesh gets the old mesh's fields X, u and u_prev at
+/// one place of the old mesh. A node made on an edge at weight w takes
+/// (1 - w) of one end's and w of the other's; a snapped node takes them at
+/// its new place, barycentrically from the element of its star that holds
+/// it (its nearest point there when rounding leaves it outside) or, on the
+/// surface, from the nearest of its boundary faces, so that the reference
+/// mesh keeps the old boundary and its volume (the mass). Its deformed place
+/// is then X + u, within rounding of where cut_along put it inside, and a
+/// surface node's is on the surface as it is now. (u and u_prev are
+/// component-major, 3 x n_nodes, as a backend's download; `nodes`
+/// interleaved x y z per node.)
+struct DeformedCut {
+  CutResult cut;              ///< cut.nodes: the reference positions of the cut mesh
+  std::vector<double> u;      ///< u^n of the cut mesh (3 x its n_nodes, component-major)
+  std::vector<double> u_prev; ///< u^(n-1), likewise
+};
+DeformedCut cut_deformed(std::span<const double> nodes, std::span<const index_t> tets, std::span<const double> u,
+                         std::span<const double> u_prev, const CutSurface& cut, const CutOptions& options = {});
+
 }  // namespace tissue

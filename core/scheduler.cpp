@@ -102,8 +102,8 @@ double median_surface_edge(const TissueModel<double>& m) {
 }
 
 Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, SchedulerSettings settings)
-    : backend_(backend), model_(model), settings_(std::move(settings)) {
-  check_settings(settings_, model_);
+    : backend_(backend), model_(&model), settings_(std::move(settings)) {
+  check_settings(settings_, model);
   steps_per_tick_ = std::max(1, static_cast<int>(std::lround(settings_.tick / model.dt)));
   depth_ = settings_.depth;
   if (settings_.depth == kDepthAuto) {
@@ -114,18 +114,13 @@ Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, Schedul
     auto_depth_ = true;
     depth_ = settings_.auto_start;
   }
-  std::vector<ToolShape> shapes;
-  for (ToolSetting& t : settings_.tools) {
-    t.axis = (1.0 / norm(t.axis)) * t.axis;
-    shapes.push_back(t.shape);
-  }
-  backend_.set_tools(shapes, settings_.contact);
+  for (ToolSetting& t : settings_.tools) t.axis = (1.0 / norm(t.axis)) * t.axis;
   if (!settings_.body_contact.empty() && settings_.depth != kDepthAll)
     throw std::invalid_argument(fmt::format("depth {}: bodies that touch each other need the whole mesh (depth all): "
                                             "a region of rings does not reach across to the other body",
                                             settings_.depth == kDepthAuto ? std::string("auto")
                                                                           : std::to_string(settings_.depth)));
-  backend_.set_body_contact(settings_.body_contact);
+  give_backend_tools();
   prev_.assign(settings_.tools.size(), ToolPose{});
   entering_.assign(settings_.tools.size(), 0);
   motion_.assign(settings_.tools.size(), ToolMotion{});
@@ -136,9 +131,36 @@ Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, Schedul
   fast_reported_.assign(settings_.tools.size(), 0);
   // a contact carries the surface it meets with the tool within each step: beyond half an edge per step
   // the elements under it deform by a large fraction of their size in one step (and invert at a few edges)
-  follow_step_ = 0.5 * median_surface_edge(model_);
+  follow_step_ = 0.5 * median_surface_edge(*model_);
   // depth N: an empty region (nothing moves) until the first contact seeds it
   region_ = backend_.build_region({}, depth_);
+}
+
+void Scheduler::give_backend_tools() {
+  std::vector<ToolShape> shapes;
+  for (const ToolSetting& t : settings_.tools) shapes.push_back(t.shape);
+  backend_.set_tools(shapes, settings_.contact);
+  backend_.set_body_contact(settings_.body_contact);
+}
+
+void Scheduler::remesh(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from) {
+  if (pending_) throw std::logic_error("Scheduler::remesh: a tick was begun and not ended (end_tick)");
+  if (node_from.size() != std::size_t(model.n_nodes))
+    throw std::invalid_argument(fmt::format("Scheduler::remesh: {} node origins for {} nodes", node_from.size(),
+                                            model.n_nodes));
+  check_settings(settings_, model);
+  model_ = &model;
+  steps_per_tick_ = std::max(1, static_cast<int>(std::lround(settings_.tick / model.dt)));
+  give_backend_tools();
+  follow_step_ = 0.5 * median_surface_edge(model);
+  // a new node is a seed where it comes from one (a copy of a seed, a node made on an edge from one)
+  std::vector<index_t> seeds;
+  for (std::size_t i = 0; i < node_from.size(); ++i)
+    if (std::binary_search(seeds_.begin(), seeds_.end(), node_from[i][0]) ||
+        std::binary_search(seeds_.begin(), seeds_.end(), node_from[i][1]))
+      seeds.push_back(index_t(i));
+  seeds_ = std::move(seeds);
+  region_ = backend_.build_region(seeds_, region_.whole() ? kDepthAll : depth_);
 }
 
 std::vector<std::string> Scheduler::take_notes() {
@@ -246,14 +268,14 @@ void Scheduler::note_passed_through(const Reductions& r) {
     const double l = settings_.tools[t].shape.shaft;
     // a tool lifted off ends its contact outside the undeformed body: only one inside it costs a download
     // (the haptic tick's traffic stays fixed)
-    if (!inside_reference_surface(model_, m.to.tip) &&
-        !(l > 0 && inside_reference_surface(model_, m.to.tip + 0.5 * l * m.to.axis)))
+    if (!inside_reference_surface(*model_, m.to.tip) &&
+        !(l > 0 && inside_reference_surface(*model_, m.to.tip + 0.5 * l * m.to.axis)))
       continue;
     if (u.empty()) u = backend_.download().u;
     const char* part = nullptr;
-    if (inside_surface(model_, u, m.to.tip))
+    if (inside_surface(*model_, u, m.to.tip))
       part = "tip";
-    else if (l > 0 && inside_surface(model_, u, m.to.tip + 0.5 * l * m.to.axis))
+    else if (l > 0 && inside_surface(*model_, u, m.to.tip + 0.5 * l * m.to.axis))
       part = "shaft";
     if (part == nullptr) continue;
     through_reported_[t] = 1;
@@ -297,7 +319,7 @@ void Scheduler::check_health(const Reductions& r, long first_step) const {
     throw SimulationError(fmt::format(
         "tick {} (TLED steps {}..{}): element {}{} has J = {:.4g} (inverted or degenerate); stopping. "
         "Reduce the indentation or the time step{}",
-        tick_, first_step, total_steps_ - 1, r.bad_elem, element_place(model_, settings_, motion_, r.bad_elem),
+        tick_, first_step, total_steps_ - 1, r.bad_elem, element_place(*model_, settings_, motion_, r.bad_elem),
         r.bad_J, fast.empty() ? "" : ". " + fast));
   }
   if (!r.finite)
@@ -354,14 +376,14 @@ void Scheduler::begin_tick(std::span<Device* const> devices) {
     const ToolShape& shape = settings_.tools[t].shape;
     if (!has_prev_) {
       prev_[t] = pose;
-      const double gap = nearest_surface_node(model_, pose.tip);
-      if (inside_reference_surface(model_, pose.tip) && gap > shape.radius)
+      const double gap = nearest_surface_node(*model_, pose.tip);
+      if (inside_reference_surface(*model_, pose.tip) && gap > shape.radius)
         notes_.push_back(fmt::format(
             "tool '{}' starts inside the body, {:.3g} mm from its nearest surface node: contact acts on the surface, "
             "so the tool feels nothing until its surface meets the tissue's",
             shape.name, 1e3 * (gap - shape.radius)));
       else if (const std::optional<ToolPose> out = retracted_from_reference_surface(
-                   model_, shape, pose, pose.axis, 0.05 * shape.radius);
+                   *model_, shape, pose, pose.axis, 0.05 * shape.radius);
                out && norm(out->tip - pose.tip) > kEntryDepth * shape.radius) {
         prev_[t] = *out;
         entering_[t] = 1;
@@ -436,7 +458,7 @@ TickReport Scheduler::end_tick() {
   rep.strain_energy = r.strain_energy;
   rep.visco_power = r.visco_power;
   rep.visco_stored = r.visco_stored;
-  dissipated_ += 0.5 * (visco_power_ + r.visco_power) * (steps_per_tick_ * model_.dt);  // the tick's simulated time
+  dissipated_ += 0.5 * (visco_power_ + r.visco_power) * (steps_per_tick_ * model_->dt);  // the tick's simulated time
   visco_power_ = r.visco_power;
   rep.dissipated = dissipated_;
   rep.max_disp = r.max_disp;

@@ -157,6 +157,18 @@ class Scheduler {
   /// finite, >= 0); its contacts and grasp stay.
   void set_tool_friction(int t, double friction);
 
+  /// Carries the run over to a new mesh of the same scene (a cut,
+  /// core/cut.hpp), which the backend already holds (Backend::upload):
+  /// node i of `model` comes from old nodes node_from[i] (the same one
+  /// twice for a kept or copied node). Keeps the time, the tools' poses and
+  /// notes, the region's depth and its seeds (a new node is a seed where it
+  /// comes from one), gives the backend the tools again and takes the steps
+  /// per tick from the new model's dt. The caller then sets the loads and
+  /// the motion (Backend::set_motion). `model` must outlive the Scheduler or
+  /// the next remesh. Throws std::logic_error between begin_tick and
+  /// end_tick.
+  void remesh(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from);
+
   /// Notices since the last call (a tool pressing a rigid support, naming
   /// its nodes; a tool starting inside the body; a tool moving more than
   /// half the surface's median edge per TLED step in contact; a tool whose
@@ -164,6 +176,8 @@ class Scheduler {
   std::vector<std::string> take_notes();
 
  private:
+  /// Gives the backend the settings' tools and bodies (after an upload).
+  void give_backend_tools();
   void seed_region();
   bool grow_region(const Reductions& r);
   void check_health(const Reductions& r, long first_step) const;
@@ -179,7 +193,7 @@ class Scheduler {
   void note_passed_through(const Reductions& r);
 
   Backend& backend_;
-  const TissueModel<double>& model_;
+  const TissueModel<double>* model_;
   SchedulerSettings settings_;
   int steps_per_tick_ = 1;
   int depth_ = kDepthAll;       ///< current rings (settings_.depth, or the grown depth under auto)

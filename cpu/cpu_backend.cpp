@@ -72,9 +72,12 @@ void CpuBackend<T>::do_upload(const TissueModel<double>& model) {
 }
 
 template <class T>
-void CpuBackend<T>::do_set_displacements(std::span<const double> u) {
+void CpuBackend<T>::do_set_motion(std::span<const double> u, std::span<const double> u_prev) {
   const index_t n = model_.n_nodes;
-  for (std::size_t k = 0; k < u.size(); ++k) state_.u[k] = state_.u_prev[k] = state_.u_next[k] = T(u[k]);
+  for (std::size_t k = 0; k < u.size(); ++k) {
+    state_.u[k] = state_.u_next[k] = T(u[k]);
+    state_.u_prev[k] = T(u_prev[k]);
+  }
   std::fill(state_.u_carry.begin(), state_.u_carry.end(), T(0));
   state_.clear_law_state();  // a new initial state: no Prony history
   energy_.fresh = energy_.synced = false;
@@ -87,6 +90,11 @@ void CpuBackend<T>::do_set_displacements(std::span<const double> u) {
         if (!(keep >> c & 1)) state_.u_held[c * n + a] = state_.u[c * n + a];
     }
   cpu::element_pressure(model_, state_, all_elems_, all_elems_part_);
+}
+
+template <class T>
+std::vector<double> CpuBackend<T>::do_previous_displacements() {
+  return {state_.u_prev.begin(), state_.u_prev.end()};
 }
 
 template <class T>

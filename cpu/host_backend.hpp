@@ -57,7 +57,8 @@ class CpuBackend final : public Backend {
 
  protected:
   void do_upload(const TissueModel<double>& model) override;
-  void do_set_displacements(std::span<const double> u) override;
+  void do_set_motion(std::span<const double> u, std::span<const double> u_prev) override;
+  std::vector<double> do_previous_displacements() override;
   RegionSizes do_build_region(std::span<const index_t> seeds, int depth) override;
   Region do_region() override { return state_.region; }
   std::vector<std::uint8_t> do_roles(std::span<const index_t> nodes) override;

@@ -86,16 +86,17 @@ __global__ void drive_kernel(index_t n, const T* values, const index_t* ids, con
   s.u_held[a] = held_at;
 }
 
-/// u^n = u^{n-1} = u^{n+1} = src (src: 3 x n component-major, double);
-/// halo nodes are held at the new u in their components that are neither
-/// driven nor fixed.
+/// u^n = u^{n+1} = src, u^{n-1} = src + 3 n (src: two 3 x n component-major
+/// arrays, double); halo nodes are held at the new u in their components
+/// that are neither driven nor fixed.
 template <class T>
-__global__ void set_displacements_kernel(index_t n, const double* src, const std::uint8_t* flags, StateView<T> s,
-                                         StepBuffers<T> b) {
+__global__ void set_motion_kernel(index_t n, const double* src, const std::uint8_t* flags, StateView<T> s,
+                                  StepBuffers<T> b) {
   const index_t a = thread_index();
   if (a >= n) return;
   const Packed3<T> u = {T(src[a]), T(src[n + a]), T(src[2 * n + a]), T(0)};
-  b.u_prev[a] = u;
+  const double* prev = src + 3 * std::size_t(n);
+  b.u_prev[a] = {T(prev[a]), T(prev[n + a]), T(prev[2 * n + a]), T(0)};
   b.u[a] = u;
   b.u_next[a] = u;
   if (s.role[a] == kHalo) {  // held at the new u, except driven and fixed components
@@ -382,10 +383,11 @@ class CudaBackend final : public Backend {
     stream_.sync();
   }
 
-  void do_set_displacements(std::span<const double> u) override {
+  void do_set_motion(std::span<const double> u, std::span<const double> u_prev) override {
     const index_t n = store_.n_nodes();
     log_.to_device_now(scratch_.data(), u.data(), u.size_bytes(), stream());
-    launch(n, stream(), set_displacements_kernel<T>, n, scratch_.data(), store_.model().node_flags, store_.state(),
+    log_.to_device_now(scratch_.data() + u.size(), u_prev.data(), u_prev.size_bytes(), stream());
+    launch(n, stream(), set_motion_kernel<T>, n, scratch_.data(), store_.model().node_flags, store_.state(),
            store_.u.current());
     store_.clear_law_state(stream());  // a new initial state: no Prony history
     body_.clear_anchors(stream());
@@ -550,6 +552,15 @@ class CudaBackend final : public Backend {
     f.f.assign(at(4), at(7));
     f.elem_J.assign(at(7), at(7) + ne);
     return f;
+  }
+
+  std::vector<double> do_previous_displacements() override {
+    const index_t n = store_.n_nodes(), ne = store_.n_elems();
+    launch(std::max(n, ne), stream(), download_kernel<T>, store_.model(), store_.state(), store_.u.current().u_prev,
+           scratch_.data());
+    std::vector<double> u_prev(3 * std::size_t(n));
+    log_.to_host(u_prev.data(), scratch_.data(), u_prev.size() * sizeof(double), stream());
+    return u_prev;
   }
 
   void do_write_positions(float* dst) override {

@@ -218,10 +218,19 @@ void check_work(long ticks, double updates_per_tick, const std::string& per_tick
 /// lands inside a tick (step() releases the GIL, not the lock). What is fixed
 /// when it is made (sizes, names, the reference mesh, the tools' shapes, the
 /// warnings) is read without it.
+/// A Simulation's reference mesh as NumPy arrays, copied once per mesh
+/// version (Simulation::mesh_version): arrays handed out before a cut keep
+/// the mesh they were made of.
+struct MeshArrays {
+  std::uint64_t version = 0;
+  py::object rest, tets, tris;
+};
+
 template <class T>
 struct Locked {
   T value;
   std::mutex lock;
+  MeshArrays mesh = {};  ///< a Simulation's (mesh_arrays); unused by a Batch
 };
 using PySimulation = Locked<Simulation>;
 using PyBatch = Locked<tissue::Batch>;
@@ -232,6 +241,36 @@ auto locked(Locked<T>& o, F&& f) {
   py::gil_scoped_release free;
   std::lock_guard<std::mutex> hold(o.lock);
   return f(o.value);
+}
+
+/// A read-only (rows, cols) array of its own copy of `values`.
+template <class V>
+py::array read_only_copy(const std::vector<V>& values, py::ssize_t cols) {
+  py::array_t<V> a({py::ssize_t(values.size()) / cols, cols});
+  std::copy(values.begin(), values.end(), a.mutable_data());
+  a.attr("flags").attr("writeable") = false;
+  return std::move(a);
+}
+
+/// The simulation's reference mesh as arrays, made again when the mesh changed.
+const MeshArrays& mesh_arrays(PySimulation& s) {
+  std::uint64_t version = 0;
+  std::vector<double> rest;
+  std::vector<std::int32_t> tets, tris;
+  locked(s, [&](Simulation& x) {
+    version = x.mesh_version();
+    if (version == s.mesh.version) return;
+    rest.assign(x.rest_positions().begin(), x.rest_positions().end());
+    tets.assign(x.tetrahedra().begin(), x.tetrahedra().end());
+    tris.assign(x.surface_triangles().begin(), x.surface_triangles().end());
+  });
+  if (version != s.mesh.version) {
+    s.mesh.rest = read_only_copy(rest, 3);
+    s.mesh.tets = read_only_copy(tets, 4);
+    s.mesh.tris = read_only_copy(tris, 3);
+    s.mesh.version = version;
+  }
+  return s.mesh;
 }
 
 /// A new array the engine fills with the field.
@@ -420,6 +459,23 @@ void bind_module(py::module_& m) {
 
 /// What a tick gives back: TickResult and ToolResult.
 void bind_results(py::module_& m) {
+  py::class_<tissue::CutStats>(m, "CutStats", "What Simulation.cut did (docs/cutting.md)")
+      .def_readonly("nodes_before", &tissue::CutStats::nodes_before)
+      .def_readonly("elements_before", &tissue::CutStats::elements_before)
+      .def_readonly("nodes", &tissue::CutStats::nodes)
+      .def_readonly("elements", &tissue::CutStats::elements)
+      .def_readonly("elements_split", &tissue::CutStats::pieces_split)
+      .def_readonly("nodes_snapped", &tissue::CutStats::nodes_snapped)
+      .def_readonly("nodes_copied", &tissue::CutStats::nodes_copied)
+      .def_readonly("faces_opened", &tissue::CutStats::faces_opened)
+      .def_readonly("left_whole", &tissue::CutStats::left_whole)
+      .def_readonly("dt_before", &tissue::CutStats::dt_before, "TLED step before the cut (s)")
+      .def_readonly("dt_after", &tissue::CutStats::dt_after, "TLED step after it (s)")
+      .def("__repr__", [](const tissue::CutStats& c) {
+        return "<tissue.CutStats " + std::to_string(c.nodes_before) + " -> " + std::to_string(c.nodes) + " nodes, " +
+               std::to_string(c.elements_before) + " -> " + std::to_string(c.elements) + " elements, " +
+               std::to_string(c.faces_opened) + " faces opened>";
+      });
   py::class_<tissue::BodyRange>(m, "Body",
                                 "One body of a scene: its nodes and elements, consecutive ranges of the scene's")
       .def_readonly("name", &tissue::BodyRange::name)
@@ -552,18 +608,18 @@ void bind_simulation(py::module_& m) {
                   py::arg("tool_radii") = std::vector<double>{2e-3}, py::arg("tool_shaft") = 0.0,
                   py::arg("backend") = py::none(), py::arg("precision") = py::none(), py::arg("depth") = py::none(),
                   py::arg("name") = "<mesh>", "Build a simulation of a tetrahedral mesh with one material")
-      .def_property_readonly("name", [](PySimulation& s) { return s.value.name(); })
+      .def_property_readonly("name", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.name(); }); })
       .def_property_readonly("backend", [](PySimulation& s) { return s.value.backend(); })
       .def_property_readonly("precision", [](PySimulation& s) { return s.value.precision(); })
       .def_property_readonly("device_name", [](PySimulation& s) { return s.value.device_name(); })
-      .def_property_readonly("n_nodes", [](PySimulation& s) { return s.value.n_nodes(); })
-      .def_property_readonly("n_elements", [](PySimulation& s) { return s.value.n_elements(); })
+      .def_property_readonly("n_nodes", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.n_nodes(); }); })
+      .def_property_readonly("n_elements", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.n_elements(); }); })
       .def_property_readonly("n_tools", [](PySimulation& s) { return s.value.n_tools(); })
       .def_property_readonly("tick_seconds", [](PySimulation& s) { return s.value.tick_seconds(); })
-      .def_property_readonly("steps_per_tick", [](PySimulation& s) { return s.value.steps_per_tick(); })
-      .def_property_readonly("dt", [](PySimulation& s) { return s.value.dt(); })
-      .def_property_readonly("warnings", [](PySimulation& s) { return s.value.warnings(); })
-      .def_property_readonly("bodies", [](PySimulation& s) { return s.value.bodies(); },
+      .def_property_readonly("steps_per_tick", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.steps_per_tick(); }); })
+      .def_property_readonly("dt", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.dt(); }); })
+      .def_property_readonly("warnings", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.warnings(); }); })
+      .def_property_readonly("bodies", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.bodies(); }); },
                              "the scene's bodies (tissue.Body), scene order; a scene of one mesh is one body")
       .def("body_contacts", [](PySimulation& s) {
         return body_contact_arrays(locked(s, [](Simulation& x) { return x.body_contacts(); }));
@@ -571,15 +627,24 @@ void bind_simulation(py::module_& m) {
       .def_property_readonly("ticks",
                              [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.ticks(); }); })
       .def_property_readonly("time", [](PySimulation& s) { return locked(s, [](Simulation& x) { return x.time(); }); })
-      .def_property_readonly("rest_positions", [](py::object self) {
-        return view<double>(self.cast<PySimulation&>().value.rest_positions(), 3, self);
-      }, "(n_nodes, 3) reference positions (m), a read-only view")
-      .def_property_readonly("tetrahedra", [](py::object self) {
-        return view<std::int32_t>(self.cast<PySimulation&>().value.tetrahedra(), 4, self);
-      }, "(n_elements, 4) node ids, a read-only view")
-      .def_property_readonly("surface_triangles", [](py::object self) {
-        return view<std::int32_t>(self.cast<PySimulation&>().value.surface_triangles(), 3, self);
-      }, "(n_triangles, 3) outward surface triangles, a read-only view")
+      .def_property_readonly("rest_positions", [](PySimulation& s) { return mesh_arrays(s).rest; },
+                             "(n_nodes, 3) reference positions (m), read-only; a cut or a reset after one gives new "
+                             "arrays (those handed out before keep the mesh they had)")
+      .def_property_readonly("tetrahedra", [](PySimulation& s) { return mesh_arrays(s).tets; },
+                             "(n_elements, 4) node ids, read-only (as rest_positions)")
+      .def_property_readonly("surface_triangles", [](PySimulation& s) { return mesh_arrays(s).tris; },
+                             "(n_triangles, 3) outward surface triangles, read-only (as rest_positions)")
+      .def_property_readonly("mesh_version", [](PySimulation& s) {
+        return locked(s, [](Simulation& x) { return x.mesh_version(); });
+      }, "Counts the mesh's changes: 1 after loading, one more with each cut() and each reset() after one")
+      .def("cut", [](PySimulation& s, py::handle origin, py::handle edge, py::handle sweep, const std::string& method) {
+        const tissue::Vector3 o = vector3(origin, "origin"), e = vector3(edge, "edge"), w = vector3(sweep, "sweep");
+        return locked(s, [&](Simulation& x) { return x.cut(o, e, w, method); });
+      }, py::arg("origin"), py::arg("edge"), py::arg("sweep"), py::arg("method") = "snap-split",
+           "Cut the tissue where it is now along the parallelogram origin + s edge + t sweep (m, the deformed "
+           "configuration) and run on with the cut mesh: the motion, time, tools and loads carry over; the "
+           "Prony history and grasps are dropped; reset() goes back to the mesh before the first cut "
+           "(docs/cutting.md). Returns a CutStats")
       .def("set_tool_pose", [](PySimulation& s, int tool, py::handle tip, py::handle axis) {
         const tissue::Vector3 t = vector3(tip, "tip");
         const tissue::Vector3 a = axis.is_none() ? tissue::Vector3{0, 0, 0} : vector3(axis, "axis");
@@ -592,9 +657,9 @@ void bind_simulation(py::module_& m) {
       .def("follow_scene_path", [](PySimulation& s, int tool) {
         locked(s, [&](Simulation& x) { x.follow_scene_path(tool); });
       }, py::arg("tool"))
-      .def("tool_radius", [](PySimulation& s, int tool) { return s.value.tool_radius(tool); }, py::arg("tool"))
-      .def("tool_shaft", [](PySimulation& s, int tool) { return s.value.tool_shaft(tool); }, py::arg("tool"))
-      .def("tool_friction", [](PySimulation& s, int tool) { return s.value.tool_friction(tool); }, py::arg("tool"),
+      .def("tool_radius", [](PySimulation& s, int tool) { return locked(s, [&](Simulation& x) { return x.tool_radius(tool); }); }, py::arg("tool"))
+      .def("tool_shaft", [](PySimulation& s, int tool) { return locked(s, [&](Simulation& x) { return x.tool_shaft(tool); }); }, py::arg("tool"))
+      .def("tool_friction", [](PySimulation& s, int tool) { return locked(s, [&](Simulation& x) { return x.tool_friction(tool); }); }, py::arg("tool"),
            "The tool's Coulomb friction coefficient mu (0 = frictionless)")
       .def("set_tool_friction", [](PySimulation& s, int tool, double mu) {
         locked(s, [&](Simulation& x) { x.set_tool_friction(tool, mu); });

@@ -8,11 +8,21 @@
 
 namespace tissue::scene {
 
-Scene cut_scene(const Scene& scene, const CutSurface& cut, const CutOptions& options, CutResult* result) {
+void check_cuttable(const Scene& scene) {
   if (!scene.bodies.empty())
     throw SceneError(fmt::format("{}: a scene of {} bodies; cutting takes a scene of one mesh", scene.source,
                                  scene.bodies.size()));
+}
+
+Scene cut_scene(const Scene& scene, const CutSurface& cut, const CutOptions& options, CutResult* result) {
+  check_cuttable(scene);
   CutResult r = cut_along(scene.nodes, scene.tets, cut, options);
+  Scene s = scene_after_cut(scene, r);
+  if (result) *result = std::move(r);
+  return s;
+}
+
+Scene scene_after_cut(const Scene& scene, const CutResult& r) {
   Scene s = scene;
   s.nodes = r.nodes;
   s.tets = r.tets;
@@ -56,7 +66,6 @@ Scene cut_scene(const Scene& scene, const CutSurface& cut, const CutOptions& opt
     std::sort(rows.begin(), rows.end(), [](const auto& a, const auto& b) { return a.element < b.element; });
     m.fibre_rows = std::move(rows);
   }
-  if (result) *result = std::move(r);
   return s;
 }
 

@@ -18,4 +18,11 @@ namespace tissue::scene {
 /// CutError for a bad cut.
 Scene cut_scene(const Scene& scene, const CutSurface& cut, const CutOptions& options, CutResult* result = nullptr);
 
+/// The scene with its mesh replaced by a cut's (`r`, of this scene's mesh),
+/// what refers to nodes and elements following them as cut_scene says.
+Scene scene_after_cut(const Scene& scene, const CutResult& r);
+
+/// Throws SceneError for a scene that cutting does not take (several bodies).
+void check_cuttable(const Scene& scene);
+
 }  // namespace tissue::scene

@@ -7,6 +7,7 @@
 
 #include "backends/registry.hpp"
 #include "scene/checks.hpp"
+#include "scene/cut_scene.hpp"
 #include "scene/validate.hpp"
 
 namespace tissue {
@@ -37,6 +38,11 @@ Session::Session(std::shared_ptr<const scene::Scene> scene, std::shared_ptr<cons
 }
 
 void Session::restart() {
+  if (uncut_scene_) {
+    scene_ = std::move(uncut_scene_);
+    engine_.model = std::move(uncut_model_);
+    box_ = scene::mesh_box(scene_->nodes);
+  }
   start_engine(engine_, *scene_, settings_, loads_ ? &*loads_ : nullptr);
   last_ = TickReport{};
   last_.n_tools = n_tools();
@@ -129,6 +135,57 @@ void Session::set_loads(std::vector<index_t> nodes, std::vector<double> forces) 
     throw std::invalid_argument(fmt::format("{}: {}", name(), e.what()));
   }
   loads_ = scene::SceneLoads{std::move(nodes), std::move(forces)};
+}
+
+SessionCut Session::cut(const CutSurface& surface, const CutOptions& options) {
+  check_running();
+  scene::check_cuttable(*scene_);
+  const TissueModel<double>& before = model();
+  if (scene_->nodes.size() != 3 * std::size_t(before.n_nodes) || scene_->tets.size() != 4 * std::size_t(before.n_elems))
+    throw std::logic_error(fmt::format("{}: the scene's mesh ({} nodes, {} elements) is not its model's", name(),
+                                       scene_->nodes.size() / 3, scene_->tets.size() / 4));
+  SessionCut out;
+  out.dt_before = before.dt;
+  out.dt_crit_before = before.dt_crit_physical;
+  out.added_mass_before = before.added_mass;
+  out.nodes_before = before.n_nodes;
+  out.elements_before = before.n_elems;
+  const std::vector<double> u = backend().download().u, u_prev = backend().previous_displacements();
+  DeformedCut d = cut_deformed(scene_->nodes, scene_->tets, u, u_prev, surface, options);
+  auto cut_scene = std::make_shared<const scene::Scene>(scene::scene_after_cut(*scene_, d.cut));
+  auto cut_model = std::make_shared<const TissueModel<double>>(scene::load_model(*cut_scene));
+  out.dt_after = cut_model->dt;
+  out.dt_crit_after = cut_model->dt_crit_physical;
+  out.added_mass_after = cut_model->added_mass;
+  // the same velocity at the new step: u - u_prev scales with dt
+  const double ratio = cut_model->dt / before.dt;
+  if (ratio != 1)
+    for (std::size_t k = 0; k < d.u.size(); ++k) d.u_prev[k] = d.u[k] - ratio * (d.u[k] - d.u_prev[k]);
+  // the host's loads on the nodes that keep their ids (a copy takes none: the total is kept)
+  std::optional<scene::SceneLoads> loads = loads_;
+  try {
+    backend().upload(*cut_model);
+    scheduler().remesh(*cut_model, d.cut.from);
+    if (loads)
+      scheduler().set_loads(loads->nodes, loads->force);
+    else
+      scene::apply_loads(*cut_scene, *cut_model, scheduler());
+    backend().set_motion(d.u, d.u_prev);
+  } catch (const std::exception& e) {
+    // the backend holds the cut mesh in part: this session cannot go on
+    failure_ = fmt::format("the cut could not be carried over to the backend: {}", e.what());
+    throw SimulationError(fmt::format("{}: {}", name(), failure_));
+  }
+  if (!uncut_scene_) {
+    uncut_scene_ = scene_;
+    uncut_model_ = engine_.model;
+  }
+  engine_.model = std::move(cut_model);
+  scene_ = std::move(cut_scene);
+  box_ = scene::mesh_box(scene_->nodes);
+  fields_.reset();
+  out.cut = std::move(d.cut);
+  return out;
 }
 
 const Fields& Session::fields() {

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/backend.hpp"
+#include "core/cut.hpp"
 #include "core/device.hpp"
 #include "core/model.hpp"
 #include "core/scheduler.hpp"
@@ -51,6 +52,18 @@ class HostDevice final : public Device {
   Vec3<double> tip_ = {}, axis_ = {};
 };
 
+/// What Session::cut did.
+struct SessionCut {
+  CutResult cut;            ///< the counts and maps (cut.nodes: the new reference positions)
+  double dt_before = 0;     ///< the TLED step before and after (s)
+  double dt_after = 0;
+  double dt_crit_before = 0;  ///< the critical step without mass scaling before and after (s)
+  double dt_crit_after = 0;
+  double added_mass_before = 0;  ///< mass scaling's added mass before and after (kg)
+  double added_mass_after = 0;
+  index_t nodes_before = 0, elements_before = 0;
+};
+
 class Session {
  public:
   /// Validates the scene and builds its model (scene::load_model).
@@ -63,8 +76,9 @@ class Session {
           std::unique_ptr<Backend> backend);
   Session(Session&&) = delete;
 
-  /// Back to rest: u = 0, tick 0, every grasp released, no failure; keeps
-  /// the host's tool modes and loads (set_loads, else the scene's).
+  /// Back to rest: u = 0, tick 0, every grasp released, no failure, the
+  /// mesh as it was before any cut; keeps the host's tool modes and loads
+  /// (set_loads, else the scene's).
   void restart();
 
   /// One haptic tick (begin_tick + end_tick). A SimulationError is kept as
@@ -105,6 +119,22 @@ class Session {
   /// set_tool_pose's checks alone.
   void check_tool_pose(int tool, Vec3<double> tip, Vec3<double> axis) const;
 
+  /// Cuts the tissue where it is now along `surface` (given in the
+  /// deformed configuration, where the host sees the blade) between two
+  /// ticks, and runs on with the cut mesh (core cut_deformed,
+  /// docs/cutting.md): the reference mesh, its element sets, supports and
+  /// loads follow the cut; the model is built again (masses, IANP's nodal
+  /// averaging, the surface and its BVH, the step) and uploaded to the same
+  /// backend; the motion carries over (u and the velocity, the FE field's
+  /// values at the new nodes), as do the time, the tools and the region's
+  /// seeds; restart() goes back to the mesh before any cut. Forgotten: the Prony history, grasps (a held grasp takes no
+  /// nodes until its button goes down again) and the contacts' friction
+  /// anchors. Throws CutError for a bad cut and SceneError (scene
+  /// validate.hpp) for a scene of bodies, leaving the session as it was.
+  SessionCut cut(const CutSurface& surface, const CutOptions& options = {});
+  /// Whether the mesh was cut since the start or the last restart().
+  bool was_cut() const { return uncut_scene_ != nullptr; }
+
   /// The last tick's report (a zero report before the first).
   const TickReport& last() const { return last_; }
   /// Why the last tick failed ("" while running).
@@ -121,6 +151,8 @@ class Session {
 
   std::shared_ptr<const scene::Scene> scene_;
   Engine engine_;
+  std::shared_ptr<const scene::Scene> uncut_scene_;  ///< before the first cut (null: none yet)
+  std::shared_ptr<const TissueModel<double>> uncut_model_;
   scene::MeshBox box_;  ///< the reach host poses are held to, as scene waypoints are
   SchedulerSettings settings_;
   std::vector<HostDevice> devices_;

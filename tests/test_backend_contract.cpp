@@ -831,6 +831,48 @@ TEST_P(Contract, AdvanceReduceGivesTheBitsOfAdvanceThenReduce) {
   EXPECT_THROW(b->advance_reduce(-1), std::invalid_argument);
 }
 
+// The motion (u^n, u^{n-1}) read from one run and set on a fresh backend
+// (set_motion, what a cut carries over) steps on as that run does: bit for
+// bit in double, within float's rounding of the carried low bits (which
+// set_motion clears) in float.
+TEST_P(Contract, AMotionSetFromAnotherRunStepsOnAsThatRunDoes) {
+  const auto m = box_model(3, true);
+  auto a = make(m);
+  a->set_displacements(field(m, [](Vec3<double> X) { return Vec3<double>{0.05 * X.x, 0.02 * X.z, 0}; }));
+  a->advance(3);  // moving: u^n != u^{n-1}
+  const std::vector<double> u = a->download().u, u_prev = a->previous_displacements();
+  ASSERT_EQ(u_prev.size(), u.size());
+  double moving = 0;
+  for (std::size_t k = 0; k < u.size(); ++k) moving = std::max(moving, std::fabs(u[k] - u_prev[k]));
+  ASSERT_GT(moving, 0);
+  auto b = make(m);
+  b->set_motion(u, u_prev);
+  EXPECT_EQ(b->download().u, u);
+  EXPECT_EQ(b->previous_displacements(), u_prev);
+  a->advance(5);
+  b->advance(5);
+  const std::vector<double> ua = a->download().u, ub = b->download().u;
+  if (is_float()) {
+    double most = 0;
+    for (std::size_t k = 0; k < ua.size(); ++k) most = std::max(most, std::fabs(ua[k] - ub[k]));
+    EXPECT_LT(most, 1e-6 * max_abs(ua));
+  } else {
+    EXPECT_EQ(ub, ua);
+  }
+  // bad motions: named, as set_displacements' are
+  std::vector<double> short_prev(u_prev.begin(), u_prev.end() - 1), nan_prev = u_prev;
+  nan_prev[4] = NAN;
+  EXPECT_THROW(b->set_motion(u, short_prev), std::invalid_argument);
+  try {
+    b->set_motion(u, nan_prev);
+    ADD_FAILURE() << "a NaN previous displacement was taken";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("node 4: previous displacement x = nan is not finite"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_THROW(make()->previous_displacements(), std::logic_error);
+}
+
 // advance_reduce_in_region runs the tick exactly when contact_candidates()
 // is empty (the cuda backend tests that inside the tick's graph), with the
 // bits of advance_reduce; otherwise nothing moves and the tools stay.

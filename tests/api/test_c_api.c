@@ -299,6 +299,32 @@ int main(void) {
   CHECK(tissue_time(sim) == 0.0);
   CHECK(tissue_tool_force(sim, 0, f) == TISSUE_OK);
   CHECK(strcmp(tissue_last_error(), "") == 0);
+
+  /* A cut through the cube at x = 6 mm while it is pressed: more nodes and elements, the run goes on; a
+     refused cut changes nothing; reset brings back the whole cube. */
+  for (int k = 1; k <= 50; ++k) {
+    const double tip[3] = {0.0075, 0.005, 0.01 + 3e-3 - 3e-4 * (k / 50.0)};
+    CHECK(tissue_set_tool_pose(sim, 0, tip, NULL) == TISSUE_OK);
+    CHECK(tissue_step(sim, 1) == TISSUE_OK);
+  }
+  {
+    const double origin[3] = {0.006, -0.005, -0.005}, edge[3] = {0, 0.02, 0}, sweep[3] = {0, 0, 0.02};
+    const double outside[3] = {0.05, 0, 0}, none[3] = {0, 0, 0};
+    CHECK(tissue_cut(sim, outside, edge, sweep, NULL) == TISSUE_BAD_ARGUMENT);
+    CHECK(contains(tissue_last_error(), "crosses no element"));
+    CHECK(tissue_cut(sim, origin, none, sweep, NULL) == TISSUE_BAD_ARGUMENT);
+    CHECK(contains(tissue_last_error(), "edge has zero length"));
+    CHECK(tissue_cut(sim, origin, edge, sweep, "chop") == TISSUE_BAD_ARGUMENT);
+    CHECK(tissue_cut(sim, NULL, edge, sweep, NULL) == TISSUE_BAD_ARGUMENT);
+    CHECK(contains(tissue_last_error(), "tissue_cut: origin is NULL"));
+    CHECK(tissue_node_count(sim) == NN);
+    CHECK(tissue_cut(sim, origin, edge, sweep, NULL) == TISSUE_OK);
+    CHECK(tissue_node_count(sim) > NN && tissue_element_count(sim) >= NT); /* nodes copied, maybe elements split */
+    CHECK(tissue_step(sim, 20) == TISSUE_OK);
+    CHECK(tissue_tool_force(sim, 0, f) == TISSUE_OK && f[2] > 0);
+    CHECK(tissue_reset(sim) == TISSUE_OK);
+    CHECK(tissue_node_count(sim) == NN && tissue_element_count(sim) == NT);
+  }
   tissue_close(sim);
   tissue_close(NULL);
 

@@ -47,13 +47,13 @@ def test_version_and_backends():
     assert "cpu" in tissue.available_backends()
 
 
-def test_reference_mesh_is_a_read_only_view():
+def test_reference_mesh_is_read_only_and_the_same_arrays_until_it_changes():
     sim = tissue.Simulation.load("@kidney", backend="cpu")
     X = sim.rest_positions
     assert X.shape == (sim.n_nodes, 3) and X.dtype == np.float64
     assert sim.tetrahedra.shape == (sim.n_elements, 4) and sim.tetrahedra.dtype == np.int32
     assert sim.surface_triangles.shape[1] == 3
-    # the same memory on every access: a view, not a copy
+    # the same memory on every access: one array, not a copy a read
     assert X.__array_interface__["data"][0] == sim.rest_positions.__array_interface__["data"][0]
     with pytest.raises(ValueError):
         X[0, 0] = 1.0
@@ -536,3 +536,44 @@ def test_cut_mesh_separates_a_block_that_then_presses_as_two(tmp_path):
         tissue.cut_mesh(nodes, tets, origin=[0.01, 0, 0], edge=[0, 0, 0], sweep=[0, 0, 0.01])
     with pytest.raises(ValueError, match="method 'chop'"):
         tissue.cut_mesh(nodes, tets, origin=[0.01, 0, 0], edge=[0, 0.01, 0], sweep=[0, 0, 0.01], method="chop")
+
+
+def test_a_live_cut_runs_on_with_the_cut_mesh_and_reset_restores_the_whole():
+    # a block pressed on its right half, cut through beside the probe while pressed (the deformed
+    # configuration), runs on: the left half is freed and comes to rest; the arrays of the mesh before the cut
+    # keep what they held; reset goes back to the whole block
+    sim = block(n=(4, 4, 2), backend="cpu", precision="double", depth="all")
+    press(sim, 1e-3, ramp=100, hold=50, centre=(0.015, 0.01, 0.01))
+    X0, T0, version = sim.rest_positions, sim.tetrahedra, sim.mesh_version
+    n0, u_before = sim.n_nodes, sim.displacement()
+    assert np.abs(u_before[X0[:, 0] < 0.01 - 1e-9]).max() > 1e-6  # the press reaches across
+    stats = sim.cut(origin=[0.012, -0.01, -0.01], edge=[0, 0.04, 0], sweep=[0, 0, 0.03])
+    assert isinstance(stats, tissue.CutStats) and stats.nodes_before == n0 and stats.nodes == sim.n_nodes > n0
+    assert stats.faces_opened > 0 and stats.elements == sim.n_elements
+    assert sim.mesh_version == version + 1
+    X1 = sim.rest_positions
+    assert X1.shape == (sim.n_nodes, 3) and sim.tetrahedra.shape == (sim.n_elements, 4)
+    assert X0.shape == (n0, 3) and T0.shape[1] == 4  # the old arrays still hold the old mesh
+    with pytest.raises(ValueError):
+        X1[0, 0] = 1.0
+    # the old nodes keep their ids and, where not snapped onto the cut, their places
+    kept = np.flatnonzero(np.abs(X1[:n0] - X0).max(axis=1) == 0)
+    assert len(kept) > n0 // 2
+    np.testing.assert_allclose(sim.displacement()[kept], u_before[kept], atol=1e-15)
+    P = X1[sim.tetrahedra]
+    vol = np.einsum("ij,ij->i", np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), P[:, 3] - P[:, 0]) / 6
+    assert vol.min() > 0 and vol.sum() == pytest.approx(0.02 * 0.02 * 0.01, rel=1e-12)
+    ticks = sim.ticks
+    for _ in range(300):
+        sim.step()
+    assert sim.ticks == ticks + 300 and np.linalg.norm(sim.force(0)) > 0
+    # with refused cuts named and the run untouched
+    with pytest.raises(ValueError, match="crosses no element"):
+        sim.cut(origin=[0.05, 0, 0], edge=[0, 0.01, 0], sweep=[0, 0, 0.01])
+    with pytest.raises(ValueError, match="method 'chop'"):
+        sim.cut(origin=[0.01, 0, 0], edge=[0, 0.01, 0], sweep=[0, 0, 0.01], method="chop")
+    with pytest.raises(ValueError, match="origin"):
+        sim.cut(origin=[np.nan, 0, 0], edge=[0, 0.01, 0], sweep=[0, 0, 0.01])
+    sim.reset()
+    assert sim.n_nodes == n0 and sim.mesh_version == version + 2
+    np.testing.assert_array_equal(sim.rest_positions, X0)

@@ -94,6 +94,14 @@ struct CutMeshResult {
 CutMeshResult cut_mesh(std::span<const double> nodes, std::span<const std::int32_t> tets, const Vector3& origin,
                        const Vector3& edge, const Vector3& sweep, const std::string& method = "snap-split");
 
+/// What Simulation::cut did.
+struct CutStats {
+  std::size_t nodes_before = 0, elements_before = 0;  ///< the mesh before the cut
+  std::size_t nodes = 0, elements = 0;                ///< and after it
+  int pieces_split = 0, nodes_snapped = 0, nodes_copied = 0, faces_opened = 0, left_whole = 0;  ///< as CutMeshResult
+  double dt_before = 0, dt_after = 0;                 ///< the TLED step before and after (s)
+};
+
 /// One tool at the end of a tick.
 struct ToolResult {
   Vector3 tip = {};                   ///< m
@@ -191,10 +199,15 @@ class Simulation {
   /// from the backend on each call (a download on the cuda backend).
   std::vector<BodyContact> body_contacts() const;
 
-  /// The reference mesh (views valid for the Simulation's life).
+  /// The reference mesh: views valid until the mesh changes (cut(), or
+  /// reset() after a cut; mesh_version() says when), else for the
+  /// Simulation's life.
   std::span<const double> rest_positions() const;          ///< 3 per node (m)
   std::span<const std::int32_t> tetrahedra() const;        ///< 4 per element
   std::span<const std::int32_t> surface_triangles() const; ///< 3 per triangle, outward
+  /// Counts the mesh's changes: 1 after loading, one more with each cut()
+  /// and each reset() after a cut.
+  std::uint64_t mesh_version() const;
 
   // --- tools (index 0 .. n_tools()-1) ---
   /// The pose tool `tool` reaches at the end of the next tick: tip (m) and
@@ -230,6 +243,25 @@ class Simulation {
   /// std::invalid_argument naming the node and the rule (out of range, not
   /// finite, wrong count).
   void set_loads(std::span<const std::int32_t> nodes, std::span<const double> forces);
+
+  // --- cutting (docs/cutting.md) ---
+  /// Cuts the tissue where it is now, between ticks, along the
+  /// parallelogram origin + s edge + t sweep, s, t in [0, 1] (m, the
+  /// deformed configuration: where the host sees its blade), as cut_mesh
+  /// does, and runs on with the cut mesh: its nodes and elements (and so
+  /// n_nodes(), rest_positions(), tetrahedra(), the fields' sizes) change;
+  /// the old nodes keep their ids, new ones follow. The displacement and
+  /// velocity carry over (the field's values at the new nodes), and so do
+  /// the time, the tools and the loads (set_loads' nodes keep their ids; a
+  /// copy of a loaded node takes none of its load). The Prony history and
+  /// grasps are dropped (a grasp takes hold again when its button next goes
+  /// down). reset() goes back to the mesh before the first cut. Throws
+  /// std::invalid_argument naming the rule, leaving the simulation as it
+  /// was, for a zero-length blade, a blade moving along its edge, a cut that
+  /// crosses no element, an unknown method, a scene of several bodies, or a
+  /// cut whose mesh the engine refuses (an element it would invert).
+  CutStats cut(const Vector3& origin, const Vector3& edge, const Vector3& sweep,
+               const std::string& method = "snap-split");
 
   // --- time ---
   /// Runs `ticks` haptic ticks (>= 1) and returns the last one's result.

@@ -117,8 +117,16 @@ double tissue_tool_friction(const tissue_simulation* sim, int tool);
 tissue_status tissue_set_loads(tissue_simulation* sim, const int32_t* nodes, const double* forces, size_t count);
 /* Runs ticks >= 1 haptic ticks. */
 tissue_status tissue_step(tissue_simulation* sim, long ticks);
-/* Back to rest (u = 0, tick 0). */
+/* Back to rest (u = 0, tick 0), the mesh as it was before any cut. */
 tissue_status tissue_reset(tissue_simulation* sim);
+/* Cuts the tissue where it is now, between ticks, along the parallelogram
+ * origin + s edge + t sweep, s, t in [0, 1] (m, the deformed configuration;
+ * tissue::Simulation::cut, docs/cutting.md) and runs on with the cut mesh:
+ * tissue_node_count and tissue_element_count change, the old nodes keep
+ * their ids. method: "snap-split" (NULL or ""), "snap" or "split". A
+ * refused cut (TISSUE_BAD_ARGUMENT, naming the rule) changes nothing. */
+tissue_status tissue_cut(tissue_simulation* sim, const double origin[3], const double edge[3], const double sweep[3],
+                         const char* method);
 /* The force on the tool after the last tick (N): what the hand feels. */
 tissue_status tissue_tool_force(const tissue_simulation* sim, int tool, double force[3]);
 /* How many surface nodes touch the tool after the last tick. */

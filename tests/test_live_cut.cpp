@@ -1,0 +1,358 @@
+// Cutting while the simulation runs (Session::cut, core cut_deformed,
+// docs/cutting.md): a cut made where the tissue is now carries the motion
+// over as the mesh's own field at the new nodes, keeps the mass, creates no
+// energy, and the pieces move on independently; a cut while a tool presses
+// runs on; bad cuts are refused and leave the run as it was; reset goes
+// back to the mesh before the cut.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <numeric>
+#include <vector>
+
+#include "core/box_mesh.hpp"
+#include "core/cut.hpp"
+#include "io/kidney.hpp"
+#include "scene/validate.hpp"
+#include "session/session.hpp"
+
+namespace tissue {
+namespace {
+
+using V = Vec3<double>;
+
+/// A 20 x 20 x 10 mm block of 4 x 4 x 2 cells (5 mm), E 3 kPa, nu 0.4, its
+/// base held; no mass scaling (the mass is then the volume's, exactly); a
+/// probe parked far above; the whole mesh, in double.
+scene::Scene block_scene(int cells = 4) {
+  scene::Scene s;
+  ModelInput in;
+  box_mesh(in, cells, cells, cells / 2, 0.02, 0.02, 0.01);
+  s.source = "block";
+  s.nodes = in.nodes;
+  s.tets = in.tets;
+  s.materials.push_back({.name = "soft", .form = scene::Material::Form::YoungPoisson, .a = 3000, .b = 0.4, .rho = 1000});
+  s.sets.push_back({.name = "soft", .material = "soft", .all = true, .elements = {}});
+  scene::Constraint base;
+  base.kind = scene::Constraint::Kind::Box;
+  base.lo[0] = base.lo[1] = base.lo[2] = -1;
+  base.hi[0] = base.hi[1] = 1;
+  base.hi[2] = 1e-4;
+  s.constraints = {base};
+  scene::Tool probe;
+  probe.radius = 2e-3;
+  probe.path = {{0, {0.01, 0.01, 0.05}}, {1, {0.01, 0.01, 0.05}}};
+  s.tools = {probe};
+  s.solver.precision = Precision::Double;
+  s.solver.depth = kDepthAll;
+  s.solver.mass_scaling = 0;
+  return s;
+}
+
+/// The top nodes beyond x = 12 mm, pulled sideways (+x) with 0.2 mN each.
+void pull_right_top(Session& s) {
+  const TissueModel<double>& m = s.model();
+  std::vector<index_t> top;
+  std::vector<double> force;
+  for (index_t i = 0; i < m.n_nodes; ++i)
+    if (m.X[2 * size_t(m.n_nodes) + i] > 0.01 - 1e-9 && m.X[i] > 0.012 + 1e-9) {
+      top.push_back(i);
+      force.insert(force.end(), {2e-4, 0, 0});
+    }
+  s.set_loads(top, force);
+}
+
+std::string g(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.4g", v);
+  return b;
+}
+
+V at(const std::vector<double>& f, std::size_t n, std::size_t a) { return {f[a], f[n + a], f[2 * n + a]}; }
+V ref(const TissueModel<double>& m, index_t a) { return reference_position(m, a); }
+
+double total_mass(const TissueModel<double>& m) { return std::accumulate(m.mass.begin(), m.mass.end(), 0.0); }
+
+/// A vertical cut at x = x0 over the whole 20 x 20 mm section (margins beyond the block).
+CutSurface through_x(double x0) { return {{x0, -0.01, -0.01}, {0, 0.04, 0}, {0, 0, 0.03}}; }
+
+/// Each node's piece (elements joined through shared nodes): a root node id.
+std::vector<index_t> piece_of(const TissueModel<double>& m) {
+  std::vector<index_t> parent(std::size_t(m.n_nodes));
+  std::iota(parent.begin(), parent.end(), 0);
+  const auto root = [&](index_t a) {
+    while (parent[a] != a) a = parent[a] = parent[parent[a]];
+    return a;
+  };
+  const std::size_t ne = std::size_t(m.n_elems);
+  for (std::size_t e = 0; e < ne; ++e)
+    for (int c = 1; c < 4; ++c) parent[root(m.elem_nodes[c * ne + e])] = root(m.elem_nodes[e]);
+  for (index_t a = 0; a < m.n_nodes; ++a) parent[a] = root(a);
+  return parent;
+}
+
+int pieces(const TissueModel<double>& m) {
+  const std::vector<index_t> p = piece_of(m);
+  int n = 0;
+  for (index_t a = 0; a < m.n_nodes; ++a) n += p[a] == a;
+  return n;
+}
+
+// A block pulled sideways, cut mid-motion between the nodes (2 mm past
+// those at x = 10 mm: snapped, split, opened): every node that keeps its id
+// keeps its place, reference position and velocity; every node made on an
+// edge lies where the deformed edge is and moves as the edge's ends in
+// proportion; the mass is the volume's, exactly; the kinetic energy does
+// not rise.
+TEST(LiveCut, ACutCarriesTheMotionOverAsTheFieldAtTheNewNodes) {
+  Session s(block_scene());
+  pull_right_top(s);
+  for (int k = 0; k < 30; ++k) s.tick();
+  const TissueModel<double> before = s.model();  // a copy: the session's model is replaced
+  const index_t n0 = before.n_nodes;
+  const std::vector<double> u0 = s.backend().download().u, p0 = s.backend().previous_displacements();
+  const Reductions e0 = s.backend().reduce();
+  double largest_v = 0;
+  for (std::size_t k = 0; k < u0.size(); ++k) largest_v = std::max(largest_v, std::fabs(u0[k] - p0[k]));
+  ASSERT_GT(largest_v, 1e-9) << "the block is moving when it is cut";
+
+  const SessionCut c = s.cut(through_x(0.012));
+  const TissueModel<double>& after = s.model();
+  EXPECT_GT(c.cut.split, 0);
+  EXPECT_GT(c.cut.copies, 0);
+  EXPECT_EQ(pieces(after), 2) << "cut through";
+  EXPECT_EQ(after.n_nodes, c.cut.n_nodes());
+  const index_t n1 = after.n_nodes;
+  const std::vector<double> u1 = s.backend().download().u, p1 = s.backend().previous_displacements();
+  ASSERT_EQ(u1.size(), 3 * std::size_t(n1));
+
+  const auto x0 = [&](index_t a) { return ref(before, a) + at(u0, n0, a); };
+  const auto x1 = [&](index_t a) { return ref(after, a) + at(u1, n1, a); };
+  index_t unmoved = 0, edge = 0;
+  for (index_t i = 0; i < n1; ++i) {
+    const auto [a, b] = c.cut.from[i];
+    if (a == b) {
+      if (norm(x1(i) - x0(a)) > 1e-15) continue;  // a snapped node (or its copy): below
+      ++unmoved;
+      EXPECT_LT(norm(ref(after, i) - ref(before, a)), 1e-15) << "node " << i;
+      const V v0 = (1 / c.dt_before) * (at(u0, n0, a) - at(p0, n0, a));
+      const V v1 = (1 / c.dt_after) * (at(u1, n1, i) - at(p1, n1, i));
+      EXPECT_LT(norm(v1 - v0), 1e-9 * largest_v / c.dt_before) << "node " << i << ": the same velocity";
+      continue;
+    }
+    ++edge;
+    // on the deformed edge between its ends as they are after the cut, moving with them
+    const index_t ea = a, eb = b;  // the ends keep their ids (old nodes come first)
+    const double w = c.cut.weight[i];
+    EXPECT_LT(norm(x1(i) - ((1 - w) * x1(ea) + w * x1(eb))), 1e-12) << "edge node " << i;
+    const V v_i = at(u1, n1, i) - at(p1, n1, i);
+    const V v_ab = (1 - w) * (at(u1, n1, ea) - at(p1, n1, ea)) + w * (at(u1, n1, eb) - at(p1, n1, eb));
+    EXPECT_LT(norm(v_i - v_ab), 1e-12 * std::max(1.0, largest_v)) << "edge node " << i;
+  }
+  EXPECT_GT(unmoved, n0 / 2);
+  EXPECT_GT(edge, 0);
+
+  const double rho_v = 1000 * 0.02 * 0.02 * 0.01;
+  EXPECT_NEAR(total_mass(before), rho_v, 1e-12 * rho_v);
+  EXPECT_NEAR(total_mass(after), rho_v, 1e-12 * rho_v) << "no element is deleted: the mass is kept";
+
+  const Reductions e1 = s.backend().reduce();
+  EXPECT_LE(e1.kinetic, e0.kinetic * (1 + 1e-9)) << "the velocities carried over move no more mass faster";
+}
+
+/// The strain energy's change across a cut of the pulled block, relative.
+double energy_jump(bool ianp, CutMethod method) {
+  scene::Scene sc = block_scene();
+  sc.solver.ianp = ianp;
+  Session s(sc);
+  pull_right_top(s);
+  for (int k = 0; k < 30; ++k) s.tick();
+  const double before = s.backend().reduce().strain_energy;
+  s.cut(through_x(0.012), {.method = method});
+  return s.backend().reduce().strain_energy / before - 1;
+}
+
+// What the cut does to the strain energy at its instant. Splitting alone
+// keeps it exactly without IANP: each piece of a split element is that
+// element's own affine map. Snapping moves nodes within their elements, so
+// the field is interpolated again there: within 1 %. IANP's nodal pressure
+// averages over each node's elements; a node copied across the cut then
+// averages over its own side's only, and by Jensen's inequality (the
+// volumetric energy is convex in J) that can only raise the energy: +1.2 %
+// on this coarse block (0.25-0.5 % on 8 cells across, docs/cutting.md).
+TEST(LiveCut, TheCutChangesTheStrainEnergyOnlyWhereItInterpolatesOrSplitsANodalAverage) {
+  const double split_plain = energy_jump(false, CutMethod::Split), snap_plain = energy_jump(false, CutMethod::SnapSplit);
+  const double split_ianp = energy_jump(true, CutMethod::Split), snap_ianp = energy_jump(true, CutMethod::SnapSplit);
+  RecordProperty("split_plain", g(split_plain));
+  RecordProperty("snap_split_plain", g(snap_plain));
+  RecordProperty("split_ianp", g(split_ianp));
+  RecordProperty("snap_split_ianp", g(snap_ianp));
+  EXPECT_LT(std::fabs(split_plain), 1e-12);
+  EXPECT_LT(std::fabs(snap_plain), 0.01);
+  EXPECT_GT(split_ianp, 0) << "Jensen: a split average only raises a convex energy";
+  EXPECT_LT(split_ianp, 0.015);
+  EXPECT_LT(std::fabs(snap_ianp), 0.015);
+}
+
+// Undamped, the block swings after its pull is let go; cut mid-swing, its
+// energy (strain + kinetic) stays within the band it swung in before: the
+// cut and the run after it create no energy.
+TEST(LiveCut, AnUndampedBlockCutMidSwingGainsNoEnergy) {
+  scene::Scene sc = block_scene();
+  sc.solver.damping = 0.0;
+  sc.solver.dt_safety = 0.2;
+  Session s(sc);
+  pull_right_top(s);
+  for (int k = 0; k < 30; ++k) s.tick();
+  s.set_loads({}, {});
+  const auto energy = [&] {
+    const Reductions r = s.backend().reduce();
+    return r.strain_energy + r.kinetic;
+  };
+  double before = 0;
+  for (int k = 0; k < 200; ++k) {
+    s.tick();
+    before = std::max(before, energy());
+  }
+  s.cut(through_x(0.012));
+  double after = energy();
+  for (int k = 0; k < 800; ++k) {
+    s.tick();
+    after = std::max(after, energy());
+  }
+  RecordProperty("most_before_J", g(before));
+  RecordProperty("most_after_J", g(after));
+  EXPECT_LE(after, before);
+}
+
+// Cut through and run on: the half that is pulled moves off; the other, no
+// longer joined to it, springs back towards rest; the session runs on
+// without a stop and counts its ticks on.
+TEST(LiveCut, ThePiecesMoveOnIndependently) {
+  Session s(block_scene());
+  pull_right_top(s);
+  for (int k = 0; k < 200; ++k) s.tick();
+  // the largest |u| of the nodes of node 0's piece (the unloaded side: x = 0), or before the cut of those at
+  // x <= 10 mm; and the largest u_x of the others
+  const auto largest = [&](bool loaded_side) {
+    const TissueModel<double>& m = s.model();
+    const std::vector<double> u = s.backend().download().u;
+    const std::vector<index_t> piece = piece_of(m);
+    const bool whole = pieces(m) == 1;
+    double most = 0;
+    for (index_t i = 0; i < m.n_nodes; ++i) {
+      const bool left = whole ? ref(m, i).x < 0.01 + 1e-9 : piece[i] == piece[0];
+      if (left != loaded_side)
+        most = std::max(most, loaded_side ? u[std::size_t(i)] : norm(at(u, std::size_t(m.n_nodes), std::size_t(i))));
+    }
+    return most;
+  };
+  const double left_joined = largest(false), right_joined = largest(true);
+  ASSERT_GT(left_joined, 1e-5) << "the whole block carries the pull across";
+  s.cut(through_x(0.011));
+  EXPECT_EQ(pieces(s.model()), 2);
+  for (int k = 0; k < 600; ++k) s.tick();
+  EXPECT_EQ(s.scheduler().ticks(), 800);
+  EXPECT_FALSE(s.failed());
+  const double left_freed = largest(false), right_freed = largest(true);
+  RecordProperty("unloaded_before_m", g(left_joined));
+  RecordProperty("unloaded_after_m", g(left_freed));
+  RecordProperty("pulled_before_m", g(right_joined));
+  RecordProperty("pulled_after_m", g(right_freed));
+  EXPECT_LT(left_freed, 1e-3 * left_joined) << "the unloaded piece springs back to rest once nothing pulls it";
+  EXPECT_GT(right_freed, 1.2 * right_joined) << "the pulled piece, no longer held by the other, moves farther";
+}
+
+// A cut partway into a block under tension opens: the two lips, joined
+// before, move apart; the block stays one piece.
+TEST(LiveCut, APartialIncisionOpensUnderTension) {
+  scene::Scene sc = block_scene();
+  Session s(sc);
+  // pull the right face (+x) and hold the left face: tension across x
+  const TissueModel<double>& m = s.model();
+  std::vector<index_t> right;
+  std::vector<double> force;
+  for (index_t i = 0; i < m.n_nodes; ++i)
+    if (ref(m, i).x > 0.02 - 1e-9) {
+      right.push_back(i);
+      force.insert(force.end(), {5e-4, 0, 0});
+    }
+  s.set_loads(right, force);
+  for (int k = 0; k < 200; ++k) s.tick();
+  // an incision from the top (z = 10 mm) down to z = 4 mm, at x = 12 mm, across the whole width
+  const SessionCut c = s.cut({{0.012, -0.01, 0.004}, {0, 0.04, 0}, {0, 0, 0.01}});
+  EXPECT_EQ(pieces(s.model()), 1) << "a partial incision leaves one piece";
+  EXPECT_GT(c.cut.cut_faces, 0);
+  for (int k = 0; k < 400; ++k) s.tick();
+  // the gap between a top node's copies across the cut
+  const TissueModel<double>& cm = s.model();
+  const std::vector<double> u = s.backend().download().u;
+  const std::size_t n = std::size_t(cm.n_nodes);
+  double widest = 0;
+  for (index_t i = 0; i < cm.n_nodes; ++i) {
+    const auto [a, b] = c.cut.from[std::size_t(i)];
+    if (a != b || a == i || ref(cm, i).z < 0.01 - 1e-9) continue;  // a copy, on the top
+    widest = std::max(widest, norm((ref(cm, i) + at(u, n, i)) - (ref(cm, a) + at(u, n, a))));
+  }
+  RecordProperty("lip_gap_m", g(widest));
+  EXPECT_GT(widest, 1e-4) << "the incision opens under tension";
+}
+
+// A cut across the kidney while its probe presses it: no element inverts,
+// the step stays at least half of what it was, and the press runs on.
+TEST(LiveCut, ACutAcrossTheKidneyWhileItsProbePresses) {
+  Session s(io::default_kidney_scene());
+  for (int k = 0; k < 150; ++k) s.tick();
+  ASSERT_GT(s.last().tools[0].contact_nodes, 0) << "the probe presses when the cut is made";
+  const double force = norm(s.last().tools[0].force);
+  // a transverse cut 25 mm from the probe's side of the kidney's middle (x), through its whole section
+  const SessionCut c = s.cut({{-0.025, -0.06, -0.04}, {0, 0.12, 0}, {0, 0, 0.08}});
+  EXPECT_GT(c.cut.split + c.cut.snapped, 0);
+  RecordProperty("dt_after_over_before", g(c.dt_after / c.dt_before));
+  RecordProperty("dt_crit_after_over_before", g(c.dt_crit_after / c.dt_crit_before));
+  RecordProperty("added_mass_before_kg", g(c.added_mass_before));
+  RecordProperty("added_mass_after_kg", g(c.added_mass_after));
+  RecordProperty("elements_made", g(double(c.cut.n_elements() - c.elements_before)));
+  EXPECT_GE(c.dt_crit_after, 0.5 * c.dt_crit_before) << "no sliver sets the step";
+  EXPECT_GE(c.dt_after, c.dt_before) << "mass scaling keeps the scene's step";
+  for (int k = 0; k < 200; ++k) s.tick();  // throws SimulationError on an inverted element
+  EXPECT_FALSE(s.failed());
+  EXPECT_GT(norm(s.last().tools[0].force), 0.5 * force) << "the probe still presses";
+}
+
+// Refused cuts name the rule and leave the run as it was; reset goes back
+// to the mesh before the first cut.
+TEST(LiveCut, BadCutsAreRefusedAndResetRestoresTheWholeMesh) {
+  Session s(block_scene());
+  pull_right_top(s);
+  for (int k = 0; k < 20; ++k) s.tick();
+  const index_t n0 = s.model().n_nodes;
+  const std::vector<double> u0 = s.backend().download().u;
+  const auto message = [&](const CutSurface& c) {
+    try {
+      s.cut(c);
+    } catch (const CutError& e) {
+      return std::string(e.what());
+    }
+    return std::string("(no error)");
+  };
+  EXPECT_NE(message({{0.01, 0, 0}, {0, 0, 0}, {0, 0, 0.01}}).find("edge has zero length"), std::string::npos);
+  EXPECT_NE(message({{0.05, 0, 0}, {0, 0.01, 0}, {0, 0, 0.01}}).find("crosses no element"), std::string::npos);
+  EXPECT_EQ(s.model().n_nodes, n0);
+  EXPECT_EQ(s.backend().download().u, u0) << "a refused cut changes nothing";
+  s.tick();  // and the run goes on
+
+  s.cut(through_x(0.012));
+  EXPECT_GT(s.model().n_nodes, n0);
+  for (int k = 0; k < 5; ++k) s.tick();
+  s.restart();
+  EXPECT_EQ(s.model().n_nodes, n0) << "reset: the mesh before the cut";
+  EXPECT_EQ(pieces(s.model()), 1);
+  s.tick();
+}
+
+}  // namespace
+}  // namespace tissue
