@@ -24,6 +24,7 @@
 #include "scene/validate.hpp"
 #include "session/engine.hpp"
 #include "session/scene_batch.hpp"
+#include "session/session.hpp"
 
 namespace tissue::bench {
 namespace {
@@ -644,6 +645,48 @@ double host_copy_bandwidth() {
   return 2.0 * bytes / best;
 }
 
+/// The live-cut rows (BenchOptions::cut): the built-in kidney pressed by its probe to contact, then cut
+/// across (transverse planes at x = -30, -20, +20, +30 mm, the whole section each) between ticks, the
+/// probe pressing on; each cut timed alone, then the haptic ticks after the last.
+void bench_cut(Context& c, Precision p) {
+  scene::Scene s = io::default_kidney_scene();
+  s.solver.backend = c.o.backend;
+  s.solver.precision = p;
+  Session session(s);
+  while (!session.scheduler().in_contact() && session.scheduler().ticks() < 2000) session.tick();
+  for (int k = 0; k < 50; ++k) session.tick();
+  std::vector<double> cut_s;
+  const std::size_t elements_before = std::size_t(session.model().n_elems);
+  const double dt_crit_before = session.model().dt_crit_physical;
+  for (double x : {-0.03, -0.02, 0.02, 0.03}) {
+    const auto t0 = Clock::now();
+    session.cut({{x, -0.06, -0.04}, {0, 0.12, 0}, {0, 0, 0.08}});
+    cut_s.push_back(since(t0));
+    for (int k = 0; k < (c.o.quick ? 2 : 20); ++k) session.tick();
+  }
+  std::vector<double> lat;
+  for (int k = 0; k < (c.o.quick ? 20 : 500); ++k) {
+    const auto t0 = Clock::now();
+    session.tick();
+    lat.push_back(since(t0));
+  }
+  std::sort(lat.begin(), lat.end());
+  std::vector<double> sorted = cut_s;
+  std::sort(sorted.begin(), sorted.end());
+  Row r = c.row("live_cut", session.backend());
+  r.add("mesh", std::string("kidney"));
+  r.add("cuts", long(cut_s.size()));
+  r.add("elements_before", long(elements_before));
+  r.add("elements_after", long(session.model().n_elems));
+  r.add("dt_crit_after_over_before", session.model().dt_crit_physical / dt_crit_before);
+  r.add("cut_ms_median", 1e3 * sorted[sorted.size() / 2]);
+  r.add("cut_ms_max", 1e3 * sorted.back());
+  r.add("steps_per_tick", long(session.scheduler().steps_per_tick()));
+  r.add("tick_ms_p50_after", 1e3 * lat[lat.size() / 2]);
+  r.add("tick_ms_p99_after", 1e3 * lat[lat.size() * 99 / 100]);
+  c.emit(r);
+}
+
 std::vector<std::string> run_bench(const BenchOptions& o) {
   Context c{o, "", 0, today(), {}};
   {
@@ -653,6 +696,10 @@ std::vector<std::string> run_bench(const BenchOptions& o) {
   c.bandwidth = o.backend == "cpu" ? host_copy_bandwidth() : measure_device_bandwidth(o.backend);
   const auto stopped = [&] { return o.stop && o.stop(); };
   for (Precision p : o.precisions) {
+    if (o.cut) {
+      if (!stopped()) bench_cut(c, p);
+      continue;
+    }
     if (!o.batch.empty()) {
       bench_batches(c, p);
       continue;

@@ -44,6 +44,11 @@ struct BenchOptions {
   /// rows' tools, one set of those rows per value (empty: frictionless
   /// contact steps and each scene's own tools).
   std::vector<double> friction;
+  /// --cut: only the live-cut rows: the kidney pressed by its probe, cut
+  /// across between ticks (Session::cut) at several places, each cut timed
+  /// (the download, the cut, the model's rebuild and upload, the motion set
+  /// again), then the haptic tick of the cut kidney.
+  bool cut = false;
 };
 
 /// How many times faster `threads` threads run a pure-arithmetic loop (no

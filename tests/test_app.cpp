@@ -746,6 +746,33 @@ TEST(Bench, TickRowsCompareStepMarginsInOneRun) {
   EXPECT_EQ(seen, want);
 }
 
+// tissue bench --cut: only the live-cut row, the kidney cut four times
+// while pressed, each cut timed and the cut mesh's tick after; --cut with
+// the options of the other rows is refused, naming both.
+TEST(Bench, TheLiveCutRowCutsThePressedKidneyAndTimesIt) {
+  bench::BenchOptions o;
+  o.quick = true;
+  o.cut = true;
+  o.precisions = {Precision::Float};
+  const std::vector<std::string> rows = bench::run_bench(o);
+  ASSERT_EQ(rows.size(), 1u);
+  const std::string& row = rows[0];
+  const auto number = [&](const std::string& key) {
+    const size_t k = row.find("\"" + key + "\": ");
+    EXPECT_NE(k, std::string::npos) << row;
+    return k == std::string::npos ? std::nan("") : std::stod(row.substr(k + key.size() + 4));
+  };
+  EXPECT_NE(row.find("\"live_cut\""), std::string::npos) << row;
+  EXPECT_EQ(number("cuts"), 4.0);
+  EXPECT_GT(number("elements_after"), number("elements_before"));
+  EXPECT_GT(number("cut_ms_median"), 0);
+  EXPECT_GE(number("cut_ms_max"), number("cut_ms_median"));
+  EXPECT_GT(number("tick_ms_p99_after"), 0);
+  EXPECT_GT(number("dt_crit_after_over_before"), 0.25);
+  EXPECT_EQ(parse_error({"bench", "--cut", "--batch", "4"}), "--batch excludes --cut");
+  EXPECT_EQ(parse_error({"bench", "--cut", "--scene", "@kidney"}), "--scene excludes --cut");
+}
+
 TEST(Bench, LawRowsNameTheirLaw) {
   bench::BenchOptions o;
   o.quick = true;
