@@ -94,7 +94,7 @@ inline void set_tick_result(TickResult& out, const TickReport& r, long ticks) {
   out.tools.resize(std::size_t(r.n_tools));
   for (int k = 0; k < r.n_tools; ++k) {
     const ToolReport& t = r.tools[k];
-    out.tools[k] = {arr(t.tip), arr(t.axis), arr(t.force), int(t.contact_nodes), int(t.grasped), t.grasp};
+    out.tools[k] = {arr(t.tip), arr(t.axis), arr(t.force), int(t.contact_nodes), int(t.grasped), t.grasp, t.cut};
   }
   out.max_displacement = r.max_disp;
   out.residual = r.residual;

@@ -203,7 +203,9 @@ struct Simulation::Impl {
   }
 
   void tick() {
+    const long cuts = session.cuts();
     session.tick();
+    if (session.cuts() != cuts) mesh_changed();  // a blade cut the tissue
     set_tick_result(last, session.last(), session.scheduler().ticks());
   }
 };

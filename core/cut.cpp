@@ -407,8 +407,8 @@ CutResult cut_along(std::span<const double> nodes, std::span<const index_t> tets
   return r;
 }
 
-DeformedCut cut_deformed(std::span<const double> X, std::span<const index_t> tets, std::span<const double> u,
-                         std::span<const double> u_prev, const CutSurface& cut, const CutOptions& o) {
+MovingCut cut_moving(std::span<const double> X, std::span<const index_t> tets, std::span<const double> u,
+                     std::span<const double> u_prev, const CutSurface& cut, const CutOptions& o, CutSpace space) {
   const std::size_t n = X.size() / 3;
   if (X.size() % 3 != 0 || u.size() != 3 * n || u_prev.size() != 3 * n)
     throw CutError(fmt::format("cut: {} reference coordinates, {} displacements and {} previous ones are not 3 per "
@@ -418,10 +418,10 @@ DeformedCut cut_deformed(std::span<const double> X, std::span<const index_t> tet
   const auto ref = [&](std::size_t a) { return V{X[3 * a], X[3 * a + 1], X[3 * a + 2]}; };
   std::vector<double> x(X.size());
   for (std::size_t a = 0; a < n; ++a) {
-    const V p = ref(a) + field(u, a);
+    const V p = space == CutSpace::Deformed ? ref(a) + field(u, a) : ref(a);
     x[3 * a] = p.x, x[3 * a + 1] = p.y, x[3 * a + 2] = p.z;
   }
-  DeformedCut out;
+  MovingCut out;
   out.cut = cut_along(x, tets, cut, o);
   CutResult& r = out.cut;
   const std::size_t m = std::size_t(r.n_nodes());
@@ -527,6 +527,38 @@ DeformedCut cut_deformed(std::span<const double> X, std::span<const index_t> tet
     }
   }
   return out;
+}
+
+Vec3<double> pull_back(std::span<const double> X, std::span<const index_t> tets, std::span<const double> u,
+                       Vec3<double> p) {
+  const std::size_t n = X.size() / 3;
+  const auto disp = [&](std::size_t a) { return V{u[a], u[n + a], u[2 * n + a]}; };
+  const auto at = [&](std::size_t a) { return V{X[3 * a], X[3 * a + 1], X[3 * a + 2]} + disp(a); };
+  double best = -INFINITY;
+  V shift = {0, 0, 0};  // u at p: x = X + u is affine in each element, so X = p - u(p)
+  for (std::size_t e = 0; e < tets.size() / 4; ++e) {
+    const index_t* c = &tets[4 * e];
+    const V corner[4] = {at(std::size_t(c[0])), at(std::size_t(c[1])), at(std::size_t(c[2])), at(std::size_t(c[3]))};
+    const double v = volume(corner[0], corner[1], corner[2], corner[3]);
+    if (!(v > 0)) continue;
+    double w[4];
+    for (int j = 0; j < 4; ++j) {
+      V moved[4] = {corner[0], corner[1], corner[2], corner[3]};
+      moved[j] = p;
+      w[j] = volume(moved[0], moved[1], moved[2], moved[3]) / v;
+    }
+    const double least = std::min({w[0], w[1], w[2], w[3]});
+    if (!(least > best)) continue;
+    best = least;
+    // outside the mesh: the displacement of the nearest element's nearest point (a translation, not the
+    // element's map extrapolated)
+    double sum = 0;
+    for (double& wj : w) sum += (wj = std::max(wj, 0.0));
+    shift = {0, 0, 0};
+    for (int j = 0; j < 4; ++j) shift = shift + (w[j] / sum) * disp(std::size_t(c[j]));
+    if (least >= 0) break;  // inside this element
+  }
+  return p - shift;
 }
 
 }  // namespace tissue

@@ -96,9 +96,16 @@ struct CutResult {
 CutResult cut_along(std::span<const double> nodes, std::span<const index_t> tets, const CutSurface& cut,
                    const CutOptions& options = {});
 
-/// A cut made where the tissue is now: cut_along on the deformed positions
-/// x = X + u, its nodes then taken back to the reference configuration
-/// through the elements' own maps, which are affine (linear tetrahedra):
+/// Where a cut of a moving mesh is given and made (cut_moving).
+enum class CutSpace {
+  Deformed,   ///< on the positions x = X + u: where the tissue is now
+  Reference,  ///< on the reference positions X (a blade's stroke, mapped back: pull_back)
+};
+
+/// A cut of a mesh in motion: cut_along on the deformed positions x = X + u
+/// (or on X itself, CutSpace::Reference), its nodes then taken to the
+/// reference configuration through the elements' own maps, which are affine
+/// (linear tetrahedra):
 /// every node of the cut mesh gets the old mesh's fields X, u and u_prev at
 /// one place of the old mesh. A node made on an edge at weight w takes
 /// (1 - w) of one end's and w of the other's; a snapped node takes them at
@@ -110,12 +117,21 @@ CutResult cut_along(std::span<const double> nodes, std::span<const index_t> tets
 /// surface node's is on the surface as it is now. (u and u_prev are
 /// component-major, 3 x n_nodes, as a backend's download; `nodes`
 /// interleaved x y z per node.)
-struct DeformedCut {
+struct MovingCut {
   CutResult cut;              ///< cut.nodes: the reference positions of the cut mesh
   std::vector<double> u;      ///< u^n of the cut mesh (3 x its n_nodes, component-major)
   std::vector<double> u_prev; ///< u^(n-1), likewise
 };
-DeformedCut cut_deformed(std::span<const double> nodes, std::span<const index_t> tets, std::span<const double> u,
-                         std::span<const double> u_prev, const CutSurface& cut, const CutOptions& options = {});
+MovingCut cut_moving(std::span<const double> nodes, std::span<const index_t> tets, std::span<const double> u,
+                     std::span<const double> u_prev, const CutSurface& cut, const CutOptions& options = {},
+                     CutSpace space = CutSpace::Deformed);
+
+/// The reference position of the material point at deformed position p,
+/// p - u(p): through the map of the element that holds p (the one whose
+/// smallest barycentric weight is largest); outside the mesh, p less the
+/// displacement of that element's nearest point. `nodes` interleaved, u
+/// component-major, as cut_moving's.
+Vec3<double> pull_back(std::span<const double> nodes, std::span<const index_t> tets, std::span<const double> u,
+                       Vec3<double> p);
 
 }  // namespace tissue

@@ -399,7 +399,7 @@ void Scheduler::begin_tick(std::span<Device* const> devices) {
       if (norm(gap) > reach) pose.tip = prev_[t].tip + (reach / norm(gap)) * gap;
       else entering_[t] = 0;
     }
-    motion_[t] = {prev_[t], pose, in.grasp};
+    motion_[t] = {prev_[t], pose, in.grasp && !settings_.tools[t].blade};  // a blade's button cuts
     rep.tools[t].tip = pose.tip;
     rep.tools[t].axis = pose.axis;
     rep.tools[t].grasp = in.grasp;

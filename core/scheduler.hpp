@@ -44,6 +44,7 @@ namespace tissue {
 struct ToolSetting {
   ToolShape shape;
   Vec3<double> axis = {0, 0, 1};  ///< shaft direction (unit) when the device has no orientation
+  bool blade = false;             ///< its button cuts (the caller's: Session), not grasps
 };
 
 /// How fast a tool whose first pose already presses the tissue (deeper than
@@ -79,7 +80,8 @@ struct ToolReport {
   index_t contact_nodes = 0;   ///< surface nodes in contact (pushed or grasped)
   index_t grasped = 0;         ///< of which grasped
   index_t rigid_nodes = 0;     ///< fixed nodes inside the tool (a rigid support)
-  bool grasp = false;          ///< grasp button held
+  bool grasp = false;          ///< the button held (a blade's: cutting on)
+  bool cut = false;            ///< a blade's cut was made after this tick (Session)
 };
 
 /// What one tick did (one CSV row).
@@ -174,6 +176,8 @@ class Scheduler {
   /// half the surface's median edge per TLED step in contact; a tool whose
   /// contact ended inside the tissue): one line each.
   std::vector<std::string> take_notes();
+  /// Adds a notice of the caller's (a blade's refused cut: Session).
+  void note(std::string text) { notes_.push_back(std::move(text)); }
 
  private:
   /// Gives the backend the settings' tools and bodies (after an upload).

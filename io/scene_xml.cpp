@@ -464,13 +464,33 @@ Constraint Reader::read_selection(pugi::xml_node n) const {
 }
 
 scene::Tool Reader::read_tool(pugi::xml_node n) const {
-  check_attributes(n, {"name", "radius", "shaft-length", "friction", "direction", "device", "path"});
+  check_attributes(n, {"name", "kind", "radius", "shaft-length", "length", "thickness", "cut-resistance", "friction",
+                       "direction", "device", "path"});
   check_children(n, {"waypoint"});
   scene::Tool t;
   t.line = line(n);
   if (n.attribute("name")) t.name = n.attribute("name").value();
-  t.radius = real_or(n, "radius", t.radius);
-  t.shaft = real_or(n, "shaft-length", t.shaft);
+  if (const pugi::xml_attribute k = n.attribute("kind")) {
+    const std::string_view kind = scene::trim(k.value());
+    if (kind != "probe" && kind != "blade") fail(n, fmt::format("kind = '{}' must be probe or blade", k.value()));
+    if (kind == "blade") t.kind = scene::Tool::Kind::Blade;
+  }
+  const bool blade = t.kind == scene::Tool::Kind::Blade;
+  static constexpr const char* kProbeOnly[] = {"radius", "shaft-length"};
+  static constexpr const char* kBladeOnly[] = {"length", "thickness", "cut-resistance"};
+  for (const char* a : blade ? std::span<const char* const>(kProbeOnly) : std::span<const char* const>(kBladeOnly))
+    if (n.attribute(a))
+      fail(n, blade ? fmt::format("{}= is a probe's; a blade takes length= (its edge, m) and thickness= (m)", a)
+                    : fmt::format("{}= is a blade's (kind=\"blade\"); a probe takes radius= and shaft-length=", a));
+  if (blade) {
+    if (!n.attribute("length")) fail(n, "a blade needs length= (its edge, m)");
+    t.shaft = real(n, "length");
+    t.radius = 0.5 * real_or(n, "thickness", scene::kDefaultBladeThickness);
+    t.cut_resistance = real_or(n, "cut-resistance", t.cut_resistance);
+  } else {
+    t.radius = real_or(n, "radius", t.radius);
+    t.shaft = real_or(n, "shaft-length", t.shaft);
+  }
   t.friction = real_or(n, "friction", t.friction);
   if (n.attribute("direction")) {
     double d[3];
@@ -478,14 +498,19 @@ scene::Tool Reader::read_tool(pugi::xml_node n) const {
     t.direction = {d[0], d[1], d[2]};
   }
   if (n.attribute("device")) t.device = n.attribute("device").value();
+  // the button: a probe's grasp, a blade's cut
+  const char* button = blade ? "cut" : "grasp";
   for (pugi::xml_node w : n.children("waypoint")) {
-    check_attributes(w, {"t", "x", "y", "z", "grasp", "axis"});
+    check_attributes(w, {"t", "x", "y", "z", "grasp", "cut", "axis"});
     check_no_text(w);
+    if (w.attribute(blade ? "grasp" : "cut"))
+      fail(w, blade ? "a blade does not grasp: its button is cut=\"true\""
+                    : "cut= is a blade's button (kind=\"blade\"); a probe's is grasp=");
     Waypoint wp{real(w, "t"), {real(w, "x"), real(w, "y"), real(w, "z")}};
-    if (const pugi::xml_attribute g = w.attribute("grasp")) {
+    if (const pugi::xml_attribute g = w.attribute(button)) {
       const std::string b = g.value();
       if (b != "true" && b != "false" && b != "1" && b != "0")
-        fail(w, fmt::format("waypoint grasp = '{}' must be true or false (the grasp button)", g.value()));
+        fail(w, fmt::format("waypoint {} = '{}' must be true or false (the {} button)", button, g.value(), button));
       wp.grasp = b == "true" || b == "1";
     }
     if (w.attribute("axis")) {
@@ -759,8 +784,16 @@ void write_selection(pugi::xml_node n, const Constraint& c, index_t first) {
 void write_tool(pugi::xml_node root, const scene::Tool& t) {
   pugi::xml_node n = root.append_child("tool");
   set(n, "name", t.name);
-  set(n, "radius", num(t.radius));
-  if (t.shaft != 0) set(n, "shaft-length", num(t.shaft));
+  const bool blade = t.kind == scene::Tool::Kind::Blade;
+  if (blade) {
+    set(n, "kind", "blade");
+    set(n, "length", num(t.shaft));
+    set(n, "thickness", num(2 * t.radius));
+    set(n, "cut-resistance", num(t.cut_resistance));
+  } else {
+    set(n, "radius", num(t.radius));
+    if (t.shaft != 0) set(n, "shaft-length", num(t.shaft));
+  }
   if (t.friction != 0) set(n, "friction", num(t.friction));
   set(n, "direction", triple_text(t.direction));
   set(n, "device", t.device);
@@ -774,7 +807,7 @@ void write_tool(pugi::xml_node root, const scene::Tool& t) {
     set(p, "x", num(w.p.x));
     set(p, "y", num(w.p.y));
     set(p, "z", num(w.p.z));
-    if (w.grasp) set(p, "grasp", "true");
+    if (w.grasp) set(p, blade ? "cut" : "grasp", "true");
     if (norm(w.axis) > 0) set(p, "axis", triple_text(w.axis));
   }
 }

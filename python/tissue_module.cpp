@@ -501,7 +501,8 @@ void bind_results(py::module_& m) {
                              "Force on the tool (N): what the hand feels")
       .def_readonly("contact_nodes", &tissue::ToolResult::contact_nodes)
       .def_readonly("grasped_nodes", &tissue::ToolResult::grasped_nodes)
-      .def_readonly("grasp", &tissue::ToolResult::grasp);
+      .def_readonly("grasp", &tissue::ToolResult::grasp, "The button held: a probe's grasp, a blade's cut")
+      .def_readonly("cut", &tissue::ToolResult::cut, "A blade: the tissue gave, and was cut, after this tick");
 
   py::class_<tissue::TickResult>(m, "TickResult", "What one haptic tick did")
       .def_readonly("tick", &tissue::TickResult::tick)

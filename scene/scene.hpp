@@ -98,15 +98,33 @@ struct Load {
   bool each = false;
 };
 
+/// A blade's default cutting resistance (N/m = J/m^2): the fracture
+/// toughness of bovine liver, 164 +- 6 J/m^2 (Gokgol, Basdogan and
+/// Canadinc, "Estimation of fracture toughness of liver tissue: experiments
+/// and validation", Med. Eng. Phys. 34(7), 2012).
+inline constexpr double kDefaultCutResistance = 164;
+/// A blade's default thickness (m): its contact capsule's diameter.
+inline constexpr double kDefaultBladeThickness = 1e-3;
+
 /// A rigid tool -- a capsule (core/tool.hpp) -- and the device that drives it.
 struct Tool {
+  /// What the tool's button does: a probe grasps the tissue it touches; a
+  /// blade, a straight edge (its capsule: radius = half its thickness,
+  /// shaft = its length, from the tip), cuts (docs/cutting.md).
+  enum class Kind { Probe, Blade };
+  Kind kind = Kind::Probe;
   std::string name = "probe";
   double radius = 2e-3;             ///< tip and shaft radius (m): the loaded patch, physical
   double shaft = 0;                 ///< shaft length (m) from the tip along the direction; 0 = a sphere
   double friction = 0;              ///< Coulomb's mu at its contacts (>= 0); 0 = frictionless
+  /// A blade's cutting resistance (N/m = J/m^2): with its button down the
+  /// tissue gives where the force against the blade's motion per metre of
+  /// edge in contact reaches it (Mahvash and Hayward's energy criterion).
+  double cut_resistance = kDefaultCutResistance;
   Vec3<double> direction = {0, 0, 1};  ///< shaft axis, tip -> handle, used when the device has no orientation
   std::string device = "scripted";  ///< "scripted" | "mouse" | "phantom"
-  std::string path_file;            ///< CSV t,x,y,z[,grasp][,ax,ay,az] (io/path_csv) relative to the scene file;
+  std::string path_file;            ///< CSV t,x,y,z[,grasp][,ax,ay,az] (io/path_csv; a blade's grasp column is its
+                                    ///< cut button) relative to the scene file;
                                     ///< empty = inline
   std::vector<Waypoint> path;       ///< scripted path (inline, or loaded from path_file by read_scene)
   int line = 0;                     ///< source line, for messages (0 = unknown)

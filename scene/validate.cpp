@@ -520,6 +520,20 @@ void check_path_near_mesh(const Scene& s, const Tool& t, const std::string& what
 
 void check_tool(const Scene& s, const Tool& t) {
   const std::string what = fmt::format("tool '{}'", t.name);
+  if (t.kind == Tool::Kind::Blade) {
+    check_finite(s, t.line, what, "length", t.shaft);
+    check_finite(s, t.line, what, "thickness", 2 * t.radius);
+    check_finite(s, t.line, what, "cut-resistance", t.cut_resistance);
+    if (!(t.shaft > 0))
+      fail(s, t.line, fmt::format("{}: length = {} m: a blade is a straight edge of length > 0", what, t.shaft));
+    if (!(t.radius > 0))
+      fail(s, t.line, fmt::format("{}: thickness = {} m must be > 0 (the blade's contact)", what, 2 * t.radius));
+    if (!(t.cut_resistance >= 0))
+      fail(s, t.line,
+           fmt::format("{}: cut-resistance = {} N/m must be >= 0 (the force per metre of edge at which the tissue "
+                       "gives; 0 = at any touch)",
+                       what, t.cut_resistance));
+  }
   const MeshBox b = mesh_box(s.nodes);
   const double ext = b.largest_extent();  // a tool wider than the body cannot touch it as a tool
   if (const std::string e = tool_shape_error({t.name, t.radius, t.shaft, t.friction}, ext); !e.empty()) fail(s, t.line, e);
@@ -718,7 +732,8 @@ SchedulerSettings scheduler_settings(const Scene& scene) {
   check_tools(scene);
   SchedulerSettings st;
   st.tools.clear();
-  for (const Tool& t : scene.tools) st.tools.push_back({{t.name, t.radius, t.shaft, t.friction}, t.direction});
+  for (const Tool& t : scene.tools)
+    st.tools.push_back({{t.name, t.radius, t.shaft, t.friction}, t.direction, t.kind == Tool::Kind::Blade});
   st.depth = scene.solver.depth;
   check_contacts(scene);
   if (!scene.contacts.empty()) {

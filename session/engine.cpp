@@ -1,5 +1,9 @@
 #include "session/engine.hpp"
 
+#include <fmt/format.h>
+
+#include <stdexcept>
+
 #include "backends/registry.hpp"
 
 namespace tissue {
@@ -16,6 +20,14 @@ void start_engine(Engine& e, const scene::Scene& s, const SchedulerSettings& set
 
 Engine build_engine(const scene::Scene& s, std::optional<SchedulerSettings> settings,
                     std::shared_ptr<const TissueModel<double>> model) {
+  // a blade's cuts are a Session's (they replace the scene and the model): an engine alone would run it
+  // as a capsule whose button does nothing
+  for (const scene::Tool& t : s.tools)
+    if (t.kind == scene::Tool::Kind::Blade)
+      throw std::invalid_argument(fmt::format(
+          "{}: tool '{}' is a blade; blades cut in a Simulation (C++, C and Python: docs/cutting.md), and tissue "
+          "run, tissue view, the benchmarks and the accuracy commands do not run them yet",
+          s.source, t.name));
   Engine e;
   e.model = model ? std::move(model) : std::make_shared<const TissueModel<double>>(scene::load_model(s));
   e.backend = create_backend(s.solver.backend, s.solver.precision);

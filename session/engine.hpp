@@ -30,7 +30,8 @@ void start_engine(Engine& e, const scene::Scene& s, const SchedulerSettings& set
 /// The assembly of a scene: its model (scene::load_model, which validates
 /// the whole scene; or `model` when the caller built it), the backend its
 /// solver names at its precision, then start_engine with `settings` (unset:
-/// the scene's own, scene::scheduler_settings).
+/// the scene's own, scene::scheduler_settings). Throws std::invalid_argument
+/// for a scene with a blade (its cuts need a Session).
 Engine build_engine(const scene::Scene& s, std::optional<SchedulerSettings> settings = std::nullopt,
                     std::shared_ptr<const TissueModel<double>> model = nullptr);
 

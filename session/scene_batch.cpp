@@ -220,6 +220,12 @@ std::shared_ptr<const TissueModel<double>> SceneBatch::model_for(const scene::Sc
 
 SceneBatch::Prepared SceneBatch::prepare(const std::shared_ptr<const scene::Scene>& given, std::size_t index) {
   if (!given) throw std::invalid_argument(fmt::format("batch scene {}: no scene given", index));
+  for (const scene::Tool& t : given->tools)
+    if (t.kind == scene::Tool::Kind::Blade)
+      throw std::invalid_argument(fmt::format(
+          "batch scene {} ({}): tool '{}' is a blade; a blade cuts its scene's mesh, which a batch's scenes "
+          "share, so blades run in a Simulation, not a Batch",
+          index, given->source, t.name));
   try {
     // the scene on the batch's backend and precision, one copy per scene given
     std::shared_ptr<const scene::Scene> scene;

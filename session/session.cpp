@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <stdexcept>
 
@@ -32,7 +34,16 @@ Session::Session(std::shared_ptr<const scene::Scene> scene, std::shared_ptr<cons
   if (scene_->tools.empty()) throw std::runtime_error(scene_->source + ": the scene has no tool to drive");
   settings_ = scene::scheduler_settings(*scene_);
   box_ = scene::mesh_box(scene_->nodes);
-  for (const scene::Tool& t : scene_->tools) devices_.emplace_back(t.path);
+  for (const scene::Tool& t : scene_->tools) {
+    if (!t.path.empty()) {
+      devices_.emplace_back(t.path);
+      continue;
+    }
+    // a host-driven device (mouse, phantom) with no path: parked above the body until the host sets a pose
+    const Vec3<double> park = {0.5 * (box_.lo.x + box_.hi.x), 0.5 * (box_.lo.y + box_.hi.y),
+                               box_.hi.z + box_.size + 2 * t.radius * double(devices_.size() + 1)};
+    devices_.emplace_back(std::vector<Waypoint>{{0, park}});
+  }
   for (HostDevice& d : devices_) device_ptrs_.push_back(&d);
   restart();
 }
@@ -48,6 +59,8 @@ void Session::restart() {
   last_.n_tools = n_tools();
   fields_.reset();
   failure_.clear();
+  blades_.assign(std::size_t(n_tools()), BladeState{});
+  cuts_ = 0;
 }
 
 void Session::check_tool(int tool) const {
@@ -125,7 +138,164 @@ TickReport Session::end_tick() {
   } catch (const SimulationError& e) {
     fail(e);
   }
+  cut_with_blades();
   return last_;
+}
+
+namespace {
+
+/// The mean length of the edges at `nodes` (reference), 0 for none: the
+/// mesh's size where a blade touches it.
+double edge_size(const TissueModel<double>& m, const std::vector<index_t>& nodes) {
+  double sum = 0;
+  long count = 0;
+  const std::size_t ne = std::size_t(m.n_elems);
+  for (index_t a : nodes)
+    for (index_t k = m.node_elem_start[a]; k < m.node_elem_start[a + 1]; ++k) {
+      const std::size_t e = std::size_t(m.node_elem[k] / 4);
+      for (int c = 0; c < 4; ++c) {
+        const index_t b = m.elem_nodes[std::size_t(c) * ne + e];
+        if (b == a) continue;
+        sum += norm(reference_position(m, b) - reference_position(m, a));
+        ++count;
+      }
+    }
+  return count ? sum / double(count) : 0;
+}
+
+}  // namespace
+
+void Session::open_lips(const SessionCut& made, Vec3<double> tip, Vec3<double> axis, double length, double radius,
+                        Vec3<double> across) {
+  // the nodes of the faces the cut opened lie on the blade's plane, inside it: each goes to the blade's
+  // surface on the side of its own elements (the contact would push it along the plane, not apart)
+  const TissueModel<double>& m = model();
+  const std::size_t n = std::size_t(m.n_nodes), ne = std::size_t(m.n_elems);
+  const Vec3<double> normal = (1 / norm(across)) * across;
+  std::vector<double> u = backend().download().u, u_prev = backend().previous_displacements();
+  const auto place = [&](std::size_t a) {
+    return reference_position(m, index_t(a)) + Vec3<double>{u[a], u[n + a], u[2 * n + a]};
+  };
+  std::vector<std::uint8_t> lip(n, 0);
+  for (std::size_t i = std::size_t(made.nodes_before); i < n; ++i) {
+    const auto [a, b] = made.cut.from[i];
+    if (a != b) continue;  // a node made on an edge, not a copy
+    lip[i] = lip[std::size_t(a)] = 1;
+  }
+  bool moved = false;
+  for (std::size_t a = 0; a < n; ++a) {
+    if (!lip[a] || fixed_axes(m.node_flags[a]) != 0) continue;
+    const Vec3<double> x = place(a);
+    const double s = std::clamp(dot(x - tip, axis), 0.0, length);
+    const Vec3<double> off = x - (tip + s * axis);
+    if (!(norm(off) < radius)) continue;
+    // its side: where the centroids of its elements lie
+    double side = 0;
+    for (index_t k = m.node_elem_start[a]; k < m.node_elem_start[a + 1]; ++k) {
+      const std::size_t e = std::size_t(m.node_elem[k] / 4);
+      Vec3<double> c = {0, 0, 0};
+      for (int j = 0; j < 4; ++j) c = c + 0.25 * place(std::size_t(m.elem_nodes[std::size_t(j) * ne + e]));
+      side += dot(c - x, normal);
+    }
+    if (side == 0) continue;
+    const double to = (side > 0 ? 1 : -1) * radius - dot(off, normal);
+    for (int c = 0; c < 3; ++c) {
+      u[std::size_t(c) * n + a] += to * normal[c];
+      u_prev[std::size_t(c) * n + a] += to * normal[c];
+    }
+    moved = true;
+  }
+  if (moved) backend().set_motion(u, u_prev);
+  fields_.reset();
+}
+
+void Session::cut_with_blades() {
+  for (int t = 0; t < n_tools(); ++t) {
+    if (scene_->tools[std::size_t(t)].kind != scene::Tool::Kind::Blade) continue;
+    const scene::Tool blade = scene_->tools[std::size_t(t)];  // a copy: a cut replaces the scene
+    ToolReport& report = last_.tools[std::size_t(t)];
+    BladeState& state = blades_[std::size_t(t)];
+    const Vec3<double> tip = report.tip, axis = report.axis;
+    if (!report.grasp) {
+      state = {};
+      continue;
+    }
+    if (!state.down) {  // the button went down: a stroke starts where the edge is
+      state = {};
+      state.down = true;
+      state.down_tip = state.last_tip = tip;
+      continue;
+    }
+    // the direction the edge cuts in: its motion across itself this tick
+    Vec3<double> motion = tip - state.last_tip;
+    motion = motion - dot(motion, axis) * axis;
+    state.last_tip = tip;
+    if (!(norm(motion) > 1e-9 * blade.radius) || report.contact_nodes == 0) continue;
+    const Vec3<double> ahead = (1 / norm(motion)) * motion;
+    // the force against the motion per metre of edge in contact (the edge's span over its contact nodes)
+    const double against = -dot(report.force, ahead);
+    const Fields& f = fields();
+    const TissueModel<double>& m = model();
+    const index_t n = m.n_nodes;
+    std::vector<index_t> touching;
+    double lo = INFINITY, hi = -INFINITY;
+    for (const ContactNode& c : backend().contacts()) {
+      if (c.tool != t) continue;
+      touching.push_back(c.node);
+      const std::size_t a = std::size_t(c.node);
+      const Vec3<double> x = reference_position(m, c.node) + Vec3<double>{f.u[a], f.u[n + a], f.u[2 * std::size_t(n) + a]};
+      const double s = std::clamp(dot(x - tip, axis), 0.0, blade.shaft);
+      lo = std::min(lo, s);
+      hi = std::max(hi, s);
+    }
+    if (touching.empty()) continue;
+    const double in_contact = std::max(hi - lo, 2 * blade.radius);
+    if (!(against >= blade.cut_resistance * in_contact)) continue;
+    // the tissue gives: the crack grows by the work done against it since it last grew over the cutting
+    // resistance (Mahvash and Hayward), W = J_c L da, on the stroke's plane in the reference configuration
+    const std::span<const double> X(scene_->nodes);
+    const std::span<const index_t> tets(scene_->tets);
+    const double h = edge_size(m, touching);
+    if (!state.started) {  // the first cut: from the edge where the button went down to a lead beyond it
+      state.lead = 2 * blade.radius + h;
+      state.start0 = state.front0 = pull_back(X, tets, f.u, state.down_tip);
+      state.edge = pull_back(X, tets, f.u, state.down_tip + blade.shaft * axis) - state.start0;
+      const Vec3<double> g0 = pull_back(X, tets, f.u, tip + state.lead * ahead);
+      const Vec3<double> across = cross(state.edge, g0 - state.start0);
+      if (!(norm(across) > 0)) continue;
+      state.normal = (1 / norm(across)) * across;
+      state.onward = (1 / norm(state.edge)) * cross(state.normal, state.edge);
+      state.front0 = state.start0 + dot(g0 - state.start0, state.onward) * state.onward;
+      state.started = true;
+    } else {
+      const double grown = std::min(against * norm(motion) / (blade.cut_resistance * in_contact + 1e-300), state.lead);
+      state.front0 = state.front0 + grown * state.onward;
+    }
+    // and at least a lead beyond the furthest material point the edge presses (the blade is where it
+    // touches the tissue, which its press carries along)
+    double furthest = -INFINITY;
+    for (index_t a : touching) furthest = std::max(furthest, dot(reference_position(m, a) - state.start0, state.onward));
+    if (const double run = dot(state.front0 - state.start0, state.onward); furthest + state.lead > run)
+      state.front0 = state.front0 + (furthest + state.lead - run) * state.onward;
+    const double run = dot(state.front0 - state.start0, state.onward);
+    if (state.cut_at > 0 && run - state.cut_at < h / 3) continue;  // not yet a third of an element on
+    state.cut_at = run;
+    const auto start = std::chrono::steady_clock::now();
+    SessionCut made;
+    try {
+      made = cut({state.start0, state.edge, state.front0 - state.start0}, {}, CutSpace::Reference);
+    } catch (const CutError&) {
+      continue;  // nothing opens yet (the front has passed no face's middle), or the sweep lies outside
+    } catch (const ModelError& e) {
+      scheduler().note(fmt::format("tick {}: blade '{}' did not cut: the cut mesh was refused: {}", last_.tick,
+                                   blade.name, e.what()));
+      continue;
+    }
+    open_lips(made, tip, axis, blade.shaft, blade.radius, cross(axis, ahead));
+    last_cut_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    ++cuts_;
+    report.cut = true;
+  }
 }
 
 void Session::set_loads(std::vector<index_t> nodes, std::vector<double> forces) {
@@ -137,7 +307,7 @@ void Session::set_loads(std::vector<index_t> nodes, std::vector<double> forces) 
   loads_ = scene::SceneLoads{std::move(nodes), std::move(forces)};
 }
 
-SessionCut Session::cut(const CutSurface& surface, const CutOptions& options) {
+SessionCut Session::cut(const CutSurface& surface, const CutOptions& options, CutSpace space) {
   check_running();
   scene::check_cuttable(*scene_);
   const TissueModel<double>& before = model();
@@ -151,7 +321,7 @@ SessionCut Session::cut(const CutSurface& surface, const CutOptions& options) {
   out.nodes_before = before.n_nodes;
   out.elements_before = before.n_elems;
   const std::vector<double> u = backend().download().u, u_prev = backend().previous_displacements();
-  DeformedCut d = cut_deformed(scene_->nodes, scene_->tets, u, u_prev, surface, options);
+  MovingCut d = cut_moving(scene_->nodes, scene_->tets, u, u_prev, surface, options, space);
   auto cut_scene = std::make_shared<const scene::Scene>(scene::scene_after_cut(*scene_, d.cut));
   auto cut_model = std::make_shared<const TissueModel<double>>(scene::load_model(*cut_scene));
   out.dt_after = cut_model->dt;

@@ -121,7 +121,8 @@ class Session {
 
   /// Cuts the tissue where it is now along `surface` (given in the
   /// deformed configuration, where the host sees the blade) between two
-  /// ticks, and runs on with the cut mesh (core cut_deformed,
+  /// ticks, and runs on with the cut mesh (core cut_moving; `space`
+  /// Reference: `surface` given in the reference configuration,
   /// docs/cutting.md): the reference mesh, its element sets, supports and
   /// loads follow the cut; the model is built again (masses, IANP's nodal
   /// averaging, the surface and its BVH, the step) and uploaded to the same
@@ -131,7 +132,16 @@ class Session {
   /// nodes until its button goes down again) and the contacts' friction
   /// anchors. Throws CutError for a bad cut and SceneError (scene
   /// validate.hpp) for a scene of bodies, leaving the session as it was.
-  SessionCut cut(const CutSurface& surface, const CutOptions& options = {});
+  SessionCut cut(const CutSurface& surface, const CutOptions& options = {}, CutSpace space = CutSpace::Deformed);
+  /// The blades' cuts (end_tick makes them, docs/cutting.md "The blade"):
+  /// for each blade whose button is down, once the force against its
+  /// motion per metre of edge in contact reaches its cut resistance, the
+  /// crack runs from its front to a thickness plus an element beyond the
+  /// blade's edge. The last cut's time (the cut and the model's rebuild, s)
+  /// and the count since the start.
+  double last_cut_seconds() const { return last_cut_seconds_; }
+  long cuts() const { return cuts_; }
+
   /// Whether the mesh was cut since the start or the last restart().
   bool was_cut() const { return uncut_scene_ != nullptr; }
 
@@ -146,6 +156,13 @@ class Session {
 
  private:
   void check_running() const;
+  /// end_tick's cuts by the blades whose button is down (see cuts()).
+  void cut_with_blades();
+  /// After a blade's cut: each node of the faces it opened that lies inside the blade (its capsule: tip,
+  /// unit axis, length, radius) goes to the blade's surface along the normal of its plane (across: the
+  /// edge times its motion), on the side of its own elements.
+  void open_lips(const SessionCut& made, Vec3<double> tip, Vec3<double> axis, double length, double radius,
+                 Vec3<double> across);
   /// Keeps a stop as failure(), with the scene checks' likely causes appended, and throws it.
   [[noreturn]] void fail(const SimulationError& e);
 
@@ -161,6 +178,30 @@ class Session {
   TickReport last_;
   std::optional<Fields> fields_;
   std::string failure_;
+  /// Per tool: a blade's stroke (its button down). Its crack lies on one
+  /// plane of the reference configuration, set by its first cut, and grows
+  /// there by the work the blade does past the cutting resistance (its
+  /// front, the edge's two ends, reference positions). Each cut cuts the
+  /// stroke's whole crack, from where it began to its front, so that a face
+  /// the front has passed opens even where the last cut left its nodes
+  /// joined; a cut is made when the front has run a third of an element
+  /// since the last.
+  struct BladeState {
+    bool down = false;
+    bool started = false;         ///< the stroke has a front and a plane
+    Vec3<double> down_tip = {};   ///< the blade's tip when its button went down
+    Vec3<double> last_tip = {};   ///< the blade's tip after the tick before
+    Vec3<double> start0 = {};     ///< the edge's first end where the stroke began
+    Vec3<double> front0 = {};     ///< the crack's front: the edge's first end
+    Vec3<double> edge = {};       ///< the edge in the reference configuration
+    Vec3<double> normal = {};     ///< the stroke's plane
+    Vec3<double> onward = {};     ///< the way its crack runs on that plane (unit, across the edge)
+    double lead = 0;              ///< how far the first cut runs ahead of the edge (m): a thickness and an element
+    double cut_at = 0;            ///< the front's distance from the start at the last cut (m)
+  };
+  std::vector<BladeState> blades_;
+  double last_cut_seconds_ = 0;
+  long cuts_ = 0;
 };
 
 }  // namespace tissue

@@ -1,4 +1,4 @@
-// Cutting while the simulation runs (Session::cut, core cut_deformed,
+// Cutting while the simulation runs (Session::cut, core cut_moving,
 // docs/cutting.md): a cut made where the tissue is now carries the motion
 // over as the mesh's own field at the new nodes, keeps the mass, creates no
 // energy, and the pieces move on independently; a cut while a tool presses
@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <string>
+#include <memory>
 #include <numeric>
 #include <vector>
 
@@ -17,6 +18,7 @@
 #include "core/cut.hpp"
 #include "io/kidney.hpp"
 #include "scene/validate.hpp"
+#include "session/scene_batch.hpp"
 #include "session/session.hpp"
 
 namespace tissue {
@@ -352,6 +354,84 @@ TEST(LiveCut, BadCutsAreRefusedAndResetRestoresTheWholeMesh) {
   EXPECT_EQ(s.model().n_nodes, n0) << "reset: the mesh before the cut";
   EXPECT_EQ(pieces(s.model()), 1);
   s.tick();
+}
+
+/// The 8 x 8 x 4 block (2.5 mm cells) with a blade above it: a 30 mm edge
+/// along y across the whole block at x = 11.2 mm (between the nodes),
+/// 1 mm thick, moved straight down at 9.5 mm/s from 1.5 mm above the top to
+/// `to_z`, its button (cutting) held or not. No mass scaling, dt 0.5 dt_crit.
+scene::Scene blade_scene(bool cutting, double resistance, double to_z = 0.002) {
+  scene::Scene sc = block_scene(8);
+  scene::Tool blade;
+  blade.kind = scene::Tool::Kind::Blade;
+  blade.name = "scalpel";
+  blade.radius = 5e-4;
+  blade.shaft = 0.03;
+  blade.cut_resistance = resistance;
+  blade.direction = {0, 1, 0};
+  const double x = 0.0112, y = -0.005, t1 = (0.0115 - to_z) / 0.0095;
+  blade.path = {{0, {x, y, 0.0115}, cutting}, {t1, {x, y, to_z}, cutting}};
+  sc.tools = {blade};
+  sc.solver.dt_safety = 0.5;
+  return sc;
+}
+
+struct Stroke {
+  double first_cut_force = 0;  ///< the blade's force when the tissue first gave (N)
+  double most = 0;             ///< the largest force over the stroke (N)
+  long cuts = 0;
+  int pieces = 0;
+};
+
+Stroke stroke(const scene::Scene& sc, int ticks) {
+  Session s(sc);
+  Stroke out;
+  for (int k = 0; k < ticks; ++k) {
+    s.tick();
+    const ToolReport& r = s.last().tools[0];
+    out.most = std::max(out.most, r.force.z);
+    if (r.cut && out.first_cut_force == 0) out.first_cut_force = r.force.z;
+  }
+  out.cuts = s.cuts();
+  out.pieces = pieces(s.model());
+  return out;
+}
+
+// A blade pushed down through the block with its button held: it presses
+// until the force per metre of edge in contact (the block's 20 mm width)
+// reaches its cutting resistance, then the tissue gives, and by the stroke's
+// end the block lies in two pieces. Twice the resistance takes twice the
+// force to start the cut. With the button up the same blade presses like a
+// tool, beyond that force, and cuts nothing.
+TEST(Blade, ItCutsWhereTheForcePerMetreReachesItsResistanceAndPressesBelowIt) {
+  const Stroke at5 = stroke(blade_scene(true, 5), 1000), at2 = stroke(blade_scene(true, 2.5), 1000);
+  RecordProperty("first_cut_force_5", g(at5.first_cut_force));
+  RecordProperty("first_cut_force_2_5", g(at2.first_cut_force));
+  RecordProperty("most_force_5", g(at5.most));
+  RecordProperty("cuts_5", g(double(at5.cuts)));
+  EXPECT_NEAR(at5.first_cut_force, 5 * 0.02, 0.15 * 5 * 0.02) << "J_c times the edge in contact (the block's width)";
+  EXPECT_NEAR(at5.first_cut_force / at2.first_cut_force, 2, 0.2);
+  EXPECT_GE(at5.cuts, 2);
+  EXPECT_EQ(at5.pieces, 2) << "cut through";
+  EXPECT_EQ(at2.pieces, 2);
+  EXPECT_LT(at5.most, 2 * 5 * 0.02) << "the tissue gives at about its resistance, not far beyond";
+
+  const Stroke pressed = stroke(blade_scene(false, 5, 0.007), 480);  // 3 mm into the block
+  EXPECT_EQ(pressed.cuts, 0);
+  EXPECT_EQ(pressed.pieces, 1);
+  EXPECT_GT(pressed.most, 1.1 * 5 * 0.02) << "without its button the blade presses past the resistance";
+}
+
+// A blade is refused in a batch (its cuts would change a mesh the batch's
+// scenes share), naming the scene and the tool.
+TEST(Blade, ABatchRefusesABlade) {
+  const auto shared = std::make_shared<const scene::Scene>(blade_scene(true, 5));
+  try {
+    SceneBatch batch({shared}, "cpu", Precision::Double);
+    ADD_FAILURE() << "a blade ran in a batch";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("tool 'scalpel' is a blade"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

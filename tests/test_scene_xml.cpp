@@ -106,6 +106,8 @@ void expect_same_scene(const Scene& a, const Scene& b) {
   for (size_t k = 0; k < a.tools.size(); ++k) {
     const scene::Tool &x = a.tools[k], &y = b.tools[k];
     EXPECT_EQ(x.name, y.name);
+    EXPECT_EQ(x.kind, y.kind);
+    EXPECT_EQ(x.cut_resistance, y.cut_resistance);
     EXPECT_EQ(x.radius, y.radius);
     EXPECT_EQ(x.shaft, y.shaft);
     EXPECT_EQ(x.friction, y.friction);
@@ -440,6 +442,63 @@ TEST(SceneXml, UnknownAttributeIsAnError) {
                               "unknown attribute 'colour'", "allowed: name, E, nu, mu, K, lambda, rho"}));
   const std::string solver = fmt::format("<tissue-scene>{}\n<solver dt_safety=\"0.3\"/></tissue-scene>", kTet);
   EXPECT_TRUE(xml_error(solver, {"scene.xml:5: ", "<solver>", "unknown attribute 'dt_safety'", "dt-safety"}));
+}
+
+// A blade: kind="blade" with its length, thickness and cutting resistance
+// (a capsule of half the thickness and the length as shaft), its button
+// cut="true"; it round-trips; a probe's attributes on a blade, a blade's on
+// a probe, cut= on a probe and grasp= on a blade, and a blade without a
+// length are refused naming the rule.
+TEST(SceneXml, ABladeIsAnEdgeWhoseButtonCuts) {
+  const auto scene_with = [](const std::string& tool) {
+    return fmt::format("<tissue-scene>\n{}\n<material name=\"m\" E=\"3000\" nu=\"0.45\" rho=\"1000\"/>\n"
+                       "<element-set name=\"all\" material=\"m\" elements=\"all\"/>\n<fixed nodes=\"0\"/>\n{}\n"
+                       "</tissue-scene>",
+                       kTet, tool);
+  };
+  const std::string blade = scene_with(
+      R"(<tool name="scalpel" kind="blade" length="0.02" thickness="0.0005" cut-resistance="120" direction="0 1 0">
+  <waypoint t="0" x="0.5" y="-0.5" z="1.5"/>
+  <waypoint t="1" x="0.5" y="-0.5" z="0.5" cut="true"/>
+</tool>)");
+  const Scene s = parse_scene(blade, "b.xml", "");
+  ASSERT_EQ(s.tools.size(), 1u);
+  const scene::Tool& t = s.tools[0];
+  EXPECT_EQ(t.kind, scene::Tool::Kind::Blade);
+  EXPECT_DOUBLE_EQ(t.shaft, 0.02);
+  EXPECT_DOUBLE_EQ(t.radius, 0.00025);
+  EXPECT_DOUBLE_EQ(t.cut_resistance, 120);
+  EXPECT_FALSE(t.path[0].grasp);
+  EXPECT_TRUE(t.path[1].grasp) << "the cut button rides in the tool's button";
+  EXPECT_EQ(scheduler_settings(s).tools[0].blade, true);
+  const Scene again = parse_scene(format_scene(s, ""), "again.xml", "");
+  expect_same_scene(s, again);
+  EXPECT_NE(format_scene(s, "").find("cut=\"true\""), std::string::npos);
+  const Scene defaults = parse_scene(scene_with(R"(<tool kind="blade" length="0.02"><waypoint t="0" x="0.5" y="0.5" z="2"/></tool>)"), "d.xml", "");
+  EXPECT_DOUBLE_EQ(defaults.tools[0].radius, 0.5 * scene::kDefaultBladeThickness);
+  EXPECT_DOUBLE_EQ(defaults.tools[0].cut_resistance, scene::kDefaultCutResistance);
+
+  const std::string w = R"(<waypoint t="0" x="0.5" y="0.5" z="2"/>)";
+  EXPECT_TRUE(xml_error(scene_with(R"(<tool kind="blade" length="0.02" radius="0.001">)" + w + "</tool>"),
+                        {"radius= is a probe's", "length="}));
+  EXPECT_TRUE(xml_error(scene_with(R"(<tool length="0.02">)" + w + "</tool>"), {"length= is a blade's"}));
+  EXPECT_TRUE(xml_error(scene_with(R"(<tool kind="blade">)" + w + "</tool>"), {"a blade needs length="}));
+  EXPECT_TRUE(xml_error(scene_with(R"(<tool kind="knife" length="0.02">)" + w + "</tool>"),
+                        {"kind = 'knife' must be probe or blade"}));
+  EXPECT_TRUE(xml_error(scene_with(R"(<tool><waypoint t="0" x="0.5" y="0.5" z="2" cut="true"/></tool>)"),
+                        {"cut= is a blade's button"}));
+  EXPECT_TRUE(xml_error(
+      scene_with(R"(<tool kind="blade" length="0.02"><waypoint t="0" x="0.5" y="0.5" z="2" grasp="true"/></tool>)"),
+      {"a blade does not grasp"}));
+  // the rules of the scene (validate), with the tool's line
+  const auto rule_error = [&](const std::string& tool, const std::string& part) {
+    return throws_with<SceneError>([&] { scene::validate(parse_scene(scene_with(tool), "scene.xml", "")); },
+                                   {"scene.xml:9", part});
+  };
+  EXPECT_TRUE(rule_error(R"(<tool kind="blade" length="0">)" + w + "</tool>",
+                         "tool 'probe': length = 0 m: a blade is a straight edge of length > 0"));
+  EXPECT_TRUE(rule_error(R"(<tool kind="blade" length="0.02" cut-resistance="-1">)" + w + "</tool>",
+                         "cut-resistance = -1 N/m must be >= 0"));
 }
 
 // mass-scaling: a fraction, or "off"; anything else names the attribute and the line.

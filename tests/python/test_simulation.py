@@ -577,3 +577,49 @@ def test_a_live_cut_runs_on_with_the_cut_mesh_and_reset_restores_the_whole():
     sim.reset()
     assert sim.n_nodes == n0 and sim.mesh_version == version + 2
     np.testing.assert_array_equal(sim.rest_positions, X0)
+
+
+def test_a_blade_driven_by_the_host_cuts_the_block_through(tmp_path):
+    # a blade scene (kind="blade"): the host holds its button down (set_grasp) and pushes it down through the
+    # block; the tissue gives at its resistance, the mesh grows, the arrays follow the new mesh, the block
+    # ends in two pieces; with the button up it only presses
+    nodes, tets = tissue.box_mesh(8, 8, 4, (0.02, 0.02, 0.01))
+    lines = ['<tissue-scene version="1">', '  <mesh>', '    <nodes>']
+    lines += ["      {:.9g} {:.9g} {:.9g}".format(*p) for p in nodes]
+    lines += ['    </nodes>', '    <elements>']
+    lines += ["      {} {} {} {}".format(*t) for t in tets]
+    lines += ['    </elements>', '  </mesh>',
+              '  <material name="tissue" E="3000" nu="0.4" rho="1000"/>',
+              '  <element-set material="tissue" elements="all"/>',
+              '  <fixed box-min="-1 -1 -1" box-max="1 1 0.0001"/>',
+              '  <tool name="scalpel" kind="blade" length="0.03" thickness="0.001" cut-resistance="5" '
+              'direction="0 1 0" device="mouse"/>',
+              '  <solver precision="double" depth="all" dt-safety="0.5" mass-scaling="off"/>',
+              '</tissue-scene>']
+    path = tmp_path / "blade.xml"
+    path.write_text("\n".join(lines))
+    sim = tissue.Simulation.load(str(path), backend="cpu")
+    n0, version = sim.n_nodes, sim.mesh_version
+    sim.set_grasp(0, True)  # the cut button
+    cuts = 0
+    for k in range(1000):
+        sim.set_tool_pose(0, [0.0112, -0.005, 0.0115 - 0.0095 * min(k, 1000) / 1000])
+        r = sim.step()
+        cuts += r.tools[0].cut
+        assert r.tools[0].grasp and r.tools[0].grasped_nodes == 0  # a blade's button cuts, it does not grasp
+    assert cuts >= 2 and sim.n_nodes > n0 and sim.mesh_version >= version + cuts
+    assert sim.rest_positions.shape == (sim.n_nodes, 3) and sim.displacement().shape == (sim.n_nodes, 3)
+    # two pieces: the elements joined through shared nodes
+    parent = np.arange(sim.n_nodes)
+
+    def root(a):
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+    for t in sim.tetrahedra:
+        for c in t[1:]:
+            parent[root(c)] = root(t[0])
+    assert len({root(a) for a in range(sim.n_nodes)}) == 2
+    sim.reset()
+    assert sim.n_nodes == n0

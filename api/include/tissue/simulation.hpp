@@ -109,7 +109,8 @@ struct ToolResult {
   Vector3 force = {};                 ///< the force on the tool: what the hand feels (N)
   int contact_nodes = 0;              ///< surface nodes in contact (pushed or grasped)
   int grasped_nodes = 0;              ///< of which grasped
-  bool grasp = false;                 ///< grasp button held
+  bool grasp = false;                 ///< the button held: a probe's grasp, a blade's cut
+  bool cut = false;                   ///< a blade: the tissue gave, and was cut, after this tick
 };
 
 /// What one haptic tick did.
@@ -218,7 +219,12 @@ class Simulation {
   /// or axis that is not finite, or a tip farther from the mesh's bounding
   /// box than 1000 times its diagonal (the scene rule for waypoints).
   void set_tool_pose(int tool, const Vector3& tip, const Vector3& axis = {0, 0, 0});
-  /// The grasp button: down grasps the nodes in contact, up releases them.
+  /// The tool's button. A probe's grasps: down grasps the nodes in
+  /// contact, up releases them. A blade's (`<tool kind="blade">`) cuts: while
+  /// it is down the tissue gives where the blade presses it with its cutting
+  /// resistance per metre of edge in contact, and the mesh is cut between
+  /// ticks (docs/cutting.md, "The blade"; n_nodes() and the reference mesh
+  /// change, as with cut()).
   void set_grasp(int tool, bool down);
   /// Hands the tool back to the scene's scripted path.
   void follow_scene_path(int tool);
