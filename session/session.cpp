@@ -268,7 +268,9 @@ void Session::cut_with_blades() {
       state.front0 = state.start0 + dot(g0 - state.start0, state.onward) * state.onward;
       state.started = true;
     } else {
-      const double grown = std::min(against * norm(motion) / (blade.cut_resistance * in_contact + 1e-300), state.lead);
+      // no faster than the blade moves: the blade drives the crack (the force past the resistance includes
+      // the lips' wedge on the blade, which does not open the crack's tip)
+      const double grown = std::min(against * norm(motion) / (blade.cut_resistance * in_contact + 1e-300), norm(motion));
       state.front0 = state.front0 + grown * state.onward;
     }
     // and at least a lead beyond the furthest material point the edge presses (the blade is where it

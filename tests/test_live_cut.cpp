@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <string>
+#include <map>
 #include <memory>
 #include <numeric>
 #include <vector>
