@@ -673,6 +673,32 @@ void bench_cut(Context& c, Precision p) {
   std::sort(lat.begin(), lat.end());
   std::vector<double> sorted = cut_s;
   std::sort(sorted.begin(), sorted.end());
+  // the same cuts prepared while the probe presses on (Session::begin_cut, a blade's way), each taking
+  // effect 0.1 s later, the ticks paced at the haptic rate as the haptic loop paces them
+  // (the preparation runs on the cores they leave idle): every tick timed, the commits' among them
+  Session live(s);
+  while (!live.scheduler().in_contact() && live.scheduler().ticks() < 2000) live.tick();
+  for (int k = 0; k < 50; ++k) live.tick();
+  const long delay = std::lround(std::ceil(0.1 / live.settings().tick - 1e-9));  // a blade's cut-delay="0.1"
+  std::vector<double> cutting, commit_s, prepare_s;
+  for (double x : {-0.03, -0.02, 0.02, 0.03}) {
+    live.begin_cut({{x, -0.06, -0.04}, {0, 0.12, 0}, {0, 0, 0.08}}, {}, CutSpace::Deformed,
+                   live.scheduler().ticks() + delay);
+    const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(live.settings().tick));
+    auto deadline = Clock::now();
+    for (int k = 0; k < delay + (c.o.quick ? 2 : 20); ++k) {
+      const auto t0 = Clock::now();
+      live.tick();
+      cutting.push_back(since(t0));
+      deadline += period;
+      std::this_thread::sleep_until(deadline);
+    }
+    commit_s.push_back(live.last_cut_seconds());
+    prepare_s.push_back(live.last_cut_prepare_seconds());
+  }
+  std::sort(cutting.begin(), cutting.end());
+  std::sort(commit_s.begin(), commit_s.end());
+  std::sort(prepare_s.begin(), prepare_s.end());
   Row r = c.row("live_cut", session.backend());
   r.add("mesh", std::string("kidney"));
   r.add("cuts", long(cut_s.size()));
@@ -684,6 +710,13 @@ void bench_cut(Context& c, Precision p) {
   r.add("steps_per_tick", long(session.scheduler().steps_per_tick()));
   r.add("tick_ms_p50_after", 1e3 * lat[lat.size() / 2]);
   r.add("tick_ms_p99_after", 1e3 * lat[lat.size() * 99 / 100]);
+  r.add("cut_delay_ticks", delay);
+  r.add("prepare_ms_median", 1e3 * prepare_s[prepare_s.size() / 2]);
+  r.add("commit_ms_median", 1e3 * commit_s[commit_s.size() / 2]);
+  r.add("commit_ms_max", 1e3 * commit_s.back());
+  r.add("tick_ms_p50_while_cutting", 1e3 * cutting[cutting.size() / 2]);
+  r.add("tick_ms_p99_while_cutting", 1e3 * cutting[cutting.size() * 99 / 100]);
+  r.add("tick_ms_max_while_cutting", 1e3 * cutting.back());
   c.emit(r);
 }
 

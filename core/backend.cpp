@@ -113,6 +113,11 @@ void Backend::set_motion(std::span<const double> u, std::span<const double> u_pr
   do_set_motion(u, u_prev);
 }
 
+void Backend::warm_up() {
+  require_upload("warm_up");
+  do_warm_up();
+}
+
 std::vector<double> Backend::previous_displacements() {
   require_upload("previous_displacements");
   return do_previous_displacements();

@@ -407,6 +407,29 @@ CutResult cut_along(std::span<const double> nodes, std::span<const index_t> tets
   return r;
 }
 
+std::vector<double> MovingCut::Transfer::operator()(std::span<const double> field) const {
+  const std::size_t n = std::size_t(n_old), m = between.size();
+  if (field.size() != 3 * n)
+    throw std::invalid_argument(
+        fmt::format("cut transfer: a field of {} values for the old mesh's {} nodes (3 per node)", field.size(), n));
+  const std::size_t places = start.size() - 1;
+  std::vector<double> at(3 * places), out(3 * m);
+  for (std::size_t p = 0; p < places; ++p)
+    for (std::size_t c = 0; c < 3; ++c) {
+      double sum = 0;
+      for (index_t k = start[p]; k < start[p + 1]; ++k) sum += weight[std::size_t(k)] * field[c * n + std::size_t(node[std::size_t(k)])];
+      at[3 * p + c] = sum;
+    }
+  for (std::size_t i = 0; i < m; ++i) {
+    const auto [a, b] = between[i];
+    for (std::size_t c = 0; c < 3; ++c) {
+      const double fa = at[3 * std::size_t(a) + c], fb = at[3 * std::size_t(b) + c];
+      out[c * m + i] = a == b ? fa : (1 - w[i]) * fa + w[i] * fb;
+    }
+  }
+  return out;
+}
+
 MovingCut cut_moving(std::span<const double> X, std::span<const index_t> tets, std::span<const double> u,
                      std::span<const double> u_prev, const CutSurface& cut, const CutOptions& o, CutSpace space) {
   const std::size_t n = X.size() / 3;
@@ -437,10 +460,20 @@ MovingCut cut_moving(std::span<const double> X, std::span<const index_t> tets, s
     for (std::size_t k = 0; k < tets.size(); ++k) star[std::size_t(fill[std::size_t(tets[k])]++)] = index_t(k / 4);
   }
   // an input node's reference place and motion after the cut: its own, or (snapped) the field at its new place,
-  // from the element of its star that holds it (the one whose smallest barycentric weight is largest)
-  struct Place { V X, u, u_prev; };
-  std::vector<Place> kept(n);
-  std::vector<std::uint8_t> known(n, 0);
+  // from the element of its star that holds it (the one whose smallest barycentric weight is largest); each a
+  // place of the transfer, its weights on old nodes
+  MovingCut::Transfer& tr = out.transfer;
+  tr.n_old = index_t(n);
+  tr.start = {0};
+  const auto add_place = [&](std::span<const index_t> corners, std::span<const double> w) {
+    for (std::size_t j = 0; j < corners.size(); ++j) {
+      tr.node.push_back(corners[j]);
+      tr.weight.push_back(w[j]);
+    }
+    tr.start.push_back(index_t(tr.node.size()));
+    return index_t(tr.start.size() - 2);
+  };
+  std::vector<index_t> kept(n, -1);
   // the boundary faces (in one element only), by node: a surface node's new place is taken back onto the
   // reference surface, so that the reference mesh keeps the old one's boundary and volume
   std::vector<std::vector<std::array<index_t, 3>>> boundary(n);
@@ -454,29 +487,31 @@ MovingCut cut_moving(std::span<const double> X, std::span<const index_t> tets, s
       for (index_t v : faces[f].key) boundary[std::size_t(v)].push_back(faces[f].key);
     }
   }
-  const auto kept_place = [&](std::size_t k, V p) -> const Place& {
-    if (known[k]) return kept[k];
-    known[k] = 1;
-    if (norm(p - now(k)) == 0) return kept[k] = {ref(k), field(u, k), field(u_prev, k)};
+  const auto kept_place = [&](std::size_t k, V p) -> index_t {
+    if (kept[k] >= 0) return kept[k];
+    const index_t self[1] = {index_t(k)};
+    const double one[1] = {1.0};
+    if (norm(p - now(k)) == 0) return kept[k] = add_place(self, one);
     if (!boundary[k].empty()) {  // the nearest point of its boundary faces, as they are now
       double nearest = INFINITY;
-      Place at{ref(k), field(u, k), field(u_prev, k)};
+      std::array<index_t, 3> corners{};
+      double at[3] = {1, 0, 0};
+      bool found = false;
       for (const std::array<index_t, 3>& f : boundary[k]) {
         double w[3];
         const V q = closest_on_triangle(p, now(std::size_t(f[0])), now(std::size_t(f[1])), now(std::size_t(f[2])), w);
         if (!(norm(q - p) < nearest)) continue;
         nearest = norm(q - p);
-        at = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
-        for (int j = 0; j < 3; ++j) {
-          at.X = at.X + w[j] * ref(std::size_t(f[j]));
-          at.u = at.u + w[j] * field(u, std::size_t(f[j]));
-          at.u_prev = at.u_prev + w[j] * field(u_prev, std::size_t(f[j]));
-        }
+        corners = f;
+        std::copy(w, w + 3, at);
+        found = true;
       }
-      return kept[k] = at;
+      return kept[k] = found ? add_place(corners, at) : add_place(self, one);
     }
     double best = -INFINITY;
-    Place at{ref(k), field(u, k), field(u_prev, k)};
+    std::array<index_t, 4> corners{};
+    double at[4] = {};
+    bool found = false;
     for (index_t s = start[k]; s < start[k + 1]; ++s) {
       const std::size_t e = std::size_t(star[std::size_t(s)]);
       const index_t* c = &tets[4 * e];
@@ -495,37 +530,33 @@ MovingCut cut_moving(std::span<const double> X, std::span<const index_t> tets, s
       double sum = 0;
       for (double& wj : w) sum += (wj = std::max(wj, 0.0));
       for (double& wj : w) wj /= sum;
-      at = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
-      for (int j = 0; j < 4; ++j) {
-        at.X = at.X + w[j] * ref(std::size_t(c[j]));
-        at.u = at.u + w[j] * field(u, std::size_t(c[j]));
-        at.u_prev = at.u_prev + w[j] * field(u_prev, std::size_t(c[j]));
-      }
+      std::copy(c, c + 4, corners.begin());
+      std::copy(w, w + 4, at);
+      found = true;
     }
-    return kept[k] = at;
+    return kept[k] = found ? add_place(corners, at) : add_place(self, one);
   };
-  std::vector<Place> place(m);
+  tr.between.resize(m);
+  tr.w.assign(m, 0.0);
   for (std::size_t i = 0; i < m; ++i) {
     const auto [a, b] = r.from[i];
     if (a == b) {
-      place[i] = kept_place(std::size_t(a), placed(i));
+      const index_t p = kept_place(std::size_t(a), placed(i));
+      tr.between[i] = {p, p};
       continue;
     }
     // an edge node: between its ends as they are after the snap (each end's own kept place)
-    const Place pa = kept_place(std::size_t(a), placed(std::size_t(a)));
-    const Place pb = kept_place(std::size_t(b), placed(std::size_t(b)));
-    const double w = r.weight[i];
-    place[i] = {(1 - w) * pa.X + w * pb.X, (1 - w) * pa.u + w * pb.u, (1 - w) * pa.u_prev + w * pb.u_prev};
+    tr.between[i] = {kept_place(std::size_t(a), placed(std::size_t(a))), kept_place(std::size_t(b), placed(std::size_t(b)))};
+    tr.w[i] = r.weight[i];
   }
-  out.u.resize(3 * m);
-  out.u_prev.resize(3 * m);
-  for (std::size_t i = 0; i < m; ++i) {
-    for (int c = 0; c < 3; ++c) {
-      out.u[c * m + i] = place[i].u[c];
-      out.u_prev[c * m + i] = place[i].u_prev[c];
-      r.nodes[3 * i + std::size_t(c)] = place[i].X[c];
-    }
-  }
+  out.u = tr(u);
+  out.u_prev = tr(u_prev);
+  std::vector<double> X_major(3 * n);
+  for (std::size_t a = 0; a < n; ++a)
+    for (int c = 0; c < 3; ++c) X_major[std::size_t(c) * n + a] = X[3 * a + std::size_t(c)];
+  const std::vector<double> X_new = tr(X_major);
+  for (std::size_t i = 0; i < m; ++i)
+    for (int c = 0; c < 3; ++c) r.nodes[3 * i + std::size_t(c)] = X_new[std::size_t(c) * m + i];
   return out;
 }
 

@@ -121,6 +121,25 @@ struct MovingCut {
   CutResult cut;              ///< cut.nodes: the reference positions of the cut mesh
   std::vector<double> u;      ///< u^n of the cut mesh (3 x its n_nodes, component-major)
   std::vector<double> u_prev; ///< u^(n-1), likewise
+  /// How the cut mesh's fields come from the old mesh's, as a linear map
+  /// fixed by the cut: u and u_prev above are it applied to the u and
+  /// u_prev given. A cut prepared while the simulation runs on applies it
+  /// to the motion of the moment it takes effect (Session's deferred cut).
+  struct Transfer {
+    /// The places of the old mesh the new nodes take their fields at: place
+    /// p is sum over k in [start[p], start[p + 1]) of weight[k] f(node[k]).
+    std::vector<index_t> start, node;
+    std::vector<double> weight;
+    /// Per new node: its two places and its weight between them (1 - w of
+    /// the first, w of the second; one place for a kept or snapped node).
+    std::vector<std::array<index_t, 2>> between;
+    std::vector<double> w;
+    index_t n_old = 0;
+    /// A field of the old mesh (3 x n_old, component-major) on the cut
+    /// mesh (3 x its n_nodes). Throws std::invalid_argument for a field of
+    /// another size.
+    std::vector<double> operator()(std::span<const double> field) const;
+  } transfer;
 };
 MovingCut cut_moving(std::span<const double> nodes, std::span<const index_t> tets, std::span<const double> u,
                      std::span<const double> u_prev, const CutSurface& cut, const CutOptions& options = {},

@@ -102,7 +102,7 @@ double median_surface_edge(const TissueModel<double>& m) {
 }
 
 Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, SchedulerSettings settings)
-    : backend_(backend), model_(&model), settings_(std::move(settings)) {
+    : backend_(&backend), model_(&model), settings_(std::move(settings)) {
   check_settings(settings_, model);
   steps_per_tick_ = std::max(1, static_cast<int>(std::lround(settings_.tick / model.dt)));
   depth_ = settings_.depth;
@@ -133,14 +133,24 @@ Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, Schedul
   // the elements under it deform by a large fraction of their size in one step (and invert at a few edges)
   follow_step_ = 0.5 * median_surface_edge(*model_);
   // depth N: an empty region (nothing moves) until the first contact seeds it
-  region_ = backend_.build_region({}, depth_);
+  region_ = backend_->build_region({}, depth_);
 }
 
 void Scheduler::give_backend_tools() {
   std::vector<ToolShape> shapes;
   for (const ToolSetting& t : settings_.tools) shapes.push_back(t.shape);
-  backend_.set_tools(shapes, settings_.contact);
-  backend_.set_body_contact(settings_.body_contact);
+  backend_->set_tools(shapes, settings_.contact);
+  backend_->set_body_contact(settings_.body_contact);
+}
+
+std::vector<index_t> Scheduler::seeds_after(std::span<const index_t> seeds,
+                                            std::span<const std::array<index_t, 2>> node_from) {
+  std::vector<index_t> out;
+  for (std::size_t i = 0; i < node_from.size(); ++i)
+    if (std::binary_search(seeds.begin(), seeds.end(), node_from[i][0]) ||
+        std::binary_search(seeds.begin(), seeds.end(), node_from[i][1]))
+      out.push_back(index_t(i));
+  return out;
 }
 
 void Scheduler::remesh(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from) {
@@ -153,14 +163,27 @@ void Scheduler::remesh(const TissueModel<double>& model, std::span<const std::ar
   steps_per_tick_ = std::max(1, static_cast<int>(std::lround(settings_.tick / model.dt)));
   give_backend_tools();
   follow_step_ = 0.5 * median_surface_edge(model);
-  // a new node is a seed where it comes from one (a copy of a seed, a node made on an edge from one)
-  std::vector<index_t> seeds;
-  for (std::size_t i = 0; i < node_from.size(); ++i)
-    if (std::binary_search(seeds_.begin(), seeds_.end(), node_from[i][0]) ||
-        std::binary_search(seeds_.begin(), seeds_.end(), node_from[i][1]))
-      seeds.push_back(index_t(i));
+  seeds_ = seeds_after(seeds_, node_from);
+  region_ = backend_->build_region(seeds_, region_depth());
+}
+
+void Scheduler::remesh(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from,
+                       Backend& fresh, const PreparedRegion& prepared) {
+  if (pending_) throw std::logic_error("Scheduler::remesh: a tick was begun and not ended (end_tick)");
+  if (node_from.size() != std::size_t(model.n_nodes) || fresh.n_nodes() != model.n_nodes)
+    throw std::invalid_argument(fmt::format("Scheduler::remesh: {} node origins and a backend of {} nodes for {} "
+                                            "nodes",
+                                            node_from.size(), fresh.n_nodes(), model.n_nodes));
+  check_settings(settings_, model);
+  std::vector<index_t> seeds = seeds_after(seeds_, node_from);
+  const int depth = region_depth();
+  backend_ = &fresh;
+  model_ = &model;
+  steps_per_tick_ = std::max(1, static_cast<int>(std::lround(settings_.tick / model.dt)));
+  give_backend_tools();
+  follow_step_ = 0.5 * median_surface_edge(model);
   seeds_ = std::move(seeds);
-  region_ = backend_.build_region(seeds_, region_.whole() ? kDepthAll : depth_);
+  region_ = seeds_ == prepared.seeds && depth == prepared.depth ? prepared.sizes : backend_->build_region(seeds_, depth);
 }
 
 std::vector<std::string> Scheduler::take_notes() {
@@ -170,29 +193,29 @@ std::vector<std::string> Scheduler::take_notes() {
 }
 
 void Scheduler::set_tool_friction(int t, double friction) {
-  backend_.set_tool_friction(t, friction);
+  backend_->set_tool_friction(t, friction);
   settings_.tools[std::size_t(t)].shape.friction = friction;
 }
 
 void Scheduler::set_loads(std::span<const index_t> nodes, std::span<const double> force) {
-  backend_.set_loads(nodes, force);
+  backend_->set_loads(nodes, force);
   if (region_.whole()) return;
-  const std::vector<index_t>& loaded = backend_.loaded_nodes();
+  const std::vector<index_t>& loaded = backend_->loaded_nodes();
   std::vector<index_t> seeds;
   std::set_union(seeds_.begin(), seeds_.end(), loaded.begin(), loaded.end(), std::back_inserter(seeds));
   if (seeds == seeds_) return;
   seeds_ = std::move(seeds);
-  region_ = backend_.build_region(seeds_, depth_);
+  region_ = backend_->build_region(seeds_, depth_);
 }
 
 void Scheduler::seed_region() {
   if (region_.whole()) return;
-  const std::vector<index_t> cand = backend_.contact_candidates();
+  const std::vector<index_t> cand = backend_->contact_candidates();
   if (cand.empty()) return;
   std::vector<index_t> seeds;
   std::set_union(seeds_.begin(), seeds_.end(), cand.begin(), cand.end(), std::back_inserter(seeds));
   seeds_ = std::move(seeds);
-  region_ = backend_.build_region(seeds_, depth_);
+  region_ = backend_->build_region(seeds_, depth_);
 }
 
 bool Scheduler::grow_region(const Reductions& r) {
@@ -200,10 +223,10 @@ bool Scheduler::grow_region(const Reductions& r) {
   if (r.front_disp < 0)
     throw SimulationError(fmt::format("depth auto: the {} backend does not report the front ring's displacement "
                                       "(Reductions::front_disp); use a fixed depth",
-                                      backend_.name()));
+                                      backend_->name()));
   if (!(r.front_disp > settings_.auto_tol * r.max_disp)) return false;
   ++depth_;
-  region_ = backend_.build_region(seeds_, depth_);
+  region_ = backend_->build_region(seeds_, depth_);
   return true;
 }
 
@@ -271,7 +294,7 @@ void Scheduler::note_passed_through(const Reductions& r) {
     if (!inside_reference_surface(*model_, m.to.tip) &&
         !(l > 0 && inside_reference_surface(*model_, m.to.tip + 0.5 * l * m.to.axis)))
       continue;
-    if (u.empty()) u = backend_.download().u;
+    if (u.empty()) u = backend_->download().u;
     const char* part = nullptr;
     if (inside_surface(*model_, u, m.to.tip))
       part = "tip";
@@ -337,7 +360,7 @@ void Scheduler::note_contacts(const Reductions& r) {
     if (rigid_reported_[t] > 0) continue;  // once per episode of rigid contact
     rigid_reported_[t] = tr.rigid;
     std::vector<index_t> named;
-    for (const ContactNode& c : backend_.contacts())
+    for (const ContactNode& c : backend_->contacts())
       if (c.tool == int(t) && c.kind == kRigidContact && named.size() < 8) named.push_back(c.node);
     notes_.push_back(fmt::format(
         "tick {}: tool '{}' presses {} node(s) that the scene fixes (a rigid support): node(s) {}{}; they do not "
@@ -405,22 +428,22 @@ void Scheduler::begin_tick(std::span<Device* const> devices) {
     rep.tools[t].grasp = in.grasp;
   }
   has_prev_ = true;
-  backend_.move_tools(motion_);
+  backend_->move_tools(motion_);
   pending_first_step_ = total_steps_;
   pending_devices_.assign(devices.begin(), devices.end());
   // a limited region grows first where the tools' motion reaches beyond it (the cuda backend checks that
   // inside the tick's own graph: no round trip when the region holds)
-  backend_.start_tick(steps_per_tick_, !region_.whole());
+  backend_->start_tick(steps_per_tick_, !region_.whole());
   pending_ = true;
 }
 
 TickReport Scheduler::end_tick() {
   if (!pending_) throw std::logic_error("Scheduler::end_tick: no tick was begun (begin_tick)");
   pending_ = false;
-  std::optional<Reductions> ran = backend_.finish_tick();
+  std::optional<Reductions> ran = backend_->finish_tick();
   if (!ran) {
     seed_region();
-    ran = backend_.advance_reduce(steps_per_tick_);
+    ran = backend_->advance_reduce(steps_per_tick_);
   }
   const std::size_t n_tools = settings_.tools.size();
   const long first_step = pending_first_step_;

@@ -170,6 +170,23 @@ class Scheduler {
   /// the next remesh. Throws std::logic_error between begin_tick and
   /// end_tick.
   void remesh(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from);
+  /// A region a backend prepared for a remesh holds already (Backend::build_region of `seeds` at `depth`).
+  struct PreparedRegion {
+    std::vector<index_t> seeds;
+    int depth = kDepthAll;
+    RegionSizes sizes;
+  };
+  /// remesh onto `fresh`, a backend that holds the new model already and
+  /// replaces the Scheduler's from now on (the caller owns it and keeps the
+  /// old one until this returns). Its region is `prepared` where the seeds
+  /// and depth are still those it was built with, else built again.
+  void remesh(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from, Backend& fresh,
+              const PreparedRegion& prepared);
+  /// The seeds of the region after a remesh (a new node is one where it comes from one).
+  static std::vector<index_t> seeds_after(std::span<const index_t> seeds,
+                                          std::span<const std::array<index_t, 2>> node_from);
+  /// The region's current depth (rings; kDepthAll for the whole mesh).
+  int region_depth() const { return region_.whole() ? kDepthAll : depth_; }
 
   /// Notices since the last call (a tool pressing a rigid support, naming
   /// its nodes; a tool starting inside the body; a tool moving more than
@@ -196,7 +213,7 @@ class Scheduler {
   /// surface went through that surface: noted, naming it, once per episode.
   void note_passed_through(const Reductions& r);
 
-  Backend& backend_;
+  Backend* backend_;
   const TissueModel<double>* model_;
   SchedulerSettings settings_;
   int steps_per_tick_ = 1;

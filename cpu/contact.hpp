@@ -80,6 +80,8 @@ class ContactStage {
   /// the BVH's margin, not only the region's nodes: call after any change of
   /// u beyond the region's nodes (new displacements, a new region, driven nodes).
   void surface_moved() { bvh_.invalidate(); }
+  /// Makes the surface BVH valid for the current u now (a build, the first time).
+  void warm_up(const TissueState<T>& s) { bvh_.update(s.u.data()); }
 
   /// The surface BVH (tests: builds only when the surface left the margin).
   const SurfaceBvh<T>& bvh() const { return bvh_; }

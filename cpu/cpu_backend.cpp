@@ -93,6 +93,11 @@ void CpuBackend<T>::do_set_motion(std::span<const double> u, std::span<const dou
 }
 
 template <class T>
+void CpuBackend<T>::do_warm_up() {
+  if (contact_) contact_->warm_up(state_);
+}
+
+template <class T>
 std::vector<double> CpuBackend<T>::do_previous_displacements() {
   return {state_.u_prev.begin(), state_.u_prev.end()};
 }

@@ -464,8 +464,8 @@ Constraint Reader::read_selection(pugi::xml_node n) const {
 }
 
 scene::Tool Reader::read_tool(pugi::xml_node n) const {
-  check_attributes(n, {"name", "kind", "radius", "shaft-length", "length", "thickness", "cut-resistance", "friction",
-                       "direction", "device", "path"});
+  check_attributes(n, {"name", "kind", "radius", "shaft-length", "length", "thickness", "cut-resistance", "cut-delay",
+                       "friction", "direction", "device", "path"});
   check_children(n, {"waypoint"});
   scene::Tool t;
   t.line = line(n);
@@ -477,7 +477,7 @@ scene::Tool Reader::read_tool(pugi::xml_node n) const {
   }
   const bool blade = t.kind == scene::Tool::Kind::Blade;
   static constexpr const char* kProbeOnly[] = {"radius", "shaft-length"};
-  static constexpr const char* kBladeOnly[] = {"length", "thickness", "cut-resistance"};
+  static constexpr const char* kBladeOnly[] = {"length", "thickness", "cut-resistance", "cut-delay"};
   for (const char* a : blade ? std::span<const char* const>(kProbeOnly) : std::span<const char* const>(kBladeOnly))
     if (n.attribute(a))
       fail(n, blade ? fmt::format("{}= is a probe's; a blade takes length= (its edge, m) and thickness= (m)", a)
@@ -487,6 +487,7 @@ scene::Tool Reader::read_tool(pugi::xml_node n) const {
     t.shaft = real(n, "length");
     t.radius = 0.5 * real_or(n, "thickness", scene::kDefaultBladeThickness);
     t.cut_resistance = real_or(n, "cut-resistance", t.cut_resistance);
+    t.cut_delay = real_or(n, "cut-delay", t.cut_delay);
   } else {
     t.radius = real_or(n, "radius", t.radius);
     t.shaft = real_or(n, "shaft-length", t.shaft);
@@ -790,6 +791,7 @@ void write_tool(pugi::xml_node root, const scene::Tool& t) {
     set(n, "length", num(t.shaft));
     set(n, "thickness", num(2 * t.radius));
     set(n, "cut-resistance", num(t.cut_resistance));
+    set(n, "cut-delay", num(t.cut_delay));
   } else {
     set(n, "radius", num(t.radius));
     if (t.shaft != 0) set(n, "shaft-length", num(t.shaft));

@@ -103,6 +103,14 @@ struct Load {
 /// Canadinc, "Estimation of fracture toughness of liver tissue: experiments
 /// and validation", Med. Eng. Phys. 34(7), 2012).
 inline constexpr double kDefaultCutResistance = 164;
+/// A blade's default cut delay (s): 0, the cut made within the tick that
+/// gives. A delay > 0 prepares it off the tick's thread while the simulation
+/// runs on, and it takes effect that long after the tissue gives (Session,
+/// docs/cutting.md "The blade").
+inline constexpr double kDefaultCutDelay = 0;
+/// The longest cut delay a scene may ask (s): a blade that gives a second
+/// late is a typing mistake.
+inline constexpr double kMaxCutDelay = 1;
 /// A blade's default thickness (m): its contact capsule's diameter.
 inline constexpr double kDefaultBladeThickness = 1e-3;
 
@@ -121,6 +129,10 @@ struct Tool {
   /// tissue gives where the force against the blade's motion per metre of
   /// edge in contact reaches it (Mahvash and Hayward's energy criterion).
   double cut_resistance = kDefaultCutResistance;
+  /// A blade's cut delay (s): how long after the tissue gives its cut takes
+  /// effect; the cut is prepared meanwhile while the ticks run on (0: made
+  /// within the tick, a pause of the cut's whole time).
+  double cut_delay = kDefaultCutDelay;
   Vec3<double> direction = {0, 0, 1};  ///< shaft axis, tip -> handle, used when the device has no orientation
   std::string device = "scripted";  ///< "scripted" | "mouse" | "phantom"
   std::string path_file;            ///< CSV t,x,y,z[,grasp][,ax,ay,az] (io/path_csv; a blade's grasp column is its

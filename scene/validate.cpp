@@ -533,6 +533,12 @@ void check_tool(const Scene& s, const Tool& t) {
            fmt::format("{}: cut-resistance = {} N/m must be >= 0 (the force per metre of edge at which the tissue "
                        "gives; 0 = at any touch)",
                        what, t.cut_resistance));
+    check_finite(s, t.line, what, "cut-delay", t.cut_delay);
+    if (!(t.cut_delay >= 0 && t.cut_delay <= kMaxCutDelay))
+      fail(s, t.line,
+           fmt::format("{}: cut-delay = {} s must be in [0, {}] (how long after the tissue gives its cut takes "
+                       "effect; 0 = within the tick)",
+                       what, t.cut_delay, kMaxCutDelay));
   }
   const MeshBox b = mesh_box(s.nodes);
   const double ext = b.largest_extent();  // a tool wider than the body cannot touch it as a tool

@@ -6,6 +6,11 @@
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
+#include <tbb/task_arena.h>
+#ifdef __linux__
+#include <sys/resource.h>
+#include <unistd.h>
+#endif
 
 #include "backends/registry.hpp"
 #include "scene/checks.hpp"
@@ -49,6 +54,10 @@ Session::Session(std::shared_ptr<const scene::Scene> scene, std::shared_ptr<cons
 }
 
 void Session::restart() {
+  if (pending_) {
+    pending_->job.wait();  // its copies only: dropped
+    pending_.reset();
+  }
   if (uncut_scene_) {
     scene_ = std::move(uncut_scene_);
     engine_.model = std::move(uncut_model_);
@@ -209,7 +218,32 @@ void Session::open_lips(const SessionCut& made, Vec3<double> tip, Vec3<double> a
   fields_.reset();
 }
 
+void Session::take_pending_cut() {
+  const int t = pending_->blade;
+  const Vec3<double> ahead = pending_->ahead;
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    const SessionCut made = finish_cut();
+    if (t >= 0) {
+      const scene::Tool& blade = scene_->tools[std::size_t(t)];
+      const ToolReport& r = last_.tools[std::size_t(t)];
+      open_lips(made, r.tip, r.axis, blade.shaft, blade.radius, cross(r.axis, ahead));
+      last_.tools[std::size_t(t)].cut = true;
+    }
+    last_cut_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    ++cuts_;
+  } catch (const CutError&) {
+    if (t < 0) throw;  // the host's (begin_cut): refused, as cut() refuses it
+    // a blade's: nothing opens yet (the front has passed no face's middle), or the sweep lies outside
+  } catch (const ModelError& e) {
+    if (t < 0) throw;
+    scheduler().note(fmt::format("tick {}: blade '{}' did not cut: the cut mesh was refused: {}", last_.tick,
+                                 scene_->tools[std::size_t(t)].name, e.what()));
+  }
+}
+
 void Session::cut_with_blades() {
+  if (pending_ && engine_.scheduler->ticks() >= pending_->due) take_pending_cut();
   for (int t = 0; t < n_tools(); ++t) {
     if (scene_->tools[std::size_t(t)].kind != scene::Tool::Kind::Blade) continue;
     const scene::Tool blade = scene_->tools[std::size_t(t)];  // a copy: a cut replaces the scene
@@ -281,11 +315,20 @@ void Session::cut_with_blades() {
       state.front0 = state.front0 + (furthest + state.lead - run) * state.onward;
     const double run = dot(state.front0 - state.start0, state.onward);
     if (state.cut_at > 0 && run - state.cut_at < h / 3) continue;  // not yet a third of an element on
+    if (pending_) continue;  // a cut in preparation: the crack grows on, and the next cut takes it
     state.cut_at = run;
+    const CutSurface crack{state.start0, state.edge, state.front0 - state.start0};
+    const long delay = std::lround(std::ceil(blade.cut_delay / settings_.tick - 1e-9));
+    if (delay > 0) {  // prepared while the ticks run on; it takes effect `delay` ticks from now
+      begin_cut(crack, {}, CutSpace::Reference, engine_.scheduler->ticks() + delay);
+      pending_->blade = t;
+      pending_->ahead = ahead;
+      continue;
+    }
     const auto start = std::chrono::steady_clock::now();
     SessionCut made;
     try {
-      made = cut({state.start0, state.edge, state.front0 - state.start0}, {}, CutSpace::Reference);
+      made = cut(crack, {}, CutSpace::Reference);
     } catch (const CutError&) {
       continue;  // nothing opens yet (the front has passed no face's middle), or the sweep lies outside
     } catch (const ModelError& e) {
@@ -309,23 +352,112 @@ void Session::set_loads(std::vector<index_t> nodes, std::vector<double> forces) 
   loads_ = scene::SceneLoads{std::move(nodes), std::move(forces)};
 }
 
-SessionCut Session::cut(const CutSurface& surface, const CutOptions& options, CutSpace space) {
+Session::PreparedCut Session::prepare_cut(CutInput in) {
+  const auto start = std::chrono::steady_clock::now();
+  PreparedCut p;
+  p.made = cut_moving(in.scene->nodes, in.scene->tets, in.u, in.u_prev, in.surface, in.options, in.space);
+  p.scene = std::make_shared<const scene::Scene>(scene::scene_after_cut(*in.scene, p.made.cut));
+  p.model = std::make_shared<const TissueModel<double>>(scene::load_model(*p.scene));
+  p.tick = in.tick;
+  if (!in.backend.empty()) {
+    // the backend it runs on, ready to step: uploaded, its region built, its surface BVH made (one thread: the
+    // ticks' cores are the ticks')
+    tbb::task_arena one(1);
+    one.execute([&] {
+      p.backend = create_backend(in.backend, in.precision);
+      p.backend->upload(*p.model);
+      p.region.seeds = Scheduler::seeds_after(in.seeds, p.made.cut.from);
+      p.region.depth = in.depth;
+      p.region.sizes = p.backend->build_region(p.region.seeds, in.depth);
+      p.backend->set_motion(p.made.u, p.made.u_prev);
+      p.backend->warm_up();
+    });
+  }
+  p.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return p;
+}
+
+void Session::check_cut_now() const {
   check_running();
   scene::check_cuttable(*scene_);
-  const TissueModel<double>& before = model();
-  if (scene_->nodes.size() != 3 * std::size_t(before.n_nodes) || scene_->tets.size() != 4 * std::size_t(before.n_elems))
+  const TissueModel<double>& m = model();
+  if (scene_->nodes.size() != 3 * std::size_t(m.n_nodes) || scene_->tets.size() != 4 * std::size_t(m.n_elems))
     throw std::logic_error(fmt::format("{}: the scene's mesh ({} nodes, {} elements) is not its model's", name(),
                                        scene_->nodes.size() / 3, scene_->tets.size() / 4));
+}
+
+SessionCut Session::cut(const CutSurface& surface, const CutOptions& options, CutSpace space) {
+  if (pending_) take_pending_cut();  // a blade's, made first
+  check_cut_now();
+  return commit_cut(prepare_cut(cut_input(surface, options, space)));
+}
+
+Session::CutInput Session::cut_input(const CutSurface& surface, const CutOptions& options, CutSpace space) {
+  CutInput in;
+  in.scene = scene_;
+  in.u = backend().download().u;
+  in.u_prev = backend().previous_displacements();
+  in.surface = surface;
+  in.options = options;
+  in.space = space;
+  in.tick = engine_.scheduler->ticks();
+  return in;
+}
+
+namespace {
+
+/// The calling thread (a cut's preparation) runs at the lowest priority: the haptic ticks come first. (Nice 19,
+/// not SCHED_IDLE: idle-class preparation took 2-3 times as long on a 2-core machine, past its delay, and
+/// the ticks were no faster.)
+void yield_to_the_ticks() {
+#ifdef __linux__
+  setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), 19);  // refused: it runs as the others do
+#endif
+}
+
+}  // namespace
+
+void Session::begin_cut(const CutSurface& surface, const CutOptions& options, CutSpace space, long due) {
+  if (pending_) throw std::logic_error(fmt::format("{}: begin_cut: a cut is already in preparation", name()));
+  check_cut_now();
+  CutInput in = cut_input(surface, options, space);
+  in.backend = backend().name();
+  in.precision = backend().precision();
+  in.seeds = scheduler().seeds();
+  in.depth = scheduler().region_depth();
+  pending_.emplace();
+  pending_->due = due;
+  pending_->job = std::async(std::launch::async, [in = std::move(in)]() mutable {
+    yield_to_the_ticks();
+    return prepare_cut(std::move(in));
+  });
+}
+
+SessionCut Session::finish_cut() {
+  if (!pending_) throw std::logic_error(fmt::format("{}: no cut is in preparation", name()));
+  std::future<PreparedCut> job = std::move(pending_->job);
+  pending_.reset();
+  PreparedCut p = job.get();  // rethrows the preparation's CutError, SceneError or ModelError
+  last_cut_prepare_seconds_ = p.seconds;
+  check_cut_now();
+  return commit_cut(std::move(p));
+}
+
+SessionCut Session::commit_cut(PreparedCut&& p) {
+  const TissueModel<double>& before = model();
   SessionCut out;
   out.dt_before = before.dt;
   out.dt_crit_before = before.dt_crit_physical;
   out.added_mass_before = before.added_mass;
   out.nodes_before = before.n_nodes;
   out.elements_before = before.n_elems;
-  const std::vector<double> u = backend().download().u, u_prev = backend().previous_displacements();
-  MovingCut d = cut_moving(scene_->nodes, scene_->tets, u, u_prev, surface, options, space);
-  auto cut_scene = std::make_shared<const scene::Scene>(scene::scene_after_cut(*scene_, d.cut));
-  auto cut_model = std::make_shared<const TissueModel<double>>(scene::load_model(*cut_scene));
+  MovingCut& d = p.made;
+  if (p.tick != engine_.scheduler->ticks()) {  // prepared ticks ago: the motion of now, at the same material points
+    d.u = d.transfer(backend().download().u);
+    d.u_prev = d.transfer(backend().previous_displacements());
+  }
+  std::shared_ptr<const TissueModel<double>> cut_model = std::move(p.model);
+  std::shared_ptr<const scene::Scene> cut_scene = std::move(p.scene);
   out.dt_after = cut_model->dt;
   out.dt_crit_after = cut_model->dt_crit_physical;
   out.added_mass_after = cut_model->added_mass;
@@ -336,8 +468,18 @@ SessionCut Session::cut(const CutSurface& surface, const CutOptions& options, Cu
   // the host's loads on the nodes that keep their ids (a copy takes none: the total is kept)
   std::optional<scene::SceneLoads> loads = loads_;
   try {
-    backend().upload(*cut_model);
-    scheduler().remesh(*cut_model, d.cut.from);
+    if (p.backend) {  // prepared on it: it takes over, the old one is let go on another thread
+      std::unique_ptr<Backend> old = std::exchange(engine_.backend, std::move(p.backend));
+      scheduler().remesh(*cut_model, d.cut.from, *engine_.backend, p.region);
+      if (retiring_.valid()) retiring_.wait();
+      retiring_ = std::async(std::launch::async, [old = std::move(old)]() mutable {
+        yield_to_the_ticks();
+        old.reset();
+      });
+    } else {
+      backend().upload(*cut_model);
+      scheduler().remesh(*cut_model, d.cut.from);
+    }
     if (loads)
       scheduler().set_loads(loads->nodes, loads->force);
     else

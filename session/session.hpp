@@ -3,6 +3,8 @@
 // and every scene of a Batch are Sessions (docs/batch.md).
 #pragma once
 
+#include <chrono>
+#include <future>
 #include <memory>
 #include <optional>
 #include <span>
@@ -132,14 +134,32 @@ class Session {
   /// nodes until its button goes down again) and the contacts' friction
   /// anchors. Throws CutError for a bad cut and SceneError (scene
   /// validate.hpp) for a scene of bodies, leaving the session as it was.
+  /// A blade's cut in preparation takes effect first.
   SessionCut cut(const CutSurface& surface, const CutOptions& options = {}, CutSpace space = CutSpace::Deformed);
+  /// The same cut, prepared on another thread while the ticks run on: the
+  /// cut and the model's rebuild are made from the motion of now, and the
+  /// cut takes effect at the end of tick `due` (the tick's thread waits
+  /// there if it is not ready), with the motion of that moment carried over
+  /// through the cut's transfer (MovingCut::Transfer: the same material
+  /// points, so a cut in the reference configuration is then the cut that
+  /// cut() would have made there). One at a time: throws std::logic_error
+  /// while one is pending. A cut found bad is refused when it takes effect:
+  /// the tick (or cut()) that makes it throws its CutError or ModelError,
+  /// the session as it was.
+  void begin_cut(const CutSurface& surface, const CutOptions& options, CutSpace space, long due);
+  /// Whether a cut is in preparation (begin_cut, or a blade's).
+  bool cut_pending() const { return pending_.has_value(); }
   /// The blades' cuts (end_tick makes them, docs/cutting.md "The blade"):
   /// for each blade whose button is down, once the force against its
   /// motion per metre of edge in contact reaches its cut resistance, the
   /// crack runs from its front to a thickness plus an element beyond the
-  /// blade's edge. The last cut's time (the cut and the model's rebuild, s)
-  /// and the count since the start.
+  /// blade's edge; its cut is prepared meanwhile and takes effect the
+  /// blade's cut-delay later. The last cut's times (s): on the tick's
+  /// thread (the whole cut for cut(), the commit for a prepared one) and
+  /// its preparation (the cut and the model's rebuild; 0 for cut()); the
+  /// count since the start.
   double last_cut_seconds() const { return last_cut_seconds_; }
+  double last_cut_prepare_seconds() const { return last_cut_prepare_seconds_; }
   long cuts() const { return cuts_; }
 
   /// Whether the mesh was cut since the start or the last restart().
@@ -158,11 +178,49 @@ class Session {
   void check_running() const;
   /// end_tick's cuts by the blades whose button is down (see cuts()).
   void cut_with_blades();
+  /// The cut in preparation takes effect (finish_cut); a blade's lips are then set outside it. A cut that
+  /// opens nothing is dropped; one whose mesh is refused is noted (Scheduler::note).
+  void take_pending_cut();
   /// After a blade's cut: each node of the faces it opened that lies inside the blade (its capsule: tip,
   /// unit axis, length, radius) goes to the blade's surface along the normal of its plane (across: the
   /// edge times its motion), on the side of its own elements.
   void open_lips(const SessionCut& made, Vec3<double> tip, Vec3<double> axis, double length, double radius,
                  Vec3<double> across);
+  /// What a cut is made from: the scene, its motion at tick `tick`, the cut; for one prepared on another
+  /// thread (begin_cut), the backend to make (name, precision) and the region's seeds and depth.
+  struct CutInput {
+    std::shared_ptr<const scene::Scene> scene;
+    std::vector<double> u, u_prev;
+    CutSurface surface;
+    CutOptions options;
+    CutSpace space = CutSpace::Deformed;
+    long tick = 0;
+    std::string backend;  ///< "" : none (cut() uploads to the session's own)
+    Precision precision = Precision::Float;
+    std::vector<index_t> seeds;
+    int depth = kDepthAll;
+  };
+  /// A cut made ready (on any thread): the cut mesh, its scene and its model; for begin_cut's, a backend
+  /// holding the cut model with the cut motion, its region built and warmed up.
+  struct PreparedCut {
+    MovingCut made;
+    std::shared_ptr<const scene::Scene> scene;
+    std::shared_ptr<const TissueModel<double>> model;
+    long tick = 0;
+    double seconds = 0;  ///< its preparation's time
+    std::unique_ptr<Backend> backend;
+    Scheduler::PreparedRegion region;
+  };
+  static PreparedCut prepare_cut(CutInput in);
+  /// The cut's input of now (the motion downloaded), for cut() (no backend) and begin_cut.
+  CutInput cut_input(const CutSurface& surface, const CutOptions& options, CutSpace space);
+  /// Checks that the scene may be cut now and that its mesh is its model's.
+  void check_cut_now() const;
+  /// Makes a prepared cut take effect on the motion of now (cut()'s carry-over).
+  SessionCut commit_cut(PreparedCut&& p);
+  /// A cut begun (begin_cut, or a blade's): waits for it, makes it take effect. Rethrows its CutError or
+  /// SceneError, the session as it was.
+  SessionCut finish_cut();
   /// Keeps a stop as failure(), with the scene checks' likely causes appended, and throws it.
   [[noreturn]] void fail(const SimulationError& e);
 
@@ -200,7 +258,19 @@ class Session {
     double cut_at = 0;            ///< the front's distance from the start at the last cut (m)
   };
   std::vector<BladeState> blades_;
+  /// A cut in preparation: the job, the tick at whose end it takes effect,
+  /// and for a blade's, the blade and the way it cut.
+  struct PendingCut {
+    std::future<PreparedCut> job;
+    long due = 0;
+    int blade = -1;
+    Vec3<double> ahead = {};
+  };
+  std::optional<PendingCut> pending_;
+  /// The backend a prepared cut replaced, let go on another thread (its threads joined, its memory freed).
+  std::future<void> retiring_;
   double last_cut_seconds_ = 0;
+  double last_cut_prepare_seconds_ = 0;
   long cuts_ = 0;
 };
 

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "core/box_mesh.hpp"
+#include "backend_test_support.hpp"
 #include "core/cut.hpp"
 #include "io/kidney.hpp"
 #include "scene/validate.hpp"
@@ -361,7 +362,7 @@ TEST(LiveCut, BadCutsAreRefusedAndResetRestoresTheWholeMesh) {
 /// along y across the whole block at x = 11.2 mm (between the nodes),
 /// 1 mm thick, moved straight down at 9.5 mm/s from 1.5 mm above the top to
 /// `to_z`, its button (cutting) held or not. No mass scaling, dt 0.5 dt_crit.
-scene::Scene blade_scene(bool cutting, double resistance, double to_z = 0.002) {
+scene::Scene blade_scene(bool cutting, double resistance, double to_z = 0.002, double delay = 0) {
   scene::Scene sc = block_scene(8);
   scene::Tool blade;
   blade.kind = scene::Tool::Kind::Blade;
@@ -369,6 +370,7 @@ scene::Scene blade_scene(bool cutting, double resistance, double to_z = 0.002) {
   blade.radius = 5e-4;
   blade.shaft = 0.03;
   blade.cut_resistance = resistance;
+  blade.cut_delay = delay;
   blade.direction = {0, 1, 0};
   const double x = 0.0112, y = -0.005, t1 = (0.0115 - to_z) / 0.0095;
   blade.path = {{0, {x, y, 0.0115}, cutting}, {t1, {x, y, to_z}, cutting}};
@@ -378,6 +380,7 @@ scene::Scene blade_scene(bool cutting, double resistance, double to_z = 0.002) {
 }
 
 struct Stroke {
+  long first_cut_tick = 0;     ///< the tick whose report first said the tissue gave
   double first_cut_force = 0;  ///< the blade's force when the tissue first gave (N)
   double most = 0;             ///< the largest force over the stroke (N)
   long cuts = 0;
@@ -391,7 +394,7 @@ Stroke stroke(const scene::Scene& sc, int ticks) {
     s.tick();
     const ToolReport& r = s.last().tools[0];
     out.most = std::max(out.most, r.force.z);
-    if (r.cut && out.first_cut_force == 0) out.first_cut_force = r.force.z;
+    if (r.cut && out.first_cut_force == 0) out.first_cut_force = r.force.z, out.first_cut_tick = s.last().tick;
   }
   out.cuts = s.cuts();
   out.pieces = pieces(s.model());
@@ -421,6 +424,147 @@ TEST(Blade, ItCutsWhereTheForcePerMetreReachesItsResistanceAndPressesBelowIt) {
   EXPECT_EQ(pressed.cuts, 0);
   EXPECT_EQ(pressed.pieces, 1);
   EXPECT_GT(pressed.most, 1.1 * 5 * 0.02) << "without its button the blade presses past the resistance";
+}
+
+// A cut prepared while the ticks run on (begin_cut) and taking effect ten
+// ticks later is, in the reference configuration, the very cut cut() makes
+// then: the same mesh and, bit for bit, the same motion, then and 50 ticks
+// on (cpu, double). One at a time; restart drops one in preparation.
+TEST(DeferredCut, ACutTakingEffectLaterIsTheCutMadeThen) {
+  const CutSurface plane = through_x(0.012);
+  Session later(block_scene()), now(block_scene());
+  for (Session* s : {&later, &now}) {
+    pull_right_top(*s);
+    for (int k = 0; k < 30; ++k) s->tick();
+  }
+  later.begin_cut(plane, {}, CutSpace::Reference, 40);
+  EXPECT_TRUE(later.cut_pending());
+  EXPECT_THROW(later.begin_cut(plane, {}, CutSpace::Reference, 45), std::logic_error);
+  for (int k = 30; k < 40; ++k) {
+    EXPECT_EQ(later.model().n_nodes, now.model().n_nodes) << "the cut takes effect at the end of tick 40, not before";
+    later.tick(), now.tick();
+  }
+  EXPECT_FALSE(later.cut_pending());
+  EXPECT_EQ(later.cuts(), 1);
+  EXPECT_GT(later.last_cut_prepare_seconds(), 0);
+  now.cut(plane, {}, CutSpace::Reference);
+  ASSERT_EQ(later.model().n_nodes, now.model().n_nodes);
+  ASSERT_EQ(later.model().n_elems, now.model().n_elems);
+  EXPECT_EQ(pieces(later.model()), 2);
+  EXPECT_EQ(later.backend().download().u, now.backend().download().u);
+  EXPECT_EQ(later.backend().previous_displacements(), now.backend().previous_displacements());
+  for (int k = 0; k < 50; ++k) later.tick(), now.tick();
+  EXPECT_EQ(later.backend().download().u, now.backend().download().u) << "and runs on as it";
+
+  later.begin_cut(through_x(0.004), {}, CutSpace::Reference, later.scheduler().ticks() + 5);
+  later.restart();
+  EXPECT_FALSE(later.cut_pending());
+  EXPECT_FALSE(later.was_cut());
+  for (int k = 0; k < 10; ++k) later.tick();
+  EXPECT_FALSE(later.was_cut()) << "restart dropped the cut in preparation";
+
+  // a cut outside the body: the tick that makes it refuses it, and the run goes on uncut
+  later.begin_cut({{0.1, -0.01, -0.01}, {0, 0.04, 0}, {0, 0, 0.03}}, {}, CutSpace::Reference, later.scheduler().ticks() + 2);
+  later.tick();
+  EXPECT_THROW(later.tick(), CutError);
+  EXPECT_FALSE(later.cut_pending());
+  later.tick();
+  EXPECT_FALSE(later.was_cut());
+  EXPECT_FALSE(later.failed());
+}
+
+// A blade with a cut delay (the default's way): the tissue gives at the
+// same tick as without one (the runs are the same until then), and its cut
+// takes effect the delay later, prepared while the ticks ran on; the
+// stroke still ends in two pieces.
+TEST(DeferredCut, ABladesCutTakesEffectItsDelayAfterTheTissueGives) {
+  const Stroke at_once = stroke(blade_scene(true, 5), 1000);
+  const Stroke delayed = stroke(blade_scene(true, 5, 0.002, 0.02), 1000);
+  RecordProperty("first_cut_tick", g(double(at_once.first_cut_tick)));
+  RecordProperty("first_cut_tick_delayed", g(double(delayed.first_cut_tick)));
+  RecordProperty("first_cut_force_delayed", g(delayed.first_cut_force));
+  EXPECT_EQ(delayed.first_cut_tick, at_once.first_cut_tick + 20) << "0.02 s at 1 ms ticks";
+  EXPECT_GT(delayed.first_cut_force, at_once.first_cut_force) << "it pressed on meanwhile";
+  EXPECT_GE(delayed.cuts, 2);
+  EXPECT_EQ(delayed.pieces, 2);
+}
+
+scene::Scene on(scene::Scene s, const char* backend, Precision p) {
+  s.solver.backend = backend;
+  s.solver.precision = p;
+  return s;
+}
+
+/// Largest |a - b| over the largest |a|.
+double relative_gap(const std::vector<double>& a, const std::vector<double>& b) {
+  double most = 0, scale = 0;
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    most = std::max(most, std::fabs(a[k] - b[k]));
+    scale = std::max(scale, std::fabs(a[k]));
+  }
+  return most / scale;
+}
+
+// The same live cut on the cuda backend: the block pulled, cut mid-motion
+// and run on gives the cpu's pieces (the same node and element counts) and
+// the cpu's displacements within the cross-backend tolerances (docs/cuda.md,
+// "Cross-backend consistency": double 1e-9, float 1e-3 on a box), through
+// cuda's set_motion and previous_displacements.
+TEST(LiveCutCuda, ACutMidMotionGivesTheCpusPiecesAndMotion) {
+  SKIP_UNLESS_USABLE("cuda");
+  for (Precision p : {Precision::Double, Precision::Float}) {
+    const bool dbl = p == Precision::Double;
+    Session cpu(on(block_scene(), "cpu", p)), gpu(on(block_scene(), "cuda", p));
+    ASSERT_EQ(gpu.backend().name(), "cuda");
+    std::vector<SessionCut> cuts;
+    for (Session* s : {&cpu, &gpu}) {
+      pull_right_top(*s);
+      for (int k = 0; k < 30; ++k) s->tick();
+      cuts.push_back(s->cut(through_x(0.012)));
+    }
+    EXPECT_EQ(cuts[1].cut.n_nodes(), cuts[0].cut.n_nodes()) << (dbl ? "double" : "float");
+    EXPECT_EQ(cuts[1].cut.n_elements(), cuts[0].cut.n_elements());
+    EXPECT_EQ(pieces(gpu.model()), 2);
+    const double right_after = relative_gap(cpu.backend().download().u, gpu.backend().download().u);
+    EXPECT_LT(right_after, dbl ? 1e-9 : 1e-3) << "the motion set on each backend";
+    const std::vector<double> v_cpu = cpu.backend().previous_displacements(),
+                              v_gpu = gpu.backend().previous_displacements();
+    EXPECT_LT(relative_gap(v_cpu, v_gpu), dbl ? 1e-9 : 1e-3) << "u_prev set on each backend";
+    for (int k = 0; k < 100; ++k) cpu.tick(), gpu.tick();
+    const double after = relative_gap(cpu.backend().download().u, gpu.backend().download().u);
+    RecordProperty(dbl ? "double_u_gap_100_ticks_after" : "float_u_gap_100_ticks_after", g(after));
+    EXPECT_LT(after, dbl ? 1e-9 : 1e-3) << (dbl ? "double" : "float");
+  }
+}
+
+// The blade on cuda: the same stroke through the block (double) makes the
+// cpu's cuts, at the cpu's force, into the cpu's two pieces.
+TEST(LiveCutCuda, TheBladeCutsAsOnTheCpu) {
+  SKIP_UNLESS_USABLE("cuda");
+  const Stroke cpu = stroke(blade_scene(true, 5), 1000);
+  const Stroke gpu = stroke(on(blade_scene(true, 5), "cuda", Precision::Double), 1000);
+  RecordProperty("first_cut_force_cuda", g(gpu.first_cut_force));
+  EXPECT_EQ(gpu.cuts, cpu.cuts);
+  EXPECT_EQ(gpu.pieces, 2);
+  EXPECT_NEAR(gpu.first_cut_force, cpu.first_cut_force, 1e-6 * cpu.first_cut_force);
+  EXPECT_NEAR(gpu.most, cpu.most, 1e-6 * cpu.most);
+}
+
+// The kidney cut across while its probe presses, on cuda in the scene's
+// float: no element inverts over 200 ticks after, the step holds, the probe
+// still presses.
+TEST(LiveCutCuda, ACutAcrossTheKidneyWhileItsProbePresses) {
+  SKIP_UNLESS_USABLE("cuda");
+  Session s(on(io::default_kidney_scene(), "cuda", Precision::Float));
+  for (int k = 0; k < 150; ++k) s.tick();
+  ASSERT_GT(s.last().tools[0].contact_nodes, 0);
+  const double force = norm(s.last().tools[0].force);
+  const SessionCut c = s.cut({{-0.025, -0.06, -0.04}, {0, 0.12, 0}, {0, 0, 0.08}});
+  RecordProperty("elements_made", g(double(c.cut.n_elements() - c.elements_before)));
+  EXPECT_GE(c.dt_crit_after, 0.5 * c.dt_crit_before);
+  for (int k = 0; k < 200; ++k) s.tick();
+  EXPECT_FALSE(s.failed());
+  EXPECT_GT(norm(s.last().tools[0].force), 0.5 * force);
 }
 
 // A blade is refused in a batch (its cuts would change a mesh the batch's

@@ -108,6 +108,7 @@ void expect_same_scene(const Scene& a, const Scene& b) {
     EXPECT_EQ(x.name, y.name);
     EXPECT_EQ(x.kind, y.kind);
     EXPECT_EQ(x.cut_resistance, y.cut_resistance);
+    EXPECT_EQ(x.cut_delay, y.cut_delay);
     EXPECT_EQ(x.radius, y.radius);
     EXPECT_EQ(x.shaft, y.shaft);
     EXPECT_EQ(x.friction, y.friction);
@@ -457,7 +458,7 @@ TEST(SceneXml, ABladeIsAnEdgeWhoseButtonCuts) {
                        kTet, tool);
   };
   const std::string blade = scene_with(
-      R"(<tool name="scalpel" kind="blade" length="0.02" thickness="0.0005" cut-resistance="120" direction="0 1 0">
+      R"(<tool name="scalpel" kind="blade" length="0.02" thickness="0.0005" cut-resistance="120" cut-delay="0.03" direction="0 1 0">
   <waypoint t="0" x="0.5" y="-0.5" z="1.5"/>
   <waypoint t="1" x="0.5" y="-0.5" z="0.5" cut="true"/>
 </tool>)");
@@ -468,6 +469,7 @@ TEST(SceneXml, ABladeIsAnEdgeWhoseButtonCuts) {
   EXPECT_DOUBLE_EQ(t.shaft, 0.02);
   EXPECT_DOUBLE_EQ(t.radius, 0.00025);
   EXPECT_DOUBLE_EQ(t.cut_resistance, 120);
+  EXPECT_DOUBLE_EQ(t.cut_delay, 0.03);
   EXPECT_FALSE(t.path[0].grasp);
   EXPECT_TRUE(t.path[1].grasp) << "the cut button rides in the tool's button";
   EXPECT_EQ(scheduler_settings(s).tools[0].blade, true);
@@ -477,6 +479,7 @@ TEST(SceneXml, ABladeIsAnEdgeWhoseButtonCuts) {
   const Scene defaults = parse_scene(scene_with(R"(<tool kind="blade" length="0.02"><waypoint t="0" x="0.5" y="0.5" z="2"/></tool>)"), "d.xml", "");
   EXPECT_DOUBLE_EQ(defaults.tools[0].radius, 0.5 * scene::kDefaultBladeThickness);
   EXPECT_DOUBLE_EQ(defaults.tools[0].cut_resistance, scene::kDefaultCutResistance);
+  EXPECT_DOUBLE_EQ(defaults.tools[0].cut_delay, scene::kDefaultCutDelay);
 
   const std::string w = R"(<waypoint t="0" x="0.5" y="0.5" z="2"/>)";
   EXPECT_TRUE(xml_error(scene_with(R"(<tool kind="blade" length="0.02" radius="0.001">)" + w + "</tool>"),
@@ -499,6 +502,11 @@ TEST(SceneXml, ABladeIsAnEdgeWhoseButtonCuts) {
                          "tool 'probe': length = 0 m: a blade is a straight edge of length > 0"));
   EXPECT_TRUE(rule_error(R"(<tool kind="blade" length="0.02" cut-resistance="-1">)" + w + "</tool>",
                          "cut-resistance = -1 N/m must be >= 0"));
+  EXPECT_TRUE(rule_error(R"(<tool kind="blade" length="0.02" cut-delay="-0.01">)" + w + "</tool>",
+                         "cut-delay = -0.01 s must be in [0, 1]"));
+  EXPECT_TRUE(rule_error(R"(<tool kind="blade" length="0.02" cut-delay="5">)" + w + "</tool>",
+                         "cut-delay = 5 s must be in [0, 1]"));
+  EXPECT_TRUE(xml_error(scene_with(R"(<tool cut-delay="0.01">)" + w + "</tool>"), {"cut-delay= is a blade's"}));
 }
 
 // mass-scaling: a fraction, or "off"; anything else names the attribute and the line.
