@@ -652,15 +652,20 @@ void bench_cut(Context& c, Precision p) {
   scene::Scene s = io::default_kidney_scene();
   s.solver.backend = c.o.backend;
   s.solver.precision = p;
+  const auto pressed = [](Session& run) {  // the probe in contact, 50 ticks on
+    while (!run.scheduler().in_contact() && run.scheduler().ticks() < 2000) run.tick();
+    for (int k = 0; k < 50; ++k) run.tick();
+  };
+  const auto across = [](double x) { return CutSurface{{x, -0.06, -0.04}, {0, 0.12, 0}, {0, 0, 0.08}}; };
+  constexpr double kPlanes[] = {-0.03, -0.02, 0.02, 0.03};
   Session session(s);
-  while (!session.scheduler().in_contact() && session.scheduler().ticks() < 2000) session.tick();
-  for (int k = 0; k < 50; ++k) session.tick();
+  pressed(session);
   std::vector<double> cut_s;
   const std::size_t elements_before = std::size_t(session.model().n_elems);
   const double dt_crit_before = session.model().dt_crit_physical;
-  for (double x : {-0.03, -0.02, 0.02, 0.03}) {
+  for (double x : kPlanes) {
     const auto t0 = Clock::now();
-    session.cut({{x, -0.06, -0.04}, {0, 0.12, 0}, {0, 0, 0.08}});
+    session.cut(across(x));
     cut_s.push_back(since(t0));
     for (int k = 0; k < (c.o.quick ? 2 : 20); ++k) session.tick();
   }
@@ -677,14 +682,12 @@ void bench_cut(Context& c, Precision p) {
   // effect 0.1 s later, the ticks paced at the haptic rate as the haptic loop paces them
   // (the preparation runs on the cores they leave idle): every tick timed, the commits' among them
   Session live(s);
-  while (!live.scheduler().in_contact() && live.scheduler().ticks() < 2000) live.tick();
-  for (int k = 0; k < 50; ++k) live.tick();
+  pressed(live);
   const long delay = std::lround(std::ceil(0.1 / live.settings().tick - 1e-9));  // a blade's cut-delay="0.1"
+  const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(live.settings().tick));
   std::vector<double> cutting, commit_s, prepare_s;
-  for (double x : {-0.03, -0.02, 0.02, 0.03}) {
-    live.begin_cut({{x, -0.06, -0.04}, {0, 0.12, 0}, {0, 0, 0.08}}, {}, CutSpace::Deformed,
-                   live.scheduler().ticks() + delay);
-    const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(live.settings().tick));
+  for (double x : kPlanes) {
+    live.begin_cut(across(x), {}, CutSpace::Deformed, live.scheduler().ticks() + delay);
     auto deadline = Clock::now();
     for (int k = 0; k < delay + (c.o.quick ? 2 : 20); ++k) {
       const auto t0 = Clock::now();

@@ -154,36 +154,31 @@ std::vector<index_t> Scheduler::seeds_after(std::span<const index_t> seeds,
 }
 
 void Scheduler::remesh(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from) {
+  remesh_onto(model, node_from, *backend_, nullptr);
+}
+
+void Scheduler::remesh(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from,
+                       Backend& fresh, const PreparedRegion& prepared) {
+  remesh_onto(model, node_from, fresh, &prepared);
+}
+
+void Scheduler::remesh_onto(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from,
+                            Backend& backend, const PreparedRegion* prepared) {
   if (pending_) throw std::logic_error("Scheduler::remesh: a tick was begun and not ended (end_tick)");
-  if (node_from.size() != std::size_t(model.n_nodes))
-    throw std::invalid_argument(fmt::format("Scheduler::remesh: {} node origins for {} nodes", node_from.size(),
-                                            model.n_nodes));
+  if (node_from.size() != std::size_t(model.n_nodes) || backend.n_nodes() != model.n_nodes)
+    throw std::invalid_argument(fmt::format("Scheduler::remesh: {} node origins and a backend of {} nodes for {} "
+                                            "nodes",
+                                            node_from.size(), backend.n_nodes(), model.n_nodes));
   check_settings(settings_, model);
+  const int depth = region_depth();
+  backend_ = &backend;
   model_ = &model;
   steps_per_tick_ = std::max(1, static_cast<int>(std::lround(settings_.tick / model.dt)));
   give_backend_tools();
   follow_step_ = 0.5 * median_surface_edge(model);
   seeds_ = seeds_after(seeds_, node_from);
-  region_ = backend_->build_region(seeds_, region_depth());
-}
-
-void Scheduler::remesh(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from,
-                       Backend& fresh, const PreparedRegion& prepared) {
-  if (pending_) throw std::logic_error("Scheduler::remesh: a tick was begun and not ended (end_tick)");
-  if (node_from.size() != std::size_t(model.n_nodes) || fresh.n_nodes() != model.n_nodes)
-    throw std::invalid_argument(fmt::format("Scheduler::remesh: {} node origins and a backend of {} nodes for {} "
-                                            "nodes",
-                                            node_from.size(), fresh.n_nodes(), model.n_nodes));
-  check_settings(settings_, model);
-  std::vector<index_t> seeds = seeds_after(seeds_, node_from);
-  const int depth = region_depth();
-  backend_ = &fresh;
-  model_ = &model;
-  steps_per_tick_ = std::max(1, static_cast<int>(std::lround(settings_.tick / model.dt)));
-  give_backend_tools();
-  follow_step_ = 0.5 * median_surface_edge(model);
-  seeds_ = std::move(seeds);
-  region_ = seeds_ == prepared.seeds && depth == prepared.depth ? prepared.sizes : backend_->build_region(seeds_, depth);
+  region_ = prepared && seeds_ == prepared->seeds && depth == prepared->depth ? prepared->sizes
+                                                                               : backend_->build_region(seeds_, depth);
 }
 
 std::vector<std::string> Scheduler::take_notes() {

@@ -199,6 +199,9 @@ class Scheduler {
  private:
   /// Gives the backend the settings' tools and bodies (after an upload).
   void give_backend_tools();
+  /// Both remeshes: onto `backend` (the Scheduler's own or a fresh one), with the region it holds already, if any.
+  void remesh_onto(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from,
+                   Backend& backend, const PreparedRegion* prepared);
   void seed_region();
   bool grow_region(const Reductions& r);
   void check_health(const Reductions& r, long first_step) const;

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <stdexcept>
 #include <tbb/task_arena.h>
 #ifdef __linux__
@@ -218,28 +219,30 @@ void Session::open_lips(const SessionCut& made, Vec3<double> tip, Vec3<double> a
   fields_.reset();
 }
 
-void Session::take_pending_cut() {
-  const int t = pending_->blade;
-  const Vec3<double> ahead = pending_->ahead;
+void Session::land_cut(int blade, Vec3<double> ahead, const std::function<SessionCut()>& make) {
   const auto start = std::chrono::steady_clock::now();
   try {
-    const SessionCut made = finish_cut();
-    if (t >= 0) {
-      const scene::Tool& blade = scene_->tools[std::size_t(t)];
-      const ToolReport& r = last_.tools[std::size_t(t)];
-      open_lips(made, r.tip, r.axis, blade.shaft, blade.radius, cross(r.axis, ahead));
-      last_.tools[std::size_t(t)].cut = true;
+    const SessionCut made = make();
+    if (blade >= 0) {
+      const scene::Tool& b = scene_->tools[std::size_t(blade)];
+      ToolReport& r = last_.tools[std::size_t(blade)];
+      open_lips(made, r.tip, r.axis, b.shaft, b.radius, cross(r.axis, ahead));
+      r.cut = true;
     }
     last_cut_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     ++cuts_;
   } catch (const CutError&) {
-    if (t < 0) throw;  // the host's (begin_cut): refused, as cut() refuses it
+    if (blade < 0) throw;  // the host's (begin_cut): refused, as cut() refuses it
     // a blade's: nothing opens yet (the front has passed no face's middle), or the sweep lies outside
   } catch (const ModelError& e) {
-    if (t < 0) throw;
+    if (blade < 0) throw;
     scheduler().note(fmt::format("tick {}: blade '{}' did not cut: the cut mesh was refused: {}", last_.tick,
-                                 scene_->tools[std::size_t(t)].name, e.what()));
+                                 scene_->tools[std::size_t(blade)].name, e.what()));
   }
+}
+
+void Session::take_pending_cut() {
+  land_cut(pending_->blade, pending_->ahead, [this] { return finish_cut(); });
 }
 
 void Session::cut_with_blades() {
@@ -247,7 +250,7 @@ void Session::cut_with_blades() {
   for (int t = 0; t < n_tools(); ++t) {
     if (scene_->tools[std::size_t(t)].kind != scene::Tool::Kind::Blade) continue;
     const scene::Tool blade = scene_->tools[std::size_t(t)];  // a copy: a cut replaces the scene
-    ToolReport& report = last_.tools[std::size_t(t)];
+    const ToolReport& report = last_.tools[std::size_t(t)];
     BladeState& state = blades_[std::size_t(t)];
     const Vec3<double> tip = report.tip, axis = report.axis;
     if (!report.grasp) {
@@ -325,21 +328,7 @@ void Session::cut_with_blades() {
       pending_->ahead = ahead;
       continue;
     }
-    const auto start = std::chrono::steady_clock::now();
-    SessionCut made;
-    try {
-      made = cut(crack, {}, CutSpace::Reference);
-    } catch (const CutError&) {
-      continue;  // nothing opens yet (the front has passed no face's middle), or the sweep lies outside
-    } catch (const ModelError& e) {
-      scheduler().note(fmt::format("tick {}: blade '{}' did not cut: the cut mesh was refused: {}", last_.tick,
-                                   blade.name, e.what()));
-      continue;
-    }
-    open_lips(made, tip, axis, blade.shaft, blade.radius, cross(axis, ahead));
-    last_cut_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    ++cuts_;
-    report.cut = true;
+    land_cut(t, ahead, [&] { return cut(crack, {}, CutSpace::Reference); });
   }
 }
 

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <chrono>
+#include <functional>
 #include <future>
 #include <memory>
 #include <optional>
@@ -178,8 +179,11 @@ class Session {
   void check_running() const;
   /// end_tick's cuts by the blades whose button is down (see cuts()).
   void cut_with_blades();
-  /// The cut in preparation takes effect (finish_cut); a blade's lips are then set outside it. A cut that
-  /// opens nothing is dropped; one whose mesh is refused is noted (Scheduler::note).
+  /// Makes a cut (`make`: cut() or finish_cut()) and counts it; a blade's (tool `blade`, cutting along
+  /// `ahead`; -1: the host's) then has its lips set outside it and its report says so. A blade's cut that
+  /// opens nothing is dropped, one whose mesh is refused is noted (Scheduler::note); the host's are rethrown.
+  void land_cut(int blade, Vec3<double> ahead, const std::function<SessionCut()>& make);
+  /// The cut in preparation takes effect (land_cut of finish_cut).
   void take_pending_cut();
   /// After a blade's cut: each node of the faces it opened that lies inside the blade (its capsule: tip,
   /// unit axis, length, radius) goes to the blade's surface along the normal of its plane (across: the
