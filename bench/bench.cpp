@@ -699,6 +699,17 @@ void bench_cut(Context& c, Precision p) {
     commit_s.push_back(live.last_cut_seconds());
     prepare_s.push_back(live.last_cut_prepare_seconds());
   }
+  // beside them, as many ticks paced alike with no cut (the machine's own stalls)
+  std::vector<double> paced;
+  auto deadline = Clock::now();
+  for (std::size_t k = 0; k < cutting.size(); ++k) {
+    const auto t0 = Clock::now();
+    live.tick();
+    paced.push_back(since(t0));
+    deadline += period;
+    std::this_thread::sleep_until(deadline);
+  }
+  std::sort(paced.begin(), paced.end());
   std::sort(cutting.begin(), cutting.end());
   std::sort(commit_s.begin(), commit_s.end());
   std::sort(prepare_s.begin(), prepare_s.end());
@@ -720,6 +731,15 @@ void bench_cut(Context& c, Precision p) {
   r.add("tick_ms_p50_while_cutting", 1e3 * cutting[cutting.size() / 2]);
   r.add("tick_ms_p99_while_cutting", 1e3 * cutting[cutting.size() * 99 / 100]);
   r.add("tick_ms_max_while_cutting", 1e3 * cutting.back());
+  r.add("tick_ms_p50_paced_uncut", 1e3 * paced[paced.size() / 2]);
+  r.add("tick_ms_p99_paced_uncut", 1e3 * paced[paced.size() * 99 / 100]);
+  r.add("tick_ms_max_paced_uncut", 1e3 * paced.back());
+  // the share of ticks longer than the haptic period
+  const auto late = [&](const std::vector<double>& t) {
+    return double(t.end() - std::upper_bound(t.begin(), t.end(), live.settings().tick)) / double(t.size());
+  };
+  r.add("late_while_cutting", late(cutting));
+  r.add("late_paced_uncut", late(paced));
   c.emit(r);
 }
 

@@ -299,6 +299,12 @@ class Backend {
   /// batch of scenes on the cpu runs one scene per thread and sets 1; a
   /// device backend has no host threads to set and ignores it.
   virtual void set_worker_threads(int /*threads*/) {}
+  /// Leaves `cores` of the cores its steps run on to other work of the
+  /// process for now (a cut prepared on another thread), 0 to take them
+  /// back: the cpu backend's steps then keep at most its team's size less
+  /// `cores` threads busy (at least one), with the same bits; a device
+  /// backend has no host threads to spare and ignores it.
+  virtual void lend_cores(int /*cores*/) {}
 
   /// Copies the store's fields to the host (output, tests).
   Fields download();

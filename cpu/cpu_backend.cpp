@@ -182,7 +182,7 @@ const Slices& CpuBackend<T>::team_slices() {
     team_ = std::make_unique<ThreadTeam>(size);
     slices_.parts = 0;
   }
-  const int members = busy_members(state_.region.elems.size(), size);
+  const int members = busy_members(state_.region.elems.size(), std::max(1, size - lent_cores_));
   if (slices_.parts != members) slice_region(state_.region, model_.node_elem_start.data(), members, kLanes, slices_);
   return slices_;
 }

@@ -10,6 +10,7 @@
 // thread-safe: one thread (the haptic loop) drives it.
 #pragma once
 
+#include <algorithm>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -51,6 +52,7 @@ class CpuBackend final : public Backend {
   }
   /// A batch runs one scene per thread: set_team_size(threads).
   void set_worker_threads(int threads) override { set_team_size(threads); }
+  void lend_cores(int cores) override { lent_cores_ = std::max(0, cores); }
   /// The members the last advance or reduce kept busy (0 before the first,
   /// and after upload or build_region until the next).
   int busy_team_members() const { return slices_.parts; }
@@ -108,6 +110,7 @@ class CpuBackend final : public Backend {
   Slices slices_;                     ///< the region's slices for team_ (parts 0 after the region changes)
   ReduceScratch sums_;                ///< reduce's per-chunk sums
   int team_size_ = 0;                 ///< set_team_size's, 0 = default_team_size()
+  int lent_cores_ = 0;                ///< lend_cores': the team keeps this many members fewer busy
   tbb::affinity_partitioner all_elems_part_;
 };
 

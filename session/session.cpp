@@ -68,6 +68,7 @@ void Session::restart() {
   last_ = TickReport{};
   last_.n_tools = n_tools();
   fields_.reset();
+  share_cores();
   failure_.clear();
   blades_.assign(std::size_t(n_tools()), BladeState{});
   cuts_ = 0;
@@ -149,7 +150,18 @@ TickReport Session::end_tick() {
     fail(e);
   }
   cut_with_blades();
+  share_cores();
   return last_;
+}
+
+void Session::share_cores() {
+  const auto running = [](const auto& job) {
+    return job.valid() && job.wait_for(std::chrono::seconds(0)) != std::future_status::ready;
+  };
+  const bool busy = (pending_ && running(pending_->job)) || running(retiring_);
+  if (busy == cores_lent_) return;
+  backend().lend_cores(busy ? 1 : 0);
+  cores_lent_ = busy;
 }
 
 namespace {
@@ -420,6 +432,7 @@ void Session::begin_cut(const CutSurface& surface, const CutOptions& options, Cu
     yield_to_the_ticks();
     return prepare_cut(std::move(in));
   });
+  share_cores();
 }
 
 SessionCut Session::finish_cut() {
@@ -465,6 +478,7 @@ SessionCut Session::commit_cut(PreparedCut&& p) {
         yield_to_the_ticks();
         old.reset();
       });
+      cores_lent_ = false;  // the new backend's own
     } else {
       backend().upload(*cut_model);
       scheduler().remesh(*cut_model, d.cut.from);

@@ -185,6 +185,9 @@ class Session {
   void land_cut(int blade, Vec3<double> ahead, const std::function<SessionCut()>& make);
   /// The cut in preparation takes effect (land_cut of finish_cut).
   void take_pending_cut();
+  /// While a cut's preparation or a replaced backend's release runs on another thread, the ticks leave that
+  /// thread a core (Backend::lend_cores); once neither runs, they take it back (checked after each tick).
+  void share_cores();
   /// After a blade's cut: each node of the faces it opened that lies inside the blade (its capsule: tip,
   /// unit axis, length, radius) goes to the blade's surface along the normal of its plane (across: the
   /// edge times its motion), on the side of its own elements.
@@ -273,6 +276,7 @@ class Session {
   std::optional<PendingCut> pending_;
   /// The backend a prepared cut replaced, let go on another thread (its threads joined, its memory freed).
   std::future<void> retiring_;
+  bool cores_lent_ = false;  ///< the backend leaves a core to the two above (share_cores)
   double last_cut_seconds_ = 0;
   double last_cut_prepare_seconds_ = 0;
   long cuts_ = 0;

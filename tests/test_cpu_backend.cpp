@@ -154,6 +154,31 @@ TEST_P(CpuBackendTest, RunsAreBitIdenticalAcrossTeamSizes) {
   EXPECT_GT(max_abs(f1.f), 0.0);
 }
 
+// Cores lent to other work (a cut in preparation, Session) leave the team's
+// members idle for a while, never fewer than one busy, and change no bit.
+TEST(CpuBackendTeam, LentCoresIdleMembersAndKeepTheBits) {
+  const auto m = box_model(12, true);
+  const auto run = [&](bool lend, std::vector<int>* busy) {
+    auto b = std::make_unique<cpu::CpuBackend<double>>();
+    b->set_team_size(3);
+    b->upload(m);
+    b->set_displacements(field(m, [](Vec3<double> X) { return Vec3<double>{0.02 * X.x, 0.0, -0.01 * X.z}; }));
+    for (int lent : {0, 1, 5, 0}) {
+      if (lend) b->lend_cores(lent);
+      b->advance(10);
+      busy->push_back(b->busy_team_members());
+    }
+    return b->download();
+  };
+  std::vector<int> kept, lent;
+  const Fields a = run(false, &kept), b = run(true, &lent);
+  EXPECT_EQ(kept, (std::vector<int>{3, 3, 3, 3}));
+  EXPECT_EQ(lent, (std::vector<int>{3, 2, 1, 3}));
+  EXPECT_TRUE(same_bits(a.u, b.u));
+  EXPECT_TRUE(same_bits(a.f, b.f));
+  EXPECT_GT(max_abs(a.f), 0.0);
+}
+
 TEST(CpuBackendPrecision, FloatAgreesWithDouble) {
   const auto m = box_model(12, true);
   const RunResult f = scripted_run(Precision::Float, m);
