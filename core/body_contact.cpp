@@ -3,7 +3,9 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <functional>
 #include <cstdint>
 #include <stdexcept>
 #include <string>
@@ -16,9 +18,13 @@ namespace tissue {
 void check_body_contact(const BodyContactSpec& spec, index_t n_nodes) {
   if (spec.empty()) return;
   const int nb = spec.n_bodies();
-  if (nb < 2) throw std::invalid_argument("body contact: needs two bodies or more (first_node gives " +
-                                          std::to_string(nb) + ")");
-  if (spec.first_node.front() != 0 || spec.first_node.back() != n_nodes)
+  if (nb < 2 && !spec.pairs.empty())
+    throw std::invalid_argument("body contact: needs two bodies or more (first_node gives " + std::to_string(nb) +
+                                ")");
+  if (!(spec.lip_friction >= 0) || !std::isfinite(spec.lip_friction))
+    throw std::invalid_argument("body contact: lip friction must be finite and >= 0, got " +
+                                std::to_string(spec.lip_friction));
+  if (nb > 0 && (spec.first_node.front() != 0 || spec.first_node.back() != n_nodes))
     throw std::invalid_argument("body contact: the bodies' node ranges must cover nodes 0.." +
                                 std::to_string(n_nodes - 1) + " of the mesh");
   for (int b = 0; b < nb; ++b)
@@ -45,7 +51,72 @@ void check_body_contact(const BodyContactSpec& spec, index_t n_nodes) {
 namespace {
 
 int body_of(const BodyContactSpec& spec, index_t node) {
+  if (spec.first_node.empty()) return 0;  // one body
   return int(std::upper_bound(spec.first_node.begin(), spec.first_node.end(), node) - spec.first_node.begin()) - 1;
+}
+
+/// The lips of cuts: the surface triangles that have a twin of the same reference corners in the same body
+/// (the two faces a cut opened from one interior face; their nodes differ, but for a crack front's); per node
+/// its side, the unit sum of its lips' reference normals (area-weighted, outward; zero for a node of no lip,
+/// or of lips of both sides, on a crack's front); and the ring, the other surface triangles with a corner on
+/// a lip: where a lip meets the organ's surface, a node slid past the other lip's edge finds the surface
+/// beyond it (not the edge, which would push it along the surface).
+template <class T> struct Lips {
+  std::vector<std::uint8_t> tri;     ///< per surface triangle: 1 = a lip, 2 = of the ring
+  std::vector<Vec3<double>> normal;  ///< per triangle: its reference normal (lips only)
+  std::vector<Vec3<double>> side;    ///< per node
+};
+
+template <class T> Lips<T> find_lips(const TissueModel<T>& m, const BodyContactSpec& spec) {
+  const index_t nt = m.n_tris, n = m.n_nodes;
+  Lips<T> L;
+  L.tri.assign(std::size_t(nt), 0);
+  L.normal.assign(std::size_t(nt), Vec3<double>{0, 0, 0});
+  L.side.assign(std::size_t(n), Vec3<double>{0, 0, 0});
+  std::vector<double> area(std::size_t(n), 0.0);
+  const auto X = [&](index_t a) {
+    return Vec3<double>{double(m.X[a]), double(m.X[std::size_t(n) + a]), double(m.X[2 * std::size_t(n) + a])};
+  };
+  using Key = std::array<double, 9>;
+  struct KeyHash {
+    std::size_t operator()(const Key& k) const {
+      std::size_t h = 0;
+      for (double v : k) h = h * 1000003u ^ std::hash<double>{}(v);
+      return h;
+    }
+  };
+  std::unordered_map<Key, index_t, KeyHash> first;
+  first.reserve(std::size_t(nt));
+  for (index_t t = 0; t < nt; ++t) {
+    std::array<Vec3<double>, 3> c = {X(m.tris[t]), X(m.tris[nt + t]), X(m.tris[2 * nt + t])};
+    std::sort(c.begin(), c.end(), [](const Vec3<double>& a, const Vec3<double>& b) {
+      return a.x != b.x ? a.x < b.x : a.y != b.y ? a.y < b.y : a.z < b.z;
+    });
+    const Key key = {c[0].x, c[0].y, c[0].z, c[1].x, c[1].y, c[1].z, c[2].x, c[2].y, c[2].z};
+    const auto [it, fresh] = first.emplace(key, t);
+    if (fresh) continue;
+    const index_t u = it->second;
+    if (body_of(spec, m.tris[u]) != body_of(spec, m.tris[t])) continue;  // two bodies' faces that coincide
+    L.tri[std::size_t(u)] = L.tri[std::size_t(t)] = 1;
+  }
+  for (index_t t = 0; t < nt; ++t) {
+    if (!L.tri[std::size_t(t)]) continue;
+    const Vec3<double> x0 = X(m.tris[t]);
+    const Vec3<double> N = cross(X(m.tris[nt + t]) - x0, X(m.tris[2 * nt + t]) - x0);
+    L.normal[std::size_t(t)] = N;
+    for (int k = 0; k < 3; ++k) {
+      const std::size_t a = std::size_t(m.tris[k * nt + t]);
+      L.side[a] = L.side[a] + N;
+      area[a] += norm(N);
+    }
+  }
+  for (std::size_t a = 0; a < std::size_t(n); ++a)
+    L.side[a] = area[a] > 0 && norm(L.side[a]) >= 0.5 * area[a] ? (1 / norm(L.side[a])) * L.side[a] : Vec3<double>{0, 0, 0};
+  for (index_t t = 0; t < nt; ++t)
+    if (!L.tri[std::size_t(t)])
+      for (int k = 0; k < 3; ++k)
+        if (norm(L.side[std::size_t(m.tris[k * nt + t])]) > 0) L.tri[std::size_t(t)] = 2;
+  return L;
 }
 
 /// A grid cell key (21 bits a coordinate).
@@ -82,12 +153,36 @@ BodyLists build_body_lists(const TissueModel<T>& m, const BodyContactSpec& spec,
                                             "leave out faces on symmetry planes by their corners' supports)",
                                             m.node_flags.size(), m.n_nodes));
   const index_t nt = m.n_tris;
-  const int nb = spec.n_bodies();
+  const int nb = std::max(1, spec.n_bodies());
   // which bodies each body touches, and with what mu (-1: not)
   std::vector<double> mu(std::size_t(nb) * nb, -1.0);
   for (const BodyContactSpec::Pair& p : spec.pairs) mu[std::size_t(p.a) * nb + p.b] = mu[std::size_t(p.b) * nb + p.a] = p.friction;
   std::vector<int> tri_body(nt);
   std::vector<std::uint8_t> touches(nb, 0);
+  const Lips<T> lips = spec.lips ? find_lips(m, spec) : Lips<T>{};
+  const auto is_lip = [&](index_t t) { return spec.lips && lips.tri[std::size_t(t)] != 0; };  // or of the ring
+  // a row for each corner of a lip or a ring triangle (those off the lips, and a front's, with no candidates:
+  // they are candidates' corners)
+  std::vector<std::uint8_t> lip_corner(spec.lips ? std::size_t(m.n_nodes) : 0, 0);
+  for (index_t t = 0; t < nt && spec.lips; ++t)
+    if (lips.tri[std::size_t(t)] != 0)
+      for (int k = 0; k < 3; ++k) lip_corner[std::size_t(m.tris[k * nt + t])] = 1;
+  const auto lip_node = [&](index_t a) { return spec.lips && lip_corner[std::size_t(a)] != 0; };
+  // whether triangle t lies across the lips from a node of side s: a lip facing it, or a ring triangle with a
+  // corner on the other lip and none on its own
+  const auto across = [&](index_t t, const Vec3<double>& s) {
+    if (lips.tri[std::size_t(t)] == 1) {
+      const Vec3<double>& N = lips.normal[std::size_t(t)];
+      return dot(N, s) < -0.5 * norm(N);
+    }
+    bool other = false;
+    for (int k = 0; k < 3; ++k) {
+      const double d = dot(lips.side[std::size_t(m.tris[k * nt + t])], s);
+      if (d > 0.5) return false;
+      other = other || d < -0.5;
+    }
+    return other;
+  };
   for (int a = 0; a < nb; ++a)
     for (int b = 0; b < nb; ++b) touches[a] |= mu[std::size_t(a) * nb + b] >= 0 ? 1 : 0;
   const auto P = [&](index_t a) { return Vec3<double>{x[3 * size_t(a)], x[3 * size_t(a) + 1], x[3 * size_t(a) + 2]}; };
@@ -116,7 +211,7 @@ BodyLists build_body_lists(const TissueModel<T>& m, const BodyContactSpec& spec,
   std::unordered_map<std::uint64_t, std::vector<index_t>> grid;
   std::vector<double> lo(3 * std::size_t(nt)), hi(3 * std::size_t(nt));
   for (index_t t = 0; t < nt; ++t) {
-    if (!touches[tri_body[t]]) continue;
+    if (!touches[tri_body[t]] && !is_lip(t)) continue;
     const Vec3<double> x0 = P(m.tris[t]);
     if (on_symmetry_plane(m, t, cross(P(m.tris[nt + t]) - x0, P(m.tris[2 * nt + t]) - x0))) continue;
     for (int c = 0; c < 3; ++c) {
@@ -137,32 +232,44 @@ BodyLists build_body_lists(const TissueModel<T>& m, const BodyContactSpec& spec,
       for (std::int64_t j = j0; j <= j1; ++j)
         for (std::int64_t k = k0; k <= k1; ++k) grid[cell_key(i, j, k)].push_back(t);
   }
-  // rows: the touching bodies' surface nodes, each with the triangles of the bodies it touches near it
+  // rows: the touching bodies' surface nodes and the lips' corners, each with the triangles of the bodies it
+  // touches near it and the lips facing it
   std::vector<index_t> row_of(std::size_t(m.n_nodes), -1);
+  std::vector<std::pair<index_t, double>> found;  // a row's (triangle, mu)
   L.cand_start.push_back(0);
   for (index_t i = 0; i < m.n_surf; ++i) {
     const index_t a = m.surf_nodes[i];
     const int ba = body_of(spec, a);
-    if (!touches[ba]) continue;
+    if (!touches[ba] && !lip_node(a)) continue;
     row_of[a] = L.rows();
     L.node.push_back(a);
     const Vec3<double> xa = P(a);
     for (int c = 0; c < 3; ++c) L.x_built.push_back(xa[c]);
+    const Vec3<double> side = lip_node(a) ? lips.side[std::size_t(a)] : Vec3<double>{0, 0, 0};
     const auto it = grid.find(cell_key(std::int64_t(std::floor(xa.x / h)), std::int64_t(std::floor(xa.y / h)),
                                        std::int64_t(std::floor(xa.z / h))));
+    found.clear();
     if (it != grid.end()) {
-      const std::size_t first = L.cand_tri.size();
       for (index_t t : it->second) {
-        const double f = mu[std::size_t(ba) * nb + tri_body[t]];
-        if (f < 0) continue;  // its own body, or one it does not touch
         bool in = true;
         for (int c = 0; c < 3 && in; ++c) in = xa[c] >= lo[3 * size_t(t) + c] && xa[c] <= hi[3 * size_t(t) + c];
         if (!in) continue;
-        L.cand_tri.push_back(t);
+        if (touches[ba] && touches[tri_body[t]]) {
+          const double f = mu[std::size_t(ba) * nb + tri_body[t]];
+          if (f >= 0) {  // not its own body, nor one it does not touch
+            found.emplace_back(t, f);
+            continue;
+          }
+        }
+        if (!is_lip(t) || norm(side) == 0 || !across(t, side)) continue;  // its own side, or another cut's
+        if (m.tris[t] == a || m.tris[nt + t] == a || m.tris[2 * nt + t] == a) continue;
+        found.emplace_back(t, spec.lip_friction);
       }
-      std::sort(L.cand_tri.begin() + std::ptrdiff_t(first), L.cand_tri.end());
-      for (std::size_t j = first; j < L.cand_tri.size(); ++j)
-        L.cand_mu.push_back(mu[std::size_t(ba) * nb + tri_body[L.cand_tri[j]]]);
+    }
+    std::sort(found.begin(), found.end());
+    for (const auto& [t, f] : found) {
+      L.cand_tri.push_back(t);
+      L.cand_mu.push_back(f);
     }
     L.cand_start.push_back(index_t(L.cand_tri.size()));
   }

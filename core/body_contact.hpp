@@ -38,8 +38,15 @@
 // The corrections close the gap where the step left one and never pull:
 // bodies that separate by themselves are not touched.
 //
+// The lips of a cut (BodyContactSpec::lips) touch each other by the same
+// rule: a lip is a surface triangle with a twin of the same reference
+// corners in the same body (the two faces a cut opened from one); a lip's
+// corner is a row, and its candidates are the lips facing it (reference
+// normal against the node's lip normal, the sum of its lips' reference
+// normals; a corner of lips of both sides, on a crack's front, has none).
+//
 // Candidate lists (Verlet lists): a row's candidates are the triangles of
-// the bodies it touches whose box comes within the skin of the node when
+// the bodies it touches (or the lips facing it) whose box comes within the skin of the node when
 // the lists are built; they hold while no listed node has moved more than a
 // quarter of the skin since (body_lists_stale), checked after every advance.
 #pragma once
@@ -58,16 +65,19 @@ namespace tissue {
 template <class T> struct TissueModel;
 
 /// Which bodies touch: the bodies as node ranges of the one mesh, and the
-/// pairs that may touch, each with its Coulomb coefficient.
+/// pairs that may touch, each with its Coulomb coefficient; and whether the
+/// lips of cuts touch each other.
 struct BodyContactSpec {
-  std::vector<index_t> first_node;  ///< per body, then n_nodes: ascending, first 0
+  std::vector<index_t> first_node;  ///< per body, then n_nodes: ascending, first 0 (empty: one body, for lips alone)
   struct Pair {
     int a = 0, b = 0;               ///< body indices, a != b
     double friction = 0;            ///< mu (>= 0)
   };
   std::vector<Pair> pairs;
+  bool lips = false;                ///< a cut's two lips keep out of each other (a mesh without lips has no rows)
+  double lip_friction = 0;          ///< mu between lips (>= 0)
   double skin = 0;                  ///< m (> 0): list reach; 0 = the median surface edge
-  bool empty() const { return pairs.empty(); }
+  bool empty() const { return pairs.empty() && !lips; }
   int n_bodies() const { return first_node.empty() ? 0 : int(first_node.size()) - 1; }
 };
 

@@ -115,7 +115,7 @@ Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, Schedul
     depth_ = settings_.auto_start;
   }
   for (ToolSetting& t : settings_.tools) t.axis = (1.0 / norm(t.axis)) * t.axis;
-  if (!settings_.body_contact.empty() && settings_.depth != kDepthAll)
+  if (!settings_.body_contact.pairs.empty() && settings_.depth != kDepthAll)
     throw std::invalid_argument(fmt::format("depth {}: bodies that touch each other need the whole mesh (depth all): "
                                             "a region of rings does not reach across to the other body",
                                             settings_.depth == kDepthAuto ? std::string("auto")
@@ -170,15 +170,31 @@ void Scheduler::remesh_onto(const TissueModel<double>& model, std::span<const st
                                             "nodes",
                                             node_from.size(), backend.n_nodes(), model.n_nodes));
   check_settings(settings_, model);
-  const int depth = region_depth();
+  const int depth = depth_after_cut();
+  if (depth == kDepthAll) {
+    depth_ = kDepthAll;
+    auto_depth_ = false;
+  }
   backend_ = &backend;
   model_ = &model;
   steps_per_tick_ = std::max(1, static_cast<int>(std::lround(settings_.tick / model.dt)));
+  // a cut's lips touch (a node outside the region is still: the lip inside it gives way)
+  remeshed_ = true;
+  settings_.body_contact.lips = lips_on();
+  settings_.body_contact.lip_friction = settings_.lip_friction;
   give_backend_tools();
   follow_step_ = 0.5 * median_surface_edge(model);
   seeds_ = seeds_after(seeds_, node_from);
   region_ = prepared && seeds_ == prepared->seeds && depth == prepared->depth ? prepared->sizes
                                                                                : backend_->build_region(seeds_, depth);
+}
+
+void Scheduler::suspend_lip_contact(bool suspend) {
+  if (suspend == lips_suspended_) return;
+  lips_suspended_ = suspend;
+  if (settings_.body_contact.lips == lips_on()) return;
+  settings_.body_contact.lips = lips_on();
+  backend_->set_body_contact(settings_.body_contact);
 }
 
 std::vector<std::string> Scheduler::take_notes() {

@@ -70,6 +70,11 @@ struct SchedulerSettings {
   std::vector<ToolSetting> tools = {ToolSetting{}};  ///< one per device (at most kMaxTools)
   ContactOptions contact;      ///< face contact, contact check spacing
   BodyContactSpec body_contact;  ///< bodies that touch each other (empty: none); needs depth kDepthAll
+  /// After a cut (remesh), its lips keep out of each other (body_contact.lips,
+  /// at lip_friction): a cut's two faces are one body's surfaces, which
+  /// nothing else keeps from crossing.
+  bool lip_contact = false;
+  double lip_friction = 0;
 };
 
 /// One tool in one tick.
@@ -185,8 +190,17 @@ class Scheduler {
   /// The seeds of the region after a remesh (a new node is one where it comes from one).
   static std::vector<index_t> seeds_after(std::span<const index_t> seeds,
                                           std::span<const std::array<index_t, 2>> node_from);
+  /// Holds the lips' contact off (true) or lets it on again (false), for a
+  /// blade's stroke: its edge parts the lips where they still meet, and
+  /// pushes a node of the lips' plane to whichever side is nearer.
+  void suspend_lip_contact(bool suspend);
   /// The region's current depth (rings; kDepthAll for the whole mesh).
   int region_depth() const { return region_.whole() ? kDepthAll : depth_; }
+  /// The depth remesh builds the region at: the whole mesh where the lips
+  /// will touch (as bodies touching do: a region's edge across the lips held
+  /// a lip node still against its moving twin, and the kidney cut across at
+  /// depth auto stopped within two steps), else region_depth().
+  int depth_after_cut() const { return settings_.lip_contact ? kDepthAll : region_depth(); }
 
   /// Notices since the last call (a tool pressing a rigid support, naming
   /// its nodes; a tool starting inside the body; a tool moving more than
@@ -199,6 +213,10 @@ class Scheduler {
  private:
   /// Gives the backend the settings' tools and bodies (after an upload).
   void give_backend_tools();
+  /// Whether the lips touch now: lip_contact, after a cut, unless suspended.
+  bool lips_on() const { return settings_.lip_contact && remeshed_ && !lips_suspended_; }
+  bool remeshed_ = false;        ///< a cut was made (remesh)
+  bool lips_suspended_ = false;  ///< suspend_lip_contact's
   /// Both remeshes: onto `backend` (the Scheduler's own or a fresh one), with the region it holds already, if any.
   void remesh_onto(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from,
                    Backend& backend, const PreparedRegion* prepared);

@@ -33,6 +33,11 @@ class BodyStage {
   std::vector<BodyContactNode> contacts() const;
   /// Forgets every stick anchor (a new initial state).
   void clear_anchors() { anchors_.assign(anchors_.size(), BodyAnchor<T>{}); }
+  /// A new motion (Backend::set_motion): the lists built again at its u, no anchor kept.
+  void restart(const TissueState<T>& s) {
+    build(s);
+    clear_anchors();
+  }
   long builds() const { return builds_; }
 
  private:

@@ -82,7 +82,7 @@ void CpuBackend<T>::do_set_motion(std::span<const double> u, std::span<const dou
   state_.clear_law_state();  // a new initial state: no Prony history
   energy_.fresh = energy_.synced = false;
   if (contact_) contact_->surface_moved();
-  if (body_) body_->clear_anchors();
+  if (body_) body_->restart(state_);
   for (index_t a = 0; a < n; ++a)
     if (state_.region.role[a] == kHalo) {
       const std::uint8_t keep = state_.driven[a] | fixed_axes(model_.node_flags[a]);

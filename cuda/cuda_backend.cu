@@ -390,6 +390,7 @@ class CudaBackend final : public Backend {
     launch(n, stream(), set_motion_kernel<T>, n, scratch_.data(), store_.model().node_flags, store_.state(),
            store_.u.current());
     store_.clear_law_state(stream());  // a new initial state: no Prony history
+    if (body_.active()) body_.rebuild(surface_, positions(), log_, stream());  // the lists at the new motion
     body_.clear_anchors(stream());
     pass1_all();
   }

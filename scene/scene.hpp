@@ -156,6 +156,7 @@ struct Solver {
   double residual_tol = 1e-3;       ///< equilibrium: relative free-node residual (SchedulerSettings)
   double kinetic_tol = 1e-6;        ///< equilibrium: relative kinetic energy (SchedulerSettings)
   bool ianp = true;                 ///< improved average nodal pressure; false = plain tets
+  bool lip_contact = false;         ///< a cut's lips keep out of each other (SchedulerSettings::lip_contact)
   int line = 0;                     ///< source line of <solver>, for messages (0 = unknown / defaults)
 };
 

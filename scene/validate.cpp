@@ -752,6 +752,7 @@ SchedulerSettings scheduler_settings(const Scene& scene) {
   st.tick = scene.solver.tick;
   st.residual_tol = scene.solver.residual_tol;
   st.kinetic_tol = scene.solver.kinetic_tol;
+  st.lip_contact = scene.solver.lip_contact;
   return st;
 }
 

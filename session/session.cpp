@@ -259,6 +259,11 @@ void Session::take_pending_cut() {
 
 void Session::cut_with_blades() {
   if (pending_ && engine_.scheduler->ticks() >= pending_->due) take_pending_cut();
+  // the lips touch but while a blade's button is down
+  bool stroke = false;
+  for (int t = 0; t < n_tools(); ++t)
+    stroke = stroke || (scene_->tools[std::size_t(t)].kind == scene::Tool::Kind::Blade && last_.tools[std::size_t(t)].grasp);
+  scheduler().suspend_lip_contact(stroke);
   for (int t = 0; t < n_tools(); ++t) {
     if (scene_->tools[std::size_t(t)].kind != scene::Tool::Kind::Blade) continue;
     const scene::Tool blade = scene_->tools[std::size_t(t)];  // a copy: a cut replaces the scene
@@ -328,6 +333,18 @@ void Session::cut_with_blades() {
     for (index_t a : touching) furthest = std::max(furthest, dot(reference_position(m, a) - state.start0, state.onward));
     if (const double run = dot(state.front0 - state.start0, state.onward); furthest + state.lead > run)
       state.front0 = state.front0 + (furthest + state.lead - run) * state.onward;
+    // and through the far side where less than a third of an element is left of the tissue ahead of it in
+    // the crack's strip (the mesh holds no thinner ligament)
+    const double span = norm(state.edge);
+    const Vec3<double> along = (1 / span) * state.edge;
+    double far = -INFINITY;
+    for (index_t a = 0; a < n; ++a) {
+      const Vec3<double> d = reference_position(m, a) - state.start0;
+      if (std::fabs(dot(d, state.normal)) < h && dot(d, along) > -h && dot(d, along) < span + h)
+        far = std::max(far, dot(d, state.onward));
+    }
+    if (const double run = dot(state.front0 - state.start0, state.onward); run < far && run > far - h / 3)
+      state.front0 = state.front0 + (far + h - run) * state.onward;
     const double run = dot(state.front0 - state.start0, state.onward);
     if (state.cut_at > 0 && run - state.cut_at < h / 3) continue;  // not yet a third of an element on
     if (pending_) continue;  // a cut in preparation: the crack grows on, and the next cut takes it
@@ -425,7 +442,7 @@ void Session::begin_cut(const CutSurface& surface, const CutOptions& options, Cu
   in.backend = backend().name();
   in.precision = backend().precision();
   in.seeds = scheduler().seeds();
-  in.depth = scheduler().region_depth();
+  in.depth = scheduler().depth_after_cut();
   pending_.emplace();
   pending_->due = due;
   pending_->job = std::async(std::launch::async, [in = std::move(in)]() mutable {

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <string>
@@ -204,10 +205,11 @@ TEST(LiveCut, TheCutChangesTheStrainEnergyOnlyWhereItInterpolatesOrSplitsANodalA
 // Undamped, the block swings after its pull is let go; cut mid-swing, its
 // energy (strain + kinetic) stays within the band it swung in before: the
 // cut and the run after it create no energy.
-TEST(LiveCut, AnUndampedBlockCutMidSwingGainsNoEnergy) {
+void undamped_cut_mid_swing(bool lip_contact) {
   scene::Scene sc = block_scene();
   sc.solver.damping = 0.0;
   sc.solver.dt_safety = 0.2;
+  sc.solver.lip_contact = lip_contact;
   Session s(sc);
   pull_right_top(s);
   for (int k = 0; k < 30; ++k) s.tick();
@@ -227,9 +229,14 @@ TEST(LiveCut, AnUndampedBlockCutMidSwingGainsNoEnergy) {
     s.tick();
     after = std::max(after, energy());
   }
-  RecordProperty("most_before_J", g(before));
-  RecordProperty("most_after_J", g(after));
-  EXPECT_LE(after, before);
+  ::testing::Test::RecordProperty(lip_contact ? "most_before_lips_touching_J" : "most_before_J", g(before));
+  ::testing::Test::RecordProperty(lip_contact ? "most_after_lips_touching_J" : "most_after_J", g(after));
+  EXPECT_LE(after, before) << (lip_contact ? "the lips touching" : "");
+}
+
+TEST(LiveCut, AnUndampedBlockCutMidSwingGainsNoEnergy) {
+  undamped_cut_mid_swing(false);
+  undamped_cut_mid_swing(true);
 }
 
 // Cut through and run on: the half that is pulled moves off; the other, no
@@ -307,24 +314,37 @@ TEST(LiveCut, APartialIncisionOpensUnderTension) {
 
 // A cut across the kidney while its probe presses it: no element inverts,
 // the step stays at least half of what it was, and the press runs on.
-TEST(LiveCut, ACutAcrossTheKidneyWhileItsProbePresses) {
-  Session s(io::default_kidney_scene());
+void kidney_cut_while_pressed(bool lip_contact) {
+  scene::Scene sc = io::default_kidney_scene();
+  sc.solver.lip_contact = lip_contact;
+  Session s(sc);
   for (int k = 0; k < 150; ++k) s.tick();
   ASSERT_GT(s.last().tools[0].contact_nodes, 0) << "the probe presses when the cut is made";
   const double force = norm(s.last().tools[0].force);
   // a transverse cut 25 mm from the probe's side of the kidney's middle (x), through its whole section
   const SessionCut c = s.cut({{-0.025, -0.06, -0.04}, {0, 0.12, 0}, {0, 0, 0.08}});
   EXPECT_GT(c.cut.split + c.cut.snapped, 0);
-  RecordProperty("dt_after_over_before", g(c.dt_after / c.dt_before));
-  RecordProperty("dt_crit_after_over_before", g(c.dt_crit_after / c.dt_crit_before));
-  RecordProperty("added_mass_before_kg", g(c.added_mass_before));
-  RecordProperty("added_mass_after_kg", g(c.added_mass_after));
-  RecordProperty("elements_made", g(double(c.cut.n_elements() - c.elements_before)));
+  if (!lip_contact) {
+    ::testing::Test::RecordProperty("dt_after_over_before", g(c.dt_after / c.dt_before));
+    ::testing::Test::RecordProperty("dt_crit_after_over_before", g(c.dt_crit_after / c.dt_crit_before));
+    ::testing::Test::RecordProperty("added_mass_before_kg", g(c.added_mass_before));
+    ::testing::Test::RecordProperty("added_mass_after_kg", g(c.added_mass_after));
+    ::testing::Test::RecordProperty("elements_made", g(double(c.cut.n_elements() - c.elements_before)));
+  }
   EXPECT_GE(c.dt_crit_after, 0.5 * c.dt_crit_before) << "no sliver sets the step";
   EXPECT_GE(c.dt_after, c.dt_before) << "mass scaling keeps the scene's step";
   for (int k = 0; k < 200; ++k) s.tick();  // throws SimulationError on an inverted element
   EXPECT_FALSE(s.failed());
   EXPECT_GT(norm(s.last().tools[0].force), 0.5 * force) << "the probe still presses";
+  if (lip_contact) {
+    EXPECT_TRUE(s.backend().body_contact().lips) << "the lips touch";
+    EXPECT_TRUE(s.scheduler().region_depth() == kDepthAll) << "a cut mesh whose lips touch steps whole";
+  }
+}
+
+TEST(LiveCut, ACutAcrossTheKidneyWhileItsProbePresses) {
+  kidney_cut_while_pressed(false);
+  kidney_cut_while_pressed(true);  // its lips touching
 }
 
 // Refused cuts name the rule and leave the run as it was; reset goes back
@@ -569,6 +589,158 @@ TEST(LiveCutCuda, ACutAcrossTheKidneyWhileItsProbePresses) {
 
 // A blade is refused in a batch (its cuts would change a mesh the batch's
 // scenes share), naming the scene and the tool.
+// ---- the lips of a cut touch each other ------------------------------------
+
+/// An incision at x = 11 mm from the top of the block down to z = 4 mm, across its width.
+CutSurface incision() { return {{0.011, -0.01, 0.004}, {0, 0.04, 0}, {0, 0, 0.01}}; }
+
+/// The pairs of nodes at one reference position (a cut's two lips), each (left, right) of the plane x = x0.
+std::vector<std::array<index_t, 2>> twins(const TissueModel<double>& m, double x0);
+
+/// Whether node a lies on the left of x0: the mean of its elements' centroids (reference) does.
+bool left_of(const TissueModel<double>& m, index_t a, double x0) {
+  const std::size_t ne = std::size_t(m.n_elems);
+  double sum = 0;
+  int count = 0;
+  for (index_t k = m.node_elem_start[a]; k < m.node_elem_start[a + 1]; ++k) {
+    const std::size_t e = std::size_t(m.node_elem[k] / 4);
+    for (int c = 0; c < 4; ++c) sum += 0.25 * m.X[std::size_t(m.elem_nodes[std::size_t(c) * ne + e])];
+    ++count;
+  }
+  return sum / count < x0;
+}
+
+std::vector<std::array<index_t, 2>> twins(const TissueModel<double>& m, double x0) {
+  std::map<std::array<double, 3>, std::vector<index_t>> at_place;
+  for (index_t a = 0; a < m.n_nodes; ++a) {
+    const V X = ref(m, a);
+    at_place[{X.x, X.y, X.z}].push_back(a);
+  }
+  std::vector<std::array<index_t, 2>> out;
+  for (const auto& [place, nodes] : at_place) {
+    if (nodes.size() != 2) continue;
+    const bool first_left = left_of(m, nodes[0], x0);
+    out.push_back(first_left ? std::array<index_t, 2>{nodes[0], nodes[1]} : std::array<index_t, 2>{nodes[1], nodes[0]});
+  }
+  return out;
+}
+
+// The lists of the lips' contact (core/body_contact.hpp): none before a cut;
+// after it, every lip node a row whose candidates are the other lip's faces
+// and the surface faces at its rim (never its own side's, nor one it is a
+// corner of); a node of both lips (the incision's front) and the other
+// corners of the rim's faces rows without candidates.
+TEST(LipContact, EachLipsNodesHaveTheOtherLipsFacesAsCandidates) {
+  Session s(block_scene());
+  BodyContactSpec spec;
+  spec.lips = true;
+  const auto lists = [&] {
+    const TissueModel<double>& m = s.model();
+    std::vector<double> x(3 * std::size_t(m.n_nodes));
+    for (index_t a = 0; a < m.n_nodes; ++a)
+      for (int c = 0; c < 3; ++c) x[3 * size_t(a) + c] = m.X[std::size_t(c) * m.n_nodes + a];
+    return build_body_lists(m, spec, x);
+  };
+  EXPECT_EQ(lists().rows(), 0) << "an uncut block has no lips";
+  s.cut(incision());
+  const TissueModel<double>& m = s.model();
+  const BodyLists L = lists();
+  const index_t nt = m.n_tris;
+  std::vector<std::uint8_t> twinned(std::size_t(m.n_nodes), 0);
+  for (const auto& [l, r] : twins(m, 0.011)) twinned[std::size_t(l)] = twinned[std::size_t(r)] = 1;
+  int copies = 0, others = 0;
+  for (index_t r = 0; r < L.rows(); ++r) {
+    const index_t a = L.node[r];
+    const index_t count = L.cand_start[r + 1] - L.cand_start[r];
+    if (!twinned[std::size_t(a)]) {
+      EXPECT_EQ(count, 0) << "node " << a << " lies on both lips (the front) or off them";
+      ++others;
+      continue;
+    }
+    EXPECT_NEAR(m.X[a], 0.011, 0.0025) << "a lip node lies within half an edge of the cut's plane: node " << a;
+    ++copies;
+    EXPECT_GT(count, 0) << "lip node " << a;
+    const bool left = left_of(m, a, 0.011);
+    for (index_t j = L.cand_start[r]; j < L.cand_start[r + 1]; ++j) {
+      const index_t t = L.cand_tri[j];
+      const V x0 = ref(m, m.tris[t]);
+      const V N = cross(ref(m, m.tris[nt + t]) - x0, ref(m, m.tris[2 * nt + t]) - x0);
+      EXPECT_LT(left ? N.x : -N.x, 0.1 * norm(N)) << "node " << a << ": triangle " << t << " is not of its lip";
+      bool other = false;
+      for (int k = 0; k < 3; ++k) {
+        const index_t b = m.tris[k * nt + t];
+        EXPECT_NE(b, a);
+        EXPECT_TRUE(!twinned[std::size_t(b)] || left_of(m, b, 0.011) != left)
+            << "node " << a << ": triangle " << t << " has a corner on its own lip";
+        other = other || (twinned[std::size_t(b)] && left_of(m, b, 0.011) != left);
+      }
+      EXPECT_TRUE(other) << "node " << a << ": triangle " << t << " touches the other lip";
+      EXPECT_EQ(L.cand_mu[j], 0.0);
+    }
+  }
+  EXPECT_GT(copies, 0);
+  EXPECT_GT(others, 0);
+  RecordProperty("lip_rows", L.rows());
+  RecordProperty("rows_without_candidates", others);
+}
+
+/// How far the incision's lips cross after a push of both ends towards them: the most a left lip node lies
+/// right of its twin on the right lip (m; <= 0: none crossed), over the lips' inside and over their rim (the
+/// nodes on the block's surface too).
+struct Crossing {
+  double inside = -1, rim = -1;
+};
+
+Crossing lip_crossing(bool lip_contact) {
+  scene::Scene sc = block_scene(8);  // 2.5 mm cells: lip nodes inside the lips, not only on their rim
+  sc.solver.lip_contact = lip_contact;
+  Session s(sc);
+  s.cut(incision());
+  const TissueModel<double>& m = s.model();
+  // both end faces pushed inwards, 0.5 mN a node: the block compressed across the incision
+  std::vector<index_t> ends;
+  std::vector<double> force;
+  for (index_t i = 0; i < m.n_nodes; ++i) {
+    const double x = ref(m, i).x;
+    if (x < 1e-9 || x > 0.02 - 1e-9) {
+      ends.push_back(i);
+      force.insert(force.end(), {x < 0.01 ? 5e-4 : -5e-4, 0.0, 0.0});
+    }
+  }
+  s.set_loads(ends, force);
+  for (int k = 0; k < 400; ++k) s.tick();
+  EXPECT_FALSE(s.failed()) << s.failure();
+  const std::vector<double> u = s.backend().download().u;
+  Crossing out;
+  int inside = 0;
+  for (const auto& [l, r] : twins(m, 0.011)) {
+    const V X = ref(m, l);
+    const double by = u[std::size_t(l)] - u[std::size_t(r)];
+    out.rim = std::max(out.rim, by);
+    if (X.z < 0.01 - 1e-9 && X.y > 1e-9 && X.y < 0.02 - 1e-9) {
+      out.inside = std::max(out.inside, by);
+      ++inside;
+    }
+  }
+  EXPECT_GT(inside, 4);
+  return out;
+}
+
+// An incision pressed shut: without the lips' contact the two lips pass
+// through each other; with it (the default) they meet and stay apart,
+// but for their rim, where a node of one lip may ride over the other's
+// edge onto the block's surface (docs/cutting.md).
+TEST(LipContact, TheLipsOfAnIncisionPressedShutDoNotCross) {
+  const Crossing free_lips = lip_crossing(false), touching = lip_crossing(true);
+  RecordProperty("inside_crossing_without_m", g(free_lips.inside));
+  RecordProperty("inside_crossing_with_m", g(touching.inside));
+  RecordProperty("rim_crossing_without_m", g(free_lips.rim));
+  RecordProperty("rim_crossing_with_m", g(touching.rim));
+  EXPECT_GT(free_lips.inside, 1e-4) << "the check can fail: free lips cross";
+  EXPECT_LT(touching.inside, 1e-3 * free_lips.inside);
+  EXPECT_LT(touching.rim, 0.6 * free_lips.rim);
+}
+
 TEST(Blade, ABatchRefusesABlade) {
   const auto shared = std::make_shared<const scene::Scene>(blade_scene(true, 5));
   try {
