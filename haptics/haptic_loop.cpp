@@ -58,8 +58,9 @@ bool make_realtime(int priority) {
 #endif
 }
 
-Engine checked(Engine s) {
-  if (!s.model || !s.backend || !s.scheduler)
+Simulated checked(Simulated s) {
+  const Engine& e = s.engine();
+  if (!e.model || !e.backend || !e.scheduler)
     throw std::invalid_argument("haptic loop: the simulation factory returned an incomplete simulation");
   return s;
 }
@@ -99,14 +100,14 @@ HapticLoop::HapticLoop(std::vector<Device*> devices, EngineFactory factory, Live
       options_(options),
       params_(params),
       sim_(checked(factory_(params))),
-      period_(sim_.scheduler->settings().tick) {
+      period_(engine().scheduler->settings().tick) {
   if (options_.window < 2 || options_.stats_every < 1 || options_.max_lag < 1)
     throw std::invalid_argument(fmt::format(
         "haptic loop: window = {} must be >= 2, stats_every = {} >= 1 and max_lag = {} >= 1", options_.window,
         options_.stats_every, options_.max_lag));
-  if (devices_.size() != std::size_t(sim_.scheduler->n_tools()))
+  if (devices_.size() != std::size_t(engine().scheduler->n_tools()))
     throw std::invalid_argument(fmt::format("haptic loop: {} devices for the scene's {} tools (one device per tool)",
-                                            devices_.size(), sim_.scheduler->n_tools()));
+                                            devices_.size(), engine().scheduler->n_tools()));
   options_.coupling.period = period_;
   for (Device* d : devices_) {
     if (d == nullptr) throw std::invalid_argument("haptic loop: a tool's device is null");
@@ -114,20 +115,22 @@ HapticLoop::HapticLoop(std::vector<Device*> devices, EngineFactory factory, Live
     coupled_.push_back(std::make_unique<CoupledDevice>(*clocks_.back(), options_.coupling));
     coupled_ptrs_.push_back(coupled_.back().get());
   }
+  if (sim_.session) sim_.session->drive_with(coupled_ptrs_);
   for (auto* v : {&work_ring_, &wake_ring_, &start_ring_, &scratch_}) v->assign(options_.window, 0.0);
   late_ring_.assign(options_.window, 0);
   histogram_.assign(kHistBins, 0);
   local_.params = params_;
-  local_.n_tools = sim_.scheduler->n_tools();
+  local_.n_tools = engine().scheduler->n_tools();
   for (int t = 0; t < local_.n_tools; ++t) {
-    const ToolSetting& tool = sim_.scheduler->settings().tools[t];
+    const ToolSetting& tool = engine().scheduler->settings().tools[t];
     local_.tools[t].radius = tool.shape.radius;
     local_.tools[t].shaft = tool.shape.shaft;
     local_.tools[t].axis = tool.axis;
   }
   local_.sim_version = 1;
-  local_.region = sim_.scheduler->region();
-  local_.steps_per_tick = sim_.scheduler->steps_per_tick();
+  local_.mesh_version = 1;
+  local_.region = engine().scheduler->region();
+  local_.steps_per_tick = engine().scheduler->steps_per_tick();
   local_.stats.period = period_;
   last_region_ = local_.region;
   session_start_ = now_s();
@@ -201,7 +204,7 @@ std::future<void> HapticLoop::post(std::function<void(Engine&)> task) {
   std::packaged_task<void(Engine&)> job(std::move(task));
   std::future<void> done = job.get_future();
   if (!running_) {
-    job(sim_);
+    job(engine());
     return done;
   }
   {
@@ -216,7 +219,9 @@ std::future<void> HapticLoop::post(std::function<void(Engine&)> task) {
 void HapticLoop::set_friction(double mu) {
   if (const std::string e = tool_friction_error("every tool", mu); !e.empty()) throw std::invalid_argument(e);
   post([this, mu](Engine& e) {
-    for (int t = 0; t < e.scheduler->n_tools(); ++t) e.scheduler->set_tool_friction(t, mu);
+    for (int t = 0; t < e.scheduler->n_tools(); ++t)
+      if (sim_.session) sim_.session->set_tool_friction(t, mu);  // kept across its cuts
+      else e.scheduler->set_tool_friction(t, mu);
     params_.friction = mu;
     local_.params = params_;
     publish();
@@ -243,29 +248,29 @@ void HapticLoop::serve_requests() {
     has_requests_ = false;
   }
   if (params) rebuild(*params);
-  for (auto& t : tasks) t(sim_);
+  for (auto& t : tasks) t(engine());
 }
 
 void HapticLoop::rebuild(const LiveParams& params) {
-  Engine next;
+  Simulated next;
   try {
     next = checked(factory_(params));
-    if (std::abs(next.scheduler->settings().tick - period_) > 1e-12)
+    const Scheduler& sched = *next.engine().scheduler;
+    if (std::abs(sched.settings().tick - period_) > 1e-12)
       throw std::invalid_argument(fmt::format("the haptic tick changed from {} s to {} s", period_,
-                                              next.scheduler->settings().tick));
-    if (next.scheduler->n_tools() != int(devices_.size()))
+                                              sched.settings().tick));
+    if (sched.n_tools() != int(devices_.size()))
       throw std::invalid_argument(fmt::format("the scene's tools changed from {} to {}", devices_.size(),
-                                              next.scheduler->n_tools()));
+                                              sched.n_tools()));
+    if (next.session) next.session->drive_with(coupled_ptrs_);
   } catch (const std::exception& e) {
     set_status(fmt::format("parameters refused (E = {} Pa, nu = {}, depth {}, {}); keeping the running simulation: {}",
                            params.E, params.nu, params.depth == kDepthAll ? "all" : std::to_string(params.depth),
                            to_string(params.precision), e.what()));
     return;
   }
-  clock_offset_ += sim_.scheduler->time();
-  sim_.scheduler.reset();  // it refers to the backend and the model
-  sim_.backend.reset();
-  sim_.model.reset();
+  clock_offset_ += engine().scheduler->time();
+  sim_ = Simulated{};  // the old one goes first (its scheduler before the backend and model it refers to)
   sim_ = std::move(next);
   params_ = params;
   failed_ = false;
@@ -277,16 +282,24 @@ void HapticLoop::rebuild(const LiveParams& params) {
   local_.tissue_force = {};
   for (ToolView& t : local_.tools) t.tissue_force = {};
   local_.sim_version += 1;
+  local_.mesh_version += 1;
+  local_.cuts = 0;
   local_.region_version += 1;
-  local_.region = last_region_ = sim_.scheduler->region();
-  local_.steps_per_tick = sim_.scheduler->steps_per_tick();
+  local_.region = last_region_ = engine().scheduler->region();
+  local_.steps_per_tick = engine().scheduler->steps_per_tick();
   last_seeds_.clear();
 }
 
 bool HapticLoop::tick_once() {
-  Scheduler& sched = *sim_.scheduler;
   try {
-    const TickReport rep = sched.tick(coupled_ptrs_);
+    // a session's tick may cut: the scheduler then steps a new mesh
+    const TickReport rep = sim_.session ? sim_.session->tick() : engine().scheduler->tick(coupled_ptrs_);
+    Scheduler& sched = *engine().scheduler;
+    if (sim_.session && sim_.session->cuts() != local_.cuts) {
+      local_.cuts = sim_.session->cuts();
+      local_.mesh_version += 1;
+      local_.region_version += 1;
+    }
     local_.tick = sched.ticks();
     local_.time = clock_offset_ + rep.time;
     local_.n_tools = rep.n_tools;
@@ -319,7 +332,7 @@ bool HapticLoop::tick_once() {
   } catch (const std::exception& e) {
     failed_ = true;
     local_.failed = true;
-    set_status(fmt::format("the solver stopped at tick {}: {}", sched.ticks(), e.what()));
+    set_status(fmt::format("the solver stopped at tick {}: {}", engine().scheduler->ticks(), e.what()));
     return false;
   }
 }

@@ -26,8 +26,9 @@
 //   is posted as a task, which the haptic thread runs between two ticks; the
 //   display waits on the returned future, the haptic thread never waits;
 // - parameter changes (E, nu, region depth, precision) are requested by the
-//   display and applied by the haptic thread between ticks: it builds a new
-//   Engine through the factory (a new model and backend; the tissue
+//   display and applied by the haptic thread between ticks: it builds anew
+//   through the factory (an Engine, or a Session where the scene has a
+//   blade, whose ticks may cut: a new model and backend; the tissue
 //   restarts from rest, the device's clock and the coupling go on), and
 //   keeps the old one, reporting why, when the factory throws.
 // The owner thread (the one that constructs the loop) calls start, stop,
@@ -52,6 +53,7 @@
 #include "haptics/force_coupling.hpp"
 #include "core/scheduler.hpp"
 #include "session/engine.hpp"
+#include "session/session.hpp"
 
 namespace tissue {
 
@@ -69,13 +71,35 @@ struct LiveParams {
   /// Every tool's Coulomb friction coefficient (docs/contact.md); < 0: the
   /// scene's. Changed live by HapticLoop::set_friction, without a rebuild.
   double friction = -1;
+  /// The first tool becomes a blade (docs/cutting.md, "The blade"): the
+  /// viewer's scalpel. Its edge runs along the tool's direction for
+  /// kScalpelLength from the tip, kScalpelThickness thick; the loop's device
+  /// button (the mouse's right button) cuts.
+  bool scalpel = false;
 };
 
-/// Builds the Engine the loop runs (session/engine.hpp: the model, a backend
-/// holding it, the Scheduler over both; built together, destroyed together)
-/// for the parameters (the app supplies it, with build_engine). Throws, with a message naming the rule
-/// broken, for parameters it cannot use.
-using EngineFactory = std::function<Engine(const LiveParams&)>;
+/// The scalpel's edge length and thickness (m).
+inline constexpr double kScalpelLength = 0.02;
+inline constexpr double kScalpelThickness = 1e-3;
+
+/// What the loop runs: an Engine (session/engine.hpp: the model, a backend
+/// holding it, the Scheduler over both; built together, destroyed
+/// together), or a Session over one, which also makes its blades' cuts
+/// (docs/cutting.md) and so replaces the engine's mesh, model and backend
+/// between two ticks (HapticSnapshot::mesh_version counts the changes).
+struct Simulated {
+  Simulated() = default;
+  Simulated(Engine e) : own(std::move(e)) {}                      // NOLINT: an engine is a simulation
+  Simulated(std::unique_ptr<Session> s) : session(std::move(s)) {}  // NOLINT: so is a session
+  Engine& engine() { return session ? session->engine() : own; }
+  Engine own;
+  std::unique_ptr<Session> session;
+};
+
+/// Builds what the loop runs for the parameters (the app supplies it, with
+/// build_engine, or a Session for a scene with a blade). Throws, with a
+/// message naming the rule broken, for parameters it cannot use.
+using EngineFactory = std::function<Simulated(const LiveParams&)>;
 
 /// Timing of the loop. Window figures cover the last `window` ticks;
 /// session figures every tick since start() (or the first run_ticks()).
@@ -133,6 +157,8 @@ struct HapticSnapshot {
   RegionSizes region;                  ///< current deformation region
   long region_version = 0;             ///< changes whenever the region changes
   long sim_version = 0;                ///< changes on every (re)build of the simulation
+  long mesh_version = 0;               ///< changes on every (re)build and every cut: the mesh is new
+  long cuts = 0;                       ///< the blades' cuts since the (re)build
   int steps_per_tick = 0;              ///< TLED steps per tick
   double max_disp = 0;                 ///< m
   double residual = 0;                 ///< relative free-node residual
@@ -240,7 +266,8 @@ class HapticLoop {
   EngineFactory factory_;
   Options options_;
   LiveParams params_;
-  Engine sim_;
+  Simulated sim_;
+  Engine& engine() { return sim_.engine(); }
   double period_ = 1e-3;
   double clock_offset_ = 0;  ///< simulated time of the simulations before the running one (s)
   std::vector<std::unique_ptr<SessionClock>> clocks_;     ///< per tool

@@ -74,6 +74,20 @@ void Session::restart() {
   cuts_ = 0;
 }
 
+void Session::drive_with(std::vector<Device*> devices) {
+  if (devices.empty()) {
+    device_ptrs_.clear();
+    for (HostDevice& d : devices_) device_ptrs_.push_back(&d);
+    return;
+  }
+  if (devices.size() != devices_.size())
+    throw std::invalid_argument(fmt::format("{}: drive_with: {} devices for the scene's {} tools (one per tool)", name(),
+                                            devices.size(), devices_.size()));
+  for (std::size_t t = 0; t < devices.size(); ++t)
+    if (devices[t] == nullptr) throw std::invalid_argument(fmt::format("{}: drive_with: tool {}'s device is null", name(), t));
+  device_ptrs_ = std::move(devices);
+}
+
 void Session::check_tool(int tool) const {
   if (tool < 0 || tool >= n_tools())
     throw std::invalid_argument(fmt::format("{}: tool {} does not exist (the scene has {} tool{}: 0..{})", name(), tool,

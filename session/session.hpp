@@ -107,6 +107,17 @@ class Session {
   const SchedulerSettings& settings() const { return settings_; }
   int n_tools() const { return static_cast<int>(devices_.size()); }
   HostDevice& device(int tool) { return devices_.at(std::size_t(tool)); }
+  /// The tools read these devices from the next tick on, one per tool in
+  /// order (a haptic loop's couplings), instead of the host's poses and the
+  /// scene's paths; empty: the session's own devices again. They must
+  /// outlive their use. Throws std::invalid_argument naming the scene for a
+  /// count that is not the tools' or a null device.
+  void drive_with(std::vector<Device*> devices);
+  /// The engine (model, backend, Scheduler) the session runs, for a host
+  /// that reads its backend between two ticks (the haptic loop's tasks). A
+  /// cut replaces its model and backend: keep no reference into them across
+  /// a tick.
+  Engine& engine() { return engine_; }
   /// Throws std::invalid_argument naming the scene when tool is not one of its tools.
   void check_tool(int tool) const;
   /// Tool `tool`'s Coulomb coefficient from the next tick on, also across

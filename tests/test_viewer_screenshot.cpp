@@ -308,6 +308,24 @@ TEST_F(ViewerPictures, OverlayAndGlyphsAreDrawn) {
   EXPECT_GT(d.near, 50) << "tool, contact marker and arrow near the tool";
 }
 
+// --scalpel: the kidney's tool becomes a blade of the scalpel's size; on
+// the scene's press (along the blade's own axis, its button up) it presses
+// like a tool and cuts nothing, the mesh the kidney's own. (The cuts
+// themselves: tests/test_viewer_session.cpp, through the haptic loop.)
+TEST_F(ViewerPictures, TheScalpelPressesLikeAToolWithItsButtonUp) {
+  const Picture probe = render("probe", "--device scripted --ticks 300");
+  const Picture blade = render("blade", "--device scripted --ticks 300 --scalpel --hide overlay");
+  if (HasFailure()) return;
+  expect_shows_organ(blade);
+  EXPECT_NE(probe.json.find("\"tool_radius\": 0.002,"), std::string::npos) << probe.json;
+  EXPECT_NE(blade.json.find("\"tool_radius\": 0.0005,"), std::string::npos) << blade.json;
+  EXPECT_TRUE(json_true(blade.json, "contact")) << blade.json;
+  EXPECT_NE(blade.json.find("\"cuts\": 0,"), std::string::npos) << blade.json;
+  EXPECT_NE(blade.json.find("\"cut_triangles\": 0\n"), std::string::npos) << blade.json;
+  const auto nodes = [](const std::string& j) { return j.substr(j.find("\"nodes\":"), 16); };
+  EXPECT_EQ(nodes(blade.json), nodes(probe.json));
+}
+
 TEST_F(ViewerPictures, TheSurfaceShowsTheDisplacementFieldWithALegendAndTheForcePlot) {
   const std::string args = "--device scripted --ticks 300 --hide tool,region,overlay" + kLocal;
   const Picture organ = render("organ", args);

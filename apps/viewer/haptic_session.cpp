@@ -98,8 +98,10 @@ struct Display {
   void frame(double t) {
     const HapticSnapshot s = loop.snapshot();
     if (host_positions) {  // a device backend writes device memory only: the viewer maps a GL buffer for it
-      float* dst = staging.data();
-      loop.post([dst](Engine& sim) { sim.backend->write_positions(dst); }).get();
+      loop.post([this](Engine& sim) {  // sized on the haptic thread: a cut changes the node count
+            staging.resize(3 * std::size_t(sim.model->n_nodes));
+            sim.backend->write_positions(staging.data());
+          }).get();
     }
     if (s.region_version != region_version) {
       region_version = s.region_version;

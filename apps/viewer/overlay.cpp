@@ -121,6 +121,9 @@ void Overlay::show_status(const OverlayFacts& f, const HapticSnapshot& s) {
                                                s.region.n_halo, s.region.n_elems,
                                                s.params.depth == kDepthAuto ? "auto, " : "", s.region.depth));
   row("time", fmt::format("{:.3f} s simulated, max |u| {:.2f} mm", s.time, 1e3 * s.max_disp));
+  if (s.params.scalpel || s.cuts > 0)
+    row("scalpel", fmt::format("{}{} cut{} made", s.params.scalpel ? "the right button cuts; " : "", s.cuts,
+                               s.cuts == 1 ? "" : "s"));
 }
 
 bool Overlay::edit_material(const OverlayFacts& f) {
@@ -208,6 +211,9 @@ OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, con
   if (shown != FieldKind::None) legend(*display.field);
   bool smooth = display.smooth;
   if (ImGui::Checkbox("smooth shading", &smooth)) act.smooth = smooth;
+  ImGui::SameLine();
+  bool scalpel = s.params.scalpel;
+  if (ImGui::Checkbox("scalpel (C)", &scalpel)) act.scalpel = true;
   ImGui::Separator();
   const bool material = edit_material(f);
   const bool region = edit_region_and_precision();
@@ -227,7 +233,8 @@ OverlayActions Overlay::draw(const OverlayFacts& f, const HapticSnapshot& s, con
   if (glfw_) {
     ImGui::Separator();
     ImGui::TextDisabled("left drag: tool in the view plane; wheel: push along the view");
-    ImGui::TextDisabled("right drag: orbit; middle drag: pan; shift+wheel: zoom");
+    ImGui::TextDisabled("right button: grasp (the scalpel: cut); C: scalpel on / off");
+    ImGui::TextDisabled("shift+left drag: orbit; middle drag: pan; shift+wheel: zoom");
   }
   const ImVec2 pos = ImGui::GetWindowPos(), size = ImGui::GetWindowSize();
   rect_[0] = pos.x;

@@ -41,6 +41,7 @@ struct OverlayActions {
   std::optional<FieldKind> field;   ///< colour the surface by this field from now on
   std::optional<double> friction;   ///< every tool's friction coefficient, live (HapticLoop::set_friction)
   std::optional<bool> smooth;       ///< shade the surface smoothly (true) or flat from now on
+  bool scalpel = false;             ///< toggle the scalpel (a rebuild: LiveParams::scalpel)
 };
 
 class Overlay {

@@ -55,7 +55,8 @@ std::string picture_json(const PictureFacts& f) {
       "  \"tool_shown\": {}, \"region_shown\": {},\n"
       "  \"tissue_force\": {}, \"rendered_force\": {},\n"
       "  \"region_nodes\": {}, \"region_elements\": {}, \"max_displacement\": {:.9g},\n"
-      "  \"field\": \"{}\", \"field_range\": [{:.9g}, {:.9g}], \"force_samples\": {}\n"
+      "  \"field\": \"{}\", \"field_range\": [{:.9g}, {:.9g}], \"force_samples\": {},\n"
+      "  \"nodes\": {}, \"cuts\": {}, \"cut_triangles\": {}\n"
       "}}\n",
       f.width, f.height, escaped(f.backend), escaped(f.precision), escaped(f.positions), s.tick, s.time, contact ? "true" : "false",
       s.contact_nodes, s.tools[0].radius, vec(s.tool), vec(s.device), f.tool_px[0], f.tool_px[1], f.device_px[0], f.device_px[1],
@@ -66,7 +67,7 @@ std::string picture_json(const PictureFacts& f) {
                 : "null",
       f.tool_shown ? "true" : "false", f.region_shown ? "true" : "false", vec(s.tissue_force), vec(s.rendered_force),
       s.region.nodes(), s.region.n_elems, s.max_disp, escaped(f.field), f.field_range[0], f.field_range[1],
-      f.force_samples);
+      f.force_samples, f.nodes, s.cuts, f.cut_triangles);
 }
 
 void project_box(const Camera& c, Vec3<double> lo, Vec3<double> hi, double box[4]) {

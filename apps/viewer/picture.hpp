@@ -31,6 +31,7 @@ struct PictureFacts {
   std::string field = "none";           ///< the surface's field (field_name)
   double field_range[2] = {0, 0};       ///< its colour map's ends
   long force_samples = 0;               ///< points of the overlay's force plot
+  long nodes = 0, cut_triangles = 0;    ///< the mesh drawn: its nodes, the surface triangles a cut made
 };
 
 /// The sidecar as JSON text.

@@ -13,9 +13,7 @@ class HostPositions : public PositionSource {
  public:
   explicit HostPositions(Renderer& r) : renderer_(r), staging_(3 * size_t(r.n_nodes())) {}
   void update(HapticLoop& loop) override {
-    float* dst = staging_.data();
-    loop.post([dst](Engine& sim) { sim.backend->write_positions(dst); }).get();
-    renderer_.upload_positions(dst);
+    if (post_positions(loop, staging_.data(), renderer_.n_nodes())) renderer_.upload_positions(staging_.data());
   }
   std::string path() const override { return "host: write_positions -> glBufferSubData"; }
 
@@ -25,6 +23,16 @@ class HostPositions : public PositionSource {
 };
 
 }  // namespace
+
+bool post_positions(HapticLoop& loop, float* dst, index_t n_nodes) {
+  bool wrote = false;
+  loop.post([&](Engine& sim) {
+        if (sim.model->n_nodes != n_nodes) return;
+        sim.backend->write_positions(dst);
+        wrote = true;
+      }).get();
+  return wrote;
+}
 
 std::unique_ptr<PositionSource> make_position_source(Renderer& renderer, const std::string& backend) {
   if (backend == "cuda") {

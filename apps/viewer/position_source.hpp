@@ -31,6 +31,12 @@ class PositionSource {
   virtual std::string path() const = 0;
 };
 
+/// Posts write_positions(dst) to the haptic thread and waits for it; it
+/// writes only while the mesh still has `n_nodes` nodes, the size `dst` was
+/// made for (a cut that lands first leaves the frame as it was: the display
+/// then makes its buffers anew). Returns whether it wrote.
+bool post_positions(HapticLoop& loop, float* dst, index_t n_nodes);
+
 /// The source for a backend by name ("cpu", "cuda"); GL context current.
 std::unique_ptr<PositionSource> make_position_source(Renderer& renderer, const std::string& backend);
 

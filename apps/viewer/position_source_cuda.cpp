@@ -24,7 +24,7 @@ void check(cudaError_t e, const char* what) {
 /// The vertex buffer registered with CUDA and written by the backend's kernel.
 class InteropPositions : public PositionSource {
  public:
-  explicit InteropPositions(Renderer& r) : bytes_(3 * sizeof(float) * size_t(r.n_nodes())) {
+  explicit InteropPositions(Renderer& r) : n_nodes_(r.n_nodes()), bytes_(3 * sizeof(float) * size_t(r.n_nodes())) {
     check(cudaGraphicsGLRegisterBuffer(&resource_, r.position_buffer(), cudaGraphicsRegisterFlagsWriteDiscard),
           "cudaGraphicsGLRegisterBuffer");
   }
@@ -40,7 +40,7 @@ class InteropPositions : public PositionSource {
         throw std::runtime_error(fmt::format("tissue view: mapped vertex buffer holds {} bytes, {} needed", size, bytes_));
       float* dst = static_cast<float*>(ptr);
       // the backend's kernel writes X + u into the buffer and synchronises its stream
-      loop.post([dst](Engine& sim) { sim.backend->write_positions(dst); }).get();
+      post_positions(loop, dst, n_nodes_);
     } catch (...) {
       cudaGraphicsUnmapResources(1, &resource_, 0);
       throw;
@@ -51,6 +51,7 @@ class InteropPositions : public PositionSource {
 
  private:
   cudaGraphicsResource* resource_ = nullptr;
+  index_t n_nodes_;
   size_t bytes_;
 };
 
@@ -62,8 +63,7 @@ class StagedPositions : public PositionSource {
   }
   ~StagedPositions() override { cudaFree(device_); }
   void update(HapticLoop& loop) override {
-    float* dst = device_;
-    loop.post([dst](Engine& sim) { sim.backend->write_positions(dst); }).get();
+    if (!post_positions(loop, device_, renderer_.n_nodes())) return;
     check(cudaMemcpy(host_.data(), device_, host_.size() * sizeof(float), cudaMemcpyDeviceToHost),
           "cudaMemcpy (positions to host)");
     renderer_.upload_positions(host_.data());

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <stdexcept>
 #include <string>
 
@@ -82,6 +83,7 @@ void main() {
 )";
 
 constexpr float kOrgan[3] = {0.66f, 0.25f, 0.21f};
+constexpr float kCutFace[3] = {0.93f, 0.62f, 0.52f};  // a cut's faces: the paler parenchyma under the capsule
 constexpr float kTool[3] = {0.76f, 0.78f, 0.82f};
 constexpr float kDevice[3] = {0.36f, 0.37f, 0.42f};
 constexpr float kContact[3] = {0.25f, 0.90f, 0.35f};
@@ -172,54 +174,32 @@ Renderer::Renderer(const TissueModel<double>& model) : n_nodes_(model.n_nodes) {
   glUniform1i(glGetUniformLocation(program_, "u_corners"), 1);  // texture unit 1
   glUseProgram(0);
 
-  // the tissue: positions of all nodes (reference until the first upload), surface triangles
-  std::vector<float> xyz(3 * size_t(n_nodes_));
-  for (index_t i = 0; i < n_nodes_; ++i)
-    for (int c = 0; c < 3; ++c) xyz[3 * i + c] = float(model.X[c * size_t(n_nodes_) + i]);
-  std::vector<unsigned> idx(3 * size_t(model.n_tris));
-  for (index_t t = 0; t < model.n_tris; ++t)
-    for (int v = 0; v < 3; ++v) idx[3 * t + v] = unsigned(model.tris[v * size_t(model.n_tris) + t]);
-  n_indices_ = int(idx.size());
+  // the tissue's buffers, filled by set_mesh
   glGenVertexArrays(1, &vao_);
   glBindVertexArray(vao_);
   glGenBuffers(1, &vbo_pos_);
   glBindBuffer(GL_ARRAY_BUFFER, vbo_pos_);
-  glBufferData(GL_ARRAY_BUFFER, xyz.size() * sizeof(float), xyz.data(), GL_DYNAMIC_DRAW);
   glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, 3 * sizeof(float), nullptr);
   glEnableVertexAttribArray(0);
   glGenBuffers(1, &vbo_role_);
   glBindBuffer(GL_ARRAY_BUFFER, vbo_role_);
-  glBufferData(GL_ARRAY_BUFFER, 2 * size_t(n_nodes_), nullptr, GL_DYNAMIC_DRAW);
   glVertexAttribPointer(1, 2, GL_UNSIGNED_BYTE, GL_TRUE, 2, nullptr);
   glEnableVertexAttribArray(1);
   glGenBuffers(1, &vbo_field_);
   glBindBuffer(GL_ARRAY_BUFFER, vbo_field_);
-  glBufferData(GL_ARRAY_BUFFER, 3 * size_t(n_nodes_), nullptr, GL_DYNAMIC_DRAW);
   glVertexAttribPointer(2, 3, GL_UNSIGNED_BYTE, GL_TRUE, 3, nullptr);
   glEnableVertexAttribArray(2);
-  const SurfaceRings rings = surface_rings(model);
   glGenBuffers(1, &vbo_ring_);
   glBindBuffer(GL_ARRAY_BUFFER, vbo_ring_);
-  glBufferData(GL_ARRAY_BUFFER, rings.range.size() * sizeof(std::int32_t), rings.range.data(), GL_STATIC_DRAW);
   glVertexAttribIPointer(3, 2, GL_INT, 2 * sizeof(std::int32_t), nullptr);
   glEnableVertexAttribArray(3);
   glGenBuffers(1, &tbo_corners_);
-  glBindBuffer(GL_TEXTURE_BUFFER, tbo_corners_);
-  glBufferData(GL_TEXTURE_BUFFER, std::max<std::size_t>(rings.corners.size(), 2) * sizeof(std::int32_t),
-               rings.corners.empty() ? nullptr : rings.corners.data(), GL_STATIC_DRAW);
-  glBindBuffer(GL_TEXTURE_BUFFER, 0);
   glGenTextures(1, &tex_pos_);
-  glBindTexture(GL_TEXTURE_BUFFER, tex_pos_);
-  glTexBuffer(GL_TEXTURE_BUFFER, GL_R32F, vbo_pos_);
   glGenTextures(1, &tex_corners_);
-  glBindTexture(GL_TEXTURE_BUFFER, tex_corners_);
-  glTexBuffer(GL_TEXTURE_BUFFER, GL_RG32I, tbo_corners_);
-  glBindTexture(GL_TEXTURE_BUFFER, 0);
   glGenBuffers(1, &ibo_);
   glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, ibo_);
-  glBufferData(GL_ELEMENT_ARRAY_BUFFER, idx.size() * sizeof(unsigned), idx.data(), GL_STATIC_DRAW);
   glBindVertexArray(0);
-  upload_roles({});
+  set_mesh(model);
 
   std::vector<float> v;
   std::vector<unsigned> i;
@@ -247,6 +227,49 @@ Renderer::~Renderer() {
   const unsigned buffers[6] = {vbo_pos_, vbo_role_, vbo_field_, vbo_ring_, tbo_corners_, ibo_};
   glDeleteBuffers(6, buffers);
   glDeleteProgram(program_);
+}
+
+void Renderer::set_mesh(const TissueModel<double>& model) {
+  n_nodes_ = model.n_nodes;
+  // positions of all nodes (reference until the first upload)
+  std::vector<float> xyz(3 * size_t(n_nodes_));
+  for (index_t i = 0; i < n_nodes_; ++i)
+    for (int c = 0; c < 3; ++c) xyz[3 * i + c] = float(model.X[c * size_t(n_nodes_) + i]);
+  // the surface triangles, those a cut made after the others (drawn in their own colour)
+  const std::vector<std::uint8_t> cut = cut_faces(model);
+  std::vector<unsigned> idx;
+  idx.reserve(3 * size_t(model.n_tris));
+  for (int pass = 0; pass < 2; ++pass)
+    for (index_t t = 0; t < model.n_tris; ++t)
+      if (cut[std::size_t(t)] == pass)
+        for (int v = 0; v < 3; ++v) idx.push_back(unsigned(model.tris[v * size_t(model.n_tris) + t]));
+  n_indices_ = int(idx.size());
+  n_cut_indices_ = 3 * int(std::count(cut.begin(), cut.end(), std::uint8_t(1)));
+  glBindVertexArray(vao_);
+  glBindBuffer(GL_ARRAY_BUFFER, vbo_pos_);
+  glBufferData(GL_ARRAY_BUFFER, xyz.size() * sizeof(float), xyz.data(), GL_DYNAMIC_DRAW);
+  glBindBuffer(GL_ARRAY_BUFFER, vbo_role_);
+  glBufferData(GL_ARRAY_BUFFER, 2 * size_t(n_nodes_), nullptr, GL_DYNAMIC_DRAW);
+  glBindBuffer(GL_ARRAY_BUFFER, vbo_field_);
+  glBufferData(GL_ARRAY_BUFFER, 3 * size_t(n_nodes_), nullptr, GL_DYNAMIC_DRAW);
+  const SurfaceRings rings = surface_rings(model);
+  glBindBuffer(GL_ARRAY_BUFFER, vbo_ring_);
+  glBufferData(GL_ARRAY_BUFFER, rings.range.size() * sizeof(std::int32_t), rings.range.data(), GL_STATIC_DRAW);
+  glBindBuffer(GL_TEXTURE_BUFFER, tbo_corners_);
+  glBufferData(GL_TEXTURE_BUFFER, std::max<std::size_t>(rings.corners.size(), 2) * sizeof(std::int32_t),
+               rings.corners.empty() ? nullptr : rings.corners.data(), GL_STATIC_DRAW);
+  glBindBuffer(GL_TEXTURE_BUFFER, 0);
+  glBindTexture(GL_TEXTURE_BUFFER, tex_pos_);
+  glTexBuffer(GL_TEXTURE_BUFFER, GL_R32F, vbo_pos_);
+  glBindTexture(GL_TEXTURE_BUFFER, tex_corners_);
+  glTexBuffer(GL_TEXTURE_BUFFER, GL_RG32I, tbo_corners_);
+  glBindTexture(GL_TEXTURE_BUFFER, 0);
+  glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, ibo_);
+  glBufferData(GL_ELEMENT_ARRAY_BUFFER, idx.size() * sizeof(unsigned), idx.data(), GL_STATIC_DRAW);
+  glBindVertexArray(0);
+  glBindBuffer(GL_ARRAY_BUFFER, 0);
+  field_shown_ = false;
+  upload_roles({});
 }
 
 Renderer::Mesh Renderer::make_mesh(const std::vector<float>& xyz, const std::vector<unsigned>& idx) {
@@ -330,7 +353,12 @@ void Renderer::draw(const Camera& camera, const Glyphs& g) {
   glBindTexture(GL_TEXTURE_BUFFER, tex_corners_);
   glActiveTexture(GL_TEXTURE0);
   glBindVertexArray(vao_);
-  glDrawElements(GL_TRIANGLES, n_indices_, GL_UNSIGNED_INT, nullptr);
+  glDrawElements(GL_TRIANGLES, n_indices_ - n_cut_indices_, GL_UNSIGNED_INT, nullptr);
+  if (n_cut_indices_ > 0) {  // the faces a cut opened, after the others in the index buffer
+    glUniform3fv(u_color_, 1, kCutFace);
+    glDrawElements(GL_TRIANGLES, n_cut_indices_, GL_UNSIGNED_INT,
+                   reinterpret_cast<const void*>(std::uintptr_t(n_indices_ - n_cut_indices_) * sizeof(unsigned)));
+  }
   if (!g.show_tool) {
     glBindVertexArray(0);
     return;

@@ -11,7 +11,9 @@
 // flat shading takes the normal from screen-space derivatives of the
 // position in the fragment shader. A second per-node buffer holds the region role (outside,
 // inner, halo) that tints the active region; it changes only when the
-// region does. A third holds a colour per node when a field is shown.
+// region does. A third holds a colour per node when a field is shown. The
+// faces a cut opened (surface_rings.hpp cut_faces) are drawn in a paler
+// colour of their own.
 #pragma once
 
 #include <cstdint>
@@ -55,6 +57,10 @@ class Renderer {
   Renderer(const Renderer&) = delete;
   Renderer& operator=(const Renderer&) = delete;
 
+  /// The tissue's mesh anew (after a cut): its node buffers resized, its
+  /// surface and rings rebuilt, the roles and the field cleared. A position
+  /// source registered on the old buffer must be made again.
+  void set_mesh(const TissueModel<double>& model);
   /// The tissue's position buffer (GL name), for CUDA registration.
   unsigned position_buffer() const { return vbo_pos_; }
   index_t n_nodes() const { return n_nodes_; }
@@ -87,6 +93,7 @@ class Renderer {
 
   index_t n_nodes_ = 0;
   int n_indices_ = 0;
+  int n_cut_indices_ = 0;  ///< the last indices: the faces a cut made (cut_faces)
   unsigned program_ = 0;
   unsigned vao_ = 0, vbo_pos_ = 0, vbo_role_ = 0, vbo_field_ = 0, vbo_ring_ = 0, ibo_ = 0;
   unsigned tbo_corners_ = 0, tex_pos_ = 0, tex_corners_ = 0;  ///< the ring list and the texture views

@@ -36,13 +36,23 @@ scene::Scene with_params(scene::Scene s, const LiveParams& p) {
   }
   if (p.friction >= 0)
     for (scene::Tool& t : s.tools) t.friction = p.friction;
+  if (p.scalpel && !s.tools.empty() && s.tools.front().kind != scene::Tool::Kind::Blade) {
+    scene::Tool& t = s.tools.front();  // its path, device and direction kept; the button cuts
+    t.kind = scene::Tool::Kind::Blade;
+    t.radius = 0.5 * kScalpelThickness;
+    t.shaft = kScalpelLength;
+  }
   s.solver.depth = p.depth;
   s.solver.precision = p.precision;
   return s;
 }
 
-Engine build_simulation(const scene::Scene& base, const LiveParams& p) {
-  return build_engine(with_params(base, p));
+Simulated build_simulation(const scene::Scene& base, const LiveParams& p) {
+  scene::Scene s = with_params(base, p);
+  // a blade's cuts are a Session's; every other scene runs its engine alone, as it always has
+  for (const scene::Tool& t : s.tools)
+    if (t.kind == scene::Tool::Kind::Blade) return std::make_unique<tissue::Session>(std::move(s));
+  return build_engine(s);
 }
 
 EngineFactory Session::factory() const {
@@ -58,6 +68,7 @@ Session make_session(scene::Scene scene, const std::string& backend, const std::
   scene::validate(scene);
   Session s;
   s.params.depth = scene.solver.depth;
+  s.params.scalpel = !scene.tools.empty() && scene.tools.front().kind == scene::Tool::Kind::Blade;
   s.params.precision = scene.solver.precision;
   // one material: its (E, nu), which rebuild the same model; several: E = 0
   // keeps them all until the user sets one E and nu for every set

@@ -25,13 +25,15 @@ void young_poisson(const MaterialParams& m, double* E, double* nu);
 /// The scene with LiveParams applied: E > 0 gives every material (E, nu)
 /// (density kept); fibre_eta >= 0 and prony_terms >= 0 give every material
 /// that fibre stiffness (direction kept, x where it had none) and Prony
-/// series; depth and precision replace the solver's.
+/// series; depth and precision replace the solver's; scalpel makes the
+/// first tool a blade (kScalpelLength, kScalpelThickness) where it is not one.
 scene::Scene with_params(scene::Scene s, const LiveParams& p);
 
 /// Scene -> model -> backend (the scene's solver backend) -> scheduler, for
-/// the given parameters. Throws SceneError / ModelError / std::runtime_error
-/// with the scene's file and the rule broken.
-Engine build_simulation(const scene::Scene& scene, const LiveParams& p);
+/// the given parameters: an engine, or for a scene with a blade (the
+/// scalpel among them) a Session, which makes its cuts. Throws SceneError /
+/// ModelError / std::runtime_error with the scene's file and the rule broken.
+Simulated build_simulation(const scene::Scene& scene, const LiveParams& p);
 
 struct Session {
   scene::Scene scene;

@@ -1,5 +1,8 @@
 #include "apps/viewer/surface_rings.hpp"
 
+#include <algorithm>
+#include <array>
+
 namespace tissue::viewer {
 
 SurfaceRings surface_rings(const TissueModel<double>& m) {
@@ -24,6 +27,27 @@ SurfaceRings surface_rings(const TissueModel<double>& m) {
       r.corners[k + 1] = m.tris[((v + 2) % 3) * size_t(nt) + t];
     }
   return r;
+}
+
+std::vector<std::uint8_t> cut_faces(const TissueModel<double>& m) {
+  const std::size_t nt = std::size_t(m.n_tris), n = std::size_t(m.n_nodes);
+  // each triangle's corners' reference positions, sorted: twins have equal keys
+  using Key = std::array<std::array<double, 3>, 3>;
+  std::vector<Key> key(nt);
+  for (std::size_t t = 0; t < nt; ++t) {
+    for (int v = 0; v < 3; ++v) {
+      const std::size_t a = std::size_t(m.tris[std::size_t(v) * nt + t]);
+      key[t][std::size_t(v)] = {m.X[a], m.X[n + a], m.X[2 * n + a]};
+    }
+    std::sort(key[t].begin(), key[t].end());
+  }
+  std::vector<std::size_t> order(nt);
+  for (std::size_t t = 0; t < nt; ++t) order[t] = t;
+  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return key[a] < key[b]; });
+  std::vector<std::uint8_t> cut(nt, 0);
+  for (std::size_t k = 1; k < nt; ++k)
+    if (key[order[k]] == key[order[k - 1]]) cut[order[k]] = cut[order[k - 1]] = 1;
+  return cut;
 }
 
 }  // namespace tissue::viewer

@@ -21,4 +21,10 @@ struct SurfaceRings {
 };
 SurfaceRings surface_rings(const TissueModel<double>& model);
 
+/// 1 for each surface triangle a cut made, 0 for the others: a cut's faces
+/// are the surface triangles with a twin, another surface triangle on the
+/// same reference corners (the two faces one interior face became,
+/// docs/cutting.md).
+std::vector<std::uint8_t> cut_faces(const TissueModel<double>& model);
+
 }  // namespace tissue::viewer

@@ -51,6 +51,9 @@ void add_view_options(CLI::App& cmd_app, int& rc) {
                   "Stop after this many seconds (0: when the window closes; needed with --gl egl without a picture)")
       ->check(real_number(0, 1e7));
   cmd->add_flag("--repeat", o->repeat, "With --device scripted: play the tool path over and over");
+  cmd->add_flag("--scalpel", o->scalpel,
+                "The first tool is a scalpel: a blade whose button (the right mouse button, a path's cut column) cuts "
+                "(docs/cutting.md); the C key toggles it");
   cmd->add_option("--mouse-speed", o->mouse_speed, "Fastest the mouse moves the tool (m/s)")
       ->default_val(0.25)
       ->check(real_number(0, 100, true));

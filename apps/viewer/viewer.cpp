@@ -7,6 +7,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -27,6 +28,7 @@
 #include "apps/viewer/renderer.hpp"
 #include "apps/viewer/path_device.hpp"
 #include "apps/viewer/session.hpp"
+#include "apps/viewer/surface_rings.hpp"
 #include "io/atomic_file.hpp"
 
 namespace tissue::viewer {
@@ -100,7 +102,7 @@ DeviceChoice make_device(const std::string& kind, const Session& s, double mouse
   return d;
 }
 
-/// The parts of the model the renderer needs (mesh only; it never changes on rebuilds).
+/// The parts of the model the renderer needs (mesh only; a cut changes it, a rebuild brings the scene's back).
 TissueModel<double> mesh_of(HapticLoop& loop) {
   TissueModel<double> m;
   loop.post([&m](Engine& sim) {
@@ -176,7 +178,21 @@ struct Viewer {
   double wheel_step = 0;
   NodeField field;                      ///< what the surface shows (kind None: the organ's colour)
   ForceHistory forces;                  ///< each tool's |force| for the overlay's plot
+  long mesh_version = 1;                ///< the mesh the renderer holds (HapticSnapshot::mesh_version)
 };
+
+/// The mesh anew when a cut (or a rebuild after one) changed it: the renderer's buffers and the position
+/// source made again, the region tint and the field shown afresh.
+void update_mesh(Viewer& v, const HapticSnapshot& snap, long* shown_mesh, long* shown_region) {
+  if (snap.mesh_version == *shown_mesh) return;
+  *shown_mesh = snap.mesh_version;
+  v.positions.reset();  // registered on the old buffer
+  v.mesh = mesh_of(*v.loop);
+  v.renderer->set_mesh(v.mesh);
+  v.positions = make_position_source(*v.renderer, v.session.scene.solver.backend);
+  v.field = NodeField{};
+  *shown_region = -1;
+}
 
 /// Downloads the store (between two ticks, on the haptic thread) and
 /// recolours the surface by v.field.kind; kind None restores the organ's
@@ -189,6 +205,7 @@ void update_field(Viewer& v, FieldKind kind) {
   }
   Fields f;
   v.loop->post([&f](Engine& sim) { f = sim.backend->download(); }).get();
+  if (f.u.size() != 3 * std::size_t(v.mesh.n_nodes)) return;  // a cut landed first: the next frame's mesh
   v.field = node_field(kind, f, v.mesh.n_nodes, v.mesh.node_elem_start, v.mesh.node_elem);
   v.renderer->upload_field_colours(node_colours(v.field));
 }
@@ -202,6 +219,11 @@ void sample_forces(Viewer& v, const HapticSnapshot& s) {
 std::unique_ptr<Viewer> make_viewer(const ViewOptions& o, scene::Scene scene) {
   auto v = std::make_unique<Viewer>();
   v->session = make_session(std::move(scene), o.backend, o.precision, o.depth);
+  if (o.scalpel) {
+    if (v->session.scene.tools.empty())
+      throw std::invalid_argument(fmt::format("--scalpel: {} has no tool to make a scalpel", v->session.scene.source));
+    v->session.params.scalpel = true;
+  }
   // the mouse needs a window; pictures and windowless runs take the scene tool's device
   const bool windowless = !o.screenshot.empty() || o.gl == "egl";
   const std::string kind = !o.device.empty()                ? o.device
@@ -277,9 +299,10 @@ int run_picture(const ViewOptions& o, Viewer& v) {
   const HapticSnapshot snap = loop.snapshot();
 
   OffscreenTarget target(o.width, o.height);
+  long shown = -1;
+  update_mesh(v, snap, &v.mesh_version, &shown);
   v.positions->update(loop);
   update_field(v, parse_field_kind(o.field));
-  long shown = -1;
   update_roles(loop, *v.renderer, snap, !hide.region, &shown);
   std::unique_ptr<Overlay> overlay = hide.overlay ? nullptr : std::make_unique<Overlay>(nullptr);
   const OverlayFacts facts = facts_of(loop, v.mesh, v.session, *v.ctx, *v.positions);
@@ -309,6 +332,9 @@ int run_picture(const ViewOptions& o, Viewer& v) {
   pf.field_range[0] = v.field.lo;
   pf.field_range[1] = v.field.hi;
   pf.force_samples = long(v.forces.size());
+  pf.nodes = v.mesh.n_nodes;
+  const std::vector<std::uint8_t> cut = cut_faces(v.mesh);
+  pf.cut_triangles = long(std::count(cut.begin(), cut.end(), std::uint8_t(1)));
   const std::string json_path = o.screenshot + ".json";
   io::write_file_atomic(json_path, picture_json(pf));
   fmt::print("wrote {} ({}x{}, {} ticks, {}, |F| = {:.4f} N, {}) and {}\n", o.screenshot, o.width, o.height,
@@ -324,6 +350,7 @@ struct Input {
   MouseController* mouse = nullptr;
   Overlay* overlay = nullptr;
   bool reset = false;
+  bool scalpel = false;  ///< C: the scalpel toggled
 };
 
 /// Cursor position in framebuffer pixels (the camera's units).
@@ -372,6 +399,7 @@ void install_input(GLFWwindow* w, Input* in) {
     if (action != GLFW_PRESS) return;
     if (key == GLFW_KEY_ESCAPE) glfwSetWindowShouldClose(win, GLFW_TRUE);
     if (key == GLFW_KEY_R) in->reset = true;
+    if (key == GLFW_KEY_C) in->scalpel = true;
   });
 }
 
@@ -392,7 +420,7 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
   std::unique_ptr<OffscreenTarget> offscreen = win ? nullptr : std::make_unique<OffscreenTarget>(o.width, o.height);
   std::unique_ptr<Overlay> overlay = hide.overlay ? nullptr : std::make_unique<Overlay>(win);
   input.overlay = overlay.get();
-  const OverlayFacts facts = facts_of(loop, v.mesh, v.session, *v.ctx, *v.positions);
+  OverlayFacts facts = facts_of(loop, v.mesh, v.session, *v.ctx, *v.positions);
   fmt::print("tissue view: {} on {} ({}); GL {}; positions: {}\n", v.session.scene.source, facts.backend,
              to_string(v.session.params.precision), facts.gl, facts.positions);
   loop.start();
@@ -420,6 +448,19 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
       loop.request_params(snap.params);
       input.reset = false;
     }
+    if (input.scalpel) {  // a rebuild: the tissue restarts from rest with the tool changed
+      LiveParams p = snap.params;
+      p.scalpel = !p.scalpel;
+      loop.request_params(p);
+      input.scalpel = false;
+    }
+    if (snap.mesh_version != v.mesh_version) {
+      update_mesh(v, snap, &v.mesh_version, &shown_region);
+      facts.n_nodes = v.mesh.n_nodes;
+      facts.n_elems = v.mesh.n_elems;
+      facts.n_tris = v.mesh.n_tris;
+      facts.positions = v.positions->path();
+    }
     update_roles(loop, *v.renderer, snap, !hide.region, &shown_region);
     v.positions->update(loop);
     sample_forces(v, snap);
@@ -444,6 +485,7 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
       if (act.friction) loop.set_friction(*act.friction);
       if (act.smooth) v.renderer->set_shading(*act.smooth ? Shading::Smooth : Shading::Flat);
       if (act.reset) loop.request_params(snap.params);
+      if (act.scalpel) input.scalpel = true;  // the next frame rebuilds, as the C key does
     }
     if (win) v.ctx->swap_buffers();
     else glFinish();  // the frame's work is done, as a swap would have it

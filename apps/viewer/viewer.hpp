@@ -25,6 +25,7 @@ struct ViewOptions {
   std::string mouse_events;              ///< scripted mouse input for pictures (mouse_controller.hpp)
   double seconds = 0;                    ///< close after this long (0: when the window closes; required without one)
   bool repeat = false;                   ///< scripted device: play the path over and over
+  bool scalpel = false;                  ///< the first tool is a blade, its button cuts (LiveParams::scalpel)
   double mouse_speed = 0.25;             ///< fastest the mouse moves the tool (m/s)
   double arrow_scale = 0;                ///< force arrow length (m per N); 0: 1.5 x the organ's diagonal
   double fps = 60;                       ///< interactive: most frames per second (the display yields the rest)
