@@ -238,9 +238,9 @@ int run(const Options& o) {
   fmt::print("{}\n", describe(s.stats));
   fmt::print("haptic thread: {}\n", s.realtime ? "SCHED_FIFO (real-time)" : "normal priority");
   fmt::print("session: {} ticks in {:.2f} s ({:.1f} Hz), TLED {} steps/tick, {} display frames, {} region downloads, "
-             "{} rebuilds, final |F| = {:.4f} N\n",
+             "{} rebuilds, {} cuts since the last (re)build, {} nodes, final |F| = {:.4f} N\n",
              s.stats.ticks, o.seconds, s.stats.session_rate_hz, s.steps_per_tick, display.frames,
-             display.region_downloads, s.sim_version - 1, norm(s.rendered_force));
+             display.region_downloads, s.sim_version - 1, s.cuts, display.staging.size() / 3, norm(s.rendered_force));
   int rc = 0;
   if (!loop.status().empty()) {
     fmt::print(stderr, "haptic session: {}\n", loop.status());
