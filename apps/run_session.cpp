@@ -16,6 +16,7 @@
 #include "scene/checks.hpp"
 #include "scene/validate.hpp"
 #include "session/engine.hpp"
+#include "session/session.hpp"
 
 namespace tissue::app {
 namespace {
@@ -144,7 +145,7 @@ int run_scene(const RunOptions& o) {
   set_activity(fmt::format("building the model of {}", s.source));
   // validates the whole scene first
   const auto model_ptr = std::make_shared<const TissueModel<double>>(scene::load_model(s));
-  const TissueModel<double>& model = *model_ptr;
+  const TissueModel<double>& model = *model_ptr;  // before any cut
   std::vector<ScriptedDevice> devices = scripted_devices(s);
   std::vector<Device*> device_ptrs;
   for (ScriptedDevice& d : devices) device_ptrs.push_back(&d);
@@ -170,9 +171,22 @@ int run_scene(const RunOptions& o) {
       fmt::print("--overwrite: removed {} files of the previous run from {}\n", folder->removed(), o.out_dir);
   }
   set_activity(fmt::format("uploading {} to the {} backend", s.source, s.solver.backend));
-  Engine engine = build_engine(s, settings, model_ptr);
-  Backend* backend = engine.backend.get();
-  Scheduler& sched = *engine.scheduler;
+  // a scene with a blade runs as a Session, which makes the blade's cuts (docs/cutting.md): its mesh, model and
+  // backend change between ticks; every other scene runs its engine alone
+  const bool blades = std::any_of(s.tools.begin(), s.tools.end(),
+                                  [](const scene::Tool& t) { return t.kind == scene::Tool::Kind::Blade; });
+  Engine engine;
+  std::unique_ptr<Session> session;
+  if (blades) {
+    session = std::make_unique<Session>(std::make_shared<const scene::Scene>(s), model_ptr,
+                                        create_backend(s.solver.backend, s.solver.precision));
+    session->drive_with(device_ptrs);
+  } else {
+    engine = build_engine(s, settings, model_ptr);
+  }
+  Engine& live = session ? session->engine() : engine;
+  const Backend* backend = live.backend.get();
+  Scheduler& sched = *live.scheduler;
 
   fmt::print("running {} ticks of {} on {} ({}), region depth {}\n", n_ticks, s.source, backend->name(),
              to_string(backend->precision()), settings.depth == kDepthAll ? "all" : settings.depth == kDepthAuto ? "auto" : std::to_string(settings.depth));
@@ -197,13 +211,13 @@ int run_scene(const RunOptions& o) {
   auto last_progress = t0;
   try {
     for (long k = 0; k < n_ticks && !InterruptGuard::requested(); ++k) {
-      rep = sched.tick(device_ptrs);
+      rep = session ? session->tick() : sched.tick(device_ptrs);
       for (std::size_t t = 0; t < sum.tools.size(); ++t)
         sum.tools[t].peak_force = std::max(sum.tools[t].peak_force, norm(rep.tools[t].force));
       for (const std::string& note : sched.take_notes()) fmt::print(stderr, "note: {}\n", note);
       if (log) log->write(rep);
       if (frames && ((k + 1) % frame_every == 0 || k + 1 == n_ticks)) {
-        frames->write(model, backend->download(), rep.time);
+        frames->write(*live.model, live.backend->download(), rep.time);  // a cut's mesh in each frame after it
         last_frame = k + 1;
       }
       if (!o.quiet && seconds_since(last_progress) > 1.0) {
@@ -214,11 +228,12 @@ int run_scene(const RunOptions& o) {
       }
     }
   } catch (const SimulationError& e) {
+    if (session) throw;  // its stop names the likely causes already (Session::tick)
     throw SimulationError(e.what() + scene::stop_cause_text(s, model));  // the log keeps the ticks that ran
   }
   if (InterruptGuard::requested()) {
     sum.stopped_by = InterruptGuard::signal_name();
-    if (frames && sched.ticks() > last_frame) frames->write(model, backend->download(), rep.time);  // the last state
+    if (frames && sched.ticks() > last_frame) frames->write(*live.model, live.backend->download(), rep.time);  // the last state
   }
   if (log) log->close();
   sum.wall_time = seconds_since(t0);
@@ -233,7 +248,12 @@ int run_scene(const RunOptions& o) {
   sum.region_nodes = rep.region_nodes;
   sum.region_elems = rep.region_elems;
   sum.equilibrium = rep.equilibrium;
-  print_summary(sum, *backend, model, sched.steps_per_tick());
+  print_summary(sum, *live.backend, *live.model, sched.steps_per_tick());
+  if (session)
+    fmt::print("cuts: {} by the blade{}, the mesh now {} nodes and {} elements (was {} and {})\n", session->cuts(),
+               std::count_if(s.tools.begin(), s.tools.end(),
+                             [](const scene::Tool& t) { return t.kind == scene::Tool::Kind::Blade; }) > 1 ? "s" : "",
+               live.model->n_nodes, live.model->n_elems, model.n_nodes, model.n_elems);
   if (folder)
     fmt::print("wrote {} ({} rows){}\n", log->path(), log->rows(),
                frames ? fmt::format(" and {} ({} frames)", frames->pvd_path(), frames->frames()) : "");

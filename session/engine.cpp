@@ -25,8 +25,8 @@ Engine build_engine(const scene::Scene& s, std::optional<SchedulerSettings> sett
   for (const scene::Tool& t : s.tools)
     if (t.kind == scene::Tool::Kind::Blade)
       throw std::invalid_argument(fmt::format(
-          "{}: tool '{}' is a blade; blades cut in a Simulation (C++, C and Python: docs/cutting.md) and in tissue "
-          "view; tissue run, the benchmarks and the accuracy commands do not run them yet",
+          "{}: tool '{}' is a blade; blades cut in a Simulation (C++, C and Python: docs/cutting.md), tissue run "
+          "and tissue view; the benchmarks and the accuracy commands do not run them yet",
           s.source, t.name));
   Engine e;
   e.model = model ? std::move(model) : std::make_shared<const TissueModel<double>>(scene::load_model(s));

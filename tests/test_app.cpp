@@ -28,6 +28,7 @@
 #include "apps/run_session.hpp"
 #include "apps/viewer/view_command.hpp"
 #include "bench/bench.hpp"
+#include "core/box_mesh.hpp"
 #include "io/scene_xml.hpp"
 #include "scene/checks.hpp"
 #include "scene/validate.hpp"
@@ -449,6 +450,66 @@ TEST(Program, CutWritesASceneThatRuns) {
   args.insert(args.end(), blade.begin(), blade.end());
   EXPECT_EQ(run_tissue(t, "far", args), 1);
   EXPECT_NE(slurp(t.file("far.err")).find("crosses no element"), std::string::npos) << slurp(t.file("far.err"));
+}
+
+// `tissue run` on a scene with a blade: an 8 x 8 x 4 block of 2.5 mm cells
+// cut by a blade pushed down through it with its button held (the stroke of
+// tests/test_live_cut.cpp). It runs as a Session: the summary counts the
+// cuts, and the last frame holds the cut mesh, the nodes the summary says.
+TEST(Program, RunCutsWithABladeAndItsFramesHoldTheCutMesh) {
+  TempDir t;
+  scene::Scene s;
+  ModelInput in;
+  box_mesh(in, 8, 8, 4, 0.02, 0.02, 0.01);
+  s.source = "block";
+  s.nodes = in.nodes;
+  s.tets = in.tets;
+  s.materials.push_back({.name = "soft", .form = scene::Material::Form::YoungPoisson, .a = 3000, .b = 0.4, .rho = 1000});
+  s.sets.push_back({.name = "soft", .material = "soft", .all = true, .elements = {}});
+  scene::Constraint base;
+  base.kind = scene::Constraint::Kind::Box;
+  base.lo[0] = base.lo[1] = base.lo[2] = -1;
+  base.hi[0] = base.hi[1] = 1;
+  base.hi[2] = 1e-4;
+  s.constraints = {base};
+  scene::Tool blade;
+  blade.kind = scene::Tool::Kind::Blade;
+  blade.name = "scalpel";
+  blade.radius = 5e-4;
+  blade.shaft = 0.03;
+  blade.cut_resistance = 5;
+  blade.direction = {0, 1, 0};
+  blade.path = {{0, {0.0112, -0.005, 0.0115}, true}, {1, {0.0112, -0.005, 0.002}, true}};
+  s.tools = {blade};
+  s.solver.precision = Precision::Double;
+  s.solver.depth = kDepthAll;
+  s.solver.mass_scaling = 0;
+  s.solver.dt_safety = 0.5;
+  io::write_scene(s, t.file("blade.xml"), true);
+  const std::string out = t.file("out");
+  ASSERT_EQ(run_tissue(t, "run", {"run", t.file("blade.xml"), "--frames", "2", "--out", out, "--quiet"}), 0)
+      << slurp(t.file("run.err"));
+  const std::string text = slurp(t.file("run.out"));
+  const size_t at = text.find("cuts: ");
+  ASSERT_NE(at, std::string::npos) << text;
+  EXPECT_GT(std::stol(text.substr(at + 6)), 0) << text;
+  const auto points = [](const std::string& vtu) {
+    pugi::xml_document doc;
+    EXPECT_TRUE(doc.load_file(vtu.c_str())) << vtu;
+    long n = 0;
+    for (pugi::xpath_node p : doc.select_nodes("//Piece")) n += p.node().attribute("NumberOfPoints").as_int();
+    return n;
+  };
+  std::vector<std::string> frames;
+  for (const auto& e : std::filesystem::directory_iterator(out))
+    if (e.path().extension() == ".vtu") frames.push_back(e.path().string());
+  std::sort(frames.begin(), frames.end());
+  ASSERT_EQ(frames.size(), 2u);
+  const size_t now = text.find("the mesh now ");
+  ASSERT_NE(now, std::string::npos) << text;
+  const long nodes = std::stol(text.substr(now + 13));
+  EXPECT_GT(nodes, 9 * 9 * 5) << text;
+  EXPECT_EQ(points(frames.back()), nodes) << "the last frame holds the cut mesh";
 }
 
 // `tissue run` prints what the run will cost before it builds the backend;
