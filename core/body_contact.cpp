@@ -11,6 +11,7 @@
 #include <string>
 #include <unordered_map>
 
+#include "core/cut.hpp"
 #include "core/model.hpp"
 
 namespace tissue {
@@ -77,27 +78,11 @@ template <class T> Lips<T> find_lips(const TissueModel<T>& m, const BodyContactS
   const auto X = [&](index_t a) {
     return Vec3<double>{double(m.X[a]), double(m.X[std::size_t(n) + a]), double(m.X[2 * std::size_t(n) + a])};
   };
-  using Key = std::array<double, 9>;
-  struct KeyHash {
-    std::size_t operator()(const Key& k) const {
-      std::size_t h = 0;
-      for (double v : k) h = h * 1000003u ^ std::hash<double>{}(v);
-      return h;
-    }
-  };
-  std::unordered_map<Key, index_t, KeyHash> first;
-  first.reserve(std::size_t(nt));
+  const std::vector<index_t> twin = twin_triangles(std::span<const index_t>(m.tris), X);
   for (index_t t = 0; t < nt; ++t) {
-    std::array<Vec3<double>, 3> c = {X(m.tris[t]), X(m.tris[nt + t]), X(m.tris[2 * nt + t])};
-    std::sort(c.begin(), c.end(), [](const Vec3<double>& a, const Vec3<double>& b) {
-      return a.x != b.x ? a.x < b.x : a.y != b.y ? a.y < b.y : a.z < b.z;
-    });
-    const Key key = {c[0].x, c[0].y, c[0].z, c[1].x, c[1].y, c[1].z, c[2].x, c[2].y, c[2].z};
-    const auto [it, fresh] = first.emplace(key, t);
-    if (fresh) continue;
-    const index_t u = it->second;
-    if (body_of(spec, m.tris[u]) != body_of(spec, m.tris[t])) continue;  // two bodies' faces that coincide
-    L.tri[std::size_t(u)] = L.tri[std::size_t(t)] = 1;
+    const index_t u = twin[std::size_t(t)];
+    // not two bodies' faces that coincide
+    if (u >= 0 && body_of(spec, m.tris[u]) == body_of(spec, m.tris[t])) L.tri[std::size_t(t)] = 1;
   }
   for (index_t t = 0; t < nt; ++t) {
     if (!L.tri[std::size_t(t)]) continue;

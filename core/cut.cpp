@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <unordered_map>
 #include <numeric>
 #include <utility>
 
@@ -590,6 +591,34 @@ Vec3<double> pull_back(std::span<const double> X, std::span<const index_t> tets,
     if (least >= 0) break;  // inside this element
   }
   return p - shift;
+}
+
+std::vector<index_t> twin_triangles(std::span<const index_t> tris,
+                                    const std::function<Vec3<double>(index_t)>& position) {
+  const std::size_t nt = tris.size() / 3;
+  using Key = std::array<double, 9>;  // the sorted corners' coordinates
+  struct KeyHash {
+    std::size_t operator()(const Key& k) const {
+      std::size_t h = 0;
+      for (double v : k) h = h * 1000003u ^ std::hash<double>{}(v);
+      return h;
+    }
+  };
+  std::unordered_map<Key, index_t, KeyHash> first;
+  first.reserve(nt);
+  std::vector<index_t> twin(nt, -1);
+  for (std::size_t t = 0; t < nt; ++t) {
+    std::array<Vec3<double>, 3> c = {position(tris[t]), position(tris[nt + t]), position(tris[2 * nt + t])};
+    std::sort(c.begin(), c.end(), [](const Vec3<double>& a, const Vec3<double>& b) {
+      return a.x != b.x ? a.x < b.x : a.y != b.y ? a.y < b.y : a.z < b.z;
+    });
+    const Key key = {c[0].x, c[0].y, c[0].z, c[1].x, c[1].y, c[1].z, c[2].x, c[2].y, c[2].z};
+    const auto [it, fresh] = first.emplace(key, index_t(t));
+    if (fresh) continue;
+    twin[t] = it->second;
+    twin[std::size_t(it->second)] = index_t(t);
+  }
+  return twin;
 }
 
 }  // namespace tissue

@@ -37,6 +37,7 @@
 #pragma once
 
 #include <array>
+#include <functional>
 #include <span>
 #include <stdexcept>
 #include <vector>
@@ -152,5 +153,12 @@ MovingCut cut_moving(std::span<const double> nodes, std::span<const index_t> tet
 /// component-major, as cut_moving's.
 Vec3<double> pull_back(std::span<const double> nodes, std::span<const index_t> tets, std::span<const double> u,
                        Vec3<double> p);
+
+/// Each surface triangle's twin: another triangle on the same corner positions, or -1. A cut turns an
+/// interior face into two such twins (its nodes copied at the same reference place), so a cut's faces are
+/// the triangles with a twin. `tris` holds corner k of triangle t at k * n_tris + t (TissueModel::tris),
+/// `position(a)` node a's reference position.
+std::vector<index_t> twin_triangles(std::span<const index_t> tris,
+                                    const std::function<Vec3<double>(index_t)>& position);
 
 }  // namespace tissue

@@ -1,7 +1,6 @@
 #include "apps/viewer/surface_rings.hpp"
 
-#include <algorithm>
-#include <array>
+#include "core/cut.hpp"
 
 namespace tissue::viewer {
 
@@ -30,23 +29,12 @@ SurfaceRings surface_rings(const TissueModel<double>& m) {
 }
 
 std::vector<std::uint8_t> cut_faces(const TissueModel<double>& m) {
-  const std::size_t nt = std::size_t(m.n_tris), n = std::size_t(m.n_nodes);
-  // each triangle's corners' reference positions, sorted: twins have equal keys
-  using Key = std::array<std::array<double, 3>, 3>;
-  std::vector<Key> key(nt);
-  for (std::size_t t = 0; t < nt; ++t) {
-    for (int v = 0; v < 3; ++v) {
-      const std::size_t a = std::size_t(m.tris[std::size_t(v) * nt + t]);
-      key[t][std::size_t(v)] = {m.X[a], m.X[n + a], m.X[2 * n + a]};
-    }
-    std::sort(key[t].begin(), key[t].end());
-  }
-  std::vector<std::size_t> order(nt);
-  for (std::size_t t = 0; t < nt; ++t) order[t] = t;
-  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return key[a] < key[b]; });
-  std::vector<std::uint8_t> cut(nt, 0);
-  for (std::size_t k = 1; k < nt; ++k)
-    if (key[order[k]] == key[order[k - 1]]) cut[order[k]] = cut[order[k - 1]] = 1;
+  const std::size_t n = std::size_t(m.n_nodes);
+  const std::vector<index_t> twin = twin_triangles(std::span<const index_t>(m.tris), [&](index_t a) {
+    return Vec3<double>{m.X[std::size_t(a)], m.X[n + std::size_t(a)], m.X[2 * n + std::size_t(a)]};
+  });
+  std::vector<std::uint8_t> cut(twin.size());
+  for (std::size_t t = 0; t < twin.size(); ++t) cut[t] = twin[t] >= 0 ? 1 : 0;
   return cut;
 }
 
