@@ -173,23 +173,20 @@ int run_scene(const RunOptions& o) {
   set_activity(fmt::format("uploading {} to the {} backend", s.source, s.solver.backend));
   // a scene with a blade runs as a Session, which makes the blade's cuts (docs/cutting.md): its mesh, model and
   // backend change between ticks; every other scene runs its engine alone
-  const bool blades = std::any_of(s.tools.begin(), s.tools.end(),
-                                  [](const scene::Tool& t) { return t.kind == scene::Tool::Kind::Blade; });
   Engine engine;
   std::unique_ptr<Session> session;
-  if (blades) {
+  if (has_blade(s)) {
     session = std::make_unique<Session>(std::make_shared<const scene::Scene>(s), model_ptr,
                                         create_backend(s.solver.backend, s.solver.precision));
     session->drive_with(device_ptrs);
   } else {
     engine = build_engine(s, settings, model_ptr);
   }
-  Engine& live = session ? session->engine() : engine;
-  const Backend* backend = live.backend.get();
+  Engine& live = session ? session->engine() : engine;  // a cut replaces its model and backend
   Scheduler& sched = *live.scheduler;
 
-  fmt::print("running {} ticks of {} on {} ({}), region depth {}\n", n_ticks, s.source, backend->name(),
-             to_string(backend->precision()), settings.depth == kDepthAll ? "all" : settings.depth == kDepthAuto ? "auto" : std::to_string(settings.depth));
+  fmt::print("running {} ticks of {} on {} ({}), region depth {}\n", n_ticks, s.source, live.backend->name(),
+             to_string(live.backend->precision()), settings.depth == kDepthAll ? "all" : settings.depth == kDepthAuto ? "auto" : std::to_string(settings.depth));
 
   std::optional<io::TickLog> log;
   std::optional<io::VtuSeries> frames;
@@ -250,10 +247,8 @@ int run_scene(const RunOptions& o) {
   sum.equilibrium = rep.equilibrium;
   print_summary(sum, *live.backend, *live.model, sched.steps_per_tick());
   if (session)
-    fmt::print("cuts: {} by the blade{}, the mesh now {} nodes and {} elements (was {} and {})\n", session->cuts(),
-               std::count_if(s.tools.begin(), s.tools.end(),
-                             [](const scene::Tool& t) { return t.kind == scene::Tool::Kind::Blade; }) > 1 ? "s" : "",
-               live.model->n_nodes, live.model->n_elems, model.n_nodes, model.n_elems);
+    fmt::print("cuts: {}, the mesh now {} nodes and {} elements (was {} and {})\n", session->cuts(), live.model->n_nodes,
+               live.model->n_elems, model.n_nodes, model.n_elems);
   if (folder)
     fmt::print("wrote {} ({} rows){}\n", log->path(), log->rows(),
                frames ? fmt::format(" and {} ({} frames)", frames->pvd_path(), frames->frames()) : "");

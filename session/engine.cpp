@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <stdexcept>
 
 #include "backends/registry.hpp"
@@ -16,6 +17,11 @@ void start_engine(Engine& e, const scene::Scene& s, const SchedulerSettings& set
     e.scheduler->set_loads(loads->nodes, loads->force);
   else
     scene::apply_loads(s, *e.model, *e.scheduler);
+}
+
+bool has_blade(const scene::Scene& s) {
+  return std::any_of(s.tools.begin(), s.tools.end(),
+                     [](const scene::Tool& t) { return t.kind == scene::Tool::Kind::Blade; });
 }
 
 Engine build_engine(const scene::Scene& s, std::optional<SchedulerSettings> settings,

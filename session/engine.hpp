@@ -27,6 +27,10 @@ struct Engine {
 void start_engine(Engine& e, const scene::Scene& s, const SchedulerSettings& settings,
                   const scene::SceneLoads* loads = nullptr);
 
+/// Whether a tool of the scene is a blade: its cuts replace the scene and
+/// the model, so it runs as a Session (session/session.hpp), not an engine.
+bool has_blade(const scene::Scene& s);
+
 /// The assembly of a scene: its model (scene::load_model, which validates
 /// the whole scene; or `model` when the caller built it), the backend its
 /// solver names at its precision, then start_engine with `settings` (unset:

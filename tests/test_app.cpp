@@ -28,10 +28,10 @@
 #include "apps/run_session.hpp"
 #include "apps/viewer/view_command.hpp"
 #include "bench/bench.hpp"
-#include "core/box_mesh.hpp"
 #include "io/scene_xml.hpp"
 #include "scene/checks.hpp"
 #include "scene/validate.hpp"
+#include "tests/cut_scenes.hpp"
 #include "tests/temp_dir.hpp"
 
 namespace tissue::app {
@@ -458,33 +458,7 @@ TEST(Program, CutWritesASceneThatRuns) {
 // cuts, and the last frame holds the cut mesh, the nodes the summary says.
 TEST(Program, RunCutsWithABladeAndItsFramesHoldTheCutMesh) {
   TempDir t;
-  scene::Scene s;
-  ModelInput in;
-  box_mesh(in, 8, 8, 4, 0.02, 0.02, 0.01);
-  s.source = "block";
-  s.nodes = in.nodes;
-  s.tets = in.tets;
-  s.materials.push_back({.name = "soft", .form = scene::Material::Form::YoungPoisson, .a = 3000, .b = 0.4, .rho = 1000});
-  s.sets.push_back({.name = "soft", .material = "soft", .all = true, .elements = {}});
-  scene::Constraint base;
-  base.kind = scene::Constraint::Kind::Box;
-  base.lo[0] = base.lo[1] = base.lo[2] = -1;
-  base.hi[0] = base.hi[1] = 1;
-  base.hi[2] = 1e-4;
-  s.constraints = {base};
-  scene::Tool blade;
-  blade.kind = scene::Tool::Kind::Blade;
-  blade.name = "scalpel";
-  blade.radius = 5e-4;
-  blade.shaft = 0.03;
-  blade.cut_resistance = 5;
-  blade.direction = {0, 1, 0};
-  blade.path = {{0, {0.0112, -0.005, 0.0115}, true}, {1, {0.0112, -0.005, 0.002}, true}};
-  s.tools = {blade};
-  s.solver.precision = Precision::Double;
-  s.solver.depth = kDepthAll;
-  s.solver.mass_scaling = 0;
-  s.solver.dt_safety = 0.5;
+  const scene::Scene s = test::blade_scene(true, 5);
   io::write_scene(s, t.file("blade.xml"), true);
   const std::string out = t.file("out");
   ASSERT_EQ(run_tissue(t, "run", {"run", t.file("blade.xml"), "--frames", "2", "--out", out, "--quiet"}), 0)

@@ -9,7 +9,7 @@
 
 #include "apps/viewer/session.hpp"
 #include "apps/viewer/surface_rings.hpp"
-#include "core/box_mesh.hpp"
+#include "cut_scenes.hpp"
 #include "io/kidney.hpp"
 #include "scene/validate.hpp"
 
@@ -71,35 +71,16 @@ TEST(ViewerSession, BadEditsNameTheSceneAndTheMaterial) {
   }
 }
 
-/// An 8 x 8 x 4 block of 2.5 mm cells (E 3 kPa, nu 0.4, its base held, no
-/// mass scaling, the whole mesh in double) with a probe pushed straight down
-/// through it at x = 11.2 mm with its button held, its shaft along y.
+/// The cutting tests' 8 x 8 x 4 block (tests/cut_scenes.hpp) with a probe
+/// in the blade's place: pushed straight down through it at x = 11.2 mm with
+/// its button held, its shaft along y, cut resistance 5 N/m.
 scene::Scene block_with_probe() {
-  scene::Scene s;
-  ModelInput in;
-  box_mesh(in, 8, 8, 4, 0.02, 0.02, 0.01);
-  s.source = "block";
-  s.nodes = in.nodes;
-  s.tets = in.tets;
-  s.materials.push_back({.name = "soft", .form = scene::Material::Form::YoungPoisson, .a = 3000, .b = 0.4, .rho = 1000});
-  s.sets.push_back({.name = "soft", .material = "soft", .all = true, .elements = {}});
-  scene::Constraint base;
-  base.kind = scene::Constraint::Kind::Box;
-  base.lo[0] = base.lo[1] = base.lo[2] = -1;
-  base.hi[0] = base.hi[1] = 1;
-  base.hi[2] = 1e-4;
-  s.constraints = {base};
-  scene::Tool probe;
+  scene::Scene s = test::blade_scene(true, 5);
+  scene::Tool& probe = s.tools.front();
+  probe.kind = scene::Tool::Kind::Probe;
   probe.name = "probe";
   probe.radius = 2e-3;
-  probe.direction = {0, 1, 0};
-  probe.cut_resistance = 5;  // N/m: the block is soft
-  probe.path = {{0, {0.0112, -0.005, 0.0115}, true}, {1, {0.0112, -0.005, 0.002}, true}};
-  s.tools = {probe};
-  s.solver.precision = Precision::Double;
-  s.solver.depth = kDepthAll;
-  s.solver.mass_scaling = 0;
-  s.solver.dt_safety = 0.5;
+  probe.shaft = 0;
   return s;
 }
 

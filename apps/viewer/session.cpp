@@ -50,8 +50,7 @@ scene::Scene with_params(scene::Scene s, const LiveParams& p) {
 Simulated build_simulation(const scene::Scene& base, const LiveParams& p) {
   scene::Scene s = with_params(base, p);
   // a blade's cuts are a Session's; every other scene runs its engine alone, as it always has
-  for (const scene::Tool& t : s.tools)
-    if (t.kind == scene::Tool::Kind::Blade) return std::make_unique<tissue::Session>(std::move(s));
+  if (has_blade(s)) return std::make_unique<tissue::Session>(std::move(s));
   return build_engine(s);
 }
 

@@ -456,10 +456,7 @@ int run_interactive(const ViewOptions& o, Viewer& v) {
     }
     if (snap.mesh_version != v.mesh_version) {
       update_mesh(v, snap, &v.mesh_version, &shown_region);
-      facts.n_nodes = v.mesh.n_nodes;
-      facts.n_elems = v.mesh.n_elems;
-      facts.n_tris = v.mesh.n_tris;
-      facts.positions = v.positions->path();
+      facts = facts_of(loop, v.mesh, v.session, *v.ctx, *v.positions);
     }
     update_roles(loop, *v.renderer, snap, !hide.region, &shown_region);
     v.positions->update(loop);
