@@ -686,18 +686,31 @@ void bench_cut(Context& c, Precision p) {
   const long delay = std::lround(std::ceil(0.1 / live.settings().tick - 1e-9));  // a blade's cut-delay="0.1"
   const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(live.settings().tick));
   std::vector<double> cutting, commit_s, prepare_s;
+  // the commit's parts (their medians), and the ticks from the commit's on (the most over the cuts)
+  std::vector<double> parts[4];
+  constexpr int kAfter = 8;
+  std::vector<double> from_commit(kAfter + 1, 0.0);
   for (double x : kPlanes) {
     live.begin_cut(across(x), {}, CutSpace::Deformed, live.scheduler().ticks() + delay);
     auto deadline = Clock::now();
+    int since_commit = -1;
     for (int k = 0; k < delay + (c.o.quick ? 2 : 20); ++k) {
+      const long cuts = live.cuts();
       const auto t0 = Clock::now();
       live.tick();
       cutting.push_back(since(t0));
+      if (live.cuts() != cuts) since_commit = 0;
+      if (since_commit >= 0 && since_commit <= kAfter) {
+        from_commit[std::size_t(since_commit)] = std::max(from_commit[std::size_t(since_commit)], cutting.back());
+        ++since_commit;
+      }
       deadline += period;
       std::this_thread::sleep_until(deadline);
     }
     commit_s.push_back(live.last_cut_seconds());
     prepare_s.push_back(live.last_cut_prepare_seconds());
+    const Session::CommitTimes& t = live.last_commit_times();
+    for (int j = 0; const double part : {t.motion, t.swap, t.loads, t.upload}) parts[j++].push_back(part);
   }
   // beside them, as many ticks paced alike with no cut (the machine's own stalls)
   std::vector<double> paced;
@@ -728,6 +741,13 @@ void bench_cut(Context& c, Precision p) {
   r.add("prepare_ms_median", 1e3 * prepare_s[prepare_s.size() / 2]);
   r.add("commit_ms_median", 1e3 * commit_s[commit_s.size() / 2]);
   r.add("commit_ms_max", 1e3 * commit_s.back());
+  for (int j = 0; const char* part : {"motion", "swap", "loads", "upload"}) {
+    std::vector<double>& v = parts[j++];
+    std::sort(v.begin(), v.end());
+    r.add(fmt::format("commit_ms_median_{}", part), 1e3 * v[v.size() / 2]);
+  }
+  r.add("tick_ms_max_at_commit", 1e3 * from_commit[0]);
+  for (int j = 1; j <= kAfter; ++j) r.add(fmt::format("tick_ms_max_commit_plus_{}", j), 1e3 * from_commit[std::size_t(j)]);
   r.add("tick_ms_p50_while_cutting", 1e3 * cutting[cutting.size() / 2]);
   r.add("tick_ms_p99_while_cutting", 1e3 * cutting[cutting.size() * 99 / 100]);
   r.add("tick_ms_max_while_cutting", 1e3 * cutting.back());

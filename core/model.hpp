@@ -150,6 +150,11 @@ Vec3<T> reference_position(const TissueModel<T>& m, index_t a) {
   return {m.X[a], m.X[std::size_t(m.n_nodes) + a], m.X[2 * std::size_t(m.n_nodes) + a]};
 }
 
+/// The median length of the surface triangles' edges (m) in the reference
+/// configuration (0 without triangles).
+template <class T>
+double median_surface_edge(const TissueModel<T>& m);
+
 /// Precomputes the model from the input; throws ModelError for zero-volume
 /// tets (relative to the tet's size; coordinates whose volumes overflow or
 /// underflow are named as such), two elements with the same four nodes,

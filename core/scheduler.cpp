@@ -88,19 +88,6 @@ std::optional<ToolPose> retracted_from_reference_surface(const TissueModel<doubl
   return std::nullopt;
 }
 
-/// The median length of the model's surface edges (m).
-double median_surface_edge(const TissueModel<double>& m) {
-  const index_t nt = m.n_tris;
-  std::vector<double> len;
-  len.reserve(3 * std::size_t(nt));
-  for (index_t t = 0; t < nt; ++t)
-    for (int k = 0; k < 3; ++k)
-      len.push_back(norm(reference_position(m, m.tris[k * nt + t]) - reference_position(m, m.tris[((k + 1) % 3) * nt + t])));
-  if (len.empty()) return 0;
-  std::nth_element(len.begin(), len.begin() + long(len.size() / 2), len.end());
-  return len[len.size() / 2];
-}
-
 Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, SchedulerSettings settings)
     : backend_(&backend), model_(&model), settings_(std::move(settings)) {
   check_settings(settings_, model);
@@ -158,12 +145,12 @@ void Scheduler::remesh(const TissueModel<double>& model, std::span<const std::ar
 }
 
 void Scheduler::remesh(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from,
-                       Backend& fresh, const PreparedRegion& prepared) {
+                       Backend& fresh, const PreparedRemesh& prepared) {
   remesh_onto(model, node_from, fresh, &prepared);
 }
 
 void Scheduler::remesh_onto(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from,
-                            Backend& backend, const PreparedRegion* prepared) {
+                            Backend& backend, const PreparedRemesh* prepared) {
   if (pending_) throw std::logic_error("Scheduler::remesh: a tick was begun and not ended (end_tick)");
   if (node_from.size() != std::size_t(model.n_nodes) || backend.n_nodes() != model.n_nodes)
     throw std::invalid_argument(fmt::format("Scheduler::remesh: {} node origins and a backend of {} nodes for {} "
@@ -183,7 +170,7 @@ void Scheduler::remesh_onto(const TissueModel<double>& model, std::span<const st
   settings_.body_contact.lips = lips_on();
   settings_.body_contact.lip_friction = settings_.lip_friction;
   give_backend_tools();
-  follow_step_ = 0.5 * median_surface_edge(model);
+  follow_step_ = 0.5 * (prepared ? prepared->surface_edge : median_surface_edge(model));
   seeds_ = seeds_after(seeds_, node_from);
   region_ = prepared && seeds_ == prepared->seeds && depth == prepared->depth ? prepared->sizes
                                                                                : backend_->build_region(seeds_, depth);

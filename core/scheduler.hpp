@@ -175,18 +175,20 @@ class Scheduler {
   /// the next remesh. Throws std::logic_error between begin_tick and
   /// end_tick.
   void remesh(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from);
-  /// A region a backend prepared for a remesh holds already (Backend::build_region of `seeds` at `depth`).
-  struct PreparedRegion {
+  /// What was made ready for a remesh off the tick's thread: the region the backend holds already
+  /// (Backend::build_region of `seeds` at `depth`) and the new model's median surface edge.
+  struct PreparedRemesh {
     std::vector<index_t> seeds;
     int depth = kDepthAll;
     RegionSizes sizes;
+    double surface_edge = 0;  ///< median_surface_edge of the new model (m)
   };
   /// remesh onto `fresh`, a backend that holds the new model already and
   /// replaces the Scheduler's from now on (the caller owns it and keeps the
   /// old one until this returns). Its region is `prepared` where the seeds
   /// and depth are still those it was built with, else built again.
   void remesh(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from, Backend& fresh,
-              const PreparedRegion& prepared);
+              const PreparedRemesh& prepared);
   /// The seeds of the region after a remesh (a new node is one where it comes from one).
   static std::vector<index_t> seeds_after(std::span<const index_t> seeds,
                                           std::span<const std::array<index_t, 2>> node_from);
@@ -219,7 +221,7 @@ class Scheduler {
   bool lips_suspended_ = false;  ///< suspend_lip_contact's
   /// Both remeshes: onto `backend` (the Scheduler's own or a fresh one), with the region it holds already, if any.
   void remesh_onto(const TissueModel<double>& model, std::span<const std::array<index_t, 2>> node_from,
-                   Backend& backend, const PreparedRegion* prepared);
+                   Backend& backend, const PreparedRemesh* prepared);
   void seed_region();
   bool grow_region(const Reductions& r);
   void check_health(const Reductions& r, long first_step) const;

@@ -214,26 +214,7 @@ const std::vector<index_t>& SurfaceBvh<T>::query_within_skin(const Box& box) {
   return kept_;
 }
 
-template <class T>
-double median_surface_edge(const TissueModel<T>& m) {
-  const index_t n = m.n_nodes, nt = m.n_tris;
-  std::vector<double> len;
-  len.reserve(3 * std::size_t(nt));
-  for (index_t t = 0; t < nt; ++t)
-    for (int k = 0; k < 3; ++k) {
-      const index_t a = m.tris[k * nt + t], b = m.tris[((k + 1) % 3) * nt + t];
-      double d2 = 0;
-      for (int c = 0; c < 3; ++c) d2 += (double(m.X[c * n + a]) - m.X[c * n + b]) * (double(m.X[c * n + a]) - m.X[c * n + b]);
-      len.push_back(std::sqrt(d2));
-    }
-  if (len.empty()) return 0;
-  std::nth_element(len.begin(), len.begin() + long(len.size() / 2), len.end());
-  return len[len.size() / 2];
-}
-
 template class SurfaceBvh<float>;
 template class SurfaceBvh<double>;
-template double median_surface_edge(const TissueModel<float>&);
-template double median_surface_edge(const TissueModel<double>&);
 
 }  // namespace tissue::cpu

@@ -105,9 +105,5 @@ class SurfaceBvh {
   bool full_check_ = true;
 };
 
-/// Median length of the surface triangles' edges (m) in the reference
-/// configuration (0 without triangles).
-template <class T>
-double median_surface_edge(const TissueModel<T>& m);
 
 }  // namespace tissue::cpu

@@ -401,6 +401,7 @@ Session::PreparedCut Session::prepare_cut(CutInput in) {
       p.region.seeds = Scheduler::seeds_after(in.seeds, p.made.cut.from);
       p.region.depth = in.depth;
       p.region.sizes = p.backend->build_region(p.region.seeds, in.depth);
+      p.region.surface_edge = median_surface_edge(*p.model);
       p.backend->set_motion(p.made.u, p.made.u_prev);
       p.backend->warm_up();
     });
@@ -485,6 +486,13 @@ SessionCut Session::commit_cut(PreparedCut&& p) {
   out.nodes_before = before.n_nodes;
   out.elements_before = before.n_elems;
   MovingCut& d = p.made;
+  CommitTimes times;
+  auto lap = std::chrono::steady_clock::now();
+  const auto took = [&lap](double& part) {
+    const auto now = std::chrono::steady_clock::now();
+    part = std::chrono::duration<double>(now - lap).count();
+    lap = now;
+  };
   if (p.tick != engine_.scheduler->ticks()) {  // prepared ticks ago: the motion of now, at the same material points
     d.u = d.transfer(backend().download().u);
     d.u_prev = d.transfer(backend().previous_displacements());
@@ -498,6 +506,7 @@ SessionCut Session::commit_cut(PreparedCut&& p) {
   const double ratio = cut_model->dt / before.dt;
   if (ratio != 1)
     for (std::size_t k = 0; k < d.u.size(); ++k) d.u_prev[k] = d.u[k] - ratio * (d.u[k] - d.u_prev[k]);
+  took(times.motion);
   // the host's loads on the nodes that keep their ids (a copy takes none: the total is kept)
   std::optional<scene::SceneLoads> loads = loads_;
   try {
@@ -514,11 +523,14 @@ SessionCut Session::commit_cut(PreparedCut&& p) {
       backend().upload(*cut_model);
       scheduler().remesh(*cut_model, d.cut.from);
     }
+    took(times.swap);
     if (loads)
       scheduler().set_loads(loads->nodes, loads->force);
     else
       scene::apply_loads(*cut_scene, *cut_model, scheduler());
+    took(times.loads);
     backend().set_motion(d.u, d.u_prev);
+    took(times.upload);
   } catch (const std::exception& e) {
     // the backend holds the cut mesh in part: this session cannot go on
     failure_ = fmt::format("the cut could not be carried over to the backend: {}", e.what());
@@ -533,6 +545,7 @@ SessionCut Session::commit_cut(PreparedCut&& p) {
   box_ = scene::mesh_box(scene_->nodes);
   fields_.reset();
   out.cut = std::move(d.cut);
+  last_commit_times_ = times;
   return out;
 }
 

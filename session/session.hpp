@@ -172,6 +172,13 @@ class Session {
   /// count since the start.
   double last_cut_seconds() const { return last_cut_seconds_; }
   double last_cut_prepare_seconds() const { return last_cut_prepare_seconds_; }
+  /// The last prepared cut's commit on the tick's thread, in its parts (s; `tissue bench --cut`): the motion
+  /// of now downloaded and carried to the cut mesh, the swap onto the prepared backend (the old one handed
+  /// to its release, the region built again where its seeds changed), the loads set, the motion uploaded.
+  struct CommitTimes {
+    double motion = 0, swap = 0, loads = 0, upload = 0;
+  };
+  const CommitTimes& last_commit_times() const { return last_commit_times_; }
   long cuts() const { return cuts_; }
 
   /// Whether the mesh was cut since the start or the last restart().
@@ -227,7 +234,7 @@ class Session {
     long tick = 0;
     double seconds = 0;  ///< its preparation's time
     std::unique_ptr<Backend> backend;
-    Scheduler::PreparedRegion region;
+    Scheduler::PreparedRemesh region;
   };
   static PreparedCut prepare_cut(CutInput in);
   /// The cut's input of now (the motion downloaded), for cut() (no backend) and begin_cut.
@@ -290,6 +297,7 @@ class Session {
   bool cores_lent_ = false;  ///< the backend leaves a core to the two above (share_cores)
   double last_cut_seconds_ = 0;
   double last_cut_prepare_seconds_ = 0;
+  CommitTimes last_commit_times_;
   long cuts_ = 0;
 };
 

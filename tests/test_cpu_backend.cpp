@@ -469,7 +469,7 @@ TEST(SurfaceBvh, RebuiltOnlyWhenTheSurfaceLeavesItsMargin) {
 /// full check after invalidate() whatever the shares found.
 TEST(SurfaceBvh, SharedMarginChecksRebuildAsOneCheckDoes) {
   const auto m = box_model(6);
-  const double margin = cpu::median_surface_edge(m);
+  const double margin = median_surface_edge(m);
   cpu::SurfaceBvh<double> one(m, margin), shared(m, margin);
   std::vector<double> u(3 * size_t(m.n_nodes), 0.0);
   one.update(u.data());
@@ -541,7 +541,7 @@ TEST(SurfaceBvh, DisplacementsBeyondTheRegionAreSeenByTheNextQuery) {
 /// box or the BVH was rebuilt, and skin 0 walks it every time.
 TEST(SurfaceBvh, SkinQueriesHoldThePlainQueryAndAreReusedWithinTheSkin) {
   const auto m = box_model(8, true);
-  cpu::SurfaceBvh<double> bvh(m, cpu::median_surface_edge(m)), bvh0(m, cpu::median_surface_edge(m));
+  cpu::SurfaceBvh<double> bvh(m, median_surface_edge(m)), bvh0(m, median_surface_edge(m));
   const std::vector<double> u(3 * size_t(m.n_nodes), 0.0);
   bvh.update(u.data());
   bvh0.update(u.data());
