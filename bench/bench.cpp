@@ -687,7 +687,7 @@ void bench_cut(Context& c, Precision p) {
   const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(live.settings().tick));
   std::vector<double> cutting, commit_s, prepare_s;
   // the commit's parts (their medians), and the ticks from the commit's on (the most over the cuts)
-  std::vector<double> parts[4];
+  std::vector<double> parts[5];
   constexpr int kAfter = 8;
   std::vector<double> from_commit(kAfter + 1, 0.0);
   for (double x : kPlanes) {
@@ -710,7 +710,7 @@ void bench_cut(Context& c, Precision p) {
     commit_s.push_back(live.last_cut_seconds());
     prepare_s.push_back(live.last_cut_prepare_seconds());
     const Session::CommitTimes& t = live.last_commit_times();
-    for (int j = 0; const double part : {t.motion, t.swap, t.loads, t.upload}) parts[j++].push_back(part);
+    for (int j = 0; const double part : {t.download, t.transfer, t.swap, t.loads, t.upload}) parts[j++].push_back(part);
   }
   // beside them, as many ticks paced alike with no cut (the machine's own stalls)
   std::vector<double> paced;
@@ -741,7 +741,7 @@ void bench_cut(Context& c, Precision p) {
   r.add("prepare_ms_median", 1e3 * prepare_s[prepare_s.size() / 2]);
   r.add("commit_ms_median", 1e3 * commit_s[commit_s.size() / 2]);
   r.add("commit_ms_max", 1e3 * commit_s.back());
-  for (int j = 0; const char* part : {"motion", "swap", "loads", "upload"}) {
+  for (int j = 0; const char* part : {"download", "transfer", "swap", "loads", "upload"}) {
     std::vector<double>& v = parts[j++];
     std::sort(v.begin(), v.end());
     r.add(fmt::format("commit_ms_median_{}", part), 1e3 * v[v.size() / 2]);

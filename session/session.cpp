@@ -501,8 +501,10 @@ SessionCut Session::commit_cut(PreparedCut&& p) {
     lap = now;
   };
   if (p.tick != engine_.scheduler->ticks()) {  // prepared ticks ago: the motion of now, at the same material points
-    d.u = d.transfer(backend().download().u);
-    d.u_prev = d.transfer(backend().previous_displacements());
+    const std::vector<double> u = backend().download().u, u_prev = backend().previous_displacements();
+    took(times.download);
+    d.u = d.transfer(u);
+    d.u_prev = d.transfer(u_prev);
   }
   std::shared_ptr<const TissueModel<double>> cut_model = std::move(p.model);
   std::shared_ptr<const scene::Scene> cut_scene = std::move(p.scene);
@@ -513,7 +515,7 @@ SessionCut Session::commit_cut(PreparedCut&& p) {
   const double ratio = cut_model->dt / before.dt;
   if (ratio != 1)
     for (std::size_t k = 0; k < d.u.size(); ++k) d.u_prev[k] = d.u[k] - ratio * (d.u[k] - d.u_prev[k]);
-  took(times.motion);
+  took(times.transfer);
   // the host's loads on the nodes that keep their ids (a copy takes none: the total is kept)
   std::optional<scene::SceneLoads> loads = loads_;
   try {

@@ -173,10 +173,10 @@ class Session {
   double last_cut_seconds() const { return last_cut_seconds_; }
   double last_cut_prepare_seconds() const { return last_cut_prepare_seconds_; }
   /// The last prepared cut's commit on the tick's thread, in its parts (s; `tissue bench --cut`): the motion
-  /// of now downloaded and carried to the cut mesh, the swap onto the prepared backend (the old one handed
-  /// to its release, the region built again where its seeds changed), the loads set, the motion uploaded.
+  /// of now downloaded, carried to the cut mesh, the swap onto the prepared backend (the old one handed to
+  /// its release, the region built again where its seeds changed), the loads set, the motion uploaded.
   struct CommitTimes {
-    double motion = 0, swap = 0, loads = 0, upload = 0;
+    double download = 0, transfer = 0, swap = 0, loads = 0, upload = 0;
   };
   const CommitTimes& last_commit_times() const { return last_commit_times_; }
   long cuts() const { return cuts_; }
