@@ -404,9 +404,10 @@ TEST(Blade, ItCutsWhereTheForcePerMetreReachesItsResistanceAndPressesBelowIt) {
 // ticks later is, in the reference configuration, the very cut cut() makes
 // then: the same mesh and, bit for bit, the same motion, then and 50 ticks
 // on (cpu, double). One at a time; restart drops one in preparation.
-TEST(DeferredCut, ACutTakingEffectLaterIsTheCutMadeThen) {
+/// The block pulled and cut through at x = 12 mm at the end of tick 40 twice: prepared from tick 30 on
+/// (`later`, begin_cut) and made then (`now`, cut()); both run on 50 ticks. The two must agree bit for bit.
+void expect_a_later_cut_to_be_the_cut_made_then(Session& later, Session& now) {
   const CutSurface plane = through_x(0.012);
-  Session later(block_scene()), now(block_scene());
   for (Session* s : {&later, &now}) {
     pull_right_top(*s);
     for (int k = 0; k < 30; ++k) s->tick();
@@ -429,6 +430,11 @@ TEST(DeferredCut, ACutTakingEffectLaterIsTheCutMadeThen) {
   EXPECT_EQ(later.backend().previous_displacements(), now.backend().previous_displacements());
   for (int k = 0; k < 50; ++k) later.tick(), now.tick();
   EXPECT_EQ(later.backend().download().u, now.backend().download().u) << "and runs on as it";
+}
+
+TEST(DeferredCut, ACutTakingEffectLaterIsTheCutMadeThen) {
+  Session later(block_scene()), now(block_scene());
+  expect_a_later_cut_to_be_the_cut_made_then(later, now);
 
   later.begin_cut(through_x(0.004), {}, CutSpace::Reference, later.scheduler().ticks() + 5);
   later.restart();
@@ -509,6 +515,16 @@ TEST(LiveCutCuda, ACutMidMotionGivesTheCpusPiecesAndMotion) {
     RecordProperty(dbl ? "double_u_gap_100_ticks_after" : "float_u_gap_100_ticks_after", g(after));
     EXPECT_LT(after, dbl ? 1e-9 : 1e-3) << (dbl ? "double" : "float");
   }
+}
+
+// A prepared cut on cuda (double): its backend, made on another thread,
+// given the tools and loads and its tick graphs captured there
+// (Backend::warm_up), ticks on bit for bit as the cut made then.
+TEST(LiveCutCuda, ACutTakingEffectLaterIsTheCutMadeThen) {
+  SKIP_UNLESS_USABLE("cuda");
+  Session later(on(block_scene(), "cuda", Precision::Double)), now(on(block_scene(), "cuda", Precision::Double));
+  ASSERT_EQ(later.backend().name(), "cuda");
+  expect_a_later_cut_to_be_the_cut_made_then(later, now);
 }
 
 // The blade on cuda: the same stroke through the block (double) makes the
