@@ -83,7 +83,6 @@ void Backend::upload(const TissueModel<double>& m) {
   grasp_pose_.clear();
   grasping_.clear();
   loaded_.clear();
-  load_.clear();
 }
 
 namespace {
@@ -114,10 +113,9 @@ void Backend::set_motion(std::span<const double> u, std::span<const double> u_pr
   do_set_motion(u, u_prev);
 }
 
-void Backend::warm_up(int steps) {
+void Backend::warm_up() {
   require_upload("warm_up");
-  if (steps < 1) throw std::invalid_argument(fmt::format("warm_up: {} steps a tick; at least 1", steps));
-  do_warm_up(steps);
+  do_warm_up();
 }
 
 std::vector<double> Backend::previous_displacements() {
@@ -222,9 +220,7 @@ void Backend::set_loads(std::span<const index_t> nodes, std::span<const double> 
                                               k % n, load[k], "xyz"[k / n]));
   std::sort(loaded.begin(), loaded.end());
   loaded.erase(std::unique(loaded.begin(), loaded.end()), loaded.end());
-  if (load == load_ && loaded == loaded_) return;  // the loads it has (a prepared cut's backend given them beforehand)
   do_set_loads(load);
-  load_ = std::move(load);
   loaded_ = std::move(loaded);
 }
 

@@ -161,12 +161,11 @@ class Backend {
   void set_motion(std::span<const double> u, std::span<const double> u_prev);
   /// u^{n-1} (3 x n_nodes, m), with download()'s u the motion set_motion takes.
   std::vector<double> previous_displacements();
-  /// Builds now what the first ticks of `steps` TLED steps after an upload
-  /// or set_motion would build on their way (the cpu backend's surface BVH
-  /// at the current u; the cuda backend's tick graphs over the tools set),
-  /// so that a backend prepared on another thread (a cut,
-  /// Session::begin_cut) ticks at once when it takes over.
-  void warm_up(int steps);
+  /// Builds now what the first step after an upload or set_motion would
+  /// build on its way (the cpu backend's surface BVH at the current u;
+  /// nothing on cuda), so that a backend prepared on another thread (a
+  /// cut, Session::begin_cut) steps at once when it takes over.
+  void warm_up();
 
   /// Flood-fills the region from seeds for depth rings (kDepthAll = whole
   /// mesh), holds the new halo at its current displacement, freezes nodes
@@ -325,7 +324,7 @@ class Backend {
  protected:
   virtual void do_upload(const TissueModel<double>& model) = 0;
   virtual void do_set_motion(std::span<const double> u, std::span<const double> u_prev) = 0;
-  virtual void do_warm_up(int /*steps*/) {}
+  virtual void do_warm_up() {}
   virtual std::vector<double> do_previous_displacements() = 0;
   virtual RegionSizes do_build_region(std::span<const index_t> seeds, int depth) = 0;
   virtual Region do_region() = 0;
@@ -386,7 +385,6 @@ class Backend {
   std::vector<ToolPose> grasp_pose_;    ///< pose when each tool's grasp started
   std::vector<std::uint8_t> grasping_;  ///< per tool
   std::vector<index_t> loaded_;         ///< set_loads' nodes
-  std::vector<double> load_;            ///< set_loads' forces as do_set_loads took them (empty: none)
   BodyContactSpec body_spec_;           ///< set_body_contact's
   bool tick_pending_ = false;           ///< start_tick called, finish_tick not yet
   bool pending_steps_ = false;          ///< the pending tick takes steps (else it is a reduction alone)

@@ -93,7 +93,7 @@ void CpuBackend<T>::do_set_motion(std::span<const double> u, std::span<const dou
 }
 
 template <class T>
-void CpuBackend<T>::do_warm_up(int /*steps*/) {
+void CpuBackend<T>::do_warm_up() {
   if (contact_) contact_->warm_up(state_);
 }
 

@@ -61,7 +61,7 @@ class CpuBackend final : public Backend {
   void do_upload(const TissueModel<double>& model) override;
   void do_set_motion(std::span<const double> u, std::span<const double> u_prev) override;
   std::vector<double> do_previous_displacements() override;
-  void do_warm_up(int steps) override;
+  void do_warm_up() override;
   RegionSizes do_build_region(std::span<const index_t> seeds, int depth) override;
   Region do_region() override { return state_.region; }
   std::vector<std::uint8_t> do_roles(std::span<const index_t> nodes) override;

@@ -140,7 +140,8 @@ template <class T>
 std::size_t DeviceContact<T>::stage(const ContactTools<T>& tools) {
   if (tools_pending_) tools_copied_.sync();  // the staging is free again
   tools_host_[0] = tools;
-  return staged_bytes(tools.n_tools);
+  // only the tools in use cross (the struct's head and n_tools entries)
+  return offsetof(ContactTools<T>, tool) + sizeof(ToolStep<T>) * size_t(tools.n_tools);
 }
 
 template <class T>

@@ -38,10 +38,6 @@ class DeviceContact {
   /// last upload has been read) and returns the bytes to copy;
   /// enqueue_copy() queues that copy (in a graph: its memcpy node).
   std::size_t stage(const ContactTools<T>& tools);
-  /// The bytes stage() returns for n_tools tools (only the tools in use cross: the struct's head and theirs).
-  static constexpr std::size_t staged_bytes(int n_tools) {
-    return offsetof(ContactTools<T>, tool) + sizeof(ToolStep<T>) * std::size_t(n_tools);
-  }
   void enqueue_copy(std::size_t bytes, cudaStream_t stream);
   const ContactTools<T>* device_tools() const { return tools_.data(); }
 

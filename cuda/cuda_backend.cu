@@ -655,22 +655,9 @@ class CudaBackend final : public Backend {
     // a checked tick's first pass 3 runs beside the check (cuda/tled.cuh element_forces_beside_check_kernel)
     const StepStart steps_start = check && start == StepStart::kPass3 ? StepStart::kPass3BesideCheck : start;
     const bool passes = prepare_reduction(r);  // (its copy before the graph, on its stream)
-    const cudaGraphExec_t exec = tick_exec(steps, tool_bytes, dtools, check, steps_start);
-    if (check) contact_.reach_host()[0] = 0;  // the check kernel writes 1 when the region must grow
-    CUDA_CHECK(cudaGraphLaunch(exec, stream()));
-    reduce_tools_ = dtools;
-    launched_ = {true, check, steps, tool_bytes, start, passes};
-  }
-
-  /// The tick graph of `steps` steps from the current buffer phase and pass-array set, with the tools'
-  /// upload of `tool_bytes` to `dtools` (none: null), led by the region's check or not, its first step
-  /// from `steps_start`: captured on its first use (Stepper::cached_graph), then taken from the cache.
-  cudaGraphExec_t tick_exec(int steps, std::size_t tool_bytes, const ContactTools<T>* dtools, bool check,
-                            StepStart steps_start) {
-    const RegionView r = region_.view();
     const GraphKey key{store_.u.phase, steps, dtools != nullptr, check ? GraphKey::kCheckedTick : GraphKey::kTick,
                        tool_bytes, Stepper<T>::pressures_of(store_.state()), static_cast<int>(steps_start)};
-    return stepper_.cached_graph(
+    const cudaGraphExec_t exec = stepper_.cached_graph(
         key,
         [&](cudaStream_t st) {
           StateView<T> s = store_.state();
@@ -688,31 +675,10 @@ class CudaBackend final : public Backend {
                            st, true);
         },
         stream());
-  }
-
-  /// Captures now the tick graphs a tick of `steps` steps over the tools set would capture on its way: each
-  /// buffer phase and pass-array set, checked or not, from pass 1 or pass 3 (a backend prepared on another
-  /// thread, Session::begin_cut, then ticks at once when it takes over). Nothing where the tick would not
-  /// run as one graph (tick_graph_runs) or no tool is set.
-  void do_warm_up(int steps) override {
-    if (n_tools() == 0 || !tick_graph_runs(steps) || launched_.launched) return;
-    const std::size_t tool_bytes = DeviceContact<T>::staged_bytes(n_tools());
-    const ContactTools<T>* dtools = contact_.device_tools();
-    const int phase = store_.u.phase;
-    const bool checks = store_.model().n_surf > 0;
-    for (int set = 0; set < 2; ++set) {
-      for (int p = 0; p < 3; ++p) {
-        store_.u.phase = p;
-        for (const StepStart start : {StepStart::kPass1, StepStart::kPass3}) {
-          tick_exec(steps, tool_bytes, dtools, false, start);
-          if (checks)
-            tick_exec(steps, tool_bytes, dtools, true,
-                      start == StepStart::kPass3 ? StepStart::kPass3BesideCheck : start);
-        }
-      }
-      store_.swap_pressures();  // twice: as it was
-    }
-    store_.u.phase = phase;
+    if (check) contact_.reach_host()[0] = 0;  // the check kernel writes 1 when the region must grow
+    CUDA_CHECK(cudaGraphLaunch(exec, stream()));
+    reduce_tools_ = dtools;
+    launched_ = {true, check, steps, tool_bytes, start, passes};
   }
 
   /// tick_graph's second half: waits for the launched graph and reads its answers.

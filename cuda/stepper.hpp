@@ -135,9 +135,8 @@ class Stepper {
     if (body.rows > 0 && (mode_ == CudaStepMode::Grid || mode_ == CudaStepMode::Cluster))
       throw std::invalid_argument("cuda step mode 'grid' or 'cluster' has no contact between bodies; use auto, graph "
                                   "or launch");
-    const bool none = body.rows == 0 && body_.rows == 0;  // none before and none now: the graphs hold
     body_ = body;
-    if (!none) graphs_.clear();
+    graphs_.clear();
   }
   CudaStepMode mode() const { return mode_; }
   /// The mode advance() uses for a region of this size (Auto resolved).

@@ -403,10 +403,7 @@ Session::PreparedCut Session::prepare_cut(CutInput in) {
       p.region.sizes = p.backend->build_region(p.region.seeds, in.depth);
       p.region.surface_edge = median_surface_edge(*p.model);
       p.backend->set_motion(p.made.u, p.made.u_prev);
-      p.backend->set_tools(in.tools, in.contact);
-      const scene::SceneLoads loads = in.loads ? *in.loads : scene::resolve_loads(*p.scene, *p.model);
-      if (!loads.nodes.empty()) p.backend->set_loads(loads.nodes, loads.force);
-      p.backend->warm_up(std::max(1, static_cast<int>(std::lround(in.period / p.model->dt))));
+      p.backend->warm_up();
     });
   }
   p.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -461,10 +458,6 @@ void Session::begin_cut(const CutSurface& surface, const CutOptions& options, Cu
   in.precision = backend().precision();
   in.seeds = scheduler().seeds();
   in.depth = scheduler().depth_after_cut();
-  for (const ToolSetting& t : scheduler().settings().tools) in.tools.push_back(t.shape);
-  in.contact = scheduler().settings().contact;
-  in.loads = loads_;
-  in.period = scheduler().settings().tick;
   pending_.emplace();
   pending_->due = due;
   pending_->job = std::async(std::launch::async, [in = std::move(in)]() mutable {

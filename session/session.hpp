@@ -224,12 +224,6 @@ class Session {
     Precision precision = Precision::Float;
     std::vector<index_t> seeds;
     int depth = kDepthAll;
-    /// what the Scheduler gives the backend at the remesh, given it beforehand: the tools, the host's
-    /// loads (else the cut scene's), and the haptic period the step count comes from (s)
-    std::vector<ToolShape> tools;
-    ContactOptions contact;
-    std::optional<scene::SceneLoads> loads;
-    double period = 0;
   };
   /// A cut made ready (on any thread): the cut mesh, its scene and its model; for begin_cut's, a backend
   /// holding the cut model with the cut motion, its region built and warmed up.

@@ -517,9 +517,8 @@ TEST(LiveCutCuda, ACutMidMotionGivesTheCpusPiecesAndMotion) {
   }
 }
 
-// A prepared cut on cuda (double): its backend, made on another thread,
-// given the tools and loads and its tick graphs captured there
-// (Backend::warm_up), ticks on bit for bit as the cut made then.
+// A prepared cut on cuda (double): its backend, made and uploaded on
+// another thread, ticks on bit for bit as the cut made then.
 TEST(LiveCutCuda, ACutTakingEffectLaterIsTheCutMadeThen) {
   SKIP_UNLESS_USABLE("cuda");
   Session later(on(block_scene(), "cuda", Precision::Double)), now(on(block_scene(), "cuda", Precision::Double));
