@@ -21,6 +21,7 @@
 #include "core/scheduler.hpp"
 #include "scene/cut_scene.hpp"
 #include "scene/validate.hpp"
+#include "tests/cut_scenes.hpp"
 
 namespace tissue {
 namespace {
@@ -185,29 +186,14 @@ TEST(Cut, AnObliqueCutByEveryMethodLeavesAConformingMesh) {
   }
 }
 
-/// The block as a scene: E 3 kPa, nu 0.4, its base held (a box at z = 0 and,
-/// by id, its corner node 0), a probe parked far above.
+/// The cutting tests' block as a scene (tests/cut_scenes.hpp: E 3 kPa, nu 0.4, its base held, a probe
+/// parked far above), its corner node 0 held by id too, with the default mass scaling.
 scene::Scene block_scene() {
-  scene::Scene s;
-  const Mesh m = block();
-  s.nodes = m.nodes;
-  s.tets = m.tets;
-  s.materials.push_back({.name = "soft", .form = scene::Material::Form::YoungPoisson, .a = 3000, .b = 0.4, .rho = 1000});
-  s.sets.push_back({.name = "soft", .material = "soft", .all = true});
-  scene::Constraint base;
-  base.kind = scene::Constraint::Kind::Box;
-  base.lo[0] = base.lo[1] = base.lo[2] = -1;
-  base.hi[0] = base.hi[1] = 1;
-  base.hi[2] = 1e-4;
+  scene::Scene s = test::block_scene();
   scene::Constraint corner;
   corner.nodes = {0};
-  s.constraints = {base, corner};
-  scene::Tool probe;
-  probe.radius = 2e-3;
-  probe.path = {{0, {0.01, 0.01, 0.05}}, {1, {0.01, 0.01, 0.05}}};
-  s.tools = {probe};
-  s.solver.precision = Precision::Double;
-  s.solver.depth = kDepthAll;
+  s.constraints.push_back(corner);
+  s.solver.mass_scaling = scene::Solver{}.mass_scaling;
   return s;
 }
 
