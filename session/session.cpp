@@ -257,9 +257,17 @@ void Session::land_cut(int blade, Vec3<double> ahead, const std::function<Sessio
     }
     last_cut_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     ++cuts_;
-  } catch (const CutError&) {
+  } catch (const CutError& e) {
     if (blade < 0) throw;  // the host's (begin_cut): refused, as cut() refuses it
-    // a blade's: nothing opens yet (the front has passed no face's middle), or the sweep lies outside
+    // a blade's: the tissue gave, but its crack, at rest, meets no element: the blade pressed the surface down
+    // ahead of the crack (docs/cutting.md, "What it does not do"); said once a stroke
+    BladeState& state = blades_[std::size_t(blade)];
+    if (!state.refusal_noted)
+      scheduler().note(fmt::format(
+          "tick {}: blade '{}': the tissue gave, but the cut it makes meets no element of the body at rest ({}): "
+          "the blade has carried the surface down with it, deeper than the crack, and passes through uncut",
+          last_.tick, scene_->tools[std::size_t(blade)].name, e.what()));
+    state.refusal_noted = true;
   } catch (const ModelError& e) {
     if (blade < 0) throw;
     scheduler().note(fmt::format("tick {}: blade '{}' did not cut: the cut mesh was refused: {}", last_.tick,

@@ -281,6 +281,7 @@ class Session {
     Vec3<double> onward = {};     ///< the way its crack runs on that plane (unit, across the edge)
     double lead = 0;              ///< how far the first cut runs ahead of the edge (m): a thickness and an element
     double cut_at = 0;            ///< the front's distance from the start at the last cut (m)
+    bool refusal_noted = false;   ///< a cut of this stroke crossed no element, and the notes say so
   };
   std::vector<BladeState> blades_;
   /// A cut in preparation: the job, the tick at whose end it takes effect,
