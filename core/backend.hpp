@@ -229,6 +229,8 @@ class Backend {
   std::vector<BodyContactNode> body_contacts();
   /// How many times the candidate lists were built (tests, reports).
   virtual long body_list_builds() const { return 0; }
+  /// How many step graphs were captured and instantiated so far (cuda; 0 where none are): reports.
+  virtual long graph_captures() const { return 0; }
 
   /// The pending tool motion as the steps of an advance of `steps` steps
   /// see it (core/contact.hpp ContactTools: poses, substeps, grasps): what

@@ -172,8 +172,12 @@ void Scheduler::remesh_onto(const TissueModel<double>& model, std::span<const st
   give_backend_tools();
   follow_step_ = 0.5 * (prepared ? prepared->surface_edge : median_surface_edge(model));
   seeds_ = seeds_after(seeds_, node_from);
-  region_ = prepared && seeds_ == prepared->seeds && depth == prepared->depth ? prepared->sizes
-                                                                               : backend_->build_region(seeds_, depth);
+  if (prepared && seeds_ == prepared->seeds && depth == prepared->depth) {
+    region_ = prepared->sizes;
+  } else {
+    region_ = backend_->build_region(seeds_, depth);
+    ++region_rebuilds_;
+  }
 }
 
 void Scheduler::suspend_lip_contact(bool suspend) {
@@ -204,6 +208,7 @@ void Scheduler::set_loads(std::span<const index_t> nodes, std::span<const double
   if (seeds == seeds_) return;
   seeds_ = std::move(seeds);
   region_ = backend_->build_region(seeds_, depth_);
+  ++region_rebuilds_;
 }
 
 void Scheduler::seed_region() {
@@ -214,6 +219,7 @@ void Scheduler::seed_region() {
   std::set_union(seeds_.begin(), seeds_.end(), cand.begin(), cand.end(), std::back_inserter(seeds));
   seeds_ = std::move(seeds);
   region_ = backend_->build_region(seeds_, depth_);
+  ++region_rebuilds_;
 }
 
 bool Scheduler::grow_region(const Reductions& r) {
@@ -225,6 +231,7 @@ bool Scheduler::grow_region(const Reductions& r) {
   if (!(r.front_disp > settings_.auto_tol * r.max_disp)) return false;
   ++depth_;
   region_ = backend_->build_region(seeds_, depth_);
+  ++region_rebuilds_;
   return true;
 }
 

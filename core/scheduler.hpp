@@ -148,6 +148,9 @@ class Scheduler {
   double time() const { return tick_ * settings_.tick; }
   bool in_contact() const { return in_contact_; }
   const RegionSizes& region() const { return region_; }
+  /// How many times the region was built again after the first: grown to the tools' contact candidates
+  /// or the loads, by a ring at depth auto, or for a cut mesh that its preparation did not build it for.
+  long region_rebuilds() const { return region_rebuilds_; }
   /// Rings of the current region (kDepthAll = whole); under depth auto, the
   /// depth it has grown to.
   int depth() const { return depth_; }
@@ -240,6 +243,7 @@ class Scheduler {
   const TissueModel<double>* model_;
   SchedulerSettings settings_;
   int steps_per_tick_ = 1;
+  long region_rebuilds_ = 0;
   int depth_ = kDepthAll;       ///< current rings (settings_.depth, or the grown depth under auto)
   bool auto_depth_ = false;
   long tick_ = 0;

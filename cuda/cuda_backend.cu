@@ -592,6 +592,7 @@ class CudaBackend final : public Backend {
 
  public:
   long body_list_builds() const override { return body_.builds(); }
+  long graph_captures() const override { return stepper_.captures(); }
 
  private:
   cudaStream_t stream() const { return stream_.get(); }

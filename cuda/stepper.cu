@@ -201,6 +201,7 @@ template <class T>
 cudaGraphExec_t Stepper<T>::cached_graph(const GraphKey& key, const std::function<void(cudaStream_t)>& enqueue,
                                          cudaStream_t stream) {
   if (auto it = graphs_.find(key); it != graphs_.end()) return it->second.get();
+  ++captures_;
   return graphs_.emplace(key, capture_graph(stream, enqueue)).first->second.get();
 }
 

@@ -223,6 +223,8 @@ class Stepper {
   /// `enqueue` queues on the stream; dropped with the others (invalidate).
   cudaGraphExec_t cached_graph(const GraphKey& key, const std::function<void(cudaStream_t)>& enqueue,
                                cudaStream_t stream);
+  /// How many graphs cached_graph captured so far.
+  long captures() const { return captures_; }
 
  private:
   void launch_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b, int steps,
@@ -231,6 +233,7 @@ class Stepper {
                         int steps, const ContactTools<T>* tools, StepStart start, cudaStream_t stream);
 
   CudaStepMode mode_ = CudaStepMode::Auto;
+  long captures_ = 0;
   PersistentLimits limits_;
   LawView<T> law_;
   BodySteps<T> body_;  ///< contact between bodies (rows 0: none)
