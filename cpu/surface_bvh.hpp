@@ -105,5 +105,4 @@ class SurfaceBvh {
   bool full_check_ = true;
 };
 
-
 }  // namespace tissue::cpu

@@ -172,9 +172,10 @@ class Session {
   /// count since the start.
   double last_cut_seconds() const { return last_cut_seconds_; }
   double last_cut_prepare_seconds() const { return last_cut_prepare_seconds_; }
-  /// The last prepared cut's commit on the tick's thread, in its parts (s; `tissue bench --cut`): the motion
-  /// of now downloaded, carried to the cut mesh, the swap onto the prepared backend (the old one handed to
-  /// its release, the region built again where its seeds changed), the loads set, the motion uploaded.
+  /// The last cut's carry-over on the tick's thread, in its parts (s; `tissue bench --cut`): the motion of
+  /// now downloaded and carried to the cut mesh (0 for cut(), whose cut is made at the motion of now), the
+  /// swap onto the prepared backend (the old one handed to its release; for cut(), the upload of the cut
+  /// model), the loads set, the motion uploaded.
   struct CommitTimes {
     double download = 0, transfer = 0, swap = 0, loads = 0, upload = 0;
   };
