@@ -175,9 +175,13 @@ void Scheduler::remesh_onto(const TissueModel<double>& model, std::span<const st
   if (prepared && seeds_ == prepared->seeds && depth == prepared->depth) {
     region_ = prepared->sizes;
   } else {
-    region_ = backend_->build_region(seeds_, depth);
-    ++region_rebuilds_;
+    rebuild_region(depth);
   }
+}
+
+void Scheduler::rebuild_region(int depth) {
+  region_ = backend_->build_region(seeds_, depth);
+  ++region_rebuilds_;
 }
 
 void Scheduler::suspend_lip_contact(bool suspend) {
@@ -207,8 +211,7 @@ void Scheduler::set_loads(std::span<const index_t> nodes, std::span<const double
   std::set_union(seeds_.begin(), seeds_.end(), loaded.begin(), loaded.end(), std::back_inserter(seeds));
   if (seeds == seeds_) return;
   seeds_ = std::move(seeds);
-  region_ = backend_->build_region(seeds_, depth_);
-  ++region_rebuilds_;
+  rebuild_region(depth_);
 }
 
 void Scheduler::seed_region() {
@@ -218,8 +221,7 @@ void Scheduler::seed_region() {
   std::vector<index_t> seeds;
   std::set_union(seeds_.begin(), seeds_.end(), cand.begin(), cand.end(), std::back_inserter(seeds));
   seeds_ = std::move(seeds);
-  region_ = backend_->build_region(seeds_, depth_);
-  ++region_rebuilds_;
+  rebuild_region(depth_);
 }
 
 bool Scheduler::grow_region(const Reductions& r) {
@@ -230,8 +232,7 @@ bool Scheduler::grow_region(const Reductions& r) {
                                       backend_->name()));
   if (!(r.front_disp > settings_.auto_tol * r.max_disp)) return false;
   ++depth_;
-  region_ = backend_->build_region(seeds_, depth_);
-  ++region_rebuilds_;
+  rebuild_region(depth_);
   return true;
 }
 

@@ -243,6 +243,8 @@ class Scheduler {
   const TissueModel<double>* model_;
   SchedulerSettings settings_;
   int steps_per_tick_ = 1;
+  /// The region built again around seeds_ at `depth` (the backend's build), counted in region_rebuilds_.
+  void rebuild_region(int depth);
   long region_rebuilds_ = 0;
   int depth_ = kDepthAll;       ///< current rings (settings_.depth, or the grown depth under auto)
   bool auto_depth_ = false;

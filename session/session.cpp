@@ -259,15 +259,14 @@ void Session::land_cut(int blade, Vec3<double> ahead, const std::function<Sessio
     ++cuts_;
   } catch (const CutError& e) {
     if (blade < 0) throw;  // the host's (begin_cut): refused, as cut() refuses it
-    // a blade's: the tissue gave, but its crack, at rest, meets no element: the blade pressed the surface down
-    // ahead of the crack (docs/cutting.md, "What it does not do"); said once a stroke
+    // a blade's: the tissue gave, but its crack, at rest, meets no element (a blade that has pressed the
+    // surface down deeper than its crack, docs/cutting.md "What it does not do"); said once a stroke
     BladeState& state = blades_[std::size_t(blade)];
-    if (!state.refusal_noted)
+    if (!std::exchange(state.refusal_noted, true))
       scheduler().note(fmt::format(
-          "tick {}: blade '{}': the tissue gave, but the cut it makes meets no element of the body at rest ({}): "
-          "the blade has carried the surface down with it, deeper than the crack, and passes through uncut",
+          "tick {}: blade '{}': the tissue gave, but the cut it makes meets no element of the body at rest ({}); "
+          "a blade that has carried the surface down deeper than its crack passes through uncut",
           last_.tick, scene_->tools[std::size_t(blade)].name, e.what()));
-    state.refusal_noted = true;
   } catch (const ModelError& e) {
     if (blade < 0) throw;
     scheduler().note(fmt::format("tick {}: blade '{}' did not cut: the cut mesh was refused: {}", last_.tick,
