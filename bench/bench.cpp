@@ -693,8 +693,9 @@ void bench_cut(Context& c, Precision p) {
   // the region rebuilds while cutting, and those in the ticks after a commit (every rebuild gives the cuda
   // backend new tick graphs)
   long rebuilds_cutting = 0, rebuilds_after_commit = 0;
-  // and the step graphs captured (cuda): at the commits' ticks (the prepared backend's own among them) and after
-  long captures_at_commit = 0, captures_after_commit = 0;
+  // and the step graphs captured (cuda): at the commits' ticks (the prepared backend's own among them) and after,
+  // and of those after, how many updated a kept graph in place rather than instantiating one
+  long captures_at_commit = 0, captures_after_commit = 0, updates_after_commit = 0;
   for (double x : kPlanes) {
     live.begin_cut(across(x), {}, CutSpace::Deformed, live.scheduler().ticks() + delay);
     auto deadline = Clock::now();
@@ -702,16 +703,18 @@ void bench_cut(Context& c, Precision p) {
     for (int k = 0; k < delay + (c.o.quick ? 2 : 20); ++k) {
       const long cuts = live.cuts(), rebuilds = live.scheduler().region_rebuilds();
       const Backend* was = &live.backend();
-      const long captures = was->graph_captures();
+      const long captures = was->graph_captures(), updates = was->graph_updates();
       const auto t0 = Clock::now();
       live.tick();
       cutting.push_back(since(t0));
       const long rebuilt = live.scheduler().region_rebuilds() - rebuilds;
       const long captured = live.backend().graph_captures() - (&live.backend() == was ? captures : 0);
+      const long updated = live.backend().graph_updates() - (&live.backend() == was ? updates : 0);
       rebuilds_cutting += rebuilt;
       if (live.cuts() != cuts) since_commit = 0;
       if (since_commit == 0) captures_at_commit += captured;
-      if (since_commit >= 1 && since_commit <= kAfter) rebuilds_after_commit += rebuilt, captures_after_commit += captured;
+      if (since_commit >= 1 && since_commit <= kAfter)
+        rebuilds_after_commit += rebuilt, captures_after_commit += captured, updates_after_commit += updated;
       if (since_commit >= 0 && since_commit <= kAfter) {
         from_commit[std::size_t(since_commit)] = std::max(from_commit[std::size_t(since_commit)], cutting.back());
         ++since_commit;
@@ -762,6 +765,7 @@ void bench_cut(Context& c, Precision p) {
   r.add("region_rebuilds_commit_plus_1_to_8", rebuilds_after_commit);
   r.add("graph_captures_at_commits", captures_at_commit);
   r.add("graph_captures_commit_plus_1_to_8", captures_after_commit);
+  r.add("graph_updates_commit_plus_1_to_8", updates_after_commit);
   r.add("tick_ms_max_at_commit", 1e3 * from_commit[0]);
   for (int j = 1; j <= kAfter; ++j) r.add(fmt::format("tick_ms_max_commit_plus_{}", j), 1e3 * from_commit[std::size_t(j)]);
   r.add("tick_ms_p50_while_cutting", 1e3 * cutting[cutting.size() / 2]);

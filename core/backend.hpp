@@ -229,8 +229,16 @@ class Backend {
   std::vector<BodyContactNode> body_contacts();
   /// How many times the candidate lists were built (tests, reports).
   virtual long body_list_builds() const { return 0; }
-  /// How many step graphs were captured and instantiated so far (cuda; 0 where none are): reports.
+  /// How many step graphs were captured so far (cuda; 0 where none are),
+  /// and how many of those updated a graph kept from before in place
+  /// rather than instantiating a new one: reports.
   virtual long graph_captures() const { return 0; }
+  virtual long graph_updates() const { return 0; }
+  /// Takes `from`'s step graphs, so that this backend's first captures
+  /// update them in place rather than instantiate new ones (cuda, the same
+  /// precision on the same device; nothing elsewhere): a cut's new backend
+  /// taking over from the old one. `from` must not be stepping.
+  virtual void adopt_graphs(Backend& from) { (void)from; }
 
   /// The pending tool motion as the steps of an advance of `steps` steps
   /// see it (core/contact.hpp ContactTools: poses, substeps, grasps): what

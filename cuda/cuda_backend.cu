@@ -593,6 +593,10 @@ class CudaBackend final : public Backend {
  public:
   long body_list_builds() const override { return body_.builds(); }
   long graph_captures() const override { return stepper_.captures(); }
+  long graph_updates() const override { return stepper_.updates(); }
+  void adopt_graphs(Backend& from) override {
+    if (auto* other = dynamic_cast<CudaBackend*>(&from)) stepper_.adopt_graphs(other->stepper_);
+  }
 
  private:
   cudaStream_t stream() const { return stream_.get(); }

@@ -202,10 +202,41 @@ cudaGraphExec_t Stepper<T>::cached_graph(const GraphKey& key, const std::functio
                                          cudaStream_t stream) {
   if (auto it = graphs_.find(key); it != graphs_.end()) return it->second.get();
   ++captures_;
-  return graphs_.emplace(key, capture_graph(stream, enqueue)).first->second.get();
+  GraphKey shape = key;
+  shape.pressures = 0;
+  GraphExec reuse;
+  if (auto it = kept_.find(shape); it != kept_.end()) {
+    reuse = std::move(it->second);
+    kept_.erase(it);
+  }
+  bool updated = false;
+  GraphExec exec = capture_graph(stream, enqueue, std::move(reuse), &updated);
+  updates_ += updated;
+  return graphs_.emplace(key, std::move(exec)).first->second.get();
 }
 
-GraphExec capture_graph(cudaStream_t stream, const std::function<void(cudaStream_t)>& enqueue) {
+template <class T>
+void Stepper<T>::invalidate() {
+  if (kept_.size() + graphs_.size() > kMaxKept) kept_.clear();
+  for (auto& [key, exec] : graphs_) {
+    GraphKey shape = key;
+    shape.pressures = 0;
+    kept_.emplace(shape, std::move(exec));
+  }
+  graphs_.clear();
+}
+
+template <class T>
+void Stepper<T>::adopt_graphs(Stepper& other) {
+  other.invalidate();
+  invalidate();
+  if (kept_.size() + other.kept_.size() > kMaxKept) kept_.clear();
+  kept_.merge(other.kept_);
+  other.kept_.clear();
+}
+
+GraphExec capture_graph(cudaStream_t stream, const std::function<void(cudaStream_t)>& enqueue, GraphExec reuse,
+                        bool* updated) {
   cudaGraph_t g = nullptr;
   CUDA_CHECK(cudaStreamBeginCapture(stream, cudaStreamCaptureModeThreadLocal));
   try {
@@ -216,6 +247,15 @@ GraphExec capture_graph(cudaStream_t stream, const std::function<void(cudaStream
     throw;
   }
   CUDA_CHECK(cudaStreamEndCapture(stream, &g));
+  if (reuse.get()) {
+    cudaGraphExecUpdateResultInfo info{};
+    if (cudaGraphExecUpdate(reuse.get(), g, &info) == cudaSuccess) {
+      cudaGraphDestroy(g);
+      if (updated) *updated = true;
+      return reuse;
+    }
+    (void)cudaGetLastError();  // a topology that differs: not an error, instantiated below
+  }
   cudaGraphExec_t exec = nullptr;
   const cudaError_t err = cudaGraphInstantiate(&exec, g, 0);
   cudaGraphDestroy(g);

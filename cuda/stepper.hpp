@@ -63,8 +63,13 @@ class GraphExec {
 /// terms computes its forces while the check runs; cuda/tled.cuh
 /// element_forces_beside_check_kernel).
 /// The work `enqueue` queues on `stream`, captured as one graph and
-/// instantiated (a failure leaves no capture open).
-GraphExec capture_graph(cudaStream_t stream, const std::function<void(cudaStream_t)>& enqueue);
+/// instantiated (a failure leaves no capture open). With `reuse`, an
+/// instantiated graph of the same topology, that one is updated in place
+/// instead (cudaGraphExecUpdate: new kernel arguments and launch sizes, at a
+/// fraction of an instantiation's cost) and returned; `updated` says whether
+/// it was (a topology that differs instantiates anew).
+GraphExec capture_graph(cudaStream_t stream, const std::function<void(cudaStream_t)>& enqueue, GraphExec reuse = {},
+                        bool* updated = nullptr);
 
 enum class StepStart { kPass1, kPass3, kPass3BesideCheck };
 
@@ -119,15 +124,22 @@ class Stepper {
 
   /// Queries the device's limits for the persistent kernels.
   void init();
-  /// Drops captured graphs (the region, and so the kernel arguments, changed).
-  void invalidate() { graphs_.clear(); }
+  /// Drops captured graphs (the region, and so the kernel arguments,
+  /// changed). They are kept aside as instantiated, so that the next capture
+  /// of the same key (its pass arrays aside) updates one in place rather than
+  /// instantiating anew (capture_graph).
+  void invalidate();
+  /// Takes `other`'s graphs as invalidate() keeps them: a stepper that
+  /// replaces another on the same device (a cut's new backend) updates them
+  /// in its first captures. `other` keeps none.
+  void adopt_graphs(Stepper& other);
 
   void set_mode(CudaStepMode mode);
   /// The model's law terms (DeviceStore::law()): pass 3 runs the law kernel
   /// when it has any.
   void set_law(const LawView<T>& law) {
     law_ = law;
-    graphs_.clear();
+    invalidate();
   }
   /// Contact between bodies in every step from now on (rows 0: none); the
   /// Graph and Launch modes run it (set_mode refuses the others while it is on).
@@ -136,7 +148,7 @@ class Stepper {
       throw std::invalid_argument("cuda step mode 'grid' or 'cluster' has no contact between bodies; use auto, graph "
                                   "or launch");
     body_ = body;
-    graphs_.clear();
+    invalidate();
   }
   CudaStepMode mode() const { return mode_; }
   /// The mode advance() uses for a region of this size (Auto resolved).
@@ -223,8 +235,10 @@ class Stepper {
   /// `enqueue` queues on the stream; dropped with the others (invalidate).
   cudaGraphExec_t cached_graph(const GraphKey& key, const std::function<void(cudaStream_t)>& enqueue,
                                cudaStream_t stream);
-  /// How many graphs cached_graph captured so far.
+  /// How many graphs cached_graph captured so far, and how many of those
+  /// updated a kept graph in place rather than instantiating one.
   long captures() const { return captures_; }
+  long updates() const { return updates_; }
 
  private:
   void launch_steps(const ModelView<T>& m, const StateView<T>& s, const RegionView& r, StepBuffers<T> b, int steps,
@@ -234,11 +248,16 @@ class Stepper {
 
   CudaStepMode mode_ = CudaStepMode::Auto;
   long captures_ = 0;
+  long updates_ = 0;
+  /// Most graphs kept aside for updates (invalidate): a handful of keys are in use at a time.
+  static constexpr std::size_t kMaxKept = 64;
   PersistentLimits limits_;
   LawView<T> law_;
   BodySteps<T> body_;  ///< contact between bodies (rows 0: none)
   /// the tools' buffer is the backend's one device array
   std::map<GraphKey, GraphExec> graphs_;
+  /// Dropped graphs under their key with `pressures` 0, to be updated in place (invalidate).
+  std::multimap<GraphKey, GraphExec> kept_;
 };
 
 }  // namespace tissue::gpu

@@ -521,6 +521,7 @@ SessionCut Session::commit_cut(PreparedCut&& p) {
   try {
     if (p.backend) {  // prepared on it: it takes over, the old one is let go on another thread
       std::unique_ptr<Backend> old = std::exchange(engine_.backend, std::move(p.backend));
+      engine_.backend->adopt_graphs(*old);  // (its graphs updated in place are no instantiations in the ticks on)
       scheduler().remesh(*cut_model, d.cut.from, *engine_.backend, p.region);
       if (retiring_.valid()) retiring_.wait();
       retiring_ = std::async(std::launch::async, [old = std::move(old)]() mutable {

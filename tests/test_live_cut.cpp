@@ -526,6 +526,33 @@ TEST(LiveCutCuda, ACutTakingEffectLaterIsTheCutMadeThen) {
   expect_a_later_cut_to_be_the_cut_made_then(later, now);
 }
 
+// A prepared cut of the pressed kidney on cuda (double): the new backend's
+// tick graphs are the old backend's, updated in place (cudaGraphExecUpdate)
+// rather than instantiated, and they step as the cpu does, 60 ticks on,
+// within the cross-backend tolerance of double.
+TEST(LiveCutCuda, APreparedCutOfTheKidneyUpdatesItsTickGraphsAndStepsAsTheCpu) {
+  SKIP_UNLESS_USABLE("cuda");
+  Session cpu(on(io::default_kidney_scene(), "cpu", Precision::Double)),
+      gpu(on(io::default_kidney_scene(), "cuda", Precision::Double));
+  ASSERT_EQ(gpu.backend().name(), "cuda");
+  const CutSurface across{{-0.025, -0.06, -0.04}, {0, 0.12, 0}, {0, 0, 0.08}};
+  for (Session* s : {&cpu, &gpu}) {
+    for (int k = 0; k < 150; ++k) s->tick();
+    s->begin_cut(across, {}, CutSpace::Reference, 160);
+    for (int k = 150; k < 220; ++k) s->tick();
+    EXPECT_EQ(s->cuts(), 1);
+    EXPECT_FALSE(s->failed());
+  }
+  const Backend& b = gpu.backend();
+  RecordProperty("graph_captures", g(double(b.graph_captures())));
+  RecordProperty("graph_updates", g(double(b.graph_updates())));
+  EXPECT_GT(b.graph_updates(), 0) << "the old backend's graphs, taken over";
+  EXPECT_LE(b.graph_updates(), b.graph_captures());
+  const double gap = relative_gap(cpu.backend().download().u, gpu.backend().download().u);
+  RecordProperty("u_gap_60_ticks_after", g(gap));
+  EXPECT_LT(gap, 1e-9);
+}
+
 // The blade on cuda: the same stroke through the block (double) makes the
 // cpu's cuts, at the cpu's force, into the cpu's two pieces.
 TEST(LiveCutCuda, TheBladeCutsAsOnTheCpu) {
