@@ -136,6 +136,12 @@ struct TissueModel {
   double added_mass = 0;    ///< kg added by mass scaling (included in `mass`)
   index_t scaled_elems = 0; ///< elements whose density mass scaling raised
   double max_density_scale = 1;  ///< largest of their density factors
+  /// With mass scaling: 2 / omega_max of the assembled lumped system at rest
+  /// over the scaled elements' patch (plain tets; 0 when not computed), and
+  /// the nodes given more mass to keep dt within 0.95 of it (core/model.cpp
+  /// hold_assembled_step; their mass is in added_mass).
+  double assembled_step = 0;
+  index_t assembled_nodes = 0;
   double dt_crit_physical = 0;   ///< critical step without mass scaling (s)
   index_t reoriented = 0;   ///< inverted input tets whose corners were swapped
   bool ianp = true;         ///< pass 3 uses IANP (else plain tet forces, passes 1-2 unused)

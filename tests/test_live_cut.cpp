@@ -322,6 +322,36 @@ TEST(LiveCut, ACutAcrossTheKidneyWhileItsProbePresses) {
   kidney_cut_while_pressed(true);  // its lips touching
 }
 
+// The kidney cut across four times, 20 ticks apart, while its probe presses,
+// stepped whole with its lips touching (cpu, double): the pieces a cut leaves
+// between the planes' splits took the assembled mesh's stable step below the
+// scene's dt while every element's own L_e / c_e still allowed it (0.87 of
+// dt after the third cut, on the cuts made at rest), and an element in the
+// cut inverted 20 ticks after it.
+// The model's assembled check gives the nodes of that mode mass instead.
+TEST(LiveCut, TheKidneyCutFourTimesStepsWholeWithItsLipsTouching) {
+  scene::Scene scene = io::default_kidney_scene();
+  scene.solver.precision = Precision::Double;
+  scene.solver.lip_contact = true;
+  Session s(scene);
+  while (!s.scheduler().in_contact() && s.scheduler().ticks() < 2000) s.tick();
+  for (int k = 0; k < 50; ++k) s.tick();
+  index_t given = 0;
+  for (double x : {-0.03, -0.02, 0.02, 0.03}) {
+    s.cut({{x, -0.06, -0.04}, {0, 0.12, 0}, {0, 0, 0.08}});
+    const TissueModel<double>& m = s.model();
+    EXPECT_LE(m.dt, 0.95 * m.assembled_step * (1 + 1e-12)) << "cut at x = " << x;
+    given = std::max(given, m.assembled_nodes);
+    for (int k = 0; k < 20; ++k) s.tick();  // throws SimulationError on an inverted element
+  }
+  ::testing::Test::RecordProperty("assembled_nodes_most", g(double(given)));
+  EXPECT_GT(given, 0) << "a cut left a mode the elements' own steps miss";
+  EXPECT_EQ(s.scheduler().steps_per_tick(), 4) << "mass, not more steps";
+  for (int k = 0; k < 100; ++k) s.tick();
+  EXPECT_FALSE(s.failed());
+  EXPECT_TRUE(s.scheduler().region_depth() == kDepthAll);
+}
+
 // Refused cuts name the rule and leave the run as it was; reset goes back
 // to the mesh before the first cut.
 TEST(LiveCut, BadCutsAreRefusedAndResetRestoresTheWholeMesh) {
