@@ -556,14 +556,18 @@ TEST(LiveCutCuda, ACutTakingEffectLaterIsTheCutMadeThen) {
   expect_a_later_cut_to_be_the_cut_made_then(later, now);
 }
 
-// A prepared cut of the pressed kidney on cuda (double): the new backend's
-// tick graphs are the old backend's, updated in place (cudaGraphExecUpdate)
-// rather than instantiated, and they step as the cpu does, 60 ticks on,
-// within the cross-backend tolerance of double.
+// A prepared cut of the pressed kidney on cuda (double, depth 5, as the
+// consistency suite compares the kidney: under depth auto a ring can be
+// added a tick apart on the two backends): the new backend's tick graphs are
+// the old backend's, updated in place (cudaGraphExecUpdate) rather than
+// instantiated, and they step as the cpu does, 60 ticks on, within the
+// kidney's cross-backend tolerance (1e-5 m, tests/api/test_api.cpp
+// Facade.CudaRunsTheKidneyAsTheCpuDoes).
 TEST(LiveCutCuda, APreparedCutOfTheKidneyUpdatesItsTickGraphsAndStepsAsTheCpu) {
   SKIP_UNLESS_USABLE("cuda");
-  Session cpu(on(io::default_kidney_scene(), "cpu", Precision::Double)),
-      gpu(on(io::default_kidney_scene(), "cuda", Precision::Double));
+  scene::Scene kidney = io::default_kidney_scene();
+  kidney.solver.depth = 5;
+  Session cpu(on(kidney, "cpu", Precision::Double)), gpu(on(kidney, "cuda", Precision::Double));
   ASSERT_EQ(gpu.backend().name(), "cuda");
   const CutSurface across{{-0.025, -0.06, -0.04}, {0, 0.12, 0}, {0, 0, 0.08}};
   for (Session* s : {&cpu, &gpu}) {
@@ -578,9 +582,12 @@ TEST(LiveCutCuda, APreparedCutOfTheKidneyUpdatesItsTickGraphsAndStepsAsTheCpu) {
   RecordProperty("graph_updates", g(double(b.graph_updates())));
   EXPECT_GT(b.graph_updates(), 0) << "the old backend's graphs, taken over";
   EXPECT_LE(b.graph_updates(), b.graph_captures());
-  const double gap = relative_gap(cpu.backend().download().u, gpu.backend().download().u);
-  RecordProperty("u_gap_60_ticks_after", g(gap));
-  EXPECT_LT(gap, 1e-9);
+  const std::vector<double> uc = cpu.backend().download().u, ug = gpu.backend().download().u;
+  ASSERT_EQ(uc.size(), ug.size());
+  double most = 0;
+  for (std::size_t k = 0; k < uc.size(); ++k) most = std::max(most, std::fabs(uc[k] - ug[k]));
+  RecordProperty("u_gap_m_60_ticks_after", g(most));
+  EXPECT_LT(most, 1e-5);
 }
 
 // The blade on cuda: the same stroke through the block (double) makes the
