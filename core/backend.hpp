@@ -235,9 +235,10 @@ class Backend {
   virtual long graph_captures() const { return 0; }
   virtual long graph_updates() const { return 0; }
   /// Takes `from`'s step graphs, so that this backend's first captures
-  /// update them in place rather than instantiate new ones (cuda, the same
-  /// precision on the same device; nothing elsewhere): a cut's new backend
-  /// taking over from the old one. `from` must not be stepping.
+  /// update them in place rather than instantiate new ones (cuda of the same
+  /// precision; nothing elsewhere; a graph that cannot be updated, another
+  /// device's, is instantiated anew): a cut's new backend taking over from
+  /// the old one, between ticks.
   virtual void adopt_graphs(Backend& from) { (void)from; }
 
   /// The pending tool motion as the steps of an advance of `steps` steps

@@ -555,16 +555,21 @@ void interface_steps(const ModelInput& in, TissueModel<double>& m, ElementSteps&
 }
 
 /// The assembled mesh's stable step where mass scaling raised elements: 2 / omega_max of the lumped,
-/// linearised system at rest (plain tets: stiffer than IANP's averaged pressure, so a bound from below),
-/// found by power iteration over the scaled elements' nodes and their neighbours (the others held: a
-/// mode of the scaled elements lives there). Each element's own L_e / c_e holds the step of a mesh of
-/// well-shaped elements (the default kidney: dt 0.81 of this limit), but not of the pieces a cut
-/// leaves: on the kidney cut across three times it was 1.14 of it, and the whole mesh stepped at it
-/// inverted an element in the cut within 20 ticks. Where dt exceeds kAssembledShare of the limit,
-/// the nodes that carry the mode's kinetic energy get mass until it does (rounds of the iteration),
-/// or, past kAssembledRounds, dt falls to that share (to a whole number of steps per tick; a dt the
-/// input asks for stays).
+/// linearised system at rest, estimated by power iteration over the scaled elements and the ring of
+/// elements around them (their nodes move; every element touching one of those nodes adds its
+/// stiffness; the nodes beyond are held). Each element's stiffness is plain linear elasticity with its
+/// step's moduli (the stiffest corner's K at an IANP interface, and the fibre's wave modulus as an
+/// isotropic factor), stiffer than IANP's averaged pressure. Each element's own L_e / c_e holds the
+/// step of a mesh of well-shaped elements (the default kidney: dt 0.81 of this limit), but not of the
+/// pieces a cut leaves: on the kidney cut across three times it was 1.14 of it, and the whole mesh
+/// stepped at it inverted an element in the cut within 20 ticks. Where dt exceeds kAssembledShare of
+/// the limit, the nodes that carry at least kAssembledKinetic of the mode's largest nodal kinetic
+/// energy get mass, 1.05 (dt / (kAssembledShare limit))^2 times theirs, round after round (each from the
+/// fixed start again, so that the next mode is found), within the mass scaling budget. Where the
+/// rounds or the budget do not bring it down, the mass they gave is taken back and dt falls to that
+/// share (to a whole number of steps per tick); a dt the input asks for is refused instead.
 constexpr double kAssembledShare = 0.95;
+constexpr double kAssembledKinetic = 0.05;
 constexpr int kAssembledRounds = 12;
 
 struct AssembledStep {
@@ -573,67 +578,87 @@ struct AssembledStep {
   index_t nodes = 0;      ///< nodes given mass
 };
 
-AssembledStep hold_assembled_step(TissueModel<double>& m, const std::vector<double>& scale, double& dt,
-                                  double tick, bool may_lower) {
+AssembledStep hold_assembled_step(const ModelInput& in, TissueModel<double>& m, const std::vector<double>& scale,
+                                  double& dt, double budget_left) {
   AssembledStep out;
   const index_t n = m.n_nodes, ne = m.n_elems;
-  // the patch: nodes of scaled elements and of the elements that share one of them; the rest held
-  std::vector<std::uint8_t> movable(n, 0), in_patch(ne, 0);
+  // the nodes that move: those of the scaled elements and of the elements that share one of them
+  std::vector<std::uint8_t> movable(n, 0), touched(n, 0);
   for (index_t e = 0; e < ne; ++e)
     if (scale[e] > 1)
       for (int a = 0; a < 4; ++a) movable[m.elem_nodes[a * ne + e]] = 1;
+  std::vector<std::uint8_t> ring(ne, 0);
   for (index_t e = 0; e < ne; ++e)
-    for (int a = 0; a < 4; ++a) in_patch[e] |= movable[m.elem_nodes[a * ne + e]];
-  std::vector<index_t> patch, nodes;  // its elements, and every node they touch
+    for (int a = 0; a < 4; ++a) ring[e] |= movable[m.elem_nodes[a * ne + e]];
   for (index_t e = 0; e < ne; ++e)
-    if (in_patch[e]) {
-      patch.push_back(e);
+    if (ring[e])
       for (int a = 0; a < 4; ++a) movable[m.elem_nodes[a * ne + e]] = 1;
-    }
   for (index_t a = 0; a < n; ++a)
-    if (movable[a]) {
-      nodes.push_back(a);
-      if (m.node_flags[a] & kFixed) movable[a] = 0;
-    }
+    if (m.node_flags[a] & kFixed) movable[a] = 0;
+  // every element with a moving node adds its stiffness (the nodes beyond them are held)
+  std::vector<index_t> patch, nodes;
+  for (index_t e = 0; e < ne; ++e) {
+    bool moves = false;
+    for (int a = 0; a < 4; ++a) moves = moves || movable[m.elem_nodes[a * ne + e]];
+    if (!moves) continue;
+    patch.push_back(e);
+    for (int a = 0; a < 4; ++a) touched[m.elem_nodes[a * ne + e]] = 1;
+  }
+  for (index_t a = 0; a < n; ++a)
+    if (touched[a]) nodes.push_back(a);
   if (patch.empty()) return out;
-  // y = K x over the patch (plain linear elasticity, lambda = K - 2 mu / 3)
+  // each patch element's moduli: mu, lambda from its step's K, and the fibre as a factor on the stress
+  const std::vector<double> node_K = m.ianp && in.materials.size() > 1 ? node_bulk_moduli(m) : std::vector<double>{};
+  std::vector<double> mu_e(patch.size()), lambda_e(patch.size()), factor_e(patch.size(), 1.0);
+  for (std::size_t k = 0; k < patch.size(); ++k) {
+    const index_t e = patch[k];
+    double K = m.K[e];
+    if (!node_K.empty())
+      for (int a = 0; a < 4; ++a) K = std::max(K, node_K[m.elem_nodes[a * ne + e]]);
+    mu_e[k] = m.mu[e];
+    lambda_e[k] = K - 2 * m.mu[e] / 3;
+    if (m.has_fibre()) factor_e[k] += fibre_wave_modulus(m.fibre[3 * size_t(ne) + e]) / (K + 4 * m.mu[e] / 3);
+  }
+  // y = K x over the patch (x is zero at held nodes)
   const auto stiffness = [&](const std::vector<double>& x, std::vector<double>& y) {
     for (const index_t a : nodes)
       for (int i = 0; i < 3; ++i) y[3 * size_t(a) + i] = 0;
-    for (const index_t e : patch) {
+    for (std::size_t k = 0; k < patch.size(); ++k) {
+      const index_t e = patch[k];
       double H[3][3] = {};
       for (int a = 0; a < 4; ++a) {
         const index_t node = m.elem_nodes[a * ne + e];
         for (int i = 0; i < 3; ++i)
           for (int j = 0; j < 3; ++j) H[i][j] += x[3 * size_t(node) + i] * m.dndx[(3 * a + j) * size_t(ne) + e];
       }
-      const double mu = m.mu[e], lambda = m.K[e] - 2 * mu / 3, tr = H[0][0] + H[1][1] + H[2][2];
+      const double mu = mu_e[k], tr = H[0][0] + H[1][1] + H[2][2], f = factor_e[k] * m.volume[e];
       double S[3][3];
       for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) S[i][j] = mu * (H[i][j] + H[j][i]) + (i == j ? lambda * tr : 0.0);
+        for (int j = 0; j < 3; ++j) S[i][j] = mu * (H[i][j] + H[j][i]) + (i == j ? lambda_e[k] * tr : 0.0);
       for (int a = 0; a < 4; ++a) {
         const index_t node = m.elem_nodes[a * ne + e];
         for (int i = 0; i < 3; ++i) {
-          double f = 0;
-          for (int j = 0; j < 3; ++j) f += S[i][j] * m.dndx[(3 * a + j) * size_t(ne) + e];
-          y[3 * size_t(node) + i] += m.volume[e] * f;
+          double sum = 0;
+          for (int j = 0; j < 3; ++j) sum += S[i][j] * m.dndx[(3 * a + j) * size_t(ne) + e];
+          y[3 * size_t(node) + i] += f * sum;
         }
       }
     }
   };
-  std::vector<double> x(3 * size_t(n), 0.0), y(3 * size_t(n));
-  for (const index_t a : nodes)  // a fixed pseudo-random start: every mode has a share
-    if (movable[a])
+  std::vector<double> x(3 * size_t(n), 0.0), y(3 * size_t(n), 0.0);
+  // power iteration on M^-1 K from a fixed pseudo-random start (every mode has a share), until the
+  // residual |K x - w2 M x| (in M^-1) is within 1e-3 w2 |x| (in M), at most 2,000 iterations
+  const auto omega2 = [&]() {
+    for (const index_t a : nodes)
       for (int i = 0; i < 3; ++i) {
         std::uint64_t h = (std::uint64_t(a) * 3 + std::uint64_t(i) + 1) * 0x9E3779B97F4A7C15ull;
         h ^= h >> 29;
         h *= 0xBF58476D1CE4E5B9ull;
         h ^= h >> 32;
-        x[3 * size_t(a) + i] = double(h % 2001) / 1000.0 - 1.0;
+        x[3 * size_t(a) + i] = movable[a] ? double(h % 2001) / 1000.0 - 1.0 : 0.0;
       }
-  const auto omega2 = [&]() {  // power iteration on M^-1 K from x (kept for the next round)
-    double lambda = 0;
-    for (int it = 0; it < 400; ++it) {
+    double w2 = 0;
+    for (int it = 0; it < 2000; ++it) {
       stiffness(x, y);
       double xKx = 0, xMx = 0;
       for (const index_t a : nodes)
@@ -642,52 +667,76 @@ AssembledStep hold_assembled_step(TissueModel<double>& m, const std::vector<doub
           xKx += x[k] * y[k];
           xMx += m.mass[a] * x[k] * x[k];
         }
-      const double rayleigh = xKx / xMx;
-      double big = 0;
-      for (const index_t a : nodes)
+      if (!(xMx > 0)) return 0.0;
+      w2 = xKx / xMx;
+      double r2 = 0, big = 0;
+      for (const index_t a : nodes) {
+        if (!movable[a]) continue;
         for (int i = 0; i < 3; ++i) {
           const size_t k = 3 * size_t(a) + i;
-          x[k] = movable[a] ? y[k] / m.mass[a] : 0.0;
+          const double r = y[k] - w2 * m.mass[a] * x[k];
+          r2 += r * r / m.mass[a];
+          x[k] = y[k] / m.mass[a];
           big = std::max(big, std::fabs(x[k]));
         }
-      if (!(big > 0)) return 0.0;
+      }
+      if (r2 <= 1e-6 * w2 * w2 * xMx || !(big > 0)) break;
       for (const index_t a : nodes)
         for (int i = 0; i < 3; ++i) x[3 * size_t(a) + i] /= big;
-      if (it > 30 && std::fabs(rayleigh - lambda) < 1e-5 * rayleigh) return rayleigh;
-      lambda = rayleigh;
     }
-    return lambda;
+    return w2;
   };
+  const std::vector<double> mass_before = m.mass;
   std::vector<std::uint8_t> given(n, 0);
   for (int round = 0;; ++round) {
     const double w2 = omega2();
     if (!(w2 > 0)) return out;
-    out.limit = 2 / std::sqrt(w2);
-    const double over = dt / (kAssembledShare * out.limit);
-    if (over <= 1) break;
-    if (round == kAssembledRounds) {  // the mass did not bring it down: a smaller step (not a dt asked for)
-      if (!may_lower) break;
-      dt = kAssembledShare * out.limit;
-      if (tick > 0) dt = tick / std::ceil(tick / dt * (1 - 1e-12));
-      break;
+    const double limit = 2 / std::sqrt(w2);
+    if (round == 0) out.limit = limit;
+    const double over = dt / (kAssembledShare * limit);
+    if (over <= 1) {
+      out.limit = limit;
+      return out;
     }
-    // the nodes that carry the mode's kinetic energy, each scaled by over^2 (a little more, to converge)
+    // the mode's nodes, by their kinetic energy in it (x is the last iterate)
     const auto kinetic = [&](index_t a) {
       const double* v = &x[3 * size_t(a)];
       return m.mass[a] * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
     };
-    double most = 0;
+    double most = 0, more = 0;
     for (const index_t a : nodes) most = std::max(most, kinetic(a));
+    for (const index_t a : nodes)
+      if (movable[a] && kinetic(a) >= kAssembledKinetic * most) more += m.mass[a] * (1.05 * over * over - 1);
+    if (round == kAssembledRounds || out.added_mass + more > budget_left) {
+      // the mass does not bring it down within the rounds and the budget: a smaller step instead
+      m.mass = mass_before;
+      out = {limit, 0, 0};
+      if (in.dt > 0)
+        throw ModelError(fmt::format(
+            "{}: time step dt = {:.6g} s is above {} of the assembled mesh's stable limit {:.6g} s (2 / omega_max "
+            "of the lumped system over the mass-scaled elements), and mass scaling's budget ({:.3g} %) cannot "
+            "bring it down; use a smaller dt or a larger mass-scaling budget",
+            in.source, in.dt, kAssembledShare, limit, 100 * in.mass_scaling));
+      dt = kAssembledShare * limit;
+      if (in.tick > 0) {
+        const double steps = std::ceil(in.tick / dt * (1 - 1e-12));
+        if (steps > kMaxStepsPerTick)
+          throw ModelError(fmt::format("{}: the assembled mesh's stable limit {:.6g} s would need {:.3g} steps per "
+                                       "{:.4g} s haptic tick (the most is {:.0e})",
+                                       in.source, limit, steps, in.tick, kMaxStepsPerTick));
+        dt = in.tick / steps;
+      }
+      return out;
+    }
     for (const index_t a : nodes) {
-      if (!(kinetic(a) >= 0.05 * most)) continue;
-      const double more = m.mass[a] * (1.05 * over * over - 1);
-      m.mass[a] += more;
-      out.added_mass += more;
+      if (!movable[a] || !(kinetic(a) >= kAssembledKinetic * most)) continue;
+      const double extra = m.mass[a] * (1.05 * over * over - 1);
+      m.mass[a] += extra;
+      out.added_mass += extra;
       out.nodes += !given[a];
       given[a] = 1;
     }
   }
-  return out;
 }
 
 /// build_model's time step: the requested or safe dt, selective mass scaling within its budget, the
@@ -725,7 +774,8 @@ void choose_time_step(const ModelInput& in, TissueModel<double>& m, const Elemen
       m.added_mass = ms.added_mass;
       m.scaled_elems = ms.scaled_elems;
       m.max_density_scale = ms.max_scale;
-      const AssembledStep held = hold_assembled_step(m, scale, dt, in.dt > 0 ? 0.0 : in.tick, in.dt == 0);
+      const AssembledStep held =
+          hold_assembled_step(in, m, scale, dt, std::max(0.0, in.mass_scaling * m.total_mass - m.added_mass));
       m.added_mass += held.added_mass;
       m.assembled_step = held.limit;
       m.assembled_nodes = held.nodes;

@@ -249,12 +249,17 @@ GraphExec capture_graph(cudaStream_t stream, const std::function<void(cudaStream
   CUDA_CHECK(cudaStreamEndCapture(stream, &g));
   if (reuse.get()) {
     cudaGraphExecUpdateResultInfo info{};
-    if (cudaGraphExecUpdate(reuse.get(), g, &info) == cudaSuccess) {
+    const cudaError_t update = cudaGraphExecUpdate(reuse.get(), g, &info);
+    if (update == cudaSuccess) {
       cudaGraphDestroy(g);
       if (updated) *updated = true;
       return reuse;
     }
-    (void)cudaGetLastError();  // a topology that differs: not an error, instantiated below
+    if (update != cudaErrorGraphExecUpdateFailure) {  // not a topology that differs: a real error
+      cudaGraphDestroy(g);
+      CUDA_CHECK(update);
+    }
+    (void)cudaGetLastError();  // a topology that differs: instantiated below
   }
   cudaGraphExec_t exec = nullptr;
   const cudaError_t err = cudaGraphInstantiate(&exec, g, 0);

@@ -570,18 +570,25 @@ TEST(LiveCutCuda, APreparedCutOfTheKidneyUpdatesItsTickGraphsAndStepsAsTheCpu) {
   Session cpu(on(kidney, "cpu", Precision::Double)), gpu(on(kidney, "cuda", Precision::Double));
   ASSERT_EQ(gpu.backend().name(), "cuda");
   const CutSurface across{{-0.025, -0.06, -0.04}, {0, 0.12, 0}, {0, 0, 0.08}};
+  long updates_after_commit = -1;
   for (Session* s : {&cpu, &gpu}) {
     for (int k = 0; k < 150; ++k) s->tick();
     s->begin_cut(across, {}, CutSpace::Reference, 160);
-    for (int k = 150; k < 220; ++k) s->tick();
-    EXPECT_EQ(s->cuts(), 1);
+    while (s->cuts() == 0 && s->scheduler().ticks() < 170) s->tick();
+    ASSERT_EQ(s->cuts(), 1);
+    // the new backend's first ticks, before it has dropped a graph of its own (no region built again): what it
+    // updates it took over from the old one
+    const long rebuilds = s->scheduler().region_rebuilds(), updates = s->backend().graph_updates();
+    for (int k = 0; k < 8; ++k) s->tick();
+    if (s == &gpu) {
+      EXPECT_EQ(s->scheduler().region_rebuilds(), rebuilds);
+      updates_after_commit = s->backend().graph_updates() - updates;
+    }
+    while (s->scheduler().ticks() < 220) s->tick();
     EXPECT_FALSE(s->failed());
   }
-  const Backend& b = gpu.backend();
-  RecordProperty("graph_captures", g(double(b.graph_captures())));
-  RecordProperty("graph_updates", g(double(b.graph_updates())));
-  EXPECT_GT(b.graph_updates(), 0) << "the old backend's graphs, taken over";
-  EXPECT_LE(b.graph_updates(), b.graph_captures());
+  RecordProperty("graph_updates_8_ticks_after_commit", g(double(updates_after_commit)));
+  EXPECT_GT(updates_after_commit, 0) << "the old backend's graphs, taken over and updated";
   const std::vector<double> uc = cpu.backend().download().u, ug = gpu.backend().download().u;
   ASSERT_EQ(uc.size(), ug.size());
   double most = 0;
