@@ -779,6 +779,7 @@ void choose_time_step(const ModelInput& in, TissueModel<double>& m, const Elemen
       m.added_mass += held.added_mass;
       m.assembled_step = held.limit;
       m.assembled_nodes = held.nodes;
+      m.assembled_mass = held.added_mass;
     }
   }
   const double damping = in.damping ? *in.damping : 2.0 * lowest_mode_estimate(m);

@@ -138,10 +138,11 @@ struct TissueModel {
   double max_density_scale = 1;  ///< largest of their density factors
   /// With mass scaling: 2 / omega_max of the assembled lumped system at rest
   /// over the scaled elements' patch (plain tets; 0 when not computed), and
-  /// the nodes given more mass to keep dt within 0.95 of it (core/model.cpp
-  /// hold_assembled_step; their mass is in added_mass).
+  /// the nodes given more mass to keep dt within 0.95 of it and that mass
+  /// (kg, within added_mass; core/model.cpp hold_assembled_step).
   double assembled_step = 0;
   index_t assembled_nodes = 0;
+  double assembled_mass = 0;
   double dt_crit_physical = 0;   ///< critical step without mass scaling (s)
   index_t reoriented = 0;   ///< inverted input tets whose corners were swapped
   bool ianp = true;         ///< pass 3 uses IANP (else plain tet forces, passes 1-2 unused)

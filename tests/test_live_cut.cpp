@@ -352,6 +352,41 @@ TEST(LiveCut, TheKidneyCutFourTimesStepsWholeWithItsLipsTouching) {
   EXPECT_TRUE(s.scheduler().region_depth() == kDepthAll);
 }
 
+// The same cuts made at rest: the assembled check gives the cut's mode mass
+// within the mass-scaling budget. With a budget that the elements' own
+// scaling fits in but the check's mass does not, the check takes its mass
+// back and lowers dt to 0.95 of the assembled limit, in whole steps per
+// tick; a dt the scene asks for is refused, naming the assembled limit.
+TEST(LiveCut, TheAssembledCheckKeepsToTheMassScalingBudget) {
+  scene::Scene kidney = io::default_kidney_scene();
+  kidney.solver.precision = Precision::Double;
+  Session s(kidney);
+  for (double x : {-0.03, -0.02, 0.02}) s.cut({{x, -0.06, -0.04}, {0, 0.12, 0}, {0, 0, 0.08}}, {}, CutSpace::Reference);
+  const TissueModel<double>& m = s.model();
+  ASSERT_GT(m.assembled_mass, 0) << "the third cut's mode is given mass";
+  EXPECT_LE(m.added_mass, kidney.solver.mass_scaling * m.total_mass * (1 + 1e-12));
+  const double elements = m.added_mass - m.assembled_mass;
+  scene::Scene tight = s.scene();
+  tight.solver.mass_scaling = (elements + 0.5 * m.assembled_mass) / m.total_mass;
+  const TissueModel<double> lowered = scene::load_model(tight);
+  EXPECT_EQ(lowered.assembled_nodes, 0);
+  EXPECT_EQ(lowered.assembled_mass, 0);
+  EXPECT_NEAR(lowered.added_mass, elements, 1e-12 * m.total_mass) << "the elements' own scaling only";
+  EXPECT_GT(lowered.assembled_step, 0);
+  EXPECT_LE(lowered.dt, 0.95 * lowered.assembled_step * (1 + 1e-12));
+  EXPECT_LT(lowered.dt, m.dt);
+  const double steps = tight.solver.tick / lowered.dt;
+  EXPECT_NEAR(steps, std::round(steps), 1e-9);
+  ::testing::Test::RecordProperty("steps_per_tick_lowered", g(std::round(steps)));
+  tight.solver.dt = m.dt;
+  try {
+    scene::load_model(tight);
+    ADD_FAILURE() << "a requested dt above the assembled limit was accepted";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("assembled mesh's stable limit"), std::string::npos) << e.what();
+  }
+}
+
 // Refused cuts name the rule and leave the run as it was; reset goes back
 // to the mesh before the first cut.
 TEST(LiveCut, BadCutsAreRefusedAndResetRestoresTheWholeMesh) {
