@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/step_guard.hpp"
+
 namespace tissue {
 namespace {
 
@@ -111,6 +113,42 @@ void Backend::set_motion(std::span<const double> u, std::span<const double> u_pr
   check_motion("set_motion", "displacement", u, n_nodes_);
   check_motion("set_motion", "previous displacement", u_prev, n_nodes_);
   do_set_motion(u, u_prev);
+}
+
+void Backend::set_masses(const TissueModel<double>& model) {
+  require_upload("set_masses");
+  if (model.n_nodes != n_nodes_ || model.n_elems != n_elems_ || model.mass.size() != std::size_t(n_nodes_) ||
+      model.cd_A.size() != std::size_t(n_nodes_) || model.cd_B.size() != std::size_t(n_nodes_) ||
+      model.cd_C.size() != std::size_t(n_nodes_))
+    throw std::invalid_argument(fmt::format("set_masses: a model of {} nodes and {} elements for the {} and {} uploaded",
+                                            model.n_nodes, model.n_elems, n_nodes_, n_elems_));
+  for (index_t a = 0; a < n_nodes_; ++a)
+    if (!(model.mass[a] > 0) || !std::isfinite(model.mass[a]))
+      throw std::invalid_argument(fmt::format("set_masses: node {} has mass {} kg (must be finite and > 0)", a,
+                                              model.mass[a]));
+  do_set_masses(model);
+}
+
+std::vector<double> Backend::deformed_altitudes(const TissueModel<double>& model, std::span<const index_t> elems) {
+  require_upload("deformed_altitudes");
+  if (model.n_nodes != n_nodes_ || model.n_elems != n_elems_)
+    throw std::invalid_argument(fmt::format("deformed_altitudes: a model of {} nodes and {} elements for the {} and {} "
+                                            "uploaded",
+                                            model.n_nodes, model.n_elems, n_nodes_, n_elems_));
+  for (const index_t e : elems)
+    if (e < 0 || e >= n_elems_)
+      throw std::out_of_range(fmt::format("deformed_altitudes: element {} out of range (0..{})", e, n_elems_ - 1));
+  return do_deformed_altitudes(model, elems);
+}
+
+std::vector<double> Backend::do_deformed_altitudes(const TissueModel<double>& model, std::span<const index_t> elems) {
+  const std::vector<double> u = download().u;
+  if (u.size() != 3 * std::size_t(n_nodes_))
+    throw std::logic_error(fmt::format("{} backend: download() gave {} displacements for {} nodes", name(), u.size(),
+                                       n_nodes_));
+  std::vector<double> out(elems.size());
+  for (std::size_t k = 0; k < elems.size(); ++k) out[k] = deformed_altitude(model, std::span<const double>(u), elems[k]);
+  return out;
 }
 
 void Backend::warm_up() {

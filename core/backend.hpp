@@ -166,6 +166,16 @@ class Backend {
   /// nothing on cuda), so that a backend prepared on another thread (a
   /// cut, Session::begin_cut) steps at once when it takes over.
   void warm_up();
+  /// Takes the model's nodal masses and central-difference constants again
+  /// (mass, cd_A, cd_B, cd_C of the model uploaded, whose mesh, dt and
+  /// damping it keeps): the step guard's added mass (core/step_guard.hpp).
+  /// The state and the region are kept. Throws std::invalid_argument for
+  /// another mesh's model.
+  void set_masses(const TissueModel<double>& model);
+  /// The smallest altitude of each listed element on its deformed shape
+  /// (m; 0 where it is inverted or flat), the step guard's measure. Throws
+  /// std::out_of_range naming an element that is not the model's.
+  std::vector<double> deformed_altitudes(const TissueModel<double>& model, std::span<const index_t> elems);
 
   /// Flood-fills the region from seeds for depth rings (kDepthAll = whole
   /// mesh), holds the new halo at its current displacement, freezes nodes
@@ -336,6 +346,9 @@ class Backend {
   virtual void do_upload(const TissueModel<double>& model) = 0;
   virtual void do_set_motion(std::span<const double> u, std::span<const double> u_prev) = 0;
   virtual void do_warm_up() {}
+  virtual void do_set_masses(const TissueModel<double>& model) = 0;
+  /// The base class's: from download()'s displacements.
+  virtual std::vector<double> do_deformed_altitudes(const TissueModel<double>& model, std::span<const index_t> elems);
   virtual std::vector<double> do_previous_displacements() = 0;
   virtual RegionSizes do_build_region(std::span<const index_t> seeds, int depth) = 0;
   virtual Region do_region() = 0;

@@ -782,6 +782,14 @@ void choose_time_step(const ModelInput& in, TissueModel<double>& m, const Elemen
       m.assembled_mass = held.added_mass;
     }
   }
+  m.elem_step = steps.dt;
+  m.elem_mass = steps.rho_V;
+  if (m.scaled_elems > 0)
+    for (index_t e = 0; e < m.n_elems; ++e)
+      if (const double s_e = density_scale(m.elem_step[e], m.dt_crit); s_e > 1) {  // dt_crit: mass scaling's need
+        m.elem_step[e] *= std::sqrt(s_e);
+        m.elem_mass[e] *= s_e;
+      }
   const double damping = in.damping ? *in.damping : 2.0 * lowest_mode_estimate(m);
   try {
     set_time_step(m, dt, damping);

@@ -144,6 +144,10 @@ struct TissueModel {
   index_t assembled_nodes = 0;
   double assembled_mass = 0;
   double dt_crit_physical = 0;   ///< critical step without mass scaling (s)
+  /// Each element's stable step L_e / c_e at rest with mass scaling's
+  /// density (s), and its mass rho_e V_e with that density (kg): host only,
+  /// the step guard's reference (core/step_guard.hpp).
+  std::vector<double> elem_step, elem_mass;
   index_t reoriented = 0;   ///< inverted input tets whose corners were swapped
   bool ianp = true;         ///< pass 3 uses IANP (else plain tet forces, passes 1-2 unused)
 

@@ -121,6 +121,7 @@ Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, Schedul
   follow_step_ = 0.5 * median_surface_edge(*model_);
   // depth N: an empty region (nothing moves) until the first contact seeds it
   region_ = backend_->build_region({}, depth_);
+  guard_ = StepGuard(*model_, settings_.step_guard);
 }
 
 void Scheduler::give_backend_tools() {
@@ -172,6 +173,10 @@ void Scheduler::remesh_onto(const TissueModel<double>& model, std::span<const st
   give_backend_tools();
   follow_step_ = 0.5 * (prepared ? prepared->surface_edge : median_surface_edge(model));
   seeds_ = seeds_after(seeds_, node_from);
+  guard_ = StepGuard(model, settings_.step_guard);  // the new model's masses, built for its own mesh
+  guarded_.reset();
+  guard_lifts_ = 0;
+  guard_after_remesh_ = true;  // the cut mesh's masses are its own at rest: checked after its first tick
   if (prepared && seeds_ == prepared->seeds && depth == prepared->depth) {
     region_ = prepared->sizes;
   } else {
@@ -503,8 +508,48 @@ TickReport Scheduler::end_tick() {
   rep.depth = depth_;
   rep.steps = steps_per_tick_;
   for (std::size_t t = 0; t < n_tools; ++t) pending_devices_[t]->send_force(rep.tools[t].force);
+  guard_steps(r);  // after the forces went out: its check delays the next tick, not this force
   ++tick_;
   return rep;
+}
+
+void Scheduler::guard_steps(const Reductions& r) {
+  if (!in_contact_ || !guard_.watching()) return;
+  if (!guard_after_remesh_ && tick_ % settings_.step_guard.interval != 0) return;
+  guard_after_remesh_ = false;
+  std::vector<ToolShape> shapes;
+  std::vector<ToolPose> poses;
+  double radius = 0;
+  for (std::size_t t = 0; t < settings_.tools.size(); ++t)
+    if (r.tools[t].contact > 0) {
+      shapes.push_back(settings_.tools[t].shape);
+      poses.push_back(prev_[t]);  // where this tick left it
+      radius = std::max(radius, settings_.tools[t].shape.radius);
+    }
+  // a corner within a radius of a tool now lies within that plus how far the tissue moved at its place at rest
+  const std::vector<index_t> elems = guard_.near(shapes, poses, radius + r.max_disp);
+  if (elems.empty()) return;
+  const std::vector<double> altitude = backend_->deformed_altitudes(*model_, elems);
+  std::vector<double> mass = guarded_ ? guarded_->mass : model_->mass;
+  const StepGuardLift lift = guard_.lift(*model_, mass, elems, altitude);
+  if (lift.refused > 0 && !guard_refused_noted_) {
+    guard_refused_noted_ = true;
+    notes_.push_back(fmt::format(
+        "tick {}: the step guard's budget (the mass-scaling budget, {:.3g} % of the mass) is spent: {} crushed "
+        "element(s) get no more mass, and may ring until they invert (docs/accuracy.md, \"The step guard\")",
+        tick_, 100 * settings_.step_guard.budget, lift.refused));
+  }
+  if (lift.elements == 0) return;
+  if (!guarded_) guarded_ = std::make_unique<TissueModel<double>>(*model_);
+  guarded_->mass = std::move(mass);
+  set_time_step(*guarded_, guarded_->dt, guarded_->damping);  // the central difference's constants at the new masses
+  backend_->set_masses(*guarded_);
+  if (guard_lifts_ == 0)
+    notes_.push_back(fmt::format(
+        "tick {}: the tools crush elements whose step falls below {:.2g} of dt (element {}: {:.3g}); the step guard "
+        "gives them mass ({:.3g} mg so far) so that dt stays stable (docs/accuracy.md, \"The step guard\")",
+        tick_, settings_.step_guard.trigger, lift.worst_elem, lift.worst, 1e6 * guard_.added_mass()));
+  guard_lifts_ += lift.elements;
 }
 
 }  // namespace tissue

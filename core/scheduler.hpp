@@ -28,6 +28,7 @@
 #pragma once
 
 #include <array>
+#include <memory>
 #include <optional>
 #include <span>
 #include <stdexcept>
@@ -36,6 +37,7 @@
 
 #include "core/backend.hpp"
 #include "core/device.hpp"
+#include "core/step_guard.hpp"
 #include "core/tool.hpp"
 
 namespace tissue {
@@ -75,6 +77,9 @@ struct SchedulerSettings {
   /// nothing else keeps from crossing.
   bool lip_contact = false;
   double lip_friction = 0;
+  /// Mass scaling carried on under the tools as they crush small elements
+  /// (core/step_guard.hpp).
+  StepGuardSettings step_guard;
 };
 
 /// One tool in one tick.
@@ -167,6 +172,12 @@ class Scheduler {
   /// finite, >= 0); its contacts and grasp stay.
   void set_tool_friction(int t, double friction);
 
+  /// The step guard's work so far (core/step_guard.hpp): elements given
+  /// mass (counted once per lift) and the mass added (kg), since the
+  /// Scheduler was made or the last remesh.
+  index_t guard_lifts() const { return guard_lifts_; }
+  double guard_added_mass() const { return guard_.added_mass(); }
+
   /// Carries the run over to a new mesh of the same scene (a cut,
   /// core/cut.hpp), which the backend already holds (Backend::upload):
   /// node i of `model` comes from old nodes node_from[i] (the same one
@@ -228,6 +239,13 @@ class Scheduler {
   void seed_region();
   bool grow_region(const Reductions& r);
   void check_health(const Reductions& r, long first_step) const;
+  /// The step guard's check after a tick (every settings.step_guard.interval ticks in contact).
+  void guard_steps(const Reductions& r);
+  StepGuard guard_;
+  std::unique_ptr<TissueModel<double>> guarded_;  ///< the model with the guard's masses, once it added any
+  index_t guard_lifts_ = 0;
+  bool guard_after_remesh_ = false;   ///< a remesh's cut mesh is checked after its first tick in contact
+  bool guard_refused_noted_ = false;  ///< the budget's end was noted
   void note_contacts(const Reductions& r);
   /// The tools that moved more than follow_step_ per TLED step this tick, as
   /// a sentence naming them ("" when none): for the failure message and notes.

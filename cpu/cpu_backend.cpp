@@ -15,6 +15,8 @@
 #include "cpu/element_lanes.hpp"
 #include "cpu/host_backend.hpp"
 
+#include "core/step_guard.hpp"
+
 namespace tissue {
 
 std::unique_ptr<Backend> make_cpu_backend(Precision precision) {
@@ -95,6 +97,23 @@ void CpuBackend<T>::do_set_motion(std::span<const double> u, std::span<const dou
 template <class T>
 void CpuBackend<T>::do_warm_up() {
   if (contact_) contact_->warm_up(state_);
+}
+
+template <class T>
+void CpuBackend<T>::do_set_masses(const TissueModel<double>& model) {
+  model_.mass.assign(model.mass.begin(), model.mass.end());
+  model_.cd_A.assign(model.cd_A.begin(), model.cd_A.end());
+  model_.cd_B.assign(model.cd_B.begin(), model.cd_B.end());
+  model_.cd_C.assign(model.cd_C.begin(), model.cd_C.end());
+}
+
+template <class T>
+std::vector<double> CpuBackend<T>::do_deformed_altitudes(const TissueModel<double>& model,
+                                                         std::span<const index_t> elems) {
+  std::vector<double> out(elems.size());
+  const std::span<const T> u(state_.u);
+  for (std::size_t k = 0; k < elems.size(); ++k) out[k] = deformed_altitude(model, u, elems[k]);
+  return out;
 }
 
 template <class T>

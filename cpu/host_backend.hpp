@@ -62,6 +62,9 @@ class CpuBackend final : public Backend {
   void do_set_motion(std::span<const double> u, std::span<const double> u_prev) override;
   std::vector<double> do_previous_displacements() override;
   void do_warm_up() override;
+  void do_set_masses(const TissueModel<double>& model) override;
+  /// From the displacements it holds (no copy of the state).
+  std::vector<double> do_deformed_altitudes(const TissueModel<double>& model, std::span<const index_t> elems) override;
   RegionSizes do_build_region(std::span<const index_t> seeds, int depth) override;
   Region do_region() override { return state_.region; }
   std::vector<std::uint8_t> do_roles(std::span<const index_t> nodes) override;

@@ -34,6 +34,7 @@
 #include "cuda/reduce.hpp"
 #include "cuda/region_fill.hpp"
 #include "core/node_rules.hpp"
+#include "core/step_guard.hpp"
 #include "cuda/stepper.hpp"
 #include "cuda/text.hpp"
 
@@ -383,6 +384,15 @@ class CudaBackend final : public Backend {
     stream_.sync();
   }
 
+  void do_set_masses(const TissueModel<double>& model) override {
+    TissueModel<T> m;
+    m.mass.assign(model.mass.begin(), model.mass.end());
+    m.cd_A.assign(model.cd_A.begin(), model.cd_A.end());
+    m.cd_B.assign(model.cd_B.begin(), model.cd_B.end());
+    m.cd_C.assign(model.cd_C.begin(), model.cd_C.end());
+    store_.set_masses(m, log_, stream());
+  }
+
   void do_set_motion(std::span<const double> u, std::span<const double> u_prev) override {
     const index_t n = store_.n_nodes();
     log_.to_device_now(scratch_.data(), u.data(), u.size_bytes(), stream());
@@ -553,6 +563,18 @@ class CudaBackend final : public Backend {
     f.f.assign(at(4), at(7));
     f.elem_J.assign(at(7), at(7) + ne);
     return f;
+  }
+
+  /// Downloads u only (the pattern of do_previous_displacements), not the whole state.
+  std::vector<double> do_deformed_altitudes(const TissueModel<double>& model, std::span<const index_t> elems) override {
+    const index_t n = store_.n_nodes(), ne = store_.n_elems();
+    launch(std::max(n, ne), stream(), download_kernel<T>, store_.model(), store_.state(), store_.u.current().u,
+           scratch_.data());
+    std::vector<double> u(3 * std::size_t(n));
+    log_.to_host(u.data(), scratch_.data(), u.size() * sizeof(double), stream());
+    std::vector<double> out(elems.size());
+    for (std::size_t k = 0; k < elems.size(); ++k) out[k] = deformed_altitude(model, std::span<const double>(u), elems[k]);
+    return out;
   }
 
   std::vector<double> do_previous_displacements() override {

@@ -320,6 +320,21 @@ void DeviceStore<T>::copy_pressures_to_scratch(cudaStream_t stream) {
 #undef TISSUE_PASS_COPY
 }
 
+template <class T>
+void DeviceStore<T>::set_masses(const TissueModel<T>& m, Transfers& log, cudaStream_t stream) {
+  const auto copy = [&](auto& dst, const std::vector<T>& v) {
+    if (dst.bytes() != v.size() * sizeof(T))
+      throw std::invalid_argument(str("cuda backend: set_masses: ", v.size(), " values for an array of ",
+                                      dst.bytes() / sizeof(T)));
+    log.to_device(dst.data(), v.data(), dst.bytes(), stream);
+  };
+  copy(arrays_.mass, m.mass);
+  copy(arrays_.cd_A, m.cd_A);
+  copy(arrays_.cd_B, m.cd_B);
+  copy(arrays_.cd_C, m.cd_C);
+  CUDA_CHECK(cudaStreamSynchronize(stream));  // the host sources must outlive the copies
+}
+
 template class DeviceStore<float>;
 template class DeviceStore<double>;
 

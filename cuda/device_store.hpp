@@ -41,6 +41,11 @@ class DeviceStore {
   void upload(const TissueModel<T>& m, const TissueModel<double>& ref, CudaGradients gradients, Transfers& log,
               cudaStream_t stream);
 
+  /// Copies m's nodal masses and central-difference constants (mass, cd_A,
+  /// cd_B, cd_C; n_nodes each, the upload's sizes) into the arrays the
+  /// upload allocated, in place (the tick graphs keep their pointers).
+  void set_masses(const TissueModel<T>& m, Transfers& log, cudaStream_t stream);
+
   /// u = u_prev = u_next = 0, u_held = 0, f = f_slot = elem_dv = node_p = 0,
   /// elem_J = 1 (both pass-array sets; set 0 the state's), held = the
   /// fixed axes, driven = 0, every node inner, no bad element, no contact.

@@ -535,7 +535,7 @@ scene::Tool Reader::read_tool(pugi::xml_node n) const {
 
 scene::Solver Reader::read_solver(pugi::xml_node n) const {
   check_attributes(n, {"backend", "precision", "dt", "dt-safety", "mass-scaling", "damping", "depth", "tick",
-                       "residual-tol", "kinetic-tol", "ianp", "lip-contact"});
+                       "residual-tol", "kinetic-tol", "ianp", "lip-contact", "step-guard"});
   check_no_text(n);
   scene::Solver v;
   v.line = line(n);
@@ -584,6 +584,11 @@ scene::Solver Reader::read_solver(pugi::xml_node n) const {
     const std::string_view b = scene::trim(a.value());
     if (b != "true" && b != "false") fail(n, fmt::format("lip-contact = '{}' must be true or false", a.value()));
     v.lip_contact = b == "true";
+  }
+  if (const pugi::xml_attribute a = n.attribute("step-guard")) {
+    const std::string_view b = scene::trim(a.value());
+    if (b != "true" && b != "false") fail(n, fmt::format("step-guard = '{}' must be true or false", a.value()));
+    v.step_guard = b == "true";
   }
   return v;
 }
@@ -833,6 +838,7 @@ void write_solver(pugi::xml_node root, const scene::Solver& v) {
   set(n, "kinetic-tol", num(v.kinetic_tol));
   set(n, "ianp", v.ianp ? "true" : "false");
   set(n, "lip-contact", v.lip_contact ? "true" : "false");
+  set(n, "step-guard", v.step_guard ? "true" : "false");
 }
 
 }  // namespace

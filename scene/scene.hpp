@@ -157,6 +157,7 @@ struct Solver {
   double kinetic_tol = 1e-6;        ///< equilibrium: relative kinetic energy (SchedulerSettings)
   bool ianp = true;                 ///< improved average nodal pressure; false = plain tets
   bool lip_contact = false;         ///< a cut's lips keep out of each other (SchedulerSettings::lip_contact)
+  bool step_guard = true;           ///< mass scaling carried on under the tools (SchedulerSettings::step_guard)
   int line = 0;                     ///< source line of <solver>, for messages (0 = unknown / defaults)
 };
 

@@ -753,6 +753,8 @@ SchedulerSettings scheduler_settings(const Scene& scene) {
   st.residual_tol = scene.solver.residual_tol;
   st.kinetic_tol = scene.solver.kinetic_tol;
   st.lip_contact = scene.solver.lip_contact;
+  st.step_guard.on = scene.solver.step_guard;
+  st.step_guard.budget = scene.solver.mass_scaling;
   return st;
 }
 

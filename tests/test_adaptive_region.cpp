@@ -186,6 +186,7 @@ class NoFrontBackend final : public Backend {
  protected:
   void do_upload(const TissueModel<double>& m) override { b_->upload(m); }
   void do_set_motion(std::span<const double> u, std::span<const double> u_prev) override { b_->set_motion(u, u_prev); }
+  void do_set_masses(const TissueModel<double>& m) override { b_->set_masses(m); }
   std::vector<double> do_previous_displacements() override { return b_->previous_displacements(); }
   RegionSizes do_build_region(std::span<const index_t> s, int d) override { return b_->build_region(s, d); }
   Region do_region() override { return b_->region(); }

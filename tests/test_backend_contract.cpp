@@ -43,6 +43,17 @@ class Contract : public ::testing::TestWithParam<test::BackendKind> {
   }
   /// Relative rounding scale of the backend's scalar.
   double eps() const { return is_float() ? 1.2e-7 : 2.2e-16; }
+  /// Two runs from one motion (set_motion clears float's carried low bits):
+  /// bit for bit in double, within 1e-6 of max |u| in float.
+  void expect_same_run(const std::vector<double>& ua, const std::vector<double>& ub) const {
+    if (is_float()) {
+      double most = 0;
+      for (std::size_t k = 0; k < ua.size(); ++k) most = std::max(most, std::fabs(ua[k] - ub[k]));
+      EXPECT_LT(most, 1e-6 * max_abs(ua));
+    } else {
+      EXPECT_EQ(ub, ua);
+    }
+  }
 };
 
 INSTANTIATE_TEST_SUITE_P(Backends, Contract,
@@ -851,14 +862,8 @@ TEST_P(Contract, AMotionSetFromAnotherRunStepsOnAsThatRunDoes) {
   EXPECT_EQ(b->previous_displacements(), u_prev);
   a->advance(5);
   b->advance(5);
-  const std::vector<double> ua = a->download().u, ub = b->download().u;
-  if (is_float()) {
-    double most = 0;
-    for (std::size_t k = 0; k < ua.size(); ++k) most = std::max(most, std::fabs(ua[k] - ub[k]));
-    EXPECT_LT(most, 1e-6 * max_abs(ua));
-  } else {
-    EXPECT_EQ(ub, ua);
-  }
+  const std::vector<double> ua = a->download().u;
+  expect_same_run(ua, b->download().u);
   // bad motions: named, as set_displacements' are
   std::vector<double> short_prev(u_prev.begin(), u_prev.end() - 1), nan_prev = u_prev;
   nan_prev[4] = NAN;
@@ -871,6 +876,41 @@ TEST_P(Contract, AMotionSetFromAnotherRunStepsOnAsThatRunDoes) {
         << e.what();
   }
   EXPECT_THROW(make()->previous_displacements(), std::logic_error);
+}
+
+// New nodal masses (the step guard's, Backend::set_masses) step on as an
+// upload of the model with them does (bit for bit in double, within float's
+// carried bits in float), the state kept; the deformed altitudes are the
+// model's at the downloaded displacements.
+TEST_P(Contract, NewMassesStepOnAsAnUploadWithThem) {
+  const auto m = box_model(3, true);
+  TissueModel<double> heavier = m;
+  for (index_t a = 0; a < m.n_nodes; a += 3) heavier.mass[a] *= 7.5;
+  set_time_step(heavier, m.dt, m.damping);
+  auto a = make(m);
+  a->set_displacements(field(m, [](Vec3<double> X) { return Vec3<double>{0.05 * X.x, 0.02 * X.z, 0}; }));
+  a->advance(3);
+  const std::vector<double> u = a->download().u, u_prev = a->previous_displacements();
+  a->set_masses(heavier);
+  auto b = make(heavier);
+  b->set_motion(u, u_prev);
+  a->advance(5);
+  b->advance(5);
+  const std::vector<double> ua = a->download().u;
+  expect_same_run(ua, b->download().u);
+  auto c = make(m);  // the old masses step elsewhere: the check can fail
+  c->set_motion(u, u_prev);
+  c->advance(5);
+  EXPECT_NE(c->download().u, ua);
+  const std::vector<index_t> elems = {0, 7, m.n_elems - 1};
+  const std::vector<double> alt = a->deformed_altitudes(m, elems);
+  for (std::size_t k = 0; k < elems.size(); ++k)
+    EXPECT_NEAR(alt[k], deformed_altitude(m, std::span<const double>(ua), elems[k]), 1e-12 * alt[k]);
+  EXPECT_THROW(a->set_masses(box_model(2, true)), std::invalid_argument);
+  heavier.mass[2] = -1;
+  EXPECT_THROW(a->set_masses(heavier), std::invalid_argument);
+  const std::vector<index_t> outside = {m.n_elems};
+  EXPECT_THROW(a->deformed_altitudes(m, outside), std::out_of_range);
 }
 
 // advance_reduce_in_region runs the tick exactly when contact_candidates()

@@ -136,6 +136,7 @@ void expect_same_scene(const Scene& a, const Scene& b) {
   EXPECT_EQ(u.kinetic_tol, v.kinetic_tol);
   EXPECT_EQ(u.ianp, v.ianp);
   EXPECT_EQ(u.lip_contact, v.lip_contact);
+  EXPECT_EQ(u.step_guard, v.step_guard);
 }
 
 /// A scene using every feature, on a 3 x 2 x 2 box of 0.03 x 0.02 x 0.017 m
@@ -194,6 +195,7 @@ Scene rich_scene() {
   s.solver.kinetic_tol = 3e-7;
   s.solver.ianp = false;
   s.solver.lip_contact = true;
+  s.solver.step_guard = false;
   return s;
 }
 
@@ -311,6 +313,7 @@ TEST(SceneXml, SolverDefaultsAndKeywords) {
   EXPECT_EQ(s.solver.tick, def.tick);
   EXPECT_TRUE(s.solver.ianp);
   EXPECT_FALSE(s.solver.lip_contact);
+  EXPECT_TRUE(s.solver.step_guard);
   const Scene plain = parse_scene(fmt::format(R"(<tissue-scene>{}
   <solver depth="7" dt="1e-5" damping="0"/></tissue-scene>)",
                                               kTet),
@@ -338,6 +341,8 @@ TEST(SceneXml, SentinelsAreNotAcceptedAsInput) {
   EXPECT_TRUE(xml_error(scene_with(R"(depth="-2")"), {"scene.xml:7: ", "depth = -2 must be >= 0", "\"auto\""}));
   EXPECT_TRUE(xml_error(scene_with(R"(lip-contact="yes")"), {"scene.xml:7: ", "lip-contact = 'yes' must be true or false"}));
   EXPECT_TRUE(parse_scene(scene_with(R"(lip-contact="true")"), "scene.xml", "").solver.lip_contact);
+  EXPECT_TRUE(xml_error(scene_with(R"(step-guard="1")"), {"scene.xml:7: ", "step-guard = '1' must be true or false"}));
+  EXPECT_FALSE(parse_scene(scene_with(R"(step-guard="false")"), "scene.xml", "").solver.step_guard);
   const Scene s = parse_scene(scene_with(R"(damping="auto" dt="auto" depth="auto")"), "scene.xml", "");
   EXPECT_FALSE(s.solver.damping);
   EXPECT_FALSE(s.solver.dt);
