@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "core/step_guard.hpp"
+#include "core/tet.hpp"
 
 namespace tissue {
 namespace {
@@ -115,18 +116,26 @@ void Backend::set_motion(std::span<const double> u, std::span<const double> u_pr
   do_set_motion(u, u_prev);
 }
 
-void Backend::set_masses(const TissueModel<double>& model) {
+void Backend::set_masses(std::span<const double> mass, double dt, double damping) {
   require_upload("set_masses");
-  if (model.n_nodes != n_nodes_ || model.n_elems != n_elems_ || model.mass.size() != std::size_t(n_nodes_) ||
-      model.cd_A.size() != std::size_t(n_nodes_) || model.cd_B.size() != std::size_t(n_nodes_) ||
-      model.cd_C.size() != std::size_t(n_nodes_))
-    throw std::invalid_argument(fmt::format("set_masses: a model of {} nodes and {} elements for the {} and {} uploaded",
-                                            model.n_nodes, model.n_elems, n_nodes_, n_elems_));
-  for (index_t a = 0; a < n_nodes_; ++a)
-    if (!(model.mass[a] > 0) || !std::isfinite(model.mass[a]))
-      throw std::invalid_argument(fmt::format("set_masses: node {} has mass {} kg (must be finite and > 0)", a,
-                                              model.mass[a]));
-  do_set_masses(model);
+  if (mass.size() != std::size_t(n_nodes_))
+    throw std::invalid_argument(
+        fmt::format("set_masses: {} masses for the {} nodes uploaded", mass.size(), n_nodes_));
+  NodeMasses k;
+  k.mass.assign(mass.begin(), mass.end());
+  k.cd_A.resize(mass.size());
+  k.cd_B.resize(mass.size());
+  k.cd_C.resize(mass.size());
+  for (index_t a = 0; a < n_nodes_; ++a) {
+    if (!(mass[a] > 0) || !std::isfinite(mass[a]))
+      throw std::invalid_argument(
+          fmt::format("set_masses: node {} has mass {} kg (must be finite and > 0)", a, mass[a]));
+    const auto c = central_difference_constants(mass[a], dt, damping);
+    k.cd_A[a] = c.A;
+    k.cd_B[a] = c.B;
+    k.cd_C[a] = c.C;
+  }
+  do_set_masses(k);
 }
 
 std::vector<double> Backend::deformed_altitudes(const TissueModel<double>& model, std::span<const index_t> elems) {

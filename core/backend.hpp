@@ -166,12 +166,14 @@ class Backend {
   /// nothing on cuda), so that a backend prepared on another thread (a
   /// cut, Session::begin_cut) steps at once when it takes over.
   void warm_up();
-  /// Takes the model's nodal masses and central-difference constants again
-  /// (mass, cd_A, cd_B, cd_C of the model uploaded, whose mesh, dt and
-  /// damping it keeps): the step guard's added mass (core/step_guard.hpp).
-  /// The state and the region are kept. Throws std::invalid_argument for
-  /// another mesh's model.
-  void set_masses(const TissueModel<double>& model);
+  /// New nodal masses (n_nodes, kg) for the model uploaded, whose dt and
+  /// damping (s, 1/s) are given: the central difference's constants are
+  /// computed from them as set_time_step computes them, and taken with the
+  /// masses in place; the state and the region are kept (the step guard's
+  /// added mass, core/step_guard.hpp). Throws std::invalid_argument for a
+  /// size that is not n_nodes, or a mass that is not finite and > 0 (naming
+  /// the node).
+  void set_masses(std::span<const double> mass, double dt, double damping);
   /// The smallest altitude of each listed element on its deformed shape
   /// (m; 0 where it is inverted or flat), the step guard's measure. Throws
   /// std::out_of_range naming an element that is not the model's.
@@ -346,7 +348,11 @@ class Backend {
   virtual void do_upload(const TissueModel<double>& model) = 0;
   virtual void do_set_motion(std::span<const double> u, std::span<const double> u_prev) = 0;
   virtual void do_warm_up() {}
-  virtual void do_set_masses(const TissueModel<double>& model) = 0;
+  /// mass, cd_A, cd_B, cd_C: n_nodes each (checked).
+  struct NodeMasses {
+    std::vector<double> mass, cd_A, cd_B, cd_C;
+  };
+  virtual void do_set_masses(const NodeMasses& masses) = 0;
   /// The base class's: from download()'s displacements.
   virtual std::vector<double> do_deformed_altitudes(const TissueModel<double>& model, std::span<const index_t> elems);
   virtual std::vector<double> do_previous_displacements() = 0;

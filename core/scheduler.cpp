@@ -122,6 +122,7 @@ Scheduler::Scheduler(Backend& backend, const TissueModel<double>& model, Schedul
   // depth N: an empty region (nothing moves) until the first contact seeds it
   region_ = backend_->build_region({}, depth_);
   guard_ = StepGuard(*model_, settings_.step_guard);
+  if (guard_.watching()) guard_mass_ = model_->mass;  // held from the start: a lift allocates nothing
 }
 
 void Scheduler::give_backend_tools() {
@@ -174,7 +175,7 @@ void Scheduler::remesh_onto(const TissueModel<double>& model, std::span<const st
   follow_step_ = 0.5 * (prepared ? prepared->surface_edge : median_surface_edge(model));
   seeds_ = seeds_after(seeds_, node_from);
   guard_ = StepGuard(model, settings_.step_guard);  // the new model's masses, built for its own mesh
-  guarded_.reset();
+  guard_mass_.assign(model.mass.begin(), guard_.watching() ? model.mass.end() : model.mass.begin());
   guard_lifts_ = 0;
   guard_after_remesh_ = true;  // the cut mesh's masses are its own at rest: checked after its first tick
   if (prepared && seeds_ == prepared->seeds && depth == prepared->depth) {
@@ -530,8 +531,7 @@ void Scheduler::guard_steps(const Reductions& r) {
   const std::vector<index_t> elems = guard_.near(shapes, poses, radius + r.max_disp);
   if (elems.empty()) return;
   const std::vector<double> altitude = backend_->deformed_altitudes(*model_, elems);
-  std::vector<double> mass = guarded_ ? guarded_->mass : model_->mass;
-  const StepGuardLift lift = guard_.lift(*model_, mass, elems, altitude);
+  const StepGuardLift lift = guard_.lift(*model_, guard_mass_, elems, altitude);
   if (lift.refused > 0 && !guard_refused_noted_) {
     guard_refused_noted_ = true;
     notes_.push_back(fmt::format(
@@ -540,10 +540,7 @@ void Scheduler::guard_steps(const Reductions& r) {
         tick_, 100 * settings_.step_guard.budget, lift.refused));
   }
   if (lift.elements == 0) return;
-  if (!guarded_) guarded_ = std::make_unique<TissueModel<double>>(*model_);
-  guarded_->mass = std::move(mass);
-  set_time_step(*guarded_, guarded_->dt, guarded_->damping);  // the central difference's constants at the new masses
-  backend_->set_masses(*guarded_);
+  backend_->set_masses(guard_mass_, model_->dt, model_->damping);
   if (guard_lifts_ == 0)
     notes_.push_back(fmt::format(
         "tick {}: the tools crush elements whose step falls below {:.2g} of dt (element {}: {:.3g}); the step guard "

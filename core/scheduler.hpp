@@ -28,7 +28,6 @@
 #pragma once
 
 #include <array>
-#include <memory>
 #include <optional>
 #include <span>
 #include <stdexcept>
@@ -242,7 +241,7 @@ class Scheduler {
   /// The step guard's check after a tick (every settings.step_guard.interval ticks in contact).
   void guard_steps(const Reductions& r);
   StepGuard guard_;
-  std::unique_ptr<TissueModel<double>> guarded_;  ///< the model with the guard's masses, once it added any
+  std::vector<double> guard_mass_;  ///< the nodal masses with the guard's (kg), while it watches
   index_t guard_lifts_ = 0;
   bool guard_after_remesh_ = false;   ///< a remesh's cut mesh is checked after its first tick in contact
   bool guard_refused_noted_ = false;  ///< the budget's end was noted

@@ -100,11 +100,11 @@ void CpuBackend<T>::do_warm_up() {
 }
 
 template <class T>
-void CpuBackend<T>::do_set_masses(const TissueModel<double>& model) {
-  model_.mass.assign(model.mass.begin(), model.mass.end());
-  model_.cd_A.assign(model.cd_A.begin(), model.cd_A.end());
-  model_.cd_B.assign(model.cd_B.begin(), model.cd_B.end());
-  model_.cd_C.assign(model.cd_C.begin(), model.cd_C.end());
+void CpuBackend<T>::do_set_masses(const NodeMasses& k) {
+  model_.mass.assign(k.mass.begin(), k.mass.end());
+  model_.cd_A.assign(k.cd_A.begin(), k.cd_A.end());
+  model_.cd_B.assign(k.cd_B.begin(), k.cd_B.end());
+  model_.cd_C.assign(k.cd_C.begin(), k.cd_C.end());
 }
 
 template <class T>

@@ -62,7 +62,7 @@ class CpuBackend final : public Backend {
   void do_set_motion(std::span<const double> u, std::span<const double> u_prev) override;
   std::vector<double> do_previous_displacements() override;
   void do_warm_up() override;
-  void do_set_masses(const TissueModel<double>& model) override;
+  void do_set_masses(const NodeMasses& masses) override;
   /// From the displacements it holds (no copy of the state).
   std::vector<double> do_deformed_altitudes(const TissueModel<double>& model, std::span<const index_t> elems) override;
   RegionSizes do_build_region(std::span<const index_t> seeds, int depth) override;

@@ -384,12 +384,12 @@ class CudaBackend final : public Backend {
     stream_.sync();
   }
 
-  void do_set_masses(const TissueModel<double>& model) override {
+  void do_set_masses(const NodeMasses& k) override {
     TissueModel<T> m;
-    m.mass.assign(model.mass.begin(), model.mass.end());
-    m.cd_A.assign(model.cd_A.begin(), model.cd_A.end());
-    m.cd_B.assign(model.cd_B.begin(), model.cd_B.end());
-    m.cd_C.assign(model.cd_C.begin(), model.cd_C.end());
+    m.mass.assign(k.mass.begin(), k.mass.end());
+    m.cd_A.assign(k.cd_A.begin(), k.cd_A.end());
+    m.cd_B.assign(k.cd_B.begin(), k.cd_B.end());
+    m.cd_C.assign(k.cd_C.begin(), k.cd_C.end());
     store_.set_masses(m, log_, stream());
   }
 

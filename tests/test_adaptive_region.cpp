@@ -184,9 +184,13 @@ class NoFrontBackend final : public Backend {
   std::string device_name() const override { return b_->device_name(); }
 
  protected:
-  void do_upload(const TissueModel<double>& m) override { b_->upload(m); }
+  void do_upload(const TissueModel<double>& m) override {
+    dt_ = m.dt;
+    damping_ = m.damping;
+    b_->upload(m);
+  }
   void do_set_motion(std::span<const double> u, std::span<const double> u_prev) override { b_->set_motion(u, u_prev); }
-  void do_set_masses(const TissueModel<double>& m) override { b_->set_masses(m); }
+  void do_set_masses(const NodeMasses& k) override { b_->set_masses(k.mass, dt_, damping_); }
   std::vector<double> do_previous_displacements() override { return b_->previous_displacements(); }
   RegionSizes do_build_region(std::span<const index_t> s, int d) override { return b_->build_region(s, d); }
   Region do_region() override { return b_->region(); }
@@ -245,6 +249,7 @@ class NoFrontBackend final : public Backend {
 
  private:
   std::unique_ptr<Backend> b_;
+  double dt_ = 0, damping_ = 0;
 };
 
 TEST(AdaptiveRegion, BackendWithoutFrontMeasureIsNamed) {

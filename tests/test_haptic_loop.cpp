@@ -57,7 +57,7 @@ class StubBackend : public Backend {
  protected:
   void do_upload(const TissueModel<double>& m) override { n_ = m.n_nodes; }
   void do_set_motion(std::span<const double>, std::span<const double>) override {}
-  void do_set_masses(const TissueModel<double>&) override {}
+  void do_set_masses(const NodeMasses&) override {}
   std::vector<double> do_previous_displacements() override { return std::vector<double>(3 * std::size_t(n_), 0.0); }
   RegionSizes do_build_region(std::span<const index_t>, int depth) override { return {depth, n_, 0, 0}; }
   Region do_region() override { return {}; }
