@@ -745,6 +745,8 @@ void choose_time_step(const ModelInput& in, TissueModel<double>& m, const Elemen
   m.dt_crit_physical = m.dt_crit;
   if (in.dt == 0) check_step_count(in, m, in.dt_safety);
   double dt = in.dt > 0 ? in.dt : in.dt_safety * m.dt_crit;
+  m.elem_step = steps.dt;  // mass scaling below raises the scaled elements'
+  m.elem_mass = steps.rho_V;
   if (in.mass_scaling > 0) {
     MassScaling ms;
     if (in.dt > 0) {  // lift every element to the requested step
@@ -769,6 +771,8 @@ void choose_time_step(const ModelInput& in, TissueModel<double>& m, const Elemen
         if (const double s_e = density_scale(steps.dt[e], ms.need); s_e > 1) {
           scale[e] = s_e;
           for (int a = 0; a < 4; ++a) m.mass[m.elem_nodes[a * ne + e]] += (s_e - 1) * steps.rho_V[e] / 4;
+          m.elem_step[e] *= std::sqrt(s_e);
+          m.elem_mass[e] *= s_e;
         }
       m.dt_crit = ms.need;  // every scaled element now has dt_e = need; the others had more
       m.added_mass = ms.added_mass;
@@ -782,14 +786,6 @@ void choose_time_step(const ModelInput& in, TissueModel<double>& m, const Elemen
       m.assembled_mass = held.added_mass;
     }
   }
-  m.elem_step = steps.dt;
-  m.elem_mass = steps.rho_V;
-  if (m.scaled_elems > 0)
-    for (index_t e = 0; e < m.n_elems; ++e)
-      if (const double s_e = density_scale(m.elem_step[e], m.dt_crit); s_e > 1) {  // dt_crit: mass scaling's need
-        m.elem_step[e] *= std::sqrt(s_e);
-        m.elem_mass[e] *= s_e;
-      }
   const double damping = in.damping ? *in.damping : 2.0 * lowest_mode_estimate(m);
   try {
     set_time_step(m, dt, damping);

@@ -6,6 +6,7 @@
 
 #include <fmt/format.h>
 
+#include "core/contact.hpp"
 #include "core/tet.hpp"
 
 namespace tissue {
@@ -17,8 +18,8 @@ Vec3<double> corner(const TissueModel<double>& m, index_t e, int a) {
 
 /// Distance (m) from x to the capsule of `shape` at `pose` (negative inside).
 double capsule_distance(const ToolShape& shape, const ToolPose& pose, const Vec3<double>& x) {
-  const double s = shape.shaft > 0 ? std::clamp(dot(x - pose.tip, pose.axis), 0.0, shape.shaft) : 0.0;
-  return norm(x - (pose.tip + s * pose.axis)) - shape.radius;
+  const Vec3<double> a = pose.tip, b = pose.tip + shape.shaft * pose.axis;
+  return norm(x - (a + closest_on_segment(a, b, x) * (b - a))) - shape.radius;
 }
 
 }  // namespace
